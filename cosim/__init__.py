@@ -1,0 +1,1 @@
+"""The co-simulation master: scenarios, FMU access, algorithms, observers, CLI."""

@@ -1,0 +1,245 @@
+"""Command line: ``python -m cosim <command> ...``.
+
+The CLI is thin: each subcommand parses its options, calls one library
+function and prints the result (readable, or JSON with ``--json``). Heavy
+imports happen inside the command that needs them. Errors print one line on
+stderr and exit non-zero: 2 for an unreachable pose or bad input, 1 for a failed
+acceptance check.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from typing import Callable, Sequence
+
+from delta.errors import CosimError, UnreachableError
+
+EXIT_OK = 0
+EXIT_CHECK_FAILED = 1
+EXIT_BAD_INPUT = 2
+
+Handler = Callable[[argparse.Namespace], int]
+
+
+def _emit(args: argparse.Namespace, payload: dict, text: str) -> None:
+    if getattr(args, "json", False):
+        print(json.dumps(payload, indent=2))
+    else:
+        print(text)
+
+
+# --------------------------------------------------------------------------- robot
+
+
+def _robot_parser(sub: argparse._SubParsersAction) -> None:
+    robot = sub.add_parser("robot", help="kinematics, workspace and singularities of a robot preset")
+    rsub = robot.add_subparsers(dest="robot_command", required=True, metavar="{ik,fk,workspace,singularity}")
+
+    def common(p: argparse.ArgumentParser) -> None:
+        p.add_argument("--robot", required=True, help="preset name (see `python -m cosim robot presets`)")
+        p.add_argument("--json", action="store_true", help="machine-readable output")
+
+    p = rsub.add_parser("presets", help="list the robot presets")
+    p.add_argument("--json", action="store_true")
+    p.set_defaults(handler=_cmd_presets)
+
+    p = rsub.add_parser("ik", help="inverse kinematics: platform position -> joint values")
+    common(p)
+    p.add_argument("xyz", nargs=3, type=float, metavar=("X", "Y", "Z"), help="platform position (m, or mm with --mm)")
+    p.add_argument("--mm", action="store_true", help="position given in millimetres")
+    p.add_argument("--margin", type=float, default=None, help="margin on the singularity proximity (0..1)")
+    p.set_defaults(handler=_cmd_ik)
+
+    p = rsub.add_parser("fk", help="forward kinematics: joint values -> platform position")
+    common(p)
+    p.add_argument("q", nargs=3, type=float, metavar=("Q1", "Q2", "Q3"),
+                   help="joint values: carriage travel in m (mm with --mm) or arm angle in rad (deg with --deg)")
+    p.add_argument("--mm", action="store_true", help="linear joints given in millimetres")
+    p.add_argument("--deg", action="store_true", help="rotary joints given in degrees")
+    p.set_defaults(handler=_cmd_fk)
+
+    p = rsub.add_parser("workspace", help="sampled workspace, or a cylinder check")
+    common(p)
+    p.add_argument("--spacing", type=float, default=0.01, help="grid step, m (default 0.01)")
+    p.add_argument("--margin", type=float, default=None, help="margin on the singularity proximity (0..1)")
+    p.add_argument("--cylinder", nargs=3, type=float, metavar=("Z_BELOW", "Z_ABOVE", "R"),
+                   help="check a cylinder around --centre instead (m, or mm with --mm); "
+                        "give one value as 'nan' to find its largest reachable value")
+    p.add_argument("--centre", nargs=3, type=float, metavar=("X", "Y", "Z"),
+                   help="cylinder centre (default: home of a rotary delta, mid-stroke of a linear one)")
+    p.add_argument("--surface", action="store_true", help="check the lateral surface only (seed 004's path)")
+    p.add_argument("--no-limits", action="store_true", help="ignore joint limits (real solutions only)")
+    p.add_argument("--mm", action="store_true", help="cylinder and centre in millimetres")
+    p.set_defaults(handler=_cmd_workspace)
+
+    p = rsub.add_parser("singularity", help="classify a pose (type 1 / type 2) and measure its proximity")
+    common(p)
+    g = p.add_mutually_exclusive_group(required=True)
+    g.add_argument("--q", nargs=3, type=float, metavar=("Q1", "Q2", "Q3"), help="joint values (SI)")
+    g.add_argument("--p", nargs=3, type=float, metavar=("X", "Y", "Z"), help="platform position, m")
+    p.add_argument("--margin", type=float, default=0.01, help="margin on the singularity proximity (default 0.01)")
+    p.set_defaults(handler=_cmd_singularity)
+
+
+def _cmd_presets(args: argparse.Namespace) -> int:
+    from delta.robots import PRESETS
+
+    payload = {name: robot.as_dict() for name, robot in PRESETS.items()}
+    lines = []
+    for name, robot in PRESETS.items():
+        d = {k: v for k, v in robot.as_dict().items() if k not in ("name", "kind", "leg_angles")}
+        lines.append(f"{name} ({robot.kind}): " + ", ".join(f"{k}={v:.6g}" for k, v in d.items()))
+    _emit(args, payload, "\n".join(lines))
+    return EXIT_OK
+
+
+def _q_display(robot, q) -> tuple[list[float], str]:
+    import numpy as np
+
+    if robot.kind == "linear":
+        return [float(x) for x in q], "m"
+    return [float(x) for x in np.degrees(q)], "deg"
+
+
+def _cmd_ik(args: argparse.Namespace) -> int:
+    import numpy as np
+
+    from delta.robots import get_preset
+    from delta.workspace import check_point
+
+    robot = get_preset(args.robot)
+    p = np.array(args.xyz) * (1e-3 if args.mm else 1.0)
+    res = check_point(robot, p, args.margin)
+    if not res.ok:
+        raise UnreachableError(f"{args.robot}: p = ({p[0]:.4f}, {p[1]:.4f}, {p[2]:.4f}) m: {res.reason}")
+    shown, unit = _q_display(robot, res.q)
+    payload = {"robot": robot.name, "p": p.tolist(), "q": [float(x) for x in res.q],
+               "q_unit": robot.q_unit, "singularity_proximity": res.proximity}
+    text = "q = (" + ", ".join(f"{x:.6g}" for x in shown) + f") {unit}"
+    if robot.kind == "linear":
+        text += "   [" + ", ".join(f"{x * 100:.2f}" for x in res.q) + "] cm"
+    text += f"\nsingularity proximity = {res.proximity:.4f}"
+    _emit(args, payload, text)
+    return EXIT_OK
+
+
+def _cmd_fk(args: argparse.Namespace) -> int:
+    import numpy as np
+
+    from delta.kinematics import fk
+    from delta.robots import get_preset
+
+    robot = get_preset(args.robot)
+    q = np.array(args.q, dtype=float)
+    if args.mm:
+        q = q * 1e-3
+    if args.deg:
+        q = np.radians(q)
+    res = fk(robot, q)
+    if not res.ok:
+        raise UnreachableError(f"{args.robot}: q = {q.tolist()}: {res.reason}")
+    p = res.p
+    limits = bool(np.all((q >= robot.q_min) & (q <= robot.q_max)))
+    payload = {"robot": robot.name, "q": q.tolist(), "p": p.tolist(), "within_limits": limits}
+    text = f"p = ({p[0]:.6f}, {p[1]:.6f}, {p[2]:.6f}) m" + ("" if limits else "   (joint values outside the limits)")
+    _emit(args, payload, text)
+    return EXIT_OK
+
+
+def _cmd_workspace(args: argparse.Namespace) -> int:
+    import math
+
+    import numpy as np
+
+    from delta.robots import get_preset
+    from delta.workspace import check_cylinder, largest_cylinder, sample_workspace
+
+    robot = get_preset(args.robot)
+    scale = 1e-3 if args.mm else 1.0
+    if args.cylinder is None:
+        ws = sample_workspace(robot, args.spacing, args.margin)
+        payload = {"robot": robot.name, "spacing": ws.spacing, "volume_m3": ws.volume,
+                   "bbox_min": ws.bbox_min.tolist(), "bbox_max": ws.bbox_max.tolist(), "grid_counts": ws.counts}
+        text = (f"volume = {ws.volume * 1e3:.3f} dm^3 (grid {ws.spacing * 1e3:g} mm, {len(ws.points)} points)\n"
+                f"bbox min = {np.round(ws.bbox_min, 4).tolist()} m\nbbox max = {np.round(ws.bbox_max, 4).tolist()} m")
+        _emit(args, payload, text)
+        return EXIT_OK
+    if args.centre is not None:
+        centre = np.array(args.centre) * scale
+    elif robot.kind == "rotary":
+        centre = np.array([0.0, 0.0, robot.home_z])
+    else:
+        centre = np.array([0.0, 0.0, -0.5 * (robot.q_min + robot.q_max) - 0.8 * robot.rod_length])
+    dims = [None if math.isnan(v) else v * scale for v in args.cylinder]
+    options = {"surface_only": args.surface, "check_limits": not args.no_limits}
+    if None in dims:
+        names = ("z_below", "z_above", "radius")
+        free = names[dims.index(None)]
+        value = largest_cylinder(robot, centre, singularity_margin=args.margin, **dict(zip(names, dims)), **options)
+        payload = {"robot": robot.name, "centre": centre.tolist(), "largest": {free: value}}
+        _emit(args, payload, f"largest {free} = {value:.4f} m ({value * 1e3:.1f} mm) around {np.round(centre, 4).tolist()}")
+        return EXIT_OK
+    res = check_cylinder(robot, centre, *dims, args.margin, **options)
+    payload = {"robot": robot.name, "centre": centre.tolist(), "cylinder": dims, "ok": res.ok,
+               "reason": res.reason, "p": res.p.tolist()}
+    if not res.ok:
+        x, y, z = res.p
+        raise UnreachableError(f"{args.robot}: cylinder not reachable at p = ({x:.4f}, {y:.4f}, {z:.4f}) m: {res.reason}")
+    _emit(args, payload, "cylinder reachable")
+    return EXIT_OK
+
+
+def _cmd_singularity(args: argparse.Namespace) -> int:
+    import numpy as np
+
+    from delta.robots import get_preset
+    from delta.singularity import analyse_pose
+
+    robot = get_preset(args.robot)
+    try:
+        rep = analyse_pose(robot, q=None if args.q is None else np.array(args.q),
+                           p=None if args.p is None else np.array(args.p))
+    except ValueError as exc:
+        raise UnreachableError(f"{args.robot}: {exc}") from None
+    payload = {"robot": robot.name, "q": rep.q.tolist(), "p": rep.p.tolist(), "kind": rep.kind,
+               "type1_legs": list(rep.type1_legs), "type2": rep.type2, "serial": rep.serial.tolist(),
+               "parallel": rep.parallel, "inverse_condition": rep.inverse_condition, "proximity": rep.proximity,
+               "within_margin": rep.within_margin(args.margin)}
+    if rep.theta2 is not None:
+        payload["theta2_deg"] = np.degrees(rep.theta2).tolist()
+        payload["theta3_deg"] = np.degrees(rep.theta3).tolist()
+    text = (f"{rep.kind}\nserial measures |cos(rod, actuator)| = {np.round(rep.serial, 4).tolist()}\n"
+            f"parallel measure |det rods| = {rep.parallel:.4f}\n1/cond(J) = {rep.inverse_condition:.4f}\n"
+            f"proximity = {rep.proximity:.4f} "
+            f"({'within' if rep.within_margin(args.margin) else 'below'} margin {args.margin:g})")
+    _emit(args, payload, text)
+    return EXIT_OK
+
+
+# --------------------------------------------------------------------------- entry
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog="python -m cosim", description="Delta robot FMI co-simulation platform")
+    sub = parser.add_subparsers(dest="command", required=True)
+    _robot_parser(sub)
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    handler: Handler = args.handler
+    try:
+        return handler(args)
+    except UnreachableError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return EXIT_BAD_INPUT
+    except CosimError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return EXIT_BAD_INPUT
+    except KeyboardInterrupt:
+        print("interrupted", file=sys.stderr)
+        return 130

@@ -1,0 +1,1 @@
+"""pythonfmu adapters for the delta components and the FMU builder."""

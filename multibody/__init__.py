@@ -1,0 +1,1 @@
+"""Exudyn multibody plants of the linear and rotary delta."""
