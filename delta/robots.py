@@ -35,11 +35,17 @@ MM = 1e-3
 _DEFAULT_ANGLES = (0.0, 2.0 * pi / 3.0, 4.0 * pi / 3.0)
 
 
-def _check_positive(obj: object, names: tuple[str, ...]) -> None:
-    for name in names:
-        value = getattr(obj, name)
+def _validate(robot: "LinearDelta | RotaryDelta", lengths: tuple[str, ...]) -> None:
+    """Lengths positive, three leg angles, a non-empty joint range; the error names the robot."""
+    where = f"{type(robot).__name__} {robot.name!r}"
+    for name in lengths:
+        value = getattr(robot, name)
         if not value > 0.0:
-            raise RobotError(f"{type(obj).__name__} {obj.name!r}: {name} must be > 0, got {value!r}")
+            raise RobotError(f"{where}: {name} must be > 0, got {value!r}")
+    if len(robot.leg_angles) != 3:
+        raise RobotError(f"{where}: leg_angles needs 3 angles, got {len(robot.leg_angles)}")
+    if not robot.q_min < robot.q_max:
+        raise RobotError(f"{where}: q_min {robot.q_min} must be < q_max {robot.q_max}")
 
 
 @dataclass(frozen=True)
@@ -70,11 +76,7 @@ class LinearDelta:
     kind: str = "linear"
 
     def __post_init__(self) -> None:
-        _check_positive(self, ("rail_radius", "platform_radius", "rod_length"))
-        if len(self.leg_angles) != 3:
-            raise RobotError(f"LinearDelta {self.name!r}: leg_angles needs 3 angles, got {len(self.leg_angles)}")
-        if not self.q_min < self.q_max:
-            raise RobotError(f"LinearDelta {self.name!r}: q_min {self.q_min} must be < q_max {self.q_max}")
+        _validate(self, ("rail_radius", "platform_radius", "rod_length"))
 
     @property
     def q_unit(self) -> str:
@@ -115,11 +117,7 @@ class RotaryDelta:
     kind: str = "rotary"
 
     def __post_init__(self) -> None:
-        _check_positive(self, ("base_radius", "arm_length", "forearm_length", "platform_radius"))
-        if len(self.leg_angles) != 3:
-            raise RobotError(f"RotaryDelta {self.name!r}: leg_angles needs 3 angles, got {len(self.leg_angles)}")
-        if not self.q_min < self.q_max:
-            raise RobotError(f"RotaryDelta {self.name!r}: q_min {self.q_min} must be < q_max {self.q_max}")
+        _validate(self, ("base_radius", "arm_length", "forearm_length", "platform_radius"))
 
     @property
     def q_unit(self) -> str:
