@@ -1,0 +1,1 @@
+"""Thin pythonfmu adapters: FMI variables in, calls into delta/ and multibody/, FMI variables out."""

@@ -1,0 +1,82 @@
+"""Parameter groups shared by the adapters: robot geometry and masses (paper presets)."""
+
+from __future__ import annotations
+
+from dataclasses import fields
+
+from delta.dynamics import LinearDeltaMasses, RotaryDeltaMasses
+from delta.robots import LinearDelta, RotaryDelta, get_preset
+
+from .._fmi import Adapter, joint_names
+
+__all__ = ["PRESET", "declare_robot", "robot_from", "declare_masses", "masses_from", "q_units"]
+
+PRESET = {"linear": "linear_delta_thesis", "rotary": "rotary_delta_prototype"}
+"""Robot preset whose geometry gives the parameter start values of each robot kind's FMUs."""
+
+_GEOMETRY = {
+    "rail_radius": ("m", "planar distance from the base centre to each rail (thesis U_A)"),
+    "base_radius": ("m", "distance from the base centre to each motor axis (seed 004 OF)"),
+    "arm_length": ("m", "upper arm length (seed 004 rf)"),
+    "forearm_length": ("m", "parallelogram forearm length (seed 004 re)"),
+    "rod_length": ("m", "parallelogram rod length (thesis l)"),
+    "platform_radius": ("m", "planar distance from the platform centre to each platform joint"),
+}
+_MASSES = {
+    "carriage": ("mass.carriage", "kg", "mass of one carriage (thesis m_s)"),
+    "motor_inertia": ("mass.motor_inertia", "kg.m2", "rotor and gearbox inertia about the motor axis"),
+    "arm": ("mass.arm", "kg", "upper arm mass, uniform along the arm"),
+    "elbow": ("mass.elbow", "kg", "concentrated mass at the elbow"),
+    "rod": ("mass.rod", "kg", "mass of one parallelogram rod (thesis m_l); two per leg"),
+    "rod_radius": ("geometry.rod_radius", "m", "rod radius (multibody rod inertia)"),
+    "parallelogram_width": ("geometry.parallelogram_width", "m", "distance between the two rods of a leg"),
+    "platform": ("mass.platform", "kg", "platform mass without payload (thesis m_p)"),
+    "payload": ("mass.payload", "kg", "payload carried by the platform"),
+    "w_inertia": ("model.w_inertia", "1", "share of each rod lumped at the platform, inertia terms (thesis w)"),
+    "w_gravity": ("model.w_gravity", "1", "share of each rod lumped at the platform, gravity terms (thesis w)"),
+    "gravity": ("model.gravity", "m/s2", "gravitational acceleration along -z"),
+}
+
+
+def q_units(kind: str) -> tuple[str, str, str, str]:
+    """Units of q, qd, qdd and u for a robot kind."""
+    return ("m", "m/s", "m/s2", "N") if kind == "linear" else ("rad", "rad/s", "rad/s2", "N.m")
+
+
+def declare_robot(fmu: Adapter, kind: str) -> None:
+    """Fixed ``geometry.*`` parameters with the preset of ``kind`` as start values."""
+    robot = get_preset(PRESET[kind])
+    for f in fields(robot):
+        if f.name in _GEOMETRY:
+            unit, text = _GEOMETRY[f.name]
+            fmu.parameter(f"geometry.{f.name}", float(getattr(robot, f.name)), unit, text)
+    qu = q_units(kind)[0]
+    fmu.parameter("geometry.q_min", float(robot.q_min), qu, "lower joint limit")
+    fmu.parameter("geometry.q_max", float(robot.q_max), qu, "upper joint limit")
+    fmu.parameters3(joint_names("geometry.leg_angle"), robot.leg_angles, "rad", "leg angle about +z from +x")
+
+
+def robot_from(fmu: Adapter, kind: str) -> LinearDelta | RotaryDelta:
+    """The robot described by the current ``geometry.*`` parameter values."""
+    cls = LinearDelta if kind == "linear" else RotaryDelta
+    values = {f.name: fmu.values[f"geometry.{f.name}"] for f in fields(cls) if f.name in _GEOMETRY}
+    return cls(name=f"{PRESET[kind]} (FMU {fmu.modelName})",
+               leg_angles=tuple(fmu.vec(joint_names("geometry.leg_angle"))),
+               q_min=fmu.values["geometry.q_min"], q_max=fmu.values["geometry.q_max"], **values)
+
+
+def _mass_class(kind: str):
+    return LinearDeltaMasses if kind == "linear" else RotaryDeltaMasses
+
+
+def declare_masses(fmu: Adapter, kind: str) -> None:
+    """Fixed ``mass.*`` / ``model.*`` parameters, start values from the mass dataclass defaults."""
+    defaults = _mass_class(kind)()
+    for f in fields(defaults):
+        name, unit, text = _MASSES[f.name]
+        fmu.parameter(name, float(getattr(defaults, f.name)), unit, text)
+
+
+def masses_from(fmu: Adapter, kind: str):
+    cls = _mass_class(kind)
+    return cls(**{f.name: fmu.values[_MASSES[f.name][0]] for f in fields(cls)})

@@ -1,0 +1,90 @@
+"""Inverse and forward kinematics FMUs (delta.workspace.check_point, delta.kinematics)."""
+
+from __future__ import annotations
+
+from delta.kinematics import fk, joint_acceleration, joint_velocity, platform_velocity
+from delta.singularity import analyse
+from delta.workspace import check_point
+
+from .._fmi import Adapter, axis_names, joint_names
+from .common import declare_robot, q_units, robot_from
+
+P_REF, V_REF, A_REF = axis_names("p_ref"), axis_names("v_ref"), axis_names("a_ref")
+Q_REF, QD_REF, QDD_REF = joint_names("q_ref"), joint_names("qd_ref"), joint_names("qdd_ref")
+P, V = axis_names("p"), axis_names("v")
+Q, QD = joint_names("q"), joint_names("qd")
+
+
+class InverseKinematics(Adapter):
+    """p_ref, v_ref, a_ref -> q_ref, qd_ref, qdd_ref, reachability and singularity proximity.
+
+    When the reference leaves the workspace ``reachable`` drops to false and the joint
+    references hold their last reachable values (no NaN reaches the controller).
+    """
+
+    EXPERIMENT = (0.0, 1.0, 1e-3)
+
+    def __init__(self, **kwargs):
+        super().__init__(**kwargs)
+        kind = self.KIND
+        qu, qdu, qddu, _ = q_units(kind)
+        self.description = f"Inverse kinematics of the {kind} delta"
+        declare_robot(self, kind)
+        self.parameter("singularity.margin", 0.0, "1",
+                       "minimum singularity proximity for a reachable point (0 = only exact singularities)",
+                       tunable=True)
+        home = (0.0, 0.0, -0.5) if kind == "linear" else (0.0, 0.0, -0.4108)
+        self.inputs3(P_REF, "m", "desired platform position", home)
+        self.inputs3(V_REF, "m/s", "desired platform velocity")
+        self.inputs3(A_REF, "m/s2", "desired platform acceleration")
+        self.outputs3(Q_REF, qu, "desired joint position")
+        self.outputs3(QD_REF, qdu, "desired joint velocity")
+        self.outputs3(QDD_REF, qddu, "desired joint acceleration")
+        self.output("reachable", None, "true when p_ref is reachable within joint limits and singularity margin",
+                    False, kind="boolean")
+        self.output("singularity.proximity", "1", "singularity proximity of the pose p_ref (0 = singular)")
+
+    def start(self) -> None:
+        self.robot = robot_from(self, self.KIND)
+
+    def refresh(self) -> None:
+        p, v, a = self.vec(P_REF), self.vec(V_REF), self.vec(A_REF)
+        res = check_point(self.robot, p, self.values["singularity.margin"])
+        self.values["reachable"] = res.ok
+        self.values["singularity.proximity"] = float(res.proximity) if res.proximity is not None else 0.0
+        if res.ok:
+            self.put(Q_REF, res.q)
+            self.put(QD_REF, joint_velocity(self.robot, res.q, p, v))
+            self.put(QDD_REF, joint_acceleration(self.robot, res.q, p, v, a))
+
+
+class ForwardKinematics(Adapter):
+    """q, qd -> p, v, plus a validity flag and the singularity proximity of the pose."""
+
+    EXPERIMENT = (0.0, 1.0, 1e-3)
+
+    def __init__(self, **kwargs):
+        super().__init__(**kwargs)
+        kind = self.KIND
+        qu, qdu, _, _ = q_units(kind)
+        self.description = f"Forward kinematics of the {kind} delta"
+        declare_robot(self, kind)
+        self.inputs3(Q, qu, "joint position", (0.0,) * 3 if kind == "rotary" else (0.35, 0.35, 0.35))
+        self.inputs3(QD, qdu, "joint velocity")
+        self.outputs3(P, "m", "platform position")
+        self.outputs3(V, "m/s", "platform velocity")
+        self.output("valid", None, "true when q assembles in the working mode (else p, v hold)", False,
+                    kind="boolean")
+        self.output("singularity.proximity", "1", "singularity proximity of the pose (0 = singular)")
+
+    def start(self) -> None:
+        self.robot = robot_from(self, self.KIND)
+
+    def refresh(self) -> None:
+        q, qd = self.vec(Q), self.vec(QD)
+        res = fk(self.robot, q)
+        self.values["valid"] = res.ok
+        if res.ok:
+            self.put(P, res.p)
+            self.put(V, platform_velocity(self.robot, q, res.p, qd))
+            self.values["singularity.proximity"] = analyse(self.robot, q, res.p).proximity
