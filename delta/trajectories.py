@@ -1,0 +1,362 @@
+"""Platform trajectories with analytic position, velocity and acceleration.
+
+Every trajectory is a frozen dataclass with :meth:`Trajectory.evaluate` (one time) and
+:meth:`Trajectory.sample` (vectorised), SI units (m, m/s, m/s**2, s), and
+:meth:`Trajectory.check` against the workspace (:func:`delta.workspace.check_trajectory`).
+Point-to-point motions use rest-to-rest cubic or quintic time scalings; before its
+start and after its end a trajectory holds its first / last point at rest (the helix
+is the exception: its formula is defined for every ``t``).
+"""
+
+from __future__ import annotations
+
+import math
+from abc import ABC, abstractmethod
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .errors import ParameterError
+from .robots import Robot
+from .workspace import TrajectoryCheck, check_trajectory
+
+__all__ = [
+    "Trajectory",
+    "Helix",
+    "Hold",
+    "PointToPoint",
+    "PickAndPlace",
+    "Waypoints",
+    "seed004_z_steps",
+    "PROFILES",
+    "G0",
+]
+
+G0 = 9.80665
+"""Standard gravity used to express accelerations in g, m/s^2."""
+
+PROFILES = ("cubic", "quintic")
+# Peak |s''| of the rest-to-rest scalings on tau in [0, 1]: cubic 6 (at the ends),
+# quintic 10 / sqrt(3) (at tau = 1/2 -+ sqrt(3)/6).
+_PEAK_SDD = {"cubic": 6.0, "quintic": 10.0 / math.sqrt(3.0)}
+
+
+def _vec3(name: str, value: object) -> tuple[float, float, float]:
+    arr = np.asarray(value, dtype=float).reshape(-1)
+    if arr.shape != (3,) or not np.all(np.isfinite(arr)):
+        raise ParameterError(f"{name} must be 3 finite numbers (x, y, z) in m, got {value!r}")
+    return float(arr[0]), float(arr[1]), float(arr[2])
+
+
+def _positive(cls: str, name: str, value: float, allow_inf: bool = False) -> None:
+    ok = value > 0.0 and (allow_inf or math.isfinite(value))
+    if not ok:
+        raise ParameterError(f"{cls}.{name} must be > 0{'' if allow_inf else ' and finite'}, got {value!r}")
+
+
+def _profile(cls: str, profile: str) -> None:
+    if profile not in PROFILES:
+        raise ParameterError(f"{cls}.profile must be one of {PROFILES}, got {profile!r}")
+
+
+def _scaling(profile: str, tau: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Time scaling s(tau) and its derivatives d/dtau, d2/dtau2 on tau in [0, 1]."""
+    if profile == "cubic":
+        return tau * tau * (3.0 - 2.0 * tau), 6.0 * tau * (1.0 - tau), 6.0 - 12.0 * tau
+    t2 = tau * tau
+    return (
+        t2 * tau * (10.0 + tau * (-15.0 + 6.0 * tau)),
+        30.0 * t2 * (1.0 - tau) ** 2,
+        60.0 * tau * (1.0 + tau * (-3.0 + 2.0 * tau)),
+    )
+
+
+class Trajectory(ABC):
+    """Base class: a platform motion ``t -> (p, v, a)`` in the base frame."""
+
+    duration: float
+    """Length of the motion, s (``math.inf`` if endless); a :class:`PointToPoint` starts at ``t0``."""
+
+    @property
+    def end_time(self) -> float:
+        """Time at which the motion ends, s."""
+        return self.duration
+
+    @abstractmethod
+    def sample(self, times: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Positions, velocities and accelerations at ``times`` (N,) s: three (N, 3) arrays."""
+
+    def evaluate(self, t: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Position (3,) m, velocity (3,) m/s and acceleration (3,) m/s^2 at time ``t`` s."""
+        p, v, a = self.sample(np.array([float(t)]))
+        return p[0], v[0], a[0]
+
+    def check(self, robot: Robot, dt: float = 0.01, singularity_margin: float | None = None) -> TrajectoryCheck:
+        """Check positions sampled every ``dt`` s over ``[0, duration]`` against the workspace."""
+        if not math.isfinite(self.end_time):
+            raise ParameterError(f"{type(self).__name__}: cannot check an endless trajectory; give a finite duration")
+        _positive(type(self).__name__ + ".check", "dt", dt)
+        n = int(math.ceil(self.end_time / dt)) + 1
+        times = np.linspace(0.0, self.end_time, n)
+        return check_trajectory(robot, self.sample(times)[0], times, singularity_margin)
+
+
+@dataclass(frozen=True)
+class Helix(Trajectory):
+    """Helix of thesis eq. (27): ``x = cx + rx cos(w t)``, ``y = cy + ry sin(w t)``, ``z = z0 + vz t``.
+
+    Defaults are the platform's reference helix: centre (0, 0), radii 0.1 m,
+    ``omega = pi`` rad/s, ``z0 = -0.45`` m, ``vz = -0.01`` m/s, 10 s.
+    """
+
+    centre: tuple[float, float] = (0.0, 0.0)
+    rx: float = 0.1
+    ry: float = 0.1
+    omega: float = math.pi
+    z0: float = -0.45
+    vz: float = -0.01
+    duration: float = 10.0
+
+    def __post_init__(self) -> None:
+        c = np.asarray(self.centre, dtype=float).reshape(-1)
+        if c.shape != (2,):
+            raise ParameterError(f"Helix.centre must be (x, y) in m, got {self.centre!r}")
+        object.__setattr__(self, "centre", (float(c[0]), float(c[1])))
+        for name in ("rx", "ry"):
+            if not getattr(self, name) >= 0.0:
+                raise ParameterError(f"Helix.{name} must be >= 0 m, got {getattr(self, name)!r}")
+        _positive("Helix", "duration", self.duration, allow_inf=True)
+
+    def sample(self, times: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        t = np.asarray(times, dtype=float).reshape(-1)
+        w = self.omega
+        c, s = np.cos(w * t), np.sin(w * t)
+        p = np.stack([self.centre[0] + self.rx * c, self.centre[1] + self.ry * s, self.z0 + self.vz * t], axis=1)
+        v = np.stack([-self.rx * w * s, self.ry * w * c, np.full_like(t, self.vz)], axis=1)
+        a = np.stack([-self.rx * w * w * c, -self.ry * w * w * s, np.zeros_like(t)], axis=1)
+        return p, v, a
+
+
+class _Segments(Trajectory):
+    """Piecewise rest-to-rest moves: segment k goes from ``_p0[k]`` to ``_p1[k]`` over ``[_t0[k], _t1[k]]``."""
+
+    _t0: np.ndarray
+    _t1: np.ndarray
+    _p0: np.ndarray
+    _p1: np.ndarray
+
+    def _set_segments(self, knots: list[tuple[float, float, tuple, tuple]]) -> None:
+        arr = list(zip(*knots))
+        object.__setattr__(self, "_t0", np.array(arr[0], dtype=float))
+        object.__setattr__(self, "_t1", np.array(arr[1], dtype=float))
+        object.__setattr__(self, "_p0", np.array(arr[2], dtype=float))
+        object.__setattr__(self, "_p1", np.array(arr[3], dtype=float))
+
+    @property
+    def end_time(self) -> float:
+        return float(self._t1[-1])
+
+    @property
+    def peak_acceleration(self) -> float:
+        """Largest |a| over the motion, m/s^2 (analytic: peak |s''| |delta p| / T^2 per segment)."""
+        dist = np.linalg.norm(self._p1 - self._p0, axis=1)
+        return float(np.max(_PEAK_SDD[self.profile] * dist / (self._t1 - self._t0) ** 2))
+
+    def sample(self, times: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        t = np.asarray(times, dtype=float).reshape(-1)
+        k = np.clip(np.searchsorted(self._t1, t, side="left"), 0, len(self._t1) - 1)
+        span = self._t1[k] - self._t0[k]
+        tau = np.clip((t - self._t0[k]) / span, 0.0, 1.0)
+        moving = ((t > self._t0[k]) & (t < self._t1[k]))[:, None]
+        s, sd, sdd = _scaling(self.profile, tau)
+        delta = self._p1[k] - self._p0[k]
+        p = self._p0[k] + delta * s[:, None]
+        v = np.where(moving, delta * (sd / span)[:, None], 0.0)
+        a = np.where(moving, delta * (sdd / span**2)[:, None], 0.0)
+        return p, v, a
+
+
+@dataclass(frozen=True)
+class Hold(_Segments):
+    """The platform at rest at ``point`` (3,) m for ``duration`` s (regulation tests)."""
+
+    point: tuple[float, float, float]
+    duration: float = 1.0
+    profile: str = "quintic"
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "point", _vec3("Hold.point", self.point))
+        _positive("Hold", "duration", self.duration)
+        self._set_segments([(0.0, self.duration, self.point, self.point)])
+
+
+@dataclass(frozen=True)
+class PointToPoint(_Segments):
+    """Rest-to-rest straight move from ``start`` to ``end`` (3,) m in ``duration`` s, starting at ``t0`` s.
+
+    Before ``t0`` the platform rests at ``start``; :attr:`end_time` is ``t0 + duration``.
+
+    ``profile``: ``"quintic"`` (zero velocity and acceleration at both ends) or
+    ``"cubic"`` (zero velocity; acceleration jumps at the ends).
+    """
+
+    start: tuple[float, float, float]
+    end: tuple[float, float, float]
+    duration: float
+    profile: str = "quintic"
+    t0: float = 0.0
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "start", _vec3("PointToPoint.start", self.start))
+        object.__setattr__(self, "end", _vec3("PointToPoint.end", self.end))
+        _positive("PointToPoint", "duration", self.duration)
+        _profile("PointToPoint", self.profile)
+        if not (math.isfinite(self.t0) and self.t0 >= 0.0):
+            raise ParameterError(f"PointToPoint.t0 must be >= 0 s, got {self.t0!r}")
+        knots = [(0.0, self.t0, self.start, self.start)] if self.t0 > 0.0 else []
+        knots.append((self.t0, self.t0 + self.duration, self.start, self.end))
+        self._set_segments(knots)
+
+
+def _legs_with_dwell(points: np.ndarray, starts: list[float], moves: list[float], dwell: float
+                     ) -> list[tuple[float, float, tuple, tuple]]:
+    knots = []
+    for k in range(len(points) - 1):
+        t0 = starts[k]
+        knots.append((t0, t0 + moves[k], tuple(points[k]), tuple(points[k + 1])))
+        if dwell > 0.0 and k < len(points) - 2:
+            knots.append((t0 + moves[k], t0 + moves[k] + dwell, tuple(points[k + 1]), tuple(points[k + 1])))
+    return knots
+
+
+@dataclass(frozen=True)
+class Waypoints(_Segments):
+    """Rest-to-rest moves through ``points`` (K, 3) m, stopping at each one.
+
+    Give either ``segment_time`` (s per move, plus ``dwell`` s at rest at every
+    intermediate point) or ``times`` (K,) (arrival time of each point, increasing,
+    ``times[0]`` = time at the first point; no dwell, hold by repeating a point).
+    """
+
+    points: tuple[tuple[float, float, float], ...]
+    segment_time: float | None = None
+    times: tuple[float, ...] | None = None
+    dwell: float = 0.0
+    profile: str = "quintic"
+
+    def __post_init__(self) -> None:
+        pts = np.asarray(self.points, dtype=float)
+        if pts.ndim != 2 or pts.shape[1] != 3 or len(pts) < 2 or not np.all(np.isfinite(pts)):
+            raise ParameterError(f"Waypoints.points must be K >= 2 points of (x, y, z) m, got shape {pts.shape}")
+        object.__setattr__(self, "points", tuple(tuple(float(x) for x in row) for row in pts))
+        _profile("Waypoints", self.profile)
+        if (self.segment_time is None) == (self.times is None):
+            raise ParameterError("Waypoints: give exactly one of segment_time (s per move) or times (arrival times)")
+        if not (self.dwell >= 0.0 and math.isfinite(self.dwell)):
+            raise ParameterError(f"Waypoints.dwell must be >= 0 s, got {self.dwell!r}")
+        if self.segment_time is not None:
+            _positive("Waypoints", "segment_time", self.segment_time)
+            step = self.segment_time + self.dwell
+            starts = [k * step for k in range(len(pts) - 1)]
+            self._set_segments(_legs_with_dwell(pts, starts, [self.segment_time] * (len(pts) - 1), self.dwell))
+            return
+        times = np.asarray(self.times, dtype=float).reshape(-1)
+        if times.shape != (len(pts),) or times[0] < 0.0 or np.any(np.diff(times) <= 0.0):
+            raise ParameterError(f"Waypoints.times must be {len(pts)} increasing times >= 0 s, got {self.times!r}")
+        if self.dwell != 0.0:
+            raise ParameterError("Waypoints: dwell applies to segment_time only; with times, repeat a point to rest")
+        object.__setattr__(self, "times", tuple(float(t) for t in times))
+        knots = [(0.0, float(times[0]), tuple(pts[0]), tuple(pts[0]))] if times[0] > 0.0 else []
+        knots += _legs_with_dwell(pts, list(times[:-1]), list(np.diff(times)), 0.0)
+        self._set_segments(knots)
+
+    @property
+    def duration(self) -> float:
+        return self.end_time
+
+    @property
+    def arrival_times(self) -> np.ndarray:
+        """Time at which each point is reached (at rest), (K,) s."""
+        if self.times is not None:
+            return np.asarray(self.times)
+        step = self.segment_time + self.dwell
+        return np.array([0.0] + [k * step + self.segment_time for k in range(len(self.points) - 1)])
+
+
+@dataclass(frozen=True)
+class PickAndPlace(_Segments):
+    """Industrial pick-and-place cycle: ``up`` m, ``across`` m, ``down`` m, and back the same way.
+
+    The platform starts at ``start`` (3,) m, rises by ``up``, moves ``across`` along the
+    horizontal unit ``direction``, lowers by ``down`` (place), then returns: up by ``down``,
+    back across, down by ``up``. Every leg is a rest-to-rest move (quintic by default,
+    zero velocity at each of the seven stops). Leg times are proportional to
+    ``sqrt(distance)`` so every leg reaches the same peak acceleration; the default
+    ``cycle_time = 0.5`` s gives 69.7 m/s^2 = 7.1 g (quintic, 25/305/25 mm).
+    """
+
+    start: tuple[float, float, float]
+    up: float = 0.025
+    across: float = 0.305
+    down: float = 0.025
+    cycle_time: float = 0.5
+    direction: tuple[float, float] = (1.0, 0.0)
+    cycles: int = 1
+    profile: str = "quintic"
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "start", _vec3("PickAndPlace.start", self.start))
+        for name in ("up", "across", "down", "cycle_time"):
+            _positive("PickAndPlace", name, getattr(self, name))
+        d = np.asarray(self.direction, dtype=float).reshape(-1)
+        if d.shape != (2,) or not np.linalg.norm(d) > 0.0:
+            raise ParameterError(f"PickAndPlace.direction must be a non-zero (x, y) vector, got {self.direction!r}")
+        if not (isinstance(self.cycles, int) and self.cycles >= 1):
+            raise ParameterError(f"PickAndPlace.cycles must be an integer >= 1, got {self.cycles!r}")
+        _profile("PickAndPlace", self.profile)
+        d = d / np.linalg.norm(d)
+        object.__setattr__(self, "direction", (float(d[0]), float(d[1])))
+        pts, moves = self._cycle_plan()
+        starts = np.concatenate([[0.0], np.cumsum(moves)[:-1]])
+        knots = []
+        for c in range(self.cycles):
+            knots += _legs_with_dwell(pts, list(starts + c * self.cycle_time), list(moves), 0.0)
+        self._set_segments(knots)
+
+    def _cycle_plan(self) -> tuple[np.ndarray, np.ndarray]:
+        a = np.array(self.start)
+        ez = np.array([0.0, 0.0, 1.0])
+        h = np.array([self.direction[0], self.direction[1], 0.0])
+        b_up = a + self.up * ez
+        c_up = b_up + self.across * h
+        place = c_up - self.down * ez
+        pts = np.array([a, b_up, c_up, place, c_up, b_up, a])
+        dist = np.linalg.norm(np.diff(pts, axis=0), axis=1)
+        roots = np.sqrt(dist)
+        return pts, self.cycle_time * roots / roots.sum()
+
+    @property
+    def duration(self) -> float:
+        return self.end_time
+
+    @property
+    def waypoints(self) -> np.ndarray:
+        """The seven stops of one cycle (pick, up, across, place, up, back, pick), (7, 3) m."""
+        return self._cycle_plan()[0]
+
+    @property
+    def waypoint_times(self) -> np.ndarray:
+        """Times of every stop over all cycles, (6 cycles + 1,) s."""
+        return np.concatenate([[0.0], self._t1])
+
+
+SEED004_HOME = (0.0, 0.0, -0.411)
+"""Seed 004 Fig. 24 home position of the rotary prototype, m."""
+
+
+def seed004_z_steps(segment_time: float = 1.0, dwell: float = 0.5, home: tuple[float, float, float] = SEED004_HOME,
+                    profile: str = "quintic") -> Waypoints:
+    """Seed 004's experiment: home -> (0, 0, -0.561) -> (0, 0, -0.311) -> home, m (Fig. 24, Table 6)."""
+    x, y, _ = home
+    return Waypoints(points=(tuple(home), (x, y, -0.561), (x, y, -0.311), tuple(home)),
+                     segment_time=segment_time, dwell=dwell, profile=profile)
