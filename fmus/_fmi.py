@@ -19,43 +19,9 @@ from pythonfmu import Fmi2Causality, Fmi2Initial, Fmi2Slave, Fmi2Variability
 from pythonfmu.default_experiment import DefaultExperiment
 from pythonfmu.variables import Boolean, Integer, Real, String
 
+from ._names import UNITS, XYZ, axis_names, joint_names
+
 __all__ = ["Adapter", "UNITS", "XYZ", "joint_names", "axis_names", "DefaultExperiment"]
-
-XYZ = ("x", "y", "z")
-
-# SI base-unit exponents of every unit used in the FMUs (FMI 2.0 UnitDefinitions).
-UNITS: dict[str, dict[str, int]] = {
-    "1": {},
-    "s": {"s": 1},
-    "m": {"m": 1},
-    "m/s": {"m": 1, "s": -1},
-    "m/s2": {"m": 1, "s": -2},
-    "rad": {"rad": 1},
-    "rad/s": {"rad": 1, "s": -1},
-    "rad/s2": {"rad": 1, "s": -2},
-    "kg": {"kg": 1},
-    "kg.m2": {"kg": 1, "m": 2},
-    "N": {"kg": 1, "m": 1, "s": -2},
-    "N.m": {"kg": 1, "m": 2, "s": -2},
-    "N/m": {"kg": 1, "s": -2},
-    "N.s/m": {"kg": 1, "s": -1},
-    "N.m/rad": {"kg": 1, "m": 2, "s": -2, "rad": -1},
-    "N.m.s/rad": {"kg": 1, "m": 2, "s": -1, "rad": -1},
-    "N.m/(rad.s)": {"kg": 1, "m": 2, "s": -3, "rad": -1},
-    "1/s": {"s": -1},
-    "1/s2": {"s": -2},
-    "1/s3": {"s": -3},
-}
-
-
-def joint_names(prefix: str) -> list[str]:
-    """``prefix[1] prefix[2] prefix[3]`` (conventions.md: 1-based joint indices)."""
-    return [f"{prefix}[{i}]" for i in (1, 2, 3)]
-
-
-def axis_names(prefix: str) -> list[str]:
-    """``prefix.x prefix.y prefix.z``."""
-    return [f"{prefix}.{a}" for a in XYZ]
 
 
 @dataclass(frozen=True)

@@ -7,7 +7,7 @@ from dataclasses import fields
 from delta.dynamics import LinearDeltaMasses, RotaryDeltaMasses
 from delta.robots import LinearDelta, RotaryDelta, get_preset
 
-from .._fmi import Adapter, joint_names
+from .._names import joint_names
 
 __all__ = ["PRESET", "declare_robot", "robot_from", "declare_masses", "masses_from", "q_units"]
 
@@ -43,7 +43,7 @@ def q_units(kind: str) -> tuple[str, str, str, str]:
     return ("m", "m/s", "m/s2", "N") if kind == "linear" else ("rad", "rad/s", "rad/s2", "N.m")
 
 
-def declare_robot(fmu: Adapter, kind: str) -> None:
+def declare_robot(fmu, kind: str) -> None:
     """Fixed ``geometry.*`` parameters with the preset of ``kind`` as start values."""
     robot = get_preset(PRESET[kind])
     for f in fields(robot):
@@ -56,7 +56,7 @@ def declare_robot(fmu: Adapter, kind: str) -> None:
     fmu.parameters3(joint_names("geometry.leg_angle"), robot.leg_angles, "rad", "leg angle about +z from +x")
 
 
-def robot_from(fmu: Adapter, kind: str) -> LinearDelta | RotaryDelta:
+def robot_from(fmu, kind: str) -> LinearDelta | RotaryDelta:
     """The robot described by the current ``geometry.*`` parameter values."""
     cls = LinearDelta if kind == "linear" else RotaryDelta
     values = {f.name: fmu.values[f"geometry.{f.name}"] for f in fields(cls) if f.name in _GEOMETRY}
@@ -69,7 +69,7 @@ def _mass_class(kind: str):
     return LinearDeltaMasses if kind == "linear" else RotaryDeltaMasses
 
 
-def declare_masses(fmu: Adapter, kind: str) -> None:
+def declare_masses(fmu, kind: str) -> None:
     """Fixed ``mass.*`` / ``model.*`` parameters, start values from the mass dataclass defaults."""
     defaults = _mass_class(kind)()
     for f in fields(defaults):
@@ -77,6 +77,25 @@ def declare_masses(fmu: Adapter, kind: str) -> None:
         fmu.parameter(name, float(getattr(defaults, f.name)), unit, text)
 
 
-def masses_from(fmu: Adapter, kind: str):
+def masses_from(fmu, kind: str):
     cls = _mass_class(kind)
     return cls(**{f.name: fmu.values[_MASSES[f.name][0]] for f in fields(cls)})
+
+
+HOME = {"linear": (0.0, 0.0, -0.5), "rotary": (0.0, 0.0, -0.4108)}
+"""Default platform position of each kind (plant initial state, IK input start), m."""
+
+
+def home_joints(kind: str) -> tuple[float, float, float]:
+    """Joint values of the kind's home position for its preset (start values of the plant state)."""
+    from delta.kinematics import ik
+
+    return tuple(float(x) for x in ik(get_preset(PRESET[kind]), HOME[kind]).require())
+
+
+def hold_effort(kind: str) -> tuple[float, float, float]:
+    """Effort that holds the preset still at its home joints (start value of the plant inputs u)."""
+    from delta.dynamics import analytic_model
+
+    model = analytic_model(get_preset(PRESET[kind]), _mass_class(kind)())
+    return tuple(float(x) for x in model.gravity_term(home_joints(kind)))

@@ -1,0 +1,53 @@
+"""The analytic plant as an FMI 3.0 model-exchange FMU: states q, qd, derivatives from the forward dynamics."""
+
+from __future__ import annotations
+
+from delta.dynamics import analytic_model
+
+from .._names import axis_names, joint_names
+from .._fmi3 import AdapterME
+from .common import declare_masses, declare_robot, hold_effort, home_joints, masses_from, q_units, robot_from
+
+Q, QD, QDD, U = joint_names("q"), joint_names("qd"), joint_names("qdd"), joint_names("u")
+DQ, DQD = [f"der(q[{i}])" for i in (1, 2, 3)], [f"der(qd[{i}])" for i in (1, 2, 3)]
+P, V = axis_names("p"), axis_names("v")
+Q0, QD0 = joint_names("initial.q"), joint_names("initial.qd")
+
+
+class AnalyticPlantME(AdapterME):
+    """dq/dt = qd, dqd/dt = forward_dynamics(q, qd, u); the importing tool integrates."""
+
+    EXPERIMENT = (0.0, 1.0, 1e-3)
+
+    def __init__(self, **kwargs):
+        super().__init__(**kwargs)
+        kind = self.KIND
+        qu, qdu, qddu, uu = q_units(kind)
+        self.description = f"Analytic dynamics plant of the {kind} delta (model exchange)"
+        declare_robot(self, kind)
+        declare_masses(self, kind)
+        self.parameters3(Q0, home_joints(kind), qu, "initial joint position")
+        self.parameters3(QD0, (0.0, 0.0, 0.0), qdu, "initial joint velocity")
+        for i in range(3):
+            self.input(U[i], uu, f"actuator effort along +q (leg {i + 1})", hold_effort(kind)[i])
+        for i in range(3):
+            self.state(Q[i], DQ[i], qu, qdu, f"joint position (leg {i + 1})")
+        for i in range(3):
+            self.state(QD[i], DQD[i], qdu, qddu, f"joint velocity (leg {i + 1})")
+        for n, a in zip(P, "xyz"):
+            self.output(n, "m", f"platform position ({a})")
+        for n, a in zip(V, "xyz"):
+            self.output(n, "m/s", f"platform velocity ({a})")
+
+    def start(self) -> None:
+        self.model = analytic_model(robot_from(self, self.KIND), masses_from(self, self.KIND))
+        self.put(Q, self.vec(Q0))
+        self.put(QD, self.vec(QD0))
+
+    def derivatives(self) -> None:
+        q, qd = self.vec(Q), self.vec(QD)
+        self.put(DQ, qd)
+        self.put(DQD, self.model.forward_dynamics(q, qd, self.vec(U)))
+        p, v = self.model.platform_state(q, qd)
+        self.put(P, p)
+        self.put(V, v)

@@ -1,0 +1,66 @@
+"""Plant FMUs: the analytic model integrated between communication points, and the Exudyn plant."""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.integrate import solve_ivp
+
+from delta.dynamics import analytic_model
+
+from .._fmi import Adapter, axis_names, joint_names
+from .common import declare_masses, declare_robot, hold_effort, home_joints, masses_from, q_units, robot_from
+
+Q, QD, U = joint_names("q"), joint_names("qd"), joint_names("u")
+P, V = axis_names("p"), axis_names("v")
+Q0, QD0 = joint_names("initial.q"), joint_names("initial.qd")
+
+
+def declare_plant_interface(fmu: Adapter, kind: str) -> None:
+    """Inputs u, outputs q, qd, p, v and the initial-state parameters shared by the plants."""
+    qu, qdu, _, uu = q_units(kind)
+    declare_robot(fmu, kind)
+    declare_masses(fmu, kind)
+    q0 = home_joints(kind)
+    fmu.parameters3(Q0, q0, qu, "initial joint position")
+    fmu.parameters3(QD0, (0.0, 0.0, 0.0), qdu, "initial joint velocity")
+    fmu.inputs3(U, uu, "actuator effort along +q", hold_effort(kind))
+    fmu.outputs3(Q, qu, "joint position", q0)
+    fmu.outputs3(QD, qdu, "joint velocity")
+    fmu.outputs3(P, "m", "platform position")
+    fmu.outputs3(V, "m/s", "platform velocity")
+
+
+class AnalyticPlant(Adapter):
+    """Analytic virtual-work dynamics (delta.dynamics) integrated by DOP853 over each communication step,
+    with the effort u held constant over the step (zero-order hold)."""
+
+    EXPERIMENT = (0.0, 1.0, 1e-3)
+
+    def __init__(self, **kwargs):
+        super().__init__(**kwargs)
+        self.description = f"Analytic dynamics plant of the {self.KIND} delta (co-simulation)"
+        declare_plant_interface(self, self.KIND)
+        self.parameter("solver.rtol", 1e-10, "1", "relative tolerance of the DOP853 integrator")
+        self.parameter("solver.atol", 1e-12, "1", "absolute tolerance of the DOP853 integrator")
+
+    def start(self) -> None:
+        self.model = analytic_model(robot_from(self, self.KIND), masses_from(self, self.KIND))
+        self.state = np.concatenate([self.vec(Q0), self.vec(QD0)])
+
+    def _rhs(self, t: float, x: np.ndarray, u: np.ndarray) -> np.ndarray:
+        return np.concatenate([x[3:], self.model.forward_dynamics(x[:3], x[3:], u)])
+
+    def advance(self, t: float, h: float) -> None:
+        sol = solve_ivp(self._rhs, (t, t + h), self.state, method="DOP853", args=(self.vec(U),),
+                        rtol=self.values["solver.rtol"], atol=self.values["solver.atol"])
+        if not sol.success:
+            raise RuntimeError(f"{self.modelName} at t = {t:.6f} s: integration failed: {sol.message}")
+        self.state = sol.y[:, -1]
+
+    def refresh(self) -> None:
+        q, qd = self.state[:3], self.state[3:]
+        self.put(Q, q)
+        self.put(QD, qd)
+        p, v = self.model.platform_state(q, qd)
+        self.put(P, p)
+        self.put(V, v)
