@@ -225,6 +225,9 @@ def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="python -m cosim", description="Delta robot FMI co-simulation platform")
     sub = parser.add_subparsers(dest="command", required=True)
     _robot_parser(sub)
+    from fmus.cli import register as _register_fmus
+
+    _register_fmus(sub)
     return parser
 
 

@@ -85,7 +85,7 @@ def get(name: str) -> FmuEntry:
 
 def _has_adapter(entry: FmuEntry) -> bool:
     adapter = Path(__file__).parent / "adapters" / f"{entry.module}.py"
-    return adapter.exists() and all(_module_has_api(m) for m in entry.requires)
+    return adapter.exists() and f"class {entry.cls}(" in adapter.read_text() and all(_module_has_api(m) for m in entry.requires)
 
 
 def _module_has_api(module: str) -> bool:

@@ -82,8 +82,8 @@ def masses_from(fmu, kind: str):
     return cls(**{f.name: fmu.values[_MASSES[f.name][0]] for f in fields(cls)})
 
 
-HOME = {"linear": (0.0, 0.0, -0.5), "rotary": (0.0, 0.0, -0.4108)}
-"""Default platform position of each kind (plant initial state, IK input start), m."""
+HOME = {"linear": (0.1, 0.0, -0.45), "rotary": (0.0, 0.0, -0.4108)}
+"""Default platform position of each kind (plant initial state; linear = start of the default helix), m."""
 
 
 def home_joints(kind: str) -> tuple[float, float, float]:

@@ -8,7 +8,7 @@ from scipy.integrate import solve_ivp
 from delta.dynamics import analytic_model
 
 from .._fmi import Adapter, axis_names, joint_names
-from .common import declare_masses, declare_robot, hold_effort, home_joints, masses_from, q_units, robot_from
+from .common import HOME, declare_masses, declare_robot, hold_effort, home_joints, masses_from, q_units, robot_from
 
 Q, QD, U = joint_names("q"), joint_names("qd"), joint_names("u")
 P, V = axis_names("p"), axis_names("v")
@@ -64,3 +64,42 @@ class AnalyticPlant(Adapter):
         p, v = self.model.platform_state(q, qd)
         self.put(P, p)
         self.put(V, v)
+
+
+class ExudynPlant(Adapter):
+    """Exudyn multibody plant (multibody.make_plant), ``model.fidelity`` = "full" or "lumped"."""
+
+    EXPERIMENT = (0.0, 0.5, 1e-3)
+
+    def __init__(self, **kwargs):
+        super().__init__(**kwargs)
+        kind = self.KIND
+        qu, qdu, _, uu = q_units(kind)
+        self.description = f"Exudyn multibody plant of the {kind} delta (full rigid legs or lumped point masses)"
+        declare_robot(self, kind)
+        declare_masses(self, kind)
+        self.parameter("model.fidelity", "full", None, "multibody fidelity: full (rigid rods) or lumped (point masses)")
+        self.parameters3(axis_names("initial.p"), HOME[kind], "m", "initial platform position")
+        self.inputs3(U, uu, "actuator effort along +q", hold_effort(kind))
+        self.outputs3(Q, qu, "joint position", home_joints(kind))
+        self.outputs3(QD, qdu, "joint velocity")
+        self.outputs3(P, "m", "platform position", HOME[kind])
+        self.outputs3(V, "m/s", "platform velocity")
+        self.outputs3(joint_names("reaction"), uu, "actuator effort applied during the last step")
+
+    def start(self) -> None:
+        from multibody import make_plant
+
+        self.plant = make_plant(robot_from(self, self.KIND), masses_from(self, self.KIND),
+                                fidelity=self.values["model.fidelity"])
+        self._show(self.plant.reset(self.vec(axis_names("initial.p")), t0=self.time))
+
+    def _show(self, out) -> None:
+        self.put(Q, out.q)
+        self.put(QD, out.qd)
+        self.put(P, out.p)
+        self.put(V, out.v)
+        self.put(joint_names("reaction"), out.reaction)
+
+    def advance(self, t: float, h: float) -> None:
+        self._show(self.plant.step(t, h, self.vec(U)))
