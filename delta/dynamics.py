@@ -372,14 +372,18 @@ class _DeltaModel:
 
     def forward_dynamics(self, q: np.ndarray, qd: np.ndarray, f: np.ndarray) -> np.ndarray:
         """Joint accelerations ``qdd = M^-1 (f - C qd - G)`` (3,)."""
+        return np.array(self.accel(q, qd, f))
+
+    def accel(self, q, qd, f) -> _Vec:  # noqa: ANN001
+        """:meth:`forward_dynamics` on any 3-sequences, returning a float tuple (integrator fast path)."""
         m, c, g = self.terms(q, qd)
         mi = _inv3(m)
         r0, r1, r2 = float(f[0]) - c[0] - g[0], float(f[1]) - c[1] - g[1], float(f[2]) - c[2] - g[2]
-        return np.array([
+        return (
             mi[0][0] * r0 + mi[0][1] * r1 + mi[0][2] * r2,
             mi[1][0] * r0 + mi[1][1] * r1 + mi[1][2] * r2,
             mi[2][0] * r0 + mi[2][1] * r1 + mi[2][2] * r2,
-        ])
+        )
 
     def energy(self, q: np.ndarray, qd: np.ndarray) -> tuple[float, float]:
         """Kinetic and potential energy of the lumped model, J (potential zero at q = 0, p_z = 0)."""

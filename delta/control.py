@@ -1,0 +1,215 @@
+"""Discrete-time joint-space controllers (thesis sections 9-11), SI units.
+
+Each controller is called once per sample period ``h`` with the measured joint
+state and the joint references and returns the actuator efforts ``u`` (3,) along
++q (N for a linear delta, N*m for a rotary delta), held constant over the period.
+Gains are per joint: a scalar or 3 values. Controllers hold ``h`` and their state
+(the PID integral); :meth:`reset` clears it.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from .dynamics import AnalyticModel
+from .errors import ParameterError
+from .robots import LinearDelta, Robot
+
+__all__ = ["Controller", "PD", "PID", "PDPlus", "CTC", "default_controller", "DEFAULT_GAINS", "KINDS"]
+
+_Vec = tuple[float, float, float]
+
+
+def _per_joint(cls: str, name: str, value: object, positive: bool = False) -> _Vec:
+    arr = np.asarray(value, dtype=float).reshape(-1)
+    if arr.size == 1:
+        arr = np.repeat(arr, 3)
+    if arr.shape != (3,) or not np.all(np.isfinite(arr)):
+        raise ParameterError(f"{cls}.{name} must be a scalar or 3 finite values, got {value!r}")
+    if np.any(arr <= 0.0) if positive else np.any(arr < 0.0):
+        raise ParameterError(f"{cls}.{name} must be {'> 0' if positive else '>= 0'} per joint, got {value!r}")
+    return float(arr[0]), float(arr[1]), float(arr[2])
+
+
+def _limit(cls: str, name: str, value: object) -> _Vec | None:
+    return None if value is None else _per_joint(cls, name, value, positive=True)
+
+
+def _period(cls: str, h: float) -> float:
+    if not (h > 0.0 and math.isfinite(h)):
+        raise ParameterError(f"{cls}.h must be a sample period > 0 s, got {h!r}")
+    return float(h)
+
+
+def _clip(u: list[float], u_max: _Vec | None) -> np.ndarray:
+    if u_max is not None:
+        for i in range(3):
+            if u[i] > u_max[i]:
+                u[i] = u_max[i]
+            elif u[i] < -u_max[i]:
+                u[i] = -u_max[i]
+    return np.array(u)
+
+
+class Controller:
+    """Interface: ``reset()`` and ``step(q, qd, q_ref, qd_ref, qdd_ref) -> u`` (all (3,))."""
+
+    h: float
+    u_max: _Vec | None
+
+    def reset(self) -> None:
+        """Clear the internal state (nothing for stateless laws)."""
+
+    def step(self, q, qd, q_ref, qd_ref, qdd_ref) -> np.ndarray:  # noqa: ANN001
+        raise NotImplementedError
+
+
+class PD(Controller):
+    """``u = Kp (q_ref - q) + Kd (qd_ref - qd)`` (thesis eq. (39)), saturated at ``u_max``.
+
+    ``kp`` in N/m (N*m/rad), ``kd`` in N*s/m (N*m*s/rad).
+    """
+
+    def __init__(self, kp, kd, h: float, u_max=None) -> None:  # noqa: ANN001
+        self.kp = _per_joint("PD", "kp", kp, positive=True)
+        self.kd = _per_joint("PD", "kd", kd)
+        self.h = _period("PD", h)
+        self.u_max = _limit("PD", "u_max", u_max)
+
+    def step(self, q, qd, q_ref, qd_ref, qdd_ref) -> np.ndarray:  # noqa: ANN001
+        kp, kd = self.kp, self.kd
+        u = [kp[i] * (q_ref[i] - q[i]) + kd[i] * (qd_ref[i] - qd[i]) for i in range(3)]
+        return _clip(u, self.u_max)
+
+
+class PID(Controller):
+    """``u = Kp e + Kd e_dot + Ki int e dt`` (thesis eq. (40)) with anti-windup and saturation.
+
+    The integral is the forward-Euler sum of ``e h``. Anti-windup: (1) conditional
+    integration, the integral does not grow while the output is saturated and the error
+    pushes it further into saturation; (2) the integral contribution ``Ki int e`` is
+    clamped to ``+-i_max`` (default ``u_max``). ``ki`` in N/(m*s) (N*m/(rad*s)).
+    """
+
+    def __init__(self, kp, ki, kd, h: float, u_max=None, i_max=None) -> None:  # noqa: ANN001
+        self.kp = _per_joint("PID", "kp", kp, positive=True)
+        self.ki = _per_joint("PID", "ki", ki)
+        self.kd = _per_joint("PID", "kd", kd)
+        self.h = _period("PID", h)
+        self.u_max = _limit("PID", "u_max", u_max)
+        self.i_max = _limit("PID", "i_max", i_max) if i_max is not None else self.u_max
+        self.integral = [0.0, 0.0, 0.0]
+
+    def reset(self) -> None:
+        self.integral = [0.0, 0.0, 0.0]
+
+    def step(self, q, qd, q_ref, qd_ref, qdd_ref) -> np.ndarray:  # noqa: ANN001
+        u = [0.0, 0.0, 0.0]
+        for i in range(3):
+            e = q_ref[i] - q[i]
+            pd = self.kp[i] * e + self.kd[i] * (qd_ref[i] - qd[i])
+            old = self.integral[i]
+            new = old + e * self.h
+            if self.i_max is not None:
+                bound = self.i_max[i] / self.ki[i] if self.ki[i] > 0.0 else math.inf
+                new = min(max(new, -bound), bound)
+            out = pd + self.ki[i] * new
+            if self.u_max is not None and abs(out) > self.u_max[i] and out * e > 0.0 and abs(new) > abs(old):
+                new = old  # conditional integration
+                out = pd + self.ki[i] * new
+            self.integral[i] = new
+            u[i] = out
+        return _clip(u, self.u_max)
+
+
+class PDPlus(Controller):
+    """PD with gravity compensation: ``u = Kp e + Kd e_dot + G(q)`` from the analytic model."""
+
+    def __init__(self, model: AnalyticModel, kp, kd, h: float, u_max=None) -> None:  # noqa: ANN001
+        self.model = model
+        self.kp = _per_joint("PDPlus", "kp", kp, positive=True)
+        self.kd = _per_joint("PDPlus", "kd", kd)
+        self.h = _period("PDPlus", h)
+        self.u_max = _limit("PDPlus", "u_max", u_max)
+
+    def step(self, q, qd, q_ref, qd_ref, qdd_ref) -> np.ndarray:  # noqa: ANN001
+        g = self.model._grav(self.model._kin(q))
+        kp, kd = self.kp, self.kd
+        u = [kp[i] * (q_ref[i] - q[i]) + kd[i] * (qd_ref[i] - qd[i]) + g[i] for i in range(3)]
+        return _clip(u, self.u_max)
+
+
+class CTC(Controller):
+    """Computed torque control ``u = M(q) (qdd_ref + Kd e_dot + Kp e) + C(q, qd) qd + G(q)`` (thesis eq. (50)).
+
+    ``kp`` in 1/s^2 and ``kd`` in 1/s (the error dynamics are ``e'' + Kd e' + Kp e = 0``,
+    thesis eq. (48)-(49)). With ``feedforward=False`` the velocity and acceleration
+    references are dropped (``qd_ref = qdd_ref = 0``: regulation to ``q_ref``).
+    """
+
+    def __init__(self, model: AnalyticModel, kp, kd, h: float, u_max=None, feedforward: bool = True) -> None:  # noqa: ANN001
+        self.model = model
+        self.kp = _per_joint("CTC", "kp", kp, positive=True)
+        self.kd = _per_joint("CTC", "kd", kd)
+        self.h = _period("CTC", h)
+        self.u_max = _limit("CTC", "u_max", u_max)
+        self.feedforward = bool(feedforward)
+
+    def step(self, q, qd, q_ref, qd_ref, qdd_ref) -> np.ndarray:  # noqa: ANN001
+        m, c, g = self.model.terms(q, qd)
+        kp, kd = self.kp, self.kd
+        if self.feedforward:
+            w = [qdd_ref[i] + kd[i] * (qd_ref[i] - qd[i]) + kp[i] * (q_ref[i] - q[i]) for i in range(3)]
+        else:
+            w = [kp[i] * (q_ref[i] - q[i]) - kd[i] * qd[i] for i in range(3)]
+        u = [m[i][0] * w[0] + m[i][1] * w[1] + m[i][2] * w[2] + c[i] + g[i] for i in range(3)]  # thesis eq. (50)
+        return _clip(u, self.u_max)
+
+
+KINDS = ("pd", "pid", "pdplus", "ctc")
+
+# Tuned on the analytic model, h = 1 ms (see tests/unit/test_control.py). Joint-space
+# effective inertia: linear thesis robot ~1.0-1.6 kg, rotary prototype ~0.03-0.05 kg m^2.
+# PD/PID/PD+: kp sets the stiffness (sag G/kp), kd ~ critical damping 2 sqrt(kp m);
+# PID integral time kp/ki = 0.1 s (Routh: kd kp > m ki holds with a wide margin).
+# CTC: natural frequency 150 rad/s, damping ratio 1 (kp = wn^2, kd = 2 wn): wn h = 0.15.
+# u_max: assumed actuator limits (the thesis gives none), far above the helix's needs.
+DEFAULT_GAINS: dict[str, dict[str, dict[str, float]]] = {
+    "linear": {
+        "pd": {"kp": 4.0e4, "kd": 500.0},
+        "pid": {"kp": 4.0e4, "ki": 4.0e5, "kd": 500.0},
+        "pdplus": {"kp": 4.0e4, "kd": 500.0},
+        "ctc": {"kp": 22500.0, "kd": 300.0},
+        "u_max": {"u_max": 500.0},
+    },
+    "rotary": {
+        "pd": {"kp": 1000.0, "kd": 12.0},
+        "pid": {"kp": 1000.0, "ki": 1.0e4, "kd": 12.0},
+        "pdplus": {"kp": 1000.0, "kd": 12.0},
+        "ctc": {"kp": 22500.0, "kd": 300.0},
+        "u_max": {"u_max": 50.0},
+    },
+}
+
+
+def default_controller(kind: str, robot: Robot, model: AnalyticModel | None = None, h: float = 1e-3) -> Controller:
+    """A controller of ``kind`` (``"pd"``, ``"pid"``, ``"pdplus"``, ``"ctc"``) with the tuned defaults.
+
+    ``model`` is required by ``"pdplus"`` and ``"ctc"``.
+    """
+    if kind not in KINDS:
+        raise ParameterError(f"unknown controller kind {kind!r}; valid kinds: {', '.join(KINDS)}")
+    table = DEFAULT_GAINS["linear" if isinstance(robot, LinearDelta) else "rotary"]
+    gains = table[kind]
+    u_max = table["u_max"]["u_max"]
+    if kind in ("pdplus", "ctc") and model is None:
+        raise ParameterError(f"controller {kind!r} needs the analytic model (pass model=analytic_model(robot))")
+    if kind == "pd":
+        return PD(gains["kp"], gains["kd"], h, u_max=u_max)
+    if kind == "pid":
+        return PID(gains["kp"], gains["ki"], gains["kd"], h, u_max=u_max)
+    if kind == "pdplus":
+        return PDPlus(model, gains["kp"], gains["kd"], h, u_max=u_max)
+    return CTC(model, gains["kp"], gains["kd"], h, u_max=u_max)
