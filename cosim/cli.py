@@ -3,8 +3,9 @@
 The CLI is thin: each subcommand parses its options, calls one library
 function and prints the result (readable, or JSON with ``--json``). Heavy
 imports happen inside the command that needs them. Errors print one line on
-stderr and exit non-zero: 2 for an unreachable pose or bad input, 1 for a failed
-acceptance check.
+stderr (one line per issue for a scenario) and exit non-zero: 2 for an
+unreachable pose, bad input or a failed FMU, 1 for a failed acceptance check,
+130 on Ctrl-C (the MCAP log is finished first).
 """
 
 from __future__ import annotations
@@ -218,6 +219,100 @@ def _cmd_singularity(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
+# --------------------------------------------------------------------------- co-simulation
+
+EXIT_INTERRUPTED = 130
+
+
+def _cosim_parser(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("run", help="run a co-simulation scenario (YAML) and log it to MCAP")
+    p.add_argument("scenario", help="scenario file")
+    p.add_argument("--out", help="MCAP output path (default: the scenario's logging.out or runs/<name>.mcap)")
+    p.add_argument("--stop-time", type=float, help="override time.stop, s")
+    p.add_argument("--set", action="append", default=[], metavar="COMP.PARAM=VALUE",
+                   help="override a component parameter (repeatable)")
+    p.add_argument("--no-log", action="store_true", help="do not write an MCAP file")
+    p.add_argument("--quiet", action="store_true", help="no progress bar and no summary")
+    p.add_argument("--json", action="store_true", help="summary as JSON on stdout")
+    p.set_defaults(handler=_cmd_run)
+
+    p = sub.add_parser("check", help="validate a scenario and run the pre-flight only")
+    p.add_argument("scenario")
+    p.add_argument("--set", action="append", default=[], metavar="COMP.PARAM=VALUE")
+    p.add_argument("--json", action="store_true")
+    p.set_defaults(handler=_cmd_check)
+
+    p = sub.add_parser("schema", help="print the scenario JSON Schema (for editors)")
+    p.set_defaults(handler=_cmd_schema)
+
+    p = sub.add_parser("recover", help="rewrite an unfinished MCAP log into a valid, indexed one")
+    p.add_argument("file")
+    p.add_argument("--out", help="output path (default: FILE with .recovered.mcap)")
+    p.add_argument("--json", action="store_true")
+    p.set_defaults(handler=_cmd_recover)
+
+
+def _summary_text(res) -> str:
+    lines = [f"{res.scenario}: {res.status}{(' - ' + res.message) if res.message else ''}",
+             f"  {res.steps} steps, {res.sim_time:.4g} s simulated in {res.wall_time:.3f} s wall "
+             f"(real-time factor {res.real_time_factor:.3g})"]
+    total = sum(res.component_time.values()) or 1.0
+    share = ", ".join(f"{n} {100 * t / res.wall_time if res.wall_time else 0:.0f}%"
+                      for n, t in sorted(res.component_time.items(), key=lambda kv: -kv[1]))
+    lines.append(f"  time share: {share}, master {100 * max(0.0, 1 - total / res.wall_time) if res.wall_time else 0:.0f}%")
+    for e in res.errors:
+        lines.append(f"  {e.actual} vs {e.reference}: RMSE {e.rmse:.4g}, max error {e.max_error:.4g}")
+    for name, c in res.checks.items():
+        lines.append(f"  check {name}: {c['value']:.4g} {'<=' if c['ok'] else '>'} {c['limit']:g} "
+                     f"{'ok' if c['ok'] else 'FAILED'}")
+    if res.mcap:
+        lines.append(f"  log: {res.mcap}")
+    return "\n".join(lines)
+
+
+def _cmd_run(args: argparse.Namespace) -> int:
+    from .run import run_scenario
+    from .scenario import apply_overrides, load_scenario
+
+    scenario = load_scenario(args.scenario, apply_overrides(args.set, args.stop_time))
+    res = run_scenario(scenario, out=args.out, log=False if args.no_log else None,
+                       progress=not (args.quiet or args.json))
+    if args.json:
+        print(json.dumps(res.as_dict(), indent=2))
+    elif not args.quiet:
+        print(_summary_text(res))
+    return EXIT_OK if res.passed else EXIT_CHECK_FAILED
+
+
+def _cmd_check(args: argparse.Namespace) -> int:
+    from .run import check_scenario
+    from .scenario import apply_overrides
+
+    scenario, plan, report = check_scenario(args.scenario, apply_overrides(args.set))
+    order = " -> ".join(plan.names[c] for c in plan.order)
+    payload = {"scenario": scenario.name, "ok": True, "preflight": report, "order": [plan.names[c] for c in plan.order],
+               "connections": len(plan.links)}
+    _emit(args, payload, f"{scenario.name}: ok\n  pre-flight: {report}\n  order: {order}\n"
+                         f"  {len(plan.links)} connections")
+    return EXIT_OK
+
+
+def _cmd_schema(args: argparse.Namespace) -> int:
+    from .scenario import scenario_json_schema
+
+    print(json.dumps(scenario_json_schema(), indent=2))
+    return EXIT_OK
+
+
+def _cmd_recover(args: argparse.Namespace) -> int:
+    from .recover import recover
+
+    rep = recover(args.file, args.out)
+    _emit(args, rep.as_dict(), f"recovered {rep.messages} messages on {rep.channels} channels "
+                               f"({rep.attachments} attachments, {rep.metadata} metadata) -> {rep.out}")
+    return EXIT_OK
+
+
 # --------------------------------------------------------------------------- entry
 
 
@@ -225,6 +320,7 @@ def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="python -m cosim", description="Delta robot FMI co-simulation platform")
     sub = parser.add_subparsers(dest="command", required=True)
     _robot_parser(sub)
+    _cosim_parser(sub)
     from fmus.cli import register as _register_fmus
 
     _register_fmus(sub)
@@ -241,8 +337,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f"error: {exc}", file=sys.stderr)
         return EXIT_BAD_INPUT
     except CosimError as exc:
-        print(f"error: {exc}", file=sys.stderr)
+        text = str(exc)
+        print(f"error: {text}" if "\n" not in text else "error:\n" + text, file=sys.stderr)
         return EXIT_BAD_INPUT
     except KeyboardInterrupt:
         print("interrupted", file=sys.stderr)
-        return 130
+        return EXIT_INTERRUPTED

@@ -1,0 +1,171 @@
+"""Master algorithms: Gauss-Seidel (default) and Jacobi, multi-rate, integer time.
+
+Time is an integer count of nanoseconds: ``t_ns = start_ns + k * step_ns``, never
+a float accumulated step after step. A component with step multiple ``m`` steps
+at base steps ``k`` with ``k % m == 0`` over ``m * step``.
+
+Gauss-Seidel: components run in the plan's order; each reads its inputs from the
+latest outputs (those already advanced in this macro step included).
+Jacobi: every active component reads the outputs of the previous macro step, then
+all step, then all outputs are read.
+
+Observers are called after each macro step with the components that stepped.
+A stop request (Ctrl-C) is honoured between macro steps, never inside an FMU call.
+"""
+
+from __future__ import annotations
+
+import math
+import signal
+import threading
+import time as _time
+from dataclasses import dataclass, field
+from typing import Any, Callable, Protocol, Sequence
+
+from .fmu import Slave
+from .system import SystemPlan
+
+__all__ = ["Observer", "Runtime", "initialize", "simulate", "StopRequest"]
+
+
+class Observer(Protocol):
+    """Watches a run; never changes inputs. Methods are called in this order."""
+
+    def start(self, rt: "Runtime") -> None: ...
+    def stepped(self, k: int, t_ns: int, active: Sequence[int]) -> None: ...
+    def finish(self, rt: "Runtime", error: BaseException | None) -> None: ...
+
+
+@dataclass
+class Runtime:
+    """A plan bound to live slaves: links as direct buffer copies, timings, the schedule."""
+
+    plan: SystemPlan
+    slaves: list[Slave]
+    start_ns: int
+    stop_ns: int
+    step_ns: int
+    multiples: list[int]
+    algorithm: str = "gauss_seidel"
+    comp_time: list[float] = field(default_factory=list)  # wall seconds spent in each component
+    k_done: int = 0  # macro steps completed
+    copies: list[list[tuple[Any, int, Any, int]]] = field(default_factory=list)
+
+    def __post_init__(self) -> None:
+        self.comp_time = [0.0] * len(self.slaves)
+        self.copies = [[] for _ in self.slaves]
+        for lk in self.plan.links:
+            dv, di = self.slaves[lk.dst.comp].locate(lk.dst.var, output=False)
+            sv, si = self.slaves[lk.src.comp].locate(lk.src.var, output=True)
+            self.copies[lk.dst.comp].append((dv, di, sv, si))
+
+    @property
+    def n_steps(self) -> int:
+        return (self.stop_ns - self.start_ns) // self.step_ns
+
+    def t_ns(self, k: int) -> int:
+        return self.start_ns + k * self.step_ns
+
+    def schedule(self) -> list[list[int]]:
+        """Active components (in order) for each base step of one hyper-period."""
+        period = math.lcm(*self.multiples) if self.multiples else 1
+        return [[c for c in self.plan.order if k % self.multiples[c] == 0] for k in range(period)]
+
+    def pull(self, c: int) -> None:
+        """Copy connected outputs into component ``c``'s input buffers."""
+        for dv, di, sv, si in self.copies[c]:
+            dv[di] = sv[si]
+
+
+class StopRequest:
+    """Turns SIGINT into a flag checked between macro steps (an FMU is never interrupted mid-call)."""
+
+    def __init__(self) -> None:
+        self.requested = False
+        self._previous = None
+
+    def __enter__(self) -> "StopRequest":
+        if threading.current_thread() is threading.main_thread():
+            self._previous = signal.signal(signal.SIGINT, self._handle)
+        return self
+
+    def _handle(self, signum, frame) -> None:
+        if self.requested:  # second Ctrl-C: give up waiting
+            raise KeyboardInterrupt
+        self.requested = True
+
+    def __exit__(self, *exc) -> None:
+        if self._previous is not None:
+            signal.signal(signal.SIGINT, self._previous)
+
+
+def initialize(rt: Runtime) -> None:
+    """Instantiate, set start values, initialization mode, propagate outputs in order, exit."""
+    start, stop = rt.start_ns * 1e-9, rt.stop_ns * 1e-9
+    for c, s in enumerate(rt.slaves):
+        s.instantiate()
+        s.set_start(rt.plan.start_values[c])
+        s.enter_initialization(start, stop)
+    for c in rt.plan.order:
+        s = rt.slaves[c]
+        rt.pull(c)
+        s.set_inputs()
+        s.get_outputs()
+    for c in rt.plan.order:  # second pass: inputs of components whose sources come later in the order
+        rt.pull(c)
+        rt.slaves[c].set_inputs()
+    for s in rt.slaves:
+        s.exit_initialization()
+    for c in rt.plan.order:
+        rt.slaves[c].get_outputs()
+
+
+def simulate(rt: Runtime, observers: Sequence[Observer] = (), stop: StopRequest | None = None,
+             progress: Callable[[int], None] | None = None, progress_every: int = 0) -> None:
+    """Run the macro steps from ``rt.k_done`` to the end. Raises KeyboardInterrupt on a stop request."""
+    schedule = rt.schedule()
+    period = len(schedule)
+    slaves = rt.slaves
+    h = [m * rt.step_ns * 1e-9 for m in rt.multiples]
+    copies = rt.copies
+    ctime = rt.comp_time
+    clock = _time.perf_counter
+    stepped = [o.stepped for o in observers]
+    jacobi = rt.algorithm == "jacobi"
+    start_ns, step_ns = rt.start_ns, rt.step_ns
+    for k in range(rt.k_done, rt.n_steps):
+        t = (start_ns + k * step_ns) * 1e-9
+        active = schedule[k % period]
+        if jacobi:
+            for c in active:
+                t0 = clock()
+                for dv, di, sv, si in copies[c]:
+                    dv[di] = sv[si]
+                slaves[c].set_inputs()
+                ctime[c] += clock() - t0
+            for c in active:
+                t0 = clock()
+                slaves[c].step(t, h[c])
+                ctime[c] += clock() - t0
+            for c in active:
+                t0 = clock()
+                slaves[c].get_outputs()
+                ctime[c] += clock() - t0
+        else:
+            for c in active:
+                t0 = clock()
+                s = slaves[c]
+                for dv, di, sv, si in copies[c]:
+                    dv[di] = sv[si]
+                s.set_inputs()
+                s.step(t, h[c])
+                s.get_outputs()
+                ctime[c] += clock() - t0
+        rt.k_done = k + 1
+        t_end = start_ns + (k + 1) * step_ns
+        for f in stepped:
+            f(k, t_end, active)
+        if progress is not None and progress_every and (k + 1) % progress_every == 0:
+            progress(k + 1)
+        if stop is not None and stop.requested:
+            raise KeyboardInterrupt

@@ -1,0 +1,93 @@
+"""Errors of the co-simulation master.
+
+Every class derives from :class:`delta.errors.CosimError` (the project's one root)
+and from the builtin that matches its meaning, so callers can catch either.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from delta.errors import CosimError
+
+__all__ = [
+    "CosimError",
+    "Issue",
+    "ScenarioError",
+    "WiringError",
+    "FMIError",
+    "AlgebraicLoopError",
+    "PreflightError",
+    "ComponentSourceError",
+]
+
+
+@dataclass(frozen=True)
+class Issue:
+    """One problem found in a scenario: where (file, line, dotted path) and what."""
+
+    path: str  # dotted location in the scenario, e.g. "components.ctl.parameters.gain.kp[1]"
+    message: str
+    file: str | None = None
+    line: int | None = None
+
+    def __str__(self) -> str:
+        where = f"{self.file}:{self.line}: " if self.file and self.line else (f"{self.file}: " if self.file else "")
+        path = f"{self.path}: " if self.path else ""
+        return f"{where}{path}{self.message}"
+
+
+class ScenarioError(CosimError, ValueError):
+    """A scenario is invalid. Holds every issue found, one per line of the message."""
+
+    def __init__(self, issues: list[Issue] | Issue | str):
+        if isinstance(issues, str):
+            issues = [Issue("", issues)]
+        elif isinstance(issues, Issue):
+            issues = [issues]
+        self.issues: list[Issue] = list(issues)
+        super().__init__("\n".join(str(i) for i in self.issues))
+
+
+class WiringError(ScenarioError):
+    """A connection names a missing variable or joins incompatible ends (kept apart for tests)."""
+
+
+class ComponentSourceError(ScenarioError):
+    """A component's FMU cannot be found or built."""
+
+
+class PreflightError(CosimError, ValueError):
+    """The pre-flight check failed (e.g. the trajectory leaves the workspace)."""
+
+
+class AlgebraicLoopError(ScenarioError):
+    """Direct-feedthrough connections form a cycle; the message lists the variables in it."""
+
+    def __init__(self, loop: list[str]):
+        self.loop = list(loop)
+        super().__init__(
+            [Issue("connections", "algebraic loop through direct feedthrough: " + " -> ".join(self.loop)
+                   + "; break it with a component that has no direct feedthrough or use algorithm: jacobi")]
+        )
+
+
+_STATUS = ("ok", "warning", "discard", "error", "fatal", "pending")
+
+
+class FMIError(CosimError, RuntimeError):
+    """An FMI call returned a failing status (or the FMU raised).
+
+    Names the component, the FMI function, the simulation time and the status.
+    """
+
+    def __init__(self, component: str, function: str, time: float, status: int | None = None,
+                 detail: str = ""):
+        self.component = component
+        self.function = function
+        self.time = time
+        self.status = status
+        label = "" if status is None else (
+            f" returned {_STATUS[status] if 0 <= status < len(_STATUS) else status}")
+        tail = f": {detail}" if detail else ""
+        super().__init__(f"component {component!r}: {function}{label} at t = {time:.6g} s{tail}")

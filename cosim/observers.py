@@ -1,0 +1,80 @@
+"""Observers that only watch: comparison statistics (RMSE, max error) and progress."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Sequence
+
+from .algorithm import Runtime
+
+__all__ = ["Comparison", "AxisError", "Probe"]
+
+
+@dataclass(frozen=True)
+class AxisError:
+    actual: str
+    reference: str
+    rmse: float
+    max_error: float
+    samples: int
+
+
+class Comparison:
+    """Accumulates actual - reference at every macro step (after it) and at the start."""
+
+    def __init__(self, actual: list[str], reference: list[str]):
+        self.actual = actual
+        self.reference = reference
+
+    def start(self, rt: Runtime) -> None:
+        self._pairs = []
+        for a, r in zip(self.actual, self.reference):
+            pa, pr = rt.plan.port(a), rt.plan.port(r)
+            self._pairs.append((rt.slaves[pa.comp].locate(pa.var, pa.var.causality == "output"),
+                                rt.slaves[pr.comp].locate(pr.var, pr.var.causality == "output")))
+        n = len(self._pairs)
+        self.sq = [0.0] * n
+        self.mx = [0.0] * n
+        self.n = 0
+        self.stepped(-1, rt.start_ns, ())
+
+    def stepped(self, k: int, t_ns: int, active: Sequence[int]) -> None:
+        sq, mx = self.sq, self.mx
+        for j, ((av, ai), (rv, ri)) in enumerate(self._pairs):
+            e = av[ai] - rv[ri]
+            sq[j] += e * e
+            if abs(e) > mx[j]:
+                mx[j] = abs(e)
+        self.n += 1
+
+    def finish(self, rt: Runtime, error: BaseException | None) -> None:
+        return None
+
+    def result(self) -> list[AxisError]:
+        return [AxisError(a, r, math.sqrt(s / self.n) if self.n else math.nan, m, self.n)
+                for a, r, s, m in zip(self.actual, self.reference, self.sq, self.mx)]
+
+
+class Probe:
+    """Keeps every value of the given signals in memory (tests, small runs)."""
+
+    def __init__(self, signals: list[str]):
+        self.signals = signals
+        self.t_ns: list[int] = []
+        self.values: dict[str, list[float]] = {s: [] for s in signals}
+
+    def start(self, rt: Runtime) -> None:
+        self._src = []
+        for s in self.signals:
+            p = rt.plan.port(s)
+            self._src.append(rt.slaves[p.comp].locate(p.var, p.var.causality == "output"))
+        self.stepped(-1, rt.start_ns, ())
+
+    def stepped(self, k: int, t_ns: int, active: Sequence[int]) -> None:
+        self.t_ns.append(t_ns)
+        for s, (arr, i) in zip(self.signals, self._src):
+            self.values[s].append(arr[i])
+
+    def finish(self, rt: Runtime, error: BaseException | None) -> None:
+        return None

@@ -1,0 +1,218 @@
+"""Orchestration: load, pre-flight, locate/build FMUs, instantiate, initialize, loop, summary."""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Sequence
+
+from .algorithm import Observer, Runtime, StopRequest, initialize, simulate
+from .errors import ComponentSourceError, CosimError, Issue
+from .fmu import FMUInfo, load_fmu, make_slave
+from .observers import AxisError, Comparison
+from .scenario import Scenario, _line_for, expand_signal, load_scenario
+
+__all__ = ["RunResult", "locate_fmus", "prepare", "run_scenario", "check_scenario"]
+
+
+@dataclass
+class RunResult:
+    """What a run produced: timings, errors against the reference, check verdicts, log path."""
+
+    scenario: str
+    steps: int
+    sim_time: float  # s simulated
+    wall_time: float  # s in the loop
+    component_time: dict[str, float]  # s per component
+    errors: list[AxisError] = field(default_factory=list)
+    checks: dict[str, dict[str, Any]] = field(default_factory=dict)
+    mcap: str | None = None
+    status: str = "completed"  # completed | interrupted | error
+    message: str = ""
+
+    @property
+    def real_time_factor(self) -> float:
+        return self.sim_time / self.wall_time if self.wall_time > 0 else float("inf")
+
+    @property
+    def passed(self) -> bool:
+        return all(c["ok"] for c in self.checks.values())
+
+    def as_dict(self) -> dict[str, Any]:
+        return {"scenario": self.scenario, "status": self.status, "message": self.message, "steps": self.steps,
+                "sim_time_s": self.sim_time, "wall_time_s": self.wall_time,
+                "real_time_factor": self.real_time_factor, "component_time_s": self.component_time,
+                "errors": [e.__dict__ for e in self.errors], "checks": self.checks, "passed": self.passed,
+                "mcap": self.mcap}
+
+
+def locate_fmus(scenario: Scenario) -> dict[str, FMUInfo]:
+    """Each component's FMU: ``path`` relative to the scenario file, or ``fmu`` built by fmus.registry."""
+    base = Path(scenario.source).parent if scenario.source and scenario.source != "<string>" else Path.cwd()
+    lines = getattr(scenario, "_lines", {})
+    infos: dict[str, FMUInfo] = {}
+    issues: list[Issue] = []
+    built: dict[str, Path] = {}
+    for name, comp in scenario.components.items():
+        loc = ("components", name, "fmu" if comp.fmu else "path")
+        where = dict(file=scenario.source, line=_line_for(loc, lines))
+        try:
+            if comp.path is not None:
+                path = Path(comp.path)
+                path = path if path.is_absolute() else base / path
+                if not path.exists():
+                    issues.append(Issue(f"components.{name}.path", f"FMU file not found: {path}", **where))
+                    continue
+            else:
+                if comp.fmu not in built:
+                    built[comp.fmu] = _build_ours(comp.fmu)
+                path = built[comp.fmu]
+            infos[name] = load_fmu(path)
+        except ComponentSourceError as exc:
+            issues += [Issue(f"components.{name}", i.message, **where) for i in exc.issues]
+    if issues:
+        raise ComponentSourceError(issues)
+    return infos
+
+
+def _build_ours(name: str) -> Path:
+    try:
+        from fmus import registry
+    except ImportError:
+        raise ComponentSourceError(Issue("", f"fmu: {name}: our FMU registry (fmus.registry) is not available; "
+                                             "give 'path' to an .fmu instead")) from None
+    try:
+        return Path(registry.build(name))
+    except (KeyError, ValueError, LookupError) as exc:
+        known = getattr(registry, "names", None)
+        hint = f"; known: {', '.join(known())}" if callable(known) else ""
+        raise ComponentSourceError(Issue("", f"unknown FMU {name!r}: {exc}{hint}")) from None
+
+
+def prepare(scenario: Scenario, log_signals: str | None = None):
+    """Pre-flight and plan (no FMU instantiated): returns (plan, preflight report)."""
+    from .preflight import initial_state_values, preflight
+    from .system import build_plan
+
+    report = preflight(scenario)
+    infos = locate_fmus(scenario)
+    plan = build_plan(scenario, infos, log_signals)
+    init = initial_state_values(scenario)
+    if init:
+        c = plan.names.index(scenario.initial_state.component)
+        variables = plan.infos[c].variables
+        missing = [n for n in init if n not in variables]
+        if missing:
+            from .errors import ScenarioError
+
+            raise ScenarioError(Issue("initial_state", f"{scenario.initial_state.component} has no "
+                                      f"{', '.join(missing)} (set initial_state.position/velocity to its start "
+                                      f"parameters, or from_trajectory: false)", scenario.source))
+        plan.start_values[c] = {**init, **plan.start_values[c]}  # explicit parameters win
+    return plan, report
+
+
+def check_scenario(path: str | Path, overrides: dict | None = None) -> tuple[Scenario, Any, str]:
+    """Validate the scenario, resolve its FMUs and wiring and run the pre-flight."""
+    scenario = load_scenario(path, overrides)
+    plan, report = prepare(scenario)
+    return scenario, plan, report
+
+
+def run_scenario(scenario: Scenario | str | Path, out: str | Path | None = None, overrides: dict | None = None,
+                 log: bool | None = None, progress: bool = False, extra_observers: Sequence[Observer] = ()
+                 ) -> RunResult:
+    """Run a scenario end to end. Raises CosimError (bad input, FMU failure) or KeyboardInterrupt.
+
+    The MCAP file, when logging, is finished whatever happens.
+    """
+    if not isinstance(scenario, Scenario):
+        scenario = load_scenario(scenario, overrides)
+    logging_on = scenario.logging.enabled if log is None else log
+    plan, _ = prepare(scenario, None if logging_on else "none")
+    slaves = [make_slave(n, plan.infos[i], scenario.components[n].interface, scenario.components[n].rtol)
+              for i, n in enumerate(plan.names)]
+    for c, s in enumerate(slaves):
+        s.bind(plan.inputs[c], plan.outputs[c])
+    rt = Runtime(plan, slaves, scenario.time.start_ns, scenario.time.stop_ns, scenario.time.step_ns,
+                 [scenario.components[n].step_multiple for n in plan.names], scenario.algorithm)
+    observers: list[Observer] = []
+    comparison = None
+    if scenario.compare is not None:
+        comparison = Comparison(expand_signal(scenario.compare.actual), expand_signal(scenario.compare.reference))
+        observers.append(comparison)
+    mcap_path = None
+    if logging_on:
+        from .mcap_log import McapRecorder
+
+        if out is not None:
+            mcap_path = Path(out)
+        elif scenario.logging.out is not None:  # relative to the scenario file
+            base = Path(scenario.source).parent if scenario.source and scenario.source != "<string>" else Path(".")
+            mcap_path = base / scenario.logging.out
+        else:
+            mcap_path = Path("runs") / f"{scenario.name}.mcap"
+        robot = None
+        scene = scenario.logging.scene
+        if scene is not None and scenario.robot:
+            from delta.robots import get_preset
+
+            robot = get_preset(scenario.robot)
+        observers.append(McapRecorder(mcap_path, scenario, scenario.source, scenario.logging.flush_interval,
+                                      robot, expand_signal(scene.position) if scene else None,
+                                      scene.rate_hz if scene else 30.0))
+    observers += list(extra_observers)
+    started: list[Observer] = []
+    error: BaseException | None = None
+    t_wall = time.perf_counter()
+    bar = None
+    try:
+        initialize(rt)
+        for o in observers:
+            o.start(rt)
+            started.append(o)
+        t_wall = time.perf_counter()
+        cb, every = None, 0
+        if progress and rt.n_steps >= 1000:
+            from rich.progress import BarColumn, Progress, TextColumn, TimeRemainingColumn
+
+            bar = Progress(TextColumn("[bold]{task.description}"), BarColumn(), TextColumn("{task.percentage:>3.0f}%"),
+                           TimeRemainingColumn(), transient=True)
+            bar.start()
+            task = bar.add_task(scenario.name, total=rt.n_steps)
+            every = max(1, rt.n_steps // 200)
+            cb = lambda k: bar.update(task, completed=k)  # noqa: E731
+        with StopRequest() as stop:
+            simulate(rt, observers, stop, cb, every)
+    except BaseException as exc:  # finish the log on every failure, Ctrl-C included, then re-raise
+        error = exc
+        raise
+    finally:
+        wall = time.perf_counter() - t_wall
+        if bar is not None:
+            bar.stop()
+        for s in slaves:
+            try:
+                if error is None:
+                    s.terminate()
+            except CosimError as exc:
+                error = error or exc
+            finally:
+                s.free()
+        for o in started:
+            o.finish(rt, error)
+    result = RunResult(scenario.name, rt.k_done, rt.k_done * rt.step_ns * 1e-9, wall,
+                       dict(zip(plan.names, rt.comp_time)), mcap=str(mcap_path) if mcap_path else None)
+    if comparison is not None:
+        result.errors = comparison.result()
+        if scenario.checks is not None:
+            worst_rmse = max(e.rmse for e in result.errors)
+            worst_max = max(e.max_error for e in result.errors)
+            if scenario.checks.max_rmse is not None:
+                result.checks["max_rmse"] = {"limit": scenario.checks.max_rmse, "value": worst_rmse,
+                                             "ok": worst_rmse <= scenario.checks.max_rmse}
+            if scenario.checks.max_error is not None:
+                result.checks["max_error"] = {"limit": scenario.checks.max_error, "value": worst_max,
+                                              "ok": worst_max <= scenario.checks.max_error}
+    return result

@@ -1,0 +1,382 @@
+"""Scenario files: pydantic v2 models, YAML loading with line numbers, one error list.
+
+A scenario names the components (our FMUs by name or any FMU by path), their
+parameters, the connections, the time grid, the algorithm, the initial state,
+logging, the comparison used by the summary and optional acceptance checks.
+Unknown keys are rejected. Every problem is reported at once as
+``file:line: dotted.path: message``.
+"""
+
+from __future__ import annotations
+
+import re
+from pathlib import Path
+from typing import Any, Literal, Union
+
+import yaml
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
+
+from .errors import Issue, ScenarioError
+
+__all__ = [
+    "Scenario",
+    "Component",
+    "Connection",
+    "TimeGrid",
+    "TrajectorySpec",
+    "InitialState",
+    "Logging",
+    "Compare",
+    "Checks",
+    "load_scenario",
+    "parse_scenario",
+    "scenario_json_schema",
+    "apply_overrides",
+    "expand_signal",
+    "NS_PER_S",
+]
+
+NS_PER_S = 1_000_000_000
+ParamValue = Union[bool, int, float, str, list[Union[bool, int, float]]]
+
+
+class _Model(BaseModel):
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+
+class Component(_Model):
+    """One FMU instance: ``fmu`` (one of our FMUs, by name) or ``path`` (any FMI 2.0/3.0 FMU)."""
+
+    fmu: str | None = Field(None, description="name of one of our FMUs (fmus.registry)")
+    path: str | None = Field(None, description="path to an .fmu file, relative to the scenario file")
+    parameters: dict[str, ParamValue] = Field(
+        default_factory=dict,
+        description="start values by variable name; a list sets name[1], name[2], ...")
+    step_multiple: int = Field(1, ge=1, description="steps every N base communication steps (multi-rate)")
+    interface: Literal["auto", "cs", "me"] = Field(
+        "auto", description="co-simulation or model exchange; auto prefers co-simulation")
+    feedthrough: Literal["auto", "none"] = Field(
+        "auto", description="'none' declares that no output depends directly on an input, for FMUs whose "
+                            "ModelStructure leaves dependencies undeclared (e.g. pythonfmu)")
+    rtol: float = Field(1e-6, gt=0, description="model exchange: CVode relative tolerance")
+
+    @model_validator(mode="after")
+    def _one_source(self) -> "Component":
+        if (self.fmu is None) == (self.path is None):
+            raise ValueError("give exactly one of 'fmu' (our FMU by name) or 'path' (an .fmu file)")
+        return self
+
+
+class Connection(_Model):
+    """``from: comp.var`` -> ``to: comp.var``; a name without index expands nothing."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True, populate_by_name=True)
+    src: str = Field(alias="from", description="output, as component.variable")
+    dst: str = Field(alias="to", description="input, as component.variable")
+
+    @field_validator("src", "dst")
+    @classmethod
+    def _dotted(cls, v: str) -> str:
+        if "." not in v or v.startswith(".") or v.endswith("."):
+            raise ValueError(f"expected 'component.variable', got {v!r}")
+        return v
+
+
+class TimeGrid(_Model):
+    """Stop time and base communication step, s. Converted once to integer nanoseconds."""
+
+    stop: float = Field(gt=0, description="stop time, s")
+    step: float = Field(gt=0, description="base communication step, s")
+    start: float = Field(0.0, ge=0, description="start time, s")
+
+    @model_validator(mode="after")
+    def _grid(self) -> "TimeGrid":
+        for name in ("stop", "step", "start"):
+            v = getattr(self, name)
+            # a float read from YAML is within 1e-3 ns of its intended whole-nanosecond value
+            if abs(v * NS_PER_S - round(v * NS_PER_S)) > 1e-3:
+                raise ValueError(f"{name} = {v} s is not a whole number of nanoseconds")
+        if self.stop_ns <= self.start_ns:
+            raise ValueError(f"stop ({self.stop} s) must be after start ({self.start} s)")
+        if (self.stop_ns - self.start_ns) % self.step_ns:
+            n = (self.stop_ns - self.start_ns) // self.step_ns
+            raise ValueError(
+                f"stop - start = {self.stop - self.start} s is not a whole number of steps of {self.step} s; "
+                f"use stop = {self.start + n * self.step:g} or {self.start + (n + 1) * self.step:g}")
+        return self
+
+    @property
+    def step_ns(self) -> int:
+        return round(self.step * NS_PER_S)
+
+    @property
+    def stop_ns(self) -> int:
+        return round(self.stop * NS_PER_S)
+
+    @property
+    def start_ns(self) -> int:
+        return round(self.start * NS_PER_S)
+
+
+class TrajectorySpec(_Model):
+    """The reference trajectory, for the pre-flight and the initial state.
+
+    ``type`` is one of delta.trajectories' classes (helix, pick_and_place,
+    point_to_point, waypoints); ``params`` are its constructor arguments.
+    """
+
+    type: Literal["helix", "pick_and_place", "point_to_point", "waypoints"]
+    params: dict[str, Any] = Field(default_factory=dict)
+    check_step: float = Field(0.01, gt=0, description="pre-flight sampling step, s")
+    singularity_margin: float | None = Field(
+        0.01, ge=0, description="minimum singularity proximity along the path (None: no check)")
+
+
+class InitialState(_Model):
+    """Start the plant on the trajectory at t = start (position and velocity).
+
+    The master sets ``position`` and ``velocity`` parameters of ``component``
+    from the trajectory (x, y, z order). Off: the plant keeps its own start values.
+    """
+
+    from_trajectory: bool = True
+    component: str = Field("plant", description="component whose start parameters are set")
+    position: list[str] = Field(default_factory=lambda: ["init.p.x", "init.p.y", "init.p.z"])
+    velocity: list[str] = Field(default_factory=lambda: ["init.v.x", "init.v.y", "init.v.z"])
+
+    @field_validator("position", "velocity")
+    @classmethod
+    def _three(cls, v: list[str]) -> list[str]:
+        if len(v) not in (0, 3):
+            raise ValueError(f"give 3 variable names (x, y, z) or none, got {len(v)}")
+        return v
+
+
+class SceneSpec(_Model):
+    """Where the 3D drawing takes the platform position from (needs ``robot``)."""
+
+    position: str = Field("plant.p", description="component.prefix; .x .y .z are appended")
+    rate_hz: float = Field(30.0, gt=0)
+
+
+class Logging(_Model):
+    """MCAP recording. ``signals``: all inputs and outputs, or outputs only."""
+
+    enabled: bool = True
+    out: str | None = Field(None, description="MCAP path (default runs/<scenario name>.mcap)")
+    signals: Literal["all", "outputs", "none"] = "all"
+    flush_interval: float = Field(1.0, gt=0, description="wall-clock seconds between flushes")
+    scene: SceneSpec | None = None
+
+
+class Compare(_Model):
+    """Actual vs reference signals for the summary (RMSE, max error)."""
+
+    actual: str | list[str] = Field(description="component.prefix (expands .x .y .z) or a list of names")
+    reference: str | list[str]
+
+
+class Checks(_Model):
+    """Acceptance checks on the comparison; a failure sets exit code 1."""
+
+    max_rmse: float | None = Field(None, gt=0, description="largest per-axis RMSE allowed, in signal units")
+    max_error: float | None = Field(None, gt=0, description="largest absolute error allowed")
+
+
+class Scenario(_Model):
+    """A co-simulation scenario."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True, title="cosim scenario")
+    name: str = "scenario"
+    description: str = ""
+    robot: str | None = Field(None, description="robot preset (delta.robots), for the pre-flight and the scene")
+    components: dict[str, Component]
+    connections: list[Connection] = Field(default_factory=list)
+    time: TimeGrid
+    algorithm: Literal["gauss_seidel", "jacobi"] = "gauss_seidel"
+    trajectory: TrajectorySpec | None = None
+    initial_state: InitialState = Field(default_factory=InitialState)
+    logging: Logging = Field(default_factory=Logging)
+    compare: Compare | None = None
+    checks: Checks | None = None
+    # set by the loader, not part of the file format
+    source: str | None = Field(None, exclude=True, json_schema_extra={"readOnly": True})
+
+    @model_validator(mode="after")
+    def _names(self) -> "Scenario":
+        for name in self.components:
+            if not name.isidentifier():
+                raise ValueError(f"component name {name!r} must be an identifier (letters, digits, _)")
+        return self
+
+
+def expand_signal(spec: str | list[str]) -> list[str]:
+    """``"plant.p"`` -> ``["plant.p.x", "plant.p.y", "plant.p.z"]``; a list is kept as is."""
+    if isinstance(spec, list):
+        return list(spec)
+    return [f"{spec}.{axis}" for axis in "xyz"]
+
+
+# --------------------------------------------------------------------------- YAML with lines
+
+
+def _collect_lines(node: yaml.Node, path: tuple, lines: dict[tuple, int]) -> None:
+    """Record the 1-based line of every key and item, by key path."""
+    lines.setdefault(path, node.start_mark.line + 1)
+    if isinstance(node, yaml.MappingNode):
+        for k, v in node.value:
+            key = k.value if isinstance(k, yaml.ScalarNode) else str(k)
+            lines[path + (key,)] = k.start_mark.line + 1
+            _collect_lines(v, path + (key,), lines)
+    elif isinstance(node, yaml.SequenceNode):
+        for i, v in enumerate(node.value):
+            _collect_lines(v, path + (i,), lines)
+
+
+def _format_loc(loc: tuple) -> str:
+    out = ""
+    for part in loc:
+        if isinstance(part, int):
+            out += f"[{part}]"
+        else:
+            out += ("." if out else "") + str(part)
+    return out
+
+
+def _line_for(loc: tuple, lines: dict[tuple, int]) -> int | None:
+    for n in range(len(loc), -1, -1):
+        if loc[:n] in lines:
+            return lines[loc[:n]]
+    return None
+
+
+_ALIASES = {"src": "from", "dst": "to"}
+_UNION_TAG = re.compile(r"^(bool|int|float|str|list\[.*\]|union\[.*\])$")
+_PARAM_MSG = "expected a number, a boolean, a string or a list of numbers"
+
+
+def parse_scenario(text: str, file: str = "<string>", overrides: dict[tuple, Any] | None = None) -> Scenario:
+    """Parse and validate scenario YAML; raise :class:`ScenarioError` with every issue."""
+    try:
+        root = yaml.compose(text)
+    except yaml.YAMLError as exc:
+        mark = getattr(exc, "problem_mark", None)
+        raise ScenarioError(Issue("", f"invalid YAML: {getattr(exc, 'problem', exc)}", file,
+                                  mark.line + 1 if mark else None)) from None
+    lines: dict[tuple, int] = {}
+    if root is not None:
+        _collect_lines(root, (), lines)
+    data = yaml.safe_load(text) or {}
+    if not isinstance(data, dict):
+        raise ScenarioError(Issue("", "a scenario is a mapping (components, connections, time, ...)", file, 1))
+    for path, value in (overrides or {}).items():
+        if path[0] == "components" and path[1] not in (data.get("components") or {}):
+            raise ScenarioError(Issue("--set", f"unknown component {path[1]!r}; components: "
+                                      f"{', '.join(data.get('components') or {})}", file))
+        node = data
+        for key in path[:-1]:
+            node = node.setdefault(key, {})
+        node[path[-1]] = value
+    data["source"] = file
+    try:
+        scenario = Scenario.model_validate(data)
+    except ValidationError as exc:
+        by_loc: dict[tuple, list[str]] = {}
+        for err in exc.errors():
+            # drop pydantic's union-member tags (".int", ".list[...]") from the location
+            loc = tuple(_ALIASES.get(p, p) if isinstance(p, str) else p for p in err["loc"]
+                        if not (isinstance(p, str) and _UNION_TAG.match(p)))
+            msg = err["msg"].removeprefix("Value error, ")
+            if err["type"] == "extra_forbidden":
+                msg = "unknown key"
+            by_loc.setdefault(loc, []).append(msg)
+        issues = [Issue(_format_loc(loc), msgs[0] if len(msgs) == 1 else _PARAM_MSG, file, _line_for(loc, lines))
+                  for loc, msgs in by_loc.items()]
+        raise ScenarioError(issues) from None
+    issues = [Issue(_format_loc(loc), msg, file, _line_for(loc, lines)) for loc, msg in _semantic_issues(scenario)]
+    if issues:
+        raise ScenarioError(issues)
+    object.__setattr__(scenario, "_lines", lines)
+    return scenario
+
+
+def _semantic_issues(s: Scenario) -> list[tuple[tuple, str]]:
+    """Cross-field checks pydantic cannot see: names that must exist, sections that need a robot."""
+    import difflib
+
+    out: list[tuple[tuple, str]] = []
+    names = list(s.components)
+
+    def comp_of(ref: str, loc: tuple) -> None:
+        comp = ref.split(".", 1)[0]
+        if comp not in s.components:
+            close = difflib.get_close_matches(comp, names, n=3)
+            hint = f"; did you mean {', '.join(close)}?" if close else f"; components: {', '.join(names)}"
+            out.append((loc, f"unknown component {comp!r}{hint}"))
+
+    for i, c in enumerate(s.connections):
+        comp_of(c.src, ("connections", i, "from"))
+        comp_of(c.dst, ("connections", i, "to"))
+    seen: dict[str, int] = {}
+    for i, c in enumerate(s.connections):
+        if c.dst in seen:
+            out.append((("connections", i, "to"), f"input {c.dst} is already driven by connections[{seen[c.dst]}]"))
+        seen.setdefault(c.dst, i)
+    if s.trajectory is not None and s.robot is None:
+        out.append((("trajectory",), "a trajectory needs 'robot' (the preset to check it against)"))
+    if s.robot is not None:
+        from delta.robots import PRESETS
+
+        if s.robot not in PRESETS:
+            close = difflib.get_close_matches(s.robot, list(PRESETS), n=3) or list(PRESETS)
+            out.append((("robot",), f"unknown robot preset {s.robot!r}; valid: {', '.join(close)}"))
+    if s.trajectory is not None and s.initial_state.from_trajectory and s.initial_state.position:
+        if s.initial_state.component not in s.components:
+            out.append((("initial_state", "component"), f"unknown component {s.initial_state.component!r}"))
+    if s.logging.scene is not None:
+        if s.robot is None:
+            out.append((("logging", "scene"), "the 3D scene needs 'robot'"))
+        comp_of(s.logging.scene.position, ("logging", "scene", "position"))
+    if s.compare is not None:
+        act, ref = expand_signal(s.compare.actual), expand_signal(s.compare.reference)
+        if len(act) != len(ref):
+            out.append((("compare",), f"actual has {len(act)} signals, reference {len(ref)}"))
+        for key, sigs in (("actual", act), ("reference", ref)):
+            for sig in sigs:
+                comp_of(sig, ("compare", key))
+    if s.checks is not None and s.compare is None:
+        out.append((("checks",), "acceptance checks need a 'compare' section"))
+    return out
+
+
+def load_scenario(path: str | Path, overrides: dict[tuple, Any] | None = None) -> Scenario:
+    """Load a scenario file. ``overrides`` maps key paths to values (``--set``, ``--stop-time``)."""
+    path = Path(path)
+    try:
+        text = path.read_text()
+    except OSError as exc:
+        raise ScenarioError(Issue("", f"cannot read scenario: {exc.strerror}", str(path))) from None
+    return parse_scenario(text, str(path), overrides)
+
+
+def apply_overrides(sets: list[str], stop_time: float | None = None) -> dict[tuple, Any]:
+    """Turn ``--set comp.param=value`` and ``--stop-time`` into loader overrides."""
+    out: dict[tuple, Any] = {}
+    for item in sets:
+        if "=" not in item or "." not in item.split("=", 1)[0]:
+            raise ScenarioError(Issue("--set", f"expected component.parameter=value, got {item!r}"))
+        key, raw = item.split("=", 1)
+        comp, param = key.split(".", 1)
+        out[("components", comp, "parameters", param)] = yaml.safe_load(raw)
+    if stop_time is not None:
+        out[("time", "stop")] = stop_time
+    return out
+
+
+def scenario_json_schema() -> dict:
+    """JSON Schema of the scenario format, for editors (yaml-language-server)."""
+    schema = Scenario.model_json_schema(by_alias=True)
+    schema.get("properties", {}).pop("source", None)
+    schema["$schema"] = "https://json-schema.org/draft/2020-12/schema"
+    return schema
+

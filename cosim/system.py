@@ -1,0 +1,279 @@
+"""System structure: names resolved once into typed ids, wiring checked, Gauss-Seidel order.
+
+Pure with respect to FMI calls: it reads model descriptions (:class:`cosim.fmu.FMUInfo`)
+and the scenario, and produces a :class:`SystemPlan` the algorithm executes.
+"""
+
+from __future__ import annotations
+
+import difflib
+from dataclasses import dataclass, field
+from typing import Any, Mapping
+
+from .errors import AlgebraicLoopError, Issue, ScenarioError, WiringError
+from .fmu import FMUInfo, Variable
+from .scenario import Scenario, _format_loc, _line_for, expand_signal
+
+__all__ = ["Port", "Link", "SystemPlan", "build_plan", "gauss_seidel_order", "find_variable_loop"]
+
+
+@dataclass(frozen=True)
+class Port:
+    """A resolved variable: component index and variable (value reference, type, unit)."""
+
+    comp: int
+    var: Variable
+
+    def label(self, names: list[str]) -> str:
+        return f"{names[self.comp]}.{self.var.name}"
+
+
+@dataclass(frozen=True)
+class Link:
+    src: Port
+    dst: Port
+
+
+@dataclass
+class SystemPlan:
+    """Everything the algorithm needs, resolved: components, links, order, what to read and log."""
+
+    names: list[str]
+    infos: list[FMUInfo]
+    links: list[Link]
+    order: list[int]  # Gauss-Seidel order, component indices
+    start_values: list[dict[str, Any]]  # per component, variable name -> value
+    inputs: list[list[Variable]]  # connected inputs, per component
+    outputs: list[list[Variable]]  # outputs read every step, per component
+    logged: list[list[Variable]] = field(default_factory=list)  # inputs + outputs recorded, per component
+    notes: list[str] = field(default_factory=list)  # non-fatal findings (e.g. loops broken at undeclared deps)
+
+    def port(self, ref: str) -> Port:
+        comp, var = ref.split(".", 1)
+        i = self.names.index(comp)
+        return Port(i, self.infos[i].variables[var])
+
+
+def _close(name: str, candidates: list[str]) -> str:
+    close = difflib.get_close_matches(name, candidates, n=3, cutoff=0.5)
+    if close:
+        return "; did you mean " + ", ".join(close) + "?"
+    shown = candidates[:8]
+    more = "" if len(candidates) <= 8 else f", ... ({len(candidates)} in all)"
+    return "; available: " + (", ".join(shown) + more if shown else "none")
+
+
+def _describe(ref: str, v: Variable) -> str:
+    return f"{ref} ({v.fmi_type}{', ' + v.unit if v.unit else ''})"
+
+
+def build_plan(scenario: Scenario, infos: Mapping[str, FMUInfo], log_signals: str | None = None) -> SystemPlan:
+    """Resolve every name in ``scenario`` against the FMUs; raise one error listing every problem."""
+    names = list(scenario.components)
+    idx = {n: i for i, n in enumerate(names)}
+    lines = getattr(scenario, "_lines", {})
+    issues: list[Issue] = []
+
+    def issue(loc: tuple, msg: str) -> None:
+        issues.append(Issue(_format_loc(loc), msg, scenario.source, _line_for(loc, lines)))
+
+    start_values: list[dict[str, Any]] = [dict() for _ in names]
+    for n, comp in scenario.components.items():
+        info = infos[n]
+        for pname, value in comp.parameters.items():
+            targets = [(f"{pname}[{k + 1}]", v) for k, v in enumerate(value)] if isinstance(value, list) \
+                else [(pname, value)]
+            for vname, val in targets:
+                var = info.variables.get(vname)
+                loc = ("components", n, "parameters", pname)
+                if var is None:
+                    settable = [v.name for v in info.variables.values()
+                                if v.causality in ("parameter", "input") or v.variability == "tunable"]
+                    issue(loc, f"{info.path.name} has no variable {vname!r}{_close(vname, settable)}")
+                elif var.variability == "constant" or var.causality in ("output", "calculatedParameter",
+                                                                         "independent"):
+                    issue(loc, f"{vname} is {var.causality}/{var.variability}: its value cannot be set")
+                else:
+                    start_values[idx[n]][vname] = val
+
+    links: list[Link] = []
+
+    def resolve(ref: str, loc: tuple, role: str) -> Port | None:
+        comp, vname = ref.split(".", 1)
+        if comp not in idx:
+            return None  # already reported by the scenario validation
+        info = infos[comp]
+        want = ("output",) if role == "output" else ("input",)
+        var = info.variables.get(vname)
+        candidates = [v.name for v in info.variables.values() if v.causality in want]
+        if var is None:
+            issue(loc, f"{info.path.name} ({comp}) has no variable {vname!r}{_close(vname, candidates)}")
+            return None
+        if var.causality not in want:
+            issue(loc, f"{ref} is a{'n' if var.causality[0] in 'aeiou' else ''} {var.causality}, expected an "
+                       f"{role}{_close(vname, candidates)}")
+            return None
+        return Port(idx[comp], var)
+
+    for i, c in enumerate(scenario.connections):
+        src = resolve(c.src, ("connections", i, "from"), "output")
+        dst = resolve(c.dst, ("connections", i, "to"), "input")
+        if src is None or dst is None:
+            continue
+        if src.var.kind != dst.var.kind:
+            issue(("connections", i), f"type mismatch: {_describe(c.src, src.var)} -> {_describe(c.dst, dst.var)}")
+            continue
+        if src.var.unit and dst.var.unit and src.var.unit != dst.var.unit:
+            issue(("connections", i), f"unit mismatch: {_describe(c.src, src.var)} -> {_describe(c.dst, dst.var)}")
+            continue
+        links.append(Link(src, dst))
+
+    extra_reads: list[str] = []
+    if scenario.compare is not None:
+        extra_reads += expand_signal(scenario.compare.actual) + expand_signal(scenario.compare.reference)
+    if scenario.logging.scene is not None:
+        extra_reads += expand_signal(scenario.logging.scene.position)
+    reads: list[Port] = []
+    for ref in extra_reads:
+        comp, vname = ref.split(".", 1)
+        if comp in idx:
+            var = infos[comp].variables.get(vname)
+            if var is None or var.causality not in ("output", "input"):
+                outs = [v.name for v in infos[comp].variables.values() if v.causality == "output"]
+                issue(("compare",) if scenario.compare else ("logging", "scene"),
+                      f"{ref}: no such output{_close(vname, outs)}")
+            else:
+                reads.append(Port(idx[comp], var))
+    if issues:
+        raise WiringError(issues)
+
+    inputs = [[] for _ in names]
+    outputs = [[] for _ in names]
+    for link in links:
+        inputs[link.dst.comp].append(link.dst.var)
+        if link.src.var not in outputs[link.src.comp]:
+            outputs[link.src.comp].append(link.src.var)
+    for p in reads:
+        if p.var.causality == "output" and p.var not in outputs[p.comp]:
+            outputs[p.comp].append(p.var)
+    signals = log_signals if log_signals is not None else (
+        scenario.logging.signals if scenario.logging.enabled else "none")
+    logged = [[] for _ in names]
+    if signals != "none":
+        for k, n in enumerate(names):
+            all_out = [v for v in infos[n].variables.values() if v.causality == "output" and v.kind != "String"]
+            for v in all_out:
+                if v not in outputs[k]:
+                    outputs[k].append(v)
+            logged[k] = (list(inputs[k]) if signals == "all" else []) + list(outputs[k])
+
+    feedthrough = [_feedthrough(infos[n], scenario.components[n].feedthrough) for n in names]
+    notes: list[str] = []
+    if scenario.algorithm == "gauss_seidel":
+        loop = find_variable_loop(names, links, feedthrough)
+        if loop is not None:
+            labels, undeclared = loop
+            err = AlgebraicLoopError(labels)
+            if undeclared:
+                hint = (f"; {', '.join(sorted(undeclared))} do not declare output dependencies in ModelStructure "
+                        f"(so every output is assumed to depend on every input): if they have no direct "
+                        f"feedthrough, set components.<name>.feedthrough: none")
+                err = AlgebraicLoopError(labels)
+                err.issues[0] = Issue(err.issues[0].path, err.issues[0].message + hint, scenario.source,
+                                      _line_for(("connections",), lines))
+            else:
+                err.issues[0] = Issue(err.issues[0].path, err.issues[0].message, scenario.source,
+                                      _line_for(("connections",), lines))
+            err.args = ("\n".join(str(i) for i in err.issues),)
+            raise err
+    order = gauss_seidel_order(len(names), [(lk.src.comp, lk.dst.comp, lk.dst.var.name in feedthrough[lk.dst.comp])
+                                            for lk in links])
+    return SystemPlan(names, [infos[n] for n in names], links, order, start_values, inputs, outputs, logged, notes)
+
+
+def _feedthrough(info: FMUInfo, declared: str) -> dict[str, list[str] | None] | set[str]:
+    """The set of inputs that reach some output directly (``None`` marks an assumed dependency)."""
+    if declared == "none":
+        return {}
+    inputs = [v.name for v in info.variables.values() if v.causality == "input"]
+    out: dict[str, bool] = {}
+    for outname, deps in info.feedthrough.items():
+        for u in (inputs if deps is None else deps):
+            out[u] = out.get(u, False) or deps is not None  # True: declared, False: assumed
+    return out
+
+
+def find_variable_loop(names: list[str], links: list[Link], feedthrough: list[dict]) -> tuple[list[str], set[str]] | None:
+    """A cycle in the variable graph (output -> input by connection, input -> outputs by feedthrough).
+
+    Returns the variables along the loop and the components whose dependency was
+    assumed (undeclared in ModelStructure), or None when there is no loop.
+    """
+    # collapse to the component level: an edge src_comp -> dst_comp exists when the connected
+    # input feeds through in dst; a cycle of such edges is an algebraic loop
+    edges: dict[int, list[tuple[int, Link]]] = {}
+    for lk in links:
+        if lk.dst.var.name in feedthrough[lk.dst.comp]:
+            edges.setdefault(lk.src.comp, []).append((lk.dst.comp, lk))
+    colour = [0] * len(names)
+    stack: list[tuple[int, Link | None]] = []
+
+    def dfs(u: int) -> list[Link] | None:
+        colour[u] = 1
+        for v, lk in edges.get(u, []):
+            stack.append((v, lk))
+            if colour[v] == 1:
+                cycle = []
+                for node, link in reversed(stack):
+                    cycle.append(link)
+                    if link.src.comp == v:
+                        break
+                return list(reversed(cycle))
+            if colour[v] == 0:
+                found = dfs(v)
+                if found:
+                    return found
+            stack.pop()
+        colour[u] = 2
+        return None
+
+    for start in range(len(names)):
+        if colour[start] == 0:
+            cycle = dfs(start)
+            if cycle:
+                labels = []
+                undeclared = set()
+                for lk in cycle:
+                    labels += [lk.src.label(names), lk.dst.label(names)]
+                    if not feedthrough[lk.dst.comp][lk.dst.var.name]:
+                        undeclared.add(names[lk.dst.comp])
+                labels.append(cycle[0].src.label(names))
+                return labels, undeclared
+    return None
+
+
+def gauss_seidel_order(n: int, edges: list[tuple[int, int, bool]]) -> list[int]:
+    """Order components so that each runs after the components it reads from.
+
+    ``edges`` are (source, destination, hard): hard when the destination's input feeds
+    through to an output. Cycles (only possible through soft edges once loops are
+    excluded) are broken at a component whose incoming edges are all soft: it runs
+    first and uses its inputs from the previous communication step. Ties keep the
+    scenario order.
+    """
+    incoming: list[set[tuple[int, bool]]] = [set() for _ in range(n)]
+    for s, d, hard in edges:
+        if s != d:
+            incoming[d].add((s, hard))
+    done: list[int] = []
+    remaining = list(range(n))
+    while remaining:
+        ready = [c for c in remaining if all(s in done for s, _ in incoming[c])]
+        if not ready:
+            ready = [c for c in remaining if all(s in done or not hard for s, hard in incoming[c])]
+            if not ready:
+                raise AlgebraicLoopError([str(c) for c in remaining])
+        c = ready[0]
+        done.append(c)
+        remaining.remove(c)
+    return done
