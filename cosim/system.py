@@ -186,7 +186,9 @@ def build_plan(scenario: Scenario, infos: Mapping[str, FMUInfo], log_signals: st
                                       _line_for(("connections",), lines))
             err.args = ("\n".join(str(i) for i in err.issues),)
             raise err
-    order = gauss_seidel_order(len(names), [(lk.src.comp, lk.dst.comp, lk.dst.var.name in feedthrough[lk.dst.comp])
+    jacobi = scenario.algorithm == "jacobi"  # Jacobi reads the previous step only: the order is free
+    order = gauss_seidel_order(len(names), [(lk.src.comp, lk.dst.comp,
+                                             not jacobi and lk.dst.var.name in feedthrough[lk.dst.comp])
                                             for lk in links])
     return SystemPlan(names, [infos[n] for n in names], links, order, start_values, inputs, outputs, logged, notes)
 
