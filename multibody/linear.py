@@ -1,0 +1,191 @@
+"""Exudyn plant of the linear delta (thesis preset and any :class:`delta.robots.LinearDelta`).
+
+Full fidelity
+    Three carriages on vertical prismatic rails, each leg a parallelogram of two rigid rods (solid cylinders of
+    ``masses.rod`` kg and radius ``masses.rod_radius``) with spherical joints at both
+    ends, ``masses.parallelogram_width`` apart along the rail tangent, and a rigid
+    free-floating platform (disc of radius ``platform_radius``, 10 mm thick) kept level
+    by the parallelograms. Each rod keeps an idle spin about its own axis (inertia
+    ``m r^2 / 2``), which is never excited.
+Lumped fidelity
+    The analytic model's assumptions: each rod's mass split ``(1 - w)`` to the carriage
+    and ``w`` to the platform (``masses.w_inertia`` for inertia, ``masses.w_gravity`` for
+    the weight), carriages and platform as point masses, each leg a single distance
+    constraint of rod length between carriage joint and platform joint.
+
+Carriages: an ideal prismatic rail locks every carriage motion but the travel, so a carriage is
+modelled exactly as a 1-DOF mass (``ObjectMass1D``) whose coordinate *is* ``q[i]`` (its rotational
+inertia never enters); this removes six constraints per carriage from the rigid model.
+
+Actuator effort ``u[i]``: force on carriage i along +q (down the rail), N.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from delta.dynamics import LinearDeltaMasses
+from delta.kinematics import actuator_points, joint_state_from_platform, leg_axes, platform_offsets
+from delta.robots import LinearDelta
+
+from .plant import DeltaPlant, JointTrajectory, SolverSettings, rod_inertia, tilt_angle
+
+__all__ = ["LinearDeltaPlant", "MIN_ROD_MASS", "PLATFORM_THICKNESS"]
+
+MIN_ROD_MASS = 1e-6
+"""kg. A rigid rod body needs a regular mass matrix: a zero rod mass is represented by this."""
+PLATFORM_THICKNESS = 0.01
+"""Platform disc thickness, m."""
+
+
+class LinearDeltaPlant(DeltaPlant):
+    """Exudyn plant of a linear delta; see the module docstring for the two fidelities.
+
+    Parameters
+    ----------
+    robot : LinearDelta
+    masses : LinearDeltaMasses, optional
+    fidelity : {"full", "lumped"}
+    settings : SolverSettings, optional
+    p0, v0 : (3,) arrays
+        Initial platform position and velocity (default: 0.5 m below the base, at rest).
+    prescribed : callable, optional
+        ``t -> (q, qd)``; if given, the carriages follow it exactly (drive constraints) and
+        ``output.reaction`` is the drive force along +q (inverse dynamics).
+    h_nominal : float
+        Expected macro step, s (only used to initialise the solver; any h may be stepped).
+    """
+
+    kind = "linear"
+
+    def __init__(self, robot: LinearDelta, masses: LinearDeltaMasses | None = None, fidelity: str = "full",
+                 settings: SolverSettings | None = None, p0=(0.0, 0.0, -0.5), v0=(0.0, 0.0, 0.0),
+                 t0: float = 0.0, prescribed: JointTrajectory | None = None, h_nominal: float = 1e-3) -> None:
+        if not isinstance(robot, LinearDelta):
+            raise TypeError(f"LinearDeltaPlant needs a LinearDelta robot, got {type(robot).__name__}")
+        super().__init__(robot, masses or LinearDeltaMasses(), fidelity, settings, prescribed, p0, v0, t0, h_nominal)
+
+    # ------------------------------------------------------------------------------------
+    def _build(self, p0: np.ndarray, v0: np.ndarray, t0: float) -> None:
+        from exudyn.itemInterface import (
+            CoordinateConstraint,
+            DistanceConstraint,
+            LoadCoordinate,
+            Mass1D,
+            MarkerBodyPosition,
+            MarkerNodeCoordinate,
+            Node1D,
+            NodePointGround,
+            ObjectGround,
+        )
+
+        robot, m = self.robot, self.masses
+        mbs = self.mbs
+        q0, qd0, _ = joint_state_from_platform(robot, p0, v0)
+        self._q0 = q0
+        e = leg_axes(robot)
+        tangent = np.stack([-e[:, 1], e[:, 0], np.zeros(3)], axis=1)  # z x e_i
+        b = platform_offsets(robot)
+        B = actuator_points(robot, q0)
+        length = robot.rod_length
+        full = self.fidelity == "full"
+        self._ground = mbs.AddObject(ObjectGround())
+        w_i, w_g = m.w_inertia, m.w_gravity
+        platform_mass = m.platform + m.payload + (0.0 if full else 6.0 * w_i * m.rod)
+        platform_weight = m.platform + m.payload + (0.0 if full else 6.0 * w_g * m.rod)
+        if full:
+            radius = robot.platform_radius
+            j_plat = np.diag([platform_mass * (3 * radius**2 + PLATFORM_THICKNESS**2) / 12.0] * 2
+                             + [platform_mass * radius**2 / 2.0])
+            self._platform = self._add_body(platform_mass, j_plat, p0, v0)
+        else:
+            self._platform = self._add_body(platform_mass, None, p0, v0)
+        self._add_weight(self._platform, (0.0, 0.0, 0.0), platform_weight)
+
+        self._carriages: list[int] = []
+        self._carriage_markers: list[int] = []
+        self._actuator_loads: list[int] = []
+        self._drives: list[int] = []
+        self._carriage_nodes: list[int] = []
+        ground_node = mbs.AddNode(NodePointGround(referenceCoordinates=[0.0, 0.0, 0.0]))
+        ground_coord = mbs.AddMarker(MarkerNodeCoordinate(nodeNumber=ground_node, coordinate=0))
+        rail_down = [[0.0, 0.0, 1.0], [0.0, 1.0, 0.0], [-1.0, 0.0, 0.0]]  # local x -> global -z
+        carriage_mass = m.carriage if full else m.carriage + 2.0 * (1.0 - w_i) * m.rod
+        carriage_weight = m.carriage if full else m.carriage + 2.0 * (1.0 - w_g) * m.rod
+        for i in range(3):
+            vel_c = np.array([0.0, 0.0, -qd0[i]])
+            # carriage on its rail: a 1-DOF mass whose total coordinate is q_i (rail top at z = 0)
+            node = mbs.AddNode(Node1D(referenceCoordinates=[float(q0[i])], initialCoordinates=[0.0],
+                                      initialVelocities=[float(qd0[i])]))
+            carriage = mbs.AddObject(Mass1D(mass=carriage_mass, nodeNumber=node,
+                                            referencePosition=[float(x) for x in robot.rail_radius * e[i]],
+                                            referenceRotation=rail_down))
+            self._bodies.append((carriage, carriage_mass, None))
+            self._add_weight(carriage, (0.0, 0.0, 0.0), carriage_weight)
+            self._carriages.append(carriage)
+            self._carriage_nodes.append(node)
+            marker = mbs.AddMarker(MarkerBodyPosition(bodyNumber=carriage, localPosition=[0.0, 0.0, 0.0]))
+            self._carriage_markers.append(marker)
+            coord = mbs.AddMarker(MarkerNodeCoordinate(nodeNumber=node, coordinate=0))
+            if self.prescribed is None:
+                self._actuator_loads.append(mbs.AddLoad(LoadCoordinate(markerNumber=coord, load=0.0)))
+            else:
+                self._drives.append(mbs.AddObject(CoordinateConstraint(
+                    markerNumbers=[ground_coord, coord], offsetUserFunction=self._coord_offset(i),
+                    offsetUserFunction_t=self._coord_offset_t(i))))
+            # leg
+            if full:
+                rod_mass = max(m.rod, MIN_ROD_MASS)
+                vel_p = v0
+                for side in (-0.5, 0.5):
+                    a = B[i] + side * m.parallelogram_width * tangent[i]
+                    c = p0 + b[i] + side * m.parallelogram_width * tangent[i]
+                    axis = (c - a) / length
+                    omega = np.cross(c - a, vel_p - vel_c) / length**2
+                    rod = self._add_body(rod_mass, rod_inertia(rod_mass, m.rod_radius, length, axis),
+                                         0.5 * (a + c), 0.5 * (vel_c + vel_p), omega)
+                    self._add_weight(rod, (0.0, 0.0, 0.0), m.rod)
+                    mbs.CreateSphericalJoint(itemNumbers=[carriage, rod], position=list(a), show=False)
+                    mbs.CreateSphericalJoint(itemNumbers=[rod, self._platform], position=list(c), show=False)
+            else:
+                pm = mbs.AddMarker(MarkerBodyPosition(bodyNumber=self._platform, localPosition=list(b[i])))
+                mbs.AddObject(DistanceConstraint(markerNumbers=[marker, pm], distance=length))
+
+    # prescribed-motion offsets (relative to the reset pose) ---------------------------
+    def _coord_offset(self, i: int):
+        def offset(mbs, t, item, l_offset):
+            return float(self.prescribed(t)[0][i] - self._q0[i])  # node coordinate = displacement from q0
+        return offset
+
+    def _coord_offset_t(self, i: int):
+        def offset_t(mbs, t, item, l_offset):
+            return float(self.prescribed(t)[1][i])
+        return offset_t
+
+    # ------------------------------------------------------------------------------------
+    def _apply_effort(self, u: np.ndarray) -> None:
+        for load, ui in zip(self._actuator_loads, u):
+            self.mbs.SetLoadParameter(load, "load", float(ui))
+
+    def _after_assemble(self) -> None:
+        self._q_index = [self.mbs.systemData.GetNodeLTGODE2(n)[0] for n in self._carriage_nodes]
+
+    def _read_joints(self) -> tuple[np.ndarray, np.ndarray]:
+        return self._q0 + self._coords[self._q_index], self._coords_t[self._q_index]
+
+    def _read_prescribed_reaction(self) -> np.ndarray:
+        import exudyn as exu
+
+        f = [self.mbs.GetObjectOutput(j, exu.OutputVariableType.Force) for j in self._drives]
+        return _DRIVE_SIGN * np.array(f, dtype=float)
+
+    def platform_tilt(self) -> float:
+        import exudyn as exu
+
+        if self.fidelity != "full":
+            return 0.0
+        rot = self.mbs.GetObjectOutputBody(self._platform, exu.OutputVariableType.RotationMatrix, [0.0, 0.0, 0.0])
+        return tilt_angle(rot)
+
+
+_DRIVE_SIGN = -1.0  # CoordinateConstraint force acts on the ground side: flip to "effort on the carriage along +q"

@@ -1,0 +1,348 @@
+"""Common stepping machinery of the Exudyn delta plants.
+
+A plant owns one Exudyn system and one persistent
+``exu.MainSolverImplicitSecondOrder`` (generalized-alpha, index 3). ``step``
+sets *both* ``timeIntegration.endTime`` and ``solver.it.endTime`` and calls
+``SolveSteps`` (see docs/architecture.md, "Findings"). The renderer is never
+started and no solution file is written.
+
+Every body is created in its reference configuration at the reset pose with
+the identity as reference rotation, so body-local axes coincide with the base
+frame at ``reset`` time and inertia tensors are given in base-frame axes.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Callable
+
+import numpy as np
+
+from delta.errors import CosimError
+
+__all__ = ["SolverSettings", "PlantOutput", "PlantError", "DeltaPlant", "JointTrajectory"]
+
+JointTrajectory = Callable[[float], tuple[np.ndarray, np.ndarray]]
+"""Prescribed joint motion ``t -> (q(t), qd(t))``, each (3,), used by the prescribed-motion mode."""
+
+
+class PlantError(CosimError, RuntimeError):
+    """A plant could not be stepped (wrong time, solver failure); the message names the time."""
+
+
+@dataclass(frozen=True)
+class SolverSettings:
+    """Integrator settings of a plant.
+
+    Attributes
+    ----------
+    spectral_radius : float
+        Generalized-alpha spectral radius at infinity (0.8: stable at h = 1 ms for
+        every delta tried; use ~0.5 with small steps for force comparisons).
+    newton_rel_tol : float
+        Relative Newton tolerance (1e-6 halves the cost of the default with identical results).
+    newton_abs_tol : float
+        Absolute Newton tolerance (Exudyn's default scale for these small systems).
+    modified_newton : bool
+        Reuse the Jacobian across Newton iterations and steps where possible.
+    substeps : int
+        Integrator steps per macro step ``h`` of :meth:`DeltaPlant.step` (1 = one step of size h).
+    sparse : bool or None
+        Use the EigenSparse linear solver; None (default) = sparse for the full models, dense
+        for the small lumped models (measured faster on this machine).
+    """
+
+    spectral_radius: float = 0.8
+    newton_rel_tol: float = 1e-6
+    newton_abs_tol: float = 1e-10
+    modified_newton: bool = True
+    substeps: int = 1
+    sparse: bool | None = None
+
+    def __post_init__(self) -> None:
+        if not 0.0 <= self.spectral_radius <= 1.0:
+            raise ValueError(f"SolverSettings.spectral_radius must be in [0, 1], got {self.spectral_radius!r}")
+        if self.substeps < 1:
+            raise ValueError(f"SolverSettings.substeps must be >= 1, got {self.substeps!r}")
+
+
+@dataclass(frozen=True)
+class PlantOutput:
+    """Plant outputs after a step (or after ``reset``).
+
+    Attributes
+    ----------
+    t : float
+        Simulation time, s.
+    q, qd : (3,) arrays
+        Joint positions and velocities (m, m/s for the linear delta; rad, rad/s for the rotary).
+    p, v : (3,) arrays
+        Platform centre position and velocity in the base frame, m, m/s.
+    reaction : (3,) array
+        Generalized force the actuator exerts on joint i along +q (linear: N, positive pushes
+        the carriage down; rotary: N*m, positive turns the arm down). With applied efforts it
+        equals the effort u held during the step; in prescribed-motion mode it is the drive
+        constraint's reaction, i.e. the effort needed to follow the prescribed q(t).
+    """
+
+    t: float
+    q: np.ndarray
+    qd: np.ndarray
+    p: np.ndarray
+    v: np.ndarray
+    reaction: np.ndarray
+
+
+def _time_tolerance(t: float) -> float:
+    return 1e-9 * max(1.0, abs(t))
+
+
+class DeltaPlant:
+    """Base class: solver lifecycle, time bookkeeping, energy. Subclasses build the system."""
+
+    kind = "delta"
+
+    def __init__(self, robot, masses, fidelity: str, settings: SolverSettings | None,
+                 prescribed: JointTrajectory | None, p0, v0, t0: float, h_nominal: float) -> None:
+        if fidelity not in ("full", "lumped"):
+            raise ValueError(f"fidelity must be 'full' or 'lumped', got {fidelity!r}")
+        self.robot = robot
+        self.masses = masses
+        self.fidelity = fidelity
+        self.settings = settings or SolverSettings()
+        self.prescribed = prescribed
+        self._h_nominal = float(h_nominal)
+        self._output: PlantOutput | None = None
+        self.reset(p0, v0, t0)
+
+    # -- subclass interface -------------------------------------------------------------
+    def _build(self, p0: np.ndarray, v0: np.ndarray, t0: float) -> None:  # pragma: no cover
+        raise NotImplementedError
+
+    def _after_assemble(self) -> None:
+        """Hook: cache coordinate indices (valid only after ``Assemble``)."""
+
+    def _read_joints(self) -> tuple[np.ndarray, np.ndarray]:  # pragma: no cover
+        raise NotImplementedError
+
+    def _apply_effort(self, u: np.ndarray) -> None:  # pragma: no cover
+        raise NotImplementedError
+
+    def _read_prescribed_reaction(self) -> np.ndarray:  # pragma: no cover
+        raise NotImplementedError
+
+    # -- public API ---------------------------------------------------------------------
+    @property
+    def time(self) -> float:
+        """Current simulation time, s."""
+        return self._t
+
+    @property
+    def output(self) -> PlantOutput:
+        """Last output (after ``reset`` or ``step``)."""
+        assert self._output is not None
+        return self._output
+
+    def reset(self, p0, v0=(0.0, 0.0, 0.0), t0: float = 0.0) -> PlantOutput:
+        """Rebuild the system at platform position ``p0`` (m) and velocity ``v0`` (m/s).
+
+        Joint positions and velocities come from the delta IK and Jacobian, every body is
+        placed consistently; raises :class:`delta.errors.UnreachableError` if ``p0`` is
+        outside the workspace.
+        """
+        import exudyn as exu
+
+        p0 = np.asarray(p0, dtype=float).reshape(3)
+        v0 = np.asarray(v0, dtype=float).reshape(3)
+        self._t = float(t0)
+        self._u = np.zeros(3)
+        self._sc = exu.SystemContainer()
+        self.mbs = self._sc.AddSystem()
+        self._bodies: list[tuple[int, float, np.ndarray | None]] = []
+        self._weights: list[tuple[int, list[float], float]] = []
+        self._build(p0, v0, self._t)
+        self.mbs.Assemble()
+        node = self.mbs.GetObject(self._platform)["nodeNumber"]
+        self._p_index = list(self.mbs.systemData.GetNodeLTGODE2(node))[:3]
+        self._p_ref = np.asarray(self.mbs.GetNode(node)["referenceCoordinates"][:3], dtype=float)
+        self._after_assemble()
+        self._init_solver(self._h_nominal)
+        self._output = self._make_output(self._u if self.prescribed is None else self._read_prescribed_reaction())
+        return self._output
+
+    def step(self, t: float, h: float, u=(0.0, 0.0, 0.0)) -> PlantOutput:
+        """Advance from ``t`` (must equal :attr:`time`) to ``t + h`` with efforts ``u`` held constant.
+
+        Parameters
+        ----------
+        t, h : float
+            Current time and macro step, s.
+        u : (3,) array
+            Actuator efforts along +q (N or N*m); ignored in prescribed-motion mode.
+        """
+        if abs(t - self._t) > _time_tolerance(self._t):
+            raise PlantError(f"{type(self).__name__}.step: t = {t!r} s does not equal the plant time "
+                             f"{self._t!r} s; steps must be contiguous")
+        if not h > 0.0:
+            raise PlantError(f"{type(self).__name__}.step at t = {t!r} s: h must be > 0, got {h!r}")
+        t_end = t + h
+        if self.prescribed is None:
+            u = np.asarray(u, dtype=float).reshape(3)
+            if not np.all(np.isfinite(u)):
+                raise PlantError(f"{type(self).__name__}.step at t = {t!r} s: non-finite effort u = {u}")
+            self._apply_effort(u)
+            self._u = u.copy()
+        step_size = h / self.settings.substeps
+        it = self._solver.it
+        if abs(it.currentStepSize - step_size) > 1e-12 * step_size:
+            it.currentStepSize = step_size
+            it.minStepSize = step_size
+            it.maxStepSize = step_size
+            it.initialStepSize = step_size
+        self._sim.timeIntegration.endTime = t_end
+        it.endTime = t_end
+        try:
+            ok = self._solver.SolveSteps(self.mbs, self._sim)
+        except Exception as exc:  # Exudyn raises plain RuntimeError/ValueError
+            raise PlantError(f"{type(self).__name__}: solver failed between t = {t!r} s and "
+                             f"{t_end!r} s: {exc}") from exc
+        if not ok:
+            raise PlantError(f"{type(self).__name__}: solver did not converge between t = {t!r} s and "
+                             f"{t_end!r} s ({self._solver.GetErrorString()})")
+        self._t = t_end
+        reaction = self._u if self.prescribed is None else self._read_prescribed_reaction()
+        self._output = self._make_output(reaction)
+        return self._output
+
+    def energy(self) -> tuple[float, float]:
+        """Kinetic and gravitational potential energy of the model, J (potential zero at z = 0)."""
+        import exudyn as exu
+
+        ovt = exu.OutputVariableType
+        kin = pot = 0.0
+        for body, mass, inertia in self._bodies:
+            vel = np.asarray(self.mbs.GetObjectOutputBody(body, ovt.Velocity, [0.0, 0.0, 0.0]))
+            kin += 0.5 * mass * float(vel @ vel)
+            if inertia is not None:
+                w = np.asarray(self.mbs.GetObjectOutputBody(body, ovt.AngularVelocityLocal, [0.0, 0.0, 0.0]))
+                kin += 0.5 * float(w @ inertia @ w)
+        for body, local, gravity_mass in self._weights:
+            pos = np.asarray(self.mbs.GetObjectOutputBody(body, ovt.Position, list(local)))
+            pot += gravity_mass * self.masses.gravity * pos[2]
+        return kin, pot
+
+    def platform_tilt(self) -> float:
+        """Rotation angle of the platform from level, rad (0 for the translational lumped platform)."""
+        return 0.0
+
+    # -- helpers ------------------------------------------------------------------------
+    def _add_body(self, mass: float, inertia: np.ndarray | None, position, velocity,
+                  angular_velocity=(0.0, 0.0, 0.0)) -> int:
+        """Add a rigid body (``inertia`` given, about its centre of mass, base axes) or a point mass.
+
+        The body reference point is its centre of mass, so the kinetic energy is
+        ``m v.v / 2 + w.J w / 2``.
+        """
+        import exudyn as exu
+        import exudyn.utilities as eu
+        from exudyn.itemInterface import MassPoint, NodePoint
+
+        position = [float(x) for x in position]
+        velocity = [float(x) for x in velocity]
+        if inertia is None:
+            node = self.mbs.AddNode(NodePoint(referenceCoordinates=position, initialVelocities=velocity))
+            body = self.mbs.AddObject(MassPoint(mass=mass, nodeNumber=node))
+        else:
+            body = self.mbs.CreateRigidBody(
+                referencePosition=position,
+                referenceRotationMatrix=np.eye(3),
+                initialVelocity=velocity,
+                initialAngularVelocity=[float(x) for x in angular_velocity],
+                inertia=_inertia(mass, inertia),
+                nodeType=exu.NodeType.RotationEulerParameters,
+            )
+        self._bodies.append((body, mass, inertia))
+        return body
+
+    def _add_weight(self, body: int, local, gravity_mass: float) -> None:
+        """Apply the weight of ``gravity_mass`` at body-local point ``local`` (-z)."""
+        from exudyn.itemInterface import LoadForceVector, MarkerBodyPosition
+
+        if gravity_mass == 0.0 or self.masses.gravity == 0.0:
+            return
+        local = [float(x) for x in local]
+        marker = self.mbs.AddMarker(MarkerBodyPosition(bodyNumber=body, localPosition=local))
+        self.mbs.AddLoad(LoadForceVector(markerNumber=marker,
+                                         loadVector=[0.0, 0.0, -gravity_mass * self.masses.gravity]))
+        self._weights.append((body, local, gravity_mass))
+
+    def _init_solver(self, h: float) -> None:
+        import exudyn as exu
+
+        s = self.settings
+        sim = exu.SimulationSettings()
+        ti = sim.timeIntegration
+        ti.startTime = self._t
+        ti.endTime = self._t + h
+        ti.numberOfSteps = s.substeps
+        ti.verboseMode = 0
+        ti.automaticStepSize = False
+        ti.generalizedAlpha.spectralRadius = s.spectral_radius
+        ti.generalizedAlpha.computeInitialAccelerations = True
+        ti.newton.useModifiedNewton = s.modified_newton
+        ti.newton.relativeTolerance = s.newton_rel_tol
+        ti.newton.absoluteTolerance = s.newton_abs_tol
+        sim.solution.file.write = False
+        sim.solution.sensors.writePeriod = 1e30
+        sim.show.computationTime = False
+        sim.show.statistics = False
+        sparse = (self.fidelity == "full") if s.sparse is None else s.sparse
+        sim.linearSolver.solverType = exu.LinearSolverType.EigenSparse if sparse else exu.LinearSolverType.EXUdense
+        self._sim = sim
+        self._solver = exu.MainSolverImplicitSecondOrder()
+        self._solver.InitializeSolver(self.mbs, sim)
+
+    def _platform_state(self) -> tuple[np.ndarray, np.ndarray]:
+        return self._p_ref + self._coords[self._p_index], self._coords_t[self._p_index]
+
+    def _make_output(self, reaction: np.ndarray) -> PlantOutput:
+        sd = self.mbs.systemData
+        self._coords = np.asarray(sd.GetODE2Coordinates())
+        self._coords_t = np.asarray(sd.GetODE2Coordinates_t())
+        q, qd = self._read_joints()
+        p, v = self._platform_state()
+        return PlantOutput(t=self._t, q=q, qd=qd, p=p, v=v, reaction=np.array(reaction, dtype=float))
+
+
+def rod_inertia(mass: float, radius: float, length: float, axis: np.ndarray) -> np.ndarray:
+    """Inertia tensor (3, 3) of a solid cylinder about its centre, axis ``axis`` (unit), kg m^2."""
+    axial = 0.5 * mass * radius**2
+    transverse = mass * (3.0 * radius**2 + length**2) / 12.0
+    aa = np.outer(axis, axis)
+    return transverse * (np.eye(3) - aa) + axial * aa
+
+
+def point_inertia(mass: float, r: np.ndarray) -> np.ndarray:
+    """Parallel-axis term of a point mass at offset ``r`` from the reference point."""
+    r = np.asarray(r, dtype=float)
+    return mass * (float(r @ r) * np.eye(3) - np.outer(r, r))
+
+
+def tilt_angle(rotation: np.ndarray) -> float:
+    """Rotation angle of a rotation matrix, accurate for small angles, rad."""
+    rot = np.asarray(rotation, dtype=float).reshape(3, 3)
+    skew = 0.5 * (rot - rot.T)
+    s = np.linalg.norm([skew[2, 1], skew[0, 2], skew[1, 0]])
+    c = 0.5 * (np.trace(rot) - 1.0)
+    return float(np.arctan2(s, c))
+
+
+def _inertia(mass: float, tensor: np.ndarray):
+    """``RigidBodyInertia`` without the triangle-inequality check: an arm carrying a rotor
+    inertia about its axis (rotor lumped into the arm body) legitimately violates it."""
+    import exudyn.utilities as eu
+
+    out = eu.RigidBodyInertia(mass=mass, inertiaTensor=np.eye(3) * max(float(np.trace(tensor)), 1e-12),
+                              com=[0.0, 0.0, 0.0])
+    out.inertiaTensor = np.asarray(tensor, dtype=float)
+    return out
