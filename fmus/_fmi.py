@@ -19,7 +19,7 @@ from pythonfmu import Fmi2Causality, Fmi2Initial, Fmi2Slave, Fmi2Variability
 from pythonfmu.default_experiment import DefaultExperiment
 from pythonfmu.variables import Boolean, Integer, Real, String
 
-from ._names import UNITS, XYZ, axis_names, joint_names
+from ._names import UNITS, XYZ, axis_names, compensate_exporter_refcount, joint_names
 
 __all__ = ["Adapter", "UNITS", "XYZ", "joint_names", "axis_names", "DefaultExperiment"]
 
@@ -68,6 +68,7 @@ class Adapter(Fmi2Slave):
     EXPERIMENT: tuple[float, float, float] = (0.0, 1.0, 1e-3)
 
     def __init__(self, **kwargs: Any) -> None:
+        compensate_exporter_refcount(type(self))
         super().__init__(**kwargs)
         self.author = "delta-cosim"
         start, stop, step = self.EXPERIMENT

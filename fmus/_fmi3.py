@@ -16,7 +16,7 @@ from pythonfmu3 import (
     Unit,
 )
 
-from ._names import UNITS
+from ._names import UNITS, compensate_exporter_refcount
 
 __all__ = ["AdapterME"]
 
@@ -28,6 +28,7 @@ class AdapterME(Fmi3SlaveBase, ModelExchange):
     EXPERIMENT: tuple[float, float, float] = (0.0, 1.0, 1e-3)
 
     def __init__(self, **kwargs: Any) -> None:
+        compensate_exporter_refcount(type(self))
         super().__init__(**kwargs)
         self.author = "delta-cosim"
         start, stop, step = self.EXPERIMENT

@@ -2,7 +2,10 @@
 
 from __future__ import annotations
 
-__all__ = ["XYZ", "UNITS", "joint_names", "axis_names"]
+import ctypes
+import sys
+
+__all__ = ["XYZ", "UNITS", "joint_names", "axis_names", "compensate_exporter_refcount"]
 
 XYZ = ("x", "y", "z")
 
@@ -39,3 +42,22 @@ def joint_names(prefix: str) -> list[str]:
 def axis_names(prefix: str) -> list[str]:
     """``prefix.x prefix.y prefix.z``."""
     return [f"{prefix}.{a}" for a in XYZ]
+
+
+def compensate_exporter_refcount(slave_class: type) -> None:
+    """Give back the reference pythonfmu's loader takes from the slave module's globals.
+
+    pythonfmu 0.7 (and pythonfmu3) look the slave class up with a C++ ``findClass``
+    that calls ``Py_DECREF`` on the module's ``__dict__``, a *borrowed* reference,
+    once per instantiation, before the instance exists. Our generated slave modules
+    hold no functions (whose ``__globals__`` would keep extra references), so the
+    dict would be freed during the first lookup and its memory reused: a second
+    instance in the same process then fails with "module has no attribute" or the
+    interpreter crashes during garbage collection. The generated module keeps one
+    spare reference to its globals (``fmus.builder``) and every instance gives back
+    the one the lookup took; a leaked reference when an adapter is created outside
+    the C++ loader (builder, direct use) is harmless.
+    """
+    module = sys.modules.get(slave_class.__module__)
+    if module is not None:
+        ctypes.pythonapi.Py_IncRef(ctypes.py_object(vars(module)))
