@@ -85,6 +85,9 @@ class FMUInfo:
 
 
 _CACHE: dict[Path, FMUInfo] = {}
+# Callbacks and library handles handed to FMUs live as long as the process: an FMU may call its
+# logger while being freed, and pythonfmu libraries must not be unloaded (GC of their objects crashes).
+_KEEP_ALIVE: list[Any] = []
 
 
 def load_fmu(path: str | Path) -> FMUInfo:
@@ -175,10 +178,12 @@ class _Base:
         self.fmu: Any = None
         self._instantiated = False
         self._terminated = False
+        self._fatal = False  # after fmi2Fatal/fmi3Fatal no FMI function may be called, freeInstance included
 
     # -- the one place where statuses are checked
     def _check(self, status: int, function: str) -> None:
         if status > 1:  # OK = 0, Warning = 1; Discard, Error, Fatal, Pending fail
+            self._fatal = self._fatal or status == 4
             raise FMIError(self.name, function, self.time, status, self._last_log())
 
     def _last_log(self) -> str:
@@ -192,6 +197,7 @@ class _Base:
             return call(*args)
         except FMICallException as exc:
             status = getattr(exc, "status", None)
+            self._fatal = self._fatal or status == 4
             raise FMIError(self.name, function, self.time, status, self._last_log() or str(exc)) from None
         except FMIError:
             raise
@@ -228,7 +234,7 @@ class _Base:
         raise KeyError(f"{self.name}.{var.name} is not bound as an {'output' if output else 'input'}")
 
     def terminate(self) -> None:
-        if self._instantiated and not self._terminated:
+        if self._instantiated and not self._terminated and not self._fatal:
             self._terminated = True
             self._guard(f"fmi{self.fmi}Terminate", self.fmu.terminate)
 
@@ -236,14 +242,12 @@ class _Base:
         if self.fmu is None:
             return
         try:
-            if self._instantiated:
+            if self._instantiated and not self._fatal:
                 self.fmu.freeInstance()
         finally:
+            # the shared library stays loaded: unloading a pythonfmu library while the interpreter
+            # still holds objects it created crashes at garbage collection
             self._instantiated = False
-            try:
-                self.fmu.freeLibrary()
-            except Exception:  # unloading the library is best effort; the process keeps it otherwise
-                pass
             self.fmu = None
 
 
@@ -278,7 +282,8 @@ class _FMI2(_Base):
         cb.freeMemory = fmi2CallbackFreeMemoryTYPE(free)
         addLoggerProxy(byref(cb))
         self._callbacks = cb
-        self._guard("fmi2Instantiate", self.fmu.instantiate, False, cb, False)
+        _KEEP_ALIVE.append((cb, self.fmu))
+        self._guard("fmi2Instantiate", self.fmu.instantiate, False, cb, True)
         self._instantiated = True
         dll = self.fmu.dll
         self._c = self.fmu.component
@@ -497,6 +502,7 @@ class _FMI3(_Base):
         self.fmu = self._guard("load library", self._make)
         logger = lambda env, status, cat, msg: self._on_log(status, cat, msg)  # noqa: E731
         self._logger = logger
+        _KEEP_ALIVE.append((logger, self.fmu))
         self._guard("fmi3InstantiateCoSimulation", lambda: self.fmu.instantiate(logMessage=logger))
         self._instantiated = True
         self._c = self.fmu.component
@@ -566,6 +572,7 @@ class FMI3ModelExchange(_MEMixin, _FMI3):
         self.fmu = self._guard("load library", self._make)
         logger = lambda env, status, cat, msg: self._on_log(status, cat, msg)  # noqa: E731
         self._logger = logger
+        _KEEP_ALIVE.append((logger, self.fmu))
         self._guard("fmi3InstantiateModelExchange", lambda: self.fmu.instantiate(logMessage=logger))
         self._instantiated = True
         self._c = self.fmu.component
