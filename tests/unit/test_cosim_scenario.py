@@ -1,0 +1,57 @@
+"""Scenario validation messages and Gauss-Seidel ordering (pure, no FMUs)."""
+
+import pytest
+
+from cosim.errors import AlgebraicLoopError, ScenarioError
+from cosim.scenario import parse_scenario, scenario_json_schema
+from cosim.system import gauss_seidel_order
+
+GOOD = """name: t
+components:
+  a: {path: a.fmu}
+  b: {path: b.fmu, parameters: {gain.kp: [1, 2, 3]}}
+connections:
+  - {from: a.y, to: b.u}
+time: {stop: 1.0, step: 0.001}
+"""
+
+
+def test_valid_scenario_integer_time():
+    s = parse_scenario(GOOD, "x.yaml")
+    assert (s.time.step_ns, s.time.stop_ns) == (1_000_000, 1_000_000_000), (s.time.step_ns, s.time.stop_ns)
+
+
+def test_all_errors_at_once_with_file_line_and_path():
+    text = GOOD.replace("b: {path: b.fmu,", "b: {path: b.fmu, bogus: 1,").replace("to: b.u", "to: bb.u") \
+        .replace("stop: 1.0", "stop: 1.0005")
+    with pytest.raises(ScenarioError) as exc:
+        parse_scenario(text, "x.yaml")
+    msg = str(exc.value)
+    assert "x.yaml:4: components.b.bogus: unknown key" in msg, msg
+    assert "x.yaml:7: time: stop - start = 1.0005 s is not a whole number of steps" in msg, msg
+
+
+def test_unknown_component_suggests_close_name():
+    with pytest.raises(ScenarioError) as exc:
+        parse_scenario(GOOD.replace("to: b.u", "to: bb.u"), "x.yaml")
+    assert "x.yaml:6: connections[0].to: unknown component 'bb'; did you mean b?" in str(exc.value), str(exc.value)
+
+
+def test_both_or_neither_source_rejected():
+    with pytest.raises(ScenarioError) as exc:
+        parse_scenario(GOOD.replace("a: {path: a.fmu}", "a: {path: a.fmu, fmu: x}"), "x.yaml")
+    assert "x.yaml:3: components.a: give exactly one of 'fmu'" in str(exc.value), str(exc.value)
+
+
+def test_schema_is_titled_and_closed():
+    schema = scenario_json_schema()
+    assert schema["title"] == "cosim scenario", schema.get("title")
+    assert schema["additionalProperties"] is False, schema.get("additionalProperties")
+
+
+def test_order_puts_non_feedthrough_first_in_a_loop():
+    # 0 = controller (feedthrough), 1 = plant (none): plant -> ctl is hard, ctl -> plant soft
+    assert gauss_seidel_order(2, [(1, 0, True), (0, 1, False)]) == [1, 0]
+    assert gauss_seidel_order(3, [(2, 1, True), (1, 0, True)]) == [2, 1, 0]
+    with pytest.raises(AlgebraicLoopError):
+        gauss_seidel_order(2, [(0, 1, True), (1, 0, True)])
