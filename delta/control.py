@@ -54,7 +54,10 @@ def _clip(u: list[float], u_max: _Vec | None) -> np.ndarray:
 
 
 class Controller:
-    """Interface: ``reset()`` and ``step(q, qd, q_ref, qd_ref, qdd_ref) -> u`` (all (3,))."""
+    """Interface: ``reset()``, ``step(q, qd, q_ref, qd_ref, qdd_ref) -> u`` (all (3,)), called once
+    per period ``h`` (it advances the internal state), and ``output(...)``, the same effort
+    without changing the state (for hosts that read the output more than once per period,
+    e.g. an FMU's getter before ``doStep``)."""
 
     h: float
     u_max: _Vec | None
@@ -64,6 +67,10 @@ class Controller:
 
     def step(self, q, qd, q_ref, qd_ref, qdd_ref) -> np.ndarray:  # noqa: ANN001
         raise NotImplementedError
+
+    def output(self, q, qd, q_ref, qd_ref, qdd_ref) -> np.ndarray:  # noqa: ANN001
+        """Effort for these inputs; stateless laws just evaluate :meth:`step`."""
+        return self.step(q, qd, q_ref, qd_ref, qdd_ref)
 
 
 class PD(Controller):
@@ -105,8 +112,9 @@ class PID(Controller):
     def reset(self) -> None:
         self.integral = [0.0, 0.0, 0.0]
 
-    def step(self, q, qd, q_ref, qd_ref, qdd_ref) -> np.ndarray:  # noqa: ANN001
+    def _evaluate(self, q, qd, q_ref, qd_ref, qdd_ref) -> tuple[np.ndarray, list[float]]:  # noqa: ANN001
         u = [0.0, 0.0, 0.0]
+        integral = [0.0, 0.0, 0.0]
         for i in range(3):
             e = q_ref[i] - q[i]
             pd = self.kp[i] * e + self.kd[i] * (qd_ref[i] - qd[i])
@@ -119,9 +127,16 @@ class PID(Controller):
             if self.u_max is not None and abs(out) > self.u_max[i] and out * e > 0.0 and abs(new) > abs(old):
                 new = old  # conditional integration
                 out = pd + self.ki[i] * new
-            self.integral[i] = new
+            integral[i] = new
             u[i] = out
-        return _clip(u, self.u_max)
+        return _clip(u, self.u_max), integral
+
+    def output(self, q, qd, q_ref, qd_ref, qdd_ref) -> np.ndarray:  # noqa: ANN001
+        return self._evaluate(q, qd, q_ref, qd_ref, qdd_ref)[0]
+
+    def step(self, q, qd, q_ref, qd_ref, qdd_ref) -> np.ndarray:  # noqa: ANN001
+        u, self.integral = self._evaluate(q, qd, q_ref, qd_ref, qdd_ref)
+        return u
 
 
 class PDPlus(Controller):

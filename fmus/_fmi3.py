@@ -34,6 +34,8 @@ class AdapterME(Fmi3SlaveBase, ModelExchange):
         start, stop, step = self.EXPERIMENT
         self.default_experiment = DefaultExperiment(start_time=start, stop_time=stop, step_size=step)
         self.values: dict[str, float] = {}
+        self._started = False
+        self._stale = True
         self.time = 0.0
         self._units: set[str] = set()
         self.register_variable(Float64("time", causality=Fmi3Causality.independent,
@@ -44,14 +46,18 @@ class AdapterME(Fmi3SlaveBase, ModelExchange):
              variability: Fmi3Variability, initial: Fmi3Initial | None = None, derivative: int | None = None,
              settable: bool = False) -> int:
         self.values[name] = 0.0 if start is None else float(start)
+        self._stale = True
         if unit is not None and unit not in self._units:
             self._units.add(unit)
             base = {k: v for k, v in UNITS[unit].items() if v}
             self.register_units([Unit(unit, **base)])
-        setter = (lambda v, n=name: self.values.__setitem__(n, float(v))) if settable else None
+        setter = (lambda v, n=name: self._set(n, v)) if settable else None
+        if causality is Fmi3Causality.output:
+            getter = lambda n=name: self._get_output(n)  # noqa: E731
+        else:
+            getter = lambda n=name: self.values[n]  # noqa: E731
         var = Float64(name, start=start, unit=unit, causality=causality, variability=variability, initial=initial,
-                      derivative=derivative, description=description,
-                      getter=lambda n=name: self.values[n], setter=setter)
+                      derivative=derivative, description=description, getter=getter, setter=setter)
         self.register_variable(var, nested=False)
         return var.value_reference
 
@@ -78,6 +84,17 @@ class AdapterME(Fmi3SlaveBase, ModelExchange):
         self._add(der_name, None, der_unit, f"time derivative of {name}", Fmi3Causality.local,
                   Fmi3Variability.continuous, Fmi3Initial.calculated, derivative=vr)
 
+    def _set(self, name: str, value: float) -> None:
+        self.values[name] = float(value)
+        self._stale = True
+
+    def _get_output(self, name: str) -> float:
+        # Outputs follow the current states and inputs, not the solver's last trial point.
+        if self._stale and self._started:
+            self.outputs()
+            self._stale = False
+        return self.values[name]
+
     def vec(self, names: Iterable[str]):
         import numpy as np
 
@@ -91,11 +108,15 @@ class AdapterME(Fmi3SlaveBase, ModelExchange):
         """Build the model from the parameters and set the initial states."""
 
     def derivatives(self) -> None:
-        """Fill the derivative variables (and outputs) from the states and inputs."""
+        """Fill the derivative variables from the states and inputs."""
+
+    def outputs(self) -> None:
+        """Fill the output variables (other than the states) from the states and inputs."""
 
     def exit_initialization_mode(self) -> None:
         self.start()
-        self.derivatives()
+        self._started = True
+        self._stale = True
 
     def get_continuous_state_derivatives(self) -> list[float]:
         self.derivatives()

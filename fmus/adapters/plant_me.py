@@ -48,6 +48,8 @@ class AnalyticPlantME(AdapterME):
         q, qd = self.vec(Q), self.vec(QD)
         self.put(DQ, qd)
         self.put(DQD, self.model.forward_dynamics(q, qd, self.vec(U)))
-        p, v = self.model.platform_state(q, qd)
+
+    def outputs(self) -> None:
+        p, v = self.model.platform_state(self.vec(Q), self.vec(QD))
         self.put(P, p)
         self.put(V, v)
