@@ -141,8 +141,8 @@ class InitialState(_Model):
 
     from_trajectory: bool = True
     component: str = Field("plant", description="component whose start parameters are set")
-    position: list[str] = Field(default_factory=lambda: ["init.p.x", "init.p.y", "init.p.z"])
-    velocity: list[str] = Field(default_factory=lambda: ["init.v.x", "init.v.y", "init.v.z"])
+    position: list[str] = Field(default_factory=lambda: ["initial.p.x", "initial.p.y", "initial.p.z"])
+    velocity: list[str] = Field(default_factory=lambda: ["initial.v.x", "initial.v.y", "initial.v.z"])
 
     @field_validator("position", "velocity")
     @classmethod

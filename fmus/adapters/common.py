@@ -7,7 +7,7 @@ from dataclasses import fields
 from delta.dynamics import LinearDeltaMasses, RotaryDeltaMasses
 from delta.robots import LinearDelta, RotaryDelta, get_preset
 
-from .._names import joint_names
+from .._names import axis_names, joint_names
 
 __all__ = ["PRESET", "declare_robot", "robot_from", "declare_masses", "masses_from", "q_units"]
 
@@ -99,3 +99,22 @@ def hold_effort(kind: str) -> tuple[float, float, float]:
 
     model = analytic_model(get_preset(PRESET[kind]), _mass_class(kind)())
     return tuple(float(x) for x in model.gravity_term(home_joints(kind)))
+
+
+P0, V0 = axis_names("initial.p"), axis_names("initial.v")
+
+
+def declare_initial_state(fmu, kind: str) -> None:
+    """``initial.p.*`` and ``initial.v.*``: the plant starts at this platform state (joints through IK)."""
+    fmu.parameters3(P0, HOME[kind], "m", "initial platform position")
+    fmu.parameters3(V0, (0.0, 0.0, 0.0), "m/s", "initial platform velocity")
+
+
+def initial_joint_state(fmu, robot):
+    """(q, qd) stacked, from the ``initial.p`` / ``initial.v`` parameters (raises if unreachable)."""
+    import numpy as np
+
+    from delta.kinematics import joint_state_from_platform
+
+    q, qd, _ = joint_state_from_platform(robot, fmu.vec(P0), fmu.vec(V0))
+    return np.concatenate([q, qd])

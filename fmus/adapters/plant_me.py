@@ -6,12 +6,20 @@ from delta.dynamics import analytic_model
 
 from .._names import axis_names, joint_names
 from .._fmi3 import AdapterME
-from .common import declare_masses, declare_robot, hold_effort, home_joints, masses_from, q_units, robot_from
+from .common import (
+    declare_initial_state,
+    declare_masses,
+    declare_robot,
+    hold_effort,
+    initial_joint_state,
+    masses_from,
+    q_units,
+    robot_from,
+)
 
 Q, QD, QDD, U = joint_names("q"), joint_names("qd"), joint_names("qdd"), joint_names("u")
 DQ, DQD = [f"der(q[{i}])" for i in (1, 2, 3)], [f"der(qd[{i}])" for i in (1, 2, 3)]
 P, V = axis_names("p"), axis_names("v")
-Q0, QD0 = joint_names("initial.q"), joint_names("initial.qd")
 
 
 class AnalyticPlantME(AdapterME):
@@ -26,8 +34,7 @@ class AnalyticPlantME(AdapterME):
         self.description = f"Analytic dynamics plant of the {kind} delta (model exchange)"
         declare_robot(self, kind)
         declare_masses(self, kind)
-        self.parameters3(Q0, home_joints(kind), qu, "initial joint position")
-        self.parameters3(QD0, (0.0, 0.0, 0.0), qdu, "initial joint velocity")
+        declare_initial_state(self, kind)
         for i in range(3):
             self.input(U[i], uu, f"actuator effort along +q (leg {i + 1})", hold_effort(kind)[i])
         for i in range(3):
@@ -40,9 +47,11 @@ class AnalyticPlantME(AdapterME):
             self.output(n, "m/s", f"platform velocity ({a})")
 
     def start(self) -> None:
-        self.model = analytic_model(robot_from(self, self.KIND), masses_from(self, self.KIND))
-        self.put(Q, self.vec(Q0))
-        self.put(QD, self.vec(QD0))
+        robot = robot_from(self, self.KIND)
+        self.model = analytic_model(robot, masses_from(self, self.KIND))
+        x0 = initial_joint_state(self, robot)
+        self.put(Q, x0[:3])
+        self.put(QD, x0[3:])
 
     def derivatives(self) -> None:
         q, qd = self.vec(Q), self.vec(QD)

@@ -8,11 +8,23 @@ from scipy.integrate import solve_ivp
 from delta.dynamics import analytic_model
 
 from .._fmi import Adapter, axis_names, joint_names
-from .common import HOME, declare_masses, declare_robot, hold_effort, home_joints, masses_from, q_units, robot_from
+from .common import (
+    HOME,
+    P0,
+    V0,
+    declare_initial_state,
+    declare_masses,
+    declare_robot,
+    hold_effort,
+    home_joints,
+    initial_joint_state,
+    masses_from,
+    q_units,
+    robot_from,
+)
 
 Q, QD, U = joint_names("q"), joint_names("qd"), joint_names("u")
 P, V = axis_names("p"), axis_names("v")
-Q0, QD0 = joint_names("initial.q"), joint_names("initial.qd")
 
 
 def declare_plant_interface(fmu: Adapter, kind: str) -> None:
@@ -21,8 +33,7 @@ def declare_plant_interface(fmu: Adapter, kind: str) -> None:
     declare_robot(fmu, kind)
     declare_masses(fmu, kind)
     q0 = home_joints(kind)
-    fmu.parameters3(Q0, q0, qu, "initial joint position")
-    fmu.parameters3(QD0, (0.0, 0.0, 0.0), qdu, "initial joint velocity")
+    declare_initial_state(fmu, kind)
     fmu.inputs3(U, uu, "actuator effort along +q", hold_effort(kind))
     fmu.outputs3(Q, qu, "joint position", q0)
     fmu.outputs3(QD, qdu, "joint velocity")
@@ -44,8 +55,9 @@ class AnalyticPlant(Adapter):
         self.parameter("solver.atol", 1e-12, "1", "absolute tolerance of the DOP853 integrator")
 
     def start(self) -> None:
-        self.model = analytic_model(robot_from(self, self.KIND), masses_from(self, self.KIND))
-        self.state = np.concatenate([self.vec(Q0), self.vec(QD0)])
+        robot = robot_from(self, self.KIND)
+        self.model = analytic_model(robot, masses_from(self, self.KIND))
+        self.state = initial_joint_state(self, robot)
 
     def _rhs(self, t: float, x: np.ndarray, u: np.ndarray) -> np.ndarray:
         return np.concatenate([x[3:], self.model.forward_dynamics(x[:3], x[3:], u)])
@@ -79,7 +91,7 @@ class ExudynPlant(Adapter):
         declare_robot(self, kind)
         declare_masses(self, kind)
         self.parameter("model.fidelity", "full", None, "multibody fidelity: full (rigid rods) or lumped (point masses)")
-        self.parameters3(axis_names("initial.p"), HOME[kind], "m", "initial platform position")
+        declare_initial_state(self, kind)
         self.inputs3(U, uu, "actuator effort along +q", hold_effort(kind))
         self.outputs3(Q, qu, "joint position", home_joints(kind))
         self.outputs3(QD, qdu, "joint velocity")
@@ -92,7 +104,7 @@ class ExudynPlant(Adapter):
 
         self.plant = make_plant(robot_from(self, self.KIND), masses_from(self, self.KIND),
                                 fidelity=self.values["model.fidelity"])
-        self._show(self.plant.reset(self.vec(axis_names("initial.p")), t0=self.time))
+        self._show(self.plant.reset(self.vec(P0), self.vec(V0), t0=self.time))
 
     def _show(self, out) -> None:
         self.put(Q, out.q)

@@ -193,14 +193,12 @@ def test_model_exchange_plant_matches_cosimulation_plant_under_ctc(fmu_dir):
     plant integrated by fmpy's CVode; the platform paths must agree."""
     import fmpy
 
-    from delta.kinematics import joint_state_from_platform
-    from delta.robots import linear_delta_thesis
     from delta.trajectories import Helix
 
     h, n = 1e-3, 1000  # first second of the default helix (the CS plant's DOP853 dominates the cost)
     p0, v0, _ = Helix().evaluate(0.0)
-    q0, qd0, _ = joint_state_from_platform(linear_delta_thesis, p0, v0)
-    start = {**{f"initial.q[{i + 1}]": q0[i] for i in range(3)}, **{f"initial.qd[{i + 1}]": qd0[i] for i in range(3)}}
+    start = {**{f"initial.p.{a}": p0[i] for i, a in enumerate("xyz")},
+             **{f"initial.v.{a}": v0[i] for i, a in enumerate("xyz")}}
     helix = _Slave(_path(fmu_dir, "helix"), "helix")
     ik = _Slave(_path(fmu_dir, "linear_ik"), "ik")
     ctc = _Slave(_path(fmu_dir, "linear_ctc"), "ctc")
