@@ -179,13 +179,9 @@ class Adapter(Fmi2Slave):
         self.refresh()
 
     def do_step(self, current_time: float, step_size: float) -> bool:
-        if self._dirty:
-            self._dirty = False
-            self.refresh()
         self.advance(current_time, step_size)
         self.time = current_time + step_size
-        self._dirty = False
-        self.refresh()
+        self._dirty = True  # outputs are recomputed once, when next read
         return True
 
     def to_xml(self, model_options: dict[str, str] = dict()) -> Element:  # noqa: B006 (pythonfmu signature)
