@@ -30,18 +30,25 @@ GRAVITY = 9.81
 """Standard gravity used by default, m/s^2 (acts along -z)."""
 
 
-def _check(obj: object) -> None:
-    for f in fields(obj):
-        value = getattr(obj, f.name)
-        if f.name.startswith("w_"):
-            if not 0.0 <= value <= 1.0:
-                raise ParameterError(f"{type(obj).__name__}.{f.name} must be in [0, 1], got {value!r}")
-        elif isinstance(value, float) and value < 0.0:
-            raise ParameterError(f"{type(obj).__name__}.{f.name} must be >= 0, got {value!r}")
+class _Masses:
+    """Validation and copy-with-changes shared by the mass dataclasses."""
+
+    def __post_init__(self) -> None:
+        for f in fields(self):
+            value = getattr(self, f.name)
+            if f.name.startswith("w_"):
+                if not 0.0 <= value <= 1.0:
+                    raise ParameterError(f"{type(self).__name__}.{f.name} must be in [0, 1], got {value!r}")
+            elif isinstance(value, float) and value < 0.0:
+                raise ParameterError(f"{type(self).__name__}.{f.name} must be >= 0, got {value!r}")
+
+    def with_(self, **changes: float):
+        """A copy with ``changes`` applied (validated again)."""
+        return replace(self, **changes)
 
 
 @dataclass(frozen=True)
-class LinearDeltaMasses:
+class LinearDeltaMasses(_Masses):
     """Masses of the linear delta (thesis eqs. 28-29), SI units.
 
     Attributes
@@ -76,15 +83,10 @@ class LinearDeltaMasses:
     w_gravity: float = 2.0 / 3.0
     gravity: float = GRAVITY
 
-    def __post_init__(self) -> None:
-        _check(self)
-
-    def with_(self, **changes: float) -> "LinearDeltaMasses":
-        return replace(self, **changes)
 
 
 @dataclass(frozen=True)
-class RotaryDeltaMasses:
+class RotaryDeltaMasses(_Masses):
     """Masses of the rotary delta (Codourey-style lumping), SI units.
 
     Attributes
@@ -119,11 +121,6 @@ class RotaryDeltaMasses:
     w_gravity: float = 2.0 / 3.0
     gravity: float = GRAVITY
 
-    def __post_init__(self) -> None:
-        _check(self)
-
-    def with_(self, **changes: float) -> "RotaryDeltaMasses":
-        return replace(self, **changes)
 
 
 # --------------------------------------------------------------------------------------

@@ -8,6 +8,7 @@ import sys
 import numpy as np
 import pytest
 
+from delta.paper_data import THESIS_TABLE_4_CM
 from fmus import registry
 
 pytestmark = pytest.mark.integration
@@ -140,14 +141,7 @@ class _Slave:
 
 P_REF = ["p_ref.x", "p_ref.y", "p_ref.z"]
 Q_REF = ["q_ref[1]", "q_ref[2]", "q_ref[3]"]
-THESIS_TABLE_4 = [  # platform position (cm) -> carriage travels (cm), thesis Table 4
-    ((0, 0, -31.6), (-0.04455, -0.04455, -0.03874)),
-    ((5, -3.5, -34), (4.5, -0.4286, 5.08)),
-    ((-2, 0.4, -61), (28.55, 30.55, 29.2)),
-    ((0, -2, -63), (30.85, 30.85, 32.6)),
-    ((-11, -2, -51.5), (16, 27.7, 23.16)),
-    ((0, -5, -64), (31.33, 31.33, 35.82)),
-]
+THESIS_TABLE_4 = THESIS_TABLE_4_CM
 
 
 def test_ik_and_fk_fmus_reproduce_thesis_table_4(fmu_dir):
@@ -193,7 +187,7 @@ def test_model_exchange_plant_matches_cosimulation_plant_under_ctc(fmu_dir):
     plant integrated by fmpy's CVode; the platform paths must agree."""
     import fmpy
 
-    from delta.trajectories import Helix
+from delta.trajectories import Helix
 
     h, n = 1e-3, 1000  # first second of the default helix (the CS plant's DOP853 dominates the cost)
     p0, v0, _ = Helix().evaluate(0.0)

@@ -5,6 +5,7 @@ import pytest
 from hypothesis import assume, given
 from hypothesis import strategies as st
 
+from delta.paper_data import THESIS_TABLE_4_CM
 from delta.kinematics import (
     fk,
     hessians,
@@ -19,14 +20,7 @@ from delta.robots import PRESETS, linear_delta_thesis, rotary_delta_prototype
 from delta.singularity import analyse
 
 # Thesis Table 4: platform position (cm) -> carriage travels L1, L2, L3 (cm).
-THESIS_TABLE_4 = [
-    ((0, 0, -31.6), (-0.04455, -0.04455, -0.03874)),
-    ((5, -3.5, -34), (4.5, -0.4286, 5.08)),
-    ((-2, 0.4, -61), (28.55, 30.55, 29.2)),
-    ((0, -2, -63), (30.85, 30.85, 32.6)),
-    ((-11, -2, -51.5), (16, 27.7, 23.16)),
-    ((0, -5, -64), (31.33, 31.33, 35.82)),
-]
+THESIS_TABLE_4 = THESIS_TABLE_4_CM
 # The table is printed to 2-4 significant digits and its first row is not even
 # symmetric (L3 != L1 at x = y = 0), so 0.02 cm is the resolution of the table.
 TABLE_4_TOL_CM = 0.02
