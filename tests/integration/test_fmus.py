@@ -185,9 +185,7 @@ def test_model_exchange_plant_matches_cosimulation_plant_under_ctc(fmu_dir):
     """Closed loop: helix FMU -> IK FMU -> CTC FMU -> CS analytic plant FMU, Gauss-Seidel at
     1 ms. The efforts held on each step are then replayed, zero-order hold, into the ME
     plant integrated by fmpy's CVode; the platform paths must agree."""
-    import fmpy
-
-from delta.trajectories import Helix
+    from delta.trajectories import Helix
 
     h, n = 1e-3, 1000  # first second of the default helix (the CS plant's DOP853 dominates the cost)
     p0, v0, _ = Helix().evaluate(0.0)
