@@ -72,3 +72,11 @@ def build_test_fmus(dest: Path) -> dict[str, Path]:
             z.writestr(n, data)
     out["CosimTGainUndeclared"] = raw
     return out
+
+
+if __name__ == "__main__":
+    import sys
+
+    target = Path(sys.argv[1]) if len(sys.argv) > 1 else Path(__file__).parent / "scenarios" / "fmus"
+    for name, path in build_test_fmus(target).items():
+        print(f"{name}: {path}")
