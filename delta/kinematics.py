@@ -42,6 +42,8 @@ __all__ = [
     "rod_vectors",
     "jacobian",
     "hessians",
+    "jacobian_and_hessians",
+    "joint_rates",
     "joint_velocity",
     "platform_velocity",
     "joint_acceleration",
@@ -275,6 +277,13 @@ def _jacobian_parts(robot: Robot, q: np.ndarray, p: np.ndarray) -> tuple[np.ndar
     return rods, d1, d2, denom
 
 
+def _jacobian_from_parts(rods: np.ndarray, denom: np.ndarray) -> np.ndarray:
+    if np.any(denom == 0.0):
+        leg = int(np.argmin(np.abs(denom))) + 1
+        raise RobotError(f"type 1 (serial) singularity: leg {leg} rod is orthogonal to its actuator motion")
+    return rods / denom[:, None]
+
+
 def jacobian(robot: Robot, q: np.ndarray, p: np.ndarray) -> np.ndarray:
     """Task Jacobian ``J`` with ``qd = J v``, (3, 3).
 
@@ -282,27 +291,29 @@ def jacobian(robot: Robot, q: np.ndarray, p: np.ndarray) -> np.ndarray:
     ``B_i' = u_i``; for the rotary delta it equals ``J_theta^-1 J_p`` of seed 003 eq. (12)).
     """
     rods, _, _, denom = _jacobian_parts(robot, q, p)
-    if np.any(denom == 0.0):
-        leg = int(np.argmin(np.abs(denom))) + 1
-        raise RobotError(f"type 1 (serial) singularity: leg {leg} rod is orthogonal to its actuator motion")
-    return rods / denom[:, None]
+    return _jacobian_from_parts(rods, denom)
 
 
-def hessians(robot: Robot, q: np.ndarray, p: np.ndarray) -> np.ndarray:
-    """Hessians ``H_i`` (3, 3, 3) with ``qdd_i = J_i a + v^T H_i v`` (thesis eq. (22)).
+def jacobian_and_hessians(robot: Robot, q: np.ndarray, p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``J`` (3, 3) and the Hessians ``H_i`` (3, 3, 3) with ``qdd_i = J_i a + v^T H_i v`` (thesis eq. (22)).
 
     ``H_i = [(I - B_i' J_i)^T (I - B_i' J_i) - (l_i . B_i'') J_i^T J_i] / (l_i . B_i')``;
     for the linear delta ``B_i'' = 0`` and this is thesis eq. (23) (there ``l_i`` is
     the unit rod vector and the factor ``1 / L`` appears explicitly).
     """
     rods, d1, d2, denom = _jacobian_parts(robot, q, p)
-    jac = rods / denom[:, None]
+    jac = _jacobian_from_parts(rods, denom)
     out = np.empty((3, 3, 3))
     eye = np.eye(3)
     for i in range(3):
         m = eye - np.outer(d1[i], jac[i])
         out[i] = (m.T @ m - float(rods[i] @ d2[i]) * np.outer(jac[i], jac[i])) / denom[i]
-    return out
+    return jac, out
+
+
+def hessians(robot: Robot, q: np.ndarray, p: np.ndarray) -> np.ndarray:
+    """Hessians ``H_i`` (3, 3, 3), see :func:`jacobian_and_hessians`."""
+    return jacobian_and_hessians(robot, q, p)[1]
 
 
 def joint_velocity(robot: Robot, q: np.ndarray, p: np.ndarray, v: np.ndarray) -> np.ndarray:
@@ -315,21 +326,27 @@ def platform_velocity(robot: Robot, q: np.ndarray, p: np.ndarray, qd: np.ndarray
     return np.linalg.solve(jacobian(robot, q, p), np.asarray(qd, dtype=float))
 
 
-def _quadratic_terms(robot: Robot, q: np.ndarray, p: np.ndarray, v: np.ndarray) -> np.ndarray:
-    h = hessians(robot, q, p)
+def joint_rates(robot: Robot, q: np.ndarray, p: np.ndarray, v: np.ndarray,
+                a: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """``qd = J v`` and ``qdd = J a + [v^T H_i v]`` (thesis eqs. (16), (22)) from one evaluation
+    of ``J`` and ``H``; ``qdd`` is zero when ``a`` is None."""
     v = np.asarray(v, dtype=float)
-    return np.einsum("j,ijk,k->i", v, h, v)
+    if a is None:
+        return jacobian(robot, q, p) @ v, np.zeros(3)
+    jac, hess = jacobian_and_hessians(robot, q, p)
+    return jac @ v, jac @ np.asarray(a, dtype=float) + np.einsum("j,ijk,k->i", v, hess, v)
 
 
 def joint_acceleration(robot: Robot, q: np.ndarray, p: np.ndarray, v: np.ndarray, a: np.ndarray) -> np.ndarray:
     """``qdd = J a + [v^T H_i v]`` (thesis eqs. (22), (25))."""
-    return jacobian(robot, q, p) @ np.asarray(a, dtype=float) + _quadratic_terms(robot, q, p, v)
+    return joint_rates(robot, q, p, v, a)[1]
 
 
 def platform_acceleration(robot: Robot, q: np.ndarray, p: np.ndarray, v: np.ndarray, qdd: np.ndarray) -> np.ndarray:
     """``a = J^-1 (qdd - [v^T H_i v])`` (thesis eq. (37))."""
-    rhs = np.asarray(qdd, dtype=float) - _quadratic_terms(robot, q, p, v)
-    return np.linalg.solve(jacobian(robot, q, p), rhs)
+    jac, hess = jacobian_and_hessians(robot, q, p)
+    v = np.asarray(v, dtype=float)
+    return np.linalg.solve(jac, np.asarray(qdd, dtype=float) - np.einsum("j,ijk,k->i", v, hess, v))
 
 
 def joint_state_from_platform(
@@ -337,8 +354,7 @@ def joint_state_from_platform(
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Joint position, velocity, acceleration for a platform state; raises if unreachable."""
     q = ik(robot, p).require()
-    qd = joint_velocity(robot, q, p, v)
-    qdd = np.zeros(3) if a is None else joint_acceleration(robot, q, p, v, a)
+    qd, qdd = joint_rates(robot, q, p, v, a)
     return q, qd, qdd
 
 

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from delta.kinematics import fk, joint_acceleration, joint_velocity, platform_velocity
+from delta.kinematics import fk, joint_rates, platform_velocity
 from delta.singularity import analyse
 from delta.workspace import check_point
 
@@ -53,9 +53,10 @@ class InverseKinematics(Adapter):
         self.values["reachable"] = res.ok
         self.values["singularity.proximity"] = float(res.proximity) if res.proximity is not None else 0.0
         if res.ok:
+            qd, qdd = joint_rates(self.robot, res.q, p, v, a)
             self.put(Q_REF, res.q)
-            self.put(QD_REF, joint_velocity(self.robot, res.q, p, v))
-            self.put(QDD_REF, joint_acceleration(self.robot, res.q, p, v, a))
+            self.put(QD_REF, qd)
+            self.put(QDD_REF, qdd)
 
 
 class ForwardKinematics(Adapter):
