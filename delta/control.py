@@ -57,10 +57,12 @@ class Controller:
     """Interface: ``reset()``, ``step(q, qd, q_ref, qd_ref, qdd_ref) -> u`` (all (3,)), called once
     per period ``h`` (it advances the internal state), and ``output(...)``, the same effort
     without changing the state (for hosts that read the output more than once per period,
-    e.g. an FMU's getter before ``doStep``)."""
+    e.g. an FMU's getter before ``doStep``). ``stateful`` tells whether :meth:`step` changes
+    anything beyond :meth:`output` (hosts may skip it for stateless laws)."""
 
     h: float
     u_max: _Vec | None
+    stateful = False
 
     def reset(self) -> None:
         """Clear the internal state (nothing for stateless laws)."""
@@ -99,6 +101,8 @@ class PID(Controller):
     pushes it further into saturation; (2) the integral contribution ``Ki int e`` is
     clamped to ``+-i_max`` (default ``u_max``). ``ki`` in N/(m*s) (N*m/(rad*s)).
     """
+
+    stateful = True
 
     def __init__(self, kp, ki, kd, h: float, u_max=None, i_max=None) -> None:  # noqa: ANN001
         self.kp = _per_joint("PID", "kp", kp, positive=True)

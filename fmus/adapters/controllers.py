@@ -75,7 +75,8 @@ class _Controller(Adapter):
         that held during the step; the effort applied over the step was already output."""
         if self.law is None or self.law.h != h:
             self.law = self.make_law(h)
-        self.law.step(*self._inputs())
+        if self.law.stateful:  # stateless laws: the effort output before the step is all there is
+            self.law.step(*self._inputs())
 
     def refresh(self) -> None:
         # Direct feedthrough without side effects: the master sets the step's inputs,
