@@ -38,6 +38,7 @@ __all__ = [
     "platform_offsets",
     "ik",
     "ik_batch",
+    "joint_limit_reason",
     "fk",
     "rod_vectors",
     "jacobian",
@@ -200,6 +201,13 @@ def _fmt_q(robot: Robot, value: float) -> str:
     return f"{np.degrees(value):.2f} deg"
 
 
+def joint_limit_reason(robot: Robot, leg: int, value: float) -> str:
+    """``leg 2 joint limit: q = ... < q_min = ...`` for joint ``leg`` (1-based) at ``value``."""
+    if value < robot.q_min:
+        return f"leg {leg} joint limit: q = {_fmt_q(robot, value)} < q_min = {_fmt_q(robot, robot.q_min)}"
+    return f"leg {leg} joint limit: q = {_fmt_q(robot, value)} > q_max = {_fmt_q(robot, robot.q_max)}"
+
+
 def ik(robot: Robot, p: np.ndarray) -> IKResult:
     """Inverse kinematics of one platform position ``p`` (3,), m."""
     p = np.asarray(p, dtype=float).reshape(3)
@@ -210,13 +218,7 @@ def ik(robot: Robot, p: np.ndarray) -> IKResult:
         return IKResult(None, False, False, f"leg {leg} has no solution (rod cannot reach the platform joint)", leg)
     for i in range(3):
         if q[i] < robot.q_min or q[i] > robot.q_max:
-            bound = "q_min" if q[i] < robot.q_min else "q_max"
-            limit = robot.q_min if q[i] < robot.q_min else robot.q_max
-            reason = (
-                f"leg {i + 1} joint limit: q = {_fmt_q(robot, q[i])} "
-                f"{'<' if bound == 'q_min' else '>'} {bound} = {_fmt_q(robot, limit)}"
-            )
-            return IKResult(q, True, False, reason, i + 1)
+            return IKResult(q, True, False, joint_limit_reason(robot, i + 1, q[i]), i + 1)
     return IKResult(q, True, True)
 
 

@@ -14,7 +14,7 @@ from typing import Callable
 
 import numpy as np
 
-from .kinematics import ik_batch
+from .kinematics import ik_batch, joint_limit_reason
 from .robots import LinearDelta, Robot
 from .singularity import proximity_batch
 
@@ -56,12 +56,6 @@ class Reachability:
     @property
     def ok(self) -> bool:
         return self.failure is Failure.NONE
-
-
-def _fmt_q(robot: Robot, value: float) -> str:
-    if isinstance(robot, LinearDelta):
-        return f"{value:.4f} m"
-    return f"{np.degrees(value):.2f} deg"
 
 
 def reachability_batch(
@@ -113,11 +107,7 @@ def _explain(robot: Robot, p: np.ndarray, code: int, leg: int, q: np.ndarray, pr
     elif failure is Failure.NO_SOLUTION:
         reason = f"leg {leg} has no solution"
     elif failure is Failure.JOINT_LIMIT:
-        value = q[leg - 1]
-        if value < robot.q_min:
-            reason = f"leg {leg} joint limit: q = {_fmt_q(robot, value)} < q_min = {_fmt_q(robot, robot.q_min)}"
-        else:
-            reason = f"leg {leg} joint limit: q = {_fmt_q(robot, value)} > q_max = {_fmt_q(robot, robot.q_max)}"
+        reason = joint_limit_reason(robot, leg, q[leg - 1])
     else:
         reason = f"too close to a singularity: proximity {prox:.3g} < margin {margin:g}"
     return Reachability(
