@@ -19,7 +19,7 @@ from pythonfmu import Fmi2Causality, Fmi2Initial, Fmi2Slave, Fmi2Variability
 from pythonfmu.default_experiment import DefaultExperiment
 from pythonfmu.variables import Boolean, Integer, Real, String
 
-from ._names import UNITS, XYZ, axis_names, compensate_exporter_refcount, joint_names
+from ._names import UNITS, XYZ, ValueAccess, axis_names, compensate_exporter_refcount, joint_names
 
 __all__ = ["Adapter", "UNITS", "XYZ", "joint_names", "axis_names", "DefaultExperiment"]
 
@@ -56,7 +56,7 @@ _VARIABILITY = {v.name: v for v in Fmi2Variability}
 _TYPES = {"real": float, "integer": int, "boolean": bool, "string": str}
 
 
-class Adapter(Fmi2Slave):
+class Adapter(ValueAccess, Fmi2Slave):
     """FMI 2.0 co-simulation slave declared from :class:`Spec` records.
 
     Subclasses set the class attributes ``KIND`` (robot kind, or None) and
@@ -147,16 +147,6 @@ class Adapter(Fmi2Slave):
                     *, tunable: bool = False) -> None:
         for i, (n, s) in enumerate(zip(names, start)):
             self.parameter(n, float(s), unit, f"{description} ({_component(n, i)})", tunable=tunable)
-
-    # ------------------------------------------------------------------ access
-    def vec(self, names: Iterable[str]):
-        import numpy as np
-
-        return np.array([self.values[n] for n in names], dtype=float)
-
-    def put(self, names: Iterable[str], values: Iterable[Any]) -> None:
-        for n, v in zip(names, values):
-            self.values[n] = float(v)
 
     # ------------------------------------------------------------------ behaviour
     def start(self) -> None:

@@ -16,12 +16,12 @@ from pythonfmu3 import (
     Unit,
 )
 
-from ._names import UNITS, compensate_exporter_refcount
+from ._names import UNITS, ValueAccess, compensate_exporter_refcount
 
 __all__ = ["AdapterME"]
 
 
-class AdapterME(Fmi3SlaveBase, ModelExchange):
+class AdapterME(ValueAccess, Fmi3SlaveBase, ModelExchange):
     """Model-exchange slave: subclasses declare variables and implement ``start`` and ``derivatives``."""
 
     KIND: str | None = None
@@ -94,15 +94,6 @@ class AdapterME(Fmi3SlaveBase, ModelExchange):
             self.outputs()
             self._stale = False
         return self.values[name]
-
-    def vec(self, names: Iterable[str]):
-        import numpy as np
-
-        return np.array([self.values[n] for n in names], dtype=float)
-
-    def put(self, names: Iterable[str], values: Iterable[float]) -> None:
-        for n, v in zip(names, values):
-            self.values[n] = float(v)
 
     def start(self) -> None:
         """Build the model from the parameters and set the initial states."""

@@ -5,7 +5,7 @@ from __future__ import annotations
 import ctypes
 import sys
 
-__all__ = ["XYZ", "UNITS", "joint_names", "axis_names", "compensate_exporter_refcount"]
+__all__ = ["XYZ", "UNITS", "joint_names", "axis_names", "compensate_exporter_refcount", "ValueAccess"]
 
 XYZ = ("x", "y", "z")
 
@@ -62,3 +62,20 @@ def compensate_exporter_refcount(slave_class: type) -> None:
     module = sys.modules.get(slave_class.__module__)
     if module is not None:
         ctypes.pythonapi.Py_IncRef(ctypes.py_object(vars(module)))
+
+
+class ValueAccess:
+    """Vector access to an adapter's ``values`` dict, shared by the FMI 2 and FMI 3 bases."""
+
+    values: dict
+
+    def vec(self, names):
+        """Values of ``names`` as a float array."""
+        import numpy as np
+
+        return np.array([self.values[n] for n in names], dtype=float)
+
+    def put(self, names, values) -> None:
+        """Store ``values`` (floats) under ``names``."""
+        for n, v in zip(names, values):
+            self.values[n] = float(v)
