@@ -28,12 +28,10 @@ from delta.dynamics import LinearDeltaMasses
 from delta.kinematics import actuator_points, joint_state_from_platform, leg_axes, platform_offsets
 from delta.robots import LinearDelta
 
-from .plant import DeltaPlant, JointTrajectory, SolverSettings, rod_inertia, tilt_angle
+from .plant import MIN_ROD_MASS, DeltaPlant, JointTrajectory, SolverSettings, tilt_angle
 
 __all__ = ["LinearDeltaPlant", "MIN_ROD_MASS", "PLATFORM_THICKNESS"]
 
-MIN_ROD_MASS = 1e-6
-"""kg. A rigid rod body needs a regular mass matrix: a zero rod mass is represented by this."""
 PLATFORM_THICKNESS = 0.01
 """Platform disc thickness, m."""
 
@@ -135,18 +133,9 @@ class LinearDeltaPlant(DeltaPlant):
                     offsetUserFunction_t=self._coord_offset_t(i))))
             # leg
             if full:
-                rod_mass = max(m.rod, MIN_ROD_MASS)
-                vel_p = v0
                 for side in (-0.5, 0.5):
-                    a = B[i] + side * m.parallelogram_width * tangent[i]
-                    c = p0 + b[i] + side * m.parallelogram_width * tangent[i]
-                    axis = (c - a) / length
-                    omega = np.cross(c - a, vel_p - vel_c) / length**2
-                    rod = self._add_body(rod_mass, rod_inertia(rod_mass, m.rod_radius, length, axis),
-                                         0.5 * (a + c), 0.5 * (vel_c + vel_p), omega)
-                    self._add_weight(rod, (0.0, 0.0, 0.0), m.rod)
-                    mbs.CreateSphericalJoint(itemNumbers=[carriage, rod], position=list(a), show=False)
-                    mbs.CreateSphericalJoint(itemNumbers=[rod, self._platform], position=list(c), show=False)
+                    offset = side * m.parallelogram_width * tangent[i]
+                    self._add_rod(carriage, B[i] + offset, p0 + b[i] + offset, vel_c, v0)
             else:
                 pm = mbs.AddMarker(MarkerBodyPosition(bodyNumber=self._platform, localPosition=list(b[i])))
                 mbs.AddObject(DistanceConstraint(markerNumbers=[marker, pm], distance=length))

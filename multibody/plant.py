@@ -26,6 +26,10 @@ JointTrajectory = Callable[[float], tuple[np.ndarray, np.ndarray]]
 """Prescribed joint motion ``t -> (q(t), qd(t))``, each (3,), used by the prescribed-motion mode."""
 
 
+MIN_ROD_MASS = 1e-6
+"""kg. A rigid rod body needs a regular mass matrix: a zero rod mass is represented by this."""
+
+
 class PlantError(CosimError, RuntimeError):
     """A plant could not be stepped (wrong time, solver failure); the message names the time."""
 
@@ -263,6 +267,22 @@ class DeltaPlant:
             )
         self._bodies.append((body, mass, inertia))
         return body
+
+    def _add_rod(self, parent: int, start: np.ndarray, end: np.ndarray, v_start: np.ndarray,
+                 v_end: np.ndarray) -> int:
+        """One parallelogram rod from ``start`` (on ``parent``) to ``end`` (on the platform): a
+        uniform rigid cylinder with spherical joints at both ends, initial motion from the end
+        velocities (the spin about its own axis is zero)."""
+        m = self.masses
+        rod_mass = max(m.rod, MIN_ROD_MASS)
+        length = float(np.linalg.norm(end - start))
+        omega = np.cross(end - start, v_end - v_start) / length**2
+        rod = self._add_body(rod_mass, rod_inertia(rod_mass, m.rod_radius, length, (end - start) / length),
+                             0.5 * (start + end), 0.5 * (v_start + v_end), omega)
+        self._add_weight(rod, (0.0, 0.0, 0.0), m.rod)
+        self.mbs.CreateSphericalJoint(itemNumbers=[parent, rod], position=list(start), show=False)
+        self.mbs.CreateSphericalJoint(itemNumbers=[rod, self._platform], position=list(end), show=False)
+        return rod
 
     def _add_weight(self, body: int, local, gravity_mass: float) -> None:
         """Apply the weight of ``gravity_mass`` at body-local point ``local`` (-z)."""

@@ -27,7 +27,7 @@ from delta.dynamics import RotaryDeltaMasses
 from delta.kinematics import actuator_points, actuator_tangents, joint_state_from_platform, leg_axes, platform_offsets
 from delta.robots import RotaryDelta
 
-from .linear import MIN_ROD_MASS, PLATFORM_THICKNESS
+from .linear import PLATFORM_THICKNESS
 from .plant import DeltaPlant, JointTrajectory, SolverSettings, point_inertia, rod_inertia, tilt_angle
 
 __all__ = ["RotaryDeltaPlant", "ARM_RADIUS"]
@@ -122,18 +122,10 @@ class RotaryDeltaPlant(DeltaPlant):
             self._drives.append(joint)
             vel_e = d_elbow[i] * qd0[i]
             if full:
-                rod_mass = max(m.rod, MIN_ROD_MASS)
                 for side in (-0.5, 0.5):
                     pa = elbows[i] + side * m.parallelogram_width * a
-                    pc = p0 + b[i] + side * m.parallelogram_width * a
-                    axis = (pc - pa) / length
-                    vel_a = vel_e + np.cross(omega, pa - elbows[i])
-                    rod_omega = np.cross(pc - pa, v0 - vel_a) / length**2
-                    rod = self._add_body(rod_mass, rod_inertia(rod_mass, m.rod_radius, length, axis),
-                                         0.5 * (pa + pc), 0.5 * (vel_a + v0), rod_omega)
-                    self._add_weight(rod, (0.0, 0.0, 0.0), m.rod)
-                    mbs.CreateSphericalJoint(itemNumbers=[arm, rod], position=list(pa), show=False)
-                    mbs.CreateSphericalJoint(itemNumbers=[rod, self._platform], position=list(pc), show=False)
+                    self._add_rod(arm, pa, p0 + b[i] + side * m.parallelogram_width * a,
+                                  vel_e + np.cross(omega, pa - elbows[i]), v0)
             else:
                 pm = mbs.AddMarker(MarkerBodyPosition(bodyNumber=self._platform, localPosition=list(b[i])))
                 mbs.AddObject(DistanceConstraint(markerNumbers=[elbow_marker, pm], distance=length))
