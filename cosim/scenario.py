@@ -183,6 +183,27 @@ class Checks(_Model):
     max_error: float | None = Field(None, gt=0, description="largest absolute error allowed")
 
 
+class Regression(_Model):
+    """Tolerances for ``python -m cosim compare`` (plant vs plant, or a run against a baseline log).
+
+    Keys are signal patterns: a full name (``plant.p.x``), a prefix ending at a name
+    boundary (``plant.p`` covers ``plant.p.x``, ``plant.p.y``, ``plant.p.z``; ``ctl.u``
+    covers ``ctl.u[1]``...) or a glob (``*.u[*]``). Values are the largest absolute
+    difference allowed, in the signal's unit. The most specific pattern wins.
+    """
+
+    tolerances: dict[str, float] = Field(default_factory=dict,
+                                         description="signal pattern -> largest absolute difference allowed")
+
+    @field_validator("tolerances")
+    @classmethod
+    def _positive(cls, v: dict[str, float]) -> dict[str, float]:
+        bad = [k for k, x in v.items() if not x > 0]
+        if bad:
+            raise ValueError(f"tolerances must be > 0: {', '.join(bad)}")
+        return v
+
+
 class Scenario(_Model):
     """A co-simulation scenario."""
 
@@ -199,6 +220,7 @@ class Scenario(_Model):
     logging: Logging = Field(default_factory=Logging)
     compare: Compare | None = None
     checks: Checks | None = None
+    regression: Regression = Field(default_factory=Regression)
     # set by the loader, not part of the file format
     source: str | None = Field(None, exclude=True, json_schema_extra={"readOnly": True})
 
