@@ -1,0 +1,238 @@
+"""Read a run's MCAP log back into arrays, and write decimated baselines of it.
+
+A run log (see :mod:`cosim.mcap_log`) holds one JSON channel ``/<component>`` per
+component, each message a flat object ``{"t": ..., "<variable>": value, ...}``. Here
+every logged variable becomes a :class:`Signal` named ``component.variable``
+(``plant.p.x``, ``ctl.u[1]``) with its time stamps, values, unit and causality. The
+``/scene`` channel (Foxglove drawing) is skipped.
+
+A *baseline* is the same format decimated in time (``write_baseline``): small enough
+to keep in a repository, read by the same code, so comparing a run against its
+baseline is comparing two logs.
+"""
+
+from __future__ import annotations
+
+import difflib
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Iterable, Sequence
+
+import numpy as np
+import orjson
+
+from .errors import CosimError
+
+__all__ = ["Signal", "RunLog", "read_run", "write_baseline", "AXES"]
+
+AXES = ("x", "y", "z")
+_SKIP_TOPICS = {"/scene"}
+
+
+@dataclass(frozen=True)
+class Signal:
+    """One logged variable: ``t`` (n,) s, ``y`` (n,) in ``unit``; ``t_ns`` are the exact stamps."""
+
+    name: str
+    t_ns: np.ndarray
+    y: np.ndarray
+    unit: str = ""
+    description: str = ""
+    causality: str = ""
+
+    @property
+    def t(self) -> np.ndarray:
+        return self.t_ns * 1e-9
+
+
+@dataclass
+class RunLog:
+    """Every signal of one run, by ``component.variable``, plus the log's metadata."""
+
+    path: Path
+    signals: dict[str, Signal]
+    metadata: dict[str, dict[str, str]] = field(default_factory=dict)
+    attachments: dict[str, bytes] = field(default_factory=dict)
+    channel_metadata: dict[str, dict[str, str]] = field(default_factory=dict)
+
+    @property
+    def name(self) -> str:
+        """The scenario name (metadata), else the file stem."""
+        return self.metadata.get("scenario", {}).get("name") or self.path.stem
+
+    @property
+    def robot(self) -> str | None:
+        r = self.metadata.get("scenario", {}).get("robot")
+        return r if r and r != "None" else None
+
+    @property
+    def status(self) -> str:
+        return self.metadata.get("outcome", {}).get("status", "unknown")
+
+    @property
+    def components(self) -> list[str]:
+        return list(dict.fromkeys(n.split(".", 1)[0] for n in self.signals))
+
+    def __contains__(self, name: str) -> bool:
+        return name in self.signals
+
+    def signal(self, name: str) -> Signal:
+        """The signal ``name``; an unknown name raises CosimError with the closest names."""
+        try:
+            return self.signals[name]
+        except KeyError:
+            close = difflib.get_close_matches(name, list(self.signals), n=4)
+            hint = f"; did you mean {', '.join(close)}?" if close else f"; it has {len(self.signals)} signals"
+            raise CosimError(f"{self.path}: no signal {name!r}{hint}") from None
+
+    def vector(self, prefix: str) -> tuple[np.ndarray, np.ndarray]:
+        """``"plant.p"`` -> (t (n,) s, values (n, 3)) from ``plant.p.x/.y/.z``."""
+        parts = [self.signal(f"{prefix}.{a}") for a in AXES]
+        return parts[0].t, np.column_stack([s.y for s in parts])
+
+    def joints(self, prefix: str, n: int = 3) -> tuple[np.ndarray, np.ndarray]:
+        """``"ctl.u"`` -> (t (n,) s, values (n, 3)) from ``ctl.u[1]..[3]``."""
+        parts = [self.signal(f"{prefix}[{i}]") for i in range(1, n + 1)]
+        return parts[0].t, np.column_stack([s.y for s in parts])
+
+    def find(self, variable: str) -> list[str]:
+        """Names of every signal whose variable part is ``variable`` (``"p.x"`` -> ``["plant.p.x", ...]``)."""
+        return [n for n in self.signals if n.split(".", 1)[1] == variable]
+
+
+def _open_error(path: Path, exc: Exception) -> CosimError:
+    return CosimError(f"{path}: cannot read the MCAP log ({type(exc).__name__}: {exc}); if the run was killed, "
+                      f"rewrite it first with `python -m cosim recover {path}`")
+
+
+def read_run(path: str | Path, components: Iterable[str] | None = None) -> RunLog:
+    """Read a run log. ``components`` limits the channels read (default: all but ``/scene``).
+
+    Raises CosimError naming the file when it is missing, not an MCAP file, or unfinished.
+    """
+    from mcap.exceptions import McapError
+    from mcap.reader import make_reader
+
+    path = Path(path)
+    if not path.is_file():
+        raise CosimError(f"{path}: no such file")
+    wanted = None if components is None else {f"/{c}" for c in components}
+    rows: dict[str, list] = {}
+    stamps: dict[str, list[int]] = {}
+    keys: dict[str, list[str]] = {}
+    props: dict[str, dict] = {}
+    metadata: dict[str, dict[str, str]] = {}
+    attachments: dict[str, bytes] = {}
+    channel_md: dict[str, dict[str, str]] = {}
+    try:
+        with open(path, "rb") as f:
+            reader = make_reader(f)
+            summary = reader.get_summary()
+            if summary is None:
+                raise McapError("no summary section (unfinished log)")
+            topics = []
+            for ch in summary.channels.values():
+                if ch.topic in _SKIP_TOPICS or (wanted is not None and ch.topic not in wanted):
+                    continue
+                comp = ch.topic.lstrip("/")
+                topics.append(ch.topic)
+                channel_md[comp] = dict(ch.metadata)
+                schema = summary.schemas.get(ch.schema_id)
+                props[comp] = orjson.loads(schema.data).get("properties", {}) if schema is not None else {}
+                rows[comp], stamps[comp] = [], []
+            for _, ch, msg in reader.iter_messages(topics=topics, log_time_order=False):
+                comp = ch.topic[1:]
+                d = orjson.loads(msg.data)
+                if comp not in keys:
+                    keys[comp] = list(d)
+                rows[comp].append(tuple(d.values()))
+                stamps[comp].append(msg.log_time)
+            for rec in reader.iter_metadata():
+                metadata[rec.name] = dict(rec.metadata)
+            for att in reader.iter_attachments():
+                attachments[att.name] = bytes(att.data)
+    except (McapError, OSError, ValueError, orjson.JSONDecodeError) as exc:
+        raise _open_error(path, exc) from None
+    if wanted is not None:
+        missing = sorted(w[1:] for w in wanted if w[1:] not in rows)
+        if missing:
+            raise CosimError(f"{path}: no channel for component(s) {', '.join(missing)}; "
+                             f"it has {', '.join(sorted(channel_md)) or 'none'}")
+    signals: dict[str, Signal] = {}
+    for comp, data in rows.items():
+        if not data:
+            continue
+        order = np.argsort(np.asarray(stamps[comp], dtype=np.int64), kind="stable")
+        t_ns = np.asarray(stamps[comp], dtype=np.int64)[order]
+        table = np.array(data, dtype=float)[order]  # JSON null (a NaN written by orjson) -> nan
+        for j, key in enumerate(keys[comp]):
+            if key == "t":
+                continue
+            meta = props[comp].get(key, {})
+            signals[f"{comp}.{key}"] = Signal(f"{comp}.{key}", t_ns, table[:, j], meta.get("unit", ""),
+                                              meta.get("description", ""), meta.get("causality", ""))
+    return RunLog(path, signals, metadata, attachments, channel_md)
+
+
+def write_baseline(source: str | Path, out: str | Path, period: float = 0.01,
+                   components: Sequence[str] | None = None) -> tuple[Path, int]:
+    """Decimate a run log to one message per component every ``period`` s into ``out``.
+
+    The baseline keeps the source's schemas, channels (minus ``/scene``), metadata and
+    attachments, and adds a ``baseline`` metadata record (source, period). Messages are
+    kept where the stamp is a multiple of ``period`` (the run's stamps are integer ns, so
+    the pick is exact). Returns (path, messages written).
+    """
+    from mcap.reader import make_reader
+    from mcap.writer import CompressionType, Writer
+
+    source, out = Path(source), Path(out)
+    if period <= 0:
+        raise CosimError(f"baseline period must be > 0 s, got {period}")
+    if out.resolve() == source.resolve():
+        raise CosimError(f"{out}: the baseline must not overwrite its source")
+    period_ns = int(round(period * 1e9))
+    wanted = None if components is None else {f"/{c}" for c in components}
+    tmp = out.with_name(out.name + ".part")
+    out.parent.mkdir(parents=True, exist_ok=True)
+    written = 0
+    try:
+        with open(source, "rb") as f, open(tmp, "wb") as dst:
+            reader = make_reader(f)
+            summary = reader.get_summary()
+            if summary is None:
+                raise _open_error(source, ValueError("no summary section (unfinished log)"))
+            w = Writer(dst, compression=CompressionType.ZSTD)
+            w.start(profile="", library="cosim-baseline")
+            schema_ids, channel_ids = {}, {}
+            for ch in summary.channels.values():
+                if ch.topic in _SKIP_TOPICS or (wanted is not None and ch.topic not in wanted):
+                    continue
+                sch = summary.schemas[ch.schema_id]
+                if sch.id not in schema_ids:
+                    schema_ids[sch.id] = w.register_schema(sch.name, sch.encoding, sch.data)
+                channel_ids[ch.id] = w.register_channel(ch.topic, ch.message_encoding, schema_ids[sch.id],
+                                                        dict(ch.metadata))
+            if wanted is not None:
+                found = {ch.topic for ch in summary.channels.values()}
+                missing = sorted(c[1:] for c in wanted - found)
+                if missing:
+                    raise CosimError(f"{source}: no channel for component(s) {', '.join(missing)}")
+            for _, ch, msg in reader.iter_messages(topics=[summary.channels[i].topic for i in channel_ids]):
+                if msg.log_time % period_ns == 0:
+                    w.add_message(channel_ids[ch.id], msg.log_time, msg.data, msg.publish_time)
+                    written += 1
+            for rec in reader.iter_metadata():
+                w.add_metadata(rec.name, dict(rec.metadata))
+            w.add_metadata("baseline", {"source": str(source), "period_s": repr(period)})
+            for att in reader.iter_attachments():
+                w.add_attachment(att.create_time, att.log_time, att.name, att.media_type, att.data)
+            w.finish()
+        tmp.replace(out)
+    except CosimError:
+        tmp.unlink(missing_ok=True)
+        raise
+    except Exception as exc:  # the source is unreadable: no half-written baseline is left behind
+        tmp.unlink(missing_ok=True)
+        raise _open_error(source, exc) from None
+    return out, written
