@@ -252,6 +252,85 @@ def _cosim_parser(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(handler=_cmd_recover)
 
 
+def _regression_parser(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("compare", help="compare two run logs, or one scenario run on two plants",
+                       description="`compare A.mcap B.mcap` compares two logs; `compare SCENARIO.yaml --plants "
+                                   "exudyn,analytic` runs the scenario on both plants and compares their logs. "
+                                   "Exit code 1 when a tolerance is exceeded.")
+    p.add_argument("inputs", nargs="+", metavar="INPUT", help="two .mcap logs, or one scenario file")
+    p.add_argument("--plants", default="exudyn,analytic",
+                   help="with a scenario: the two plants, comma-separated (exudyn, exudyn_lumped, analytic, "
+                        "analytic_me; default exudyn,analytic)")
+    p.add_argument("--component", help="with a scenario: the plant component (default: the one plant FMU)")
+    p.add_argument("--tol", action="append", default=[], metavar="PATTERN=VALUE",
+                   help="largest |A - B| allowed for the signals matching PATTERN (plant.p, ctl.u[1], *.q[*]); "
+                        "repeatable. Default: a scenario's regression.plant_tolerances; for two logs of one "
+                        "scenario, regression.tolerances of the scenario attached to the first")
+    p.add_argument("--signals", action="append", default=[], metavar="PATTERN",
+                   help="compare only these signals (repeatable; default all common signals)")
+    p.add_argument("--out-dir", default="runs", help="with a scenario: where the two logs go (default runs/)")
+    p.add_argument("--stop-time", type=float, help="with a scenario: override time.stop, s")
+    p.add_argument("--set", action="append", default=[], metavar="COMP.PARAM=VALUE",
+                   help="with a scenario: override a component parameter (both runs)")
+    p.add_argument("--checked-only", action="store_true", help="list only signals that have a tolerance")
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.add_argument("--json", action="store_true", help="the comparison as JSON on stdout")
+    p.set_defaults(handler=_cmd_compare)
+
+    p = sub.add_parser("baseline", help="decimate a run log into a small baseline for regression tests")
+    p.add_argument("log", help="the run's .mcap log")
+    p.add_argument("--out", required=True, help="baseline .mcap path")
+    p.add_argument("--period", type=float, default=0.01, help="one sample per component every PERIOD s "
+                                                              "(default 0.01)")
+    p.add_argument("--components", nargs="+", help="keep only these components' channels")
+    p.add_argument("--json", action="store_true")
+    p.set_defaults(handler=_cmd_baseline)
+
+
+def _cmd_compare(args: argparse.Namespace) -> int:
+    from pathlib import Path
+
+    from .compare import compare_logs, compare_plants, logged_tolerances, parse_tolerances
+    from .scenario import apply_overrides
+
+    tol = parse_tolerances(args.tol)
+    ins = args.inputs
+    if len(ins) == 1 and Path(ins[0]).suffix in (".yaml", ".yml"):
+        plants = [x.strip() for x in args.plants.split(",") if x.strip()]
+
+        def said(plant, res) -> None:
+            if not (args.json or args.quiet):
+                print(f"{plant}: {res.steps} steps in {res.wall_time:.1f} s wall -> {res.mcap}", file=sys.stderr)
+
+        cmp, _ = compare_plants(ins[0], plants, args.out_dir, tol, args.signals or None,
+                                apply_overrides(args.set, args.stop_time), args.component,
+                                progress=not (args.quiet or args.json), on_run=said)
+    elif len(ins) == 2 and all(Path(x).suffix == ".mcap" for x in ins):
+        if args.set or args.stop_time is not None:
+            raise CosimError("--set and --stop-time apply to a scenario, not to two logs")
+        from .runlog import read_run
+
+        a, b = read_run(ins[0]), read_run(ins[1])
+        if not tol and a.name == b.name:  # a run against its baseline: the scenario's own tolerances
+            tol = logged_tolerances(a)
+            if tol and not args.json:
+                print(f"tolerances: regression.tolerances of the scenario attached to {ins[0]}", file=sys.stderr)
+        cmp = compare_logs(a, b, tol, args.signals or None)
+    else:
+        raise CosimError(f"compare takes two .mcap logs or one scenario .yaml, got: {' '.join(ins)}")
+    _emit(args, cmp.as_dict(), cmp.text(args.checked_only))
+    return EXIT_OK if cmp.ok else EXIT_CHECK_FAILED
+
+
+def _cmd_baseline(args: argparse.Namespace) -> int:
+    from .runlog import write_baseline
+
+    out, n = write_baseline(args.log, args.out, args.period, args.components)
+    _emit(args, {"out": str(out), "messages": n, "period_s": args.period},
+          f"{n} messages every {args.period:g} s -> {out}")
+    return EXIT_OK
+
+
 def _summary_text(res) -> str:
     lines = [f"{res.scenario}: {res.status}{(' - ' + res.message) if res.message else ''}",
              f"  {res.steps} steps, {res.sim_time:.4g} s simulated in {res.wall_time:.3f} s wall "
@@ -321,6 +400,7 @@ def build_parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", required=True)
     _robot_parser(sub)
     _cosim_parser(sub)
+    _regression_parser(sub)
     from fmus.cli import register as _register_fmus
 
     _register_fmus(sub)

@@ -184,18 +184,22 @@ class Checks(_Model):
 
 
 class Regression(_Model):
-    """Tolerances for ``python -m cosim compare`` (plant vs plant, or a run against a baseline log).
+    """Tolerances for ``python -m cosim compare``, as largest absolute differences in signal units.
 
+    ``tolerances``: a run of this scenario against its baseline log (same models; guards
+    against unintended changes). ``plant_tolerances``: this scenario run on two plants
+    (``compare SCENARIO --plants exudyn,analytic``; guards the models' agreement).
     Keys are signal patterns: a full name (``plant.p.x``), a prefix ending at a name
-    boundary (``plant.p`` covers ``plant.p.x``, ``plant.p.y``, ``plant.p.z``; ``ctl.u``
-    covers ``ctl.u[1]``...) or a glob (``*.u[*]``). Values are the largest absolute
-    difference allowed, in the signal's unit. The most specific pattern wins.
+    boundary (``plant.p`` covers ``plant.p.x/.y/.z``; ``ctl.u`` covers ``ctl.u[1]``...)
+    or a glob (``*.u[*]``). The most specific pattern wins.
     """
 
     tolerances: dict[str, float] = Field(default_factory=dict,
-                                         description="signal pattern -> largest absolute difference allowed")
+                                         description="run vs baseline: signal pattern -> largest |A - B|")
+    plant_tolerances: dict[str, float] = Field(default_factory=dict,
+                                               description="plant vs plant: signal pattern -> largest |A - B|")
 
-    @field_validator("tolerances")
+    @field_validator("tolerances", "plant_tolerances")
     @classmethod
     def _positive(cls, v: dict[str, float]) -> dict[str, float]:
         bad = [k for k, x in v.items() if not x > 0]

@@ -1,0 +1,331 @@
+"""Regression comparisons: two run logs, or one scenario run on two plants.
+
+``compare_logs(a, b)`` aligns every signal the two logs share on A's time stamps
+(exactly where B has the same stamps, by linear interpolation otherwise), over the
+time both cover, and reports per signal the RMSE, the largest absolute difference
+and when it happened. Signals with a tolerance (``Regression.tolerances`` in a
+scenario, or ``--tol`` options) pass or fail; the others are reported only.
+Comparing a run with its baseline, the tolerances default to the ``regression``
+section of the scenario attached to the baseline (``logged_tolerances``).
+
+``compare_plants(scenario, ("exudyn", "analytic"))`` runs one scenario once per
+plant (the plant component's FMU swapped, everything else unchanged), logs each
+run, and compares the logs.
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+import re
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Callable, Mapping, Sequence
+
+import numpy as np
+
+from .errors import CosimError, Issue, ScenarioError
+from .runlog import RunLog, Signal, read_run
+
+__all__ = ["SignalDiff", "Comparison", "compare_logs", "compare_plants", "tolerance_for", "parse_tolerances",
+           "logged_tolerances", "PLANTS"]
+
+
+@dataclass(frozen=True)
+class SignalDiff:
+    """A - B for one signal over the compared samples."""
+
+    name: str
+    unit: str
+    rmse: float
+    max_abs: float
+    t_max: float  # s, time of max_abs
+    samples: int
+    tolerance: float | None = None
+
+    @property
+    def ok(self) -> bool:
+        """True without a tolerance; else max |A - B| <= tolerance (NaN fails)."""
+        return self.tolerance is None or self.max_abs <= self.tolerance
+
+    def message(self) -> str:
+        """One line: what differs, by how much, when, against which tolerance."""
+        tol = "" if self.tolerance is None else f" (tolerance {self.tolerance:.3g} {self.unit})".replace(" )", ")")
+        return (f"{self.name}: max |A - B| = {self.max_abs:.4g} {self.unit} at t = {self.t_max:.3f} s, "
+                f"RMSE {self.rmse:.4g}{tol}").replace("  ", " ")
+
+
+@dataclass
+class Comparison:
+    """Everything ``compare_logs`` found; ``ok`` when no tolerance is exceeded and the coverage matches."""
+
+    a: str
+    b: str
+    diffs: list[SignalDiff]
+    t_start: float
+    t_stop: float
+    only_a: list[str] = field(default_factory=list)
+    only_b: list[str] = field(default_factory=list)
+    problems: list[str] = field(default_factory=list)  # failures that are not a signal's tolerance
+
+    @property
+    def failed(self) -> list[SignalDiff]:
+        return [d for d in self.diffs if not d.ok]
+
+    @property
+    def ok(self) -> bool:
+        return not self.failed and not self.problems
+
+    def as_dict(self) -> dict:
+        return {"a": self.a, "b": self.b, "ok": self.ok, "t_start": self.t_start, "t_stop": self.t_stop,
+                "signals": [asdict(d) | {"ok": d.ok} for d in self.diffs], "only_a": self.only_a,
+                "only_b": self.only_b, "problems": self.problems,
+                "failed": [d.name for d in self.failed]}
+
+    def text(self, only_checked: bool = False) -> str:
+        """A readable table, failures first; ``only_checked`` leaves out signals without a tolerance."""
+        rows = sorted(self.diffs, key=lambda d: (d.ok, d.tolerance is None))
+        if only_checked:
+            rows = [d for d in rows if d.tolerance is not None]
+        width = max([len(d.name) for d in rows] + [6])
+        head = (f"A = {self.a}\nB = {self.b}\n{len(self.diffs)} common signals over "
+                f"t = {self.t_start:.3f} .. {self.t_stop:.3f} s")
+        lines = [head, f"{'signal':<{width}}  {'unit':<5} {'RMSE':>10} {'max|A-B|':>10} {'at t/s':>8} "
+                       f"{'tolerance':>10}  verdict"]
+        for d in rows:
+            tol = "-" if d.tolerance is None else f"{d.tolerance:.3g}"
+            verdict = "" if d.tolerance is None else ("ok" if d.ok else "FAILED")
+            lines.append(f"{d.name:<{width}}  {d.unit:<5} {d.rmse:>10.4g} {d.max_abs:>10.4g} {d.t_max:>8.3f} "
+                         f"{tol:>10}  {verdict}".rstrip())
+        if self.only_a:
+            lines.append(f"only in A: {', '.join(self.only_a)}")
+        if self.only_b:
+            lines.append(f"only in B: {', '.join(self.only_b)}")
+        lines += [f"FAILED: {p}" for p in self.problems]
+        lines += [f"FAILED: {d.message()}" for d in self.failed]
+        checked = sum(d.tolerance is not None for d in self.diffs)
+        lines.append(("ok" if self.ok else "FAILED") + f": {checked} signals checked against a tolerance, "
+                     f"{len(self.failed)} exceeded")
+        return "\n".join(lines)
+
+
+# --------------------------------------------------------------------------- tolerances
+
+
+def _matches(pattern: str, name: str) -> int:
+    """How specifically ``pattern`` matches ``name``: 0 no match; higher is more specific."""
+    if pattern == name:
+        return 3
+    if name.startswith(pattern) and name[len(pattern)] in ".[":
+        return 2
+    if ("*" in pattern or "?" in pattern) and _glob(pattern).fullmatch(name):
+        return 1
+    return 0
+
+
+@functools.lru_cache(maxsize=256)
+def _glob(pattern: str) -> re.Pattern:
+    """``*`` and ``?`` are wildcards; brackets are literal (they are part of names like ``u[1]``)."""
+    return re.compile(re.escape(pattern).replace(r"\*", ".*").replace(r"\?", "."))
+
+
+def tolerance_for(name: str, tolerances: Mapping[str, float]) -> float | None:
+    """The tolerance of ``name``: exact name, else the longest prefix, else a glob."""
+    best, best_key = None, (0, 0)
+    for pattern, tol in tolerances.items():
+        m = _matches(pattern, name)
+        if m and (m, len(pattern)) > best_key:
+            best, best_key = tol, (m, len(pattern))
+    return best
+
+
+def parse_tolerances(items: Sequence[str]) -> dict[str, float]:
+    """``["plant.p=1e-6", "ctl.u=0.01"]`` -> dict; a malformed item raises CosimError naming it."""
+    out: dict[str, float] = {}
+    for item in items:
+        key, sep, raw = item.partition("=")
+        try:
+            value = float(raw)
+        except ValueError:
+            value = math.nan
+        if not sep or not key or not value > 0:
+            raise CosimError(f"--tol {item!r}: expected SIGNAL_PATTERN=POSITIVE_NUMBER, e.g. plant.p=1e-6")
+        out[key.strip()] = value
+    return out
+
+
+def logged_tolerances(log: RunLog) -> dict[str, float]:
+    """``regression.tolerances`` of the scenario attached to ``log`` ({} when it has none)."""
+    import yaml
+
+    for name, data in log.attachments.items():
+        if name.startswith("scenario/"):
+            try:
+                doc = yaml.safe_load(data) or {}
+            except yaml.YAMLError:
+                return {}
+            tol = (doc.get("regression") or {}).get("tolerances") or {}
+            return {str(k): float(v) for k, v in tol.items()}
+    return {}
+
+
+# --------------------------------------------------------------------------- logs
+
+
+def _aligned(sa: Signal, sb: Signal, lo: int, hi: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A's samples in [lo, hi] ns and B at the same stamps (exact where B has them)."""
+    keep = (sa.t_ns >= lo) & (sa.t_ns <= hi)
+    t_ns, ya = sa.t_ns[keep], sa.y[keep]
+    idx = np.searchsorted(sb.t_ns, t_ns)
+    idx_c = np.minimum(idx, len(sb.t_ns) - 1)
+    exact = sb.t_ns[idx_c] == t_ns
+    if exact.all():
+        yb = sb.y[idx_c]
+    else:
+        yb = np.interp(t_ns.astype(float), sb.t_ns.astype(float), sb.y)
+        yb[exact] = sb.y[idx_c[exact]]
+    return t_ns, ya, yb
+
+
+def compare_logs(a: RunLog | str | Path, b: RunLog | str | Path, tolerances: Mapping[str, float] | None = None,
+                 signals: Sequence[str] | None = None, labels: tuple[str, str] | None = None) -> Comparison:
+    """Compare two run logs signal by signal (see the module docstring).
+
+    ``signals``: patterns (as for tolerances) selecting what to compare; default all common
+    signals. A tolerance pattern that matches no common signal is an error (a typo would
+    otherwise silently check nothing). B must cover A's time span (within one of A's steps),
+    else the comparison fails.
+    """
+    a = a if isinstance(a, RunLog) else read_run(a)
+    b = b if isinstance(b, RunLog) else read_run(b)
+    tolerances = dict(tolerances or {})
+    names_a, names_b = list(a.signals), set(b.signals)
+    common = [n for n in names_a if n in names_b]
+    if signals:
+        common = [n for n in common if any(_matches(p, n) for p in signals)]
+        if not common:
+            raise CosimError(f"no common signal of {a.path} and {b.path} matches {', '.join(signals)}")
+    if not common:
+        raise CosimError(f"{a.path} and {b.path} share no signal (components {', '.join(a.components)} vs "
+                         f"{', '.join(b.components)})")
+    unused = [p for p in tolerances if not any(_matches(p, n) for n in common)]
+    if unused:
+        raise CosimError(f"tolerance pattern(s) {', '.join(unused)} match no signal compared "
+                         f"(e.g. {', '.join(common[:4])})")
+    first = a.signals[common[0]]
+    lo = max(int(first.t_ns[0]), int(b.signals[common[0]].t_ns[0]))
+    hi = min(int(first.t_ns[-1]), int(b.signals[common[0]].t_ns[-1]))
+    problems = []
+    if hi < lo:
+        raise CosimError(f"{a.path} covers t = {first.t[0]:.3f} .. {first.t[-1]:.3f} s and {b.path} "
+                         f"t = {b.signals[common[0]].t[0]:.3f} .. {b.signals[common[0]].t[-1]:.3f} s: no overlap")
+    step = int(np.median(np.diff(first.t_ns))) if len(first.t_ns) > 1 else 0
+    if hi < first.t_ns[-1] - step or lo > first.t_ns[0] + step:
+        problems.append(f"B covers t = {lo * 1e-9:.3f} .. {hi * 1e-9:.3f} s of A's "
+                        f"{first.t[0]:.3f} .. {first.t[-1]:.3f} s (a run stopped early?)")
+    diffs = []
+    for name in common:
+        sa, sb = a.signals[name], b.signals[name]
+        t_ns, ya, yb = _aligned(sa, sb, lo, hi)
+        e = ya - yb
+        both_nan = np.isnan(ya) & np.isnan(yb)
+        e[both_nan] = 0.0
+        e[np.isnan(e)] = np.inf  # a value on one side only is an unbounded difference
+        absd = np.abs(e)
+        k = int(np.argmax(absd)) if len(absd) else 0
+        rmse = float(np.sqrt(np.mean(e * e))) if len(e) else math.nan
+        diffs.append(SignalDiff(name, sa.unit or sb.unit, rmse, float(absd[k]) if len(absd) else math.nan,
+                                float(t_ns[k] * 1e-9) if len(t_ns) else math.nan, int(len(e)),
+                                tolerance_for(name, tolerances)))
+    la, lb = labels or (str(a.path), str(b.path))
+    return Comparison(la, lb, diffs, lo * 1e-9, hi * 1e-9, [n for n in names_a if n not in names_b],
+                      sorted(names_b.difference(names_a)), problems)
+
+
+# --------------------------------------------------------------------------- plants
+
+# plant name -> (FMU name template, extra component settings)
+PLANTS: dict[str, tuple[str, dict]] = {
+    "exudyn": ("{kind}_exudyn_plant", {"parameters": {"model.fidelity": "full"}}),
+    "exudyn_lumped": ("{kind}_exudyn_plant", {"parameters": {"model.fidelity": "lumped"}}),
+    "analytic": ("{kind}_analytic_plant", {}),
+    "analytic_me": ("{kind}_analytic_plant_me", {"interface": "me"}),
+}
+_PLANT_FMU = re.compile(r"^(linear|rotary)_(exudyn_plant|analytic_plant|analytic_plant_me)$")
+
+
+def _plant_component(scenario, component: str | None) -> tuple[str, str]:
+    """(component name, robot kind) of the scenario's plant."""
+    found = {n: _PLANT_FMU.match(c.fmu or "") for n, c in scenario.components.items()}
+    found = {n: m for n, m in found.items() if m}
+    if component is not None:
+        if component not in scenario.components:
+            raise ScenarioError(Issue("--component", f"unknown component {component!r}; components: "
+                                      f"{', '.join(scenario.components)}", scenario.source))
+        if component not in found:
+            raise ScenarioError(Issue(f"components.{component}", "is not one of our plant FMUs "
+                                      "(<linear|rotary>_<exudyn|analytic>_plant[_me]); its plant cannot be swapped",
+                                      scenario.source))
+        return component, found[component].group(1)
+    if len(found) != 1:
+        raise ScenarioError(Issue("components", f"{'no' if not found else 'more than one'} plant component "
+                                  f"({', '.join(found) or 'none of our plant FMUs'}); name it with --component",
+                                  scenario.source))
+    name, m = next(iter(found.items()))
+    return name, m.group(1)
+
+
+def _plant_overrides(scenario, component: str, kind: str, plant: str) -> tuple[dict, list[str]]:
+    """Loader overrides that put ``plant`` in ``component``, and the parameters it had to drop."""
+    from fmpy import read_model_description
+
+    from fmus import registry
+
+    template, extra = PLANTS[plant]
+    fmu = template.format(kind=kind)
+    md = read_model_description(str(registry.build(fmu)))
+    variables = {v.name for v in md.modelVariables}
+    base = dict(scenario.components[component].parameters)
+    base.update(extra.get("parameters", {}))
+    kept = {k: v for k, v in base.items() if k in variables or f"{k}[1]" in variables}
+    dropped = sorted(set(base) - set(kept))
+    comp = ("components", component)
+    overrides = {comp + ("fmu",): fmu, comp + ("parameters",): kept,
+                 comp + ("interface",): extra.get("interface", "auto")}
+    return overrides, dropped
+
+
+def compare_plants(path: str | Path, plants: Sequence[str] = ("exudyn", "analytic"), out_dir: str | Path = "runs",
+                   tolerances: Mapping[str, float] | None = None, signals: Sequence[str] | None = None,
+                   overrides: dict | None = None, component: str | None = None, progress: bool = False,
+                   on_run: Callable[[str, object], None] | None = None) -> tuple[Comparison, list]:
+    """Run the scenario at ``path`` on each of two plants and compare their logs.
+
+    Tolerances: the scenario's ``regression.plant_tolerances`` updated with ``tolerances``.
+    Logs go to ``out_dir/<scenario>.<plant>.mcap``. ``on_run(plant, RunResult)`` is called
+    after each run. Returns (comparison, [RunResult, RunResult]).
+    """
+    from .run import run_scenario
+    from .scenario import load_scenario
+
+    if len(plants) != 2:
+        raise CosimError(f"--plants needs exactly two plants, got {len(plants)}: {', '.join(plants)}")
+    unknown = [p for p in plants if p not in PLANTS]
+    if unknown:
+        raise CosimError(f"unknown plant {', '.join(unknown)}; valid: {', '.join(PLANTS)}")
+    base = load_scenario(path, overrides)
+    comp, kind = _plant_component(base, component)
+    tol = {**base.regression.plant_tolerances, **(tolerances or {})}
+    results, logs, labels = [], [], []
+    for plant in plants:
+        swap, dropped = _plant_overrides(base, comp, kind, plant)
+        scenario = load_scenario(path, {**(overrides or {}), **swap})
+        out = Path(out_dir) / f"{base.name}.{plant}.mcap"
+        res = run_scenario(scenario, out=out, log=True, progress=progress)
+        if on_run is not None:
+            on_run(plant, res)
+        results.append(res)
+        logs.append(read_run(out))
+        note = f" (dropped {', '.join(dropped)})" if dropped else ""
+        labels.append(f"{plant}: {swap[('components', comp, 'fmu')]}{note} -> {out}")
+    return compare_logs(logs[0], logs[1], tol, signals, (labels[0], labels[1])), results
