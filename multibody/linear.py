@@ -102,7 +102,7 @@ class LinearDeltaPlant(DeltaPlant):
 
         self._carriages: list[int] = []
         self._carriage_markers: list[int] = []
-        self._actuator_loads: list[int] = []
+        self._effort_values: list = []  # symbolic variables returned by the actuator loads
         self._drives: list[int] = []
         self._carriage_nodes: list[int] = []
         ground_node = mbs.AddNode(NodePointGround(referenceCoordinates=[0.0, 0.0, 0.0]))
@@ -126,7 +126,8 @@ class LinearDeltaPlant(DeltaPlant):
             self._carriage_markers.append(marker)
             coord = mbs.AddMarker(MarkerNodeCoordinate(nodeNumber=node, coordinate=0))
             if self.prescribed is None:
-                self._actuator_loads.append(mbs.AddLoad(LoadCoordinate(markerNumber=coord, load=0.0)))
+                load = mbs.AddLoad(LoadCoordinate(markerNumber=coord, load=0.0))
+                self._effort_values.append(self._symbolic_load(load, "loadUserFunction", 0.0))
             else:
                 self._drives.append(mbs.AddObject(CoordinateConstraint(
                     markerNumbers=[ground_coord, coord], offsetUserFunction=self._coord_offset(i),
@@ -152,15 +153,15 @@ class LinearDeltaPlant(DeltaPlant):
         return offset_t
 
     # ------------------------------------------------------------------------------------
-    def _apply_effort(self, u: np.ndarray) -> None:
-        for load, ui in zip(self._actuator_loads, u):
-            self.mbs.SetLoadParameter(load, "load", float(ui))
+    def _apply_effort(self, u: list[float]) -> None:
+        for value, ui in zip(self._effort_values, u):
+            value.SetValue(ui)
 
     def _after_assemble(self) -> None:
-        self._q_index = [self.mbs.systemData.GetNodeLTGODE2(n)[0] for n in self._carriage_nodes]
+        self._q_index = np.array([self.mbs.systemData.GetNodeLTGODE2(n)[0] for n in self._carriage_nodes])
 
-    def _read_joints(self) -> tuple[np.ndarray, np.ndarray]:
-        return self._q0 + self._coords[self._q_index], self._coords_t[self._q_index]
+    def _read_joints(self, coords: np.ndarray, coords_t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        return self._q0 + coords[self._q_index], coords_t[self._q_index]
 
     def _read_prescribed_reaction(self) -> np.ndarray:
         import exudyn as exu

@@ -13,6 +13,7 @@ frame at ``reset`` time and inertia tensors are given in base-frame axes.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import Callable
 
@@ -52,8 +53,10 @@ class SolverSettings:
     substeps : int
         Integrator steps per macro step ``h`` of :meth:`DeltaPlant.step` (1 = one step of size h).
     sparse : bool or None
-        Use the EigenSparse linear solver; None (default) = sparse for the full models, dense
-        for the small lumped models (measured faster on this machine).
+        Use the EigenSparse linear solver (with its analysed sparsity pattern reused from step
+        to step: the pattern never changes); False = Eigen's dense LU; None (default) = the
+        faster per model as measured by ``benchmarks/plant_step.py`` (sparse for the full models,
+        dense for the small lumped ones).
     """
 
     spectral_radius: float = 0.8
@@ -124,12 +127,13 @@ class DeltaPlant:
         raise NotImplementedError
 
     def _after_assemble(self) -> None:
-        """Hook: cache coordinate indices (valid only after ``Assemble``)."""
+        """Hook: cache coordinate indices and item accessors (valid only after ``Assemble``)."""
 
-    def _read_joints(self) -> tuple[np.ndarray, np.ndarray]:  # pragma: no cover
+    def _read_joints(self, coords: np.ndarray, coords_t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:  # pragma: no cover
+        """Joint positions and velocities from the ODE2 coordinates and velocities (each (n,))."""
         raise NotImplementedError
 
-    def _apply_effort(self, u: np.ndarray) -> None:  # pragma: no cover
+    def _apply_effort(self, u: list[float]) -> None:  # pragma: no cover
         raise NotImplementedError
 
     def _read_prescribed_reaction(self) -> np.ndarray:  # pragma: no cover
@@ -164,10 +168,13 @@ class DeltaPlant:
         self.mbs = self._sc.AddSystem()
         self._bodies: list[tuple[int, float, np.ndarray | None]] = []
         self._weights: list[tuple[int, list[float], float]] = []
+        self._symbolic: list = []  # symbolic user functions and their variables, kept alive with the system
         self._build(p0, v0, self._t)
         self.mbs.Assemble()
+        self._system_data = self.mbs.systemData
         node = self.mbs.GetObject(self._platform)["nodeNumber"]
-        self._p_index = list(self.mbs.systemData.GetNodeLTGODE2(node))[:3]
+        first = int(self._system_data.GetNodeLTGODE2(node)[0])
+        self._p_slice = slice(first, first + 3)  # a node's coordinates are contiguous: position first
         self._p_ref = np.asarray(self.mbs.GetNode(node)["referenceCoordinates"][:3], dtype=float)
         self._after_assemble()
         self._init_solver(self._h_nominal)
@@ -191,22 +198,24 @@ class DeltaPlant:
             raise PlantError(f"{type(self).__name__}.step at t = {t!r} s: h must be > 0, got {h!r}")
         t_end = t + h
         if self.prescribed is None:
-            u = np.asarray(u, dtype=float).reshape(3)
-            if not np.all(np.isfinite(u)):
+            u = np.array(u, dtype=float).reshape(3)  # a copy: the caller may reuse its array
+            values = u.tolist()
+            if not all(map(math.isfinite, values)):
                 raise PlantError(f"{type(self).__name__}.step at t = {t!r} s: non-finite effort u = {u}")
-            self._apply_effort(u)
-            self._u = u.copy()
-        step_size = h / self.settings.substeps
-        it = self._solver.it
-        if abs(it.currentStepSize - step_size) > 1e-12 * step_size:
+            self._apply_effort(values)
+            self._u = u
+        step_size = h / self._substeps
+        if step_size != self._step_size:
+            it = self._it
             it.currentStepSize = step_size
             it.minStepSize = step_size
             it.maxStepSize = step_size
             it.initialStepSize = step_size
-        self._sim.timeIntegration.endTime = t_end
-        it.endTime = t_end
+            self._step_size = step_size
+        self._ti.endTime = t_end
+        self._it.endTime = t_end
         try:
-            ok = self._solver.SolveSteps(self.mbs, self._sim)
+            ok = self._solve_steps(self.mbs, self._sim)
         except Exception as exc:  # Exudyn raises plain RuntimeError/ValueError
             raise PlantError(f"{type(self).__name__}: solver failed between t = {t!r} s and "
                              f"{t_end!r} s: {exc}") from exc
@@ -214,8 +223,7 @@ class DeltaPlant:
             raise PlantError(f"{type(self).__name__}: solver did not converge between t = {t!r} s and "
                              f"{t_end!r} s ({self._solver.GetErrorString()})")
         self._t = t_end
-        reaction = self._u if self.prescribed is None else self._read_prescribed_reaction()
-        self._output = self._make_output(reaction)
+        self._output = self._make_output(self._u if self.prescribed is None else self._read_prescribed_reaction())
         return self._output
 
     def energy(self) -> tuple[float, float]:
@@ -313,25 +321,59 @@ class DeltaPlant:
         ti.newton.relativeTolerance = s.newton_rel_tol
         ti.newton.absoluteTolerance = s.newton_abs_tol
         sim.solution.file.write = False
+        sim.solution.sensors.active = False
         sim.solution.sensors.writePeriod = 1e30
         sim.show.computationTime = False
         sim.show.statistics = False
-        sparse = (self.fidelity == "full") if s.sparse is None else s.sparse
-        sim.linearSolver.solverType = exu.LinearSolverType.EigenSparse if sparse else exu.LinearSolverType.EXUdense
+        sparse = _default_sparse(self.kind, self.fidelity) if s.sparse is None else s.sparse
+        if sparse:
+            sim.linearSolver.solverType = exu.LinearSolverType.EigenSparse
+            sim.linearSolver.reuseAnalyzedPattern = True  # the sparsity pattern is fixed: analyse it once
+        else:
+            sim.linearSolver.solverType = exu.LinearSolverType.EigenDense
         self._sim = sim
+        self._ti = sim.timeIntegration  # references into sim / the solver, cached for step()
         self._solver = exu.MainSolverImplicitSecondOrder()
         self._solver.InitializeSolver(self.mbs, sim)
-
-    def _platform_state(self) -> tuple[np.ndarray, np.ndarray]:
-        return self._p_ref + self._coords[self._p_index], self._coords_t[self._p_index]
+        self._it = self._solver.it
+        self._solve_steps = self._solver.SolveSteps
+        self._substeps = s.substeps
+        self._step_size = None
 
     def _make_output(self, reaction: np.ndarray) -> PlantOutput:
-        sd = self.mbs.systemData
-        self._coords = np.asarray(sd.GetODE2Coordinates())
-        self._coords_t = np.asarray(sd.GetODE2Coordinates_t())
-        q, qd = self._read_joints()
-        p, v = self._platform_state()
-        return PlantOutput(t=self._t, q=q, qd=qd, p=p, v=v, reaction=np.array(reaction, dtype=float))
+        """Outputs from one read of the coordinates; ``reaction`` must be a fresh array."""
+        sd = self._system_data
+        coords = sd.GetODE2Coordinates()  # fresh numpy arrays (copies of the solver state)
+        coords_t = sd.GetODE2Coordinates_t()
+        q, qd = self._read_joints(coords, coords_t)
+        p = self._p_ref + coords[self._p_slice]
+        v = coords_t[self._p_slice].copy()
+        return PlantOutput(t=self._t, q=q, qd=qd, p=p, v=v, reaction=reaction)
+
+    def _symbolic_load(self, load: int, parameter: str, value):
+        """Drive load ``load``'s ``parameter`` through a symbolic user function returning a
+        variable; returns the variable (``SetValue`` / ``SetVector`` is ~3x cheaper than
+        ``SetLoadParameter``). The function and the variable live as long as the system."""
+        import exudyn as exu
+        from exudyn.advancedUtilities import CreateSymbolicUserFunction
+
+        variable = exu.symbolic.Real(float(value)) if np.ndim(value) == 0 else exu.symbolic.Vector(list(value))
+
+        def user_function(mbs, t, load_index):
+            return variable
+
+        function = CreateSymbolicUserFunction(self.mbs, user_function, parameter, load)
+        self.mbs.SetLoadParameter(load, parameter, function)
+        self._symbolic.append((function, variable))
+        return variable
+
+
+def _default_sparse(kind: str, fidelity: str) -> bool:
+    """Linear solver per model, the faster one measured with ``benchmarks/plant_step.py``:
+    sparse LU (pattern analysed once) for the full models (95 and 134 unknowns), Eigen's dense
+    LU for the lumped ones (9 and 48 unknowns). Exudyn's own EXUdense inverts the matrix and is
+    slower than both from ~50 unknowns on."""
+    return fidelity == "full"
 
 
 def rod_inertia(mass: float, radius: float, length: float, axis: np.ndarray) -> np.ndarray:

@@ -90,7 +90,9 @@ class RotaryDeltaPlant(DeltaPlant):
 
         elbow_mass = m.elbow if full else m.elbow + 2.0 * (1.0 - w_i) * m.rod
         elbow_weight = m.elbow if full else m.elbow + 2.0 * (1.0 - w_g) * m.rod
-        self._arms, self._elbow_markers, self._motor_loads, self._drives = [], [], [], []
+        self._arms, self._elbow_markers, self._drives = [], [], []
+        self._effort_values = []  # symbolic vector variables returned by the motor loads
+        self._e = e
         self._origins = robot.base_radius * e
         for i in range(3):
             a = self._axes[i]
@@ -113,7 +115,8 @@ class RotaryDeltaPlant(DeltaPlant):
                                                rotationMatrixAxes=axes_frame, constrainedAxes=[1, 1, 1, 1, 1, 0],
                                                useGlobalFrame=True, show=False)
                 rigid = mbs.AddMarker(MarkerBodyRigid(bodyNumber=arm, localPosition=[0.0, 0.0, 0.0]))
-                self._motor_loads.append(mbs.AddLoad(LoadTorqueVector(markerNumber=rigid, loadVector=[0.0] * 3)))
+                load = mbs.AddLoad(LoadTorqueVector(markerNumber=rigid, loadVector=[0.0] * 3))
+                self._effort_values.append(self._symbolic_load(load, "loadVectorUserFunction", [0.0] * 3))
             else:
                 joint = mbs.CreateGenericJoint(itemNumbers=[self._ground, arm], position=list(origin),
                                                rotationMatrixAxes=axes_frame, constrainedAxes=[1] * 6,
@@ -140,22 +143,24 @@ class RotaryDeltaPlant(DeltaPlant):
             return [0.0, 0.0, 0.0, 0.0, 0.0, float(self.prescribed(t)[1][i])]
         return offset_t
 
-    def _apply_effort(self, u: np.ndarray) -> None:
-        for load, ui, a in zip(self._motor_loads, u, self._axes):
-            self.mbs.SetLoadParameter(load, "loadVector", [float(x) for x in ui * a])
+    def _apply_effort(self, u: list[float]) -> None:
+        for value, ui, (a0, a1, a2) in zip(self._effort_values, u, self._axes_list):
+            value.SetVector([ui * a0, ui * a1, ui * a2])
 
-    def _read_joints(self) -> tuple[np.ndarray, np.ndarray]:
+    def _after_assemble(self) -> None:
         import exudyn as exu
 
         ovt = exu.OutputVariableType
-        q = np.empty(3)
-        qd = np.empty(3)
-        e = leg_axes(self.robot)
-        for i in range(3):
-            r = np.asarray(self.mbs.GetMarkerOutput(self._elbow_markers[i], ovt.Position)) - self._origins[i]
-            q[i] = np.arctan2(-r[2], float(r @ e[i]))
-            w = np.asarray(self.mbs.GetObjectOutputBody(self._arms[i], ovt.AngularVelocity, [0.0, 0.0, 0.0]))
-            qd[i] = float(w @ self._axes[i])
+        self._position, self._angular_velocity = ovt.Position, ovt.AngularVelocity
+        self._axes_list = self._axes.tolist()
+
+    def _read_joints(self, coords: np.ndarray, coords_t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        # arm angle from the elbow position in the plane of leg i, speed from the arm's angular velocity
+        marker_output, body_output = self.mbs.GetMarkerOutput, self.mbs.GetObjectOutputBody
+        elbows = np.array([marker_output(m, self._position) for m in self._elbow_markers]) - self._origins
+        omegas = np.array([body_output(a, self._angular_velocity, [0.0, 0.0, 0.0]) for a in self._arms])
+        q = np.arctan2(-elbows[:, 2], np.einsum("ij,ij->i", elbows, self._e))
+        qd = np.einsum("ij,ij->i", omegas, self._axes)
         return q, qd
 
     def _read_prescribed_reaction(self) -> np.ndarray:
