@@ -7,13 +7,17 @@ that both describe the same machine.
 from __future__ import annotations
 
 from dataclasses import dataclass, fields, replace
-from math import cos, sin, sqrt
+from math import cos, sin
 
 import numpy as np
 
 from .errors import ParameterError, RobotError, UnreachableError
 from .kinematics import actuator_points_batch, actuator_tangents_batch, ik_batch, platform_offsets
 from .robots import LinearDelta, Robot, RotaryDelta
+from .scalar_kinematics import ScalarKinematics
+from .scalar_kinematics import Vec as _Vec
+from .scalar_kinematics import dot as _dot
+from .scalar_kinematics import inv3 as _inv3
 
 __all__ = [
     "LinearDeltaMasses",
@@ -149,28 +153,6 @@ class RotaryDeltaMasses(_Masses):
 # (``w_inertia`` vs ``w_gravity``): T and V are then built from different lumps and the
 # model stays conservative.
 
-_Vec = tuple[float, float, float]
-
-
-def _dot(a: _Vec, b: _Vec) -> float:
-    return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
-
-
-def _inv3(m: list[list[float]]) -> list[list[float]]:
-    """Inverse of a 3x3 matrix (nested lists) by cofactors; raises on a singular matrix."""
-    (a, b, c), (d, e, f), (g, h, i) = m
-    c00, c01, c02 = e * i - f * h, f * g - d * i, d * h - e * g
-    det = a * c00 + b * c01 + c * c02
-    if det == 0.0:
-        raise ZeroDivisionError("singular 3x3 matrix")
-    r = 1.0 / det
-    return [
-        [c00 * r, (c * h - b * i) * r, (b * f - c * e) * r],
-        [c01 * r, (a * i - c * g) * r, (c * d - a * f) * r],
-        [c02 * r, (b * g - a * h) * r, (a * e - b * d) * r],
-    ]
-
-
 class _KinState:
     """Kinematic quantities of one joint position, plain floats (cached by the model)."""
 
@@ -187,7 +169,7 @@ class _KinState:
 
 
 class _DeltaModel:
-    """Shared virtual-work model; subclasses define the actuator path and the lumps.
+    """Shared virtual-work model (kinematics from :class:`ScalarKinematics`); subclasses define the lumps.
 
     Every public method takes joint-space ``q`` (3,) and ``qd`` (3,) and computes the
     platform position by closed-form forward kinematics (the last one is cached).
@@ -200,23 +182,15 @@ class _DeltaModel:
     def __init__(self, robot: Robot, masses: object) -> None:
         self.robot = robot
         self.masses = masses
-        angles = robot.leg_angles
-        self._e = tuple((cos(a), sin(a)) for a in angles)
-        r = robot.platform_radius
-        self._b = tuple((r * c, r * s, 0.0) for c, s in self._e)
+        self.kin = ScalarKinematics(robot)  # actuator path B_i(q_i), forward kinematics
         self._cache: _KinState | None = None
-        # Set by subclasses: actuator inertias D_i, platform masses, rod length.
+        # Set by subclasses: actuator inertias D_i, platform masses.
         self._d: float = 0.0
         self._mp_inertia: float = 0.0
         self._mp_gravity: float = 0.0
         self._g: float = 0.0
-        self._rod: float = 0.0
 
-    # -- actuator path (subclass) ------------------------------------------------------
-    def _actuator(self, i: int, qi: float) -> tuple[_Vec, _Vec, _Vec]:
-        """``B_i(q_i)``, ``B_i'`` and ``B_i''``."""
-        raise NotImplementedError
-
+    # -- actuator-side lumps (subclass) --------------------------------------------------
     def _actuator_gravity(self, qi: float) -> float:
         """``dV_i/dq_i`` of the actuator-side lumps."""
         raise NotImplementedError
@@ -230,19 +204,11 @@ class _DeltaModel:
         c = self._cache
         if c is not None and c.q == (q0, q1, q2):
             return c
-        pts, d1s, d2s, centres = [], [], [], []
-        for i, qi in enumerate((q0, q1, q2)):
-            bpt, d1, d2 = self._actuator(i, qi)
-            b = self._b[i]
-            pts.append(bpt)
-            d1s.append(d1)
-            d2s.append(d2)
-            centres.append((bpt[0] - b[0], bpt[1] - b[1], bpt[2] - b[2]))
-        p = self._trilaterate(centres, q0, q1, q2)
+        p, pts, d1s, d2s = self.kin.fk((q0, q1, q2))
         rods, denom, jac = [], [], []
         for i in range(3):
-            c_i = centres[i]
-            rod = (p[0] - c_i[0], p[1] - c_i[1], p[2] - c_i[2])  # l_i = p + b_i - B_i
+            b_i, bpt = self.kin.b[i], pts[i]
+            rod = (p[0] - (bpt[0] - b_i[0]), p[1] - (bpt[1] - b_i[1]), p[2] - (bpt[2] - b_i[2]))  # l_i = p + b_i - B_i
             den = _dot(rod, d1s[i])
             if den == 0.0:
                 raise RobotError(f"type 1 (serial) singularity at q = {(q0, q1, q2)}: leg {i + 1}")
@@ -256,26 +222,6 @@ class _DeltaModel:
         state = _KinState((q0, q1, q2), p, rods, d1s, d2s, denom, jinv)
         self._cache = state
         return state
-
-    def _trilaterate(self, centres: list[_Vec], q0: float, q1: float, q2: float) -> _Vec:
-        c1, c2, c3 = centres
-        a = (c2[0] - c1[0], c2[1] - c1[1], c2[2] - c1[2])
-        b = (c3[0] - c1[0], c3[1] - c1[1], c3[2] - c1[2])
-        n = (a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0])
-        nn = _dot(n, n)
-        if nn == 0.0:
-            raise UnreachableError(f"forward kinematics at q = {(q0, q1, q2)}: sphere centres are collinear")
-        aa, bb = _dot(a, a), _dot(b, b)
-        s = (aa * b[0] - bb * a[0], aa * b[1] - bb * a[1], aa * b[2] - bb * a[2])
-        k = 0.5 / nn
-        o = ((s[1] * n[2] - s[2] * n[1]) * k, (s[2] * n[0] - s[0] * n[2]) * k, (s[0] * n[1] - s[1] * n[0]) * k)
-        h2 = self._rod * self._rod - _dot(o, o)
-        if h2 < 0.0:
-            raise UnreachableError(f"forward kinematics at q = {(q0, q1, q2)}: the three rods cannot meet")
-        scale = sqrt(h2 / nn)
-        if n[2] > 0.0:
-            scale = -scale
-        return (c1[0] + o[0] + scale * n[0], c1[1] + o[1] + scale * n[1], c1[2] + o[2] + scale * n[2])
 
     def _platform_velocity(self, ks: _KinState, qd: _Vec) -> _Vec:
         j = ks.jinv
@@ -414,12 +360,6 @@ class LinearDeltaModel(_DeltaModel):
         self._ms_gravity = m.carriage + 2.0 * (1.0 - m.w_gravity) * m.rod
         self._mp_gravity = m.platform + m.payload + 6.0 * m.w_gravity * m.rod
         self._g = m.gravity
-        self._rod = robot.rod_length
-        self._rail = tuple((robot.rail_radius * c, robot.rail_radius * s) for c, s in self._e)
-
-    def _actuator(self, i: int, qi: float) -> tuple[_Vec, _Vec, _Vec]:
-        x, y = self._rail[i]
-        return (x, y, -qi), (0.0, 0.0, -1.0), (0.0, 0.0, 0.0)
 
     def _actuator_gravity(self, qi: float) -> float:
         return -self._ms_gravity * self._g
@@ -441,20 +381,11 @@ class RotaryDeltaModel(_DeltaModel):
         masses = RotaryDeltaMasses() if masses is None else masses
         super().__init__(robot, masses)
         m, la = masses, robot.arm_length
-        self._la = la
         self._d = m.motor_inertia + m.arm * la * la / 3.0 + (m.elbow + 2.0 * (1.0 - m.w_inertia) * m.rod) * la * la
         self._mp_inertia = m.platform + m.payload + 6.0 * m.w_inertia * m.rod
         self._mp_gravity = m.platform + m.payload + 6.0 * m.w_gravity * m.rod
         self._arm_moment = m.arm * la / 2.0 + (m.elbow + 2.0 * (1.0 - m.w_gravity) * m.rod) * la  # kg m
         self._g = m.gravity
-        self._rod = robot.forearm_length
-        self._rbase = robot.base_radius
-
-    def _actuator(self, i: int, qi: float) -> tuple[_Vec, _Vec, _Vec]:
-        ex, ey = self._e[i]
-        la, cq, sq = self._la, cos(qi), sin(qi)
-        r = self._rbase + la * cq
-        return (r * ex, r * ey, -la * sq), (-la * sq * ex, -la * sq * ey, -la * cq), (-la * cq * ex, -la * cq * ey, la * sq)
 
     def _actuator_gravity(self, qi: float) -> float:
         return -self._arm_moment * self._g * cos(qi)

@@ -75,6 +75,10 @@ class Adapter(ValueAccess, Fmi2Slave):
         self.default_experiment = DefaultExperiment(start_time=start, stop_time=stop, step_size=step)
         self.values: dict[str, Any] = {}
         self.specs: list[Spec] = []
+        # Fast paths for fmi2GetReal / fmi2SetReal (see get_real): value reference -> name.
+        self._real_get: dict[int, str] = {}
+        self._real_set: dict[int, str] = {}
+        self._output_vrs: set[int] = set()
         self._dirty = True
         self._started = False
         self.time = 0.0
@@ -102,6 +106,13 @@ class Adapter(ValueAccess, Fmi2Slave):
                 name, start=spec.start, **kwargs
             )
         self.register_variable(var, nested=False)
+        vr = var.value_reference
+        if spec.causality == "output":
+            self._output_vrs.add(vr)
+        if spec.kind == "real":
+            self._real_get[vr] = name
+            if settable:
+                self._real_set[vr] = name
 
     def _getter(self, name: str, is_output: bool):
         if is_output:
@@ -148,6 +159,12 @@ class Adapter(ValueAccess, Fmi2Slave):
         for i, (n, s) in enumerate(zip(names, start)):
             self.parameter(n, float(s), unit, f"{description} ({_component(n, i)})", tunable=tunable)
 
+    def vec3(self, names) -> tuple[float, float, float]:
+        """Values of three ``names`` as a tuple of floats (the scalar fast path; :meth:`vec` gives arrays)."""
+        a, b, c = names
+        v = self.values
+        return v[a], v[b], v[c]
+
     # ------------------------------------------------------------------ behaviour
     def start(self) -> None:
         """Build the core objects from the (now fixed) parameters."""
@@ -159,6 +176,28 @@ class Adapter(ValueAccess, Fmi2Slave):
         """Advance internal state from ``t`` to ``t + h``."""
 
     # ------------------------------------------------------------------ FMI
+    def get_real(self, vrs):
+        """fmi2GetReal: pythonfmu's version calls a getter closure and an isinstance per variable;
+        this one reads ``values`` directly, refreshing the outputs once if any is requested."""
+        if self._dirty and self._started and not self._output_vrs.isdisjoint(vrs):
+            self._dirty = False
+            self.refresh()
+        names, values = self._real_get, self.values
+        try:
+            return [values[names[vr]] for vr in vrs]
+        except KeyError:  # not a Real: pythonfmu raises the TypeError naming the reference
+            return super().get_real(vrs)
+
+    def set_real(self, vrs, values):
+        """fmi2SetReal without per-variable setter closures (same effect: store, mark outputs stale)."""
+        names, store = self._real_set, self.values
+        for vr in vrs:
+            if vr not in names:  # not a settable Real: pythonfmu's error, before anything is stored
+                return super().set_real(vrs, values)
+        for vr, value in zip(vrs, values):
+            store[names[vr]] = float(value)
+        self._dirty = True
+
     def setup_experiment(self, start_time: float, stop_time: float | None = None, tolerance: float | None = None):
         self.time = float(start_time)
 

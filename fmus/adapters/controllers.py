@@ -68,7 +68,8 @@ class _Controller(Adapter):
         return self.vec(joint_names(f"gain.{name}"))
 
     def _inputs(self):
-        return self.vec(Q), self.vec(QD), self.vec(Q_REF), self.vec(QD_REF), self.vec(QDD_REF)
+        v3 = self.vec3
+        return v3(Q), v3(QD), v3(Q_REF), v3(QD_REF), v3(QDD_REF)
 
     def advance(self, t: float, h: float) -> None:
         """One control period ends: commit the law's state (the PID integral) for the inputs

@@ -1,10 +1,12 @@
-"""Inverse and forward kinematics FMUs (delta.workspace.check_point, delta.kinematics)."""
+"""Inverse and forward kinematics FMUs (delta.scalar_kinematics, delta.kinematics)."""
 
 from __future__ import annotations
 
-from delta.kinematics import fk, joint_rates, platform_velocity
+from pythonfmu.enums import Fmi2Status
+
+from delta.kinematics import fk, joint_limit_reason, platform_velocity
+from delta.scalar_kinematics import ScalarKinematics
 from delta.singularity import analyse
-from delta.workspace import check_point
 
 from .._fmi import Adapter, axis_names, joint_names
 from .common import declare_robot, q_units, robot_from
@@ -46,17 +48,40 @@ class InverseKinematics(Adapter):
 
     def start(self) -> None:
         self.robot = robot_from(self, self.KIND)
+        self.kin = ScalarKinematics(self.robot)
+        self._reachable = True
+
+    def _unreachable_reason(self, p, q, leg: int) -> tuple[str | None, float]:
+        """Why ``p_ref`` is not reachable (None if it is) and its singularity proximity (0 when unknown),
+        with the checks and messages of :func:`delta.workspace.check_point`."""
+        if leg:
+            return f"leg {leg} has no solution", 0.0
+        limit = self.kin.limit_violation(q)
+        if limit:
+            return joint_limit_reason(self.robot, limit, q[limit - 1]), 0.0
+        proximity = self.kin.proximity(q, p)
+        margin = self.values["singularity.margin"]
+        if proximity < margin:
+            return f"too close to a singularity: proximity {proximity:.3g} < margin {margin:g}", proximity
+        return None, proximity
 
     def refresh(self) -> None:
-        p, v, a = self.vec(P_REF), self.vec(V_REF), self.vec(A_REF)
-        res = check_point(self.robot, p, self.values["singularity.margin"])
-        self.values["reachable"] = res.ok
-        self.values["singularity.proximity"] = float(res.proximity) if res.proximity is not None else 0.0
-        if res.ok:
-            qd, qdd = joint_rates(self.robot, res.q, p, v, a)
-            self.put(Q_REF, res.q)
-            self.put(QD_REF, qd)
-            self.put(QDD_REF, qdd)
+        p = self.vec3(P_REF)
+        q, leg = self.kin.ik(p)
+        reason, proximity = self._unreachable_reason(p, q, leg)
+        values = self.values
+        values["reachable"] = reason is None
+        values["singularity.proximity"] = proximity
+        if reason is not None:
+            if self._reachable:  # say why once, when the reference leaves the workspace
+                self.log(f"t = {self.time:.6g} s: p_ref = ({p[0]:.4f}, {p[1]:.4f}, {p[2]:.4f}) m is unreachable: "
+                         f"{reason}; joint references hold their last reachable values", Fmi2Status.warning)
+            self._reachable = False
+            return
+        self._reachable = True
+        qd, qdd = self.kin.joint_rates(q, p, self.vec3(V_REF), self.vec3(A_REF))
+        for names, vals in ((Q_REF, q), (QD_REF, qd), (QDD_REF, qdd)):
+            values[names[0]], values[names[1]], values[names[2]] = vals
 
 
 class ForwardKinematics(Adapter):

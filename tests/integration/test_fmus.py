@@ -276,3 +276,35 @@ def test_bundled_code_does_not_shadow(fmu_dir):
     finally:
         for s in slaves:
             s.close()
+
+
+def test_ik_fmu_unreachable_reference_names_the_leg_and_holds(fmu_dir):
+    """An unreachable p_ref: reachable drops, the joint references hold their last reachable
+    values (no NaN reaches the controller) and the FMU's log says which leg failed."""
+    from cosim.fmu import load_fmu, make_slave
+
+    info = load_fmu(_path(fmu_dir, "linear_ik"))
+    slave = make_slave("ik", info)
+    v = info.variables
+    slave.bind([v[n] for n in ("p_ref.x", "p_ref.y", "p_ref.z")],
+               [v[n] for n in ("q_ref[1]", "q_ref[2]", "q_ref[3]")] + [v["reachable"]])
+    slave.instantiate()
+    slave.enter_initialization(0.0, 1.0)
+    slave.exit_initialization()
+    p_in, (q_out, flag_out) = slave.in_bufs[0], slave.out_bufs
+    try:
+        p_in.values[:] = [0.0, 0.0, -0.6]
+        slave.set_inputs()
+        slave.get_outputs()
+        q_ok = list(q_out.values)
+        assert flag_out.values[0] == 1, "(0, 0, -0.6) m is reachable"
+        p_in.values[:] = [0.5, 0.0, -0.6]  # the README's example: out of reach of leg 1
+        slave.set_inputs()
+        slave.step(0.0, 1e-3)
+        slave.get_outputs()
+        assert flag_out.values[0] == 0, "(0.5, 0, -0.6) m must be reported unreachable"
+        assert list(q_out.values) == q_ok, f"q_ref {list(q_out.values)} must hold {q_ok}"
+        assert any("leg 1 has no solution" in m for m in slave.log), f"FMU log: {list(slave.log)}"
+    finally:
+        slave.terminate()
+        slave.free()
