@@ -1,0 +1,139 @@
+"""helix_ctc: wall time per simulated second, co-simulation vs a monolithic in-process loop.
+
+The co-simulation is ``scenarios/helix_ctc.yaml`` run by the master (helix FMU -> IK FMU ->
+CTC FMU -> Exudyn plant FMU, Gauss-Seidel, 1 ms). The monolithic loop does the same
+computation without FMI: the same Exudyn plant (``multibody.make_plant``), the same
+helix (``delta.trajectories.Helix``), the same kinematics as the IK FMU
+(``delta.scalar_kinematics``) and the same CTC law (``delta.control.CTC`` on
+``delta.dynamics``), called directly in a Python loop with the master's data flow
+(reference at t + h, effort computed from the state at t and held over the step).
+Both are timed on their stepping loop only (no FMU build, instantiation or plant
+assembly), alternated ``--rounds`` times so machine load drifts affect both alike;
+the best of each is kept. The platform RMSE of both is printed as a check that they
+compute the same thing.
+
+    python benchmarks/helix_ctc.py [--stop-time 10] [--rounds 3] [--log]
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+SCENARIO = ROOT / "scenarios" / "helix_ctc.yaml"
+STEP_NS = 1_000_000  # the scenario's 1 ms step
+
+
+def monolithic(stop_time: float) -> tuple[float, list[float], dict[str, float]]:
+    """Wall seconds of the loop, RMSE per axis and time per part, for ``stop_time`` s."""
+    from delta.control import DEFAULT_GAINS, CTC
+    from delta.dynamics import LinearDeltaMasses, analytic_model
+    from delta.robots import get_preset
+    from delta.scalar_kinematics import ScalarKinematics
+    from delta.trajectories import Helix
+    from multibody import make_plant
+
+    robot = get_preset("linear_delta_thesis")
+    masses = LinearDeltaMasses()
+    helix = Helix()
+    gains = DEFAULT_GAINS["linear"]
+    h = STEP_NS * 1e-9
+    law = CTC(analytic_model(robot, masses), gains["ctc"]["kp"], gains["ctc"]["kd"], h, u_max=gains["u_max"]["u_max"])
+    kin = ScalarKinematics(robot)
+
+    def reference(t: float):
+        p, v, a = helix.evaluate(t)
+        p, v, a = tuple(map(float, p)), tuple(map(float, v)), tuple(map(float, a))
+        q, leg = kin.ik(p)
+        if leg:
+            raise RuntimeError(f"helix leaves the workspace at t = {t} s: leg {leg} has no solution")
+        qd, qdd = kin.joint_rates(q, p, v, a)
+        return p, q, qd, qdd
+
+    p0, v0, _ = helix.evaluate(0.0)
+    plant = make_plant(robot, masses, fidelity="full", p0=p0, v0=v0)
+    out = plant.reset(p0, v0)
+    _, q_ref, qd_ref, qdd_ref = reference(0.0)
+    u = law.output(out.q, out.qd, q_ref, qd_ref, qdd_ref)
+    n = int(round(stop_time * 1e9)) // STEP_NS
+    sq = [0.0, 0.0, 0.0]
+    parts = {"plant": 0.0, "trajectory + IK": 0.0, "control": 0.0}
+    clock = time.perf_counter
+    t_start = clock()
+    for k in range(n):
+        t = (k * STEP_NS) * 1e-9
+        c0 = clock()
+        out = plant.step(t, h, u)
+        c1 = clock()
+        p_ref, q_ref, qd_ref, qdd_ref = reference(t + h)
+        c2 = clock()
+        u = law.output(out.q, out.qd, q_ref, qd_ref, qdd_ref)
+        c3 = clock()
+        parts["plant"] += c1 - c0
+        parts["trajectory + IK"] += c2 - c1
+        parts["control"] += c3 - c2
+        for i in range(3):
+            sq[i] += (float(out.p[i]) - p_ref[i]) ** 2
+    wall = clock() - t_start
+    return wall, [math.sqrt(s / n) for s in sq], parts
+
+
+def cosim(stop_time: float, log: bool, out: Path):
+    """The master's RunResult for helix_ctc over ``stop_time`` s."""
+    from cosim.run import run_scenario
+    from cosim.scenario import load_scenario
+
+    scenario = load_scenario(SCENARIO, {("time", "stop"): stop_time})
+    return run_scenario(scenario, out=out, log=log)
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--stop-time", type=float, default=10.0, help="simulated seconds (default 10)")
+    ap.add_argument("--rounds", type=int, default=3, help="alternated rounds, best kept (default 3)")
+    ap.add_argument("--log", action="store_true", help="also time the co-simulation with every signal logged")
+    args = ap.parse_args()
+    tmp = Path(tempfile.mkdtemp(prefix="helix_ctc_bench_"))
+    cosim(0.01, False, tmp / "warm.mcap")  # build/cache the FMUs outside the measurement
+    best = {"mono": math.inf, "cosim": math.inf, "cosim_log": math.inf}
+    rmse = {}
+    shares: dict[str, float] = {}
+    parts: dict[str, float] = {}
+    for _ in range(args.rounds):
+        wall, rmse["mono"], mono_parts = monolithic(args.stop_time)
+        if wall < best["mono"]:
+            best["mono"], parts = wall, mono_parts
+        for key, log in (("cosim", False), ("cosim_log", True)) if args.log else (("cosim", False),):
+            res = cosim(args.stop_time, log, tmp / "bench.mcap")
+            if res.status != "completed":
+                sys.exit(f"co-simulation did not complete: {res.status} {res.message}")
+            rmse[key] = [e.rmse for e in res.errors]
+            if res.wall_time < best[key]:
+                best[key] = res.wall_time
+                if key == "cosim":
+                    shares = dict(res.component_time)
+    per_s = {k: v / args.stop_time for k, v in best.items() if math.isfinite(v)}
+    print(f"helix_ctc, {args.stop_time:g} s simulated at 1 ms, best of {args.rounds} alternated rounds")
+    print(f"  monolithic loop (no FMI)      : {per_s['mono']:7.3f} s wall per simulated s "
+          f"({best['mono']:.3f} s)  RMSE x/y/z {' / '.join(f'{e:.3e}' for e in rmse['mono'])} m")
+    print("      " + ", ".join(f"{k} {v / best['mono'] * 100:.0f}%" for k, v in parts.items()))
+    rows = [("cosim", "co-simulation, no logging")] + ([("cosim_log", "co-simulation, all logged")] if args.log else [])
+    for key, label in rows:
+        print(f"  {label:<30}: {per_s[key]:7.3f} s wall per simulated s ({best[key]:.3f} s)  "
+              f"ratio to monolithic {best[key] / best['mono']:.2f}  RMSE x/y/z "
+              f"{' / '.join(f'{e:.3e}' for e in rmse[key])} m")
+        if key == "cosim":
+            total = sum(shares.values())
+            print("      " + ", ".join(f"{k} {v / best[key] * 100:.0f}%" for k, v in shares.items())
+                  + f", master {(best[key] - total) / best[key] * 100:.0f}%")
+    print(f"  10 s of helix_ctc (co-simulation, no logging): {per_s['cosim'] * 10:.2f} s wall (target <= 5 s); "
+          f"ratio {best['cosim'] / best['mono']:.2f} (target <= 1.3)")
+
+
+if __name__ == "__main__":
+    main()
