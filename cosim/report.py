@@ -1,0 +1,657 @@
+"""Reports of a run log: figures and a markdown summary, and the controller table (thesis Table 5).
+
+``make_report(run)`` reads a run's MCAP log (:mod:`cosim.runlog`) and writes, into
+``<log stem>_report/`` next to the log unless told otherwise:
+
+- ``path_3d.png``: the platform path, desired vs actual, in 3D;
+- ``position.png``: x, y, z desired vs actual over time;
+- ``errors.png``: position error per axis and, when the log has them, velocity error
+  per axis (actual ``plant.v`` vs ``traj.v_ref``), scaled to nm / um / mm as suits;
+- ``efforts.png``: the actuator efforts ``u[1..3]`` in the log's unit;
+- ``report.md``: scenario, robot, status, duration, per-axis RMSE and max error (with
+  its time) and the figures.
+
+``controller_table(runs)`` gives RMSE per axis per run, in m and um, as markdown,
+with the thesis's Table 5 values as extra, labelled rows when the runs are the thesis
+helix.
+
+The signals compared are those of the ``compare`` section of the scenario attached to
+the log (``plant.p`` vs ``traj.p_ref`` when there is none). Errors are ``actual -
+reference`` at the time stamps both signals carry: for a single-rate run that is the
+start sample and every step, the samples the run's own summary
+(:class:`cosim.observers.Comparison`) used, so the RMSE here equals the summary's.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import re
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Sequence
+
+import numpy as np
+
+from .errors import CosimError
+from .runlog import AXES, RunLog, read_run
+
+__all__ = ["ReportError", "AxisStats", "Pair", "Tracking", "Report", "TableRow", "Table", "tracking", "make_report",
+           "controller_table", "register"]
+
+_DEFAULT_ACTUAL, _DEFAULT_REFERENCE = "plant.p", "traj.p_ref"
+_DPI = 120
+_CONTROLLERS = {"pd": "PD", "pid": "PID", "pdplus": "PD+", "ctc": "CTC"}
+_CONTROLLER_FMU = re.compile(r"^(?:linear|rotary)_(pd|pid|pdplus|ctc)$")
+_THESIS_ROBOT = "linear_delta_thesis"
+_THESIS_SOURCE = "thesis Table 5 (MATLAB controller, ADAMS prototype)"
+
+
+class ReportError(CosimError, ValueError):
+    """A run log cannot be reported on: a signal is missing, or the log holds no samples of it."""
+
+
+# --------------------------------------------------------------------------- data
+
+
+@dataclass(frozen=True)
+class AxisStats:
+    """Error statistics of one signal pair: ``actual - reference`` over ``samples`` stamps, in ``unit``."""
+
+    axis: str
+    actual: str
+    reference: str
+    unit: str
+    rmse: float
+    max_error: float  # largest |actual - reference|
+    t_max: float  # s, when it occurs
+    samples: int
+
+    def as_dict(self) -> dict[str, Any]:
+        return dict(self.__dict__)
+
+
+def _stats(axes: Sequence[str], actual: Sequence[str], reference: Sequence[str], unit: str, t: np.ndarray,
+           e: np.ndarray) -> list[AxisStats]:
+    out = []
+    for j, (ax, a, r) in enumerate(zip(axes, actual, reference)):
+        col = e[:, j]
+        k = int(np.argmax(np.abs(col)))
+        out.append(AxisStats(ax, a, r, unit, float(np.sqrt(np.mean(col * col))), float(abs(col[k])), float(t[k]),
+                             len(col)))
+    return out
+
+
+@dataclass(frozen=True)
+class Pair:
+    """Actual and reference signals on the stamps they share: t (n,) s, actual/reference (n, k)."""
+
+    actual_names: list[str]
+    reference_names: list[str]
+    unit: str
+    t: np.ndarray
+    actual: np.ndarray
+    reference: np.ndarray
+
+    @property
+    def error(self) -> np.ndarray:
+        return self.actual - self.reference
+
+
+@dataclass(frozen=True)
+class Tracking:
+    """What a run tracked: position (and velocity when logged) actual vs reference, and the efforts."""
+
+    run: RunLog
+    source: str  # where the signal names came from
+    axes: list[str]  # "x", "y", "z" (or the signal names when they are not a platform vector)
+    position: Pair
+    velocity: Pair | None
+    efforts: tuple[list[str], str, np.ndarray, np.ndarray] | None  # names, unit, t (n,), values (n, k)
+
+    @property
+    def is_platform(self) -> bool:
+        return self.axes == list(AXES)
+
+    def position_stats(self) -> list[AxisStats]:
+        p = self.position
+        return _stats(self.axes, p.actual_names, p.reference_names, p.unit, p.t, p.error)
+
+    def velocity_stats(self) -> list[AxisStats]:
+        v = self.velocity
+        return [] if v is None else _stats(self.axes, v.actual_names, v.reference_names, v.unit, v.t, v.error)
+
+
+def _scenario_doc(run: RunLog) -> tuple[str | None, dict]:
+    """The attached scenario file (name, parsed YAML mapping), or (None, {})."""
+    import yaml
+
+    for name, data in run.attachments.items():
+        if name.startswith("scenario/"):
+            try:
+                doc = yaml.safe_load(data)
+            except yaml.YAMLError as exc:
+                raise ReportError(f"{run.path}: attachment {name} is not valid YAML ({exc})") from None
+            return name, doc if isinstance(doc, dict) else {}
+    return None, {}
+
+
+def _compare_spec(run: RunLog) -> tuple[list[str], list[str], str]:
+    from pydantic import ValidationError
+
+    from .scenario import Compare, expand_signal
+
+    att, doc = _scenario_doc(run)
+    section = doc.get("compare")
+    if section is None:
+        why = f"no compare section in {att}" if att else "no scenario attached"
+        return (expand_signal(_DEFAULT_ACTUAL), expand_signal(_DEFAULT_REFERENCE),
+                f"default {_DEFAULT_ACTUAL} vs {_DEFAULT_REFERENCE} ({why})")
+    try:
+        cmp = Compare.model_validate(section)
+    except ValidationError as exc:
+        raise ReportError(f"{run.path}: the compare section of {att} is invalid: "
+                          f"{exc.errors()[0]['msg']}") from None
+    actual, reference = expand_signal(cmp.actual), expand_signal(cmp.reference)
+    if len(actual) != len(reference):
+        raise ReportError(f"{run.path}: the compare section of {att} pairs {len(actual)} actual signals with "
+                          f"{len(reference)} reference signals")
+    return actual, reference, f"compare section of {att}"
+
+
+def _get(run: RunLog, name: str, role: str, source: str):
+    if name not in run:
+        try:
+            run.signal(name)
+        except CosimError as exc:
+            raise ReportError(f"{exc} (the {role} signal, from the {source})") from None
+    return run.signals[name]
+
+
+def _pair(run: RunLog, actual: list[str], reference: list[str], source: str) -> Pair:
+    a = [_get(run, n, "actual", source) for n in actual]
+    r = [_get(run, n, "reference", source) for n in reference]
+    stamps = a[0].t_ns
+    for s in a[1:] + r:
+        stamps = np.intersect1d(stamps, s.t_ns, assume_unique=True)
+    if stamps.size == 0:
+        raise ReportError(f"{run.path}: {actual[0]} and {reference[0]} share no time stamp")
+
+    def on_stamps(s) -> np.ndarray:
+        return s.y[np.searchsorted(s.t_ns, stamps)]
+
+    units = {s.unit for s in a + r}
+    return Pair(actual, reference, a[0].unit if len(units) == 1 else "", stamps * 1e-9,
+                 np.column_stack([on_stamps(s) for s in a]), np.column_stack([on_stamps(s) for s in r]))
+
+
+def _velocity_name(name: str) -> str | None:
+    """``plant.p.x`` -> ``plant.v.x``, ``traj.p_ref.x`` -> ``traj.v_ref.x``; other names have none."""
+    comp, _, var = name.partition(".")
+    head, _, axis = var.rpartition(".")
+    if head in ("p", "p_ref") and axis in AXES:
+        return f"{comp}.{'v' + head[1:]}.{axis}"
+    return None
+
+
+def _efforts(run: RunLog, actual_component: str):
+    """The efforts the plant received (``<plant>.u[i]``), else a controller's ``u[i]`` output."""
+    candidates = [actual_component] + [n.split(".", 1)[0] for n in run.find("u[1]")
+                                       if run.signals[n].causality == "output"]
+    for comp in dict.fromkeys(candidates):
+        names = [f"{comp}.u[{i}]" for i in range(1, 4)]
+        if all(n in run for n in names):
+            parts = [run.signals[n] for n in names]
+            if all(np.array_equal(p.t_ns, parts[0].t_ns) for p in parts):
+                return names, parts[0].unit, parts[0].t, np.column_stack([p.y for p in parts])
+    return None
+
+
+def tracking(run: RunLog | str | Path) -> Tracking:
+    """The signals a report shows, aligned in time. Raises ReportError naming the file and a missing signal."""
+    run = run if isinstance(run, RunLog) else read_run(run)
+    actual, reference, source = _compare_spec(run)
+    position = _pair(run, actual, reference, source)
+    axes = [n.rpartition(".")[2] for n in actual]
+    if axes != list(AXES):
+        axes = list(actual)
+    v_act, v_ref = [_velocity_name(n) for n in actual], [_velocity_name(n) for n in reference]
+    velocity = None
+    if all(v_act + v_ref) and all(n in run for n in v_act + v_ref):
+        velocity = _pair(run, v_act, v_ref, "velocity of the compared signals")
+    return Tracking(run, source, axes, position, velocity, _efforts(run, actual[0].split(".", 1)[0]))
+
+
+# --------------------------------------------------------------------------- figures
+
+def _scaled_unit(values: np.ndarray, unit: str) -> tuple[float, str]:
+    """(factor, unit) showing ``values`` in m or m/s as mm / um / nm, so they read as 1..1000."""
+    if unit not in ("m", "m/s"):
+        return 1.0, unit
+    finite = values[np.isfinite(values)]
+    peak = float(np.abs(finite).max()) if finite.size else 0.0
+    for size, prefix in ((1e-3, "m"), (1e-6, "µ")):
+        if peak >= size:
+            return 1.0 / size, prefix + unit
+    return 1e9, "n" + unit
+
+
+def _pretty_unit(unit: str) -> str:
+    return unit.replace("N.m", "N·m").replace("m/s2", "m/s²") or "-"
+
+
+def _fig(width: float, height: float, layout: str | None = "constrained"):
+    from matplotlib.figure import Figure
+
+    return Figure(figsize=(width, height), dpi=_DPI, layout=layout)
+
+
+def _auto(value: float, unit: str) -> str:
+    """``0.00465, "m/s"`` -> ``"4.65 mm/s"``."""
+    f, u = _scaled_unit(np.array([value]), unit)
+    return f"{value * f:.3g} {_pretty_unit(u)}"
+
+
+def _plot_path(tr: Tracking, title: str, out: Path) -> Path:
+    p = tr.position
+    fig = _fig(7.5, 6.0, layout=None)  # constrained layout clips 3D axis labels
+    fig.subplots_adjust(left=0.0, right=0.93, bottom=0.02, top=0.9)
+    ax = fig.add_subplot(projection="3d")
+    ref_mm, act_mm = p.reference * 1e3, p.actual * 1e3
+    ax.plot(*ref_mm.T, color="tab:blue", lw=2.5, alpha=0.45, label=f"desired ({p.reference_names[0][:-2]})")
+    ax.plot(*act_mm.T, color="tab:red", lw=0.9, label=f"actual ({p.actual_names[0][:-2]})")
+    ax.scatter(*act_mm[0], color="k", marker="o", s=25, label="start")
+    ax.scatter(*act_mm[-1], color="k", marker="s", s=25, label="end")
+    both = np.vstack([ref_mm, act_mm])
+    lo, hi = np.nanmin(both, axis=0), np.nanmax(both, axis=0)
+    # true proportions, except that a flat axis (a planar path) keeps a quarter of the widest span
+    span = np.maximum(hi - lo, 0.25 * max(float((hi - lo).max()), 1e-6))
+    mid = 0.5 * (lo + hi)
+    ax.set_xlim(mid[0] - span[0] / 2, mid[0] + span[0] / 2)
+    ax.set_ylim(mid[1] - span[1] / 2, mid[1] + span[1] / 2)
+    ax.set_zlim(mid[2] - span[2] / 2, mid[2] + span[2] / 2)
+    ax.set_box_aspect(span.copy(), zoom=0.95)  # a copy: matplotlib scales it in place
+    from matplotlib.ticker import MaxNLocator
+
+    for axis, label in zip((ax.xaxis, ax.yaxis, ax.zaxis), AXES):
+        axis.set_major_locator(MaxNLocator(6 if label == "x" else 5))
+        axis.set_label_text(f"{label} (mm)")
+    err = float(np.nanmax(np.abs(p.error)))
+    hint = ", not visible at this scale" if err * 1e3 < 0.005 * span.max() else ""
+    fig.suptitle(f"{title}: platform path, desired vs actual\n(largest position error {_auto(err, p.unit)}{hint}; "
+                 "see errors.png)", fontsize=10)
+    ax.legend(loc="upper left", fontsize=8)
+    path = out / "path_3d.png"
+    fig.savefig(path)
+    return path
+
+
+def _plot_position(tr: Tracking, title: str, out: Path) -> Path:
+    p = tr.position
+    n = len(tr.axes)
+    fig = _fig(9, 2.2 * n + 1.0)
+    axs = fig.subplots(n, 1, sharex=True, squeeze=False)[:, 0]
+    f, unit = (1e3, "mm") if p.unit == "m" else (1.0, _pretty_unit(p.unit))
+    for j, ax in enumerate(axs):
+        ax.plot(p.t, p.reference[:, j] * f, color="tab:blue", lw=2.5, alpha=0.45)
+        ax.plot(p.t, p.actual[:, j] * f, color="tab:red", lw=0.9)
+        ax.set_ylabel(f"{tr.axes[j]} ({unit})")
+        ax.grid(True, alpha=0.3)
+    axs[-1].set_xlabel("time (s)")
+    names = (p.reference_names[0][:-2], p.actual_names[0][:-2]) if tr.is_platform else ("reference", "actual")
+    axs[0].legend(axs[0].lines, [f"desired ({names[0]})", f"actual ({names[1]})"], loc="lower center",
+                  bbox_to_anchor=(0.5, 1.0), ncol=2, fontsize=8, frameon=False)
+    fig.suptitle(f"{title}: platform position, desired vs actual")
+    path = out / "position.png"
+    fig.savefig(path)
+    return path
+
+
+_ROUNDING = 1e-12  # m or m/s: below this an error is floating-point rounding of positions of order 0.1-1 m
+_OFF_SCALE = 4.0  # a peak this many times the 0.5..99.5 percentile band is drawn off scale (a start transient)
+
+
+def _error_column(axs, pair: Pair, stats: list[AxisStats], axes: list[str], what: str) -> None:
+    e = pair.error
+    colors = ("tab:red", "tab:green", "tab:blue")
+    for j, (ax, st) in enumerate(zip(axs, stats)):
+        col = e[:, j]
+        lo, hi = np.nanpercentile(col, [0.5, 99.5]) if np.isfinite(col).any() else (0.0, 0.0)
+        band = max(abs(lo), abs(hi))
+        clipped = band > 0 and st.max_error > _OFF_SCALE * band
+        f, unit = _scaled_unit(np.array([band if clipped else st.max_error]), pair.unit)
+        unit = _pretty_unit(unit)
+        k = int(np.searchsorted(pair.t, st.t_max))
+        ax.axhline(0.0, color="0.5", lw=0.8)
+        ax.plot(pair.t, col * f, color=colors[j % 3], lw=0.9)
+        ax.set_ylabel(f"e_{axes[j]} ({unit})")
+        ax.set_title(f"{what} {axes[j]}: RMSE {_auto(st.rmse, pair.unit)}, max |e| {_auto(st.max_error, pair.unit)} "
+                     f"at {st.t_max:.3g} s" + (" (rounding level)" if st.max_error < _ROUNDING else ""), fontsize=9)
+        if clipped:
+            lo, hi = min(lo, 0.0), max(hi, 0.0)
+            pad = 0.15 * (hi - lo)
+            ax.set_ylim((lo - pad) * f, (hi + pad) * f)
+            peak = ("-" if col[k] < 0 else "") + _auto(abs(col[k]), pair.unit)
+            ax.text(0.99, 0.04, f"off scale: {peak} at {st.t_max:.3g} s", transform=ax.transAxes, ha="right",
+                    va="bottom", fontsize=8, bbox=dict(boxstyle="round", fc="w", ec="0.6", alpha=0.9))
+        else:
+            ax.plot([st.t_max], [col[k] * f], "kx", ms=6)
+        ax.grid(True, alpha=0.3)
+    axs[-1].set_xlabel("time (s)")
+
+
+def _plot_errors(tr: Tracking, title: str, out: Path) -> Path:
+    n = len(tr.axes)
+    cols = 2 if tr.velocity is not None else 1
+    fig = _fig(6.5 * cols, 2.2 * n + 0.8)
+    axs = fig.subplots(n, cols, sharex=True, squeeze=False)
+    _error_column(axs[:, 0], tr.position, tr.position_stats(), tr.axes, "position error")
+    if tr.velocity is not None:
+        _error_column(axs[:, 1], tr.velocity, tr.velocity_stats(), tr.axes, "velocity error")
+    note = "" if tr.velocity is not None else " (no velocity signals logged)"
+    fig.suptitle(f"{title}: tracking error, actual - desired{note}")
+    path = out / "errors.png"
+    fig.savefig(path)
+    return path
+
+
+def _plot_efforts(tr: Tracking, title: str, out: Path) -> Path | None:
+    if tr.efforts is None:
+        return None
+    names, unit, t, u = tr.efforts
+    fig = _fig(9, 2.0 * len(names) + 0.8)
+    axs = fig.subplots(len(names), 1, sharex=True, sharey=True, squeeze=False)[:, 0]
+    colors = ("tab:blue", "tab:orange", "tab:green")
+    for j, (ax, name) in enumerate(zip(axs, names)):
+        ax.plot(t, u[:, j], lw=1.0, color=colors[j % 3])
+        ax.axhline(0.0, color="0.5", lw=0.8)
+        ax.set_ylabel(f"{name.split('.', 1)[1]} ({_pretty_unit(unit)})")
+        ax.set_title(f"{name} (leg {j + 1}): range {np.nanmin(u[:, j]):.3g} .. {np.nanmax(u[:, j]):.3g} "
+                     f"{_pretty_unit(unit)}", fontsize=9)
+        ax.grid(True, alpha=0.3)
+    axs[-1].set_xlabel("time (s)")
+    fig.suptitle(f"{title}: actuator efforts")
+    path = out / "efforts.png"
+    fig.savefig(path)
+    return path
+
+
+# --------------------------------------------------------------------------- report
+
+
+@dataclass
+class Report:
+    """Files written for one run and the numbers in them."""
+
+    run: str  # the log's path
+    name: str
+    robot: str | None
+    status: str
+    duration: float  # s simulated (last - first stamp)
+    out_dir: Path
+    markdown: Path
+    figures: dict[str, Path]
+    position: list[AxisStats]
+    velocity: list[AxisStats] = field(default_factory=list)
+    source: str = ""
+
+    def as_dict(self) -> dict[str, Any]:
+        return {"run": self.run, "name": self.name, "robot": self.robot, "status": self.status,
+                "duration_s": self.duration, "out_dir": str(self.out_dir), "markdown": str(self.markdown),
+                "figures": {k: str(v) for k, v in self.figures.items()}, "compared": self.source,
+                "position": [s.as_dict() for s in self.position], "velocity": [s.as_dict() for s in self.velocity]}
+
+
+def _stats_table(stats: list[AxisStats], unit: str) -> list[str]:
+    """Markdown rows; lengths (m, m/s) also in um (um/s), other units as logged."""
+    micro = unit in ("m", "m/s")
+    u, small = unit or "-", f"u{unit}" if micro else unit or "-"
+    rows = [f"| axis | actual - reference | RMSE ({u}) |" + (f" RMSE ({small}) |" if micro else "")
+            + f" max abs error ({small}) | at t (s) |", "|---|---|---|" + ("---|" if micro else "") + "---|---|"]
+    scale = 1e6 if micro else 1.0
+    for s in stats:
+        rows.append(f"| {s.axis} | {s.actual} - {s.reference} | {s.rmse:.6e} |"
+                    + (f" {s.rmse * scale:.4g} |" if micro else "") + f" {s.max_error * scale:.4g} | {s.t_max:.4g} |")
+    return rows
+
+
+def _markdown(tr: Tracking, rep: Report) -> str:
+    run = tr.run
+    sc = run.metadata.get("scenario", {})
+    outcome = run.metadata.get("outcome", {})
+    att, doc = _scenario_doc(run)
+    p = tr.position
+    lines = [f"# Run report: {rep.name}", ""]
+    desc = doc.get("description")
+    if desc:
+        lines += [str(desc), ""]
+    status = rep.status
+    if outcome.get("completed_steps"):
+        status += f", {outcome['completed_steps']} steps"
+    if outcome.get("message"):
+        status += f": {outcome['message']}"
+    step = sc.get("step_s")
+    rows = [("scenario", f"{rep.name}" + (f" (`{sc['file']}`)" if sc.get("file") else "")),
+            ("robot", rep.robot or "-"),
+            ("status", status),
+            ("simulated", f"{p.t[0]:.6g} .. {p.t[-1]:.6g} s ({rep.duration:.6g} s"
+                          + (f", step {float(step) * 1e3:.6g} ms" if step else "") + f", {len(p.t)} samples)"),
+            ("log", f"`{run.path}`"),
+            ("compared", f"{', '.join(p.actual_names)} vs {', '.join(p.reference_names)} ({tr.source})")]
+    lines += ["| | |", "|---|---|"] + [f"| {k} | {v} |" for k, v in rows] + [""]
+    lines += ["## Position error" if tr.is_platform else "## Error", "",
+              f"Error = actual - reference at the {len(p.t)} time stamps both carry (the start sample and every "
+              "step, as in the run's summary).", ""]
+    lines += _stats_table(rep.position, p.unit) + [""]
+    if rep.velocity:
+        lines += ["## Velocity error", ""] + _stats_table(rep.velocity, tr.velocity.unit) + [""]
+    lines += ["## Figures", ""]
+    captions = {"path_3d": "Platform path, desired vs actual", "position": "Position, desired vs actual",
+                "errors": "Position and velocity errors", "efforts": "Actuator efforts"}
+    for key, path in rep.figures.items():
+        lines += [f"### {captions.get(key, key)}", "", f"![{captions.get(key, key)}]({path.name})", ""]
+    if tr.efforts is None:
+        lines += ["No actuator efforts (`u[1..3]`) in the log.", ""]
+    return "\n".join(lines)
+
+
+def make_report(run: RunLog | str | Path, out_dir: str | Path | None = None) -> Report:
+    """Write the figures and ``report.md`` of one run; return what was written.
+
+    Parameters
+    ----------
+    run
+        A run log path (MCAP written by :mod:`cosim.mcap_log`) or a :class:`RunLog`.
+    out_dir
+        Where to write (created); default ``<log stem>_report/`` next to the log.
+
+    Raises
+    ------
+    CosimError
+        The log cannot be read; ReportError when a compared signal is missing (named).
+    """
+    tr = tracking(run)
+    log = tr.run
+    out = Path(out_dir) if out_dir is not None else log.path.with_name(f"{log.path.stem}_report")
+    out.mkdir(parents=True, exist_ok=True)
+    title = log.name
+    figures: dict[str, Path] = {}
+    if tr.is_platform:
+        figures["path_3d"] = _plot_path(tr, title, out)
+    figures["position"] = _plot_position(tr, title, out)
+    figures["errors"] = _plot_errors(tr, title, out)
+    eff = _plot_efforts(tr, title, out)
+    if eff is not None:
+        figures["efforts"] = eff
+    p = tr.position
+    rep = Report(str(log.path), title, log.robot, log.status, float(p.t[-1] - p.t[0]), out, out / "report.md",
+                 figures, tr.position_stats(), tr.velocity_stats(), tr.source)
+    rep.markdown.write_text(_markdown(tr, rep))
+    return rep
+
+
+# --------------------------------------------------------------------------- controller table
+
+
+@dataclass(frozen=True)
+class TableRow:
+    """One row: a run's RMSE per axis (m), or the thesis's (``source`` says which)."""
+
+    label: str
+    controller: str
+    plant: str
+    rmse: tuple[float, float, float]  # m, x y z
+    source: str  # the log's path, or _THESIS_SOURCE
+    samples: int = 0
+
+    @property
+    def from_thesis(self) -> bool:
+        return self.source == _THESIS_SOURCE
+
+
+def _fmt_m(x: float) -> str:
+    return "-" if not math.isfinite(x) else f"{x:.3e}"
+
+
+def _fmt_um(x: float) -> str:
+    if not math.isfinite(x):
+        return "-"
+    v = x * 1e6
+    return f"{v:.0f}" if v >= 100 else f"{v:.1f}" if v >= 10 else f"{v:.2f}" if v >= 0.1 else f"{v:.3g}"
+
+
+@dataclass
+class Table:
+    """RMSE per axis per run (thesis Table 5 layout: rows = runs, columns x, y, z)."""
+
+    rows: list[TableRow]
+
+    def markdown(self, units: Sequence[str] = ("m", "um")) -> str:
+        """The table in markdown; ``units`` picks the column groups, any of ``"m"`` and ``"um"``."""
+        bad = [u for u in units if u not in ("m", "um")]
+        if bad or not units:
+            raise ReportError(f"table units must be among m, um; got {', '.join(bad) or 'none'}")
+        head = ["run", "controller", "plant"] + [f"{a} ({u})" for u in units for a in AXES]
+        out = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+        for r in self.rows:
+            cells = [f"**{r.label}**" if r.from_thesis else r.label, r.controller, r.plant]
+            for u in units:  # the thesis's values as printed there; ours to 4 significant digits
+                fmt = (lambda v: f"{v:g}") if r.from_thesis and u == "m" else _fmt_m if u == "m" else _fmt_um
+                cells += [fmt(v) for v in r.rmse]
+            out.append("| " + " | ".join(cells) + " |")
+        notes = ["", "RMSE of the platform position, actual - reference, over the start sample and every step "
+                     "of each run (as in the run's summary)."]
+        if any(r.from_thesis for r in self.rows):
+            notes.append(f"Rows in bold are not computed here: they are the values printed in {_THESIS_SOURCE}.")
+        return "\n".join(out + notes)
+
+    def as_dict(self) -> dict[str, Any]:
+        return {"rows": [{"label": r.label, "controller": r.controller, "plant": r.plant, "source": r.source,
+                          "from_thesis": r.from_thesis, "samples": r.samples,
+                          "rmse_m": dict(zip(AXES, r.rmse))} for r in self.rows]}
+
+
+def _describe(run: RunLog, actual_component: str) -> tuple[str, str, bool]:
+    """(controller, plant, is the thesis helix) from the attached scenario."""
+    _, doc = _scenario_doc(run)
+    comps = doc.get("components") or {}
+    controller, plant, default_helix = "-", actual_component, False
+    for name, c in comps.items():
+        if not isinstance(c, dict):
+            continue
+        fmu = str(c.get("fmu") or c.get("path") or "")
+        m = _CONTROLLER_FMU.match(fmu)
+        if m:
+            controller = _CONTROLLERS[m.group(1)]
+        if name == actual_component and fmu:
+            fidelity = (c.get("parameters") or {}).get("model.fidelity")
+            plant = fmu + (f" ({fidelity})" if fidelity else "")
+        if fmu == "helix" and not c.get("parameters"):
+            default_helix = True
+    return controller, plant, default_helix and run.robot == _THESIS_ROBOT
+
+
+def controller_table(paths: Sequence[str | Path | RunLog], thesis: bool | None = None) -> Table:
+    """RMSE per axis of each run (platform position vs reference), in thesis Table 5's layout.
+
+    Parameters
+    ----------
+    paths
+        Run logs (paths or :class:`RunLog`), one row each, in order.
+    thesis
+        Append the thesis's Table 5 rows for the controllers among the thesis-helix runs (all
+        three when none of them is PD, PID or CTC). ``None`` (default): when at least one run is
+        the thesis helix (the default helix on ``linear_delta_thesis``).
+
+    Raises
+    ------
+    CosimError
+        A log cannot be read or lacks its compared signals; ReportError when a run's compared
+        signals are not a platform vector x, y, z.
+    """
+    from delta.paper_data import THESIS_TABLE_5_M
+
+    if not paths:
+        raise ReportError("controller table: no run logs given")
+    rows: list[TableRow] = []
+    helix_controllers: list[str] = []
+    for item in paths:
+        tr = tracking(item)
+        if not tr.is_platform:
+            raise ReportError(f"{tr.run.path}: the table needs a platform vector x, y, z; the run compares "
+                              f"{', '.join(tr.position.actual_names)}")
+        controller, plant, is_helix = _describe(tr.run, tr.position.actual_names[0].split(".", 1)[0])
+        if is_helix:
+            helix_controllers.append(controller)
+        st = tr.position_stats()
+        rows.append(TableRow(tr.run.name, controller, plant, tuple(s.rmse for s in st), str(tr.run.path),
+                             st[0].samples))
+    if thesis is None:
+        thesis = bool(helix_controllers)
+    if thesis:
+        wanted = [k for k, v in _CONTROLLERS.items() if v in helix_controllers and k in THESIS_TABLE_5_M]
+        for key in wanted or [k for k in _CONTROLLERS if k in THESIS_TABLE_5_M]:
+            rows.append(TableRow(f"thesis Table 5, {_CONTROLLERS[key]}", _CONTROLLERS[key], "ADAMS prototype",
+                                 tuple(THESIS_TABLE_5_M[key]), _THESIS_SOURCE))
+    return Table(rows)
+
+
+# --------------------------------------------------------------------------- CLI
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    """Add the ``report`` and ``table`` commands to the platform CLI."""
+    p = subparsers.add_parser("report", help="figures and a markdown summary of a run log")
+    p.add_argument("run", help="run log (MCAP written by `python -m cosim run`)")
+    p.add_argument("--out", default=None, help="output directory (default <log stem>_report/ next to the log)")
+    p.add_argument("--json", action="store_true", help="machine-readable output")
+    p.set_defaults(handler=_cmd_report)
+    p = subparsers.add_parser("table", help="RMSE per axis per run, as thesis Table 5 (markdown)")
+    p.add_argument("runs", nargs="+", help="run logs, one row each")
+    p.add_argument("--units", choices=("both", "m", "um"), default="both", help="RMSE columns (default both)")
+    p.add_argument("--thesis", action=argparse.BooleanOptionalAction, default=None,
+                   help="add thesis Table 5 rows (default: when a run is the thesis helix)")
+    p.add_argument("--json", action="store_true", help="machine-readable output")
+    p.set_defaults(handler=_cmd_table)
+
+
+def _cmd_report(args: argparse.Namespace) -> int:
+    rep = make_report(args.run, args.out)
+    if args.json:
+        print(json.dumps(rep.as_dict(), indent=2))
+        return 0
+    print(f"{rep.name}: {rep.status}, {rep.duration:.6g} s simulated -> {rep.markdown}")
+    for s in rep.position:
+        print(f"  {s.axis}: RMSE {s.rmse:.4e} {s.unit}, max |e| {s.max_error:.4e} {s.unit} at t = {s.t_max:.4g} s")
+    print("  figures: " + ", ".join(p.name for p in rep.figures.values()))
+    return 0
+
+
+def _cmd_table(args: argparse.Namespace) -> int:
+    table = controller_table(args.runs, args.thesis)
+    if args.json:
+        print(json.dumps(table.as_dict(), indent=2))
+    else:
+        print(table.markdown(("m", "um") if args.units == "both" else (args.units,)))
+    return 0
