@@ -403,6 +403,9 @@ def build_parser() -> argparse.ArgumentParser:
     _regression_parser(sub)
     from fmus.cli import register as _register_fmus
 
+    from .report import register as _register_report
+
+    _register_report(sub)
     _register_fmus(sub)
     return parser
 

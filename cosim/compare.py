@@ -201,6 +201,10 @@ def compare_logs(a: RunLog | str | Path, b: RunLog | str | Path, tolerances: Map
     tolerances = dict(tolerances or {})
     names_a, names_b = list(a.signals), set(b.signals)
     common = [n for n in names_a if n in names_b]
+    unused = [p for p in tolerances if not any(_matches(p, n) for n in common)]
+    if unused:
+        raise CosimError(f"tolerance pattern(s) {', '.join(unused)} match no signal of both logs "
+                         f"(e.g. {', '.join(common[:4])})")
     if signals:
         common = [n for n in common if any(_matches(p, n) for p in signals)]
         if not common:
@@ -208,10 +212,6 @@ def compare_logs(a: RunLog | str | Path, b: RunLog | str | Path, tolerances: Map
     if not common:
         raise CosimError(f"{a.path} and {b.path} share no signal (components {', '.join(a.components)} vs "
                          f"{', '.join(b.components)})")
-    unused = [p for p in tolerances if not any(_matches(p, n) for n in common)]
-    if unused:
-        raise CosimError(f"tolerance pattern(s) {', '.join(unused)} match no signal compared "
-                         f"(e.g. {', '.join(common[:4])})")
     first = a.signals[common[0]]
     lo = max(int(first.t_ns[0]), int(b.signals[common[0]].t_ns[0]))
     hi = min(int(first.t_ns[-1]), int(b.signals[common[0]].t_ns[-1]))

@@ -138,7 +138,7 @@ def test_tolerance_patterns_most_specific_wins():
 def test_a_tolerance_matching_nothing_is_an_error(tmp_path):
     t = grid(3)
     a = write_log(tmp_path / "a.mcap", {"plant.p.x": (t, np.zeros(3))})
-    with pytest.raises(CosimError, match=r"tolerance pattern\(s\) plant\.pp match no signal"):
+    with pytest.raises(CosimError, match=r"tolerance pattern\(s\) plant\.pp match no signal of both logs"):
         compare_logs(a, a, {"plant.pp": 1.0})
 
 
