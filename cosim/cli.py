@@ -287,6 +287,59 @@ def _regression_parser(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(handler=_cmd_baseline)
 
 
+    p = sub.add_parser("validate-model", help="analytic inverse dynamics vs the Exudyn plant on a prescribed "
+                                              "motion, against the leg mass split w",
+                       description="Drives the Exudyn plant along a validation motion, compares its actuator "
+                                   "efforts with the analytic model's inverse dynamics for a range of w and "
+                                   "identifies the best w (and the best separate inertia / gravity splits).")
+    p.add_argument("--robot", required=True, help="preset name (see `python -m cosim robot presets`)")
+    p.add_argument("--trajectory", choices=("helix", "pick_place"), default="pick_place",
+                   help="validation motion (default pick_place: 25/305/25 mm, 0.5 s, about 7 g)")
+    p.add_argument("--w", type=float, nargs="+", metavar="W",
+                   help="w values to sweep (default 0, 0.1, ..., 1)")
+    p.add_argument("--no-separate", action="store_true", help="skip the separate inertia / gravity fit")
+    p.add_argument("--fidelity", choices=("full", "lumped"), default="full", help="Exudyn plant (default full)")
+    p.add_argument("--step", type=float, default=2e-4, help="plant step, s (default 2e-4)")
+    p.add_argument("--duration", type=float, help="simulated time, s (default: the whole motion)")
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.add_argument("--json", action="store_true")
+    p.set_defaults(handler=_cmd_validate_model)
+
+
+def _cmd_validate_model(args: argparse.Namespace) -> int:
+    from multibody.validate import validate_model
+
+    from delta.robots import PRESETS
+
+    if args.robot not in PRESETS:
+        raise CosimError(f"--robot: unknown preset {args.robot!r}; valid: {', '.join(PRESETS)}")
+    for name, value in (("--step", args.step), ("--duration", args.duration)):
+        if value is not None and not value > 0:
+            raise CosimError(f"{name} must be > 0 s, got {value}")
+    if args.w is not None and any(not 0.0 <= w <= 1.0 for w in args.w):
+        raise CosimError(f"--w: every w must lie in [0, 1], got {args.w}")
+    bar = None
+    progress = None
+    if not (args.quiet or args.json):
+        from rich.progress import BarColumn, Progress, TextColumn, TimeRemainingColumn
+
+        bar = Progress(TextColumn("[bold]{task.description}"), BarColumn(), TextColumn("{task.percentage:>3.0f}%"),
+                       TimeRemainingColumn(), transient=True)
+        task = bar.add_task(f"{args.robot} {args.trajectory}", total=None)
+        bar.start()
+        progress = lambda done, total: bar.update(task, completed=done, total=total)  # noqa: E731
+    try:
+        rep = validate_model(args.robot, args.trajectory, args.w, not args.no_separate, h=args.step,
+                             duration=args.duration, fidelity=args.fidelity, progress=progress)
+    except ValueError as exc:
+        raise CosimError(f"validate-model: {exc}") from None
+    finally:
+        if bar is not None:
+            bar.stop()
+    _emit(args, rep.as_dict(), rep.text())
+    return EXIT_OK
+
+
 def _cmd_compare(args: argparse.Namespace) -> int:
     from pathlib import Path
 

@@ -96,3 +96,20 @@ def test_report_serialises_and_progress_reaches_total(rotary_pick):
 def test_unknown_trajectory_is_rejected_with_the_valid_names():
     with pytest.raises(ValueError, match="helix, pick_place"):
         validate_model("rotary_delta_prototype", "figure_eight")
+
+
+def test_cli_validate_model_prints_the_sweep_and_best_w(capsys):
+    from cosim.cli import main
+
+    code = main(["validate-model", "--robot", "rotary_delta_prototype", "--trajectory", "helix",
+                 "--duration", "0.1", "--w", "0", "0.5", "1", "--json"])
+    payload = json.loads(capsys.readouterr().out)
+    assert code == 0, payload
+    assert [row["w_inertia"] for row in payload["sweep"]] == [0.0, 0.5, 1.0], payload["sweep"]
+    assert payload["best_w"] in (0.0, 0.5, 1.0) and 0.0 <= payload["best_w_gravity"] <= 1.0, payload
+    assert payload["effort_unit"] == "N*m" and payload["samples"] >= 500, payload
+    for argv, message in ((["--robot", "nope"], "unknown preset 'nope'"),
+                          (["--robot", "linear_delta_thesis", "--w", "1.5"], "every w must lie in [0, 1]"),
+                          (["--robot", "linear_delta_thesis", "--step", "0"], "--step must be > 0 s")):
+        assert main(["validate-model", *argv]) == 2, argv
+        assert message in capsys.readouterr().err, argv
