@@ -175,6 +175,8 @@ class _Base:
         self.log: deque[str] = deque(maxlen=20)
         self.in_bufs: list[_Buffers] = []
         self.out_bufs: list[_Buffers] = []
+        self._set_calls: list | None = None
+        self._get_calls: list | None = None
         self.fmu: Any = None
         self._instantiated = False
         self._terminated = False
@@ -219,6 +221,7 @@ class _Base:
         """Pre-build buffers for the inputs the master sets and the outputs it reads."""
         self.in_bufs = self._group(inputs)
         self.out_bufs = self._group(outputs)
+        self._set_calls = self._get_calls = None  # hot-path call lists, bound at first use
 
     def _group(self, variables: Iterable[Variable]) -> list[_Buffers]:
         by_kind: dict[str, list[Variable]] = {}
@@ -306,15 +309,29 @@ class _FMI2(_Base):
         self._guard("fmi2SetupExperiment", self.fmu.setupExperiment, None, start, stop)
         self._guard("fmi2EnterInitializationMode", self.fmu.enterInitializationMode)
 
+    def _calls(self, bufs: list[_Buffers], table: dict, prefix: str) -> list[tuple[Any, Any, int, Any, str]]:
+        """(C function, value references, count, values, FMI name) per buffer, bound once."""
+        return [(table[b.kind], b.vrs, b.n, b.values, prefix + b.kind) for b in bufs]
+
     def set_inputs(self) -> None:
         c = self._c
-        for b in self.in_bufs:
-            self._check(self._set[b.kind](c, b.vrs, b.n, b.values), "fmi2Set" + b.kind)
+        calls = self._set_calls
+        if calls is None:
+            calls = self._set_calls = self._calls(self.in_bufs, self._set, "fmi2Set")
+        for fn, vrs, n, values, name in calls:
+            status = fn(c, vrs, n, values)
+            if status > 1:
+                self._check(status, name)
 
     def get_outputs(self) -> None:
         c = self._c
-        for b in self.out_bufs:
-            self._check(self._get[b.kind](c, b.vrs, b.n, b.values), "fmi2Get" + b.kind)
+        calls = self._get_calls
+        if calls is None:
+            calls = self._get_calls = self._calls(self.out_bufs, self._get, "fmi2Get")
+        for fn, vrs, n, values, name in calls:
+            status = fn(c, vrs, n, values)
+            if status > 1:
+                self._check(status, name)
 
     def read(self, variables: list[Variable]) -> list[Any]:
         """Values of arbitrary variables (slow path, for reports and initialization)."""
@@ -335,7 +352,9 @@ class FMI2CoSimulation(_FMI2):
 
     def step(self, t: float, h: float) -> None:
         self.time = t
-        self._check(self._do_step(self._c, t, h, 1), "fmi2DoStep")
+        status = self._do_step(self._c, t, h, 1)
+        if status > 1:
+            self._check(status, "fmi2DoStep")
         self.time = t + h
 
 

@@ -178,6 +178,18 @@ class ScalarKinematics:
         return p, pts, d1s, d2s
 
     # ------------------------------------------------------------------ differential kinematics
+    def _leg(self, i: int, qi: float, p: Vec) -> tuple[float, float, float, float, float, float, float]:
+        """Rod ``l_i = p + b_i - B_i(q_i)``, ``B_i'`` and ``l_i . B_i''`` of leg ``i``, unpacked."""
+        bx, by, _ = self.b[i]
+        if self.linear:
+            x, y = self._anchor[i]
+            return p[0] + bx - x, p[1] + by - y, p[2] + qi, 0.0, 0.0, -1.0, 0.0
+        ex, ey = self.e[i]
+        la, cq, sq = self._la, cos(qi), sin(qi)
+        r = self._radius + la * cq
+        lx, ly, lz = p[0] + bx - r * ex, p[1] + by - r * ey, p[2] + la * sq
+        return lx, ly, lz, -la * sq * ex, -la * sq * ey, -la * cq, la * (sq * lz - cq * (lx * ex + ly * ey))
+
     def joint_rates(self, q: Vec, p: Vec, v: Vec, a: Vec | None = None) -> tuple[Vec, Vec]:
         """``qd = J v`` (thesis eq. (16)) and ``qdd = J a + [v^T H_i v]`` (thesis eqs. (22), (25)).
 
@@ -186,21 +198,20 @@ class ScalarKinematics:
         generalised to the rotary arm). ``qdd`` is zero when ``a`` is None. Raises
         :class:`RobotError` at a type 1 singularity.
         """
+        vx, vy, vz = v
         qd = [0.0, 0.0, 0.0]
         qdd = [0.0, 0.0, 0.0]
         for i in range(3):
-            bpt, d1, d2 = self.actuator(i, q[i])
-            b = self.b[i]
-            rod = (p[0] + b[0] - bpt[0], p[1] + b[1] - bpt[1], p[2] + b[2] - bpt[2])
-            den = dot(rod, d1)
+            lx, ly, lz, d1x, d1y, d1z, l_d2 = self._leg(i, q[i], p)
+            den = lx * d1x + ly * d1y + lz * d1z
             if den == 0.0:
                 raise RobotError(f"type 1 (serial) singularity: leg {i + 1} rod is orthogonal to its actuator motion")
-            jac = (rod[0] / den, rod[1] / den, rod[2] / den)
-            qdi = dot(jac, v)
+            jx, jy, jz = lx / den, ly / den, lz / den
+            qdi = jx * vx + jy * vy + jz * vz
             qd[i] = qdi
             if a is not None:
-                w = (v[0] - d1[0] * qdi, v[1] - d1[1] * qdi, v[2] - d1[2] * qdi)
-                qdd[i] = dot(jac, a) + (dot(w, w) - dot(rod, d2) * qdi * qdi) / den
+                wx, wy, wz = vx - d1x * qdi, vy - d1y * qdi, vz - d1z * qdi
+                qdd[i] = jx * a[0] + jy * a[1] + jz * a[2] + (wx * wx + wy * wy + wz * wz - l_d2 * qdi * qdi) / den
         return (qd[0], qd[1], qd[2]), (qdd[0], qdd[1], qdd[2])
 
     def proximity(self, q: Vec, p: Vec) -> float:
@@ -215,14 +226,12 @@ class ScalarKinematics:
         units = []
         serial = 1.0
         for i in range(3):
-            bpt, d1, _ = self.actuator(i, q[i])
-            b = self.b[i]
-            rod = (p[0] + b[0] - bpt[0], p[1] + b[1] - bpt[1], p[2] + b[2] - bpt[2])
-            norm = sqrt(dot(rod, rod))
-            measure = abs(dot(rod, d1)) / (norm * sqrt(dot(d1, d1)))
+            lx, ly, lz, d1x, d1y, d1z, _ = self._leg(i, q[i], p)
+            norm = sqrt(lx * lx + ly * ly + lz * lz)
+            measure = abs(lx * d1x + ly * d1y + lz * d1z) / (norm * sqrt(d1x * d1x + d1y * d1y + d1z * d1z))
             if measure < serial:
                 serial = measure
-            units.append((rod[0] / norm, rod[1] / norm, rod[2] / norm))
+            units.append((lx / norm, ly / norm, lz / norm))
         u0, u1, u2 = units
         m00, m11, m22 = dot(u0, u0), dot(u1, u1), dot(u2, u2)
         m01, m02, m12 = dot(u0, u1), dot(u0, u2), dot(u1, u2)

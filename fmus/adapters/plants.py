@@ -114,4 +114,4 @@ class ExudynPlant(Adapter):
         self.put(joint_names("reaction"), out.reaction)
 
     def advance(self, t: float, h: float) -> None:
-        self._show(self.plant.step(t, h, self.vec(U)))
+        self._show(self.plant.step(t, h, self.vec3(U)))
