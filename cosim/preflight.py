@@ -2,16 +2,23 @@
 
 Runs before any FMU is instantiated. The trajectory comes from
 :mod:`delta.trajectories` (``helix`` -> ``Helix(**params)`` and so on).
+
+The scenario's ``trajectory:`` section is the one source of the reference: it also
+gives the start values of every component that is one of our trajectory FMUs
+(:func:`trajectory_start_values`), so the pre-flight, the plant's initial state and
+the trajectory component cannot disagree.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from .errors import Issue, PreflightError, ScenarioError
-from .scenario import Scenario, TrajectorySpec
+from typing import Any
 
-__all__ = ["make_trajectory", "check_positions", "preflight", "initial_state_values"]
+from .errors import Issue, PreflightError, ScenarioError
+from .scenario import Scenario, TrajectorySpec, _line_for
+
+__all__ = ["make_trajectory", "check_positions", "preflight", "initial_state_values", "trajectory_start_values"]
 
 _CLASSES = {"helix": "Helix", "pick_and_place": "PickAndPlace", "point_to_point": "PointToPoint",
             "waypoints": "Waypoints"}
@@ -75,4 +82,91 @@ def initial_state_values(scenario: Scenario) -> dict[str, float]:
     out = dict(zip(init.position, map(float, p)))
     if v is not None and init.velocity:
         out.update(zip(init.velocity, map(float, np.asarray(v, dtype=float).reshape(3))))
+    return out
+
+
+def _trajectory_adapters(scenario: Scenario) -> dict[str, type]:
+    """Components that are one of our trajectory FMUs (``fmu:``, not ``path:``) -> their adapter class."""
+    ours = {n: c.fmu for n, c in scenario.components.items() if c.fmu is not None}
+    if not ours:
+        return {}
+    try:
+        from fmus import registry
+        from fmus.adapters import trajectories
+    except ImportError:  # our FMUs cannot be built either; locate_fmus reports that
+        return {}
+    out = {}
+    for name, fmu in ours.items():
+        entry = registry.REGISTRY.get(fmu)
+        if entry is not None and entry.module == "trajectories":
+            out[name] = getattr(trajectories, entry.cls)
+    return out
+
+
+def _same(given: Any, value: Any) -> bool:
+    if isinstance(value, str) or isinstance(given, (str, bool)):
+        return given == value
+    try:
+        return float(given) == float(value)
+    except (TypeError, ValueError):
+        return False
+
+
+def _show(value: Any) -> str:
+    return repr(value) if isinstance(value, str) else str(value)
+
+
+def trajectory_start_values(scenario: Scenario) -> dict[str, dict[str, Any]]:
+    """Start values of our trajectory FMUs from the scenario's ``trajectory:`` section, by component.
+
+    Raises :class:`ScenarioError` (every issue, as ``file:line: path: message``) when such a
+    component generates another trajectory type than the section's, when the FMU cannot
+    represent the section's trajectory, or when the component also sets one of these
+    parameters to a different value. Components given by ``path`` are left alone.
+    """
+    spec = scenario.trajectory
+    adapters = _trajectory_adapters(scenario) if spec is not None else {}
+    if not adapters:
+        return {}
+    traj = make_trajectory(spec, scenario.source)
+    lines = getattr(scenario, "_lines", {})
+    issues: list[Issue] = []
+
+    def issue(loc: tuple, message: str) -> None:
+        path = ".".join(str(p) for p in loc)
+        issues.append(Issue(path, message, scenario.source, _line_for(loc, lines)))
+
+    out: dict[str, dict[str, Any]] = {}
+    for name, cls in adapters.items():
+        comp = scenario.components[name]
+        if cls.TYPE != spec.type:
+            from fmus import registry
+            from fmus.adapters import trajectories
+
+            wanted = [e.name for e in registry.REGISTRY.values() if e.module == "trajectories"
+                      and e.cls == trajectories.ADAPTERS[spec.type].__name__]
+            issue(("components", name, "fmu"),
+                  f"{comp.fmu} generates a {cls.TYPE} trajectory but trajectory.type is {spec.type}; "
+                  f"use fmu: {' or '.join(wanted)} or change trajectory.type")
+            continue
+        try:
+            values = cls.parameters_of(traj)
+        except ValueError as exc:
+            issue(("trajectory", "params"), f"{name} (fmu: {comp.fmu}) cannot generate it: {exc}")
+            continue
+        fields = {p.name: p.field for p in cls.PARAMS}
+        for pname, given in comp.parameters.items():
+            targets = [(f"{pname}[{k + 1}]", v) for k, v in enumerate(given)] if isinstance(given, list) \
+                else [(pname, given)]
+            for vname, val in targets:
+                if vname in values and not _same(val, values[vname]):
+                    field = fields[vname]
+                    where = "trajectory.params" if field in spec.params else \
+                        f"trajectory (the {type(traj).__name__} default)"
+                    issue(("components", name, "parameters", pname),
+                          f"{_show(val)} disagrees with {where} {field} = {_show(getattr(traj, field))}; "
+                          f"set it in one place (trajectory.params)")
+        out[name] = values
+    if issues:
+        raise ScenarioError(issues)
     return out

@@ -91,13 +91,20 @@ def _build_ours(name: str) -> Path:
 
 
 def prepare(scenario: Scenario, log_signals: str | None = None):
-    """Pre-flight and plan (no FMU instantiated): returns (plan, preflight report)."""
-    from .preflight import initial_state_values, preflight
+    """Pre-flight and plan (no FMU instantiated): returns (plan, preflight report).
+
+    With a ``trajectory:`` section, our trajectory FMUs get their parameters from it.
+    """
+    from .preflight import initial_state_values, preflight, trajectory_start_values
     from .system import build_plan
 
+    trajectory_values = trajectory_start_values(scenario)  # our trajectory FMUs follow the scenario's section
     report = preflight(scenario)
     infos = locate_fmus(scenario)
     plan = build_plan(scenario, infos, log_signals)
+    for name, values in trajectory_values.items():
+        c = plan.names.index(name)
+        plan.start_values[c] = {**values, **plan.start_values[c]}  # explicit ones are equal (checked)
     init = initial_state_values(scenario)
     if init:
         c = plan.names.index(scenario.initial_state.component)

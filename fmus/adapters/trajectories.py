@@ -2,11 +2,18 @@
 
 Robot-independent; the start values are the trajectory dataclasses' presets. Outputs are
 evaluated at the FMU's current time (after ``doStep(t, h)`` they describe ``t + h``).
+
+Each adapter declares its parameters once, in ``PARAMS``: FMU name <-> dataclass field
+(and element of a tuple field). The same table declares the FMI variables, builds the
+trajectory from the parameter values (:meth:`_Trajectory.from_parameters`) and gives the
+parameter values of a trajectory (:meth:`_Trajectory.parameters_of`), which the master
+uses to set a component from the scenario's ``trajectory:`` section.
 """
 
 from __future__ import annotations
 
-from dataclasses import fields
+from dataclasses import dataclass, fields
+from typing import Any, Callable, Mapping
 
 from delta.trajectories import Helix, PickAndPlace, PointToPoint, Waypoints, seed004_z_steps
 
@@ -15,14 +22,92 @@ from .._fmi import Adapter, axis_names
 P_REF, V_REF, A_REF = axis_names("p_ref"), axis_names("v_ref"), axis_names("a_ref")
 
 
+@dataclass(frozen=True)
+class Param:
+    """One FMU parameter: ``name`` <-> ``getattr(trajectory, field)[at[0]][at[1]]...``."""
+
+    name: str
+    field: str
+    at: tuple[int, ...] = ()
+    unit: str | None = "m"
+    description: str = ""
+    cast: Callable[[Any], Any] = float
+
+
+def _xyz(prefix: str, field: str, description: str, outer: tuple[int, ...] = ()) -> tuple[Param, ...]:
+    """The three parameters ``prefix.x/.y/.z`` (or ``prefix[k].x ...``) of a (3,) m field."""
+    return tuple(Param(name, field, outer + (i,), "m", f"{description} ({axis})")
+                 for i, (axis, name) in enumerate(zip("xyz", axis_names(prefix))))
+
+
 class _Trajectory(Adapter):
-    def _declare_outputs(self) -> None:
+    """Base: ``TYPE`` (the scenario's trajectory type), ``CLASS``, ``DEFAULT`` and ``PARAMS``."""
+
+    TYPE: str
+    CLASS: type
+    DEFAULT: Any
+    PARAMS: tuple[Param, ...]
+    LIMITS: str = ""  # what the FMU cannot represent, for error messages
+
+    def __init__(self, **kwargs):
+        super().__init__(**kwargs)
+        defaults = self.parameters_of(self.DEFAULT)
+        for p in self.PARAMS:
+            self.parameter(p.name, defaults[p.name], p.unit, p.description)
         self.outputs3(P_REF, "m", "desired platform position")
         self.outputs3(V_REF, "m/s", "desired platform velocity")
         self.outputs3(A_REF, "m/s2", "desired platform acceleration")
 
+    @classmethod
+    def from_parameters(cls, values: Mapping[str, Any]):
+        """The trajectory whose FMU parameters are ``values`` (name -> value, every name of ``PARAMS``)."""
+        kwargs: dict[str, Any] = {}
+        for p in cls.PARAMS:
+            value = p.cast(values[p.name])
+            if not p.at:
+                kwargs[p.field] = value
+                continue
+            node = kwargs.setdefault(p.field, [])
+            for i in p.at[:-1]:
+                while len(node) <= i:
+                    node.append([])
+                node = node[i]
+            while len(node) <= p.at[-1]:
+                node.append(None)
+            node[p.at[-1]] = value
+        return cls.CLASS(**{k: _tuples(v) for k, v in kwargs.items()})
+
+    @classmethod
+    def parameters_of(cls, trajectory) -> dict[str, Any]:
+        """FMU parameter values (name -> value) that make this FMU generate ``trajectory``.
+
+        The inverse of :meth:`from_parameters`. Raises ValueError naming the field if the
+        FMU cannot represent the trajectory (e.g. a number of waypoints other than its own).
+        """
+        if type(trajectory) is not cls.CLASS:
+            raise TypeError(f"{cls.__name__} generates {cls.CLASS.__name__}, got {type(trajectory).__name__}")
+        out: dict[str, Any] = {}
+        for p in cls.PARAMS:
+            value = getattr(trajectory, p.field)
+            try:
+                for i in p.at:
+                    value = value[i]
+                out[p.name] = p.cast(value)
+            except (IndexError, TypeError, ValueError):
+                raise ValueError(cls._unrepresentable(trajectory, p.field)) from None
+        back = cls.from_parameters(out)
+        for f in fields(trajectory):
+            if getattr(back, f.name) != getattr(trajectory, f.name):
+                raise ValueError(cls._unrepresentable(trajectory, f.name))
+        return out
+
+    @classmethod
+    def _unrepresentable(cls, trajectory, field: str) -> str:
+        return (f"{cls.CLASS.__name__}.{field} = {getattr(trajectory, field)!r} cannot be set on this FMU"
+                + (f" ({cls.LIMITS})" if cls.LIMITS else ""))
+
     def make(self):
-        raise NotImplementedError
+        return self.from_parameters(self.values)
 
     def start(self) -> None:
         self.trajectory = self.make()
@@ -34,107 +119,91 @@ class _Trajectory(Adapter):
         self.put(A_REF, a)
 
 
+def _tuples(value):
+    return tuple(_tuples(v) for v in value) if isinstance(value, list) else value
+
+
 class HelixTrajectory(_Trajectory):
     """Helix of thesis eq. (27)."""
 
-    EXPERIMENT = (0.0, Helix().duration, 1e-3)
+    TYPE, CLASS, DEFAULT = "helix", Helix, Helix()
+    EXPERIMENT = (0.0, DEFAULT.duration, 1e-3)
+    PARAMS = (
+        Param("helix.centre.x", "centre", (0,), "m", "helix axis x"),
+        Param("helix.centre.y", "centre", (1,), "m", "helix axis y"),
+        Param("helix.rx", "rx", (), "m", "radius along x"),
+        Param("helix.ry", "ry", (), "m", "radius along y"),
+        Param("helix.omega", "omega", (), "rad/s", "angular rate"),
+        Param("helix.z0", "z0", (), "m", "height at t = 0"),
+        Param("helix.vz", "vz", (), "m/s", "vertical speed"),
+        Param("helix.duration", "duration", (), "s", "duration of the motion"),
+    )
 
     def __init__(self, **kwargs):
         super().__init__(**kwargs)
         self.description = "Helix reference (thesis eq. 27): x = cx + rx cos(w t), y = cy + ry sin(w t), z = z0 + vz t"
-        h = Helix()
-        self.parameter("helix.centre.x", h.centre[0], "m", "helix axis x")
-        self.parameter("helix.centre.y", h.centre[1], "m", "helix axis y")
-        self.parameter("helix.rx", h.rx, "m", "radius along x")
-        self.parameter("helix.ry", h.ry, "m", "radius along y")
-        self.parameter("helix.omega", h.omega, "rad/s", "angular rate")
-        self.parameter("helix.z0", h.z0, "m", "height at t = 0")
-        self.parameter("helix.vz", h.vz, "m/s", "vertical speed")
-        self.parameter("helix.duration", h.duration, "s", "duration of the motion")
-        self._declare_outputs()
-
-    def make(self):
-        v = self.values
-        return Helix(centre=(v["helix.centre.x"], v["helix.centre.y"]), rx=v["helix.rx"], ry=v["helix.ry"],
-                     omega=v["helix.omega"], z0=v["helix.z0"], vz=v["helix.vz"], duration=v["helix.duration"])
-
-
-DEFAULT_P2P = PointToPoint(start=(0.0, 0.0, -0.5), end=(0.1, 0.05, -0.55), duration=1.0)
-DEFAULT_PICK = PickAndPlace(start=(-0.1525, 0.0, -0.5))
-DEFAULT_WAYPOINTS = seed004_z_steps()
 
 
 class PointToPointTrajectory(_Trajectory):
     """Rest-to-rest straight move (cubic or quintic time scaling)."""
 
-    EXPERIMENT = (0.0, DEFAULT_P2P.end_time + 0.5, 1e-3)
+    TYPE, CLASS = "point_to_point", PointToPoint
+    DEFAULT = PointToPoint(start=(0.0, 0.0, -0.5), end=(0.1, 0.05, -0.55), duration=1.0)
+    EXPERIMENT = (0.0, DEFAULT.end_time + 0.5, 1e-3)
+    PARAMS = (
+        *_xyz("move.start", "start", "start point"),
+        *_xyz("move.end", "end", "end point"),
+        Param("move.duration", "duration", (), "s", "duration of the move"),
+        Param("move.t0", "t0", (), "s", "start time of the move"),
+        Param("move.profile", "profile", (), None, "time scaling: quintic or cubic", str),
+    )
 
     def __init__(self, **kwargs):
         super().__init__(**kwargs)
         self.description = "Rest-to-rest point-to-point platform move"
-        d = DEFAULT_P2P
-        self.parameters3(axis_names("move.start"), d.start, "m", "start point")
-        self.parameters3(axis_names("move.end"), d.end, "m", "end point")
-        self.parameter("move.duration", d.duration, "s", "duration of the move")
-        self.parameter("move.t0", d.t0, "s", "start time of the move")
-        self.parameter("move.profile", d.profile, None, "time scaling: quintic or cubic")
-        self._declare_outputs()
-
-    def make(self):
-        return PointToPoint(start=tuple(self.vec(axis_names("move.start"))), end=tuple(self.vec(axis_names("move.end"))),
-                            duration=self.values["move.duration"], profile=self.values["move.profile"],
-                            t0=self.values["move.t0"])
 
 
 class PickAndPlaceTrajectory(_Trajectory):
     """Pick-and-place cycle (up, across, down and back)."""
 
-    EXPERIMENT = (0.0, DEFAULT_PICK.end_time, 1e-3)
+    TYPE, CLASS, DEFAULT = "pick_and_place", PickAndPlace, PickAndPlace(start=(-0.1525, 0.0, -0.5))
+    EXPERIMENT = (0.0, DEFAULT.end_time, 1e-3)
+    PARAMS = (
+        *_xyz("cycle.start", "start", "pick point"),
+        Param("cycle.up", "up", (), "m", "lift height"),
+        Param("cycle.across", "across", (), "m", "horizontal travel"),
+        Param("cycle.down", "down", (), "m", "descent at the place point"),
+        Param("cycle.time", "cycle_time", (), "s", "duration of one cycle"),
+        Param("cycle.direction.x", "direction", (0,), "1", "horizontal travel direction x"),
+        Param("cycle.direction.y", "direction", (1,), "1", "horizontal travel direction y"),
+        Param("cycle.count", "cycles", (), None, "number of cycles", int),
+        Param("cycle.profile", "profile", (), None, "time scaling: quintic or cubic", str),
+    )
 
     def __init__(self, **kwargs):
         super().__init__(**kwargs)
         self.description = "Pick-and-place cycle: up, across, down, and back"
-        d = DEFAULT_PICK
-        self.parameters3(axis_names("cycle.start"), d.start, "m", "pick point")
-        self.parameter("cycle.up", d.up, "m", "lift height")
-        self.parameter("cycle.across", d.across, "m", "horizontal travel")
-        self.parameter("cycle.down", d.down, "m", "descent at the place point")
-        self.parameter("cycle.time", d.cycle_time, "s", "duration of one cycle")
-        self.parameter("cycle.direction.x", d.direction[0], "1", "horizontal travel direction x")
-        self.parameter("cycle.direction.y", d.direction[1], "1", "horizontal travel direction y")
-        self.parameter("cycle.count", d.cycles, None, "number of cycles")
-        self.parameter("cycle.profile", d.profile, None, "time scaling: quintic or cubic")
-        self._declare_outputs()
-
-    def make(self):
-        v = self.values
-        return PickAndPlace(start=tuple(self.vec(axis_names("cycle.start"))), up=v["cycle.up"],
-                            across=v["cycle.across"], down=v["cycle.down"], cycle_time=v["cycle.time"],
-                            direction=(v["cycle.direction.x"], v["cycle.direction.y"]), cycles=v["cycle.count"],
-                            profile=v["cycle.profile"])
-
-
-N_WAYPOINTS = len(DEFAULT_WAYPOINTS.points)
 
 
 class WaypointsTrajectory(_Trajectory):
     """Rest-to-rest moves through four waypoints (default: seed 004's z-steps)."""
 
-    EXPERIMENT = (0.0, DEFAULT_WAYPOINTS.end_time + 0.5, 1e-3)
+    TYPE, CLASS, DEFAULT = "waypoints", Waypoints, seed004_z_steps()
+    N_WAYPOINTS = len(DEFAULT.points)
+    EXPERIMENT = (0.0, DEFAULT.end_time + 0.5, 1e-3)
+    LIMITS = f"it takes {len(DEFAULT.points)} points with segment_time, dwell and profile; no times"
+    PARAMS = (
+        *(q for k in range(N_WAYPOINTS) for q in _xyz(f"waypoint[{k + 1}]", "points", f"waypoint {k + 1}", (k,))),
+        Param("waypoints.segment_time", "segment_time", (), "s", "duration of each move"),
+        Param("waypoints.dwell", "dwell", (), "s", "rest at each intermediate waypoint"),
+        Param("waypoints.profile", "profile", (), None, "time scaling: quintic or cubic", str),
+    )
 
     def __init__(self, **kwargs):
         super().__init__(**kwargs)
         self.description = "Rest-to-rest moves through waypoints (default: seed 004 z-steps)"
-        d = DEFAULT_WAYPOINTS
-        for k, point in enumerate(d.points, start=1):
-            self.parameters3(axis_names(f"waypoint[{k}]"), point, "m", f"waypoint {k}")
-        self.parameter("waypoints.segment_time", d.segment_time, "s", "duration of each move")
-        self.parameter("waypoints.dwell", d.dwell, "s", "rest at each intermediate waypoint")
-        self.parameter("waypoints.profile", d.profile, None, "time scaling: quintic or cubic")
-        self._declare_outputs()
 
-    def make(self):
-        v = self.values
-        points = tuple(tuple(self.vec(axis_names(f"waypoint[{k}]"))) for k in range(1, N_WAYPOINTS + 1))
-        return Waypoints(points=points, segment_time=v["waypoints.segment_time"], dwell=v["waypoints.dwell"],
-                         profile=v["waypoints.profile"])
+
+ADAPTERS: dict[str, type[_Trajectory]] = {cls.TYPE: cls for cls in (
+    HelixTrajectory, PointToPointTrajectory, PickAndPlaceTrajectory, WaypointsTrajectory)}
+"""Scenario trajectory type -> adapter."""

@@ -1,0 +1,59 @@
+"""The scenario's trajectory section drives our trajectory FMUs: the helix FMU follows it, and
+`python -m cosim check` reports a component that disagrees with it."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from cosim.observers import Probe
+from cosim.run import run_scenario
+from cosim.scenario import load_scenario
+from delta.trajectories import Helix
+
+pytestmark = pytest.mark.integration
+ROOT = Path(__file__).resolve().parents[2]
+# the FMU evaluates the same closed form in float64 at the same times: rounding only
+EXACT = 1e-12
+
+SCENARIO = """\
+name: section
+robot: linear_delta_thesis
+trajectory:
+  type: helix
+  params: {rx: 0.05, ry: 0.08, omega: 2.0, z0: -0.5, vz: 0.002, duration: 1.0}
+initial_state: {from_trajectory: false}
+components:
+  traj: {fmu: helix}
+time: {stop: 0.5, step: 0.01}
+logging: {signals: outputs}
+"""
+
+
+def test_helix_fmu_follows_the_trajectory_section(tmp_path):
+    path = tmp_path / "section.yaml"
+    path.write_text(SCENARIO)
+    probe = Probe(["traj.p_ref.x", "traj.p_ref.y", "traj.p_ref.z"])
+    run_scenario(load_scenario(path), out=tmp_path / "section.mcap", extra_observers=[probe])
+    t = np.asarray(probe.t_ns) * 1e-9
+    expected = Helix(rx=0.05, ry=0.08, omega=2.0, z0=-0.5, vz=0.002, duration=1.0).sample(t)[0]
+    got = np.column_stack([probe.values[f"traj.p_ref.{a}"] for a in "xyz"])
+    err = np.abs(got - expected).max()
+    assert err <= EXACT, f"max |FMU - section helix| = {err} m vs {EXACT}; first rows {got[:2]} vs {expected[:2]}"
+
+
+def test_check_reports_a_component_that_disagrees(tmp_path):
+    path = tmp_path / "bad.yaml"
+    path.write_text(SCENARIO.replace("traj: {fmu: helix}", "traj: {fmu: helix, parameters: {helix.rx: 0.2}}"))
+    r = subprocess.run([sys.executable, "-m", "cosim", "check", str(path)], cwd=ROOT, capture_output=True, text=True)
+    want = (f"error: {path}:8: components.traj.parameters.helix.rx: 0.2 disagrees with trajectory.params rx = 0.05; "
+            "set it in one place (trajectory.params)")
+    assert r.returncode != 0, f"exit {r.returncode} vs non-zero: {r.stderr}"
+    assert r.stderr.strip() == want, f"{r.stderr.strip()!r} vs {want!r}"
+    ok = subprocess.run([sys.executable, "-m", "cosim", "check", str(path), "--set", "traj.helix.rx=0.05"], cwd=ROOT,
+                        capture_output=True, text=True)
+    assert ok.returncode == 0, f"equal values: exit {ok.returncode} vs 0: {ok.stderr}"
