@@ -321,10 +321,9 @@ def _cmd_validate_model(args: argparse.Namespace) -> int:
     bar = None
     progress = None
     if not (args.quiet or args.json):
-        from rich.progress import BarColumn, Progress, TextColumn, TimeRemainingColumn
+        from .run import progress_bar
 
-        bar = Progress(TextColumn("[bold]{task.description}"), BarColumn(), TextColumn("{task.percentage:>3.0f}%"),
-                       TimeRemainingColumn(), transient=True)
+        bar = progress_bar()
         task = bar.add_task(f"{args.robot} {args.trajectory}", total=None)
         bar.start()
         progress = lambda done, total: bar.update(task, completed=done, total=total)  # noqa: E731

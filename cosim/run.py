@@ -13,7 +13,7 @@ from .fmu import FMUInfo, load_fmu, make_slave
 from .observers import AxisError, Comparison
 from .scenario import Scenario, _line_for, expand_signal, load_scenario
 
-__all__ = ["RunResult", "locate_fmus", "prepare", "run_scenario", "check_scenario"]
+__all__ = ["RunResult", "progress_bar", "locate_fmus", "prepare", "run_scenario", "check_scenario"]
 
 
 @dataclass
@@ -45,6 +45,14 @@ class RunResult:
                 "real_time_factor": self.real_time_factor, "component_time_s": self.component_time,
                 "errors": [e.__dict__ for e in self.errors], "checks": self.checks, "passed": self.passed,
                 "mcap": self.mcap}
+
+
+def progress_bar():
+    """The progress bar of long commands (rich; transient, so the summary replaces it)."""
+    from rich.progress import BarColumn, Progress, TextColumn, TimeRemainingColumn
+
+    return Progress(TextColumn("[bold]{task.description}"), BarColumn(), TextColumn("{task.percentage:>3.0f}%"),
+                    TimeRemainingColumn(), transient=True)
 
 
 def locate_fmus(scenario: Scenario) -> dict[str, FMUInfo]:
@@ -182,10 +190,7 @@ def run_scenario(scenario: Scenario | str | Path, out: str | Path | None = None,
         t_wall = time.perf_counter()
         cb, every = None, 0
         if progress and rt.n_steps >= 1000:
-            from rich.progress import BarColumn, Progress, TextColumn, TimeRemainingColumn
-
-            bar = Progress(TextColumn("[bold]{task.description}"), BarColumn(), TextColumn("{task.percentage:>3.0f}%"),
-                           TimeRemainingColumn(), transient=True)
+            bar = progress_bar()
             bar.start()
             task = bar.add_task(scenario.name, total=rt.n_steps)
             every = max(1, rt.n_steps // 200)
