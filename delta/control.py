@@ -4,7 +4,8 @@ Each controller is called once per sample period ``h`` with the measured joint
 state and the joint references and returns the actuator efforts ``u`` (3,) along
 +q (N for a linear delta, N*m for a rotary delta), held constant over the period.
 Gains are per joint: a scalar or 3 values. Controllers hold ``h`` and their state
-(the PID integral); :meth:`reset` clears it.
+(the PID integral); :meth:`reset` clears it. :meth:`Controller.output_scalar` is the
+per-step path: the same effort as :meth:`Controller.output` as a tuple of plain floats.
 """
 
 from __future__ import annotations
@@ -13,7 +14,7 @@ import math
 
 import numpy as np
 
-from .dynamics import AnalyticModel
+from .dynamics import AnalyticModel, _DeltaModel, _KinState
 from .errors import ParameterError
 from .robots import LinearDelta, Robot
 
@@ -43,22 +44,79 @@ def _period(cls: str, h: float) -> float:
     return float(h)
 
 
-def _clip(u: list[float], u_max: _Vec | None) -> np.ndarray:
-    if u_max is not None:
-        for i in range(3):
-            if u[i] > u_max[i]:
-                u[i] = u_max[i]
-            elif u[i] < -u_max[i]:
-                u[i] = -u_max[i]
-    return np.array(u)
+def _clip(u0: float, u1: float, u2: float, u_max: _Vec | None) -> _Vec:
+    if u_max is None:
+        return u0, u1, u2
+    m0, m1, m2 = u_max
+    return (m0 if u0 > m0 else (-m0 if u0 < -m0 else u0),
+            m1 if u1 > m1 else (-m1 if u1 < -m1 else u1),
+            m2 if u2 > m2 else (-m2 if u2 < -m2 else u2))
+
+
+def _floats(x):  # noqa: ANN001, ANN202
+    """A 3-sequence with plain float items (arrays through one ``tolist``; same values)."""
+    return x.tolist() if type(x) is np.ndarray else x
+
+
+def _effort(model: AnalyticModel, q, qd, w) -> _Vec:  # noqa: ANN001
+    """``M(q) w + C(q, qd) qd + G(q)`` (thesis eq. (38) with ``qdd = w``) on plain floats.
+
+    :meth:`AnalyticModel.terms` and the row products ``M[i] . w`` fused into one pass over
+    locals (no nested lists, no calls per term): the same IEEE operations in the same order
+    as ``_mass``, ``_cqd`` (``-m_p J^-T J^-1 [v^T H_i v]``, thesis eq. (37)) and ``_grav`` of
+    :mod:`delta.dynamics` followed by ``sum_k M[i][k] w[k] + C[i] + G[i]``, so the result
+    equals that evaluation of the model's terms to the last bit (tested). Models other than
+    the package's analytic ones go through their ``terms``.
+    """
+    if not isinstance(model, _DeltaModel):
+        m, c, g = model.terms(q, qd)
+        return tuple(m[i][0] * w[0] + m[i][1] * w[1] + m[i][2] * w[2] + c[i] + g[i] for i in range(3))
+    ks: _KinState = model._kin(q)
+    (j00, j01, j02), (j10, j11, j12), (j20, j21, j22) = ks.jinv
+    qd0, qd1, qd2 = float(qd[0]), float(qd[1]), float(qd[2])
+    # v = J^-1 qd (thesis eq. (31))
+    v0 = j00 * qd0 + j01 * qd1 + j02 * qd2
+    v1 = j10 * qd0 + j11 * qd1 + j12 * qd2
+    v2 = j20 * qd0 + j21 * qd1 + j22 * qd2
+    # [v^T H_i v] = (|v - B_i' qd_i|^2 - (l_i . B_i'') qd_i^2) / (l_i . B_i')  (thesis eq. (22))
+    quad = []
+    for d1, rod, d2, den, qi in zip(ks.d1, ks.rods, ks.d2, ks.denom, (qd0, qd1, qd2)):
+        w0, w1, w2 = v0 - d1[0] * qi, v1 - d1[1] * qi, v2 - d1[2] * qi
+        quad.append(((w0 * w0 + w1 * w1 + w2 * w2)
+                     - (rod[0] * d2[0] + rod[1] * d2[1] + rod[2] * d2[2]) * qi * qi) / den)
+    h0, h1, h2 = quad
+    mp = model._mp_inertia
+    nmp = -mp
+    # -m_p J^-1 [v^T H v], then J^-T of it: C qd
+    x0 = nmp * (j00 * h0 + j01 * h1 + j02 * h2)
+    x1 = nmp * (j10 * h0 + j11 * h1 + j12 * h2)
+    x2 = nmp * (j20 * h0 + j21 * h1 + j22 * h2)
+    c0 = j00 * x0 + j10 * x1 + j20 * x2
+    c1 = j01 * x0 + j11 * x1 + j21 * x2
+    c2 = j02 * x0 + j12 * x1 + j22 * x2
+    # M = D + m_p J^-T J^-1 (thesis eqs. (35)-(38)), symmetric
+    d = model._d
+    m00 = mp * (j00 * j00 + j10 * j10 + j20 * j20) + d
+    m01 = mp * (j00 * j01 + j10 * j11 + j20 * j21)
+    m02 = mp * (j00 * j02 + j10 * j12 + j20 * j22)
+    m11 = mp * (j01 * j01 + j11 * j11 + j21 * j21) + d
+    m12 = mp * (j01 * j02 + j11 * j12 + j21 * j22)
+    m22 = mp * (j02 * j02 + j12 * j12 + j22 * j22) + d
+    g0, g1, g2 = model._grav(ks)
+    a0, a1, a2 = w
+    return (m00 * a0 + m01 * a1 + m02 * a2 + c0 + g0,
+            m01 * a0 + m11 * a1 + m12 * a2 + c1 + g1,
+            m02 * a0 + m12 * a1 + m22 * a2 + c2 + g2)
 
 
 class Controller:
     """Interface: ``reset()``, ``step(q, qd, q_ref, qd_ref, qdd_ref) -> u`` (all (3,)), called once
     per period ``h`` (it advances the internal state), and ``output(...)``, the same effort
     without changing the state (for hosts that read the output more than once per period,
-    e.g. an FMU's getter before ``doStep``). ``stateful`` tells whether :meth:`step` changes
-    anything beyond :meth:`output` (hosts may skip it for stateless laws)."""
+    e.g. an FMU's getter before ``doStep``); ``output_scalar(...)`` is ``output`` as a tuple
+    of 3 plain floats (the per-step path, no arrays). ``stateful`` tells whether :meth:`step`
+    changes anything beyond :meth:`output` (hosts may skip it for stateless laws).
+    Inputs are any 3-sequences of floats (tuples, lists, arrays)."""
 
     h: float
     u_max: _Vec | None
@@ -71,8 +129,12 @@ class Controller:
         raise NotImplementedError
 
     def output(self, q, qd, q_ref, qd_ref, qdd_ref) -> np.ndarray:  # noqa: ANN001
-        """Effort for these inputs; stateless laws just evaluate :meth:`step`."""
-        return self.step(q, qd, q_ref, qd_ref, qdd_ref)
+        """Effort (3,) for these inputs, without changing the state."""
+        return np.array(self.output_scalar(q, qd, q_ref, qd_ref, qdd_ref))
+
+    def output_scalar(self, q, qd, q_ref, qd_ref, qdd_ref) -> _Vec:  # noqa: ANN001
+        """:meth:`output` as a tuple of 3 floats; stateless laws evaluate :meth:`step`."""
+        return tuple(np.asarray(self.step(q, qd, q_ref, qd_ref, qdd_ref), dtype=float).tolist())
 
 
 class PD(Controller):
@@ -87,10 +149,15 @@ class PD(Controller):
         self.h = _period("PD", h)
         self.u_max = _limit("PD", "u_max", u_max)
 
+    def output_scalar(self, q, qd, q_ref, qd_ref, qdd_ref) -> _Vec:  # noqa: ANN001
+        q, qd, q_ref, qd_ref = _floats(q), _floats(qd), _floats(q_ref), _floats(qd_ref)
+        (kp0, kp1, kp2), (kd0, kd1, kd2) = self.kp, self.kd
+        return _clip(kp0 * (q_ref[0] - q[0]) + kd0 * (qd_ref[0] - qd[0]),
+                     kp1 * (q_ref[1] - q[1]) + kd1 * (qd_ref[1] - qd[1]),
+                     kp2 * (q_ref[2] - q[2]) + kd2 * (qd_ref[2] - qd[2]), self.u_max)
+
     def step(self, q, qd, q_ref, qd_ref, qdd_ref) -> np.ndarray:  # noqa: ANN001
-        kp, kd = self.kp, self.kd
-        u = [kp[i] * (q_ref[i] - q[i]) + kd[i] * (qd_ref[i] - qd[i]) for i in range(3)]
-        return _clip(u, self.u_max)
+        return np.array(self.output_scalar(q, qd, q_ref, qd_ref, qdd_ref))
 
 
 class PID(Controller):
@@ -116,7 +183,8 @@ class PID(Controller):
     def reset(self) -> None:
         self.integral = [0.0, 0.0, 0.0]
 
-    def _evaluate(self, q, qd, q_ref, qd_ref, qdd_ref) -> tuple[np.ndarray, list[float]]:  # noqa: ANN001
+    def _evaluate(self, q, qd, q_ref, qd_ref, qdd_ref) -> tuple[_Vec, list[float]]:  # noqa: ANN001
+        q, qd, q_ref, qd_ref = _floats(q), _floats(qd), _floats(q_ref), _floats(qd_ref)
         u = [0.0, 0.0, 0.0]
         integral = [0.0, 0.0, 0.0]
         for i in range(3):
@@ -133,14 +201,14 @@ class PID(Controller):
                 out = pd + self.ki[i] * new
             integral[i] = new
             u[i] = out
-        return _clip(u, self.u_max), integral
+        return _clip(u[0], u[1], u[2], self.u_max), integral
 
-    def output(self, q, qd, q_ref, qd_ref, qdd_ref) -> np.ndarray:  # noqa: ANN001
+    def output_scalar(self, q, qd, q_ref, qd_ref, qdd_ref) -> _Vec:  # noqa: ANN001
         return self._evaluate(q, qd, q_ref, qd_ref, qdd_ref)[0]
 
     def step(self, q, qd, q_ref, qd_ref, qdd_ref) -> np.ndarray:  # noqa: ANN001
         u, self.integral = self._evaluate(q, qd, q_ref, qd_ref, qdd_ref)
-        return u
+        return np.array(u)
 
 
 class PDPlus(Controller):
@@ -153,11 +221,16 @@ class PDPlus(Controller):
         self.h = _period("PDPlus", h)
         self.u_max = _limit("PDPlus", "u_max", u_max)
 
+    def output_scalar(self, q, qd, q_ref, qd_ref, qdd_ref) -> _Vec:  # noqa: ANN001
+        q, qd, q_ref, qd_ref = _floats(q), _floats(qd), _floats(q_ref), _floats(qd_ref)
+        g0, g1, g2 = self.model._grav(self.model._kin(q))
+        (kp0, kp1, kp2), (kd0, kd1, kd2) = self.kp, self.kd
+        return _clip(kp0 * (q_ref[0] - q[0]) + kd0 * (qd_ref[0] - qd[0]) + g0,
+                     kp1 * (q_ref[1] - q[1]) + kd1 * (qd_ref[1] - qd[1]) + g1,
+                     kp2 * (q_ref[2] - q[2]) + kd2 * (qd_ref[2] - qd[2]) + g2, self.u_max)
+
     def step(self, q, qd, q_ref, qd_ref, qdd_ref) -> np.ndarray:  # noqa: ANN001
-        g = self.model._grav(self.model._kin(q))
-        kp, kd = self.kp, self.kd
-        u = [kp[i] * (q_ref[i] - q[i]) + kd[i] * (qd_ref[i] - qd[i]) + g[i] for i in range(3)]
-        return _clip(u, self.u_max)
+        return np.array(self.output_scalar(q, qd, q_ref, qd_ref, qdd_ref))
 
 
 class CTC(Controller):
@@ -176,15 +249,22 @@ class CTC(Controller):
         self.u_max = _limit("CTC", "u_max", u_max)
         self.feedforward = bool(feedforward)
 
-    def step(self, q, qd, q_ref, qd_ref, qdd_ref) -> np.ndarray:  # noqa: ANN001
-        m, c, g = self.model.terms(q, qd)
-        kp, kd = self.kp, self.kd
+    def output_scalar(self, q, qd, q_ref, qd_ref, qdd_ref) -> _Vec:  # noqa: ANN001
+        q, qd, q_ref, qd_ref, qdd_ref = _floats(q), _floats(qd), _floats(q_ref), _floats(qd_ref), _floats(qdd_ref)
+        (kp0, kp1, kp2), (kd0, kd1, kd2) = self.kp, self.kd
         if self.feedforward:
-            w = [qdd_ref[i] + kd[i] * (qd_ref[i] - qd[i]) + kp[i] * (q_ref[i] - q[i]) for i in range(3)]
+            w = (qdd_ref[0] + kd0 * (qd_ref[0] - qd[0]) + kp0 * (q_ref[0] - q[0]),
+                 qdd_ref[1] + kd1 * (qd_ref[1] - qd[1]) + kp1 * (q_ref[1] - q[1]),
+                 qdd_ref[2] + kd2 * (qd_ref[2] - qd[2]) + kp2 * (q_ref[2] - q[2]))
         else:
-            w = [kp[i] * (q_ref[i] - q[i]) - kd[i] * qd[i] for i in range(3)]
-        u = [m[i][0] * w[0] + m[i][1] * w[1] + m[i][2] * w[2] + c[i] + g[i] for i in range(3)]  # thesis eq. (50)
-        return _clip(u, self.u_max)
+            w = (kp0 * (q_ref[0] - q[0]) - kd0 * qd[0],
+                 kp1 * (q_ref[1] - q[1]) - kd1 * qd[1],
+                 kp2 * (q_ref[2] - q[2]) - kd2 * qd[2])
+        u0, u1, u2 = _effort(self.model, q, qd, w)  # thesis eq. (50)
+        return _clip(u0, u1, u2, self.u_max)
+
+    def step(self, q, qd, q_ref, qd_ref, qdd_ref) -> np.ndarray:  # noqa: ANN001
+        return np.array(self.output_scalar(q, qd, q_ref, qd_ref, qdd_ref))
 
 
 KINDS = ("pd", "pid", "pdplus", "ctc")

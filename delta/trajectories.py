@@ -1,7 +1,8 @@
 """Platform trajectories with analytic position, velocity and acceleration.
 
-Every trajectory is a frozen dataclass with :meth:`Trajectory.evaluate` (one time) and
-:meth:`Trajectory.sample` (vectorised), SI units (m, m/s, m/s**2, s), and
+Every trajectory is a frozen dataclass with :meth:`Trajectory.evaluate` (one time),
+:meth:`Trajectory.evaluate_scalar` (one time, plain floats: the per-step path of the
+FMUs and co-simulation loops) and :meth:`Trajectory.sample` (vectorised), SI units (m, m/s, m/s**2, s), and
 :meth:`Trajectory.check` against the workspace (:func:`delta.workspace.check_trajectory`).
 Point-to-point motions use rest-to-rest cubic or quintic time scalings; before its
 start and after its end a trajectory holds its first / last point at rest (the helix
@@ -12,7 +13,8 @@ from __future__ import annotations
 
 import math
 from abc import ABC, abstractmethod
-from dataclasses import dataclass, field
+from bisect import bisect_left
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -40,6 +42,8 @@ PROFILES = ("cubic", "quintic")
 # quintic 10 / sqrt(3) (at tau = 1/2 -+ sqrt(3)/6).
 _PEAK_SDD = {"cubic": 6.0, "quintic": 10.0 / math.sqrt(3.0)}
 
+_Vec = tuple[float, float, float]
+
 
 def _vec3(name: str, value: object) -> tuple[float, float, float]:
     arr = np.asarray(value, dtype=float).reshape(-1)
@@ -59,14 +63,20 @@ def _profile(cls: str, profile: str) -> None:
         raise ParameterError(f"{cls}.profile must be one of {PROFILES}, got {profile!r}")
 
 
-def _scaling(profile: str, tau: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Time scaling s(tau) and its derivatives d/dtau, d2/dtau2 on tau in [0, 1]."""
+def _scaling(profile: str, tau):  # noqa: ANN001
+    """Time scaling s(tau) and its derivatives d/dtau, d2/dtau2 on tau in [0, 1].
+
+    ``tau`` is an array or a float; the same IEEE operations in the same order either way
+    (``(1 - tau)**2`` is written as a product, which is what NumPy's ``**2`` computes), so
+    the scalar and the vectorised paths agree bit for bit.
+    """
     if profile == "cubic":
         return tau * tau * (3.0 - 2.0 * tau), 6.0 * tau * (1.0 - tau), 6.0 - 12.0 * tau
     t2 = tau * tau
+    rest = 1.0 - tau
     return (
         t2 * tau * (10.0 + tau * (-15.0 + 6.0 * tau)),
-        30.0 * t2 * (1.0 - tau) ** 2,
+        30.0 * t2 * (rest * rest),
         60.0 * tau * (1.0 + tau * (-3.0 + 2.0 * tau)),
     )
 
@@ -88,8 +98,17 @@ class Trajectory(ABC):
 
     def evaluate(self, t: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Position (3,) m, velocity (3,) m/s and acceleration (3,) m/s^2 at time ``t`` s."""
+        p, v, a = self.evaluate_scalar(t)
+        return np.array(p), np.array(v), np.array(a)
+
+    def evaluate_scalar(self, t: float) -> tuple[_Vec, _Vec, _Vec]:
+        """:meth:`evaluate` as three ``(x, y, z)`` tuples of floats (no arrays: the per-step path).
+
+        Subclasses compute it with ``math`` on floats, with the operations of :meth:`sample`
+        in the same order, so both paths give the same numbers; this default samples.
+        """
         p, v, a = self.sample(np.array([float(t)]))
-        return p[0], v[0], a[0]
+        return tuple(p[0].tolist()), tuple(v[0].tolist()), tuple(a[0].tolist())
 
     def check(self, robot: Robot, dt: float = 0.01, singularity_margin: float | None = None) -> TrajectoryCheck:
         """Check positions sampled every ``dt`` s over ``[0, duration]`` against the workspace."""
@@ -136,6 +155,18 @@ class Helix(Trajectory):
         a = np.stack([-self.rx * w * w * c, -self.ry * w * w * s, np.zeros_like(t)], axis=1)
         return p, v, a
 
+    def evaluate_scalar(self, t: float) -> tuple[_Vec, _Vec, _Vec]:
+        t = float(t)
+        w = self.omega
+        wt = w * t
+        c, s = math.cos(wt), math.sin(wt)
+        rx, ry = self.rx, self.ry
+        return (
+            (self.centre[0] + rx * c, self.centre[1] + ry * s, self.z0 + self.vz * t),
+            (-rx * w * s, ry * w * c, float(self.vz)),
+            (-rx * w * w * c, -ry * w * w * s, 0.0),
+        )
+
 
 class _Segments(Trajectory):
     """Piecewise rest-to-rest moves: segment k goes from ``_p0[k]`` to ``_p1[k]`` over ``[_t0[k], _t1[k]]``."""
@@ -151,6 +182,13 @@ class _Segments(Trajectory):
         object.__setattr__(self, "_t1", np.array(arr[1], dtype=float))
         object.__setattr__(self, "_p0", np.array(arr[2], dtype=float))
         object.__setattr__(self, "_p1", np.array(arr[3], dtype=float))
+        # The same knots as float lists for evaluate_scalar: (t0, t1, p0, p1 - p0) per segment.
+        delta = self._p1 - self._p0
+        object.__setattr__(self, "_t1_list", self._t1.tolist())
+        object.__setattr__(self, "_rows", [
+            (t0, t1, tuple(p0), tuple(d))
+            for t0, t1, p0, d in zip(self._t0.tolist(), self._t1.tolist(), self._p0.tolist(), delta.tolist())
+        ])
 
     @property
     def end_time(self) -> float:
@@ -174,6 +212,23 @@ class _Segments(Trajectory):
         v = np.where(moving, delta * (sd / span)[:, None], 0.0)
         a = np.where(moving, delta * (sdd / span**2)[:, None], 0.0)
         return p, v, a
+
+    def evaluate_scalar(self, t: float) -> tuple[_Vec, _Vec, _Vec]:
+        t = float(t)
+        t1s = self._t1_list
+        k = bisect_left(t1s, t)  # np.searchsorted(side="left")
+        if k > len(t1s) - 1:
+            k = len(t1s) - 1
+        t0, t1, p0, d = self._rows[k]
+        span = t1 - t0
+        tau = (t - t0) / span
+        tau = 0.0 if tau < 0.0 else (1.0 if tau > 1.0 else tau)
+        s, sd, sdd = _scaling(self.profile, tau)
+        p = (p0[0] + d[0] * s, p0[1] + d[1] * s, p0[2] + d[2] * s)
+        if not t0 < t < t1:
+            return p, (0.0, 0.0, 0.0), (0.0, 0.0, 0.0)
+        vs, as_ = sd / span, sdd / (span * span)
+        return p, (d[0] * vs, d[1] * vs, d[2] * vs), (d[0] * as_, d[1] * as_, d[2] * as_)
 
 
 @dataclass(frozen=True)

@@ -86,7 +86,7 @@ class _Controller(Adapter):
         # DefaultExperiment's step is assumed (it only scales the PID integral update).
         if self.law is None:
             self.law = self.make_law(self.EXPERIMENT[2])
-        self.put(U, self.law.output(*self._inputs()))
+        self.put(U, self.law.output_scalar(*self._inputs()))
 
 
 class PDController(_Controller):

@@ -154,3 +154,64 @@ def test_simulate_validation():
     assert np.allclose(res.q[0], q_start) and np.allclose(res.qd[0], 0), f"start state {res.q[0]}, {res.qd[0]}"
     # CTC error dynamics e'' + 300 e' + 22500 e = 0: after 0.5 s the 50 mm step is gone.
     assert np.abs(res.p[-1] - res.p_ref[-1]).max() < 1e-9, f"final error {res.p[-1] - res.p_ref[-1]}"
+
+
+def _loop_inputs(model, n=25, seed=3):
+    """Measured states near the helix references (errors ~ mm, mm/s) as the loop produces them."""
+    rng = np.random.default_rng(seed)
+    t = np.linspace(0.0, 10.0, n)
+    q_ref, qd_ref, qdd_ref = joint_references(model, *Helix().sample(t))
+    q = q_ref + rng.normal(0.0, 1e-3, q_ref.shape) * (1.0 if model.robot.kind == "linear" else 0.01)
+    qd = qd_ref + rng.normal(0.0, 1e-2, qd_ref.shape)
+    return q, qd, q_ref, qd_ref, qdd_ref
+
+
+@pytest.mark.parametrize("robot", [linear_delta_thesis, rotary_delta_prototype], ids=["linear", "rotary"])
+@pytest.mark.parametrize("kind", ["pd", "pid", "pdplus", "ctc"])
+def test_scalar_path_equals_array_path(kind, robot):
+    """output_scalar on tuples, output / step on arrays and on lists: the same floats in the same
+    operations, so equal exactly (tolerance 0); output_scalar leaves the PID state alone."""
+    model = analytic_model(robot)
+    law = default_controller(kind, robot, model, H)
+    for k, row in enumerate(zip(*_loop_inputs(model))):
+        arrays = tuple(np.array(x) for x in row)
+        tuples = tuple(tuple(x.tolist()) for x in row)
+        lists = tuple(x.tolist() for x in row)
+        before = list(getattr(law, "integral", []))
+        us = law.output_scalar(*tuples)
+        assert type(us) is tuple and all(type(x) is float for x in us), f"{kind}: output_scalar gave {us!r}"
+        assert list(getattr(law, "integral", [])) == before, f"{kind}: output_scalar changed the state"
+        ua = law.output(*arrays)
+        assert isinstance(ua, np.ndarray) and ua.shape == (3,), f"{kind}: output gave {ua!r}"
+        assert tuple(ua.tolist()) == us == law.output_scalar(*lists), \
+            f"{kind} sample {k}: output_scalar {us} vs output {ua} vs lists {law.output_scalar(*lists)}"
+        stepped = law.step(*arrays)
+        assert tuple(stepped.tolist()) == us, f"{kind} sample {k}: step {stepped} vs output_scalar {us}"
+
+
+@pytest.mark.parametrize("robot", [linear_delta_thesis, rotary_delta_prototype], ids=["linear", "rotary"])
+@pytest.mark.parametrize("feedforward", [True, False], ids=["feedforward", "regulation"])
+def test_ctc_fused_effort_equals_model_terms(robot, feedforward):
+    """The fused CTC effort performs the operations of the model's terms() and the row products
+    sum_k M[i][k] w[k] + C[i] + G[i] in the same order: equal exactly. Against numpy's
+    M @ w + C + G (another summation order) rounding only: rtol 1e-13 of the effort scale
+    (a few ulp times the ~1e2 dynamic range between the terms)."""
+    model = analytic_model(robot)
+    gains = DEFAULT_GAINS[robot.kind]["ctc"]
+    law = CTC(model, gains["kp"], gains["kd"], H, feedforward=feedforward)  # no saturation
+    kp, kd = np.array(law.kp), np.array(law.kd)
+    for k, (q, qd, q_ref, qd_ref, qdd_ref) in enumerate(zip(*_loop_inputs(model))):
+        if feedforward:
+            w = qdd_ref + kd * (qd_ref - qd) + kp * (q_ref - q)
+        else:
+            w = kp * (q_ref - q) - kd * qd
+        m, c, g = model.terms(q, qd)
+        w_list = w.tolist()
+        expected = tuple(m[i][0] * w_list[0] + m[i][1] * w_list[1] + m[i][2] * w_list[2] + c[i] + g[i]
+                         for i in range(3))
+        u = law.output_scalar(q, qd, q_ref, qd_ref, qdd_ref)
+        assert u == expected, f"sample {k}: fused CTC {u} vs terms() {expected}"
+        vectorised = model.mass_matrix(q) @ w + model.velocity_term(q, qd) + model.gravity_term(q)
+        scale = np.abs(model.mass_matrix(q)).max() * np.abs(w).max() + np.abs(vectorised).max()
+        assert np.allclose(u, vectorised, rtol=0.0, atol=1e-13 * scale), \
+            f"sample {k}: fused CTC {u} vs M @ w + C + G {vectorised}"

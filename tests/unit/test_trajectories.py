@@ -136,3 +136,46 @@ def test_workspace_check():
 def test_validation_errors(make, match):
     with pytest.raises(ParameterError, match=match):
         make()
+
+
+def _scalar_times(traj):
+    """Dense times over the motion and beyond it, plus every knot (where tau clips and v, a switch)."""
+    end = traj.end_time
+    knots = np.concatenate([getattr(traj, "_t0", []), getattr(traj, "_t1", [])])
+    return np.concatenate([np.linspace(-0.2, end + 0.2, 2001), knots, np.nextafter(knots, np.inf),
+                           np.nextafter(knots, -np.inf)])
+
+
+@pytest.mark.parametrize("name", list(TRAJECTORIES) + ["hold"])
+def test_scalar_path_equals_vectorised(name):
+    """evaluate_scalar (math on floats) performs sample's IEEE operations in the same order, and
+    cos/sin come from the same correctly rounded libm results here, so equality is exact
+    (tolerance 0, the contract evaluate already had with sample)."""
+    traj = TRAJECTORIES.get(name) or Hold((0.05, -0.02, -0.5), duration=0.7)
+    times = _scalar_times(traj)
+    p, v, a = traj.sample(times)
+    for k, t in enumerate(times):
+        ps, vs, as_ = traj.evaluate_scalar(float(t))
+        assert all(type(x) is float for x in ps + vs + as_), f"{name}: not plain floats at t = {t}: {ps, vs, as_}"
+        assert (ps, vs, as_) == (tuple(p[k]), tuple(v[k]), tuple(a[k])), \
+            f"{name}: evaluate_scalar({t!r}) = {ps, vs, as_} vs sample {p[k], v[k], a[k]}"
+    pe, ve, ae = traj.evaluate(times[7])
+    assert all(isinstance(x, np.ndarray) and x.shape == (3,) for x in (pe, ve, ae)), \
+        f"{name}: evaluate must return three (3,) arrays, got {pe!r}, {ve!r}, {ae!r}"
+
+
+def test_scalar_path_default_samples():
+    """A trajectory that only defines sample gets evaluate / evaluate_scalar from it."""
+    from delta.trajectories import Trajectory
+
+    class Line(Trajectory):
+        duration = 1.0
+
+        def sample(self, times):
+            t = np.asarray(times, dtype=float).reshape(-1)
+            return np.stack([t, 2 * t, 3 * t], 1), np.ones((len(t), 3)), np.zeros((len(t), 3))
+
+    assert Line().evaluate_scalar(0.5) == ((0.5, 1.0, 1.5), (1.0, 1.0, 1.0), (0.0, 0.0, 0.0)), \
+        f"default evaluate_scalar: {Line().evaluate_scalar(0.5)}"
+    p, _, _ = Line().evaluate(0.5)
+    assert np.array_equal(p, [0.5, 1.0, 1.5]), f"default evaluate: {p} vs [0.5, 1.0, 1.5]"
