@@ -15,6 +15,7 @@ P_REF, V_REF, A_REF = axis_names("p_ref"), axis_names("v_ref"), axis_names("a_re
 Q_REF, QD_REF, QDD_REF = joint_names("q_ref"), joint_names("qd_ref"), joint_names("qdd_ref")
 P, V = axis_names("p"), axis_names("v")
 Q, QD = joint_names("q"), joint_names("qd")
+PROXIMITY = "singularity.proximity"
 
 
 class InverseKinematics(Adapter):
@@ -22,6 +23,12 @@ class InverseKinematics(Adapter):
 
     When the reference leaves the workspace ``reachable`` drops to false and the joint
     references hold their last reachable values (no NaN reaches the controller).
+
+    ``singularity.proximity`` is computed when it is read: a refresh that does not need it
+    (reachable pose, ``singularity.margin <= 0``, which no proximity in [0, 1] is below)
+    keeps the pose and leaves it pending; reading the output (fmi2GetReal, its getter, the
+    FMU state) computes it for that pose, so every value read is the one an eager refresh
+    would have stored.
     """
 
     EXPERIMENT = (0.0, 1.0, 1e-3)
@@ -45,22 +52,54 @@ class InverseKinematics(Adapter):
         self.output("reachable", None, "true when p_ref is reachable within joint limits and singularity margin",
                     False, kind="boolean")
         self.output("singularity.proximity", "1", "singularity proximity of the pose p_ref (0 = singular)")
+        self._proximity_vr = next(v.value_reference for v in self.vars.values() if v.name == PROXIMITY)
+        self._pending_pose = None
+
+    def _getter(self, name: str, is_output: bool):
+        get = super()._getter(name, is_output)
+        if name != PROXIMITY:
+            return get
+
+        def get_proximity():
+            value = get()  # refreshes if an input changed
+            return self._settle_proximity() if self._pending_pose is not None else value
+        return get_proximity
+
+    def _settle_proximity(self) -> float:
+        """Compute the pending proximity of the last refreshed pose and store it."""
+        q, p = self._pending_pose
+        self._pending_pose = None
+        proximity = self.values[PROXIMITY] = self.kin.proximity(q, p)
+        return proximity
+
+    def get_real(self, vrs):
+        if self._proximity_vr in vrs:
+            if self._dirty and self._started:
+                self._dirty = False
+                self.refresh()
+            if self._pending_pose is not None:
+                self._settle_proximity()
+        return super().get_real(vrs)
 
     def start(self) -> None:
         self.robot = robot_from(self, self.KIND)
         self.kin = ScalarKinematics(self.robot)
         self._reachable = True
+        self._pending_pose = None
 
-    def _unreachable_reason(self, p, q, leg: int) -> tuple[str | None, float]:
-        """Why ``p_ref`` is not reachable (None if it is) and its singularity proximity (0 when unknown),
-        with the checks and messages of :func:`delta.workspace.check_point`."""
+    def _unreachable_reason(self, p, q, leg: int) -> tuple[str | None, float | None]:
+        """Why ``p_ref`` is not reachable (None if it is) and its singularity proximity (0 when unknown,
+        None when not needed yet: see the class docstring), with the checks and messages of
+        :func:`delta.workspace.check_point`."""
         if leg:
             return f"leg {leg} has no solution", 0.0
         limit = self.kin.limit_violation(q)
         if limit:
             return joint_limit_reason(self.robot, limit, q[limit - 1]), 0.0
-        proximity = self.kin.proximity(q, p)
         margin = self.values["singularity.margin"]
+        if margin <= 0.0:
+            return None, None
+        proximity = self.kin.proximity(q, p)
         if proximity < margin:
             return f"too close to a singularity: proximity {proximity:.3g} < margin {margin:g}", proximity
         return None, proximity
@@ -71,7 +110,11 @@ class InverseKinematics(Adapter):
         reason, proximity = self._unreachable_reason(p, q, leg)
         values = self.values
         values["reachable"] = reason is None
-        values["singularity.proximity"] = proximity
+        if proximity is None:
+            self._pending_pose = (q, p)
+        else:
+            self._pending_pose = None
+            values[PROXIMITY] = proximity
         if reason is not None:
             if self._reachable:  # say why once, when the reference leaves the workspace
                 self.log(f"t = {self.time:.6g} s: p_ref = ({p[0]:.4f}, {p[1]:.4f}, {p[2]:.4f}) m is unreachable: "
