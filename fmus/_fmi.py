@@ -15,7 +15,6 @@ from dataclasses import dataclass
 from typing import Any, Iterable
 from xml.etree.ElementTree import Element, SubElement
 
-from numpy import ndarray
 from pythonfmu import Fmi2Causality, Fmi2Initial, Fmi2Slave, Fmi2Variability
 from pythonfmu.default_experiment import DefaultExperiment
 from pythonfmu.variables import Boolean, Integer, Real, String
@@ -159,19 +158,6 @@ class Adapter(ValueAccess, Fmi2Slave):
                     *, tunable: bool = False) -> None:
         for i, (n, s) in enumerate(zip(names, start)):
             self.parameter(n, float(s), unit, f"{description} ({_component(n, i)})", tunable=tunable)
-
-    def put(self, names, values) -> None:
-        """Store ``values`` (floats, a tuple or an array) under ``names``; arrays go through one
-        ``tolist`` instead of a float() per numpy scalar."""
-        if type(values) is ndarray:
-            values = values.tolist()
-        self.values.update(zip(names, map(float, values)))
-
-    def vec3(self, names) -> tuple[float, float, float]:
-        """Values of three ``names`` as a tuple of floats (the scalar fast path; :meth:`vec` gives arrays)."""
-        a, b, c = names
-        v = self.values
-        return v[a], v[b], v[c]
 
     # ------------------------------------------------------------------ behaviour
     def start(self) -> None:

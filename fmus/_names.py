@@ -75,7 +75,15 @@ class ValueAccess:
 
         return np.array([self.values[n] for n in names], dtype=float)
 
+    def vec3(self, names) -> tuple[float, float, float]:
+        """Values of three ``names`` as a tuple of floats (the per-step path; :meth:`vec` gives arrays)."""
+        a, b, c = names
+        v = self.values
+        return v[a], v[b], v[c]
+
     def put(self, names, values) -> None:
-        """Store ``values`` (floats) under ``names``."""
-        for n, v in zip(names, values):
-            self.values[n] = float(v)
+        """Store ``values`` (floats, a tuple or an array) under ``names``; an array goes through one
+        ``tolist`` instead of a ``float()`` per numpy scalar."""
+        if hasattr(values, "tolist"):
+            values = values.tolist()
+        self.values.update(zip(names, map(float, values)))

@@ -113,7 +113,7 @@ class _Trajectory(Adapter):
         self.trajectory = self.make()
 
     def refresh(self) -> None:
-        p, v, a = self.trajectory.evaluate(self.time)
+        p, v, a = self.trajectory.evaluate_scalar(self.time)
         self.put(P_REF, p)
         self.put(V_REF, v)
         self.put(A_REF, a)
