@@ -47,8 +47,7 @@ def monolithic(stop_time: float) -> tuple[float, list[float], dict[str, float]]:
     kin = ScalarKinematics(robot)
 
     def reference(t: float):
-        p, v, a = helix.evaluate(t)
-        p, v, a = tuple(map(float, p)), tuple(map(float, v)), tuple(map(float, a))
+        p, v, a = helix.evaluate_scalar(t)  # the trajectory FMU's per-step path
         q, leg = kin.ik(p)
         if leg:
             raise RuntimeError(f"helix leaves the workspace at t = {t} s: leg {leg} has no solution")
@@ -59,7 +58,7 @@ def monolithic(stop_time: float) -> tuple[float, list[float], dict[str, float]]:
     plant = make_plant(robot, masses, fidelity="full", p0=p0, v0=v0)
     out = plant.reset(p0, v0)
     _, q_ref, qd_ref, qdd_ref = reference(0.0)
-    u = law.output(out.q, out.qd, q_ref, qd_ref, qdd_ref)
+    u = law.output_scalar(out.q, out.qd, q_ref, qd_ref, qdd_ref)  # the controller FMU's path
     n = int(round(stop_time * 1e9)) // STEP_NS
     sq = [0.0, 0.0, 0.0]
     parts = {"plant": 0.0, "trajectory + IK": 0.0, "control": 0.0}
@@ -72,7 +71,7 @@ def monolithic(stop_time: float) -> tuple[float, list[float], dict[str, float]]:
         c1 = clock()
         p_ref, q_ref, qd_ref, qdd_ref = reference(t + h)
         c2 = clock()
-        u = law.output(out.q, out.qd, q_ref, qd_ref, qdd_ref)
+        u = law.output_scalar(out.q, out.qd, q_ref, qd_ref, qdd_ref)  # the controller FMU's path
         c3 = clock()
         parts["plant"] += c1 - c0
         parts["trajectory + IK"] += c2 - c1
