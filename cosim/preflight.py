@@ -11,9 +11,9 @@ the trajectory component cannot disagree.
 
 from __future__ import annotations
 
-import numpy as np
-
 from typing import Any
+
+import numpy as np
 
 from .errors import Issue, PreflightError, ScenarioError
 from .scenario import Scenario, TrajectorySpec, _line_for
