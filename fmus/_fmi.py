@@ -12,6 +12,7 @@ tunable parameter changed, so algebraic blocks (IK, FK) have direct feedthrough.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from operator import itemgetter
 from typing import Any, Iterable
 from xml.etree.ElementTree import Element, SubElement
 
@@ -75,10 +76,14 @@ class Adapter(ValueAccess, Fmi2Slave):
         self.default_experiment = DefaultExperiment(start_time=start, stop_time=stop, step_size=step)
         self.values: dict[str, Any] = {}
         self.specs: list[Spec] = []
-        # Fast paths for fmi2GetReal / fmi2SetReal (see get_real): value reference -> name.
+        # Fast paths for fmi2GetReal / fmi2SetReal (see get_real): value reference -> name, and
+        # one access plan per distinct list of references (an importer asks for the same lists
+        # every step, so the per-call work is a tuple hash and one dict lookup).
         self._real_get: dict[int, str] = {}
         self._real_set: dict[int, str] = {}
         self._output_vrs: set[int] = set()
+        self._get_plans: dict[tuple[int, ...], tuple[bool, Any] | None] = {}
+        self._set_plans: dict[tuple[int, ...], tuple[str, ...] | None] = {}
         self._dirty = True
         self._started = False
         self.time = 0.0
@@ -172,24 +177,45 @@ class Adapter(ValueAccess, Fmi2Slave):
     # ------------------------------------------------------------------ FMI
     def get_real(self, vrs):
         """fmi2GetReal: pythonfmu's version calls a getter closure and an isinstance per variable;
-        this one reads ``values`` directly, refreshing the outputs once if any is requested."""
-        if self._dirty and self._started and not self._output_vrs.isdisjoint(vrs):
+        this one reads ``values`` through a cached plan for this list of references, refreshing
+        the outputs once if any of them is requested."""
+        key = tuple(vrs)
+        try:
+            plan = self._get_plans[key]
+        except KeyError:
+            plan = self._get_plans[key] = self._get_plan(key)
+        if plan is None:  # not all Reals: pythonfmu raises the TypeError naming the reference
+            return super().get_real(vrs)
+        reads_outputs, read = plan
+        if reads_outputs and self._dirty and self._started:
             self._dirty = False
             self.refresh()
-        names, values = self._real_get, self.values
-        try:
-            return [values[names[vr]] for vr in vrs]
-        except KeyError:  # not a Real: pythonfmu raises the TypeError naming the reference
-            return super().get_real(vrs)
+        return read(self.values)
+
+    def _get_plan(self, vrs: tuple[int, ...]) -> tuple[bool, Any] | None:
+        """(whether an output is read, values -> list of the values of ``vrs``), None if one is not a Real."""
+        if not all(vr in self._real_get for vr in vrs):
+            return None
+        names = [self._real_get[vr] for vr in vrs]
+        if len(names) == 1:
+            name = names[0]
+            read = lambda values: [values[name]]  # noqa: E731
+        else:
+            pick = itemgetter(*names)
+            read = lambda values: list(pick(values))  # noqa: E731
+        return not self._output_vrs.isdisjoint(vrs), read
 
     def set_real(self, vrs, values):
         """fmi2SetReal without per-variable setter closures (same effect: store, mark outputs stale)."""
-        names, store = self._real_set, self.values
-        for vr in vrs:
-            if vr not in names:  # not a settable Real: pythonfmu's error, before anything is stored
-                return super().set_real(vrs, values)
-        for vr, value in zip(vrs, values):
-            store[names[vr]] = float(value)
+        key = tuple(vrs)
+        try:
+            names = self._set_plans[key]
+        except KeyError:
+            names = self._set_plans[key] = (tuple(self._real_set[vr] for vr in key)
+                                            if all(vr in self._real_set for vr in key) else None)
+        if names is None:  # not all settable Reals: pythonfmu's error, before anything is stored
+            return super().set_real(vrs, values)
+        self.values.update(zip(names, map(float, values)))
         self._dirty = True
 
     def setup_experiment(self, start_time: float, stop_time: float | None = None, tolerance: float | None = None):

@@ -10,6 +10,8 @@ of :data:`delta.control.DEFAULT_GAINS`.
 
 from __future__ import annotations
 
+from operator import itemgetter
+
 from delta.control import CTC, DEFAULT_GAINS, PD, PID, PDPlus
 from delta.dynamics import analytic_model
 
@@ -19,6 +21,7 @@ from .common import declare_masses, declare_robot, hold_effort, home_joints, mas
 Q, QD = joint_names("q"), joint_names("qd")
 Q_REF, QD_REF, QDD_REF = joint_names("q_ref"), joint_names("qd_ref"), joint_names("qdd_ref")
 U = joint_names("u")
+_read_inputs = itemgetter(*Q, *QD, *Q_REF, *QD_REF, *QDD_REF)  # values -> the 15 inputs, in _inputs order
 
 
 class _Controller(Adapter):
@@ -68,8 +71,9 @@ class _Controller(Adapter):
         return self.vec(joint_names(f"gain.{name}"))
 
     def _inputs(self):
-        v3 = self.vec3
-        return v3(Q), v3(QD), v3(Q_REF), v3(QD_REF), v3(QDD_REF)
+        """(q, qd, q_ref, qd_ref, qdd_ref), each a tuple of three floats."""
+        x = _read_inputs(self.values)
+        return x[0:3], x[3:6], x[6:9], x[9:12], x[12:15]
 
     def advance(self, t: float, h: float) -> None:
         """One control period ends: commit the law's state (the PID integral) for the inputs
@@ -86,7 +90,7 @@ class _Controller(Adapter):
         # DefaultExperiment's step is assumed (it only scales the PID integral update).
         if self.law is None:
             self.law = self.make_law(self.EXPERIMENT[2])
-        self.put(U, self.law.output_scalar(*self._inputs()))
+        self.values.update(zip(U, self.law.output_scalar(*self._inputs())))
 
 
 class PDController(_Controller):

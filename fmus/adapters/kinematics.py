@@ -13,6 +13,7 @@ from .common import declare_robot, q_units, robot_from
 
 P_REF, V_REF, A_REF = axis_names("p_ref"), axis_names("v_ref"), axis_names("a_ref")
 Q_REF, QD_REF, QDD_REF = joint_names("q_ref"), joint_names("qd_ref"), joint_names("qdd_ref")
+_JOINT_REFS = (*Q_REF, *QD_REF, *QDD_REF)  # in the order refresh stores them
 P, V = axis_names("p"), axis_names("v")
 Q, QD = joint_names("q"), joint_names("qd")
 PROXIMITY = "singularity.proximity"
@@ -123,8 +124,7 @@ class InverseKinematics(Adapter):
             return
         self._reachable = True
         qd, qdd = self.kin.joint_rates(q, p, self.vec3(V_REF), self.vec3(A_REF))
-        for names, vals in ((Q_REF, q), (QD_REF, qd), (QDD_REF, qdd)):
-            values[names[0]], values[names[1]], values[names[2]] = vals
+        values.update(zip(_JOINT_REFS, (*q, *qd, *qdd)))
 
 
 class ForwardKinematics(Adapter):

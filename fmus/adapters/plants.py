@@ -25,6 +25,8 @@ from .common import (
 
 Q, QD, U = joint_names("q"), joint_names("qd"), joint_names("u")
 P, V = axis_names("p"), axis_names("v")
+REACTION = joint_names("reaction")
+_EXUDYN_OUTPUTS = (*Q, *QD, *P, *V, *REACTION)  # in the order ExudynPlant._show stores them
 
 
 def declare_plant_interface(fmu: Adapter, kind: str) -> None:
@@ -97,7 +99,7 @@ class ExudynPlant(Adapter):
         self.outputs3(QD, qdu, "joint velocity")
         self.outputs3(P, "m", "platform position", HOME[kind])
         self.outputs3(V, "m/s", "platform velocity")
-        self.outputs3(joint_names("reaction"), uu, "actuator effort applied during the last step")
+        self.outputs3(REACTION, uu, "actuator effort applied during the last step")
 
     def start(self) -> None:
         from multibody import make_plant
@@ -107,11 +109,8 @@ class ExudynPlant(Adapter):
         self._show(self.plant.reset(self.vec(P0), self.vec(V0), t0=self.time))
 
     def _show(self, out) -> None:
-        self.put(Q, out.q)
-        self.put(QD, out.qd)
-        self.put(P, out.p)
-        self.put(V, out.v)
-        self.put(joint_names("reaction"), out.reaction)
+        self.values.update(zip(_EXUDYN_OUTPUTS, out.q.tolist() + out.qd.tolist() + out.p.tolist() + out.v.tolist()
+                               + out.reaction.tolist()))
 
     def advance(self, t: float, h: float) -> None:
         self._show(self.plant.step(t, h, self.vec3(U)))

@@ -20,6 +20,7 @@ from delta.trajectories import Helix, PickAndPlace, PointToPoint, Waypoints, see
 from .._fmi import Adapter, axis_names
 
 P_REF, V_REF, A_REF = axis_names("p_ref"), axis_names("v_ref"), axis_names("a_ref")
+_OUTPUTS = (*P_REF, *V_REF, *A_REF)  # in the order refresh stores them
 
 
 @dataclass(frozen=True)
@@ -114,9 +115,7 @@ class _Trajectory(Adapter):
 
     def refresh(self) -> None:
         p, v, a = self.trajectory.evaluate_scalar(self.time)
-        self.put(P_REF, p)
-        self.put(V_REF, v)
-        self.put(A_REF, a)
+        self.values.update(zip(_OUTPUTS, (*p, *v, *a)))
 
 
 def _tuples(value):
