@@ -290,8 +290,24 @@ class _FMI2(_Base):
         self._instantiated = True
         dll = self.fmu.dll
         self._c = self.fmu.component
-        self._get = {REAL: dll.fmi2GetReal, INTEGER: dll.fmi2GetInteger, BOOLEAN: dll.fmi2GetBoolean}
-        self._set = {REAL: dll.fmi2SetReal, INTEGER: dll.fmi2SetInteger, BOOLEAN: dll.fmi2SetBoolean}
+        fn = self._hot_function
+        self._get = {k: fn(dll, f"fmi2Get{k}") for k in (REAL, INTEGER, BOOLEAN)}
+        self._set = {k: fn(dll, f"fmi2Set{k}") for k in (REAL, INTEGER, BOOLEAN)}
+
+    def _hot_function(self, dll: Any, name: str) -> Any:
+        """The C function ``name`` for the per-step path.
+
+        FMUs exported by PythonFMU run Python: each call takes the GIL back (PyGILState_Ensure)
+        right after ctypes released it. For them the function is called through a PYFUNCTYPE
+        prototype with the same signature, which keeps the GIL across the call and saves that
+        round trip; any other FMU keeps ctypes' default (GIL released, so its own threads may
+        call back into Python).
+        """
+        f = getattr(dll, name)
+        if not (self.info.md.generationTool or "").startswith("PythonFMU"):
+            return f
+        proto = ctypes.PYFUNCTYPE(f.restype, *f.argtypes)
+        return proto(ctypes.cast(f, ctypes.c_void_p).value)
 
     def _set_values(self, kind: str, fmi_type: str, vrs: list[int], values: list[Any], what: str) -> None:
         fn = {REAL: self.fmu.setReal, INTEGER: self.fmu.setInteger, BOOLEAN: self.fmu.setBoolean,
@@ -348,7 +364,7 @@ class FMI2CoSimulation(_FMI2):
 
     def exit_initialization(self) -> None:
         self._guard("fmi2ExitInitializationMode", self.fmu.exitInitializationMode)
-        self._do_step = self.fmu.dll.fmi2DoStep
+        self._do_step = self._hot_function(self.fmu.dll, "fmi2DoStep")
 
     def step(self, t: float, h: float) -> None:
         self.time = t
