@@ -15,6 +15,7 @@ A stop request (Ctrl-C) is honoured between macro steps, never inside an FMU cal
 
 from __future__ import annotations
 
+import ctypes
 import math
 import signal
 import threading
@@ -49,15 +50,21 @@ class Runtime:
     algorithm: str = "gauss_seidel"
     comp_time: list[float] = field(default_factory=list)  # wall seconds spent in each component
     k_done: int = 0  # macro steps completed
-    copies: list[list[tuple[Any, int, Any, int]]] = field(default_factory=list)
+    copies: list[list[tuple[Any, int, Any, int]]] = field(default_factory=list)  # element copies
+    moves: list[list[tuple[int, int, int]]] = field(default_factory=list)  # (dst address, src address, bytes)
 
     def __post_init__(self) -> None:
         self.comp_time = [0.0] * len(self.slaves)
         self.copies = [[] for _ in self.slaves]
-        for lk in self.plan.links:
-            dv, di = self.slaves[lk.dst.comp].locate(lk.dst.var, output=False)
-            sv, si = self.slaves[lk.src.comp].locate(lk.src.var, output=True)
-            self.copies[lk.dst.comp].append((dv, di, sv, si))
+        self.moves = [[] for _ in self.slaves]
+        for c in range(len(self.slaves)):
+            links = []
+            for lk in self.plan.links:
+                if lk.dst.comp == c:
+                    dv, di = self.slaves[c].locate(lk.dst.var, output=False)
+                    sv, si = self.slaves[lk.src.comp].locate(lk.src.var, output=True)
+                    links.append((dv, di, sv, si))
+            self.moves[c], self.copies[c] = _runs(links)
 
     @property
     def n_steps(self) -> int:
@@ -73,8 +80,53 @@ class Runtime:
 
     def pull(self, c: int) -> None:
         """Copy connected outputs into component ``c``'s input buffers."""
+        for d, src, n in self.moves[c]:
+            _memmove(d, src, n)
         for dv, di, sv, si in self.copies[c]:
             dv[di] = sv[si]
+
+
+# memmove without releasing the GIL (a copy of a few bytes; ctypes.memmove would release and retake it)
+_memmove = ctypes.PYFUNCTYPE(ctypes.c_void_p, ctypes.c_void_p, ctypes.c_void_p, ctypes.c_size_t)(
+    ctypes.cast(ctypes.memmove, ctypes.c_void_p).value)
+_MOVABLE = (ctypes.c_double, ctypes.c_float, ctypes.c_int8, ctypes.c_int16, ctypes.c_int32, ctypes.c_int64,
+            ctypes.c_uint8, ctypes.c_uint16, ctypes.c_uint32, ctypes.c_uint64, ctypes.c_bool)
+
+
+def _runs(links: list[tuple[Any, int, Any, int]]) -> tuple[list[tuple[int, int, int]], list[tuple[Any, int, Any, int]]]:
+    """Split element links ``(dst array, i, src array, j)`` into block moves and element copies.
+
+    Consecutive links between the same two numeric arrays with consecutive indices on both
+    sides (the usual case: a vector output wired to a vector input) become one ``memmove``
+    of the same bytes; anything else (strings, single values, mixed element types) stays an
+    element copy, which converts through Python like before.
+    """
+    moves: list[tuple[int, int, int]] = []
+    copies: list[tuple[Any, int, Any, int]] = []
+    run: list[tuple[Any, int, Any, int]] = []
+
+    def close() -> None:
+        if len(run) > 1:
+            dv, di, sv, si = run[0]
+            size = ctypes.sizeof(dv._type_)
+            moves.append((ctypes.addressof(dv) + di * size, ctypes.addressof(sv) + si * size, size * len(run)))
+        else:
+            copies.extend(run)
+        run.clear()
+
+    for link in links:
+        dv, di, sv, si = link
+        if run:
+            pdv, pdi, psv, psi = run[-1]
+            if not (dv is pdv and sv is psv and di == pdi + 1 and si == psi + 1):
+                close()
+        if dv._type_ is sv._type_ and dv._type_ in _MOVABLE:
+            run.append(link)
+        else:
+            close()
+            copies.append(link)
+    close()
+    return moves, copies
 
 
 class StopRequest:
@@ -133,6 +185,8 @@ def simulate(rt: Runtime, observers: Sequence[Observer] = (), stop: StopRequest 
     slaves = rt.slaves
     h = [m * rt.step_ns * 1e-9 for m in rt.multiples]
     copies = rt.copies
+    moves = rt.moves
+    memmove = _memmove
     ctime = rt.comp_time
     clock = _time.perf_counter
     stepped = [o.stepped for o in observers]
@@ -144,6 +198,8 @@ def simulate(rt: Runtime, observers: Sequence[Observer] = (), stop: StopRequest 
         if jacobi:
             for c in active:
                 t0 = clock()
+                for d, src, n in moves[c]:
+                    memmove(d, src, n)
                 for dv, di, sv, si in copies[c]:
                     dv[di] = sv[si]
                 slaves[c].set_inputs()
@@ -160,6 +216,8 @@ def simulate(rt: Runtime, observers: Sequence[Observer] = (), stop: StopRequest 
             for c in active:
                 t0 = clock()
                 s = slaves[c]
+                for d, src, n in moves[c]:
+                    memmove(d, src, n)
                 for dv, di, sv, si in copies[c]:
                     dv[di] = sv[si]
                 s.set_inputs()

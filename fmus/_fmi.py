@@ -20,9 +20,9 @@ from pythonfmu import Fmi2Causality, Fmi2Initial, Fmi2Slave, Fmi2Variability
 from pythonfmu.default_experiment import DefaultExperiment
 from pythonfmu.variables import Boolean, Integer, Real, String
 
-from ._names import UNITS, XYZ, ValueAccess, axis_names, compensate_exporter_refcount, joint_names
+from ._names import UNITS, XYZ, ValueAccess, axis_names, compensate_exporter_refcount, joint_names, writer
 
-__all__ = ["Adapter", "UNITS", "XYZ", "joint_names", "axis_names", "DefaultExperiment"]
+__all__ = ["Adapter", "UNITS", "XYZ", "joint_names", "axis_names", "DefaultExperiment", "writer"]
 
 
 @dataclass(frozen=True)
@@ -83,7 +83,7 @@ class Adapter(ValueAccess, Fmi2Slave):
         self._real_set: dict[int, str] = {}
         self._output_vrs: set[int] = set()
         self._get_plans: dict[tuple[int, ...], tuple[bool, Any] | None] = {}
-        self._set_plans: dict[tuple[int, ...], tuple[str, ...] | None] = {}
+        self._set_plans: dict[tuple[int, ...], Any] = {}
         self._dirty = True
         self._started = False
         self.time = 0.0
@@ -209,13 +209,13 @@ class Adapter(ValueAccess, Fmi2Slave):
         """fmi2SetReal without per-variable setter closures (same effect: store, mark outputs stale)."""
         key = tuple(vrs)
         try:
-            names = self._set_plans[key]
+            write = self._set_plans[key]
         except KeyError:
-            names = self._set_plans[key] = (tuple(self._real_set[vr] for vr in key)
-                                            if all(vr in self._real_set for vr in key) else None)
-        if names is None:  # not all settable Reals: pythonfmu's error, before anything is stored
+            write = self._set_plans[key] = (writer([self._real_set[vr] for vr in key])
+                                            if key and all(vr in self._real_set for vr in key) else None)
+        if write is None:  # not all settable Reals: pythonfmu's error, before anything is stored
             return super().set_real(vrs, values)
-        self.values.update(zip(names, map(float, values)))
+        write(self.values, values)  # fmi2SetReal hands over Python floats
         self._dirty = True
 
     def setup_experiment(self, start_time: float, stop_time: float | None = None, tolerance: float | None = None):

@@ -5,7 +5,7 @@ from __future__ import annotations
 import ctypes
 import sys
 
-__all__ = ["XYZ", "UNITS", "joint_names", "axis_names", "compensate_exporter_refcount", "ValueAccess"]
+__all__ = ["XYZ", "UNITS", "joint_names", "axis_names", "compensate_exporter_refcount", "ValueAccess", "writer"]
 
 XYZ = ("x", "y", "z")
 
@@ -43,6 +43,24 @@ def joint_names(prefix: str) -> list[str]:
 def axis_names(prefix: str) -> list[str]:
     """``prefix.x prefix.y prefix.z``."""
     return [f"{prefix}.{a}" for a in XYZ]
+
+
+def writer(*groups):
+    """A function ``write(values, seq_1, ..., seq_n)`` storing ``seq_i[j]`` under ``groups[i][j]``.
+
+    The per-step stores of the adapters (fmi2SetReal, refreshed outputs) as one compiled
+    unpacking assignment per group: about half the time of ``values.update(zip(...))``,
+    and a sequence of the wrong length raises ``ValueError``. The names are written into
+    the generated source with ``repr``, so any string is safe.
+    """
+    groups = [tuple(g) for g in groups]
+    if not groups or not all(groups) or not all(isinstance(n, str) for g in groups for n in g):
+        raise ValueError(f"writer needs non-empty groups of variable names, got {groups!r}")
+    args = [f"s{i}" for i in range(len(groups))]
+    lines = [f"    {', '.join(f'values[{n!r}]' for n in g)}, = {a}" for g, a in zip(groups, args)]
+    namespace: dict = {}
+    exec(f"def write(values, {', '.join(args)}):\n" + "\n".join(lines) + "\n", namespace)  # noqa: S102
+    return namespace["write"]
 
 
 def compensate_exporter_refcount(slave_class: type) -> None:

@@ -15,13 +15,14 @@ from operator import itemgetter
 from delta.control import CTC, DEFAULT_GAINS, PD, PID, PDPlus
 from delta.dynamics import analytic_model
 
-from .._fmi import Adapter, joint_names
+from .._fmi import Adapter, joint_names, writer
 from .common import declare_masses, declare_robot, hold_effort, home_joints, masses_from, q_units, robot_from
 
 Q, QD = joint_names("q"), joint_names("qd")
 Q_REF, QD_REF, QDD_REF = joint_names("q_ref"), joint_names("qd_ref"), joint_names("qdd_ref")
 U = joint_names("u")
 _read_inputs = itemgetter(*Q, *QD, *Q_REF, *QD_REF, *QDD_REF)  # values -> the 15 inputs, in _inputs order
+_WRITE_U = writer(U)
 
 
 class _Controller(Adapter):
@@ -90,7 +91,7 @@ class _Controller(Adapter):
         # DefaultExperiment's step is assumed (it only scales the PID integral update).
         if self.law is None:
             self.law = self.make_law(self.EXPERIMENT[2])
-        self.values.update(zip(U, self.law.output_scalar(*self._inputs())))
+        _WRITE_U(self.values, self.law.output_scalar(*self._inputs()))
 
 
 class PDController(_Controller):

@@ -2,18 +2,21 @@
 
 from __future__ import annotations
 
+from operator import itemgetter
+
 from pythonfmu.enums import Fmi2Status
 
 from delta.kinematics import fk, joint_limit_reason, platform_velocity
 from delta.scalar_kinematics import ScalarKinematics
 from delta.singularity import analyse
 
-from .._fmi import Adapter, axis_names, joint_names
+from .._fmi import Adapter, axis_names, joint_names, writer
 from .common import declare_robot, q_units, robot_from
 
 P_REF, V_REF, A_REF = axis_names("p_ref"), axis_names("v_ref"), axis_names("a_ref")
 Q_REF, QD_REF, QDD_REF = joint_names("q_ref"), joint_names("qd_ref"), joint_names("qdd_ref")
-_JOINT_REFS = (*Q_REF, *QD_REF, *QDD_REF)  # in the order refresh stores them
+_read_refs = itemgetter(*P_REF, *V_REF, *A_REF)  # values -> p_ref, v_ref, a_ref as one tuple
+_WRITE_JOINT_REFS = writer(Q_REF, QD_REF, QDD_REF)  # (values, q, qd, qdd): refresh's store
 P, V = axis_names("p"), axis_names("v")
 Q, QD = joint_names("q"), joint_names("qd")
 PROXIMITY = "singularity.proximity"
@@ -73,14 +76,18 @@ class InverseKinematics(Adapter):
         proximity = self.values[PROXIMITY] = self.kin.proximity(q, p)
         return proximity
 
-    def get_real(self, vrs):
-        if self._proximity_vr in vrs:
-            if self._dirty and self._started:
-                self._dirty = False
-                self.refresh()
+    def _get_plan(self, vrs):
+        """fmi2GetReal plans that include the proximity settle it after the refresh, before reading."""
+        plan = super()._get_plan(vrs)
+        if plan is None or self._proximity_vr not in vrs:
+            return plan
+        reads_outputs, read = plan
+
+        def read_settled(values):
             if self._pending_pose is not None:
                 self._settle_proximity()
-        return super().get_real(vrs)
+            return read(values)
+        return reads_outputs, read_settled
 
     def start(self) -> None:
         self.robot = robot_from(self, self.KIND)
@@ -106,7 +113,8 @@ class InverseKinematics(Adapter):
         return None, proximity
 
     def refresh(self) -> None:
-        p = self.vec3(P_REF)
+        x = _read_refs(self.values)
+        p = x[0:3]
         q, leg = self.kin.ik(p)
         reason, proximity = self._unreachable_reason(p, q, leg)
         values = self.values
@@ -123,8 +131,8 @@ class InverseKinematics(Adapter):
             self._reachable = False
             return
         self._reachable = True
-        qd, qdd = self.kin.joint_rates(q, p, self.vec3(V_REF), self.vec3(A_REF))
-        values.update(zip(_JOINT_REFS, (*q, *qd, *qdd)))
+        qd, qdd = self.kin.joint_rates(q, p, x[3:6], x[6:9])
+        _WRITE_JOINT_REFS(values, q, qd, qdd)
 
 
 class ForwardKinematics(Adapter):

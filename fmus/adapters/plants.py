@@ -7,7 +7,7 @@ from scipy.integrate import solve_ivp
 
 from delta.dynamics import analytic_model
 
-from .._fmi import Adapter, axis_names, joint_names
+from .._fmi import Adapter, axis_names, joint_names, writer
 from .common import (
     HOME,
     P0,
@@ -26,7 +26,7 @@ from .common import (
 Q, QD, U = joint_names("q"), joint_names("qd"), joint_names("u")
 P, V = axis_names("p"), axis_names("v")
 REACTION = joint_names("reaction")
-_EXUDYN_OUTPUTS = (*Q, *QD, *P, *V, *REACTION)  # in the order ExudynPlant._show stores them
+_WRITE_EXUDYN_OUTPUTS = writer(Q, QD, P, V, REACTION)  # (values, q, qd, p, v, reaction): ExudynPlant._show
 
 
 def declare_plant_interface(fmu: Adapter, kind: str) -> None:
@@ -109,8 +109,8 @@ class ExudynPlant(Adapter):
         self._show(self.plant.reset(self.vec(P0), self.vec(V0), t0=self.time))
 
     def _show(self, out) -> None:
-        self.values.update(zip(_EXUDYN_OUTPUTS, out.q.tolist() + out.qd.tolist() + out.p.tolist() + out.v.tolist()
-                               + out.reaction.tolist()))
+        _WRITE_EXUDYN_OUTPUTS(self.values, out.q.tolist(), out.qd.tolist(), out.p.tolist(), out.v.tolist(),
+                              out.reaction.tolist())
 
     def advance(self, t: float, h: float) -> None:
         self._show(self.plant.step(t, h, self.vec3(U)))

@@ -17,10 +17,10 @@ from typing import Any, Callable, Mapping
 
 from delta.trajectories import Helix, PickAndPlace, PointToPoint, Waypoints, seed004_z_steps
 
-from .._fmi import Adapter, axis_names
+from .._fmi import Adapter, axis_names, writer
 
 P_REF, V_REF, A_REF = axis_names("p_ref"), axis_names("v_ref"), axis_names("a_ref")
-_OUTPUTS = (*P_REF, *V_REF, *A_REF)  # in the order refresh stores them
+_WRITE_OUTPUTS = writer(P_REF, V_REF, A_REF)  # (values, p, v, a): refresh's store
 
 
 @dataclass(frozen=True)
@@ -115,7 +115,7 @@ class _Trajectory(Adapter):
 
     def refresh(self) -> None:
         p, v, a = self.trajectory.evaluate_scalar(self.time)
-        self.values.update(zip(_OUTPUTS, (*p, *v, *a)))
+        _WRITE_OUTPUTS(self.values, p, v, a)
 
 
 def _tuples(value):
