@@ -53,9 +53,9 @@ def bare_fmi_cost(fmus: dict, steps: int) -> float:
         vin = (c_uint32 * len(ins))(*[info[n].vr for n in ins])
         vout = (c_uint32 * len(outs))(*[info[n].vr for n in outs])
         bin_, bout = (c_double * max(1, len(ins)))(), (c_double * len(outs))()
-        dll = s.fmu.dll
-        calls.append((s._c, dll.fmi2SetReal, dll.fmi2DoStep, dll.fmi2GetReal, vin, len(ins), bin_, vout, len(outs),
-                      bout))
+        dll, fn = s.fmu.dll, s._hot_function  # the C functions as the master calls them (same prototypes)
+        calls.append((s._c, fn(dll, "fmi2SetReal"), fn(dll, "fmi2DoStep"), fn(dll, "fmi2GetReal"), vin, len(ins), bin_,
+                      vout, len(outs), bout))
     h = 0.001
     t0 = time.perf_counter()
     for k in range(steps):
