@@ -55,16 +55,14 @@ class Runtime:
 
     def __post_init__(self) -> None:
         self.comp_time = [0.0] * len(self.slaves)
-        self.copies = [[] for _ in self.slaves]
-        self.moves = [[] for _ in self.slaves]
-        for c in range(len(self.slaves)):
-            links = []
-            for lk in self.plan.links:
-                if lk.dst.comp == c:
-                    dv, di = self.slaves[c].locate(lk.dst.var, output=False)
-                    sv, si = self.slaves[lk.src.comp].locate(lk.src.var, output=True)
-                    links.append((dv, di, sv, si))
-            self.moves[c], self.copies[c] = _runs(links)
+        links: list[list[tuple[Any, int, Any, int]]] = [[] for _ in self.slaves]
+        for lk in self.plan.links:
+            dv, di = self.slaves[lk.dst.comp].locate(lk.dst.var, output=False)
+            sv, si = self.slaves[lk.src.comp].locate(lk.src.var, output=True)
+            links[lk.dst.comp].append((dv, di, sv, si))
+        split = [_runs(ls) for ls in links]
+        self.moves = [m for m, _ in split]
+        self.copies = [c for _, c in split]
 
     @property
     def n_steps(self) -> int:
@@ -184,9 +182,7 @@ def simulate(rt: Runtime, observers: Sequence[Observer] = (), stop: StopRequest 
     period = len(schedule)
     slaves = rt.slaves
     h = [m * rt.step_ns * 1e-9 for m in rt.multiples]
-    copies = rt.copies
-    moves = rt.moves
-    memmove = _memmove
+    pull = rt.pull
     ctime = rt.comp_time
     clock = _time.perf_counter
     stepped = [o.stepped for o in observers]
@@ -198,10 +194,7 @@ def simulate(rt: Runtime, observers: Sequence[Observer] = (), stop: StopRequest 
         if jacobi:
             for c in active:
                 t0 = clock()
-                for d, src, n in moves[c]:
-                    memmove(d, src, n)
-                for dv, di, sv, si in copies[c]:
-                    dv[di] = sv[si]
+                pull(c)
                 slaves[c].set_inputs()
                 ctime[c] += clock() - t0
             for c in active:
@@ -216,10 +209,7 @@ def simulate(rt: Runtime, observers: Sequence[Observer] = (), stop: StopRequest 
             for c in active:
                 t0 = clock()
                 s = slaves[c]
-                for d, src, n in moves[c]:
-                    memmove(d, src, n)
-                for dv, di, sv, si in copies[c]:
-                    dv[di] = sv[si]
+                pull(c)
                 s.set_inputs()
                 s.step(t, h[c])
                 s.get_outputs()

@@ -211,12 +211,17 @@ class Adapter(ValueAccess, Fmi2Slave):
         try:
             write = self._set_plans[key]
         except KeyError:
-            write = self._set_plans[key] = (writer([self._real_set[vr] for vr in key])
-                                            if key and all(vr in self._real_set for vr in key) else None)
+            write = self._set_plans[key] = self._set_plan(key)
         if write is None:  # not all settable Reals: pythonfmu's error, before anything is stored
             return super().set_real(vrs, values)
         write(self.values, values)  # fmi2SetReal hands over Python floats
         self._dirty = True
+
+    def _set_plan(self, vrs: tuple[int, ...]) -> Any:
+        """(values, new values) -> None storing under the names of ``vrs``; None if one is not a settable Real."""
+        if not vrs or not all(vr in self._real_set for vr in vrs):
+            return None
+        return writer([self._real_set[vr] for vr in vrs])
 
     def setup_experiment(self, start_time: float, stop_time: float | None = None, tolerance: float | None = None):
         self.time = float(start_time)
