@@ -232,6 +232,9 @@ def _cosim_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--set", action="append", default=[], metavar="COMP.PARAM=VALUE",
                    help="override a component parameter (repeatable)")
     p.add_argument("--no-log", action="store_true", help="do not write an MCAP file")
+    p.add_argument("--parallel", choices=("auto", "on", "off"),
+                   help="override the scenario's parallel: run the feed-forward components (e.g. trajectory, IK) "
+                        "ahead in a worker process (same values as serial)")
     p.add_argument("--quiet", action="store_true", help="no progress bar and no summary")
     p.add_argument("--json", action="store_true", help="summary as JSON on stdout")
     p.set_defaults(handler=_cmd_run)
@@ -391,6 +394,10 @@ def _summary_text(res) -> str:
     share = ", ".join(f"{n} {100 * t / res.wall_time if res.wall_time else 0:.0f}%"
                       for n, t in sorted(res.component_time.items(), key=lambda kv: -kv[1]))
     lines.append(f"  time share: {share}, master {100 * max(0.0, 1 - total / res.wall_time) if res.wall_time else 0:.0f}%")
+    lines += [f"  {note}" for note in res.notes]
+    if res.worker_time:
+        lines.append("  in the worker process (overlapped with the master): "
+                     + ", ".join(f"{n} {t:.3f} s" for n, t in res.worker_time.items()))
     for e in res.errors:
         lines.append(f"  {e.actual} vs {e.reference}: RMSE {e.rmse:.4g}, max error {e.max_error:.4g}")
     for name, c in res.checks.items():
@@ -405,7 +412,10 @@ def _cmd_run(args: argparse.Namespace) -> int:
     from .run import run_scenario
     from .scenario import apply_overrides, load_scenario
 
-    scenario = load_scenario(args.scenario, apply_overrides(args.set, args.stop_time))
+    overrides = apply_overrides(args.set, args.stop_time)
+    if args.parallel:
+        overrides[("parallel",)] = args.parallel
+    scenario = load_scenario(args.scenario, overrides)
     res = run_scenario(scenario, out=args.out, log=False if args.no_log else None,
                        progress=not (args.quiet or args.json))
     if args.json:

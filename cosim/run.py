@@ -11,6 +11,7 @@ from .algorithm import Observer, Runtime, StopRequest, initialize, simulate
 from .errors import ComponentSourceError, CosimError, Issue
 from .fmu import FMUInfo, load_fmu, make_slave
 from .observers import AxisError, Comparison
+from .offload import Offload, choose
 from .scenario import Scenario, _line_for, expand_signal, load_scenario
 
 __all__ = ["RunResult", "progress_bar", "locate_fmus", "prepare", "run_scenario", "check_scenario"]
@@ -30,6 +31,8 @@ class RunResult:
     mcap: str | None = None
     status: str = "completed"  # completed | interrupted | error
     message: str = ""
+    notes: list[str] = field(default_factory=list)  # e.g. which components ran ahead in a worker process
+    worker_time: dict[str, float] = field(default_factory=dict)  # s per component, inside the worker process
 
     @property
     def real_time_factor(self) -> float:
@@ -44,7 +47,7 @@ class RunResult:
                 "sim_time_s": self.sim_time, "wall_time_s": self.wall_time,
                 "real_time_factor": self.real_time_factor, "component_time_s": self.component_time,
                 "errors": [e.__dict__ for e in self.errors], "checks": self.checks, "passed": self.passed,
-                "mcap": self.mcap}
+                "mcap": self.mcap, "notes": self.notes, "worker_time_s": self.worker_time}
 
 
 def progress_bar():
@@ -152,6 +155,8 @@ def run_scenario(scenario: Scenario | str | Path, out: str | Path | None = None,
         s.bind(plan.inputs[c], plan.outputs[c])
     rt = Runtime(plan, slaves, scenario.time.start_ns, scenario.time.stop_ns, scenario.time.step_ns,
                  [scenario.components[n].step_multiple for n in plan.names], scenario.algorithm)
+    ahead, note = choose(plan, scenario.parallel, rt.n_steps)
+    offload: Offload | None = None
     observers: list[Observer] = []
     comparison = None
     if scenario.compare is not None:
@@ -183,6 +188,11 @@ def run_scenario(scenario: Scenario | str | Path, out: str | Path | None = None,
     t_wall = time.perf_counter()
     bar = None
     try:
+        if ahead:  # proxies take the feed-forward components' places, on the same buffers
+            offload = Offload(plan, ahead, [slaves[c] for c in ahead], rt.multiples, rt.start_ns, rt.stop_ns,
+                              rt.step_ns, rt.algorithm)
+            for c, proxy in zip(ahead, offload.proxies):
+                slaves[c] = proxy
         initialize(rt)
         for o in observers:
             o.start(rt)
@@ -214,8 +224,11 @@ def run_scenario(scenario: Scenario | str | Path, out: str | Path | None = None,
                 s.free()
         for o in started:
             o.finish(rt, error)
+    if error is not None:  # a failure at the end (fmi2Terminate, the worker's report) fails the run too
+        raise error
     result = RunResult(scenario.name, rt.k_done, rt.k_done * rt.step_ns * 1e-9, wall,
-                       dict(zip(plan.names, rt.comp_time)), mcap=str(mcap_path) if mcap_path else None)
+                       dict(zip(plan.names, rt.comp_time)), mcap=str(mcap_path) if mcap_path else None,
+                       notes=[note] if note else [], worker_time=offload.worker_time if offload else {})
     if comparison is not None:
         result.errors = comparison.result()
         if scenario.checks is not None:

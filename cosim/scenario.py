@@ -219,6 +219,11 @@ class Scenario(_Model):
     connections: list[Connection] = Field(default_factory=list)
     time: TimeGrid
     algorithm: Literal["gauss_seidel", "jacobi"] = "gauss_seidel"
+    parallel: Union[Literal["auto", "on", "off"], bool] = Field(
+        "auto", description="run the feed-forward components (inputs only from each other, e.g. trajectory -> IK) "
+                            "ahead in a worker process on another core; same values as serial. auto: when 2 CPUs "
+                            "are available and the run has at least 2000 steps. YAML's bare on/off (booleans) "
+                            "are accepted")
     trajectory: TrajectorySpec | None = None
     initial_state: InitialState = Field(default_factory=InitialState)
     logging: Logging = Field(default_factory=Logging)
@@ -227,6 +232,11 @@ class Scenario(_Model):
     regression: Regression = Field(default_factory=Regression)
     # set by the loader, not part of the file format
     source: str | None = Field(None, exclude=True, json_schema_extra={"readOnly": True})
+
+    @field_validator("parallel", mode="after")
+    @classmethod
+    def _parallel_word(cls, v: str | bool) -> str:
+        return ("on" if v else "off") if isinstance(v, bool) else v  # YAML 1.1 reads bare on/off as booleans
 
     @model_validator(mode="after")
     def _names(self) -> "Scenario":

@@ -20,6 +20,7 @@ DEPENDENCIES = {
     "CosimTIntegrator": {"x": []},
     "CosimTRaiser": {"y": ["u"]},
     "CosimTSlow": {"y": []},
+    "CosimTSum": {"y": ["a", "b"], "n": []},
 }
 SCRIPTS = {
     "CosimTSource": "cosim_t_source.py",
@@ -27,6 +28,7 @@ SCRIPTS = {
     "CosimTIntegrator": "cosim_t_integrator.py",
     "CosimTRaiser": "cosim_t_raiser.py",
     "CosimTSlow": "cosim_t_slow.py",
+    "CosimTSum": "cosim_t_sum.py",
 }
 
 

@@ -1,0 +1,449 @@
+"""Parallel co-simulation: the feed-forward components run ahead in a worker process.
+
+A component whose inputs all come from components that are themselves free of feedback
+(in helix_ctc the trajectory and the inverse kinematics: functions of time alone) never
+waits for the rest of the system. The master hands that *feed-forward group* to one worker
+process, which runs it with the same code as a serial run (the same FMUs, :func:`initialize`,
+:func:`simulate`, schedule and algorithm) on the machine's other core, and publishes the
+values the master reads from each component, call after call, into a ring buffer in shared
+memory. In the master each of those components is replaced by a :class:`Proxy` bound to the
+same variables: its ``get_outputs`` copies the next published values byte for byte, so the
+master's other components, its observers and the MCAP log see exactly the values of a serial
+run (``tests/integration/test_parallel.py`` checks bit identity). Threads would not do:
+pythonfmu FMUs hold the GIL for the whole call.
+
+Synchronisation is one pair of counting semaphores per component (entries filled, entries
+free); in the steady state the worker is ahead, so the master's acquire and release never
+block and never make a system call. When the ring is full the worker sleeps in short naps
+instead of waiting on the semaphore, for the same reason. A failure in the worker travels
+as an error entry plus the exception over a pipe, and is raised by the master where a serial
+run would have raised it: at that component's step. A dead worker is reported as such.
+"""
+
+from __future__ import annotations
+
+import ctypes
+import importlib
+import multiprocessing as mp
+import os
+import pickle
+import signal
+import sys
+import time as _time
+from dataclasses import dataclass
+from typing import Any
+
+from .algorithm import Runtime, _memmove, initialize, simulate
+from .errors import CosimError
+from .fmu import STRING, Variable, cleanup_extracted, load_fmu, make_slave
+from .system import Link, Port, SystemPlan
+
+__all__ = ["AUTO_MIN_STEPS", "RING", "feedforward", "choose", "Offload", "Proxy"]
+
+AUTO_MIN_STEPS = 2000  # below this, the worker's start-up (about 1 s) outweighs what it saves
+RING = 1024  # entries per component: about 1 s of look-ahead at 1 ms
+_NAP = 0.002  # s, the worker's sleep while its ring is full
+_BURST = RING // 4  # free entries a full ring waits for: fewer, longer bursts disturb the master less
+_POLL = 0.05  # s, the master's wait between liveness checks when the worker is behind
+_END_TIMEOUT = 60.0  # s, the longest wait for the worker to report its end after the last step
+
+
+def feedforward(plan: SystemPlan) -> list[int]:
+    """The largest set of components whose inputs all come from inside the set (plan order)."""
+    sources = [set() for _ in plan.names]
+    for lk in plan.links:
+        sources[lk.dst.comp].add(lk.src.comp)
+    group: set[int] = set()
+    grew = True
+    while grew:
+        grew = False
+        for c in plan.order:
+            if c not in group and sources[c] <= group:
+                group.add(c)
+                grew = True
+    return [c for c in plan.order if c in group]
+
+
+def usable_cpus() -> int:
+    try:
+        return len(os.sched_getaffinity(0))
+    except AttributeError:  # not on Linux
+        return os.cpu_count() or 1
+
+
+def choose(plan: SystemPlan, mode: str, n_steps: int) -> tuple[list[int], str]:
+    """Components to offload under ``mode`` (auto, on, off) and a note saying why or why not."""
+    if mode == "off":
+        return [], ""
+    group = feedforward(plan)
+    names = ", ".join(plan.names[c] for c in group)
+    why = ""
+    if not group:
+        why = "every component is in a feedback loop"
+    elif len(group) == len(plan.names):
+        why = "every component is feed-forward: nothing would be left to overlap with"
+    else:
+        strings = [f"{plan.names[c]}.{v.name}" for c in group for v in plan.outputs[c] if v.kind == STRING]
+        if strings:
+            why = f"{', '.join(strings)} are strings (only fixed-size values are shared)"
+        elif mode == "auto" and n_steps < AUTO_MIN_STEPS:
+            why = f"{n_steps} steps is too short to pay for starting a worker (auto needs {AUTO_MIN_STEPS})"
+        elif mode == "auto" and usable_cpus() < 2:
+            why = "one CPU available"
+        elif not _main_importable():
+            why = f"the main program {sys.modules['__main__'].__file__} is not a file a worker process can import"
+    if why:
+        return [], f"parallel: {mode}: serial run ({why})"
+    return group, f"parallel: {names} run ahead in a worker process"
+
+
+def _main_importable() -> bool:
+    """A spawned worker re-imports the main script: impossible for one read from stdin."""
+    path = getattr(sys.modules.get("__main__"), "__file__", None)
+    return path is None or os.path.exists(path)
+
+
+# --------------------------------------------------------------------------- shared layout
+
+
+@dataclass(frozen=True)
+class _Layout:
+    """Per component: the byte size of each output buffer; statuses then entries, one block each."""
+
+    sizes: list[list[int]]
+
+    def entry(self, j: int) -> int:
+        return max(8, sum(self.sizes[j]))
+
+    def offsets(self, j: int) -> tuple[int, int]:
+        """(status array offset, first entry offset) of component ``j`` in the shared block."""
+        off = 0
+        for i in range(j):
+            off += 8 * RING + RING * self.entry(i)
+        return off, off + 8 * RING
+
+    @property
+    def total(self) -> int:
+        return sum(8 * RING + RING * self.entry(j) for j in range(len(self.sizes)))
+
+
+class _Ring:
+    """One component's ring in the shared block: statuses, entries, filled/free semaphores."""
+
+    def __init__(self, raw: Any, layout: _Layout, j: int, filled: Any, free: Any, buffers: list[Any]):
+        status_off, data_off = layout.offsets(j)
+        self.status = (ctypes.c_int64 * RING).from_buffer(raw, status_off)
+        self.base = ctypes.addressof(raw) + data_off
+        self.entry = layout.entry(j)
+        self.filled, self.free = filled, free
+        self.n = 0  # entries passed so far
+        self.segments: list[tuple[int, int, int]] = []  # (buffer address, offset in entry, bytes)
+        off = 0
+        for values in buffers:
+            size = ctypes.sizeof(values)
+            self.segments.append((ctypes.addressof(values), off, size))
+            off += size
+
+
+# --------------------------------------------------------------------------- master side
+
+
+class Offload:
+    """The worker process and the shared ring of a feed-forward group, seen from the master."""
+
+    def __init__(self, plan: SystemPlan, comps: list[int], templates: list[Any], multiples: list[int],
+                 start_ns: int, stop_ns: int, step_ns: int, algorithm: str):
+        self.names = [plan.names[c] for c in comps]
+        self.worker_time: dict[str, float] = {}
+        self._messages: list[tuple[str, Any]] = []
+        self._closed = False
+        self.layout = _Layout([[ctypes.sizeof(b.values) for b in t.out_bufs] for t in templates])
+        index = {c: j for j, c in enumerate(comps)}
+        spec = dict(
+            names=self.names, paths=[str(plan.infos[c].path) for c in comps],
+            kinds=[("me" if t.model_exchange else "cs", getattr(t, "rtol", 1e-6)) for t in templates],
+            start_values=[plan.start_values[c] for c in comps],
+            inputs=[[v.name for v in plan.inputs[c]] for c in comps],
+            outputs=[[v.name for v in plan.outputs[c]] for c in comps],
+            links=[(index[lk.src.comp], lk.src.var.name, index[lk.dst.comp], lk.dst.var.name)
+                   for lk in plan.links if lk.dst.comp in index],
+            order=[index[c] for c in plan.order if c in index],
+            multiples=[multiples[c] for c in comps], algorithm=algorithm,
+            start_ns=start_ns, stop_ns=stop_ns, step_ns=step_ns, sizes=self.layout.sizes)
+        ctx = mp.get_context("spawn")  # a clean interpreter: no inherited FMU libraries or threads
+        self.raw = ctx.RawArray(ctypes.c_char, self.layout.total)
+        self.filled = [ctx.Semaphore(0) for _ in comps]
+        self.free = [ctx.Semaphore(RING) for _ in comps]
+        self.stop = ctx.Event()
+        self._conn, send = ctx.Pipe(duplex=False)
+        self.process = ctx.Process(target=_worker, name="cosim-worker", daemon=True,
+                                   args=(spec, self.raw, self.filled, self.free, self.stop, send))
+        self.process.start()
+        send.close()
+        self.proxies = [Proxy(self, j, t) for j, t in enumerate(templates)]  # templates are bound already
+
+    def ring(self, j: int, buffers: list[Any]) -> _Ring:
+        return _Ring(self.raw, self.layout, j, self.filled[j], self.free[j], buffers)
+
+    # -- messages from the worker: ("error", packed exception) or ("done", {name: seconds})
+    def _drain(self) -> None:
+        try:
+            while self._conn.poll():
+                self._messages.append(self._conn.recv())
+        except (EOFError, OSError):
+            pass
+
+    def _raise_if_failed(self, proxy: "Proxy") -> None:
+        self._drain()
+        for kind, payload in self._messages:
+            if kind == "error":
+                raise _unpack(payload, self.names)
+        if not self.process.is_alive():
+            self._drain()
+            for kind, payload in self._messages:
+                if kind == "error":
+                    raise _unpack(payload, self.names)
+            raise CosimError(f"component {proxy.name!r}: the worker process running {', '.join(self.names)} "
+                             f"exited (code {self.process.exitcode}) at t = {proxy.time:.6g} s")
+
+    def wait(self, proxy: "Proxy", ring: _Ring) -> None:
+        """Block until ``ring`` has an entry (the worker is behind, e.g. while it starts)."""
+        while not ring.filled.acquire(True, _POLL):
+            self._raise_if_failed(proxy)
+
+    def finish(self, proxy: "Proxy") -> None:
+        """After the last step: the worker's end report (its component times) or its failure."""
+        deadline = _time.monotonic() + _END_TIMEOUT
+        while True:
+            self._drain()
+            if any(kind == "done" for kind, _ in self._messages):
+                break
+            self._raise_if_failed(proxy)
+            if _time.monotonic() > deadline:
+                raise CosimError(f"the worker process running {', '.join(self.names)} did not finish "
+                                 f"within {_END_TIMEOUT:g} s of the last step")
+            self._conn.poll(_POLL)
+        self.worker_time = next(p for kind, p in self._messages if kind == "done")
+
+    def close(self) -> None:
+        """Stop the worker (it frees its FMUs) and release the shared block; idempotent."""
+        if self._closed:
+            return
+        self._closed = True
+        self.stop.set()
+        self.process.join(5.0)
+        if self.process.is_alive():
+            self.process.terminate()
+            self.process.join(1.0)
+        self._conn.close()
+
+
+class Proxy:
+    """Stands in the master for a component the worker runs: same buffers, values from the ring."""
+
+    def __init__(self, group: Offload, j: int, template: Any):
+        self.group, self.j = group, j
+        self.name, self.info = template.name, template.info
+        self.model_exchange = template.model_exchange
+        self.time = 0.0
+        self._template = template  # never instantiated: it only owns the buffers (bind, locate)
+        self._ring = group.ring(j, [b.values for b in template.out_bufs])
+
+    def bind(self, inputs: list[Variable], outputs: list[Variable]) -> None:
+        self._template.bind(inputs, outputs)
+        self._ring = self.group.ring(self.j, [b.values for b in self._template.out_bufs])
+
+    def locate(self, var: Variable, output: bool = True) -> tuple[Any, int]:
+        return self._template.locate(var, output)
+
+    @property
+    def out_bufs(self) -> list[Any]:
+        return self._template.out_bufs
+
+    @property
+    def in_bufs(self) -> list[Any]:
+        return self._template.in_bufs
+
+    # the worker runs the lifecycle; these keep the master's calls in the same places
+    def instantiate(self) -> None: ...
+    def set_start(self, values: dict[str, Any]) -> None: ...
+    def enter_initialization(self, start: float, stop: float) -> None:
+        self.time = start
+
+    def exit_initialization(self) -> None: ...
+    def set_inputs(self) -> None: ...
+
+    def step(self, t: float, h: float) -> None:
+        self.time = t + h
+
+    def get_outputs(self) -> None:
+        r = self._ring
+        if not r.filled.acquire(False):
+            self.group.wait(self, r)
+        slot = r.n % RING
+        if r.status[slot]:
+            self.group._raise_if_failed(self)
+            raise CosimError(f"component {self.name!r}: the worker process reported a failure at "
+                             f"t = {self.time:.6g} s without its message")
+        at = r.base + slot * r.entry
+        for address, off, size in r.segments:
+            _memmove(address, at + off, size)
+        r.free.release()
+        r.n += 1
+
+    def read(self, variables: list[Variable]) -> list[Any]:
+        out = []
+        for v in variables:
+            arr, i = self._template.locate(v, True)
+            out.append(arr[i])
+        return out
+
+    def terminate(self) -> None:
+        if not self.group.worker_time:
+            self.group.finish(self)
+
+    def free(self) -> None:
+        self.group.close()
+
+
+# --------------------------------------------------------------------------- worker side
+
+
+class _Stopped(Exception):
+    """The master asked the worker to stop (run ended early, Ctrl-C, failure)."""
+
+
+class _Publisher:
+    """A worker slave whose every ``get_outputs`` also fills the next entry of its ring."""
+
+    def __init__(self, slave: Any, ring: _Ring, stop: Any):
+        self._slave, self._r, self._stop = slave, ring, stop
+        self.napped = 0.0  # s asleep on a full ring (counted in the component's time by simulate)
+
+    def __getattr__(self, name: str) -> Any:
+        return getattr(self._slave, name)
+
+    def _claim(self) -> int:
+        r = self._r
+        if not r.free.acquire(False):
+            t0 = _time.perf_counter()
+            while _free_count(r.free) < _BURST or not r.free.acquire(True, _NAP):
+                if self._stop.is_set():
+                    raise _Stopped
+                _time.sleep(_NAP)
+            self.napped += _time.perf_counter() - t0
+        return r.n % RING
+
+    def get_outputs(self) -> None:
+        self._slave.get_outputs()
+        r = self._r
+        slot = self._claim()
+        at = r.base + slot * r.entry
+        for address, off, size in r.segments:
+            _memmove(at + off, address, size)
+        r.status[slot] = 0
+        r.filled.release()
+        r.n += 1
+
+    def fail(self) -> None:
+        """Publish an error entry, so the master raises where this component's next values were due."""
+        slot = self._claim()
+        self._r.status[slot] = 1
+        self._r.filled.release()
+        self._r.n += 1
+
+
+def _free_count(sem: Any) -> int:
+    try:
+        return sem.get_value()
+    except NotImplementedError:  # macOS has no sem_getvalue: wait for one entry at a time
+        return _BURST
+
+
+def _worker(spec: dict, raw: Any, filled: list, free: list, stop: Any, conn: Any) -> None:
+    """Entry point of the worker process: run the feed-forward group, publishing as it goes."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the master's to handle; it stops us
+    slaves: list[Any] = []
+    pubs: list[_Publisher] = []
+    code = 1
+    try:
+        try:
+            rt = _runtime(spec, raw, filled, free, stop, slaves, pubs)
+            initialize(rt)
+            simulate(rt)
+            for s in slaves:
+                s.terminate()
+            conn.send(("done", {n: t - p.napped for n, t, p in zip(spec["names"], rt.comp_time, pubs)}))
+            code = 0
+        except _Stopped:
+            code = 0
+        except BaseException as exc:  # noqa: BLE001 - every failure goes to the master
+            conn.send(("error", _pack(exc)))
+            try:
+                for p in pubs:
+                    p.fail()
+            except _Stopped:
+                pass
+    finally:
+        for s in slaves:
+            try:
+                s.free()
+            except Exception:  # noqa: BLE001 - freeing after a failure: nothing left to report to
+                pass
+        cleanup_extracted()
+        conn.close()
+        # Leave without the interpreter's finalisation: pythonfmu libraries stay loaded (fmu._KEEP_ALIVE)
+        # and tearing down the objects they made is what can abort a process at exit.
+        sys.stdout.flush()
+        sys.stderr.flush()
+        os._exit(code)
+
+
+def _runtime(spec: dict, raw: Any, filled: list, free: list, stop: Any, slaves: list, pubs: list) -> Runtime:
+    infos = [load_fmu(p) for p in spec["paths"]]
+    for j, name in enumerate(spec["names"]):
+        interface, rtol = spec["kinds"][j]
+        s = make_slave(name, infos[j], interface, rtol)
+        s.bind([infos[j].variables[v] for v in spec["inputs"][j]], [infos[j].variables[v] for v in spec["outputs"][j]])
+        slaves.append(s)
+    layout = _Layout(spec["sizes"])
+    for j, s in enumerate(slaves):
+        sizes = [ctypes.sizeof(b.values) for b in s.out_bufs]
+        if sizes != layout.sizes[j]:  # same FMU, same variables: cannot differ unless the code does
+            raise CosimError(f"component {s.name!r}: worker buffer layout {sizes} differs from the master's "
+                             f"{layout.sizes[j]}")
+        pubs.append(_Publisher(s, _Ring(raw, layout, j, filled[j], free[j], [b.values for b in s.out_bufs]), stop))
+    variables = [info.variables for info in infos]
+    links = [Link(Port(a, variables[a][av]), Port(b, variables[b][bv])) for a, av, b, bv in spec["links"]]
+    plan = SystemPlan(spec["names"], infos, links, spec["order"], spec["start_values"],
+                      [[variables[j][v] for v in spec["inputs"][j]] for j in range(len(infos))],
+                      [[variables[j][v] for v in spec["outputs"][j]] for j in range(len(infos))])
+    return Runtime(plan, pubs, spec["start_ns"], spec["stop_ns"], spec["step_ns"], spec["multiples"],
+                   spec["algorithm"])
+
+
+# --------------------------------------------------------------------------- errors across processes
+
+
+def _pack(exc: BaseException) -> tuple[str, str, str, bytes]:
+    """An exception as plain data: our error classes keep their attributes (component, time...)."""
+    try:
+        state = pickle.dumps(dict(vars(exc)))
+    except Exception:  # noqa: BLE001 - an attribute that does not pickle: keep the message only
+        state = pickle.dumps({})
+    return type(exc).__module__, type(exc).__qualname__, str(exc), state
+
+
+def _unpack(payload: tuple[str, str, str, bytes], names: list[str]) -> BaseException:
+    module, qualname, text, state = payload
+    try:
+        cls = getattr(importlib.import_module(module), qualname)
+        if isinstance(cls, type) and issubclass(cls, CosimError):
+            exc = cls.__new__(cls)
+            Exception.__init__(exc, text)
+            exc.__dict__.update(pickle.loads(state))
+            return exc
+    except Exception:  # noqa: BLE001 - unknown class: fall through to a generic error
+        pass
+    return CosimError(f"worker process running {', '.join(names)}: {qualname}: {text}")
+
