@@ -32,6 +32,7 @@ connections:
   - {{from: g1.y, to: g2.u}}
   - {{from: g2.y, to: plant.u}}
 time: {{stop: {stop}, step: 0.001}}
+parallel: "off"  # the master's own serial loop (an open chain is never offloaded anyway)
 logging: {{signals: all, flush_interval: 1.0}}
 """
 

@@ -51,7 +51,7 @@ class Runtime:
     comp_time: list[float] = field(default_factory=list)  # wall seconds spent in each component
     k_done: int = 0  # macro steps completed
     copies: list[list[tuple[Any, int, Any, int]]] = field(default_factory=list)  # element copies
-    moves: list[list[tuple[int, int, int]]] = field(default_factory=list)  # (dst address, src address, bytes)
+    moves: list[list[tuple[memoryview, memoryview]]] = field(default_factory=list)  # (dst bytes, src bytes)
 
     def __post_init__(self) -> None:
         self.comp_time = [0.0] * len(self.slaves)
@@ -78,36 +78,44 @@ class Runtime:
 
     def pull(self, c: int) -> None:
         """Copy connected outputs into component ``c``'s input buffers."""
-        for d, src, n in self.moves[c]:
-            _memmove(d, src, n)
+        for d, src in self.moves[c]:
+            d[:] = src
         for dv, di, sv, si in self.copies[c]:
             dv[di] = sv[si]
 
 
-# memmove without releasing the GIL (a copy of a few bytes; ctypes.memmove would release and retake it)
-_memmove = ctypes.PYFUNCTYPE(ctypes.c_void_p, ctypes.c_void_p, ctypes.c_void_p, ctypes.c_size_t)(
-    ctypes.cast(ctypes.memmove, ctypes.c_void_p).value)
+def byte_view(array: Any, start: int = 0, count: int | None = None) -> memoryview:
+    """Bytes of elements ``start .. start + count`` of a ctypes array, as a writable memoryview.
+
+    ``dst[:] = src`` between two such views copies the bytes in C without a foreign-function
+    call (about 0.15 us against 0.65 us for ``memmove`` through ctypes, measured here).
+    """
+    size = ctypes.sizeof(array._type_)
+    n = len(array) - start if count is None else count
+    return memoryview(array).cast("B")[start * size:(start + n) * size]
+
+
 _MOVABLE = (ctypes.c_double, ctypes.c_float, ctypes.c_int8, ctypes.c_int16, ctypes.c_int32, ctypes.c_int64,
             ctypes.c_uint8, ctypes.c_uint16, ctypes.c_uint32, ctypes.c_uint64, ctypes.c_bool)
 
 
-def _runs(links: list[tuple[Any, int, Any, int]]) -> tuple[list[tuple[int, int, int]], list[tuple[Any, int, Any, int]]]:
+def _runs(links: list[tuple[Any, int, Any, int]]) -> tuple[list[tuple[memoryview, memoryview]],
+                                                           list[tuple[Any, int, Any, int]]]:
     """Split element links ``(dst array, i, src array, j)`` into block moves and element copies.
 
     Consecutive links between the same two numeric arrays with consecutive indices on both
-    sides (the usual case: a vector output wired to a vector input) become one ``memmove``
-    of the same bytes; anything else (strings, single values, mixed element types) stays an
-    element copy, which converts through Python like before.
+    sides (the usual case: a vector output wired to a vector input) become one move of the
+    same bytes between two :func:`byte_view` s; anything else (strings, single values, mixed
+    element types) stays an element copy, which converts through Python like before.
     """
-    moves: list[tuple[int, int, int]] = []
+    moves: list[tuple[memoryview, memoryview]] = []
     copies: list[tuple[Any, int, Any, int]] = []
     run: list[tuple[Any, int, Any, int]] = []
 
     def close() -> None:
         if len(run) > 1:
             dv, di, sv, si = run[0]
-            size = ctypes.sizeof(dv._type_)
-            moves.append((ctypes.addressof(dv) + di * size, ctypes.addressof(sv) + si * size, size * len(run)))
+            moves.append((byte_view(dv, di, len(run)), byte_view(sv, si, len(run))))
         else:
             copies.extend(run)
         run.clear()

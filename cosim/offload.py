@@ -33,7 +33,7 @@ import time as _time
 from dataclasses import dataclass
 from typing import Any
 
-from .algorithm import Runtime, _memmove, initialize, simulate
+from .algorithm import Runtime, byte_view, initialize, simulate
 from .errors import CosimError
 from .fmu import STRING, Variable, cleanup_extracted, load_fmu, make_slave
 from .system import Link, Port, SystemPlan
@@ -128,21 +128,31 @@ class _Layout:
 
 
 class _Ring:
-    """One component's ring in the shared block: statuses, entries, filled/free semaphores."""
+    """One component's ring in the shared block: statuses, entries, filled/free semaphores.
 
-    def __init__(self, raw: Any, layout: _Layout, j: int, filled: Any, free: Any, buffers: list[Any]):
+    ``moves[slot]`` pairs each of the component's output buffers with its bytes in entry
+    ``slot`` as (destination, source) views: ring to buffers in the master (``publish``
+    false), buffers to ring in the worker.
+    """
+
+    def __init__(self, raw: Any, layout: _Layout, j: int, filled: Any, free: Any, buffers: list[Any],
+                 publish: bool = False):
         status_off, data_off = layout.offsets(j)
         self.status = (ctypes.c_int64 * RING).from_buffer(raw, status_off)
-        self.base = ctypes.addressof(raw) + data_off
-        self.entry = layout.entry(j)
         self.filled, self.free = filled, free
         self.n = 0  # entries passed so far
-        self.segments: list[tuple[int, int, int]] = []  # (buffer address, offset in entry, bytes)
-        off = 0
-        for values in buffers:
-            size = ctypes.sizeof(values)
-            self.segments.append((ctypes.addressof(values), off, size))
-            off += size
+        block = memoryview(raw).cast("B")
+        entry = layout.entry(j)
+        self.moves: list[list[tuple[memoryview, memoryview]]] = []
+        for slot in range(RING):
+            at = data_off + slot * entry
+            pairs = []
+            for values in buffers:
+                size = ctypes.sizeof(values)
+                mine, shared = byte_view(values), block[at:at + size]
+                pairs.append((shared, mine) if publish else (mine, shared))
+                at += size
+            self.moves.append(pairs)
 
 
 # --------------------------------------------------------------------------- master side
@@ -285,9 +295,8 @@ class Proxy:
             self.group._raise_if_failed(self)
             raise CosimError(f"component {self.name!r}: the worker process reported a failure at "
                              f"t = {self.time:.6g} s without its message")
-        at = r.base + slot * r.entry
-        for address, off, size in r.segments:
-            _memmove(address, at + off, size)
+        for d, src in r.moves[slot]:
+            d[:] = src
         r.free.release()
         r.n += 1
 
@@ -338,9 +347,8 @@ class _Publisher:
         self._slave.get_outputs()
         r = self._r
         slot = self._claim()
-        at = r.base + slot * r.entry
-        for address, off, size in r.segments:
-            _memmove(at + off, address, size)
+        for d, src in r.moves[slot]:
+            d[:] = src
         r.status[slot] = 0
         r.filled.release()
         r.n += 1
@@ -412,7 +420,8 @@ def _runtime(spec: dict, raw: Any, filled: list, free: list, stop: Any, slaves: 
         if sizes != layout.sizes[j]:  # same FMU, same variables: cannot differ unless the code does
             raise CosimError(f"component {s.name!r}: worker buffer layout {sizes} differs from the master's "
                              f"{layout.sizes[j]}")
-        pubs.append(_Publisher(s, _Ring(raw, layout, j, filled[j], free[j], [b.values for b in s.out_bufs]), stop))
+        ring = _Ring(raw, layout, j, filled[j], free[j], [b.values for b in s.out_bufs], publish=True)
+        pubs.append(_Publisher(s, ring, stop))
     variables = [info.variables for info in infos]
     links = [Link(Port(a, variables[a][av]), Port(b, variables[b][bv])) for a, av, b, bv in spec["links"]]
     plan = SystemPlan(spec["names"], infos, links, spec["order"], spec["start_values"],

@@ -39,8 +39,8 @@ def test_writer_needs_groups_of_names(groups):
 
 
 def _apply(moves, copies):
-    for d, s, n in moves:
-        ctypes.memmove(d, s, n)
+    for d, s in moves:
+        d[:] = s
     for dv, di, sv, si in copies:
         dv[di] = sv[si]
 
@@ -51,7 +51,7 @@ def test_consecutive_numeric_links_become_one_move_with_the_same_result():
     dst = (ctypes.c_double * 12)()
     links = [(dst, i, src, i) for i in range(9)] + [(dst, 9 + i, other, i) for i in range(3)]
     moves, copies = _runs(links)
-    assert [n for _, _, n in moves] == [9 * 8, 3 * 8] and copies == []
+    assert [(d.nbytes, s.nbytes) for d, s in moves] == [(9 * 8, 9 * 8), (3 * 8, 3 * 8)] and copies == []
     _apply(moves, copies)
     assert list(dst) == [float(i) for i in range(9)] + [10.0, 11.0, 12.0]
 
