@@ -123,11 +123,14 @@ def _unit(v: Any) -> str | None:
     return getattr(dt, "unit", None) if dt is not None else None
 
 
-def cleanup_extracted() -> None:
-    """Remove every extracted FMU directory (call at process end)."""
-    for info in _CACHE.values():
-        shutil.rmtree(info.unzipdir, ignore_errors=True)
-    _CACHE.clear()
+def cleanup_extracted(keep: Iterable[Path] = ()) -> None:
+    """Remove every extracted FMU directory but those of the FMUs in ``keep`` (call at process end).
+
+    A forked worker process keeps its parent's extractions (``keep``): they are still in use.
+    """
+    keep = set(keep)
+    for path in [p for p in _CACHE if p not in keep]:
+        shutil.rmtree(_CACHE.pop(path).unzipdir, ignore_errors=True)
 
 
 class Slave(Protocol):

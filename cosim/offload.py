@@ -34,6 +34,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from .algorithm import Runtime, byte_view, initialize, simulate
+from . import fmu as _fmu
 from .errors import CosimError
 from .fmu import STRING, Variable, cleanup_extracted, load_fmu, make_slave
 from .system import Link, Port, SystemPlan
@@ -45,6 +46,10 @@ RING = 1024  # entries per component: about 1 s of look-ahead at 1 ms
 _NAP = 0.002  # s, the worker's sleep while its ring is full
 _BURST = RING // 4  # free entries a full ring waits for: fewer, longer bursts disturb the master less
 _POLL = 0.05  # s, the master's wait between liveness checks when the worker is behind
+# fork starts the worker in milliseconds with everything imported (spawn: a new interpreter,
+# about 0.5 s). It happens before any FMU is loaded in the master; Python 3.12+ deprecates
+# forking a process with threads (numpy's BLAS has some), so there and off Linux: spawn.
+_START_METHOD = "fork" if sys.platform == "linux" and sys.version_info < (3, 12) else "spawn"
 _END_TIMEOUT = 60.0  # s, the longest wait for the worker to report its end after the last step
 
 
@@ -100,7 +105,7 @@ def choose(plan: SystemPlan, mode: str, n_steps: int) -> tuple[list[int], str]:
 def _main_importable() -> bool:
     """A spawned worker re-imports the main script: impossible for one read from stdin."""
     path = getattr(sys.modules.get("__main__"), "__file__", None)
-    return path is None or os.path.exists(path)
+    return _START_METHOD != "spawn" or path is None or os.path.exists(path)
 
 
 # --------------------------------------------------------------------------- shared layout
@@ -113,7 +118,7 @@ class _Layout:
     sizes: list[list[int]]
 
     def entry(self, j: int) -> int:
-        return max(8, sum(self.sizes[j]))
+        return sum(self.sizes[j])
 
     def offsets(self, j: int) -> tuple[int, int]:
         """(status array offset, first entry offset) of component ``j`` in the shared block."""
@@ -180,7 +185,7 @@ class Offload:
             order=[index[c] for c in plan.order if c in index],
             multiples=[multiples[c] for c in comps], algorithm=algorithm,
             start_ns=start_ns, stop_ns=stop_ns, step_ns=step_ns, sizes=self.layout.sizes)
-        ctx = mp.get_context("spawn")  # a clean interpreter: no inherited FMU libraries or threads
+        ctx = mp.get_context(_START_METHOD)
         self.raw = ctx.RawArray(ctypes.c_char, self.layout.total)
         self.filled = [ctx.Semaphore(0) for _ in comps]
         self.free = [ctx.Semaphore(RING) for _ in comps]
@@ -203,23 +208,20 @@ class Offload:
         except (EOFError, OSError):
             pass
 
-    def _raise_if_failed(self, proxy: "Proxy") -> None:
+    def raise_if_failed(self, proxy: "Proxy") -> None:
+        alive = self.process.is_alive()  # before reading: a worker that reported and died is read in full
         self._drain()
         for kind, payload in self._messages:
             if kind == "error":
                 raise _unpack(payload, self.names)
-        if not self.process.is_alive():
-            self._drain()
-            for kind, payload in self._messages:
-                if kind == "error":
-                    raise _unpack(payload, self.names)
+        if not alive:
             raise CosimError(f"component {proxy.name!r}: the worker process running {', '.join(self.names)} "
                              f"exited (code {self.process.exitcode}) at t = {proxy.time:.6g} s")
 
     def wait(self, proxy: "Proxy", ring: _Ring) -> None:
         """Block until ``ring`` has an entry (the worker is behind, e.g. while it starts)."""
         while not ring.filled.acquire(True, _POLL):
-            self._raise_if_failed(proxy)
+            self.raise_if_failed(proxy)
 
     def finish(self, proxy: "Proxy") -> None:
         """After the last step: the worker's end report (its component times) or its failure."""
@@ -228,7 +230,7 @@ class Offload:
             self._drain()
             if any(kind == "done" for kind, _ in self._messages):
                 break
-            self._raise_if_failed(proxy)
+            self.raise_if_failed(proxy)
             if _time.monotonic() > deadline:
                 raise CosimError(f"the worker process running {', '.join(self.names)} did not finish "
                                  f"within {_END_TIMEOUT:g} s of the last step")
@@ -254,25 +256,12 @@ class Proxy:
     def __init__(self, group: Offload, j: int, template: Any):
         self.group, self.j = group, j
         self.name, self.info = template.name, template.info
-        self.model_exchange = template.model_exchange
         self.time = 0.0
-        self._template = template  # never instantiated: it only owns the buffers (bind, locate)
+        self._template = template  # bound, never instantiated: it owns the buffers the worker's layout matches
         self._ring = group.ring(j, [b.values for b in template.out_bufs])
-
-    def bind(self, inputs: list[Variable], outputs: list[Variable]) -> None:
-        self._template.bind(inputs, outputs)
-        self._ring = self.group.ring(self.j, [b.values for b in self._template.out_bufs])
 
     def locate(self, var: Variable, output: bool = True) -> tuple[Any, int]:
         return self._template.locate(var, output)
-
-    @property
-    def out_bufs(self) -> list[Any]:
-        return self._template.out_bufs
-
-    @property
-    def in_bufs(self) -> list[Any]:
-        return self._template.in_bufs
 
     # the worker runs the lifecycle; these keep the master's calls in the same places
     def instantiate(self) -> None: ...
@@ -292,20 +281,13 @@ class Proxy:
             self.group.wait(self, r)
         slot = r.n % RING
         if r.status[slot]:
-            self.group._raise_if_failed(self)
+            self.group.raise_if_failed(self)
             raise CosimError(f"component {self.name!r}: the worker process reported a failure at "
                              f"t = {self.time:.6g} s without its message")
         for d, src in r.moves[slot]:
             d[:] = src
         r.free.release()
         r.n += 1
-
-    def read(self, variables: list[Variable]) -> list[Any]:
-        out = []
-        for v in variables:
-            arr, i = self._template.locate(v, True)
-            out.append(arr[i])
-        return out
 
     def terminate(self) -> None:
         if not self.group.worker_time:
@@ -371,6 +353,7 @@ def _free_count(sem: Any) -> int:
 def _worker(spec: dict, raw: Any, filled: list, free: list, stop: Any, conn: Any) -> None:
     """Entry point of the worker process: run the feed-forward group, publishing as it goes."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the master's to handle; it stops us
+    inherited = set(_fmu._CACHE)  # a forked worker shares its parent's extracted FMUs: leave them
     slaves: list[Any] = []
     pubs: list[_Publisher] = []
     code = 1
@@ -398,7 +381,7 @@ def _worker(spec: dict, raw: Any, filled: list, free: list, stop: Any, conn: Any
                 s.free()
             except Exception:  # noqa: BLE001 - freeing after a failure: nothing left to report to
                 pass
-        cleanup_extracted()
+        cleanup_extracted(keep=inherited)
         conn.close()
         # Leave without the interpreter's finalisation: pythonfmu libraries stay loaded (fmu._KEEP_ALIVE)
         # and tearing down the objects they made is what can abort a process at exit.

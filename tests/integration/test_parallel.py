@@ -18,6 +18,7 @@ from pathlib import Path
 import pytest
 
 from cosim.errors import CosimError, FMIError
+from cosim import offload
 from cosim.offload import RING
 from cosim.run import run_scenario
 from cosim.scenario import load_scenario
@@ -56,8 +57,11 @@ def _messages(path: Path) -> dict[str, list[tuple[int, bytes]]]:
     return out
 
 
-@pytest.mark.parametrize("alg,m", [("gauss_seidel", 1), ("jacobi", 1), ("gauss_seidel", 2)])
-def test_parallel_run_logs_the_serial_values_bit_for_bit(write_scenario, tmp_path, alg, m):
+@pytest.mark.parametrize("alg,m,start", [("gauss_seidel", 1, None), ("jacobi", 1, None), ("gauss_seidel", 2, None),
+                                         ("gauss_seidel", 1, "spawn")])
+def test_parallel_run_logs_the_serial_values_bit_for_bit(write_scenario, tmp_path, monkeypatch, alg, m, start):
+    if start is not None:  # the start method used off Linux and on Python 3.12+ (default here: fork)
+        monkeypatch.setattr(offload, "_START_METHOD", start)
     runs = {}
     for parallel in ("off", "on"):
         path = write_scenario(MIXED.format(m=m, stop=3.0, alg=alg, parallel=parallel), f"{parallel}.yaml")
