@@ -426,15 +426,17 @@ def _cmd_run(args: argparse.Namespace) -> int:
 
 
 def _cmd_check(args: argparse.Namespace) -> int:
+    from .offload import choose
     from .run import check_scenario
     from .scenario import apply_overrides
 
     scenario, plan, report = check_scenario(args.scenario, apply_overrides(args.set))
     order = " -> ".join(plan.names[c] for c in plan.order)
+    _, parallel = choose(plan, scenario.parallel, scenario.time.n_steps)
     payload = {"scenario": scenario.name, "ok": True, "preflight": report, "order": [plan.names[c] for c in plan.order],
-               "connections": len(plan.links)}
+               "connections": len(plan.links), "parallel": parallel}
     _emit(args, payload, f"{scenario.name}: ok\n  pre-flight: {report}\n  order: {order}\n"
-                         f"  {len(plan.links)} connections")
+                         f"  {len(plan.links)} connections" + (f"\n  {parallel}" if parallel else ""))
     return EXIT_OK
 
 

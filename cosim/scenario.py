@@ -117,6 +117,10 @@ class TimeGrid(_Model):
     def start_ns(self) -> int:
         return round(self.start * NS_PER_S)
 
+    @property
+    def n_steps(self) -> int:
+        return (self.stop_ns - self.start_ns) // self.step_ns
+
 
 class TrajectorySpec(_Model):
     """The reference trajectory, for the pre-flight and the initial state.
