@@ -78,7 +78,7 @@ def test_parallel_run_logs_the_serial_values_bit_for_bit(write_scenario, tmp_pat
     for topic, serial_list in s_msgs.items():
         assert p_msgs[topic] == serial_list, f"{topic}: parallel log differs from serial (first of " \
             f"{len(serial_list)}: {next((a, b) for a, b in zip(serial_list, p_msgs[topic]) if a != b)})"
-    # the loop really consumed the group's output: ref.n counts the ref's steps, sum.y moves with src
+    # the Integer output came through the ring too: ref.n counts the ref's steps
     last_ref = p_msgs["/ref"][-1][1]
     assert b'"n":3000' in last_ref, f"last /ref message {last_ref[:120]!r}"
 
