@@ -14,8 +14,8 @@ pythonfmu FMUs hold the GIL for the whole call.
 
 Synchronisation is one pair of counting semaphores per component (entries filled, entries
 free); in the steady state the worker is ahead, so the master's acquire and release never
-block and never make a system call. When the ring is full the worker sleeps in short naps
-instead of waiting on the semaphore, for the same reason. A failure in the worker travels
+block and never make a system call. When the ring is full the worker naps until a quarter
+of it is free instead of waiting on the semaphore, for the same reason. A failure in the worker travels
 as an error entry plus the exception over a pipe, and is raised by the master where a serial
 run would have raised it: at that component's step. A dead worker is reported as such.
 """
@@ -33,15 +33,15 @@ import time as _time
 from dataclasses import dataclass
 from typing import Any
 
-from .algorithm import Runtime, byte_view, initialize, simulate
 from . import fmu as _fmu
+from .algorithm import Runtime, byte_view, initialize, simulate
 from .errors import CosimError
 from .fmu import STRING, Variable, cleanup_extracted, load_fmu, make_slave
 from .system import Link, Port, SystemPlan
 
 __all__ = ["AUTO_MIN_STEPS", "RING", "feedforward", "choose", "Offload", "Proxy"]
 
-AUTO_MIN_STEPS = 2000  # below this, the worker's start-up (about 1 s) outweighs what it saves
+AUTO_MIN_STEPS = 2000  # below this, starting the worker and loading its FMUs again can outweigh what it saves
 RING = 1024  # entries per component: about 1 s of look-ahead at 1 ms
 _NAP = 0.002  # s, the worker's sleep while its ring is full
 _BURST = RING // 4  # free entries a full ring waits for: fewer, longer bursts disturb the master less
@@ -92,7 +92,7 @@ def choose(plan: SystemPlan, mode: str, n_steps: int) -> tuple[list[int], str]:
         if strings:
             why = f"{', '.join(strings)} are strings (only fixed-size values are shared)"
         elif mode == "auto" and n_steps < AUTO_MIN_STEPS:
-            why = f"{n_steps} steps is too short to pay for starting a worker (auto needs {AUTO_MIN_STEPS})"
+            why = f"{n_steps} steps is too short to pay for starting a worker; auto needs {AUTO_MIN_STEPS}"
         elif mode == "auto" and usable_cpus() < 2:
             why = "one CPU available"
         elif not _main_importable():
@@ -383,10 +383,14 @@ def _worker(spec: dict, raw: Any, filled: list, free: list, stop: Any, conn: Any
                 pass
         cleanup_extracted(keep=inherited)
         conn.close()
-        # Leave without the interpreter's finalisation: pythonfmu libraries stay loaded (fmu._KEEP_ALIVE)
-        # and tearing down the objects they made is what can abort a process at exit.
-        sys.stdout.flush()
-        sys.stderr.flush()
+        # Leave without the interpreter's finalisation: the worker has nothing left to finalise, and
+        # it skips the teardown of the loaded pythonfmu libraries, where pythonfmu has known crashes
+        # at exit (PythonFMU issue 228). A forked worker must not run its parent's atexit handlers.
+        for stream in (sys.stdout, sys.stderr):
+            try:
+                stream.flush()
+            except (OSError, ValueError):  # closed or broken: nothing to keep
+                pass
         os._exit(code)
 
 
