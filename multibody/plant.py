@@ -52,6 +52,14 @@ class SolverSettings:
         Reuse the Jacobian across Newton iterations and steps where possible.
     substeps : int
         Integrator steps per macro step ``h`` of :meth:`DeltaPlant.step` (1 = one step of size h).
+    max_step : float or None
+        Longest integrator step, s: a longer macro step is split into the fewest equal steps no
+        longer than this (None: no limit, ``substeps`` steps whatever ``h``).
+    min_step : float
+        Resolution of the plant, s: a macro step that would leave less than this to integrate is
+        absorbed (see :meth:`DeltaPlant.step`). Generalized-alpha's Newton iteration fails below
+        ~1e-12 s on the full linear delta (its matrix scales with 1/h^2); 1e-9 s converged on every
+        model, and is the master's time resolution (integer nanoseconds).
     sparse : bool or None
         Use the EigenSparse linear solver (with its analysed sparsity pattern reused from step
         to step: the pattern never changes); False = Eigen's dense LU; None (default) = the
@@ -65,12 +73,18 @@ class SolverSettings:
     modified_newton: bool = True
     substeps: int = 1
     sparse: bool | None = None
+    max_step: float | None = None
+    min_step: float = 1e-9
 
     def __post_init__(self) -> None:
         if not 0.0 <= self.spectral_radius <= 1.0:
             raise ValueError(f"SolverSettings.spectral_radius must be in [0, 1], got {self.spectral_radius!r}")
         if self.substeps < 1:
             raise ValueError(f"SolverSettings.substeps must be >= 1, got {self.substeps!r}")
+        if self.max_step is not None and not 0.0 < self.max_step < math.inf:
+            raise ValueError(f"SolverSettings.max_step must be a finite time > 0 s or None, got {self.max_step!r}")
+        if not 0.0 <= self.min_step < math.inf:
+            raise ValueError(f"SolverSettings.min_step must be a finite time >= 0 s, got {self.min_step!r}")
 
 
 @dataclass(frozen=True)
@@ -163,6 +177,7 @@ class DeltaPlant:
         p0 = np.asarray(p0, dtype=float).reshape(3)
         v0 = np.asarray(v0, dtype=float).reshape(3)
         self._t = float(t0)
+        self._lag = 0.0  # s the solver is behind self._t: steps absorbed below its resolution
         self._u = np.zeros(3)
         self._sc = exu.SystemContainer()
         self.mbs = self._sc.AddSystem()
@@ -184,6 +199,15 @@ class DeltaPlant:
     def step(self, t: float, h: float, u=(0.0, 0.0, 0.0)) -> PlantOutput:
         """Advance from ``t`` (must equal :attr:`time`) to ``t + h`` with efforts ``u`` held constant.
 
+        Any finite ``h > 0`` is accepted. The solver integrates from its own time to ``t + h`` in
+        equal steps (``settings.substeps``, more if ``settings.max_step`` requires). A step that
+        would leave the solver less than ``settings.min_step`` (the plant's resolution, 1 ns by
+        default) to integrate, such as the 1e-13 s remainder a tool adding float steps produces,
+        is *absorbed*: :attr:`time` advances but the solver does not, and the outputs keep the
+        state of the solver's time (at most ``min_step`` old: a position error of at most
+        ``|v| * min_step``). The next step integrates the absorbed interval with its own, so no
+        time is lost; only the effort over those < 1 ns is the next step's instead of its own.
+
         Parameters
         ----------
         t, h : float
@@ -194,8 +218,8 @@ class DeltaPlant:
         if abs(t - self._t) > _time_tolerance(self._t):
             raise PlantError(f"{type(self).__name__}.step: t = {t!r} s does not equal the plant time "
                              f"{self._t!r} s; steps must be contiguous")
-        if not h > 0.0:
-            raise PlantError(f"{type(self).__name__}.step at t = {t!r} s: h must be > 0, got {h!r}")
+        if not 0.0 < h < math.inf:
+            raise PlantError(f"{type(self).__name__}.step at t = {t!r} s: h must be a finite step > 0 s, got {h!r}")
         t_end = t + h
         if self.prescribed is None:
             u = np.array(u, dtype=float).reshape(3)  # a copy: the caller may reuse its array
@@ -204,7 +228,17 @@ class DeltaPlant:
                 raise PlantError(f"{type(self).__name__}.step at t = {t!r} s: non-finite effort u = {u}")
             self._apply_effort(values)
             self._u = u
-        step_size = h / self._substeps
+        span = h + self._lag  # exactly h unless steps were absorbed
+        if span < self.settings.min_step:  # below the resolution: absorbed (see the docstring)
+            self._t = t_end
+            self._lag = span
+            self._output = self._make_output(self._u if self.prescribed is None else self._read_prescribed_reaction())
+            return self._output
+        n = self._substeps
+        max_step = self.settings.max_step
+        if max_step is not None and span > max_step * (1.0 + 1e-9):  # 1e-9: rounding of span never adds a step
+            n = max(n, math.ceil(span / max_step * (1.0 - 1e-12)))
+        step_size = span / n
         if step_size != self._step_size:
             it = self._it
             it.currentStepSize = step_size
@@ -223,6 +257,7 @@ class DeltaPlant:
             raise PlantError(f"{type(self).__name__}: solver did not converge between t = {t!r} s and "
                              f"{t_end!r} s ({self._solver.GetErrorString()})")
         self._t = t_end
+        self._lag = 0.0
         self._output = self._make_output(self._u if self.prescribed is None else self._read_prescribed_reaction())
         return self._output
 
