@@ -3,26 +3,47 @@ causality, variability and initial, stored by name, plus the FMI 2.0 slave base.
 
 An adapter declares its interface in ``__init__`` with :meth:`Adapter.input`,
 :meth:`Adapter.output`, :meth:`Adapter.parameter` (or the vector forms) and
-implements :meth:`Adapter.start` (called once the parameters are fixed) and
+implements :meth:`Adapter.start` (builds the core objects from the parameters) and
 :meth:`Adapter.advance` (one communication step). Outputs are refreshed through
 :meth:`Adapter.refresh`, called lazily when an output is read after an input or
-tunable parameter changed, so algebraic blocks (IK, FK) have direct feedthrough.
+parameter changed, so algebraic blocks (IK, FK) have direct feedthrough.
+
+Outputs are valid whenever they are read, initialization mode included: the first read
+builds the core objects (:meth:`Adapter.start`) from the parameter values of that moment
+(again after a parameter changes, until ``exitInitializationMode``) and computes the outputs
+from the inputs, so an importer that reads a trajectory's ``p_ref`` in initialization mode
+gets the reference at the start time, not a placeholder. Outputs are therefore declared
+``initial="calculated"`` (no start value) and listed in ``InitialUnknowns``.
+
+Every output declares the inputs it depends on directly (``depends=``); ``to_xml`` writes
+them as the output's ``dependencies`` in ModelStructure (``dependenciesKind="dependent"``:
+no particular structure claimed), and the ``InitialUnknowns`` depend on those inputs and on
+the parameters (every parameter: they are not tracked per output, an over-approximation the
+standard allows). A plant or controller with no direct feedthrough declares ``depends=()``.
+
+A step that cannot be taken (the adapter's ``advance`` raises) returns ``fmi2Discard`` with
+the reason logged through the FMI logger (status error), never ``fmi2Fatal``; the instance
+then refuses further steps, since its state after a failed step is undefined.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
 from operator import itemgetter
-from typing import Any, Iterable
+from typing import Any, Callable, Iterable, Union
 from xml.etree.ElementTree import Element, SubElement
 
 from pythonfmu import Fmi2Causality, Fmi2Initial, Fmi2Slave, Fmi2Variability
+from pythonfmu.enums import Fmi2Status
 from pythonfmu.default_experiment import DefaultExperiment
 from pythonfmu.variables import Boolean, Integer, Real, String
 
 from ._names import UNITS, XYZ, ValueAccess, axis_names, compensate_exporter_refcount, joint_names, writer
 
-__all__ = ["Adapter", "UNITS", "XYZ", "joint_names", "axis_names", "DefaultExperiment", "writer"]
+__all__ = ["Adapter", "Depends", "UNITS", "XYZ", "joint_names", "axis_names", "DefaultExperiment", "writer"]
+
+Depends = Union[Iterable[str], Callable[[int], Iterable[str]]]
+"""Inputs an output depends on directly: names, or (for the vector helpers) ``i -> names`` of output ``i``."""
 
 
 @dataclass(frozen=True)
@@ -36,6 +57,7 @@ class Spec:
     start: Any
     unit: str | None
     description: str
+    depends: tuple[str, ...] = ()  # outputs: the inputs this output depends on directly
 
 
 class _UnitReal(Real):
@@ -82,10 +104,13 @@ class Adapter(ValueAccess, Fmi2Slave):
         self._real_get: dict[int, str] = {}
         self._real_set: dict[int, str] = {}
         self._output_vrs: set[int] = set()
+        self._param_vrs: set[int] = set()
         self._get_plans: dict[tuple[int, ...], tuple[bool, Any] | None] = {}
-        self._set_plans: dict[tuple[int, ...], Any] = {}
-        self._dirty = True
-        self._started = False
+        self._set_plans: dict[tuple[int, ...], tuple[Any, bool] | None] = {}
+        self._dirty = True  # outputs are stale: recompute (refresh) when one is read
+        self._built = False  # start() has run with the current parameter values
+        self._initialized = False  # exitInitializationMode done: parameters no longer rebuild
+        self._failed: str | None = None  # why the last step failed (the instance cannot continue)
         self.time = 0.0
 
     # ------------------------------------------------------------------ declaration
@@ -99,51 +124,66 @@ class Adapter(ValueAccess, Fmi2Slave):
             variability=_VARIABILITY[spec.variability],
             description=spec.description,
             getter=self._getter(name, spec.causality == "output"),
-            setter=self._setter(name, spec.kind) if settable else None,
+            setter=self._setter(name, spec.kind, spec.causality == "parameter") if settable else None,
         )
-        # pythonfmu 0.7 + fmpy validation: outputs need initial="exact" and a start value.
+        start: Any = spec.start
         if spec.causality == "output":
-            kwargs["initial"] = Fmi2Initial.exact
+            # computed on demand in every mode (see the module docstring): no start value
+            kwargs["initial"] = Fmi2Initial.calculated
+            start = None
         if spec.kind == "real":
-            var = _UnitReal(name, spec.unit, start=float(spec.start), **kwargs)
+            var = _UnitReal(name, spec.unit, start=None if start is None else float(start), **kwargs)
         else:
             var = {"integer": Integer, "boolean": Boolean, "string": String}[spec.kind](
-                name, start=spec.start, **kwargs
+                name, start=start, **kwargs
             )
         self.register_variable(var, nested=False)
         vr = var.value_reference
         if spec.causality == "output":
             self._output_vrs.add(vr)
+        elif spec.causality == "parameter":
+            self._param_vrs.add(vr)
         if spec.kind == "real":
             self._real_get[vr] = name
             if settable:
                 self._real_set[vr] = name
 
+    def _update(self) -> None:
+        """Bring the outputs up to date: build from the parameters if needed, then refresh."""
+        if not self._built:
+            self.start()
+            self._built = True
+        self._dirty = False
+        self.refresh()
+
     def _getter(self, name: str, is_output: bool):
         if is_output:
             def get() -> Any:
-                if self._started and self._dirty:
-                    self._dirty = False
-                    self.refresh()
+                if self._dirty:
+                    self._update()
                 return self.values[name]
             return get
         return lambda: self.values[name]
 
-    def _setter(self, name: str, kind: str):
+    def _setter(self, name: str, kind: str, is_parameter: bool = False):
         cast = _TYPES[kind]
 
         def set_(value: Any) -> None:
             self.values[name] = cast(value)
             self._dirty = True
+            if is_parameter and not self._initialized:
+                self._built = False
         return set_
 
     def input(self, name: str, unit: str | None, description: str, start: Any = 0.0, kind: str = "real") -> None:
         self._declare(Spec(name, kind, "input", "continuous" if kind == "real" else "discrete",
                            start, unit, description))
 
-    def output(self, name: str, unit: str | None, description: str, start: Any = 0.0, kind: str = "real") -> None:
+    def output(self, name: str, unit: str | None, description: str, *, depends: Iterable[str],
+               kind: str = "real") -> None:
+        """An output; ``depends`` names the inputs it depends on directly (empty: no direct feedthrough)."""
         self._declare(Spec(name, kind, "output", "continuous" if kind == "real" else "discrete",
-                           start, unit, description))
+                           _TYPES[kind](), unit, description, tuple(depends)))
 
     def parameter(self, name: str, start: Any, unit: str | None, description: str, *,
                   tunable: bool = False, kind: str | None = None) -> None:
@@ -155,9 +195,11 @@ class Adapter(ValueAccess, Fmi2Slave):
         for i, (n, s) in enumerate(zip(names, start)):
             self.input(n, unit, f"{description} ({_component(n, i)})", s)
 
-    def outputs3(self, names: Iterable[str], unit: str, description: str, start: Iterable[float] = (0.0, 0.0, 0.0)) -> None:
-        for i, (n, s) in enumerate(zip(names, start)):
-            self.output(n, unit, f"{description} ({_component(n, i)})", s)
+    def outputs3(self, names: Iterable[str], unit: str, description: str, *, depends: Depends) -> None:
+        """Three outputs; ``depends`` is the inputs of each (names), or ``i -> names`` for output ``i`` (0-based)."""
+        for i, n in enumerate(names):
+            self.output(n, unit, f"{description} ({_component(n, i)})",
+                        depends=depends(i) if callable(depends) else depends)
 
     def parameters3(self, names: Iterable[str], start: Iterable[float], unit: str, description: str,
                     *, tunable: bool = False) -> None:
@@ -166,7 +208,8 @@ class Adapter(ValueAccess, Fmi2Slave):
 
     # ------------------------------------------------------------------ behaviour
     def start(self) -> None:
-        """Build the core objects from the (now fixed) parameters."""
+        """Build the core objects from the parameters and set the initial state; called before the
+        first output is read (initialization mode included) and again if a parameter changes there."""
 
     def refresh(self) -> None:
         """Recompute outputs from the current inputs (direct feedthrough)."""
@@ -187,9 +230,8 @@ class Adapter(ValueAccess, Fmi2Slave):
         if plan is None:  # not all Reals: pythonfmu raises the TypeError naming the reference
             return super().get_real(vrs)
         reads_outputs, read = plan
-        if reads_outputs and self._dirty and self._started:
-            self._dirty = False
-            self.refresh()
+        if reads_outputs and self._dirty:
+            self._update()
         return read(self.values)
 
     def _get_plan(self, vrs: tuple[int, ...]) -> tuple[bool, Any] | None:
@@ -209,31 +251,51 @@ class Adapter(ValueAccess, Fmi2Slave):
         """fmi2SetReal without per-variable setter closures (same effect: store, mark outputs stale)."""
         key = tuple(vrs)
         try:
-            write = self._set_plans[key]
+            plan = self._set_plans[key]
         except KeyError:
-            write = self._set_plans[key] = self._set_plan(key)
-        if write is None:  # not all settable Reals: pythonfmu's error, before anything is stored
+            plan = self._set_plans[key] = self._set_plan(key)
+        if plan is None:  # not all settable Reals: pythonfmu's error, before anything is stored
             return super().set_real(vrs, values)
+        write, sets_parameters = plan
         write(self.values, values)  # fmi2SetReal hands over Python floats
         self._dirty = True
+        if sets_parameters and not self._initialized:
+            self._built = False
 
-    def _set_plan(self, vrs: tuple[int, ...]) -> Any:
-        """(values, new values) -> None storing under the names of ``vrs``; None if one is not a settable Real."""
+    def _set_plan(self, vrs: tuple[int, ...]) -> tuple[Any, bool] | None:
+        """(write, whether a parameter is set): ``write(values, new values)`` stores under the names of
+        ``vrs``; None if one is not a settable Real."""
         if not vrs or not all(vr in self._real_set for vr in vrs):
             return None
-        return writer([self._real_set[vr] for vr in vrs])
+        return writer([self._real_set[vr] for vr in vrs]), not self._param_vrs.isdisjoint(vrs)
 
     def setup_experiment(self, start_time: float, stop_time: float | None = None, tolerance: float | None = None):
         self.time = float(start_time)
 
     def exit_initialization_mode(self) -> None:
-        self.start()
-        self._started = True
-        self._dirty = False
-        self.refresh()
+        if not self._built:  # no output was read in initialization mode
+            self.start()
+            self._built = True
+            self._dirty = True
+        self._initialized = True
 
     def do_step(self, current_time: float, step_size: float) -> bool:
-        self.advance(current_time, step_size)
+        """One communication step; False (fmi2Discard) with the reason logged when it cannot be taken."""
+        if self._failed is not None:
+            self.log(f"doStep at t = {current_time!r} s refused: an earlier step failed ({self._failed}); "
+                     "this instance cannot continue", Fmi2Status.error)
+            return False
+        if not step_size > 0.0 or step_size == float("inf"):
+            self.log(f"doStep at t = {current_time!r} s: the communication step must be a finite h > 0, "
+                     f"got {step_size!r}", Fmi2Status.error)
+            return False
+        try:
+            self.advance(current_time, step_size)
+        except Exception as exc:  # noqa: BLE001 - reported through the FMI logger, never fmi2Fatal
+            self._failed = f"{type(exc).__name__}: {exc}"
+            self.log(f"doStep from t = {current_time!r} s over h = {step_size!r} s failed: {self._failed}",
+                     Fmi2Status.error)
+            return False
         self.time = current_time + step_size
         self._dirty = True  # outputs are recomputed once, when next read
         return True
@@ -249,7 +311,43 @@ class Adapter(ValueAccess, Fmi2Slave):
             # FMI 2.0 schema order: CoSimulation, UnitDefinitions, ..., LogCategories, DefaultExperiment.
             position = list(root).index(root.find("CoSimulation")) + 1
             root.insert(position, units)
+        structure = root.find("ModelStructure")
+        for child in list(structure):
+            structure.remove(child)
+        self._write_model_structure(structure)
         return root
+
+    def _write_model_structure(self, structure: Element) -> None:
+        """Outputs with their direct-feedthrough ``dependencies`` and the InitialUnknowns (FMI 2.0 2.2.8).
+
+        Indices are 1-based positions in ModelVariables (pythonfmu writes ``self.vars`` in order).
+        """
+        index = {v.name: i + 1 for i, v in enumerate(self.vars.values())}
+        inputs = {s.name for s in self.specs if s.causality == "input"}
+        parameters = [index[s.name] for s in self.specs if s.causality == "parameter"]
+        outputs = sorted((s for s in self.specs if s.causality == "output"), key=lambda s: index[s.name])
+        for spec in outputs:
+            unknown = set(spec.depends) - inputs
+            if unknown:
+                raise ValueError(f"{type(self).__name__}: output {spec.name} depends on {sorted(unknown)}, "
+                                 f"which are not inputs; inputs: {sorted(inputs)}")
+        if not outputs:
+            return
+
+        def unknown(parent: Element, spec: Spec, known: Iterable[int]) -> None:
+            deps = sorted(set(known))
+            SubElement(parent, "Unknown", {"index": str(index[spec.name]),
+                                           "dependencies": " ".join(map(str, deps)),
+                                           "dependenciesKind": " ".join(["dependent"] * len(deps))})
+
+        node = SubElement(structure, "Outputs")
+        for spec in outputs:
+            unknown(node, spec, (index[n] for n in spec.depends))
+        # In initialization mode the knowns are the inputs and every variable with initial="exact"
+        # (here the parameters); the inputs an output depends on are the same as in a step.
+        node = SubElement(structure, "InitialUnknowns")
+        for spec in outputs:
+            unknown(node, spec, [*(index[n] for n in spec.depends), *parameters])
 
 
 def _component(name: str, index: int) -> str:

@@ -1,9 +1,17 @@
 """FMI 3.0 model-exchange counterpart of :mod:`fmus._fmi` (pythonfmu3): declared variables
-with unit and description; continuous states are declared with :meth:`AdapterME.state`."""
+with unit and description; continuous states are declared with :meth:`AdapterME.state`.
+
+As in :mod:`fmus._fmi`, outputs, states and derivatives are valid whenever they are read,
+initialization mode included (the model is built from the parameter values of that moment,
+again if a parameter changes before ``exitInitializationMode``), and ModelStructure is exact:
+each output and state derivative lists the inputs and states it depends on (``depends=``),
+and each InitialUnknown the inputs among those plus the parameters (all of them, an
+over-approximation the standard allows)."""
 
 from __future__ import annotations
 
 from typing import Any, Iterable
+from xml.etree.ElementTree import Element
 
 from pythonfmu3 import (
     DefaultExperiment,
@@ -26,6 +34,8 @@ class AdapterME(ValueAccess, Fmi3SlaveBase, ModelExchange):
 
     KIND: str | None = None
     EXPERIMENT: tuple[float, float, float] = (0.0, 1.0, 1e-3)
+    LINEAR: frozenset[tuple[str, str]] = frozenset()
+    """(unknown, known) pairs where the known enters as a constant factor (dependenciesKind "constant")."""
 
     def __init__(self, **kwargs: Any) -> None:
         compensate_exporter_refcount(type(self))
@@ -34,7 +44,10 @@ class AdapterME(ValueAccess, Fmi3SlaveBase, ModelExchange):
         start, stop, step = self.EXPERIMENT
         self.default_experiment = DefaultExperiment(start_time=start, stop_time=stop, step_size=step)
         self.values: dict[str, float] = {}
-        self._started = False
+        self._depends: dict[str, tuple[str, ...]] = {}  # output or derivative -> inputs and states it depends on
+        self._kinds: dict[str, str] = {}  # name -> "parameter" | "input" | "output" | "state" | "derivative"
+        self._built = False  # start() has run with the current parameter values
+        self._initialized = False  # exitInitializationMode done: parameters no longer rebuild
         self._stale = True
         self.time = 0.0
         self._units: set[str] = set()
@@ -44,8 +57,9 @@ class AdapterME(ValueAccess, Fmi3SlaveBase, ModelExchange):
 
     def _add(self, name: str, start: float | None, unit: str | None, description: str, causality: Fmi3Causality,
              variability: Fmi3Variability, initial: Fmi3Initial | None = None, derivative: int | None = None,
-             settable: bool = False) -> int:
+             settable: bool = False, kind: str = "") -> int:
         self.values[name] = 0.0 if start is None else float(start)
+        self._kinds[name] = kind
         self._stale = True
         if unit is not None and unit not in self._units:
             self._units.add(unit)
@@ -54,6 +68,8 @@ class AdapterME(ValueAccess, Fmi3SlaveBase, ModelExchange):
         setter = (lambda v, n=name: self._set(n, v)) if settable else None
         if causality is Fmi3Causality.output:
             getter = lambda n=name: self._get_output(n)  # noqa: E731
+        elif derivative is not None:
+            getter = lambda n=name: self._get_derivative(n)  # noqa: E731
         else:
             getter = lambda n=name: self.values[n]  # noqa: E731
         var = Float64(name, start=start, unit=unit, causality=causality, variability=variability, initial=initial,
@@ -63,7 +79,7 @@ class AdapterME(ValueAccess, Fmi3SlaveBase, ModelExchange):
 
     def parameter(self, name: str, start: float, unit: str | None, description: str) -> None:
         self._add(name, start, unit, description, Fmi3Causality.parameter, Fmi3Variability.fixed,
-                  Fmi3Initial.exact, settable=True)
+                  Fmi3Initial.exact, settable=True, kind="parameter")
 
     def parameters3(self, names: Iterable[str], start: Iterable[float], unit: str, description: str, *,
                     tunable: bool = False) -> None:
@@ -71,32 +87,55 @@ class AdapterME(ValueAccess, Fmi3SlaveBase, ModelExchange):
             self.parameter(n, float(s), unit, f"{description} (leg {i + 1})")
 
     def input(self, name: str, unit: str | None, description: str, start: float = 0.0) -> None:
-        self._add(name, start, unit, description, Fmi3Causality.input, Fmi3Variability.continuous, settable=True)
+        self._add(name, start, unit, description, Fmi3Causality.input, Fmi3Variability.continuous, settable=True,
+                  kind="input")
 
-    def output(self, name: str, unit: str | None, description: str) -> None:
+    def output(self, name: str, unit: str | None, description: str, *, depends: Iterable[str]) -> None:
+        """An output computed from the states and inputs ``depends`` (inputs among them: direct feedthrough)."""
         self._add(name, None, unit, description, Fmi3Causality.output, Fmi3Variability.continuous,
-                  Fmi3Initial.calculated)
+                  Fmi3Initial.calculated, kind="output")
+        self._depends[name] = tuple(depends)
 
-    def state(self, name: str, der_name: str, unit: str, der_unit: str, description: str) -> None:
-        """A continuous state (an output, set by the solver) and its derivative ``der_name``."""
+    def state(self, name: str, der_name: str, unit: str, der_unit: str, description: str, *,
+              depends: Iterable[str]) -> None:
+        """A continuous state (an output, set by the solver) and its derivative ``der_name``, which
+        depends on the states and inputs ``depends``."""
         vr = self._add(name, None, unit, description, Fmi3Causality.output, Fmi3Variability.continuous,
-                       Fmi3Initial.calculated, settable=True)
+                       Fmi3Initial.calculated, settable=True, kind="state")
+        self._depends[name] = (name,)  # the output is the state itself
         self._add(der_name, None, der_unit, f"time derivative of {name}", Fmi3Causality.local,
-                  Fmi3Variability.continuous, Fmi3Initial.calculated, derivative=vr)
+                  Fmi3Variability.continuous, Fmi3Initial.calculated, derivative=vr, kind="derivative")
+        self._depends[der_name] = tuple(depends)
 
     def _set(self, name: str, value: float) -> None:
         self.values[name] = float(value)
         self._stale = True
+        if self._kinds[name] == "parameter" and not self._initialized:
+            self._built = False
+
+    def _build(self) -> None:
+        """Build the model and the initial states from the current parameters if not done yet."""
+        if not self._built:
+            self.start()
+            self._built = True
+            self._stale = True
 
     def _get_output(self, name: str) -> float:
         # Outputs follow the current states and inputs, not the solver's last trial point.
-        if self._stale and self._started:
+        self._build()
+        if self._stale:
             self.outputs()
             self._stale = False
         return self.values[name]
 
+    def _get_derivative(self, name: str) -> float:
+        self._build()
+        self.derivatives()
+        return self.values[name]
+
     def start(self) -> None:
-        """Build the model from the parameters and set the initial states."""
+        """Build the model from the parameters and set the initial states (before the first read,
+        initialization mode included, and again if a parameter changes there)."""
 
     def derivatives(self) -> None:
         """Fill the derivative variables from the states and inputs."""
@@ -105,14 +144,44 @@ class AdapterME(ValueAccess, Fmi3SlaveBase, ModelExchange):
         """Fill the output variables (other than the states) from the states and inputs."""
 
     def exit_initialization_mode(self) -> None:
-        self.start()
-        self._started = True
-        self._stale = True
+        self._build()
+        self._initialized = True
 
     def get_continuous_state_derivatives(self) -> list[float]:
+        self._build()
         self.derivatives()
         return [float(self.vars[vr].getter()) for vr in self._derivative_refs()]
 
     def _derivative_refs(self) -> list[int]:
         return [v.value_reference for v in self.vars.values()
                 if isinstance(v, Float64) and v.derivative is not None]
+
+    def to_xml(self, model_options: dict[str, str] = dict()) -> Element:  # noqa: B006 (pythonfmu3 signature)
+        root = super().to_xml(model_options)
+        vr = {v.name: v.value_reference for v in self.vars.values()}
+        name = {r: n for n, r in vr.items()}
+        unknown = set().union(*self._depends.values()) - {n for n, k in self._kinds.items() if k in ("input", "state")}
+        if unknown:
+            raise ValueError(f"{type(self).__name__}: dependencies on {sorted(unknown)}, which are neither inputs "
+                             "nor states")
+        parameters = [vr[n] for n, k in self._kinds.items() if k == "parameter"]
+        for element in root.find("ModelStructure"):
+            ref = int(element.get("valueReference"))
+            deps = self._depends.get(name[ref], ())
+            if element.tag == "InitialUnknown":
+                # knowns in initialization mode: inputs and variables with initial="exact" (the
+                # parameters, which also fix the initial states)
+                known = sorted({vr[n] for n in deps if self._kinds[n] == "input"} | set(parameters))
+            elif element.tag in ("Output", "ContinuousStateDerivative"):
+                known = sorted(vr[n] for n in deps)
+            else:
+                continue
+            kinds = ["constant" if self._linear(name[ref], name[k]) else "dependent" for k in known]
+            element.set("dependencies", " ".join(map(str, known)))
+            element.set("dependenciesKind", " ".join(kinds))
+        return root
+
+    def _linear(self, unknown: str, known: str) -> bool:
+        """Whether ``known`` enters ``unknown`` as a constant factor times itself (a state as its own
+        output, dq/dt = qd); subclasses list such pairs in ``LINEAR``."""
+        return (unknown, known) in self.LINEAR or (unknown == known and self._kinds[unknown] == "state")

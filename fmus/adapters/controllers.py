@@ -16,7 +16,7 @@ from delta.control import CTC, DEFAULT_GAINS, PD, PID, PDPlus
 from delta.dynamics import analytic_model
 
 from .._fmi import Adapter, joint_names, writer
-from .common import declare_masses, declare_robot, hold_effort, home_joints, masses_from, q_units, robot_from
+from .common import declare_masses, declare_robot, home_joints, masses_from, q_units, robot_from
 
 Q, QD = joint_names("q"), joint_names("qd")
 Q_REF, QD_REF, QDD_REF = joint_names("q_ref"), joint_names("qd_ref"), joint_names("qdd_ref")
@@ -52,7 +52,11 @@ class _Controller(Adapter):
         self.inputs3(Q_REF, qu, "desired joint position", q0)
         self.inputs3(QD_REF, qdu, "desired joint velocity")
         self.inputs3(QDD_REF, qddu, "desired joint acceleration")
-        self.outputs3(U, uu, "actuator effort along +q", hold_effort(kind) if self.MODEL_BASED else (0.0,) * 3)
+        self.outputs3(U, uu, "actuator effort along +q", depends=self.feedthrough)
+
+    def feedthrough(self, i: int) -> tuple[str, ...]:
+        """Inputs that ``u[i + 1]`` depends on directly: PD and PID act leg by leg."""
+        return Q[i], QD[i], Q_REF[i], QD_REF[i]
 
     def gain_unit(self, name: str, uu: str, qu: str) -> tuple[str, str]:
         linear = uu == "N"
@@ -118,6 +122,10 @@ class PDPlusController(_Controller):
     LAW = "pdplus"
     MODEL_BASED = True
 
+    def feedthrough(self, i: int) -> tuple[str, ...]:
+        """The PD terms of leg i plus G(q), which couples the legs through the platform."""
+        return (*Q, QD[i], Q_REF[i], QD_REF[i])
+
     def make_law(self, h: float):
         model = analytic_model(robot_from(self, self.KIND), masses_from(self, self.KIND))
         return PDPlus(model, self.gains("kp"), self.gains("kd"), h, u_max=self.u_max)
@@ -128,6 +136,10 @@ class CTCController(_Controller):
 
     LAW = "ctc"
     MODEL_BASED = True
+
+    def feedthrough(self, i: int) -> tuple[str, ...]:
+        """Every input: M(q) couples the legs' outer-loop terms, C(q, qd) qd and G(q) every joint."""
+        return (*Q, *QD, *Q_REF, *QD_REF, *QDD_REF)
 
     def gain_unit(self, name: str, uu: str, qu: str) -> tuple[str, str]:
         return ({"kp": "1/s2", "kd": "1/s"}[name],

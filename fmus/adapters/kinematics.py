@@ -50,12 +50,19 @@ class InverseKinematics(Adapter):
         self.inputs3(P_REF, "m", "desired platform position", home)
         self.inputs3(V_REF, "m/s", "desired platform velocity")
         self.inputs3(A_REF, "m/s2", "desired platform acceleration")
-        self.outputs3(Q_REF, qu, "desired joint position")
-        self.outputs3(QD_REF, qdu, "desired joint velocity")
-        self.outputs3(QDD_REF, qddu, "desired joint acceleration")
+        # Each leg's IK needs the whole platform position; rates add v_ref, accelerations a_ref.
+        # On vertical rails (linear delta) a vertical shift or velocity moves every carriage alike
+        # and leaves the legs' geometry and relative velocities unchanged: the Jacobian, qd_ref
+        # (no p_ref.z), qdd_ref (no p_ref.z, v_ref.z) and the proximity do not depend on them.
+        shape = P_REF[:2] if kind == "linear" else P_REF
+        shape_rate = V_REF[:2] if kind == "linear" else V_REF
+        self.outputs3(Q_REF, qu, "desired joint position", depends=P_REF)
+        self.outputs3(QD_REF, qdu, "desired joint velocity", depends=shape + V_REF)
+        self.outputs3(QDD_REF, qddu, "desired joint acceleration", depends=shape + shape_rate + A_REF)
         self.output("reachable", None, "true when p_ref is reachable within joint limits and singularity margin",
-                    False, kind="boolean")
-        self.output("singularity.proximity", "1", "singularity proximity of the pose p_ref (0 = singular)")
+                    depends=P_REF, kind="boolean")
+        self.output("singularity.proximity", "1", "singularity proximity of the pose p_ref (0 = singular)",
+                    depends=shape)
         self._proximity_vr = next(v.value_reference for v in self.vars.values() if v.name == PROXIMITY)
         self._pending_pose = None
 
@@ -148,11 +155,11 @@ class ForwardKinematics(Adapter):
         declare_robot(self, kind)
         self.inputs3(Q, qu, "joint position", (0.0,) * 3 if kind == "rotary" else (0.35, 0.35, 0.35))
         self.inputs3(QD, qdu, "joint velocity")
-        self.outputs3(P, "m", "platform position")
-        self.outputs3(V, "m/s", "platform velocity")
-        self.output("valid", None, "true when q assembles in the working mode (else p, v hold)", False,
+        self.outputs3(P, "m", "platform position", depends=Q)
+        self.outputs3(V, "m/s", "platform velocity", depends=Q + QD)
+        self.output("valid", None, "true when q assembles in the working mode (else p, v hold)", depends=Q,
                     kind="boolean")
-        self.output("singularity.proximity", "1", "singularity proximity of the pose (0 = singular)")
+        self.output("singularity.proximity", "1", "singularity proximity of the pose (0 = singular)", depends=Q)
 
     def start(self) -> None:
         self.robot = robot_from(self, self.KIND)

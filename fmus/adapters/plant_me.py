@@ -26,6 +26,7 @@ class AnalyticPlantME(AdapterME):
     """dq/dt = qd, dqd/dt = forward_dynamics(q, qd, u); the importing tool integrates."""
 
     EXPERIMENT = (0.0, 1.0, 1e-3)
+    LINEAR = frozenset(zip(DQ, QD))  # dq/dt = qd
 
     def __init__(self, **kwargs):
         super().__init__(**kwargs)
@@ -38,13 +39,13 @@ class AnalyticPlantME(AdapterME):
         for i in range(3):
             self.input(U[i], uu, f"actuator effort along +q (leg {i + 1})", hold_effort(kind)[i])
         for i in range(3):
-            self.state(Q[i], DQ[i], qu, qdu, f"joint position (leg {i + 1})")
-        for i in range(3):
-            self.state(QD[i], DQD[i], qdu, qddu, f"joint velocity (leg {i + 1})")
-        for n, a in zip(P, "xyz"):
-            self.output(n, "m", f"platform position ({a})")
+            self.state(Q[i], DQ[i], qu, qdu, f"joint position (leg {i + 1})", depends=(QD[i],))
+        for i in range(3):  # M(q)^-1 (u - C(q, qd) qd - G(q)): every state and effort
+            self.state(QD[i], DQD[i], qdu, qddu, f"joint velocity (leg {i + 1})", depends=(*Q, *QD, *U))
+        for n, a in zip(P, "xyz"):  # forward kinematics: no direct feedthrough of u
+            self.output(n, "m", f"platform position ({a})", depends=Q)
         for n, a in zip(V, "xyz"):
-            self.output(n, "m/s", f"platform velocity ({a})")
+            self.output(n, "m/s", f"platform velocity ({a})", depends=(*Q, *QD))
 
     def start(self) -> None:
         robot = robot_from(self, self.KIND)

@@ -9,14 +9,12 @@ from delta.dynamics import analytic_model
 
 from .._fmi import Adapter, axis_names, joint_names, writer
 from .common import (
-    HOME,
     P0,
     V0,
     declare_initial_state,
     declare_masses,
     declare_robot,
     hold_effort,
-    home_joints,
     initial_joint_state,
     masses_from,
     q_units,
@@ -34,13 +32,13 @@ def declare_plant_interface(fmu: Adapter, kind: str) -> None:
     qu, qdu, _, uu = q_units(kind)
     declare_robot(fmu, kind)
     declare_masses(fmu, kind)
-    q0 = home_joints(kind)
     declare_initial_state(fmu, kind)
     fmu.inputs3(U, uu, "actuator effort along +q", hold_effort(kind))
-    fmu.outputs3(Q, qu, "joint position", q0)
-    fmu.outputs3(QD, qdu, "joint velocity")
-    fmu.outputs3(P, "m", "platform position")
-    fmu.outputs3(V, "m/s", "platform velocity")
+    # the efforts act through the dynamics: no output depends directly on u
+    fmu.outputs3(Q, qu, "joint position", depends=())
+    fmu.outputs3(QD, qdu, "joint velocity", depends=())
+    fmu.outputs3(P, "m", "platform position", depends=())
+    fmu.outputs3(V, "m/s", "platform velocity", depends=())
 
 
 class AnalyticPlant(Adapter):
@@ -65,9 +63,13 @@ class AnalyticPlant(Adapter):
         return np.concatenate([x[3:], self.model.forward_dynamics(x[:3], x[3:], u)])
 
     def advance(self, t: float, h: float) -> None:
-        sol = solve_ivp(self._rhs, (t, t + h), self.state, method="DOP853", args=(self.vec(U),),
+        """DOP853 over [t, t + h] (adaptive: any h > 0); a non-finite effort or state fails the step."""
+        u = self.vec(U)
+        if not np.all(np.isfinite(u)):
+            raise ValueError(f"non-finite effort u = {u.tolist()}")
+        sol = solve_ivp(self._rhs, (t, t + h), self.state, method="DOP853", args=(u,),
                         rtol=self.values["solver.rtol"], atol=self.values["solver.atol"])
-        if not sol.success:
+        if not sol.success or not np.all(np.isfinite(sol.y[:, -1])):
             raise RuntimeError(f"{self.modelName} at t = {t:.6f} s: integration failed: {sol.message}")
         self.state = sol.y[:, -1]
 
@@ -81,7 +83,15 @@ class AnalyticPlant(Adapter):
 
 
 class ExudynPlant(Adapter):
-    """Exudyn multibody plant (multibody.make_plant), ``model.fidelity`` = "full" or "lumped"."""
+    """Exudyn multibody plant (multibody.make_plant), ``model.fidelity`` = "full" or "lumped".
+
+    Any communication step h > 0 is accepted (:meth:`multibody.DeltaPlant.step`): a step longer
+    than ``solver.max_step`` is integrated in equal steps no longer than it, and a remainder below
+    the plant's resolution (1 ns, :class:`multibody.SolverSettings` ``min_step``), such as the
+    1e-13 s last step of a tool that adds float steps, is absorbed: the FMU's time advances, the
+    outputs keep the state at most 1 ns old, and the next step integrates that interval with its
+    own. A step the solver cannot take returns fmi2Discard with the solver's message logged.
+    """
 
     EXPERIMENT = (0.0, 0.5, 1e-3)
 
@@ -93,19 +103,24 @@ class ExudynPlant(Adapter):
         declare_robot(self, kind)
         declare_masses(self, kind)
         self.parameter("model.fidelity", "full", None, "multibody fidelity: full (rigid rods) or lumped (point masses)")
+        self.parameter("solver.max_step", 1e-3, "s",
+                       "longest integrator step; a longer communication step is split into equal steps")
         declare_initial_state(self, kind)
         self.inputs3(U, uu, "actuator effort along +q", hold_effort(kind))
-        self.outputs3(Q, qu, "joint position", home_joints(kind))
-        self.outputs3(QD, qdu, "joint velocity")
-        self.outputs3(P, "m", "platform position", HOME[kind])
-        self.outputs3(V, "m/s", "platform velocity")
-        self.outputs3(REACTION, uu, "actuator effort applied during the last step")
+        # the efforts act through the dynamics, and reaction is the effort held over the last step:
+        # no output depends directly on u
+        self.outputs3(Q, qu, "joint position", depends=())
+        self.outputs3(QD, qdu, "joint velocity", depends=())
+        self.outputs3(P, "m", "platform position", depends=())
+        self.outputs3(V, "m/s", "platform velocity", depends=())
+        self.outputs3(REACTION, uu, "actuator effort applied during the last step", depends=())
 
     def start(self) -> None:
-        from multibody import make_plant
+        from multibody import SolverSettings, make_plant
 
         self.plant = make_plant(robot_from(self, self.KIND), masses_from(self, self.KIND),
-                                fidelity=self.values["model.fidelity"])
+                                fidelity=self.values["model.fidelity"],
+                                settings=SolverSettings(max_step=self.values["solver.max_step"]))
         self._show(self.plant.reset(self.vec(P0), self.vec(V0), t0=self.time))
 
     def _show(self, out) -> None:

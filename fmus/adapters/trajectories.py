@@ -55,9 +55,10 @@ class _Trajectory(Adapter):
         defaults = self.parameters_of(self.DEFAULT)
         for p in self.PARAMS:
             self.parameter(p.name, defaults[p.name], p.unit, p.description)
-        self.outputs3(P_REF, "m", "desired platform position")
-        self.outputs3(V_REF, "m/s", "desired platform velocity")
-        self.outputs3(A_REF, "m/s2", "desired platform acceleration")
+        # functions of time and the parameters alone: no inputs
+        self.outputs3(P_REF, "m", "desired platform position", depends=())
+        self.outputs3(V_REF, "m/s", "desired platform velocity", depends=())
+        self.outputs3(A_REF, "m/s2", "desired platform acceleration", depends=())
 
     @classmethod
     def from_parameters(cls, values: Mapping[str, Any]):
