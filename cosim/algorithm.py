@@ -174,13 +174,6 @@ def initialize(rt: Runtime) -> None:
         rt.slaves[c].set_inputs()
     for s in rt.slaves:
         s.exit_initialization()
-    # One more pass in order after initialization mode: FMUs that compute their outputs only
-    # once initialized (pythonfmu adapters) now see their sources' initialized outputs, so a
-    # controller's first effort uses the initial state and references, not start values.
-    for c in rt.plan.order:
-        rt.pull(c)
-        rt.slaves[c].set_inputs()
-        rt.slaves[c].get_outputs()
 
 
 def simulate(rt: Runtime, observers: Sequence[Observer] = (), stop: StopRequest | None = None,
