@@ -10,6 +10,7 @@ over-approximation the standard allows)."""
 
 from __future__ import annotations
 
+from functools import cached_property
 from typing import Any, Iterable
 from xml.etree.ElementTree import Element
 
@@ -148,9 +149,40 @@ class AdapterME(ValueAccess, Fmi3SlaveBase, ModelExchange):
         self._initialized = True
 
     def get_continuous_state_derivatives(self) -> list[float]:
+        # one evaluation of the dynamics for every derivative (reading each derivative variable
+        # through its getter would evaluate them once per state)
         self._build()
         self.derivatives()
-        return [float(self.vars[vr].getter()) for vr in self._derivative_refs()]
+        values = self.values
+        return [values[n] for n in self._derivative_names()]
+
+    def set_continuous_states(self, values: list[float]) -> None:
+        # the states in ModelStructure order, set in one pass (pythonfmu3's generic version
+        # filters every variable on each call)
+        names = self._state_names()
+        if len(values) != len(names):
+            raise ValueError(f"{len(values)} continuous state values given, the model has {len(names)}")
+        store = self.values
+        for n, v in zip(names, values):
+            store[n] = float(v)
+        self._stale = True
+
+    def get_continuous_states(self) -> list[float]:
+        self._build()
+        return [self.values[n] for n in self._state_names()]
+
+    @cached_property
+    def _state_order(self) -> tuple[tuple[str, ...], tuple[str, ...]]:
+        """(state names, derivative names) in the order of the derivatives in ModelStructure."""
+        by_vr = {v.value_reference: v for v in self.vars.values()}
+        ders = [by_vr[vr] for vr in self._derivative_refs()]
+        return tuple(by_vr[d.derivative].name for d in ders), tuple(d.name for d in ders)
+
+    def _state_names(self) -> tuple[str, ...]:
+        return self._state_order[0]
+
+    def _derivative_names(self) -> tuple[str, ...]:
+        return self._state_order[1]
 
     def _derivative_refs(self) -> list[int]:
         return [v.value_reference for v in self.vars.values()
