@@ -23,7 +23,7 @@ import time as _time
 from dataclasses import dataclass, field
 from typing import Any, Callable, Protocol, Sequence
 
-from .fmu import Slave
+from .fmu import Slave, Terminated
 from .system import SystemPlan
 
 __all__ = ["Observer", "Runtime", "initialize", "simulate", "StopRequest"]
@@ -52,6 +52,8 @@ class Runtime:
     k_done: int = 0  # macro steps completed
     copies: list[list[tuple[Any, int, Any, int]]] = field(default_factory=list)  # element copies
     moves: list[list[tuple[memoryview, memoryview]]] = field(default_factory=list)  # (dst bytes, src bytes)
+    terminated: Terminated | None = None  # the FMU that ended the simulation, and when
+    t_end_ns: int | None = None  # time reached when the run ended early (termination); else the stop time
 
     def __post_init__(self) -> None:
         self.comp_time = [0.0] * len(self.slaves)
@@ -59,7 +61,9 @@ class Runtime:
         for lk in self.plan.links:
             dv, di = self.slaves[lk.dst.comp].locate(lk.dst.var, output=False)
             sv, si = self.slaves[lk.src.comp].locate(lk.src.var, output=True)
-            links[lk.dst.comp].append((dv, di, sv, si))
+            di += lk.dst.offset
+            si += lk.src.offset
+            links[lk.dst.comp] += [(dv, di + e, sv, si + e) for e in range(lk.count)]
         split = [_runs(ls) for ls in links]
         self.moves = [m for m, _ in split]
         self.copies = [c for _, c in split]
@@ -75,6 +79,11 @@ class Runtime:
         """Active components (in order) for each base step of one hyper-period."""
         period = math.lcm(*self.multiples) if self.multiples else 1
         return [[c for c in self.plan.order if k % self.multiples[c] == 0] for k in range(period)]
+
+    def where(self, port: Any) -> tuple[Any, int]:
+        """(values array, index) of a resolved :class:`~cosim.system.Port` (an array's first element)."""
+        arr, i = self.slaves[port.comp].locate(port.var, port.var.causality == "output")
+        return arr, i + port.offset
 
     def pull(self, c: int) -> None:
         """Copy connected outputs into component ``c``'s input buffers."""
@@ -126,7 +135,7 @@ def _runs(links: list[tuple[Any, int, Any, int]]) -> tuple[list[tuple[memoryview
             pdv, pdi, psv, psi = run[-1]
             if not (dv is pdv and sv is psv and di == pdi + 1 and si == psi + 1):
                 close()
-        if dv._type_ is sv._type_ and dv._type_ in _MOVABLE:
+        if getattr(dv, "_type_", None) is getattr(sv, "_type_", 0) and dv._type_ in _MOVABLE:
             run.append(link)
         else:
             close()
@@ -189,37 +198,61 @@ def simulate(rt: Runtime, observers: Sequence[Observer] = (), stop: StopRequest 
     stepped = [o.stepped for o in observers]
     jacobi = rt.algorithm == "jacobi"
     start_ns, step_ns = rt.start_ns, rt.step_ns
-    for k in range(rt.k_done, rt.n_steps):
-        t = (start_ns + k * step_ns) * 1e-9
-        active = schedule[k % period]
-        if jacobi:
-            for c in active:
-                t0 = clock()
-                pull(c)
-                slaves[c].set_inputs()
-                ctime[c] += clock() - t0
-            for c in active:
-                t0 = clock()
-                slaves[c].step(t, h[c])
-                ctime[c] += clock() - t0
-            for c in active:
-                t0 = clock()
-                slaves[c].get_outputs()
-                ctime[c] += clock() - t0
-        else:
-            for c in active:
-                t0 = clock()
-                s = slaves[c]
-                pull(c)
-                s.set_inputs()
-                s.step(t, h[c])
-                s.get_outputs()
-                ctime[c] += clock() - t0
-        rt.k_done = k + 1
-        t_end = start_ns + (k + 1) * step_ns
-        for f in stepped:
-            f(k, t_end, active)
-        if progress is not None and progress_every and (k + 1) % progress_every == 0:
-            progress(k + 1)
-        if stop is not None and stop.requested:
-            raise KeyboardInterrupt
+    k = rt.k_done
+    try:
+        for k in range(rt.k_done, rt.n_steps):
+            t = (start_ns + k * step_ns) * 1e-9
+            active = schedule[k % period]
+            if jacobi:
+                for c in active:
+                    t0 = clock()
+                    pull(c)
+                    slaves[c].set_inputs()
+                    ctime[c] += clock() - t0
+                for c in active:
+                    t0 = clock()
+                    slaves[c].step(t, h[c])
+                    ctime[c] += clock() - t0
+                for c in active:
+                    t0 = clock()
+                    slaves[c].get_outputs()
+                    ctime[c] += clock() - t0
+            else:
+                for c in active:
+                    t0 = clock()
+                    s = slaves[c]
+                    pull(c)
+                    s.set_inputs()
+                    s.step(t, h[c])
+                    s.get_outputs()
+                    ctime[c] += clock() - t0
+            rt.k_done = k + 1
+            t_end = start_ns + (k + 1) * step_ns
+            for f in stepped:
+                f(k, t_end, active)
+            if progress is not None and progress_every and (k + 1) % progress_every == 0:
+                progress(k + 1)
+            if stop is not None and stop.requested:
+                raise KeyboardInterrupt
+    except Terminated as term:
+        _end_at(rt, term, k, schedule[k % period], stepped)
+
+
+def _end_at(rt: Runtime, term: Terminated, k: int, active: Sequence[int], stepped: Sequence[Callable]) -> None:
+    """An FMU ended the simulation inside macro step ``k``: finish that step as far as it went.
+
+    Gauss-Seidel: the components before it in the order stepped and were read; it is read now,
+    at the time it reached. Jacobi: every component stepped up to it is read. The observers see
+    the step with those components, stamped no later than the termination time.
+    """
+    names = rt.plan.names
+    c_term = names.index(term.component)
+    done = list(active[: active.index(c_term) + 1]) if c_term in active else [c_term]
+    for c in done if rt.algorithm == "jacobi" else [c_term]:
+        rt.slaves[c].get_outputs()
+    t_end_ns = min(rt.t_ns(k + 1), max(rt.t_ns(k), round(term.time * 1e9)))
+    rt.k_done = k + 1
+    rt.terminated = term
+    rt.t_end_ns = t_end_ns
+    for f in stepped:
+        f(k, t_end_ns, done)

@@ -395,6 +395,8 @@ def _summary_text(res) -> str:
                       for n, t in sorted(res.component_time.items(), key=lambda kv: -kv[1]))
     lines.append(f"  time share: {share}, master {100 * max(0.0, 1 - total / res.wall_time) if res.wall_time else 0:.0f}%")
     lines += [f"  {note}" for note in res.notes]
+    if res.events:
+        lines.append("  model-exchange events: " + ", ".join(f"{n} {k}" for n, k in res.events.items()))
     if res.worker_time:
         lines.append("  in the worker process (overlapped with the master): "
                      + ", ".join(f"{n} {t:.3f} s" for n, t in res.worker_time.items()))

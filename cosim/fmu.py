@@ -1,37 +1,62 @@
 """FMU access layer: the only module that calls fmpy.
 
 One protocol, :class:`Slave`, over four wrappers: FMI 2.0 and 3.0, co-simulation
-and model exchange. Model exchange FMUs are integrated between communication
-points with fmpy's CVode (BDF, dense Jacobian) with state, time and step events.
+and model exchange. Model-exchange FMUs are integrated by the master as FMPy's and
+OMSimulator's loops do it (one continuous integration across communication points,
+re-started only after an event or an input change; time, state and step events;
+event iteration; termination); the numerics live in :mod:`cosim.integrators`.
 
-Every FMI status passes through :meth:`_Base._check` (the hot path calls the
-C functions directly with pre-built ctypes buffers); a failure raises
-:class:`~cosim.errors.FMIError` naming the component, the function, the
-simulation time and the FMU's last log message.
+Every FMI 3.0 variable type is exchanged: Float32/64, Int8..UInt64, Boolean, String,
+Binary, Enumeration, and arrays (buffers hold every element; ``Variable.shape`` gives the
+dimensions, fixed or from structural parameters). Clocks are rejected when loading.
+
+Every FMI status passes through :meth:`_Base._check` (the hot path calls the C functions
+directly with pre-built ctypes buffers); a failure raises :class:`~cosim.errors.FMIError`
+naming the component, the function, the simulation time and the FMU's last log message.
+An FMU that asks to end the simulation raises :class:`Terminated`, which the algorithm
+turns into a normal end of the run.
 """
 
 from __future__ import annotations
 
+import atexit
 import ctypes
+import math
 import shutil
 import tempfile
 from collections import deque
-from ctypes import byref, c_double, c_int32, c_int64, c_uint32
-from dataclasses import dataclass
+from ctypes import byref, c_double, c_int32, c_int64, c_size_t, c_uint32
+from dataclasses import dataclass, replace
 from functools import cached_property
 from pathlib import Path
 from typing import Any, Iterable, Protocol
 
 from .errors import ComponentSourceError, FMIError, Issue
 
-__all__ = ["Variable", "FMUInfo", "load_fmu", "Slave", "make_slave", "REAL", "INTEGER", "BOOLEAN", "STRING"]
+__all__ = ["Variable", "FMUInfo", "load_fmu", "Slave", "make_slave", "Terminated", "cleanup_extracted",
+           "REAL", "INTEGER", "BOOLEAN", "STRING", "BINARY"]
 
-NS = 1e-9
-REAL, INTEGER, BOOLEAN, STRING = "Real", "Integer", "Boolean", "String"
-# FMI 3.0 type names mapped onto the four kinds the master exchanges
-_KIND3 = {"Float64": REAL, "Float32": REAL, "Int32": INTEGER, "Int64": INTEGER, "Int16": INTEGER, "Int8": INTEGER,
-          "UInt32": INTEGER, "UInt64": INTEGER, "UInt16": INTEGER, "UInt8": INTEGER, "Boolean": BOOLEAN,
-          "String": STRING, "Real": REAL, "Integer": INTEGER, "Enumeration": INTEGER}
+REAL, INTEGER, BOOLEAN, STRING, BINARY, CLOCK = "Real", "Integer", "Boolean", "String", "Binary", "Clock"
+# declared FMI 2.0 / 3.0 types mapped onto the kinds the master exchanges (connections need equal kinds)
+_KIND = {"Real": REAL, "Float64": REAL, "Float32": REAL,
+         "Integer": INTEGER, "Enumeration": INTEGER, "Int8": INTEGER, "Int16": INTEGER, "Int32": INTEGER,
+         "Int64": INTEGER, "UInt8": INTEGER, "UInt16": INTEGER, "UInt32": INTEGER, "UInt64": INTEGER,
+         "Boolean": BOOLEAN, "String": STRING, "Binary": BINARY, "Clock": CLOCK}
+# kinds whose values live in Python lists (copied through Python), not in ctypes arrays
+PY_KINDS = (STRING, BINARY)
+
+
+class Terminated(Exception):
+    """An FMU ended the simulation (FMI: terminateSimulation / fmi2Terminated). Not an error.
+
+    ``time`` is the time the FMU reached; its outputs are valid there.
+    """
+
+    def __init__(self, component: str, function: str, time: float):
+        self.component = component
+        self.function = function
+        self.time = time
+        super().__init__(f"component {component!r} ended the simulation at t = {time:.9g} s ({function})")
 
 
 @dataclass(frozen=True)
@@ -40,24 +65,46 @@ class Variable:
 
     name: str
     vr: int
-    kind: str  # REAL, INTEGER, BOOLEAN or STRING
-    fmi_type: str  # the type as declared (Real, Float64, Int32, ...)
+    kind: str  # REAL, INTEGER, BOOLEAN, STRING or BINARY
+    fmi_type: str  # the type as declared (Real, Float64, Int32, Enumeration, ...)
     causality: str
     variability: str
     unit: str | None
     description: str | None
     start: Any
     index: int  # 1-based position in ModelVariables (FMI 2.0 ModelStructure indices)
+    shape: tuple[int, ...] = ()  # FMI 3.0 array dimensions; () for a scalar
+    dims: tuple[tuple[int | None, int | None], ...] = ()  # per dimension: (fixed size, structural parameter vr)
+    initial: str | None = None
+    min: str | None = None
+    max: str | None = None
+
+    @property
+    def count(self) -> int:
+        """Number of elements (1 for a scalar)."""
+        return math.prod(self.shape) if self.shape else 1
+
+    @property
+    def is_array(self) -> bool:
+        return bool(self.dims)
 
 
 @dataclass
 class FMUInfo:
-    """A parsed and extracted FMU: model description, variables, interfaces, feedthrough."""
+    """A parsed FMU: model description, variables, interfaces, feedthrough.
+
+    The archive is extracted (into a temporary directory) only when an instance needs its
+    binaries (:attr:`unzipdir`), and removed by :func:`cleanup_extracted` at the end of the run.
+    """
 
     path: Path
-    unzipdir: Path
     md: Any  # fmpy.model_description.ModelDescription
     variables: dict[str, Variable]
+
+    @property
+    def unzipdir(self) -> Path:
+        """The extracted archive (extracted at first use, shared by every copy of this info)."""
+        return _extract(self.path)
 
     @property
     def fmi_major(self) -> int:
@@ -81,17 +128,52 @@ class FMUInfo:
         return out
 
     def model_description_xml(self) -> bytes:
-        return (self.unzipdir / "modelDescription.xml").read_bytes()
+        import zipfile
+
+        with zipfile.ZipFile(self.path) as z:
+            return z.read("modelDescription.xml")
+
+    def structural_parameters(self) -> dict[str, Variable]:
+        return {n: v for n, v in self.variables.items() if v.causality == "structuralParameter"}
+
+    def with_structure(self, values: dict[str, Any]) -> "FMUInfo":
+        """A copy whose array shapes follow the structural parameter values ``values`` (name -> value)."""
+        by_vr = {v.vr: int(values[n]) if n in values else _scalar_start(v)
+                 for n, v in self.structural_parameters().items()}
+        variables = {n: replace(v, shape=_shape(v.dims, by_vr, n)) if v.dims else v
+                     for n, v in self.variables.items()}
+        return FMUInfo(self.path, self.md, variables)
 
 
-_CACHE: dict[Path, FMUInfo] = {}
+def _scalar_start(v: Variable) -> int:
+    try:
+        return int(str(v.start).split()[0])
+    except (ValueError, IndexError):
+        raise ComponentSourceError(Issue("", f"structural parameter {v.name} has no usable start value "
+                                             f"({v.start!r})")) from None
+
+
+def _shape(dims, by_vr: dict[int, int], name: str) -> tuple[int, ...]:
+    shape = []
+    for size, vr in dims:
+        if size is None:
+            if vr not in by_vr:
+                raise ComponentSourceError(Issue("", f"{name}: dimension refers to value reference {vr}, "
+                                                     "which is not a structural parameter"))
+            size = by_vr[vr]
+        shape.append(int(size))
+    return tuple(shape)
+
+
+_CACHE: dict[Path, FMUInfo] = {}  # parsed model descriptions, per resolved path
+_EXTRACTED: dict[Path, Path] = {}  # resolved FMU path -> its extraction directory
 # Callbacks and library handles handed to FMUs live as long as the process: an FMU may call its
 # logger while being freed, and pythonfmu libraries must not be unloaded (GC of their objects crashes).
 _KEEP_ALIVE: list[Any] = []
 
 
 def load_fmu(path: str | Path) -> FMUInfo:
-    """Read the model description and extract the FMU once per path (cached for the process)."""
+    """Read the model description (once per path and process); nothing is extracted yet."""
     import fmpy
 
     path = Path(path).resolve()
@@ -103,17 +185,37 @@ def load_fmu(path: str | Path) -> FMUInfo:
         md = fmpy.read_model_description(str(path), validate=False)
     except Exception as exc:  # fmpy raises bare Exception for malformed files
         raise ComponentSourceError(Issue("", f"{path}: cannot read modelDescription.xml: {exc}")) from None
-    unzipdir = Path(tempfile.mkdtemp(prefix=f"cosim_{path.stem}_"))
-    fmpy.extract(str(path), str(unzipdir))
+    clocks = [v for v in md.modelVariables if v.type == "Clock"]
+    if clocks:
+        names = ", ".join(f"{v.name} (vr {v.valueReference})" for v in clocks[:5])
+        raise ComponentSourceError(Issue("", f"{path.name} declares Clock variables ({names}): clocks (FMI 3.0 "
+                                             "scheduled execution and synchronous clocks) are not supported"))
     variables = {}
     for i, v in enumerate(md.modelVariables, start=1):
+        dims = tuple((int(d.start) if d.start is not None else None, d.valueReference) for d in v.dimensions)
         variables[v.name] = Variable(
-            name=v.name, vr=v.valueReference, kind=_KIND3.get(v.type, v.type), fmi_type=v.type,
+            name=v.name, vr=v.valueReference, kind=_KIND.get(v.type, v.type), fmi_type=v.type,
             causality=v.causality, variability=v.variability, unit=_unit(v), description=v.description,
-            start=v.start, index=i)
-    info = FMUInfo(path, unzipdir, md, variables)
+            start=v.start, index=i, shape=tuple(v.shape or ()) if dims else (), dims=dims, initial=v.initial,
+            min=_attr(v, "min"), max=_attr(v, "max"))
+    info = FMUInfo(path, md, variables)
     _CACHE[path] = info
     return info
+
+
+def _extract(path: Path) -> Path:
+    import fmpy
+
+    if path in _EXTRACTED:
+        return _EXTRACTED[path]
+    unzipdir = Path(tempfile.mkdtemp(prefix=f"cosim_{path.stem}_"))
+    try:
+        fmpy.extract(str(path), str(unzipdir))
+    except Exception as exc:  # a corrupt archive  # noqa: BLE001
+        shutil.rmtree(unzipdir, ignore_errors=True)
+        raise ComponentSourceError(Issue("", f"{path}: cannot extract: {exc}")) from None
+    _EXTRACTED[path] = unzipdir
+    return unzipdir
 
 
 def _unit(v: Any) -> str | None:
@@ -123,14 +225,26 @@ def _unit(v: Any) -> str | None:
     return getattr(dt, "unit", None) if dt is not None else None
 
 
-def cleanup_extracted(keep: Iterable[Path] = ()) -> None:
-    """Remove every extracted FMU directory but those of the FMUs in ``keep`` (call at process end).
+def _attr(v: Any, name: str) -> str | None:
+    value = getattr(v, name, None)
+    if value is None and getattr(v, "declaredType", None) is not None:
+        value = getattr(v.declaredType, name, None)
+    return None if value is None else str(value)
 
-    A forked worker process keeps its parent's extractions (``keep``): they are still in use.
+
+def cleanup_extracted(keep: Iterable[Path] = ()) -> None:
+    """Remove every extracted FMU directory but those of the FMUs in ``keep``.
+
+    Called at the end of every run (success, error or Ctrl-C) and at interpreter exit. A
+    forked worker process keeps its parent's extractions (``keep``): they are still in use.
+    Libraries already loaded stay loaded (Linux keeps a removed file's mapping).
     """
-    keep = set(keep)
-    for path in [p for p in _CACHE if p not in keep]:
-        shutil.rmtree(_CACHE.pop(path).unzipdir, ignore_errors=True)
+    keep = {Path(p).resolve() for p in keep}
+    for path in [p for p in _EXTRACTED if p not in keep]:
+        shutil.rmtree(_EXTRACTED.pop(path), ignore_errors=True)
+
+
+atexit.register(cleanup_extracted)
 
 
 class Slave(Protocol):
@@ -153,16 +267,43 @@ class Slave(Protocol):
 
 
 class _Buffers:
-    """ctypes arrays for one kind of variable: value references and values."""
+    """Value references and values of one kind (FMI 3.0: one declared type), every element.
 
-    __slots__ = ("vrs", "values", "n", "kind", "variables")
+    ``values`` is a ctypes array (numbers) or a Python list (String, Binary) of ``size``
+    elements; variable ``variables[i]`` occupies ``values[offsets[i]:offsets[i] + count]``.
+    """
 
-    def __init__(self, kind: str, variables: list[Variable], ctype: Any):
+    __slots__ = ("vrs", "values", "n", "size", "kind", "fmi_type", "variables", "offsets", "applied")
+
+    def __init__(self, kind: str, fmi_type: str, variables: list[Variable], ctype: Any):
         self.kind = kind
+        self.fmi_type = fmi_type
         self.variables = list(variables)
         self.n = len(variables)
+        self.offsets = []
+        size = 0
+        for v in variables:
+            self.offsets.append(size)
+            size += v.count
+        self.size = size
         self.vrs = (c_uint32 * self.n)(*[v.vr for v in variables])
-        self.values = (ctype * self.n)()
+        self.values = [b"" if kind == BINARY else ""] * size if ctype is None else (ctype * size)()
+        self.applied: bytes | list | None = None  # model exchange: the values last set (change detection)
+
+    def snapshot(self) -> bytes | list:
+        return list(self.values) if self.ctype_free else bytes(self.values)
+
+    @property
+    def ctype_free(self) -> bool:
+        return isinstance(self.values, list)
+
+
+def _number(kind: str, value: Any) -> Any:
+    if kind == REAL:
+        return float(value)
+    if kind == BOOLEAN:
+        return bool(value)
+    return int(value)
 
 
 class _Base:
@@ -218,7 +359,11 @@ class _Base:
     def set_start(self, values: dict[str, Any]) -> None:
         for name, value in values.items():
             var = self.info.variables[name]
-            self._set_values(var.kind, var.fmi_type, [var.vr], [value], f"set start value of {name}")
+            flat = list(value) if isinstance(value, (list, tuple)) else [value]
+            if len(flat) != var.count:
+                raise FMIError(self.name, f"set start value of {name}", self.time, None,
+                               f"{len(flat)} value(s) given, {name} has {var.count} element(s)")
+            self._set_values(var, flat, f"set start value of {name}")
 
     def bind(self, inputs: list[Variable], outputs: list[Variable]) -> None:
         """Pre-build buffers for the inputs the master sets and the outputs it reads."""
@@ -226,17 +371,12 @@ class _Base:
         self.out_bufs = self._group(outputs)
         self._set_calls = self._get_calls = None  # hot-path call lists, bound at first use
 
-    def _group(self, variables: Iterable[Variable]) -> list[_Buffers]:
-        by_kind: dict[str, list[Variable]] = {}
-        for v in variables:
-            by_kind.setdefault(v.kind, []).append(v)
-        return [_Buffers(k, vs, self._ctype(k, vs[0].fmi_type)) for k, vs in by_kind.items()]
-
     def locate(self, var: Variable, output: bool = True) -> tuple[Any, int]:
-        """(ctypes values array, index) where ``var``'s value lives after bind()."""
+        """(values array, index of the first element) where ``var``'s value lives after bind()."""
         for b in (self.out_bufs if output else self.in_bufs):
-            if var in b.variables:
-                return b.values, b.variables.index(var)
+            for v, offset in zip(b.variables, b.offsets):
+                if v == var:
+                    return b.values, offset
         raise KeyError(f"{self.name}.{var.name} is not bound as an {'output' if output else 'input'}")
 
     def terminate(self) -> None:
@@ -256,6 +396,188 @@ class _Base:
             self._instantiated = False
             self.fmu = None
 
+    def _hot_function(self, dll: Any, name: str) -> Any:
+        """The C function ``name`` for the per-step path.
+
+        FMUs exported by PythonFMU run Python: each call takes the GIL back (PyGILState_Ensure)
+        right after ctypes released it. For them the function is called through a PYFUNCTYPE
+        prototype with the same signature, which keeps the GIL across the call and saves that
+        round trip; any other FMU keeps ctypes' default (GIL released, so its own threads may
+        call back into Python).
+        """
+        f = getattr(dll, name)
+        if not (self.info.md.generationTool or "").startswith("PythonFMU"):
+            return f
+        proto = ctypes.PYFUNCTYPE(f.restype, *f.argtypes)
+        return proto(ctypes.cast(f, ctypes.c_void_p).value)
+
+
+# --------------------------------------------------------------------------- model exchange
+
+
+class _MEMixin:
+    """Model exchange: the master's own integration loop around an FMU in continuous-time mode.
+
+    As FMPy's ``simulateME`` and OMSimulator do it: one integration across communication
+    points, the FMU's time set to the time the integrator reached, time events
+    (``nextEventTime``), state events (event indicators, located by the integrator's root
+    finding), step events (``completedIntegratorStep``), event iteration until no new
+    discrete states are needed, and ``terminateSimulation`` honoured. The integrator is
+    re-started only after an event or when an input changed value (a discrete input change
+    is an event: the FMU gets it in event mode).
+    """
+
+    rtol = 1e-6
+    max_step = math.inf
+    solver = "cvode"
+    model_exchange = True
+    _update_name = ""
+    events = 0  # events handled (the initial event iteration excluded)
+    next_event: float | None = None
+    event_log: list[tuple[float, str]]  # (time, kind: state/time/step/input) not yet taken by an observer
+
+    # -- the integrator's view (cosim.integrators.OdeModel): a failing status raises FMIError,
+    #    which the integrator re-raises from advance()
+    def set_time(self, t):
+        self.time = t
+        status = self._fn_set_time(self._c, t)
+        if status > 1:
+            self._check(status, self._name_set_time)
+
+    def get_x(self, x):
+        status = self._fn_get_x(self._c, x, self.nx)
+        if status > 1:
+            self._check(status, self._name_get_x)
+
+    def set_x(self, x):
+        status = self._fn_set_x(self._c, x, self.nx)
+        if status > 1:
+            self._check(status, self._name_set_x)
+
+    def get_dx(self, dx):
+        status = self._fn_get_dx(self._c, dx, self.nx)
+        if status > 1:
+            self._check(status, self._name_get_dx)
+
+    def get_z(self, z):
+        status = self._fn_get_z(self._c, z, self.nz)
+        if status > 1:
+            self._check(status, self._name_get_z)
+
+    def get_nominals(self, x):
+        status = self._fn_get_nom(self._c, x, self.nx)
+        if status > 1:
+            self._check(status, self._name_get_nom)
+
+    def _bind_me(self, prefix: str, derivatives: str) -> None:
+        dll = self.fmu.dll
+        fn = self._hot_function
+        self._name_get_x, self._name_set_x = f"{prefix}GetContinuousStates", f"{prefix}SetContinuousStates"
+        self._name_get_dx, self._name_get_z = f"{prefix}{derivatives}", f"{prefix}GetEventIndicators"
+        self._name_get_nom, self._name_set_time = f"{prefix}GetNominalsOfContinuousStates", f"{prefix}SetTime"
+        self._fn_get_x, self._fn_set_x = fn(dll, self._name_get_x), fn(dll, self._name_set_x)
+        self._fn_get_dx, self._fn_get_z = fn(dll, self._name_get_dx), fn(dll, self._name_get_z)
+        self._fn_get_nom, self._fn_set_time = fn(dll, self._name_get_nom), fn(dll, self._name_set_time)
+
+    # -- events
+    def _event_iteration(self) -> bool:
+        """Update discrete states until none is needed; True when continuous states or nominals changed."""
+        changed = False
+        while True:
+            need, terminate, nominals, values, defined, t_next = self._update_discrete()
+            changed |= bool(values or nominals)
+            self.next_event = t_next if defined else None
+            if terminate:
+                raise Terminated(self.name, self._update_name, self.time)
+            if not need:
+                return changed
+
+    def _handle_event(self, kinds: str) -> None:
+        self._enter_event_mode()
+        self.events += 1
+        self.event_log.append((self.time, kinds))
+        self._event_iteration()
+        self._enter_continuous_mode()
+        self.integrator.reset(self.time)
+
+    def exit_initialization(self) -> None:
+        from .integrators import make_integrator
+
+        self._exit_init()
+        self.event_log = []
+        self._continuous = False
+        self._event_iteration()  # the initial event iteration (FMI 2: after exitInitializationMode)
+        self._enter_continuous_mode()
+        self._continuous = True
+        for b in self.in_bufs:
+            b.applied = b.snapshot()
+        self._restart = False
+        self.integrator = make_integrator(self.solver, self, self.time, self.rtol, self.max_step)
+
+    def set_inputs(self) -> None:
+        if not getattr(self, "_continuous", False):
+            super().set_inputs()  # initialization mode: plain setting
+            return
+        changed = [b for b in self.in_bufs if b.snapshot() != b.applied]
+        if not changed:
+            return
+        discrete = any(v.variability != "continuous" for b in changed for v in b.variables)
+        if discrete:  # FMI: discrete inputs change in event mode only, and that is an event
+            self._enter_event_mode()
+            super().set_inputs()
+            self.events += 1
+            self.event_log.append((self.time, "input"))
+            self._event_iteration()
+            self._enter_continuous_mode()
+        else:
+            super().set_inputs()
+        for b in changed:
+            b.applied = b.snapshot()
+        self._restart = True
+
+    MAX_EVENTS_AT_ONE_TIME = 1000  # event iterations at one instant before the FMU is called stuck
+
+    def step(self, t: float, h: float) -> None:
+        t_end = t + h
+        integ = self.integrator
+        tol = 100.0 * 2.220446049250313e-16 * max(1.0, abs(t_end))  # times closer than this coincide
+        if self._restart or abs(self.time - t) > tol:
+            self.time = t
+            integ.reset(t)
+            self._restart = False
+        completed = self._needs_completed
+        same_instant = 0
+        while True:
+            t_next = self.next_event
+            time_event = t_next is not None and t_next <= self.time + tol
+            state_event = False
+            if not time_event:
+                if self.time >= t_end - tol:
+                    break
+                t_stop = t_end if t_next is None or t_next >= t_end - tol else t_next
+                try:
+                    t_reached, state_event = integ.advance(t_stop)
+                except (FMIError, Terminated):
+                    raise
+                except Exception as exc:  # the integrator gave up
+                    raise FMIError(self.name, f"{self.solver} integration", self.time, None, str(exc)) from None
+                same_instant = 0
+                time_event = t_next is not None and t_reached >= t_next - tol
+            step_event = False
+            if completed:
+                step_event, terminate = self._completed_step()
+                if terminate:
+                    raise Terminated(self.name, self._completed_name, self.time)
+            if state_event or time_event or step_event:
+                same_instant += 1
+                if same_instant > self.MAX_EVENTS_AT_ONE_TIME:
+                    raise FMIError(self.name, self._update_name, self.time, None,
+                                   f"{self.MAX_EVENTS_AT_ONE_TIME} events at the same time: nextEventTime "
+                                   "does not advance")
+                self._handle_event("+".join(k for k, on in (("state", state_event), ("time", time_event),
+                                                            ("step", step_event)) if on))
+        self.time = t_end
+
 
 # --------------------------------------------------------------------------- FMI 2.0
 
@@ -264,7 +586,13 @@ class _FMI2(_Base):
     fmi = 2
 
     def _ctype(self, kind: str, fmi_type: str) -> Any:
-        return {REAL: c_double, INTEGER: c_int32, BOOLEAN: c_int32, STRING: ctypes.c_char_p}[kind]
+        return {REAL: c_double, INTEGER: c_int32, BOOLEAN: c_int32}.get(kind)
+
+    def _group(self, variables: Iterable[Variable]) -> list[_Buffers]:
+        by_kind: dict[str, list[Variable]] = {}
+        for v in variables:
+            by_kind.setdefault(v.kind, []).append(v)
+        return [_Buffers(k, vs[0].fmi_type, vs, self._ctype(k, vs[0].fmi_type)) for k, vs in by_kind.items()]
 
     def _make(self) -> Any:
         from fmpy.fmi2 import FMU2Model, FMU2Slave
@@ -297,31 +625,12 @@ class _FMI2(_Base):
         self._get = {k: fn(dll, f"fmi2Get{k}") for k in (REAL, INTEGER, BOOLEAN)}
         self._set = {k: fn(dll, f"fmi2Set{k}") for k in (REAL, INTEGER, BOOLEAN)}
 
-    def _hot_function(self, dll: Any, name: str) -> Any:
-        """The C function ``name`` for the per-step path.
-
-        FMUs exported by PythonFMU run Python: each call takes the GIL back (PyGILState_Ensure)
-        right after ctypes released it. For them the function is called through a PYFUNCTYPE
-        prototype with the same signature, which keeps the GIL across the call and saves that
-        round trip; any other FMU keeps ctypes' default (GIL released, so its own threads may
-        call back into Python).
-        """
-        f = getattr(dll, name)
-        if not (self.info.md.generationTool or "").startswith("PythonFMU"):
-            return f
-        proto = ctypes.PYFUNCTYPE(f.restype, *f.argtypes)
-        return proto(ctypes.cast(f, ctypes.c_void_p).value)
-
-    def _set_values(self, kind: str, fmi_type: str, vrs: list[int], values: list[Any], what: str) -> None:
+    def _set_values(self, var: Variable, values: list[Any], what: str) -> None:
+        kind = var.kind
         fn = {REAL: self.fmu.setReal, INTEGER: self.fmu.setInteger, BOOLEAN: self.fmu.setBoolean,
               STRING: self.fmu.setString}[kind]
-        if kind == STRING:
-            values = [str(v) for v in values]
-        elif kind == REAL:
-            values = [float(v) for v in values]
-        else:
-            values = [int(v) for v in values]
-        self._guard(f"fmi2Set{kind} ({what})", fn, vrs, values)
+        values = [str(v) for v in values] if kind == STRING else [_number(kind, v) for v in values]
+        self._guard(f"fmi2Set{kind} ({what})", fn, [var.vr], values)
 
     def enter_initialization(self, start: float, stop: float) -> None:
         self.time = start
@@ -329,8 +638,8 @@ class _FMI2(_Base):
         self._guard("fmi2EnterInitializationMode", self.fmu.enterInitializationMode)
 
     def _calls(self, bufs: list[_Buffers], table: dict, prefix: str) -> list[tuple[Any, Any, int, Any, str]]:
-        """(C function, value references, count, values, FMI name) per buffer, bound once."""
-        return [(table[b.kind], b.vrs, b.n, b.values, prefix + b.kind) for b in bufs]
+        """(C function, value references, count, values, FMI name) per numeric buffer, bound once."""
+        return [(table[b.kind], b.vrs, b.n, b.values, prefix + b.kind) for b in bufs if not b.ctype_free]
 
     def set_inputs(self) -> None:
         c = self._c
@@ -341,6 +650,9 @@ class _FMI2(_Base):
             status = fn(c, vrs, n, values)
             if status > 1:
                 self._check(status, name)
+        for b in self.in_bufs:
+            if b.ctype_free:  # strings, through fmpy
+                self._guard("fmi2SetString", self.fmu.setString, list(b.vrs), [str(s) for s in b.values])
 
     def get_outputs(self) -> None:
         c = self._c
@@ -351,6 +663,11 @@ class _FMI2(_Base):
             status = fn(c, vrs, n, values)
             if status > 1:
                 self._check(status, name)
+        for b in self.out_bufs:
+            if b.ctype_free:
+                got = self._guard("fmi2GetString", self.fmu.getString, list(b.vrs))
+                b.values[:] = [(s or b"").decode("utf-8", "replace") if isinstance(s, bytes) else (s or "")
+                               for s in got]
 
     def read(self, variables: list[Variable]) -> list[Any]:
         """Values of arbitrary variables (slow path, for reports and initialization)."""
@@ -373,118 +690,46 @@ class FMI2CoSimulation(_FMI2):
         self.time = t
         status = self._do_step(self._c, t, h, 1)
         if status > 1:
-            self._check(status, "fmi2DoStep")
+            self._step_failed(status, t, h)
         self.time = t + h
 
+    def _step_failed(self, status: int, t: float, h: float) -> None:
+        """fmi2Discard with fmi2Terminated is the FMU ending the simulation; anything else fails."""
+        from fmpy.fmi2 import fmi2LastSuccessfulTime, fmi2Terminated
 
-class _MEMixin:
-    """Model exchange: CVode between communication points, event iteration at events."""
-
-    rtol = 1e-6
-    _event_eps = 1e-12  # s; a time event within this of the solver's stop time is taken there
-
-    _pending: FMIError | None = None
-
-    def _cb(self, status: int, function: str) -> None:
-        """Status check inside CVode callbacks: ctypes swallows exceptions there, so keep the first one."""
-        if status > 1 and self._pending is None:
-            self._pending = FMIError(self.name, function, self.time, status, self._last_log())
-
-    def _raise_pending(self) -> None:
-        if self._pending is not None:
-            err, self._pending = self._pending, None
-            raise err
-
-    def _setup_solver(self, t0: float) -> None:
-        from fmpy.sundials import CVodeSolver
-
-        class _HeldInputs:  # inputs are held constant over a communication step (zero-order hold)
-            @staticmethod
-            def apply(t: float) -> None:
-                return None
-
-        self.solver = CVodeSolver(
-            nx=self.nx, nz=self.nz, get_x=self._get_x, set_x=self._set_x, get_dx=self._get_dx, get_z=self._get_z,
-            get_nominals=self._get_nominals, set_time=self._set_time, input=_HeldInputs(), startTime=t0,
-            relativeTolerance=self.rtol)
-
-    def _handle_event(self) -> bool:
-        """Event iteration; returns True when the continuous states changed (solver restart needed)."""
-        self._enter_event_mode()
-        changed = self._iterate_discrete_states()
-        self._enter_continuous_mode()
-        return changed
-
-    def _iterate_discrete_states(self) -> bool:
-        changed = False
-        while True:
-            need, terminate, nominals, values, defined, t_next = self._update_discrete()
-            if terminate:
-                raise FMIError(self.name, self._update_name, self.time, None, "the FMU requested termination")
-            changed |= bool(values or nominals)
-            self.next_event = t_next if defined else None
-            if not need:
-                return changed
-
-    def exit_initialization(self) -> None:
-        self._exit_init()
-        self._iterate_discrete_states()
-        self._enter_continuous_mode()
-        self._setup_solver(self.time)
-        self._raise_pending()
-
-    def step(self, t: float, h: float) -> None:
-        t_end = t + h
-        self.time = t
-        self.solver.reset(t)  # inputs may have jumped at the communication point
-        while self.time < t_end - self._event_eps:
-            t_stop = t_end if self.next_event is None else min(t_end, self.next_event)
+        if status == 2:  # fmi2Discard
             try:
-                state_event, _, t_reached = self.solver.step(self.time, t_stop)
-            except RuntimeError as exc:  # CVode failure (fmpy raises RuntimeError with CVode's message)
-                self._raise_pending()
-                raise FMIError(self.name, "CVode", self.time, None, str(exc)) from None
-            self._raise_pending()
-            self.time = t_reached
-            time_event = self.next_event is not None and abs(self.time - self.next_event) <= self._event_eps
-            step_event, terminate = self._completed_step()
-            if terminate:
-                raise FMIError(self.name, "completedIntegratorStep", self.time, None, "the FMU requested termination")
-            if state_event or time_event or step_event:
-                if self._handle_event():
-                    self.solver.reset(self.time)
-        self.time = t_end
+                terminated = bool(self.fmu.getBooleanStatus(fmi2Terminated))
+            except Exception:  # noqa: BLE001 - optional function: the FMU did not say it terminated
+                terminated = False
+            if terminated:
+                try:
+                    t_last = float(self.fmu.getRealStatus(fmi2LastSuccessfulTime))
+                except Exception:  # noqa: BLE001 - optional: the step's start is what we know succeeded
+                    t_last = t
+                self.time = t_last
+                raise Terminated(self.name, "fmi2DoStep", t_last)
+            detail = "the FMU rejected the step and did not ask to terminate"
+            if self._last_log():
+                detail += f" ({self._last_log()})"
+            raise FMIError(self.name, "fmi2DoStep", t, status, detail)
+        self._check(status, "fmi2DoStep")
 
 
 class FMI2ModelExchange(_MEMixin, _FMI2):
-    """FMI 2.0 model exchange, integrated with CVode."""
+    """FMI 2.0 model exchange, integrated by the master (see :class:`_MEMixin`)."""
 
-    model_exchange = True
     _update_name = "fmi2NewDiscreteStates"
+    _completed_name = "fmi2CompletedIntegratorStep"
 
     def instantiate(self) -> None:
         super().instantiate()
-        self.nx = self.info.md.numberOfContinuousStates
-        self.nz = self.info.md.numberOfEventIndicators
+        md = self.info.md
+        self.nx = md.numberOfContinuousStates
+        self.nz = md.numberOfEventIndicators
+        self._needs_completed = bool(md.modelExchange.needsCompletedIntegratorStep)
         self.next_event = None
-
-    def _get_x(self, x, nx):
-        self._cb(self.fmu.dll.fmi2GetContinuousStates(self._c, x, nx), "fmi2GetContinuousStates")
-
-    def _set_x(self, x, nx):
-        self._cb(self.fmu.dll.fmi2SetContinuousStates(self._c, x, nx), "fmi2SetContinuousStates")
-
-    def _get_dx(self, dx, nx):
-        self._cb(self.fmu.dll.fmi2GetDerivatives(self._c, dx, nx), "fmi2GetDerivatives")
-
-    def _get_z(self, z, nz):
-        self._cb(self.fmu.dll.fmi2GetEventIndicators(self._c, z, nz), "fmi2GetEventIndicators")
-
-    def _get_nominals(self, x, nx):
-        self._cb(self.fmu.dll.fmi2GetNominalsOfContinuousStates(self._c, x, nx), "fmi2GetNominalsOfContinuousStates")
-
-    def _set_time(self, t):
-        self._cb(self.fmu.dll.fmi2SetTime(self._c, t), "fmi2SetTime")
+        self._bind_me("fmi2", "GetDerivatives")
 
     def _exit_init(self):
         self._guard("fmi2ExitInitializationMode", self.fmu.exitInitializationMode)
@@ -504,28 +749,22 @@ class FMI2ModelExchange(_MEMixin, _FMI2):
 
 # --------------------------------------------------------------------------- FMI 3.0
 
+_CTYPE3 = {"Float64": c_double, "Float32": ctypes.c_float, "Int8": ctypes.c_int8, "Int16": ctypes.c_int16,
+           "Int32": c_int32, "Int64": c_int64, "UInt8": ctypes.c_uint8, "UInt16": ctypes.c_uint16,
+           "UInt32": c_uint32, "UInt64": ctypes.c_uint64, "Boolean": ctypes.c_bool, "Enumeration": c_int64}
+# FMI 3.0 accessor per declared type (Enumeration values travel as Int64)
+_ACCESSOR3 = {**{t: t for t in _CTYPE3}, "Enumeration": "Int64", "String": "String", "Binary": "Binary"}
+
 
 class _FMI3(_Base):
     fmi = 3
-    _GET = {"Float64": "Float64", "Float32": "Float32", "Int32": "Int32", "Int64": "Int64", "Boolean": "Boolean",
-            "Int8": "Int8", "Int16": "Int16", "UInt8": "UInt8", "UInt16": "UInt16", "UInt32": "UInt32",
-            "UInt64": "UInt64", "Enumeration": "Int64", "String": "String"}
-
-    def _ctype(self, kind: str, fmi_type: str) -> Any:
-        return {"Float64": c_double, "Float32": ctypes.c_float, "Int32": c_int32, "Int64": c_int64,
-                "Int16": ctypes.c_int16, "Int8": ctypes.c_int8, "UInt8": ctypes.c_uint8, "UInt16": ctypes.c_uint16,
-                "UInt32": c_uint32, "UInt64": ctypes.c_uint64, "Boolean": ctypes.c_bool,
-                "Enumeration": c_int64}[fmi_type]
 
     def _group(self, variables: Iterable[Variable]) -> list[_Buffers]:
-        # FMI 3.0 getters are per declared type, so group by fmi_type (kind kept for conversions)
+        # FMI 3.0 getters are per declared type, so group by accessor (kind kept for conversions)
         by_type: dict[str, list[Variable]] = {}
         for v in variables:
-            by_type.setdefault(v.fmi_type, []).append(v)
-        out = []
-        for t, vs in by_type.items():
-            out.append(_Buffers(t, vs, self._ctype(vs[0].kind, t)))
-        return out
+            by_type.setdefault(_ACCESSOR3[v.fmi_type], []).append(v)
+        return [_Buffers(vs[0].kind, t, vs, _CTYPE3.get(t)) for t, vs in by_type.items()]
 
     def _make(self) -> Any:
         from fmpy.fmi3 import FMU3Model, FMU3Slave
@@ -541,25 +780,27 @@ class _FMI3(_Base):
         logger = lambda env, status, cat, msg: self._on_log(status, cat, msg)  # noqa: E731
         self._logger = logger
         _KEEP_ALIVE.append((logger, self.fmu))
-        self._guard("fmi3InstantiateCoSimulation", lambda: self.fmu.instantiate(logMessage=logger))
+        what = "fmi3InstantiateModelExchange" if self.model_exchange else "fmi3InstantiateCoSimulation"
+        self._guard(what, lambda: self.fmu.instantiate(logMessage=logger))
         self._instantiated = True
         self._c = self.fmu.component
         dll = self.fmu.dll
-        self._getf = {t: getattr(dll, f"fmi3Get{t}") for t in set(self._GET.values()) if t != "String"}
-        self._setf = {t: getattr(dll, f"fmi3Set{t}") for t in set(self._GET.values()) if t != "String"}
+        self._getf = {t: getattr(dll, f"fmi3Get{t}") for t in set(_ACCESSOR3.values()) if t in _CTYPE3}
+        self._setf = {t: getattr(dll, f"fmi3Set{t}") for t in set(_ACCESSOR3.values()) if t in _CTYPE3}
 
-    def _set_values(self, kind: str, fmi_type: str, vrs: list[int], values: list[Any], what: str) -> None:
-        t = self._GET[fmi_type]
-        fn = getattr(self.fmu, f"set{t}")
-        if kind == REAL:
-            values = [float(v) for v in values]
-        elif kind == INTEGER:
-            values = [int(v) for v in values]
-        elif kind == BOOLEAN:
-            values = [bool(v) for v in values]
+    def _set_values(self, var: Variable, values: list[Any], what: str) -> None:
+        t = _ACCESSOR3[var.fmi_type]
+        if var.kind == STRING:
+            values = [str(v) for v in values]
+        elif var.kind == BINARY:
+            values = [_binary(v, var.name) for v in values]
         else:
-            values = [str(v).encode() if t == "String" else v for v in values]
-        self._guard(f"fmi3Set{t} ({what})", fn, vrs, values)
+            values = [_number(var.kind, v) for v in values]
+        self._guard(f"fmi3Set{t} ({what})", self._py_set, t, [var.vr], values)
+
+    def _py_set(self, accessor: str, vrs: list[int], values: list[Any]) -> None:
+        """fmi3Set<accessor> for any element count (fmpy's setters pass nValues = len(values))."""
+        getattr(self.fmu, f"set{accessor}")(vrs, values)
 
     def enter_initialization(self, start: float, stop: float) -> None:
         self.time = start
@@ -568,19 +809,49 @@ class _FMI3(_Base):
     def set_inputs(self) -> None:
         c = self._c
         for b in self.in_bufs:
-            self._check(self._setf[self._GET[b.kind]](c, b.vrs, b.n, b.values, b.n), "fmi3Set" + b.kind)
+            if b.ctype_free:
+                self._guard(f"fmi3Set{b.fmi_type}", self._py_set, b.fmi_type, list(b.vrs), list(b.values))
+            else:
+                self._check(self._setf[b.fmi_type](c, b.vrs, b.n, b.values, b.size), "fmi3Set" + b.fmi_type)
 
     def get_outputs(self) -> None:
         c = self._c
         for b in self.out_bufs:
-            self._check(self._getf[self._GET[b.kind]](c, b.vrs, b.n, b.values, b.n), "fmi3Get" + b.kind)
+            if b.ctype_free:
+                self._get_py(b)
+            else:
+                self._check(self._getf[b.fmi_type](c, b.vrs, b.n, b.values, b.size), "fmi3Get" + b.fmi_type)
+
+    def _get_py(self, b: _Buffers) -> None:
+        """Strings and binaries: copied out of the FMU's memory (valid only until its next call)."""
+        c = self._c
+        if b.kind == STRING:
+            raw = (ctypes.c_char_p * b.size)()
+            self._check(self.fmu.dll.fmi3GetString(c, b.vrs, b.n, raw, b.size), "fmi3GetString")
+            b.values[:] = [(s or b"").decode("utf-8", "replace") for s in raw]
+        else:
+            sizes = (c_size_t * b.size)()
+            ptrs = (ctypes.c_void_p * b.size)()
+            self._check(self.fmu.dll.fmi3GetBinary(c, b.vrs, b.n, sizes, ptrs, b.size), "fmi3GetBinary")
+            b.values[:] = [ctypes.string_at(p, n) if p else b"" for p, n in zip(ptrs, sizes)]
 
     def read(self, variables: list[Variable]) -> list[Any]:
         out = []
         for v in variables:
-            t = self._GET[v.fmi_type]
-            out.append(self._guard(f"fmi3Get{t}", getattr(self.fmu, f"get{t}"), [v.vr])[0])
+            t = _ACCESSOR3[v.fmi_type]
+            got = self._guard(f"fmi3Get{t}", getattr(self.fmu, f"get{t}"), [v.vr], v.count)
+            out.append(got[0] if not v.is_array else list(got))
         return out
+
+
+def _binary(value: Any, name: str) -> bytes:
+    """A Binary start value from a scenario: bytes, or a hex string as in modelDescription.xml."""
+    if isinstance(value, (bytes, bytearray)):
+        return bytes(value)
+    try:
+        return bytes.fromhex(str(value))
+    except ValueError:
+        raise ValueError(f"{name}: a Binary value is given as hexadecimal digits, got {value!r}") from None
 
 
 class FMI3CoSimulation(_FMI3):
@@ -594,53 +865,36 @@ class FMI3CoSimulation(_FMI3):
 
     def step(self, t: float, h: float) -> None:
         self.time = t
-        self._check(self._do_step(self._c, t, h, True, *self._refs), "fmi3DoStep")
-        if self._flags[1].value:
-            raise FMIError(self.name, "fmi3DoStep", t, None, "the FMU requested termination")
+        status = self._do_step(self._c, t, h, True, *self._refs)
+        if status > 1:
+            detail = "the FMU rejected the step" if status == 2 else ""
+            if status == 2 and self._last_log():
+                detail += f" ({self._last_log()})"
+            self._fatal = self._fatal or status == 4
+            raise FMIError(self.name, "fmi3DoStep", t, status, detail or self._last_log())
+        if self._flags[1].value:  # terminateSimulation
+            t_last = self._flags[3].value if self._flags[2].value else t + h
+            self.time = t_last
+            raise Terminated(self.name, "fmi3DoStep", t_last)
         self.time = t + h
 
 
 class FMI3ModelExchange(_MEMixin, _FMI3):
-    """FMI 3.0 model exchange, integrated with CVode."""
+    """FMI 3.0 model exchange, integrated by the master (see :class:`_MEMixin`)."""
 
-    model_exchange = True
     _update_name = "fmi3UpdateDiscreteStates"
+    _completed_name = "fmi3CompletedIntegratorStep"
 
     def instantiate(self) -> None:
-        self.fmu = self._guard("load library", self._make)
-        logger = lambda env, status, cat, msg: self._on_log(status, cat, msg)  # noqa: E731
-        self._logger = logger
-        _KEEP_ALIVE.append((logger, self.fmu))
-        self._guard("fmi3InstantiateModelExchange", lambda: self.fmu.instantiate(logMessage=logger))
-        self._instantiated = True
-        self._c = self.fmu.component
-        dll = self.fmu.dll
-        self._getf = {t: getattr(dll, f"fmi3Get{t}") for t in set(self._GET.values()) if t != "String"}
-        self._setf = {t: getattr(dll, f"fmi3Set{t}") for t in set(self._GET.values()) if t != "String"}
+        super().instantiate()
         self.next_event = None
+        self._needs_completed = bool(self.info.md.modelExchange.needsCompletedIntegratorStep)
+        self._bind_me("fmi3", "GetContinuousStateDerivatives")
 
     def exit_initialization(self) -> None:
         self.nx = self._guard("fmi3GetNumberOfContinuousStates", self.fmu.getNumberOfContinuousStates)
         self.nz = self._guard("fmi3GetNumberOfEventIndicators", self.fmu.getNumberOfEventIndicators)
         super().exit_initialization()
-
-    def _get_x(self, x, nx):
-        self._cb(self.fmu.dll.fmi3GetContinuousStates(self._c, x, nx), "fmi3GetContinuousStates")
-
-    def _set_x(self, x, nx):
-        self._cb(self.fmu.dll.fmi3SetContinuousStates(self._c, x, nx), "fmi3SetContinuousStates")
-
-    def _get_dx(self, dx, nx):
-        self._cb(self.fmu.dll.fmi3GetContinuousStateDerivatives(self._c, dx, nx), "fmi3GetContinuousStateDerivatives")
-
-    def _get_z(self, z, nz):
-        self._cb(self.fmu.dll.fmi3GetEventIndicators(self._c, z, nz), "fmi3GetEventIndicators")
-
-    def _get_nominals(self, x, nx):
-        self._cb(self.fmu.dll.fmi3GetNominalsOfContinuousStates(self._c, x, nx), "fmi3GetNominalsOfContinuousStates")
-
-    def _set_time(self, t):
-        self._cb(self.fmu.dll.fmi3SetTime(self._c, t), "fmi3SetTime")
 
     def _exit_init(self):
         self._guard("fmi3ExitInitializationMode", self.fmu.exitInitializationMode)
@@ -658,8 +912,13 @@ class FMI3ModelExchange(_MEMixin, _FMI3):
         return self._guard("fmi3CompletedIntegratorStep", self.fmu.completedIntegratorStep)
 
 
-def make_slave(name: str, info: FMUInfo, interface: str = "auto", rtol: float = 1e-6) -> Slave:
-    """The wrapper for ``info``'s FMI version and the requested interface (auto: co-simulation first)."""
+def make_slave(name: str, info: FMUInfo, interface: str = "auto", rtol: float = 1e-6, solver: str = "cvode",
+               max_step: float | None = None) -> Slave:
+    """The wrapper for ``info``'s FMI version and the requested interface (auto: co-simulation first).
+
+    ``rtol``, ``solver`` and ``max_step`` (s; None: unbounded but for the communication step) apply
+    to model exchange.
+    """
     available = info.interfaces
     if interface == "auto":
         interface = "cs" if "cs" in available else "me"
@@ -675,4 +934,6 @@ def make_slave(name: str, info: FMUInfo, interface: str = "auto", rtol: float = 
     slave = cls(name, info)
     if slave.model_exchange:
         slave.rtol = rtol
+        slave.solver = solver
+        slave.max_step = math.inf if max_step is None else max_step
     return slave

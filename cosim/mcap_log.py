@@ -27,15 +27,34 @@ from typing import Any, Sequence
 import orjson
 
 from .algorithm import Runtime
-from .fmu import BOOLEAN, INTEGER, REAL
+from .fmu import BINARY, BOOLEAN, INTEGER, REAL, STRING
 
-__all__ = ["McapRecorder", "MessageSink", "scene_update", "SCENE_SCHEMA"]
+__all__ = ["McapRecorder", "MessageSink", "scene_update", "SCENE_SCHEMA", "EVENTS_SCHEMA"]
 
 _MESSAGE_HEAD = struct.Struct("<BQHIQQ")  # opcode, record length, channel id, sequence, log time, publish time
 _MESSAGE_OPCODE = 0x05
 _MESSAGE_FIXED = 22  # bytes of a Message record after its length field, before the data
 
-_JSON_TYPE = {REAL: "number", INTEGER: "integer", BOOLEAN: "boolean"}
+_JSON_TYPE = {REAL: {"type": "number"}, INTEGER: {"type": "integer"}, BOOLEAN: {"type": "boolean"},
+              STRING: {"type": "string"}, BINARY: {"type": "string", "contentEncoding": "base64"}}
+
+
+def _json_type(v) -> dict:
+    """The JSON Schema of a logged variable's value (arrays: a flat list, row-major)."""
+    item = dict(_JSON_TYPE[v.kind])
+    if not v.is_array:
+        return item
+    return {"type": "array", "items": item, "minItems": v.count, "maxItems": v.count,
+            "description": f"shape {'x'.join(map(str, v.shape))}, row-major"}
+
+
+def _converter(v):
+    """None when the buffer's value is already the JSON value (floats, ints, C bools), else a function."""
+    if v.kind == BINARY:
+        import base64
+
+        return lambda b: base64.b64encode(b).decode("ascii")
+    return bool if v.kind == BOOLEAN else None  # FMI 2.0 Booleans are C ints
 
 
 def _stamp(t_ns: int) -> dict[str, int]:
@@ -69,6 +88,18 @@ SCENE_SCHEMA = {
                 "scale_invariant": {"type": "boolean"}, "points": {"type": "array", "items": _VEC3},
                 "color": _COLOR, "colors": {"type": "array"}, "indices": {"type": "array"}}}},
             "triangles": {"type": "array"}, "texts": {"type": "array"}, "models": {"type": "array"}}}},
+    },
+}
+
+
+EVENTS_SCHEMA = {
+    "title": "cosim.Event",
+    "description": "An event handled by the master in a model-exchange component (FMI event mode)",
+    "type": "object",
+    "properties": {
+        "t": {"type": "number", "description": "event time", "unit": "s"},
+        "component": {"type": "string", "description": "the component in event mode"},
+        "kind": {"type": "string", "description": "what triggered it: state, time, step or input (joined by +)"},
     },
 }
 
@@ -223,6 +254,20 @@ def _values(t_ns: int, groups) -> list:
     return vals
 
 
+def _values_any(t_ns: int, readers) -> list:
+    """``[t in s, logged values...]`` for components with arrays or values needing conversion.
+
+    ``readers`` holds per variable ``(array, offset, count or None for a scalar, converter or None)``.
+    """
+    vals = [t_ns * 1e-9]
+    for arr, i, n, conv in readers:
+        if n is None:
+            vals.append(arr[i] if conv is None else conv(arr[i]))
+        else:
+            vals.append(arr[i:i + n] if conv is None else [conv(x) for x in arr[i:i + n]])
+    return vals
+
+
 class McapRecorder:
     """Observer writing the run to an MCAP file (see the module docstring)."""
 
@@ -254,7 +299,7 @@ class McapRecorder:
         w.start(profile="", library="cosim")
         plan = rt.plan
         # per component: channel id, its sources grouped by buffer (see _gather), the JSON keys
-        self._channels: list[tuple[int, list[tuple[Any, list[int] | None]], tuple[str, ...]] | None] = []
+        self._channels: list[tuple[int, list, tuple[str, ...], Any] | None] = []
         for c, name in enumerate(plan.names):
             logged = plan.logged[c] if plan.logged else []
             if not logged:
@@ -262,13 +307,13 @@ class McapRecorder:
                 continue
             slave = rt.slaves[c]
             props = {"t": {"type": "number", "description": "simulation time", "unit": "s"}}
-            sources = []
+            readers = []
             keys = ["t"]
             for v in logged:
-                props[v.name] = {"type": _JSON_TYPE.get(v.kind, "string"), "description": v.description or "",
-                                 "unit": v.unit or "", "causality": v.causality}
-                is_out = v.causality == "output"
-                sources.append(slave.locate(v, output=is_out))
+                props[v.name] = {**_json_type(v), "description": v.description or "", "unit": v.unit or "",
+                                 "causality": v.causality}
+                arr, i = slave.locate(v, output=v.causality == "output")
+                readers.append((arr, i, v.count if v.is_array else None, _converter(v)))
                 keys.append(v.name)
             schema = {"title": f"cosim.{plan.infos[c].md.modelName}", "type": "object", "properties": props,
                       "description": f"signals of component {name} ({plan.infos[c].path.name})"}
@@ -276,18 +321,28 @@ class McapRecorder:
             cid = w.register_channel(topic=f"/{name}", message_encoding="json", schema_id=sid,
                                      metadata={"fmu": str(plan.infos[c].path.name),
                                                "step_multiple": str(rt.multiples[c])})
-            self._channels.append((cid, _gather(sources), tuple(keys)))
+            if all(n is None and conv is None for _, _, n, conv in readers):  # plain scalars: grouped reads
+                self._channels.append((cid, _gather([(arr, i) for arr, i, _, _ in readers]), tuple(keys), _values))
+            else:
+                self._channels.append((cid, readers, tuple(keys), _values_any))
         self._h_ns = [m * rt.step_ns for m in rt.multiples]
         self._step_ns = rt.step_ns
+        self._t0 = rt.start_ns
+        self._rt = rt
         self._scene = None
         if self.scene_robot is not None and self.scene_position:
-            sources = [rt.slaves[plan.names.index(r.split(".", 1)[0])].locate(plan.port(r).var) for r in
-                       self.scene_position]
+            sources = [rt.where(plan.port(r)) for r in self.scene_position]
             sid = w.register_schema(name="foxglove.SceneUpdate", encoding="jsonschema",
                                     data=orjson.dumps(SCENE_SCHEMA))
             cid = w.register_channel(topic="/scene", message_encoding="json", schema_id=sid)
             self._scene = (cid, sources)
             self._next_scene = rt.start_ns
+        # model-exchange components report their events (time, kind) on one /events channel
+        self._event_sources = [(c, s) for c, s in enumerate(rt.slaves) if hasattr(s, "event_log")]
+        self._events_channel = None
+        if self._event_sources:
+            sid = w.register_schema(name="cosim.events", encoding="jsonschema", data=orjson.dumps(EVENTS_SCHEMA))
+            self._events_channel = w.register_channel(topic="/events", message_encoding="json", schema_id=sid)
         self._metadata(rt)
         self._last_flush = time.monotonic()
         t0 = rt.start_ns
@@ -329,8 +384,8 @@ class McapRecorder:
         ch = self._channels[c]
         if ch is None:
             return
-        cid, groups, keys = ch
-        self._sink.add(cid, t_ns, orjson.dumps(dict(zip(keys, _values(t_ns, groups)))))
+        cid, groups, keys, values = ch
+        self._sink.add(cid, t_ns, orjson.dumps(dict(zip(keys, values(t_ns, groups)))))
         self.messages += 1
 
     def _draw(self, t_ns: int) -> None:
@@ -345,23 +400,40 @@ class McapRecorder:
 
     def stepped(self, k: int, t_ns: int, active: Sequence[int]) -> None:
         h = self._h_ns
-        t_start = t_ns - self._step_ns
+        t_start = self._t0 + k * self._step_ns
         add = self._sink.add
-        dumps, values = orjson.dumps, _values
+        dumps = orjson.dumps
         channels = self._channels
         for c in active:
             ch = channels[c]
             if ch is None:
                 continue
             stamp = t_start + h[c]  # the end of this component's own (possibly multi-rate) step
-            cid, groups, keys = ch
+            if stamp > t_ns and self._rt.t_end_ns is not None:  # an FMU ended the run: the time reached
+                stamp = t_ns
+            cid, groups, keys, values = ch
             add(cid, stamp, dumps(dict(zip(keys, values(stamp, groups)))))
         self.messages += len(active)
+        if self._events_channel is not None:
+            self._log_events()
         if self._scene is not None and t_ns >= self._next_scene:
             self._draw(t_ns)
         if time.monotonic() - self._last_flush > self.flush_interval:
             self._writer.flush()
             self._last_flush = time.monotonic()
+
+    def _log_events(self) -> None:
+        names = self._rt.plan.names
+        for c, slave in self._event_sources:
+            log = slave.event_log
+            if not log:
+                continue
+            for t, kind in log:
+                t_ns = round(t * 1e9)
+                self._sink.add(self._events_channel, t_ns, orjson.dumps(
+                    {"t": t, "component": names[c], "kind": kind}))
+                self.messages += 1
+            log.clear()
 
     def finish(self, rt: Runtime | None, error: BaseException | None) -> None:
         if self._writer is None:
@@ -372,8 +444,11 @@ class McapRecorder:
                     error, KeyboardInterrupt) else "interrupted", "message": str(error) or type(error).__name__,
                     "completed_steps": str(rt.k_done if rt else 0)})
             else:
-                self._writer.add_metadata("outcome", {"status": "completed",
-                                                      "completed_steps": str(rt.k_done if rt else 0)})
+                outcome = {"status": "completed", "completed_steps": str(rt.k_done if rt else 0)}
+                if rt is not None and rt.terminated is not None:
+                    outcome.update(terminated_by=rt.terminated.component, end_time_s=repr(rt.terminated.time),
+                                   message=str(rt.terminated))
+                self._writer.add_metadata("outcome", outcome)
             self._writer.finish()
         finally:
             self._writer = None

@@ -31,8 +31,7 @@ class Comparison:
         self._pairs = []
         for a, r in zip(self.actual, self.reference):
             pa, pr = rt.plan.port(a), rt.plan.port(r)
-            self._pairs.append((rt.slaves[pa.comp].locate(pa.var, pa.var.causality == "output"),
-                                rt.slaves[pr.comp].locate(pr.var, pr.var.causality == "output")))
+            self._pairs.append((rt.where(pa), rt.where(pr)))
         n = len(self._pairs)
         self.sq = [0.0] * n
         self.mx = [0.0] * n
@@ -67,8 +66,7 @@ class Probe:
     def start(self, rt: Runtime) -> None:
         self._src = []
         for s in self.signals:
-            p = rt.plan.port(s)
-            self._src.append(rt.slaves[p.comp].locate(p.var, p.var.causality == "output"))
+            self._src.append(rt.where(rt.plan.port(s)))
         self.stepped(-1, rt.start_ns, ())
 
     def stepped(self, k: int, t_ns: int, active: Sequence[int]) -> None:

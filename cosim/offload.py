@@ -36,7 +36,7 @@ from typing import Any
 from . import fmu as _fmu
 from .algorithm import Runtime, byte_view, initialize, simulate
 from .errors import CosimError
-from .fmu import STRING, Variable, cleanup_extracted, load_fmu, make_slave
+from .fmu import PY_KINDS, Variable, cleanup_extracted, load_fmu, make_slave
 from .system import Link, Port, SystemPlan
 
 __all__ = ["AUTO_MIN_STEPS", "RING", "feedforward", "choose", "Offload", "Proxy"]
@@ -88,9 +88,13 @@ def choose(plan: SystemPlan, mode: str, n_steps: int) -> tuple[list[int], str]:
     elif len(group) == len(plan.names):
         why = "every component is feed-forward: nothing would be left to overlap with"
     else:
-        strings = [f"{plan.names[c]}.{v.name}" for c in group for v in plan.outputs[c] if v.kind == STRING]
+        strings = [f"{plan.names[c]}.{v.name}" for c in group for v in plan.outputs[c] if v.kind in PY_KINDS]
+        restructured = [plan.names[c] for c in group
+                        if plan.infos[c] is not None and plan.infos[c].structural_parameters()]
         if strings:
-            why = f"{', '.join(strings)} are strings (only fixed-size values are shared)"
+            why = f"{', '.join(strings)} are strings or binaries (only fixed-size values are shared)"
+        elif restructured:
+            why = f"{', '.join(restructured)} have structural parameters (array sizes are set per run)"
         elif mode == "auto" and n_steps < AUTO_MIN_STEPS:
             why = f"{n_steps} steps is too short to pay for starting a worker; auto needs {AUTO_MIN_STEPS}"
         elif mode == "auto" and usable_cpus() < 2:
@@ -176,7 +180,8 @@ class Offload:
         index = {c: j for j, c in enumerate(comps)}
         spec = dict(
             names=self.names, paths=[str(plan.infos[c].path) for c in comps],
-            kinds=[("me" if t.model_exchange else "cs", getattr(t, "rtol", 1e-6)) for t in templates],
+            kinds=[("me" if t.model_exchange else "cs", getattr(t, "rtol", 1e-6), getattr(t, "solver", "cvode"),
+                    getattr(t, "max_step", None)) for t in templates],
             start_values=[plan.start_values[c] for c in comps],
             inputs=[[v.name for v in plan.inputs[c]] for c in comps],
             outputs=[[v.name for v in plan.outputs[c]] for c in comps],
@@ -353,7 +358,7 @@ def _free_count(sem: Any) -> int:
 def _worker(spec: dict, raw: Any, filled: list, free: list, stop: Any, conn: Any) -> None:
     """Entry point of the worker process: run the feed-forward group, publishing as it goes."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the master's to handle; it stops us
-    inherited = set(_fmu._CACHE)  # a forked worker shares its parent's extracted FMUs: leave them
+    inherited = set(_fmu._EXTRACTED)  # a forked worker shares its parent's extracted FMUs: leave them
     slaves: list[Any] = []
     pubs: list[_Publisher] = []
     code = 1
@@ -397,8 +402,8 @@ def _worker(spec: dict, raw: Any, filled: list, free: list, stop: Any, conn: Any
 def _runtime(spec: dict, raw: Any, filled: list, free: list, stop: Any, slaves: list, pubs: list) -> Runtime:
     infos = [load_fmu(p) for p in spec["paths"]]
     for j, name in enumerate(spec["names"]):
-        interface, rtol = spec["kinds"][j]
-        s = make_slave(name, infos[j], interface, rtol)
+        interface, rtol, solver, max_step = spec["kinds"][j]
+        s = make_slave(name, infos[j], interface, rtol, solver, max_step)
         s.bind([infos[j].variables[v] for v in spec["inputs"][j]], [infos[j].variables[v] for v in spec["outputs"][j]])
         slaves.append(s)
     layout = _Layout(spec["sizes"])

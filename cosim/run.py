@@ -9,7 +9,7 @@ from typing import Any, Sequence
 
 from .algorithm import Observer, Runtime, StopRequest, initialize, simulate
 from .errors import ComponentSourceError, CosimError, Issue
-from .fmu import FMUInfo, load_fmu, make_slave
+from .fmu import FMUInfo, cleanup_extracted, load_fmu, make_slave
 from .observers import AxisError, Comparison
 from .offload import Offload, choose
 from .scenario import Scenario, _line_for, expand_signal, load_scenario
@@ -33,6 +33,8 @@ class RunResult:
     message: str = ""
     notes: list[str] = field(default_factory=list)  # e.g. which components ran ahead in a worker process
     worker_time: dict[str, float] = field(default_factory=dict)  # s per component, inside the worker process
+    terminated_by: str | None = None  # the component that ended the simulation before the stop time
+    events: dict[str, int] = field(default_factory=dict)  # events handled per model-exchange component
 
     @property
     def real_time_factor(self) -> float:
@@ -47,7 +49,8 @@ class RunResult:
                 "sim_time_s": self.sim_time, "wall_time_s": self.wall_time,
                 "real_time_factor": self.real_time_factor, "component_time_s": self.component_time,
                 "errors": [e.__dict__ for e in self.errors], "checks": self.checks, "passed": self.passed,
-                "mcap": self.mcap, "notes": self.notes, "worker_time_s": self.worker_time}
+                "mcap": self.mcap, "notes": self.notes, "worker_time_s": self.worker_time,
+                "terminated_by": self.terminated_by, "events": self.events}
 
 
 def progress_bar():
@@ -143,13 +146,23 @@ def run_scenario(scenario: Scenario | str | Path, out: str | Path | None = None,
                  ) -> RunResult:
     """Run a scenario end to end. Raises CosimError (bad input, FMU failure) or KeyboardInterrupt.
 
-    The MCAP file, when logging, is finished whatever happens.
+    The MCAP file, when logging, is finished whatever happens, and the FMUs extracted for the
+    run are removed (success, error or Ctrl-C).
     """
+    try:
+        return _run(scenario, out, overrides, log, progress, extra_observers)
+    finally:
+        cleanup_extracted()
+
+
+def _run(scenario: Scenario | str | Path, out: str | Path | None, overrides: dict | None, log: bool | None,
+         progress: bool, extra_observers: Sequence[Observer]) -> RunResult:
     if not isinstance(scenario, Scenario):
         scenario = load_scenario(scenario, overrides)
     logging_on = scenario.logging.enabled if log is None else log
     plan, _ = prepare(scenario, None if logging_on else "none")
-    slaves = [make_slave(n, plan.infos[i], scenario.components[n].interface, scenario.components[n].rtol)
+    comps = scenario.components
+    slaves = [make_slave(n, plan.infos[i], comps[n].interface, comps[n].rtol, comps[n].solver, comps[n].max_step)
               for i, n in enumerate(plan.names)]
     for c, s in enumerate(slaves):
         s.bind(plan.inputs[c], plan.outputs[c])
@@ -226,9 +239,14 @@ def run_scenario(scenario: Scenario | str | Path, out: str | Path | None = None,
             o.finish(rt, error)
     if error is not None:  # a failure at the end (fmi2Terminate, the worker's report) fails the run too
         raise error
-    result = RunResult(scenario.name, rt.k_done, rt.k_done * rt.step_ns * 1e-9, wall,
+    t_end_ns = rt.t_end_ns if rt.t_end_ns is not None else rt.t_ns(rt.k_done)
+    result = RunResult(scenario.name, rt.k_done, (t_end_ns - rt.start_ns) * 1e-9, wall,
                        dict(zip(plan.names, rt.comp_time)), mcap=str(mcap_path) if mcap_path else None,
                        notes=[note] if note else [], worker_time=offload.worker_time if offload else {})
+    result.events = {n: s.events for n, s in zip(plan.names, slaves) if getattr(s, "model_exchange", False)}
+    if rt.terminated is not None:  # an FMU ended the simulation: a normal end, said in the summary
+        result.message = str(rt.terminated)
+        result.terminated_by = rt.terminated.component
     if comparison is not None:
         result.errors = comparison.result()
         if scenario.checks is not None:

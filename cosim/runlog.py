@@ -26,7 +26,7 @@ from .errors import CosimError
 __all__ = ["Signal", "RunLog", "read_run", "write_baseline", "AXES"]
 
 AXES = ("x", "y", "z")
-_SKIP_TOPICS = {"/scene"}
+_SKIP_TOPICS = {"/scene", "/events"}
 
 
 @dataclass(frozen=True)
@@ -54,6 +54,7 @@ class RunLog:
     metadata: dict[str, dict[str, str]] = field(default_factory=dict)
     attachments: dict[str, bytes] = field(default_factory=dict)
     channel_metadata: dict[str, dict[str, str]] = field(default_factory=dict)
+    events: list[dict] = field(default_factory=list)  # the /events channel: {"t", "component", "kind"}, in time order
 
     @property
     def name(self) -> str:
@@ -124,6 +125,7 @@ def read_run(path: str | Path, components: Iterable[str] | None = None) -> RunLo
     metadata: dict[str, dict[str, str]] = {}
     attachments: dict[str, bytes] = {}
     channel_md: dict[str, dict[str, str]] = {}
+    events: list[dict] = []
     try:
         with open(path, "rb") as f:
             reader = make_reader(f)
@@ -140,6 +142,9 @@ def read_run(path: str | Path, components: Iterable[str] | None = None) -> RunLo
                 schema = summary.schemas.get(ch.schema_id)
                 props[comp] = orjson.loads(schema.data).get("properties", {}) if schema is not None else {}
                 rows[comp], stamps[comp] = [], []
+            has_events = any(ch.topic == "/events" for ch in summary.channels.values())
+            for _, ch, msg in reader.iter_messages(topics=["/events"] if has_events else [], log_time_order=True):
+                events.append(orjson.loads(msg.data))
             for _, ch, msg in reader.iter_messages(topics=topics, log_time_order=False):
                 comp = ch.topic[1:]
                 d = orjson.loads(msg.data)
@@ -164,14 +169,30 @@ def read_run(path: str | Path, components: Iterable[str] | None = None) -> RunLo
             continue
         order = np.argsort(np.asarray(stamps[comp], dtype=np.int64), kind="stable")
         t_ns = np.asarray(stamps[comp], dtype=np.int64)[order]
-        table = np.array(data, dtype=float)[order]  # JSON null (a NaN written by orjson) -> nan
         for j, key in enumerate(keys[comp]):
             if key == "t":
                 continue
             meta = props[comp].get(key, {})
-            signals[f"{comp}.{key}"] = Signal(f"{comp}.{key}", t_ns, table[:, j], meta.get("unit", ""),
-                                              meta.get("description", ""), meta.get("causality", ""))
-    return RunLog(path, signals, metadata, attachments, channel_md)
+            signals[f"{comp}.{key}"] = Signal(f"{comp}.{key}", t_ns, _column([data[i][j] for i in order], meta),
+                                              meta.get("unit", ""), meta.get("description", ""),
+                                              meta.get("causality", ""))
+    return RunLog(path, signals, metadata, attachments, channel_md, events)
+
+
+def _column(values: list, meta: dict) -> np.ndarray:
+    """Values of one variable over time: floats (n,), (n, count) for arrays of numbers; else objects.
+
+    JSON null (a NaN written by orjson) becomes nan; strings and base64 binaries stay as they are.
+    """
+    item = meta.get("items", meta)
+    if item.get("type") in ("number", "integer", "boolean"):
+        try:
+            return np.array(values, dtype=float)
+        except (TypeError, ValueError):  # ragged or mixed: keep the objects
+            pass
+    column = np.empty(len(values), dtype=object)
+    column[:] = values
+    return column
 
 
 def write_baseline(source: str | Path, out: str | Path, period: float = 0.01,

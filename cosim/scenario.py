@@ -56,9 +56,18 @@ class Component(_Model):
     interface: Literal["auto", "cs", "me"] = Field(
         "auto", description="co-simulation or model exchange; auto prefers co-simulation")
     feedthrough: Literal["auto", "none"] = Field(
-        "auto", description="'none' declares that no output depends directly on an input, for FMUs whose "
-                            "ModelStructure leaves dependencies undeclared (e.g. pythonfmu)")
-    rtol: float = Field(1e-6, gt=0, description="model exchange: CVode relative tolerance")
+        "auto", description="override of the FMU's ModelStructure: 'none' declares that no output depends "
+                            "directly on an input, for third-party FMUs that leave dependencies undeclared "
+                            "(ours declare them)")
+    rtol: float = Field(1e-6, gt=0, description="model exchange: the integrator's relative tolerance (absolute "
+                                                "tolerance: rtol times each state's nominal value)")
+    solver: Literal["cvode", "dop853"] = Field(
+        "cvode", description="model exchange: 'cvode' (SUNDIALS BDF, as FMPy; for stiff models) or 'dop853' "
+                             "(SciPy's explicit Runge-Kutta 8(5,3); restarts for free, for non-stiff models whose "
+                             "inputs change at every communication step)")
+    max_step: float | None = Field(
+        None, gt=0, description="model exchange: largest internal step, s (default: bounded only by the "
+                                "communication step; the integrator never steps past a communication point)")
 
     @model_validator(mode="after")
     def _one_source(self) -> "Component":

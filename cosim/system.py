@@ -7,6 +7,7 @@ and the scenario, and produces a :class:`SystemPlan` the algorithm executes.
 from __future__ import annotations
 
 import difflib
+import re
 from dataclasses import dataclass, field
 from typing import Any, Mapping
 
@@ -19,19 +20,79 @@ __all__ = ["Port", "Link", "SystemPlan", "build_plan", "gauss_seidel_order", "fi
 
 @dataclass(frozen=True)
 class Port:
-    """A resolved variable: component index and variable (value reference, type, unit)."""
+    """A resolved variable: component index and variable (value reference, type, unit).
+
+    ``element`` selects one element of an FMI 3.0 array (0-based, row-major); None is the
+    whole variable (every element).
+    """
 
     comp: int
     var: Variable
+    element: int | None = None
+
+    @property
+    def offset(self) -> int:
+        return self.element or 0
+
+    @property
+    def count(self) -> int:
+        return self.var.count if self.element is None else 1
 
     def label(self, names: list[str]) -> str:
-        return f"{names[self.comp]}.{self.var.name}"
+        return f"{names[self.comp]}.{self.var.name}{_index_text(self.var, self.element)}"
 
 
 @dataclass(frozen=True)
 class Link:
     src: Port
     dst: Port
+
+    @property
+    def count(self) -> int:
+        return self.src.count
+
+
+_ELEMENT = re.compile(r"^(?P<base>.+)\[(?P<idx>\d+(?:\s*,\s*\d+)*)\]$")
+
+
+def _index_text(var: Variable, element: int | None) -> str:
+    if element is None:
+        return ""
+    idx, rest = [], element
+    for n in reversed(var.shape):
+        idx.append(rest % n + 1)
+        rest //= n
+    return "[" + ",".join(str(i) for i in reversed(idx)) + "]"
+
+
+def find_variable(info: FMUInfo, name: str) -> tuple[Variable | None, int | None, str]:
+    """``name`` in ``info``: a variable, or one element ``base[i]`` / ``base[i,j]`` of an FMI 3.0 array.
+
+    Returns (variable, element or None, problem); the problem is empty when found.
+    """
+    var = info.variables.get(name)
+    if var is not None:
+        return var, None, ""
+    m = _ELEMENT.match(name)
+    if m is None:
+        return None, None, ""
+    base = info.variables.get(m.group("base"))
+    if base is None or not base.is_array:
+        return None, None, ""
+    idx = [int(i) for i in m.group("idx").split(",")]
+    if len(idx) != len(base.shape) or any(not 1 <= i <= n for i, n in zip(idx, base.shape)):
+        return None, None, f"{name}: index out of range ({base.name} has shape {'x'.join(map(str, base.shape))}, " \
+                           f"indices start at 1)"
+    flat = 0
+    for i, n in zip(idx, base.shape):
+        flat = flat * n + (i - 1)
+    return base, flat, ""
+
+
+def _flatten(value: Any) -> list:
+    if isinstance(value, (list, tuple)):
+        return [x for item in value for x in _flatten(item)]
+    return [value]
 
 
 @dataclass
@@ -49,9 +110,12 @@ class SystemPlan:
     notes: list[str] = field(default_factory=list)  # non-fatal findings (e.g. loops broken at undeclared deps)
 
     def port(self, ref: str) -> Port:
-        comp, var = ref.split(".", 1)
+        comp, name = ref.split(".", 1)
         i = self.names.index(comp)
-        return Port(i, self.infos[i].variables[var])
+        var, element, problem = find_variable(self.infos[i], name)
+        if var is None:
+            raise KeyError(problem or f"{ref}: no such variable")
+        return Port(i, var, element)
 
 
 def _close(name: str, candidates: list[str]) -> str:
@@ -78,21 +142,39 @@ def build_plan(scenario: Scenario, infos: Mapping[str, FMUInfo], log_signals: st
         issues.append(Issue(_format_loc(loc), msg, scenario.source, _line_for(loc, lines)))
 
     start_values: list[dict[str, Any]] = [dict() for _ in names]
+    infos = dict(infos)
     for n, comp in scenario.components.items():
+        structural = {p: v for p, v in comp.parameters.items()
+                      if p in infos[n].variables and infos[n].variables[p].causality == "structuralParameter"}
+        if structural:  # array sizes follow the scenario's structural parameters
+            infos[n] = infos[n].with_structure(structural)
         info = infos[n]
         for pname, value in comp.parameters.items():
-            targets = [(f"{pname}[{k + 1}]", v) for k, v in enumerate(value)] if isinstance(value, list) \
-                else [(pname, value)]
+            loc = ("components", n, "parameters", pname)
+            whole = info.variables.get(pname)
+            if whole is not None and whole.is_array:
+                flat = _flatten(value)
+                if len(flat) != whole.count:
+                    issue(loc, f"{pname} has shape {'x'.join(map(str, whole.shape))} ({whole.count} elements), "
+                               f"{len(flat)} value(s) given (give a list, nested lists row by row)")
+                    continue
+                targets = [(pname, flat)]
+            elif isinstance(value, list):
+                targets = [(f"{pname}[{k + 1}]", v) for k, v in enumerate(value)]
+            else:
+                targets = [(pname, value)]
             for vname, val in targets:
                 var = info.variables.get(vname)
-                loc = ("components", n, "parameters", pname)
                 if var is None:
                     settable = [v.name for v in info.variables.values()
-                                if v.causality in ("parameter", "input") or v.variability == "tunable"]
+                                if v.causality in ("parameter", "input", "structuralParameter")
+                                or v.variability == "tunable"]
                     issue(loc, f"{info.path.name} has no variable {vname!r}{_close(vname, settable)}")
                 elif var.variability == "constant" or var.causality in ("output", "calculatedParameter",
                                                                          "independent"):
                     issue(loc, f"{vname} is {var.causality}/{var.variability}: its value cannot be set")
+                elif var.kind in ("Real", "Integer") and any(isinstance(x, str) for x in _flatten(val)):
+                    issue(loc, f"{vname} is {var.fmi_type}: expected a number, got {val!r}")
                 else:
                     start_values[idx[n]][vname] = val
 
@@ -104,16 +186,16 @@ def build_plan(scenario: Scenario, infos: Mapping[str, FMUInfo], log_signals: st
             return None  # already reported by the scenario validation
         info = infos[comp]
         want = ("output",) if role == "output" else ("input",)
-        var = info.variables.get(vname)
+        var, element, problem = find_variable(info, vname)
         candidates = [v.name for v in info.variables.values() if v.causality in want]
         if var is None:
-            issue(loc, f"{info.path.name} ({comp}) has no variable {vname!r}{_close(vname, candidates)}")
+            issue(loc, problem or f"{info.path.name} ({comp}) has no variable {vname!r}{_close(vname, candidates)}")
             return None
         if var.causality not in want:
             issue(loc, f"{ref} is a{'n' if var.causality[0] in 'aeiou' else ''} {var.causality}, expected an "
                        f"{role}{_close(vname, candidates)}")
             return None
-        return Port(idx[comp], var)
+        return Port(idx[comp], var, element)
 
     for i, c in enumerate(scenario.connections):
         src = resolve(c.src, ("connections", i, "from"), "output")
@@ -122,6 +204,9 @@ def build_plan(scenario: Scenario, infos: Mapping[str, FMUInfo], log_signals: st
             continue
         if src.var.kind != dst.var.kind:
             issue(("connections", i), f"type mismatch: {_describe(c.src, src.var)} -> {_describe(c.dst, dst.var)}")
+            continue
+        if src.count != dst.count:
+            issue(("connections", i), f"size mismatch: {c.src} has {src.count} element(s), {c.dst} has {dst.count}")
             continue
         if src.var.unit and dst.var.unit and src.var.unit != dst.var.unit:
             issue(("connections", i), f"unit mismatch: {_describe(c.src, src.var)} -> {_describe(c.dst, dst.var)}")
@@ -137,20 +222,21 @@ def build_plan(scenario: Scenario, infos: Mapping[str, FMUInfo], log_signals: st
     for ref in extra_reads:
         comp, vname = ref.split(".", 1)
         if comp in idx:
-            var = infos[comp].variables.get(vname)
+            var, element, _ = find_variable(infos[comp], vname)
             if var is None or var.causality not in ("output", "input"):
                 outs = [v.name for v in infos[comp].variables.values() if v.causality == "output"]
                 issue(("compare",) if scenario.compare else ("logging", "scene"),
                       f"{ref}: no such output{_close(vname, outs)}")
             else:
-                reads.append(Port(idx[comp], var))
+                reads.append(Port(idx[comp], var, element))
     if issues:
         raise WiringError(issues)
 
     inputs = [[] for _ in names]
     outputs = [[] for _ in names]
     for link in links:
-        inputs[link.dst.comp].append(link.dst.var)
+        if link.dst.var not in inputs[link.dst.comp]:
+            inputs[link.dst.comp].append(link.dst.var)
         if link.src.var not in outputs[link.src.comp]:
             outputs[link.src.comp].append(link.src.var)
     for p in reads:
@@ -161,7 +247,7 @@ def build_plan(scenario: Scenario, infos: Mapping[str, FMUInfo], log_signals: st
     logged = [[] for _ in names]
     if signals != "none":
         for k, n in enumerate(names):
-            all_out = [v for v in infos[n].variables.values() if v.causality == "output" and v.kind != "String"]
+            all_out = [v for v in infos[n].variables.values() if v.causality == "output"]
             for v in all_out:
                 if v not in outputs[k]:
                     outputs[k].append(v)
