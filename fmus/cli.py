@@ -1,4 +1,9 @@
-"""``python -m cosim fmus build|list``: build the FMUs into the cache and show their interfaces."""
+"""``python -m cosim fmus build|list|info``: build our FMUs into the cache; describe any FMU.
+
+``list`` and ``info`` accept our FMUs by name and any ``.fmu`` file by path (FMI 2.0 or 3.0,
+from any tool): FMI version, generating tool, interfaces, default experiment, and every
+variable with causality, variability, type, shape, unit and start value.
+"""
 
 from __future__ import annotations
 
@@ -18,17 +23,41 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--force", action="store_true", help="rebuild even when the cache is current")
     p.add_argument("--json", action="store_true")
     p.set_defaults(handler=_cmd_build)
-    p = sub.add_parser("list", help="list the FMUs with their inputs, outputs and parameters")
-    p.add_argument("names", nargs="*", help="FMU names (default: all)")
+    p = sub.add_parser("list", help="list FMUs (ours by name, or any .fmu by path) with inputs, outputs and parameters")
+    p.add_argument("names", nargs="*", help="FMU names or .fmu paths (default: all of ours)")
     p.add_argument("--out", default=None, help="cache directory used to build and read them (default .fmu_cache)")
     p.add_argument("--json", action="store_true")
     p.set_defaults(handler=_cmd_list)
+    p = sub.add_parser("info", help="everything about one FMU (ours by name, or any .fmu by path): interfaces, "
+                                    "default experiment, every variable with type, unit and start value")
+    p.add_argument("fmu", help="an .fmu path or one of our FMU names")
+    p.add_argument("--out", default=None, help="cache directory for our FMUs (default .fmu_cache)")
+    p.add_argument("--json", action="store_true")
+    p.set_defaults(handler=_cmd_info)
+
+
+def _is_path(name: str) -> bool:
+    return name.endswith(".fmu") or "/" in name
 
 
 def _selection(args: argparse.Namespace) -> list[str]:
     from . import registry
 
-    return [registry.get(n).name for n in args.names] if args.names else registry.available()
+    if not args.names:
+        return registry.available()
+    return [n if _is_path(n) else registry.get(n).name for n in args.names]
+
+
+def _resolve(name: str, out: str | None):
+    """(path, summary) of an .fmu path or one of our FMUs (built if needed)."""
+    from pathlib import Path
+
+    from . import registry
+
+    if _is_path(name):
+        return Path(name), ""
+    entry = registry.get(name)
+    return registry.build(name, out), entry.summary
 
 
 def _cmd_build(args: argparse.Namespace) -> int:
@@ -50,37 +79,93 @@ def _cmd_build(args: argparse.Namespace) -> int:
 
 
 def describe(path) -> dict:
-    """Inputs, outputs and parameters of a built FMU, from its modelDescription.xml."""
+    """Interfaces, default experiment and variables of an FMU file, from its modelDescription.xml."""
+    from pathlib import Path
+
     from fmpy import read_model_description
 
-    md = read_model_description(str(path))
-    out: dict = {"fmi": md.fmiVersion, "description": md.description, "inputs": [], "outputs": [], "parameters": []}
+    from delta.errors import CosimError
+
+    path = Path(path)
+    if not path.is_file():
+        raise CosimError(f"{path}: no such FMU file")
+    try:
+        md = read_model_description(str(path), validate=False)
+    except Exception as exc:  # fmpy raises bare Exception for a bad archive or XML  # noqa: BLE001
+        raise CosimError(f"{path}: not a readable FMU: {exc}") from None
+    interfaces = {}
+    for key, part in (("cs", md.coSimulation), ("me", md.modelExchange)):
+        if part is not None:
+            interfaces[key] = {"model_identifier": part.modelIdentifier}
+            if key == "cs":
+                interfaces[key]["variable_step"] = bool(part.canHandleVariableCommunicationStepSize)
+            else:
+                interfaces[key]["needs_completed_integrator_step"] = bool(part.needsCompletedIntegratorStep)
+    out: dict = {"path": str(path), "fmi": md.fmiVersion, "model_name": md.modelName,
+                 "description": md.description, "generation_tool": md.generationTool, "interfaces": interfaces,
+                 "continuous_states": md.numberOfContinuousStates, "event_indicators": md.numberOfEventIndicators,
+                 "inputs": [], "outputs": [], "parameters": [], "variables": []}
     de = md.defaultExperiment
     if de is not None:
-        out["default_experiment"] = {"start": de.startTime, "stop": de.stopTime, "step": de.stepSize}
-    key = {"input": "inputs", "output": "outputs", "parameter": "parameters"}
+        out["default_experiment"] = {"start": de.startTime, "stop": de.stopTime, "step": de.stepSize,
+                                     "tolerance": de.tolerance}
+    key = {"input": "inputs", "output": "outputs", "parameter": "parameters", "structuralParameter": "parameters"}
     for v in md.modelVariables:
+        unit = v.unit or (v.declaredType.unit if v.declaredType is not None and hasattr(v.declaredType, "unit")
+                          else None)
+        item = {"name": v.name, "causality": v.causality, "variability": v.variability, "type": v.type,
+                "unit": unit, "start": v.start, "description": v.description}
+        if v.dimensions:
+            item["shape"] = list(v.shape or ())
+        out["variables"].append(item)
         if v.causality in key:
-            item = {"name": v.name, "type": v.type, "unit": v.unit, "start": v.start, "description": v.description}
-            if v.causality == "parameter":
-                item["variability"] = v.variability
             out[key[v.causality]].append(item)
     return out
 
 
-def _cmd_list(args: argparse.Namespace) -> int:
-    from . import registry
+def _variable_line(v: dict) -> str:
+    shape = f"[{'x'.join(map(str, v['shape']))}]" if v.get("shape") else ""
+    unit = f" [{v['unit']}]" if v["unit"] else ""
+    start = f" = {v['start']}" if v["start"] is not None else ""
+    return f"    {v['name']}{shape}: {v['type']} {v['causality']}/{v['variability']}{unit}{start}"
 
+
+def _cmd_info(args: argparse.Namespace) -> int:
+    path, summary = _resolve(args.fmu, args.out)
+    info = describe(path)
+    if summary:
+        info["summary"] = summary
+    if args.json:
+        print(json.dumps(info, indent=2, default=str))
+        return 0
+    lines = [f"{info['path']}: {info['model_name']} (FMI {info['fmi']}, generated by {info['generation_tool'] or '?'})"]
+    if summary or info["description"]:
+        lines.append(f"  {summary or info['description']}")
+    for k, v in info["interfaces"].items():
+        extra = ", ".join(f"{a}={b}" for a, b in v.items())
+        lines.append(f"  interface {'co-simulation' if k == 'cs' else 'model exchange'}: {extra}")
+    if "me" in info["interfaces"]:
+        lines.append(f"  continuous states: {info['continuous_states']}, event indicators: {info['event_indicators']}")
+    de = info.get("default_experiment")
+    if de:
+        lines.append("  default experiment: " + ", ".join(f"{k} {v}" for k, v in de.items() if v is not None))
+    lines.append(f"  variables ({len(info['variables'])}):")
+    lines += [_variable_line(v) for v in info["variables"]]
+    print("\n".join(lines))
+    return 0
+
+
+def _cmd_list(args: argparse.Namespace) -> int:
     payload = {}
     for name in _selection(args):
-        entry = registry.get(name)
-        info = describe(registry.build(name, args.out))
-        payload[name] = {"summary": entry.summary, **info}
+        path, summary = _resolve(name, args.out)
+        info = describe(path)
+        payload[name] = {"summary": summary or info["description"] or "", **info}
     if args.json:
-        print(json.dumps(payload, indent=2))
+        print(json.dumps(payload, indent=2, default=str))
         return 0
     for name, info in payload.items():
-        print(f"{name} (FMI {info['fmi']}): {info['summary']}")
+        print(f"{name} (FMI {info['fmi']}, {'+'.join(info['interfaces']) or 'no interface'}): {info['summary']}")
         for group in ("inputs", "outputs", "parameters"):
             items = ", ".join(f"{v['name']} [{v['unit'] or '-'}]" for v in info[group])
             print(f"  {group}: {items or '-'}")
