@@ -524,13 +524,13 @@ class _MEMixin:
         discrete = any(v.variability != "continuous" for b in changed for v in b.variables)
         if discrete:  # FMI: discrete inputs change in event mode only, and that is an event
             self._enter_event_mode()
-            super().set_inputs()
+            self._set_buffers(changed)
             self.events += 1
             self.event_log.append((self.time, "input"))
             self._event_iteration()
             self._enter_continuous_mode()
         else:
-            super().set_inputs()
+            self._set_buffers(changed)
         for b in changed:
             b.applied = b.snapshot()
         self._restart = True
@@ -653,6 +653,14 @@ class _FMI2(_Base):
         for b in self.in_bufs:
             if b.ctype_free:  # strings, through fmpy
                 self._guard("fmi2SetString", self.fmu.setString, list(b.vrs), [str(s) for s in b.values])
+
+    def _set_buffers(self, bufs: list[_Buffers]) -> None:
+        """Set the given input buffers only (model exchange: what changed)."""
+        for b in bufs:
+            if b.ctype_free:
+                self._guard("fmi2SetString", self.fmu.setString, list(b.vrs), [str(s) for s in b.values])
+            else:
+                self._check(self._set[b.kind](self._c, b.vrs, b.n, b.values), "fmi2Set" + b.kind)
 
     def get_outputs(self) -> None:
         c = self._c
@@ -807,8 +815,11 @@ class _FMI3(_Base):
         self._guard("fmi3EnterInitializationMode", self.fmu.enterInitializationMode, None, start, stop)
 
     def set_inputs(self) -> None:
+        self._set_buffers(self.in_bufs)
+
+    def _set_buffers(self, bufs: list[_Buffers]) -> None:
         c = self._c
-        for b in self.in_bufs:
+        for b in bufs:
             if b.ctype_free:
                 self._guard(f"fmi3Set{b.fmi_type}", self._py_set, b.fmi_type, list(b.vrs), list(b.values))
             else:
@@ -830,8 +841,10 @@ class _FMI3(_Base):
             self._check(self.fmu.dll.fmi3GetString(c, b.vrs, b.n, raw, b.size), "fmi3GetString")
             b.values[:] = [(s or b"").decode("utf-8", "replace") for s in raw]
         else:
+            from fmpy.fmi3 import fmi3Binary
+
             sizes = (c_size_t * b.size)()
-            ptrs = (ctypes.c_void_p * b.size)()
+            ptrs = (fmi3Binary * b.size)()
             self._check(self.fmu.dll.fmi3GetBinary(c, b.vrs, b.n, sizes, ptrs, b.size), "fmi3GetBinary")
             b.values[:] = [ctypes.string_at(p, n) if p else b"" for p, n in zip(ptrs, sizes)]
 
@@ -866,6 +879,10 @@ class FMI3CoSimulation(_FMI3):
     def step(self, t: float, h: float) -> None:
         self.time = t
         status = self._do_step(self._c, t, h, True, *self._refs)
+        if status == 2 and self._flags[1].value:  # fmi3Discard with terminateSimulation: the FMU ends the run
+            t_last = self._flags[3].value if self._flags[2].value and self._flags[3].value > t else t
+            self.time = t_last
+            raise Terminated(self.name, "fmi3DoStep", t_last)
         if status > 1:
             detail = "the FMU rejected the step" if status == 2 else ""
             if status == 2 and self._last_log():

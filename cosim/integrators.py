@@ -275,15 +275,21 @@ class DOP853Integrator:
             self._h_last = s.h_abs  # the step size it proposes next: where the next start begins
             if self.model.nz:
                 z = self._indicators(s.t, s.y)
+                zero = self._z_prev == 0
+                if zero.any():  # an indicator sitting on zero (just after its event): its sign is the one it
+                    # takes when it leaves zero, as in CVode, probed just after the step's start
+                    t_probe = t_old + max(1e-6 * (s.t - t_old), _root_tolerance(s.t, s.t - t_old))
+                    probe = self._indicators(t_probe, s.dense_output()(t_probe))
+                    self._z_prev = np.where(zero, probe, self._z_prev)
                 hit = _crossed(self._z_prev, z)
                 if hit.any():
                     t_event = self._locate(s.dense_output(), t_old, s.t, hit)
                     x_event = s.dense_output()(t_event)
                     self._finish(t_event, x_event)
-                    return t_event, True
+                    return float(t_event), True
                 self._z_prev = z
         self._finish(s.t, s.y)
-        return s.t, False
+        return float(s.t), False
 
     def _advance_discrete(self, t_stop: float) -> tuple[float, bool]:
         """No continuous state: indicators depend on time (and held inputs) only."""
@@ -293,7 +299,7 @@ class DOP853Integrator:
             if hit.any():
                 t_event = self._locate(lambda t: self._x, self.t, t_stop, hit)
                 self._finish(t_event, self._x)
-                return t_event, True
+                return float(t_event), True
             self._z_prev = z
         self._finish(t_stop, self._x)
         return t_stop, False

@@ -429,8 +429,8 @@ class McapRecorder:
             if not log:
                 continue
             for t, kind in log:
-                t_ns = round(t * 1e9)
-                self._sink.add(self._events_channel, t_ns, orjson.dumps(
+                t = float(t)
+                self._sink.add(self._events_channel, round(t * 1e9), orjson.dumps(
                     {"t": t, "component": names[c], "kind": kind}))
                 self.messages += 1
             log.clear()

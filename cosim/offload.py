@@ -36,13 +36,14 @@ from typing import Any
 from . import fmu as _fmu
 from .algorithm import Runtime, byte_view, initialize, simulate
 from .errors import CosimError
-from .fmu import PY_KINDS, Variable, cleanup_extracted, load_fmu, make_slave
+from .fmu import PY_KINDS, Terminated, Variable, cleanup_extracted, load_fmu, make_slave
 from .system import Link, Port, SystemPlan
 
 __all__ = ["AUTO_MIN_STEPS", "RING", "feedforward", "choose", "Offload", "Proxy"]
 
 AUTO_MIN_STEPS = 2000  # below this, starting the worker and loading its FMUs again can outweigh what it saves
 RING = 1024  # entries per component: about 1 s of look-ahead at 1 ms
+_FAILED, _ENDED = 1, 2  # entry statuses besides 0 (values): the step failed / the FMU ended the simulation
 _NAP = 0.002  # s, the worker's sleep while its ring is full
 _BURST = RING // 4  # free entries a full ring waits for: fewer, longer bursts disturb the master less
 _POLL = 0.05  # s, the master's wait between liveness checks when the worker is behind
@@ -223,6 +224,20 @@ class Offload:
             raise CosimError(f"component {proxy.name!r}: the worker process running {', '.join(self.names)} "
                              f"exited (code {self.process.exitcode}) at t = {proxy.time:.6g} s")
 
+    def termination(self, proxy: "Proxy") -> Terminated:
+        """The worker's report that ``proxy``'s component ended the simulation (sent before its end)."""
+        deadline = _time.monotonic() + _END_TIMEOUT
+        while True:
+            self._drain()
+            for kind, payload in self._messages:
+                if kind == "terminated":
+                    return Terminated(*payload)
+            self.raise_if_failed(proxy)
+            if _time.monotonic() > deadline:
+                raise CosimError(f"component {proxy.name!r}: the worker marked the end of the simulation but "
+                                 f"did not say when within {_END_TIMEOUT:g} s")
+            self._conn.poll(_POLL)
+
     def wait(self, proxy: "Proxy", ring: _Ring) -> None:
         """Block until ``ring`` has an entry (the worker is behind, e.g. while it starts)."""
         while not ring.filled.acquire(True, _POLL):
@@ -280,12 +295,17 @@ class Proxy:
     def step(self, t: float, h: float) -> None:
         self.time = t + h
 
+    _ended: Terminated | None = None
+
     def get_outputs(self) -> None:
+        if self._ended is not None:  # read once more when the run ends there: the values are in place
+            return
         r = self._ring
         if not r.filled.acquire(False):
             self.group.wait(self, r)
         slot = r.n % RING
-        if r.status[slot]:
+        status = r.status[slot]
+        if status == _FAILED:
             self.group.raise_if_failed(self)
             raise CosimError(f"component {self.name!r}: the worker process reported a failure at "
                              f"t = {self.time:.6g} s without its message")
@@ -293,6 +313,9 @@ class Proxy:
             d[:] = src
         r.free.release()
         r.n += 1
+        if status == _ENDED:  # the component ended the simulation in the worker: end here, as a serial run would
+            self._ended = self.group.termination(self)
+            raise self._ended
 
     def terminate(self) -> None:
         if not self.group.worker_time:
@@ -330,20 +353,29 @@ class _Publisher:
             self.napped += _time.perf_counter() - t0
         return r.n % RING
 
+    _ended = False  # the slave ended the simulation (FMI termination) in its last step
+
+    def step(self, t: float, h: float) -> None:
+        try:
+            self._slave.step(t, h)
+        except Terminated:
+            self._ended = True
+            raise
+
     def get_outputs(self) -> None:
         self._slave.get_outputs()
         r = self._r
         slot = self._claim()
         for d, src in r.moves[slot]:
             d[:] = src
-        r.status[slot] = 0
+        r.status[slot] = _ENDED if self._ended else 0
         r.filled.release()
         r.n += 1
 
     def fail(self) -> None:
         """Publish an error entry, so the master raises where this component's next values were due."""
         slot = self._claim()
-        self._r.status[slot] = 1
+        self._r.status[slot] = _FAILED
         self._r.filled.release()
         self._r.n += 1
 
@@ -367,6 +399,9 @@ def _worker(spec: dict, raw: Any, filled: list, free: list, stop: Any, conn: Any
             rt = _runtime(spec, raw, filled, free, stop, slaves, pubs)
             initialize(rt)
             simulate(rt)
+            if rt.terminated is not None:  # one of ours ended the simulation: the master ends there too
+                term = rt.terminated
+                conn.send(("terminated", (term.component, term.function, term.time)))
             for s in slaves:
                 s.terminate()
             conn.send(("done", {n: t - p.napped for n, t, p in zip(spec["names"], rt.comp_time, pubs)}))

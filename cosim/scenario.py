@@ -37,7 +37,9 @@ __all__ = [
 ]
 
 NS_PER_S = 1_000_000_000
-ParamValue = Union[bool, int, float, str, list[Union[bool, int, float]]]
+# a list sets name[1], name[2], ... (FMI 2 structured names) or a whole FMI 3 array; nested lists
+# give a matrix row by row
+ParamValue = Union[bool, int, float, str, list[Union[bool, int, float, str]], list[list[Union[bool, int, float]]]]
 
 
 class _Model(BaseModel):
@@ -301,7 +303,7 @@ def _line_for(loc: tuple, lines: dict[tuple, int]) -> int | None:
 
 _ALIASES = {"src": "from", "dst": "to"}
 _UNION_TAG = re.compile(r"^(bool|int|float|str|list\[.*\]|union\[.*\])$")
-_PARAM_MSG = "expected a number, a boolean, a string or a list of numbers"
+_PARAM_MSG = "expected a number, a boolean, a string, a list of them, or a list of lists (rows of a matrix)"
 
 
 def parse_scenario(text: str, file: str = "<string>", overrides: dict[tuple, Any] | None = None) -> Scenario:

@@ -107,8 +107,8 @@ def describe(path) -> dict:
                  "inputs": [], "outputs": [], "parameters": [], "variables": []}
     de = md.defaultExperiment
     if de is not None:
-        out["default_experiment"] = {"start": de.startTime, "stop": de.stopTime, "step": de.stepSize,
-                                     "tolerance": de.tolerance}
+        out["default_experiment"] = {k: None if v is None else float(v) for k, v in (
+            ("start", de.startTime), ("stop", de.stopTime), ("step", de.stepSize), ("tolerance", de.tolerance))}
     key = {"input": "inputs", "output": "outputs", "parameter": "parameters", "structuralParameter": "parameters"}
     for v in md.modelVariables:
         unit = v.unit or (v.declaredType.unit if v.declaredType is not None and hasattr(v.declaredType, "unit")
