@@ -91,14 +91,16 @@ def _common_root(model: Model, token: str) -> ET.Element:
 
 def _interfaces(root: ET.Element, model: Model) -> None:
     if model.fmi == 2:
-        ET.SubElement(root, "ModelExchange", modelIdentifier=model.name, completedIntegratorStepNotNeeded="true",
+        ET.SubElement(root, "ModelExchange", modelIdentifier=model.name,
+                      completedIntegratorStepNotNeeded="false" if model.step_events else "true",
                       canNotUseMemoryManagementFunctions="true", canGetAndSetFMUstate="false",
                       canSerializeFMUstate="false")
         ET.SubElement(root, "CoSimulation", modelIdentifier=model.name, canHandleVariableCommunicationStepSize="true",
                       canNotUseMemoryManagementFunctions="true", canGetAndSetFMUstate="false",
                       canSerializeFMUstate="false")
     else:
-        ET.SubElement(root, "ModelExchange", modelIdentifier=model.name, needsCompletedIntegratorStep="false",
+        ET.SubElement(root, "ModelExchange", modelIdentifier=model.name,
+                      needsCompletedIntegratorStep="true" if model.step_events else "false",
                       canGetAndSetFMUState="false", canSerializeFMUState="false")
         cs = ET.SubElement(root, "CoSimulation", modelIdentifier=model.name,
                            canHandleVariableCommunicationStepSize="true", fixedInternalStepSize=repr(CS_FIXED_STEP),

@@ -58,6 +58,7 @@ class Model:
     units: tuple = ()
     enumerations: dict = field(default_factory=dict)  # type name -> ((item, value), ...)
     might_return_early: bool = False
+    step_events: bool = False  # model exchange needs fmi{2,3}CompletedIntegratorStep (c: MODEL.step_event)
 
 
 def _time() -> Var:
@@ -66,6 +67,7 @@ def _time() -> Var:
 
 UNITS = {
     "s": {"s": 1},
+    "1/s": {"s": -1},
     "m": {"m": 1},
     "m/s": {"m": 1, "s": -1},
     "m/s2": {"m": 1, "s": -2},
@@ -121,6 +123,29 @@ def _stair(fmi: int) -> Model:
         experiment={"startTime": 0.0, "stopTime": 10.0, "stepSize": 0.1},
         units=("s",),
         might_return_early=True,
+    )
+
+
+def _halving(fmi: int) -> Model:
+    return Model(
+        "Halving",
+        fmi,
+        "halving.c",
+        "der(x) = -k x; a step event each time x has halved once more (count += 1)",
+        (
+            _time(),
+            Var("x", 1, "Float64", "output", "continuous", "exact", 1.0, "Decaying state", nominal=1.0),
+            Var("der(x)", 2, "Float64", "local", "continuous", "calculated", field="der_x",
+                description="Derivative of x", derivative="x"),
+            Var("k", 3, "Float64", "parameter", "fixed", "exact", 1.0, "Decay rate", unit="1/s"),
+            Var("count", 4, "Int32", "output", "discrete", "calculated",
+                description="Step events so far: x fell below 1/2, 1/4, 1/8, ..."),
+        ),
+        outputs={"x": ["x"], "count": []},
+        derivatives={"der(x)": ["x"]},
+        experiment={"startTime": 0.0, "stopTime": 5.0, "stepSize": 0.01},
+        units=("s", "1/s"),
+        step_events=True,
     )
 
 
@@ -307,4 +332,6 @@ MODEL_SPECS: dict[tuple[str, int], Model] = {
     ("Feedthrough", 2): _feedthrough(2),
     ("Feedthrough", 3): _feedthrough(3),
     ("Clocked", 3): _clocked(),
+    ("Halving", 2): _halving(2),
+    ("Halving", 3): _halving(3),
 }

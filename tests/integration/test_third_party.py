@@ -1,8 +1,8 @@
 """The master against FMPy on FMUs that are not ours (issue 13).
 
-The FMUs are the small C models of ``tests/cfmus`` (bouncing ball, stair with time events
-and termination, Van der Pol, FMI 3 state space with arrays, FMI 3 feedthrough of every
-type), built with gcc against the FMI headers fmpy ships. The referee is
+The FMUs are the small C models of ``tests/cfmus`` (bouncing ball: state events; stair: time
+events and termination; halving: step events; Van der Pol; FMI 3 state space with arrays;
+feedthrough of every type), built with gcc against the FMI headers fmpy ships. The referee is
 ``fmpy.simulate_fmu`` on the same file, interface and output grid: our master must log the
 same outputs. Tolerances:
 
@@ -118,6 +118,7 @@ CASES = [  # model, FMI versions, stop, step, outputs, exactly compared outputs
     ("VanDerPol", (2, 3), 20.0, 0.01, ["x0", "x1"], ()),
     ("BouncingBall", (2, 3), 3.0, 0.01, ["h", "v", "bounces"], ("bounces",)),
     ("Stair", (2, 3), 8.0, 0.1, ["counter", "ramp"], ("counter", "ramp")),
+    ("Halving", (2, 3), 5.0, 0.01, ["x", "count"], ("count",)),
 ]
 
 

@@ -516,6 +516,7 @@ StepOutcome core_do_step(Instance *in, double t, double h, double *t_end, bool *
         }
         state_event = advance(in, dt);
         if (time_event && !state_event) in->time = in->next_time;
+        if (MODEL.step_event && MODEL.step_event(in->data, in->time)) state_event = true;  /* a step event */
         if (state_event || (in->next_time_defined && fmu_time_reached(in->time, in->next_time))) {
             EventUpdate ev;
             int i = 0;

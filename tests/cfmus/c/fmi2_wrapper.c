@@ -363,7 +363,7 @@ fmi2Status fmi2CompletedIntegratorStep(fmi2Component c, fmi2Boolean noSetFMUStat
 {
     BEGIN(c, M_CONTINUOUS);
     (void)noSetFMUStatePriorToCurrentPoint;
-    *enterEventMode = fmi2False;
+    *enterEventMode = MODEL.step_event && MODEL.step_event(in->data, in->time) ? fmi2True : fmi2False;
     *terminateSimulation = fmi2False;
     return fmi2OK;
 }

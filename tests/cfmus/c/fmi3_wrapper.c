@@ -600,7 +600,7 @@ fmi3Status fmi3CompletedIntegratorStep(fmi3Instance instance, fmi3Boolean noSetF
 {
     BEGIN(instance, M_CONTINUOUS);
     (void)noSetFMUStatePriorToCurrentPoint;
-    *enterEventMode = false;
+    *enterEventMode = MODEL.step_event && MODEL.step_event(in->data, in->time);
     *terminateSimulation = false;
     return fmi3OK;
 }

@@ -117,6 +117,10 @@ typedef struct {
     void (*outputs)(void *d, double t);
     /* The discrete update at an event instant t (state, time or input event). */
     void (*event)(void *d, double t, EventUpdate *ev);
+    /* After each completed integrator step (model exchange: CompletedIntegratorStep;
+       co-simulation: each internal step): true to ask for an event at t (NULL: never,
+       and the model exchange interface declares the call not needed). */
+    bool (*step_event)(const void *d, double t);
     /* Co-simulation only: true (and *t_reject) if a step from t0 to t1 must be
        rejected (NULL: every step is accepted). */
     bool (*rejects_step)(const void *d, double t0, double t1, double *t_reject);
