@@ -181,8 +181,13 @@ def initialize(rt: Runtime) -> None:
     for c in rt.plan.order:  # second pass: inputs of components whose sources come later in the order
         rt.pull(c)
         rt.slaves[c].set_inputs()
-    for s in rt.slaves:
-        s.exit_initialization()
+    try:
+        for s in rt.slaves:
+            s.exit_initialization()
+    except Terminated as term:  # an FMU ended the simulation in its initial event iteration
+        rt.terminated, rt.t_end_ns = term, rt.start_ns
+    for c in rt.plan.order:  # outputs as initialized (a model-exchange FMU's initial event may change them)
+        rt.slaves[c].get_outputs()
 
 
 def simulate(rt: Runtime, observers: Sequence[Observer] = (), stop: StopRequest | None = None,
@@ -199,6 +204,8 @@ def simulate(rt: Runtime, observers: Sequence[Observer] = (), stop: StopRequest 
     jacobi = rt.algorithm == "jacobi"
     start_ns, step_ns = rt.start_ns, rt.step_ns
     k = rt.k_done
+    if rt.terminated is not None:  # ended before the first step
+        return
     try:
         for k in range(rt.k_done, rt.n_steps):
             t = (start_ns + k * step_ns) * 1e-9

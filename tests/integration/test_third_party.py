@@ -377,3 +377,20 @@ def test_termination_inside_the_parallel_worker_ends_the_run_as_a_serial_run_doe
         other = logs["on"].signal(name)
         assert np.array_equal(sig.t_ns, other.t_ns), f"{name}: stamps differ with the worker"
         assert np.array_equal(sig.y, other.y), f"{name}: values differ with the worker"
+
+
+@pytest.mark.parametrize("fmi", [2, 3])
+def test_termination_in_the_initial_event_iteration_ends_the_run_at_the_start(tmp_path, fmi):
+    res, log = run_master(tmp_path, {"m": one(build("Stair", fmi), "me", {"t_terminate": 0.0})}, 5.0, 0.1)
+    assert res.terminated_by == "m" and res.steps == 0 and res.sim_time == 0.0, (res.message, res.steps)
+    assert list(log.signal("m.counter").t) == [0.0], "one sample, at the start"
+
+
+def test_model_exchange_settings_max_step_and_solver_are_honoured(tmp_path):
+    """Both solvers with a 1 ms bound on the internal step still give FMPy's result (that the bound
+    is applied is checked on the integrators themselves in tests/unit/test_integrators.py)."""
+    fmu = build("VanDerPol", 3)
+    for solver in ("cvode", "dop853"):
+        comp = {**one(fmu, "me", solver=solver), "max_step": 1e-3}
+        res, log = run_master(tmp_path, {"m": comp}, 20.0, 0.01)
+        assert_same(log, fmpy_run(fmu, "me", 20.0, 0.01, ["x0", "x1"]), ["x0", "x1"], ME_RTOL)
