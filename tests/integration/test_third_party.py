@@ -95,7 +95,7 @@ def assert_same(log, ref, names: list[str], rtol: float, exact: tuple[str, ...] 
             continue
         scale = max(np.max(np.abs(theirs)), np.finfo(float).tiny)
         err = np.max(np.abs(ours - theirs)) / scale
-        k = int(np.argmax(np.abs(ours - theirs)))
+        k = int(np.unravel_index(np.argmax(np.abs(ours - theirs)), ours.shape)[0])  # the sample (row) of the worst
         assert err <= rtol, f"{name}: relative difference {err:.3g} > {rtol:g} at t = {t_ref[k]}: ours {ours[k]!r} " \
                             f"vs FMPy {theirs[k]!r}"
 
@@ -119,6 +119,7 @@ CASES = [  # model, FMI versions, stop, step, outputs, exactly compared outputs
     ("BouncingBall", (2, 3), 3.0, 0.01, ["h", "v", "bounces"], ("bounces",)),
     ("Stair", (2, 3), 8.0, 0.1, ["counter", "ramp"], ("counter", "ramp")),
     ("Halving", (2, 3), 5.0, 0.01, ["x", "count"], ("count",)),
+    ("StateSpace", (3,), 10.0, 0.01, ["y"], ()),  # an array output (3 elements), compared element by element
 ]
 
 
