@@ -605,8 +605,12 @@ class _FMI2(_Base):
 
     def instantiate(self) -> None:
         from fmpy import calloc, free
-        from fmpy.fmi2 import (fmi2CallbackAllocateMemoryTYPE, fmi2CallbackFreeMemoryTYPE, fmi2CallbackFunctions,
-                               fmi2CallbackLoggerTYPE)
+        from fmpy.fmi2 import (
+            fmi2CallbackAllocateMemoryTYPE,
+            fmi2CallbackFreeMemoryTYPE,
+            fmi2CallbackFunctions,
+            fmi2CallbackLoggerTYPE,
+        )
         from fmpy.logging import addLoggerProxy
 
         self.fmu = self._guard("load library", self._make)
@@ -677,14 +681,6 @@ class _FMI2(_Base):
                 b.values[:] = [(s or b"").decode("utf-8", "replace") if isinstance(s, bytes) else (s or "")
                                for s in got]
 
-    def read(self, variables: list[Variable]) -> list[Any]:
-        """Values of arbitrary variables (slow path, for reports and initialization)."""
-        out = []
-        for v in variables:
-            fn = {REAL: self.fmu.getReal, INTEGER: self.fmu.getInteger, BOOLEAN: self.fmu.getBoolean,
-                  STRING: self.fmu.getString}[v.kind]
-            out.append(self._guard(f"fmi2Get{v.kind}", fn, [v.vr])[0])
-        return out
 
 
 class FMI2CoSimulation(_FMI2):
@@ -848,13 +844,6 @@ class _FMI3(_Base):
             self._check(self.fmu.dll.fmi3GetBinary(c, b.vrs, b.n, sizes, ptrs, b.size), "fmi3GetBinary")
             b.values[:] = [ctypes.string_at(p, n) if p else b"" for p, n in zip(ptrs, sizes)]
 
-    def read(self, variables: list[Variable]) -> list[Any]:
-        out = []
-        for v in variables:
-            t = _ACCESSOR3[v.fmi_type]
-            got = self._guard(f"fmi3Get{t}", getattr(self.fmu, f"get{t}"), [v.vr], v.count)
-            out.append(got[0] if not v.is_array else list(got))
-        return out
 
 
 def _binary(value: Any, name: str) -> bytes:

@@ -92,11 +92,33 @@ class CVodeIntegrator:
     MAX_NUM_STEPS = 100_000  # internal steps allowed per call (one call never passes a communication point)
 
     def __init__(self, model: OdeModel, t0: float, rtol: float, max_step: float) -> None:
-        from fmpy.sundials import (CV_BDF, N_VNew_Serial, NV_DATA_S, SUN_COMM_NULL, SUNContext, SUNContext_Create,
-                                   SUNContext_PushErrHandler, SUNDenseMatrix, SUNErrHandlerFn, SUNLinSol_Dense)
-        from fmpy.sundials.cvode import (CVodeCreate, CVodeInit, CVodeRootInit, CVodeSetMaxNumSteps,
-                                         CVodeSetMaxStep, CVodeSetNoInactiveRootWarn, CVodeSVtolerances, CVRhsFn,
-                                         CVRootFn)
+        from fmpy.sundials import (
+            CV_BDF,
+            NV_DATA_S,
+            SUN_COMM_NULL,
+            N_VNew_Serial,
+            SUNContext,
+            SUNContext_Create,
+            SUNContext_PushErrHandler,
+            SUNDenseMatrix,
+            SUNErrHandlerFn,
+            SUNLinSol_Dense,
+        )
+        from fmpy.sundials.cvode import (
+            CV_NORMAL,
+            CVode,
+            CVodeCreate,
+            CVodeGetRootInfo,
+            CVodeInit,
+            CVodeReInit,
+            CVodeRootInit,
+            CVodeSetMaxNumSteps,
+            CVodeSetMaxStep,
+            CVodeSetNoInactiveRootWarn,
+            CVodeSVtolerances,
+            CVRhsFn,
+            CVRootFn,
+        )
         from fmpy.sundials.cvode_ls import CVodeSetLinearSolver
         from fmpy.sundials.libraries import sundials_cvode
 
@@ -133,8 +155,6 @@ class CVodeIntegrator:
         self._set_stop = sundials_cvode.CVodeSetStopTime
         self._set_stop.argtypes, self._set_stop.restype = [c_void_p, c_double], c_int
         self._root_info = (c_int * max(model.nz, 1))()
-        from fmpy.sundials.cvode import CV_NORMAL, CVode, CVodeGetRootInfo, CVodeReInit
-
         self._cvode, self._normal, self._get_roots, self._reinit = CVode, CV_NORMAL, CVodeGetRootInfo, CVodeReInit
         self._tret = c_double()
 

@@ -11,7 +11,7 @@ import re
 from dataclasses import dataclass, field
 from typing import Any, Mapping
 
-from .errors import AlgebraicLoopError, Issue, ScenarioError, WiringError
+from .errors import AlgebraicLoopError, Issue, WiringError
 from .fmu import FMUInfo, Variable
 from .scenario import Scenario, _format_loc, _line_for, expand_signal
 

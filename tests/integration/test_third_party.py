@@ -28,8 +28,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-
 from cfmus import build
+
 from cosim.run import run_scenario
 from cosim.runlog import read_run
 from cosim.scenario import parse_scenario
