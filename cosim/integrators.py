@@ -108,7 +108,6 @@ class CVodeIntegrator:
             CV_NORMAL,
             CVode,
             CVodeCreate,
-            CVodeGetRootInfo,
             CVodeInit,
             CVodeReInit,
             CVodeRootInit,
@@ -154,8 +153,7 @@ class CVodeIntegrator:
         # functions fmpy does not bind
         self._set_stop = sundials_cvode.CVodeSetStopTime
         self._set_stop.argtypes, self._set_stop.restype = [c_void_p, c_double], c_int
-        self._root_info = (c_int * max(model.nz, 1))()
-        self._cvode, self._normal, self._get_roots, self._reinit = CVode, CV_NORMAL, CVodeGetRootInfo, CVodeReInit
+        self._cvode, self._normal, self._reinit = CVode, CV_NORMAL, CVodeReInit
         self._tret = c_double()
 
     @staticmethod
