@@ -30,6 +30,7 @@ __all__ = [
     "Checks",
     "load_scenario",
     "parse_scenario",
+    "scenario_from_data",
     "scenario_json_schema",
     "apply_overrides",
     "expand_signal",
@@ -320,6 +321,20 @@ def parse_scenario(text: str, file: str = "<string>", overrides: dict[tuple, Any
     data = yaml.safe_load(text) or {}
     if not isinstance(data, dict):
         raise ScenarioError(Issue("", "a scenario is a mapping (components, connections, time, ...)", file, 1))
+    return scenario_from_data(data, file, overrides, lines)
+
+
+def scenario_from_data(data: dict[str, Any], file: str = "<string>", overrides: dict[tuple, Any] | None = None,
+                       lines: dict[tuple, int] | None = None) -> Scenario:
+    """Validate scenario data (the mapping a YAML file holds, or one built from an SSP file).
+
+    ``overrides`` are applied first; ``lines`` (key path -> line) place the issues in ``file``.
+    Raises :class:`ScenarioError` with every issue.
+    """
+    import copy
+
+    lines = lines if lines is not None else {}
+    data = copy.deepcopy(data)  # the overrides must not change the caller's mapping
     for path, value in (overrides or {}).items():
         if path[0] == "components" and path[1] not in (data.get("components") or {}):
             raise ScenarioError(Issue("--set", f"unknown component {path[1]!r}; components: "
