@@ -225,10 +225,11 @@ EXIT_INTERRUPTED = 130
 
 
 def _cosim_parser(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("run", help="run a co-simulation scenario (YAML) and log it to MCAP")
-    p.add_argument("scenario", help="scenario file")
+    p = sub.add_parser("run", help="run a co-simulation scenario (YAML or SSP archive) and log it to MCAP")
+    p.add_argument("scenario", help="scenario file (.yaml) or SSP 1.0 archive (.ssp)")
     p.add_argument("--out", help="MCAP output path (default: the scenario's logging.out or runs/<name>.mcap)")
     p.add_argument("--stop-time", type=float, help="override time.stop, s")
+    p.add_argument("--step", type=float, help="override time.step (the base communication step), s")
     p.add_argument("--set", action="append", default=[], metavar="COMP.PARAM=VALUE",
                    help="override a component parameter (repeatable)")
     p.add_argument("--no-log", action="store_true", help="do not write an MCAP file")
@@ -239,9 +240,11 @@ def _cosim_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--json", action="store_true", help="summary as JSON on stdout")
     p.set_defaults(handler=_cmd_run)
 
-    p = sub.add_parser("check", help="validate a scenario and run the pre-flight only")
+    p = sub.add_parser("check", help="validate a scenario (YAML or SSP) and run the pre-flight only")
     p.add_argument("scenario")
     p.add_argument("--set", action="append", default=[], metavar="COMP.PARAM=VALUE")
+    p.add_argument("--stop-time", type=float, help="override time.stop, s")
+    p.add_argument("--step", type=float, help="override time.step, s")
     p.add_argument("--json", action="store_true")
     p.set_defaults(handler=_cmd_check)
 
@@ -410,16 +413,30 @@ def _summary_text(res) -> str:
     return "\n".join(lines)
 
 
+def _open_scenario(args: argparse.Namespace, overrides: dict):
+    """The scenario of a YAML file, or of an SSP archive (unpacked for the ``with`` block only)."""
+    from contextlib import nullcontext
+
+    from .scenario import load_scenario
+    from .ssp import is_ssp, open_ssp
+
+    if args.step is not None:
+        overrides[("time", "step")] = args.step
+    if is_ssp(args.scenario):
+        return open_ssp(args.scenario, overrides)
+    return nullcontext(load_scenario(args.scenario, overrides))
+
+
 def _cmd_run(args: argparse.Namespace) -> int:
     from .run import run_scenario
-    from .scenario import apply_overrides, load_scenario
+    from .scenario import apply_overrides
 
     overrides = apply_overrides(args.set, args.stop_time)
     if args.parallel:
         overrides[("parallel",)] = args.parallel
-    scenario = load_scenario(args.scenario, overrides)
-    res = run_scenario(scenario, out=args.out, log=False if args.no_log else None,
-                       progress=not (args.quiet or args.json))
+    with _open_scenario(args, overrides) as scenario:
+        res = run_scenario(scenario, out=args.out, log=False if args.no_log else None,
+                           progress=not (args.quiet or args.json))
     if args.json:
         print(json.dumps(res.as_dict(), indent=2))
     elif not args.quiet:
@@ -429,10 +446,11 @@ def _cmd_run(args: argparse.Namespace) -> int:
 
 def _cmd_check(args: argparse.Namespace) -> int:
     from .offload import choose
-    from .run import check_scenario
+    from .run import prepare
     from .scenario import apply_overrides
 
-    scenario, plan, report = check_scenario(args.scenario, apply_overrides(args.set))
+    with _open_scenario(args, apply_overrides(args.set, args.stop_time)) as scenario:
+        plan, report = prepare(scenario)
     order = " -> ".join(plan.names[c] for c in plan.order)
     _, parallel = choose(plan, scenario.parallel, scenario.time.n_steps)
     payload = {"scenario": scenario.name, "ok": True, "preflight": report, "order": [plan.names[c] for c in plan.order],
@@ -470,8 +488,10 @@ def build_parser() -> argparse.ArgumentParser:
     from fmus.cli import register as _register_fmus
 
     from .report import register as _register_report
+    from .ssp import register as _register_ssp
 
     _register_report(sub)
+    _register_ssp(sub)
     _register_fmus(sub)
     return parser
 

@@ -159,7 +159,7 @@ def logged_tolerances(log: RunLog) -> dict[str, float]:
     import yaml
 
     for name, data in log.attachments.items():
-        if name.startswith("scenario/"):
+        if name.startswith("scenario/") and not name.endswith(".ssp"):  # a YAML scenario, not an SSP archive
             try:
                 doc = yaml.safe_load(data) or {}
             except yaml.YAMLError:

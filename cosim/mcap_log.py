@@ -374,8 +374,10 @@ class McapRecorder:
                 "file": str(self.scenario_file or s.source or "")})
         now = time.time_ns()
         if self.scenario_file is not None and self.scenario_file.exists():
+            ssp = self.scenario_file.suffix.lower() == ".ssp"  # an SSP archive (SSP 1.0 names its MIME type)
             w.add_attachment(log_time=now, create_time=now, name=f"scenario/{self.scenario_file.name}",
-                             media_type="application/yaml", data=self.scenario_file.read_bytes())
+                             media_type="application/x-ssp-package" if ssp else "application/yaml",
+                             data=self.scenario_file.read_bytes())
         for name, info in zip(rt.plan.names, rt.plan.infos):
             w.add_attachment(log_time=now, create_time=now, name=f"fmu/{name}/modelDescription.xml",
                              media_type="application/xml", data=info.model_description_xml())

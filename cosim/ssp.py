@@ -1,0 +1,645 @@
+"""SSP 1.0 (System Structure and Parameterization, ssp-standard.org) export and import.
+
+Export (:func:`export_ssp`, ``python -m cosim ssp export SCENARIO -o SYSTEM.ssp``) writes a
+scenario as an SSP archive that any SSP tool can run:
+
+- ``SystemStructure.ssd``: one ``ssd:Component`` per FMU (``source="resources/<name>.fmu"``,
+  ``implementation`` when the scenario fixes the interface), its scalar inputs and outputs as
+  connectors with kind, type and unit (``ssd:Units`` defines the units from the FMUs' own
+  UnitDefinitions), one ``ssd:Connection`` per scenario connection (element-wise, as written),
+  the default experiment (``startTime``, ``stopTime``) with the base step in the OSP annotation
+  libcosim reads (``osp:FixedStepAlgorithm baseStepSize``) and a component's step multiple as
+  ``osp:StepSizeHint``;
+- ``resources/<name>.ssv``: per component, every start value our master sets (the plan of
+  :func:`cosim.run.prepare`: explicit parameters, our trajectory FMUs' parameters from the
+  ``trajectory:`` section and the plant's initial state), bound through ``ssd:ParameterBinding``;
+- ``resources/<name>.fmu``: the FMUs;
+- a root annotation of type ``org.delta-cosim.scenario`` holding what SSP has no place for
+  (algorithm, robot, trajectory for the pre-flight, comparison, checks, logging, per-component
+  solver options) as JSON, so our master runs the archive exactly as the YAML. Other tools ignore
+  it. ``initial_state.from_trajectory`` is written false: its values are in the plant's .ssv.
+
+Import (:func:`open_ssp`, ``python -m cosim run|check SYSTEM.ssp``) reads any SSP 1.0 archive with
+FMU components (ours or another tool's): the .ssd, its parameter bindings (.ssv files or inline
+parameter sets), the FMUs from the archive, and builds the same :class:`cosim.scenario.Scenario`
+the YAML loader builds, run by the normal :func:`cosim.run.run_scenario`. The base step comes from
+the OSP annotation, else from the FMUs' default experiments (the smallest), else ``--step``; the
+stop time from the default experiment, else the FMUs', else ``--stop-time``. The archive is
+unpacked into a temporary directory that :func:`open_ssp` removes when its block ends (also on
+error and Ctrl-C). Bad input raises :class:`SspError`: one line naming the file and the problem.
+Not supported (a clear error, never a silent change): nested systems, signal dictionaries,
+system-level connectors, parameter mappings (.ssm), connection transformations, components that
+are not FMUs, FMI 3 arrays.
+
+Library choice: the standard library's ``xml.etree.ElementTree``, written against the SSP 1.0 XSDs
+(those shipped with fmpy in ``fmpy/ssp/schema``; the tests validate every exported file against
+them). fmpy's ``fmpy.ssp`` reads but cannot write, rejects any file that fails the schema with a
+bare ``Exception`` and reads transformations in the wrong namespace; ``pyssp-standard`` would be a
+new dependency with few users. OSP libcosim matches element names by their prefixes literally
+(``ssd:``, ``ssc:``, ``ssv:``, ``osp:``), so the writer emits prefixed names itself instead of
+relying on ElementTree's namespace registry (a process-wide setting); the reader resolves
+namespaces properly, so files of other tools with other prefixes read too.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import posixpath
+import shutil
+import tempfile
+import zipfile
+from contextlib import contextmanager
+from dataclasses import dataclass
+from pathlib import Path
+from typing import TYPE_CHECKING, Any, Iterator
+from urllib.parse import unquote, urlparse
+from xml.etree import ElementTree as ET
+
+from .errors import Issue, ScenarioError
+
+if TYPE_CHECKING:  # the CLI imports this module to register its command: keep pydantic out of that
+    from .scenario import Scenario
+
+__all__ = ["SspError", "ExportReport", "export_ssp", "read_ssp", "open_ssp", "is_ssp", "NS", "SSD_NAME", "register"]
+
+NS = {
+    "ssd": "http://ssp-standard.org/SSP1/SystemStructureDescription",
+    "ssc": "http://ssp-standard.org/SSP1/SystemStructureCommon",
+    "ssv": "http://ssp-standard.org/SSP1/SystemStructureParameterValues",
+    "ssm": "http://ssp-standard.org/SSP1/SystemStructureParameterMapping",
+    "ssb": "http://ssp-standard.org/SSP1/SystemStructureSignalDictionary",
+    "osp": "http://opensimulationplatform.com/SSP/OSPAnnotations",
+    "dcs": "https://github.com/delta-cosim/ssp",
+}
+SSD_NAME = "SystemStructure.ssd"
+OSP_ANNOTATION = "com.opensimulationplatform"
+OUR_ANNOTATION = "org.delta-cosim.scenario"
+FMU_TYPE = "application/x-fmu-sharedlibrary"
+PARAMETER_SET_TYPE = "application/x-ssp-parameter-set"
+_IMPLEMENTATION = {"cs": "CoSimulation", "me": "ModelExchange"}
+_INTERFACE = {"CoSimulation": "cs", "ModelExchange": "me", "any": "auto"}
+# FMI 2.0 / 3.0 declared types -> SSP 1.0 connector / parameter types
+_SSP_TYPE = {"Real": "Real", "Float64": "Real", "Float32": "Real", "Integer": "Integer",
+             "Int8": "Integer", "Int16": "Integer", "Int32": "Integer", "Int64": "Integer", "UInt8": "Integer",
+             "UInt16": "Integer", "UInt32": "Integer", "UInt64": "Integer", "Boolean": "Boolean",
+             "String": "String"}
+# scenario sections carried in our annotation (SSP has no place for them)
+_EXTRAS = ("description", "robot", "algorithm", "parallel", "trajectory", "initial_state", "logging", "compare",
+           "checks", "regression")
+_COMPONENT_OPTIONS = ("interface", "feedthrough", "rtol", "solver", "max_step")
+
+
+class SspError(ScenarioError):
+    """An SSP archive cannot be read or written: one line naming the file and the problem."""
+
+    def __init__(self, file: str | Path, message: str):
+        super().__init__(Issue("", message, str(file)))
+
+
+def _num(x: float) -> str:
+    """A float as the shortest text that reads back to the same double (C strtod included)."""
+    return repr(float(x))
+
+
+# --------------------------------------------------------------------------- export
+
+
+@dataclass(frozen=True)
+class ExportReport:
+    """What :func:`export_ssp` wrote."""
+
+    path: Path
+    components: list[str]
+    connections: int
+    parameters: dict[str, int]  # component -> number of start values in its .ssv
+    step: float
+    stop: float
+
+    def as_dict(self) -> dict[str, Any]:
+        return {"ssp": str(self.path), "components": self.components, "connections": self.connections,
+                "parameters": self.parameters, "step_s": self.step, "stop_s": self.stop}
+
+    def text(self) -> str:
+        n = sum(self.parameters.values())
+        return (f"{self.path}: {len(self.components)} components ({', '.join(self.components)}), "
+                f"{self.connections} connections, {n} start values, step {self.step:g} s, stop {self.stop:g} s")
+
+
+def _el(parent: ET.Element | None, tag: str, attrib: dict[str, str] | None = None) -> ET.Element:
+    attrib = {k: v for k, v in (attrib or {}).items() if v is not None}
+    return ET.Element(tag, attrib) if parent is None else ET.SubElement(parent, tag, attrib)
+
+
+def _xml(root: ET.Element) -> bytes:
+    ET.indent(root)
+    return b'<?xml version="1.0" encoding="UTF-8"?>\n' + ET.tostring(root, encoding="utf-8") + b"\n"
+
+
+def _typed(parent: ET.Element, prefix: str, var, value: Any = None, where: str = "") -> None:
+    """``<prefix:Real unit=.../>`` (connector) or ``<prefix:Real value=.../>`` (parameter) for ``var``."""
+    kind = _SSP_TYPE.get(var.fmi_type)
+    if kind is None or var.is_array:
+        raise ValueError(f"{where}{var.name} is {var.fmi_type}{' array' if var.is_array else ''}, which SSP 1.0 "
+                         "connectors and parameter values do not carry")
+    attrib: dict[str, str | None] = {}
+    if value is not None:
+        if kind == "Real":
+            attrib["value"] = _num(value)
+        elif kind == "Integer":
+            attrib["value"] = str(int(value))
+        elif kind == "Boolean":
+            attrib["value"] = "true" if (value.lower() == "true" if isinstance(value, str) else bool(value)) \
+                else "false"
+        else:
+            attrib["value"] = str(value)
+    if kind == "Real" and var.unit and value is None:  # a connector's unit (defined in ssd:Units)
+        attrib["unit"] = var.unit
+    _el(parent, f"{prefix}:{kind}", attrib)
+
+
+def _unit_definitions(infos) -> dict[str, dict[str, str]]:
+    """Unit name -> BaseUnit attributes (non-default exponents, factor, offset), from the FMUs."""
+    out: dict[str, dict[str, str]] = {}
+    for info in infos:
+        for u in getattr(info.md, "unitDefinitions", None) or []:
+            b = u.baseUnit
+            attrs: dict[str, str] = {}
+            if b is not None:
+                for k in ("kg", "m", "s", "A", "K", "mol", "cd", "rad"):
+                    if int(getattr(b, k, 0) or 0):
+                        attrs[k] = str(int(getattr(b, k)))
+                if float(b.factor) != 1.0:
+                    attrs["factor"] = _num(b.factor)
+                if float(b.offset) != 0.0:
+                    attrs["offset"] = _num(b.offset)
+            out.setdefault(u.name, attrs)
+    return out
+
+
+def _extras(scenario: Scenario) -> dict[str, Any]:
+    """The scenario sections SSP has no place for, as JSON-ready data."""
+    data = scenario.model_dump(mode="json", by_alias=True, include=set(_EXTRAS), exclude_defaults=False)
+    data["name"] = scenario.name
+    logging = dict(data.get("logging") or {})
+    logging.pop("out", None)  # relative to the YAML file; the archive's runs log to runs/<name>.mcap
+    data["logging"] = logging
+    if data.get("initial_state"):
+        data["initial_state"] = {**data["initial_state"], "from_trajectory": False}  # values are in the .ssv
+    from .scenario import Component
+
+    defaults = {k: Component.model_fields[k].default for k in _COMPONENT_OPTIONS}
+    options = {}
+    for name, comp in scenario.components.items():
+        changed = {k: getattr(comp, k) for k in _COMPONENT_OPTIONS if getattr(comp, k) != defaults[k]}
+        if changed:
+            options[name] = changed
+    data["component_options"] = options
+    return data
+
+
+def export_ssp(scenario: Scenario, out: str | Path) -> ExportReport:
+    """Write ``scenario`` as an SSP 1.0 archive at ``out`` (see the module docstring).
+
+    Builds our FMUs if needed and runs the pre-flight (:func:`cosim.run.prepare`); raises
+    :class:`cosim.errors.CosimError` subclasses for a bad scenario, :class:`SspError` for what SSP
+    1.0 cannot express.
+    """
+    from .run import prepare
+
+    out = Path(out)
+    plan, _ = prepare(scenario)
+    names, infos = plan.names, plan.infos
+    t = scenario.time
+    root = _el(None, "ssd:SystemStructureDescription", {
+        "xmlns:ssd": NS["ssd"], "xmlns:ssc": NS["ssc"], "xmlns:ssv": NS["ssv"], "xmlns:osp": NS["osp"],
+        "xmlns:dcs": NS["dcs"], "name": scenario.name, "version": "1.0",
+        "description": scenario.description or None, "generationTool": "delta-cosim"})
+    system = _el(root, "ssd:System", {"name": scenario.name})
+    elements = _el(system, "ssd:Elements")
+    connected = {}  # (component, variable name) that a connection uses
+    for c in scenario.connections:
+        for ref in (c.src, c.dst):
+            comp, var = ref.split(".", 1)
+            connected[(comp, var)] = ref
+    for link in plan.links:
+        for port in (link.src, link.dst):
+            if port.var.is_array:
+                raise SspError(out, f"connection of {port.label(names)}: FMI 3 arrays have no SSP 1.0 connector")
+    ssv_files: dict[str, bytes] = {}
+    n_params: dict[str, int] = {}
+    for c, name in enumerate(names):
+        comp, info = scenario.components[name], infos[c]
+        el = _el(elements, "ssd:Component", {"name": name, "type": FMU_TYPE, "source": f"resources/{name}.fmu",
+                                             "implementation": _IMPLEMENTATION.get(comp.interface)})
+        connectors = _el(el, "ssd:Connectors")
+        for var in info.variables.values():
+            if var.causality not in ("input", "output"):
+                continue
+            if var.is_array or var.fmi_type not in _SSP_TYPE:
+                if (name, var.name) in connected:
+                    raise SspError(out, f"{name}.{var.name} is {var.fmi_type}"
+                                        f"{' array' if var.is_array else ''}: no SSP 1.0 connector type")
+                continue
+            conn = _el(connectors, "ssd:Connector", {"name": var.name, "kind": var.causality,
+                                                     "description": var.description or None})
+            _typed(conn, "ssc", var)
+        if not len(connectors):
+            el.remove(connectors)
+        values = plan.start_values[c]
+        if values:
+            pset = _el(None, "ssv:ParameterSet", {"xmlns:ssv": NS["ssv"], "version": "1.0",
+                                                  "name": f"{name}_start_values"})
+            params = _el(pset, "ssv:Parameters")
+            for vname, value in values.items():
+                var = info.variables[vname]
+                if isinstance(value, list):
+                    raise SspError(out, f"{name}.{vname}: array start values have no SSP 1.0 parameter type")
+                try:
+                    _typed(_el(params, "ssv:Parameter", {"name": vname}), "ssv", var, value, f"{name}.")
+                except ValueError as exc:
+                    raise SspError(out, str(exc)) from None
+            ssv_files[f"resources/{name}.ssv"] = _xml(pset)
+            n_params[name] = len(values)
+            bindings = _el(el, "ssd:ParameterBindings")
+            _el(bindings, "ssd:ParameterBinding", {"type": PARAMETER_SET_TYPE, "source": f"resources/{name}.ssv"})
+        else:
+            n_params[name] = 0
+        if comp.step_multiple != 1:
+            ann = _el(_el(el, "ssd:Annotations"), "ssc:Annotation", {"type": OSP_ANNOTATION})
+            _el(ann, "osp:StepSizeHint", {"value": _num(t.step * comp.step_multiple)})
+    if scenario.connections:
+        conns = _el(system, "ssd:Connections")
+        for cn in scenario.connections:
+            (se, sc), (ee, ec) = cn.src.split(".", 1), cn.dst.split(".", 1)
+            _el(conns, "ssd:Connection", {"startElement": se, "startConnector": sc, "endElement": ee,
+                                          "endConnector": ec})
+    units = _unit_definitions(infos)
+    used = {v.unit for info in infos for v in info.variables.values() if v.unit}
+    if used & set(units):
+        uel = _el(root, "ssd:Units")
+        for uname in sorted(used & set(units)):
+            _el(_el(uel, "ssc:Unit", {"name": uname}), "ssc:BaseUnit", units[uname])
+    exp = _el(root, "ssd:DefaultExperiment", {"startTime": _num(t.start), "stopTime": _num(t.stop)})
+    ann = _el(_el(exp, "ssd:Annotations"), "ssc:Annotation", {"type": OSP_ANNOTATION})
+    _el(_el(ann, "osp:Algorithm"), "osp:FixedStepAlgorithm", {"baseStepSize": _num(t.step)})
+    ours = _el(_el(root, "ssd:Annotations"), "ssc:Annotation", {"type": OUR_ANNOTATION})
+    _el(ours, "dcs:Scenario").text = json.dumps(_extras(scenario), indent=1)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    partial = out.with_name(f".{out.name}.partial")
+    try:
+        with zipfile.ZipFile(partial, "w", zipfile.ZIP_DEFLATED) as z:
+            z.writestr(SSD_NAME, _xml(root))
+            for arc, data in ssv_files.items():
+                z.writestr(arc, data)
+            for name, info in zip(names, infos):
+                z.write(info.path, f"resources/{name}.fmu", compress_type=zipfile.ZIP_STORED)  # already deflated
+        partial.replace(out)
+    finally:
+        partial.unlink(missing_ok=True)
+    return ExportReport(out, list(names), len(scenario.connections), n_params, t.step, t.stop)
+
+
+# --------------------------------------------------------------------------- import
+
+
+def _q(prefix: str, tag: str) -> str:
+    return f"{{{NS[prefix]}}}{tag}"
+
+
+def _parse_xml(data: bytes, ssp: Path, member: str) -> ET.Element:
+    try:
+        return ET.fromstring(data)
+    except ET.ParseError as exc:
+        raise SspError(ssp, f"{member}: not well-formed XML ({exc})") from None
+
+
+def _member(base: str, uri: str, ssp: Path, what: str) -> str:
+    """The archive member a relative URI in ``base`` (a member's directory) points at."""
+    parsed = urlparse(uri)
+    if parsed.scheme or parsed.netloc or uri.startswith("/"):
+        raise SspError(ssp, f"{what}: source {uri!r} is not a relative reference into the archive "
+                            "(only those are supported)")
+    path = posixpath.normpath(posixpath.join(base, unquote(parsed.path)))
+    if path.startswith("../") or path == "..":
+        raise SspError(ssp, f"{what}: source {uri!r} points outside the archive")
+    return path
+
+
+def _value(kind: str, text: str | None, ssp: Path, where: str) -> Any:
+    if text is None:
+        raise SspError(ssp, f"{where}: ssv:{kind} has no value attribute")
+    try:
+        if kind == "Real":
+            return float(text)
+        if kind == "Integer":
+            return int(text)
+        if kind == "Boolean":
+            if text.strip() in ("true", "1"):
+                return True
+            if text.strip() in ("false", "0"):
+                return False
+            raise ValueError(text)
+        return text
+    except ValueError:
+        raise SspError(ssp, f"{where}: {text!r} is not a valid {kind} value") from None
+
+
+def _parameter_set(pset: ET.Element, ssp: Path, where: str, prefix: str) -> dict[str, Any]:
+    if pset.tag != _q("ssv", "ParameterSet"):
+        raise SspError(ssp, f"{where}: expected an ssv:ParameterSet, found {pset.tag}")
+    values: dict[str, Any] = {}
+    for p in pset.iterfind("ssv:Parameters/ssv:Parameter", NS):
+        pname = p.get("name")
+        if not pname:
+            raise SspError(ssp, f"{where}: a parameter without a name")
+        for kind in ("Real", "Integer", "Boolean", "String"):
+            typed = p.find(f"ssv:{kind}", NS)
+            if typed is not None:
+                values[prefix + pname] = _value(kind, typed.get("value"), ssp, f"{where}: parameter {pname}")
+                break
+        else:
+            found = [child.tag.rsplit("}", 1)[-1] for child in p]
+            raise SspError(ssp, f"{where}: parameter {pname}: type {', '.join(found) or '(none)'} is not "
+                                "supported (Real, Integer, Boolean, String)")
+    return values
+
+
+def _bindings(el: ET.Element, zf: zipfile.ZipFile, ssp: Path, comp: str) -> dict[str, Any]:
+    values: dict[str, Any] = {}
+    for b in el.iterfind("ssd:ParameterBindings/ssd:ParameterBinding", NS):
+        btype = b.get("type", PARAMETER_SET_TYPE)
+        if btype != PARAMETER_SET_TYPE:
+            raise SspError(ssp, f"component {comp!r}: parameter binding of type {btype!r} is not supported "
+                                f"(only {PARAMETER_SET_TYPE})")
+        if b.find("ssd:ParameterMapping", NS) is not None:
+            raise SspError(ssp, f"component {comp!r}: parameter mappings (.ssm) are not supported")
+        prefix = b.get("prefix", "")
+        source = b.get("source")
+        if source is not None:
+            member = _member("", source, ssp, f"component {comp!r}: parameter binding")
+            try:
+                data = zf.read(member)
+            except KeyError:
+                raise SspError(ssp, f"component {comp!r}: parameter binding source {member} is not in the "
+                                    "archive") from None
+            values.update(_parameter_set(_parse_xml(data, ssp, member), ssp, member, prefix))
+        for pset in b.iterfind("ssd:ParameterValues/ssv:ParameterSet", NS):
+            values.update(_parameter_set(pset, ssp, f"component {comp!r}: inline parameter values", prefix))
+    return values
+
+
+def _osp_step(node: ET.Element | None, ssp: Path) -> float | None:
+    """``baseStepSize`` of the OSP FixedStepAlgorithm annotation under ``node``, if any."""
+    if node is None:
+        return None
+    for ann in node.iterfind("ssd:Annotations/ssc:Annotation", NS):
+        if ann.get("type") != OSP_ANNOTATION:
+            continue
+        algo = ann.find("osp:Algorithm/osp:FixedStepAlgorithm", NS)
+        if algo is not None:
+            try:
+                step = float(algo.get("baseStepSize", ""))
+            except ValueError:
+                raise SspError(ssp, f"osp:FixedStepAlgorithm baseStepSize {algo.get('baseStepSize')!r} is not a "
+                                    "number") from None
+            if not step > 0 or not math.isfinite(step):
+                raise SspError(ssp, f"osp:FixedStepAlgorithm baseStepSize must be > 0, got {step}")
+            return step
+    return None
+
+
+def _step_hint(el: ET.Element, ssp: Path, comp: str) -> float | None:
+    for ann in el.iterfind("ssd:Annotations/ssc:Annotation", NS):
+        if ann.get("type") == OSP_ANNOTATION:
+            hint = ann.find("osp:StepSizeHint", NS)
+            if hint is not None:
+                try:
+                    return float(hint.get("value", ""))
+                except ValueError:
+                    raise SspError(ssp, f"component {comp!r}: osp:StepSizeHint value {hint.get('value')!r} is "
+                                        "not a number") from None
+    return None
+
+
+def _time(x: float) -> float:
+    """A time read as a double, rounded to whole nanoseconds (the master's resolution)."""
+    return round(x * 1e9) / 1e9
+
+
+def read_ssp(ssp: str | Path, workdir: str | Path) -> dict[str, Any]:
+    """Read ``ssp`` into scenario data (the mapping :func:`cosim.scenario.scenario_from_data` takes).
+
+    The FMUs are unpacked into ``workdir`` (component ``path`` entries point there). The time
+    grid may lack ``step`` or ``stop`` when neither the SSD nor the FMUs give one (the caller's
+    ``--step`` / ``--stop-time`` overrides fill them in).
+    """
+    ssp, workdir = Path(ssp), Path(workdir)
+    try:
+        zf = zipfile.ZipFile(ssp)
+    except FileNotFoundError:
+        raise SspError(ssp, "no such file") from None
+    except (zipfile.BadZipFile, OSError) as exc:
+        raise SspError(ssp, f"not an SSP archive (a zip file): {exc}") from None
+    with zf:
+        members = set(zf.namelist())
+        if SSD_NAME not in members:
+            found = ", ".join(sorted(m for m in members if m.endswith(".ssd"))) or "none"
+            raise SspError(ssp, f"no {SSD_NAME} at the top of the archive (.ssd files found: {found})")
+        root = _parse_xml(zf.read(SSD_NAME), ssp, SSD_NAME)
+        if root.tag != _q("ssd", "SystemStructureDescription"):
+            raise SspError(ssp, f"{SSD_NAME}: the root element is {root.tag}, expected ssd:SystemStructureDescription "
+                                f"in namespace {NS['ssd']}")
+        if not (root.get("version") or "").startswith("1."):
+            raise SspError(ssp, f"{SSD_NAME}: SSP version {root.get('version')!r} is not supported (1.0)")
+        system = root.find("ssd:System", NS)
+        if system is None:
+            raise SspError(ssp, f"{SSD_NAME}: no ssd:System element")
+        if system.find("ssd:Connectors", NS) is not None:
+            raise SspError(ssp, f"{SSD_NAME}: connectors of the system itself are not supported (only components')")
+        extras: dict[str, Any] = {}
+        for ann in root.iterfind("ssd:Annotations/ssc:Annotation", NS):
+            if ann.get("type") == OUR_ANNOTATION:
+                node = ann.find("dcs:Scenario", NS)
+                try:
+                    extras = json.loads(node.text or "{}") if node is not None else {}
+                except json.JSONDecodeError as exc:
+                    raise SspError(ssp, f"{SSD_NAME}: annotation {OUR_ANNOTATION}: not valid JSON ({exc})") from None
+        options = extras.pop("component_options", {}) or {}
+
+        components: dict[str, dict[str, Any]] = {}
+        connectors: dict[str, dict[str, str]] = {}  # component -> connector name -> kind
+        hints: dict[str, float] = {}
+        elements = system.find("ssd:Elements", NS)
+        for el in (list(elements) if elements is not None else []):
+            tag = el.tag.rsplit("}", 1)[-1]
+            if tag != "Component":
+                raise SspError(ssp, f"{SSD_NAME}: ssd:{tag} {el.get('name', '')!r}: nested systems and signal "
+                                    "dictionaries are not supported (only FMU components)")
+            name = el.get("name")
+            if not name:
+                raise SspError(ssp, f"{SSD_NAME}: a component without a name")
+            if name in components:
+                raise SspError(ssp, f"{SSD_NAME}: two components named {name!r}")
+            ctype = el.get("type", FMU_TYPE)
+            if ctype != FMU_TYPE:
+                raise SspError(ssp, f"component {name!r}: type {ctype!r} is not supported (only FMUs, {FMU_TYPE})")
+            source = el.get("source")
+            if not source:
+                raise SspError(ssp, f"component {name!r}: no source attribute")
+            member = _member("", source, ssp, f"component {name!r}")
+            if member not in members:
+                raise SspError(ssp, f"component {name!r}: its FMU {member} is not in the archive")
+            impl = el.get("implementation", "any")
+            if impl not in _INTERFACE:
+                raise SspError(ssp, f"component {name!r}: implementation {impl!r} is not supported "
+                                    f"({', '.join(_INTERFACE)})")
+            target = workdir / "fmus" / name / posixpath.basename(member)
+            target.parent.mkdir(parents=True, exist_ok=True)
+            with zf.open(member) as src, open(target, "wb") as dst:
+                shutil.copyfileobj(src, dst)
+            comp: dict[str, Any] = {"path": str(target)}
+            if impl != "any":
+                comp["interface"] = _INTERFACE[impl]
+            comp.update(options.get(name, {}))
+            params = _bindings(el, zf, ssp, name)
+            if params:
+                comp["parameters"] = params
+            hint = _step_hint(el, ssp, name)
+            if hint is not None:
+                hints[name] = hint
+            connectors[name] = {c.get("name", ""): c.get("kind", "") for c in el.iterfind("ssd:Connectors/ssd:Connector", NS)}
+            components[name] = comp
+        if not components:
+            raise SspError(ssp, f"{SSD_NAME}: the system has no components")
+
+        connections = []
+        for cn in system.iterfind("ssd:Connections/ssd:Connection", NS):
+            ends = []
+            for side, role in (("start", "output"), ("end", "input")):
+                elem, conn = cn.get(f"{side}Element"), cn.get(f"{side}Connector")
+                label = f"connection {cn.get('startElement')}.{cn.get('startConnector')} -> " \
+                        f"{cn.get('endElement')}.{cn.get('endConnector')}"
+                if elem is None:
+                    raise SspError(ssp, f"{label}: connections to the system's own connectors are not supported")
+                if elem not in components:
+                    raise SspError(ssp, f"{label}: no component named {elem!r} (components: "
+                                        f"{', '.join(components)})")
+                if conn not in connectors[elem]:
+                    known = ", ".join(sorted(connectors[elem])[:12]) or "none"
+                    raise SspError(ssp, f"{label}: component {elem!r} has no connector {conn!r} (connectors: {known})")
+                ends.append(f"{elem}.{conn}")
+            if cn.find("ssc:LinearTransformation", NS) is not None or any(
+                    child.tag.endswith("MappingTransformation") for child in cn):
+                raise SspError(ssp, f"connection {ends[0]} -> {ends[1]}: transformations are not supported")
+            connections.append({"from": ends[0], "to": ends[1]})
+
+        exp = root.find("ssd:DefaultExperiment", NS)
+        time: dict[str, float] = {}
+        for key, attr in (("start", "startTime"), ("stop", "stopTime")):
+            if exp is not None and exp.get(attr) is not None:
+                try:
+                    time[key] = _time(float(exp.get(attr)))
+                except ValueError:
+                    raise SspError(ssp, f"ssd:DefaultExperiment {attr} {exp.get(attr)!r} is not a number") from None
+        step = _osp_step(exp, ssp)
+        if step is None or "stop" not in time:
+            fmu_step, fmu_stop = _fmu_defaults(ssp, [Path(c["path"]) for c in components.values()])
+            step = step if step is not None else fmu_step
+            if "stop" not in time and fmu_stop is not None:
+                time["stop"] = fmu_stop
+        if step is not None:
+            time["step"] = _time(step)
+            for name, hint in hints.items():
+                m = hint / step
+                if abs(m - round(m)) > 1e-9 * m or round(m) < 1:
+                    raise SspError(ssp, f"component {name!r}: osp:StepSizeHint {hint:g} s is not a whole multiple "
+                                        f"of the base step {step:g} s")
+                if round(m) > 1:
+                    components[name]["step_multiple"] = int(round(m))
+    data: dict[str, Any] = {"name": extras.pop("name", None) or root.get("name") or ssp.stem,
+                            "components": components, "connections": connections, "time": time}
+    if root.get("description") and "description" not in extras:
+        data["description"] = root.get("description")
+    data.update({k: v for k, v in extras.items() if k in _EXTRAS})
+    return data
+
+
+def _fmu_defaults(ssp: Path, paths: list[Path]) -> tuple[float | None, float | None]:
+    """(smallest default step, largest default stop time) over the FMUs' DefaultExperiment."""
+    import fmpy
+
+    steps, stops = [], []
+    for path in paths:
+        try:
+            de = fmpy.read_model_description(str(path), validate=False).defaultExperiment
+        except Exception as exc:  # noqa: BLE001 - a broken FMU, named
+            raise SspError(ssp, f"{path.parent.name}: cannot read the FMU's modelDescription.xml ({exc})") from None
+        if de is None:
+            continue
+        if de.stepSize is not None:
+            steps.append(float(de.stepSize))
+        if de.stopTime is not None:
+            stops.append(float(de.stopTime))
+    return (min(steps) if steps else None), (max(stops) if stops else None)
+
+
+@contextmanager
+def open_ssp(ssp: str | Path, overrides: dict[tuple, Any] | None = None) -> Iterator[Scenario]:
+    """The scenario of an SSP archive, valid inside the ``with`` block (its FMUs are unpacked into a
+    temporary directory removed when the block ends, also on error).
+
+    ``overrides`` as for :func:`cosim.scenario.load_scenario` (``--set``, ``--stop-time``, and
+    ``("time", "step")`` for ``--step``).
+    """
+    ssp = Path(ssp)
+    tmp = Path(tempfile.mkdtemp(prefix=f"cosim_ssp_{ssp.stem}_"))
+    try:
+        data = read_ssp(ssp, tmp)
+        overrides = dict(overrides or {})
+        missing = [(key, flag) for key, flag in (("step", "--step"), ("stop", "--stop-time"))
+                   if key not in data["time"] and ("time", key) not in overrides]
+        if missing:
+            what = " and ".join(f"the {'base step' if k == 'step' else 'stop time'}" for k, _ in missing)
+            raise SspError(ssp, f"{what}: neither the SSD's default experiment nor the FMUs give it; "
+                                f"pass {' and '.join(f for _, f in missing)}")
+        from .scenario import scenario_from_data
+
+        yield scenario_from_data(data, str(ssp), overrides)
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+
+
+def is_ssp(path: str | Path) -> bool:
+    return Path(path).suffix.lower() == ".ssp"
+
+
+# --------------------------------------------------------------------------- CLI
+
+
+def register(sub) -> None:
+    """``python -m cosim ssp export SCENARIO -o SYSTEM.ssp``."""
+    p = sub.add_parser("ssp", help="export a scenario as an SSP 1.0 archive (run one with `cosim run X.ssp`)")
+    ssub = p.add_subparsers(dest="ssp_command", required=True, metavar="{export}")
+    e = ssub.add_parser("export", help="write SystemStructure.ssd, one .ssv per component and the FMUs",
+                        description="Writes the scenario as an SSP 1.0 archive (SystemStructure.ssd, a parameter "
+                                    "set per component with every start value the master sets, the FMUs in "
+                                    "resources/) that OSP libcosim and other SSP tools run.")
+    e.add_argument("scenario", help="scenario file (YAML)")
+    e.add_argument("-o", "--out", required=True, help="the .ssp file to write")
+    e.add_argument("--stop-time", type=float, help="override time.stop, s")
+    e.add_argument("--set", action="append", default=[], metavar="COMP.PARAM=VALUE",
+                   help="override a component parameter (repeatable)")
+    e.add_argument("--json", action="store_true")
+    e.set_defaults(handler=_cmd_export)
+
+
+def _cmd_export(args) -> int:
+    from .scenario import apply_overrides, load_scenario
+
+    rep = export_ssp(load_scenario(args.scenario, apply_overrides(args.set, args.stop_time)), args.out)
+    if args.json:
+        print(json.dumps(rep.as_dict(), indent=2))
+    else:
+        print(rep.text())
+    return 0
