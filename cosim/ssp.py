@@ -508,7 +508,8 @@ def read_ssp(ssp: str | Path, workdir: str | Path) -> dict[str, Any]:
             hint = _step_hint(el, ssp, name)
             if hint is not None:
                 hints[name] = hint
-            connectors[name] = {c.get("name", ""): c.get("kind", "") for c in el.iterfind("ssd:Connectors/ssd:Connector", NS)}
+            connectors[name] = {c.get("name", ""): c.get("kind", "")
+                                for c in el.iterfind("ssd:Connectors/ssd:Connector", NS)}
             components[name] = comp
         if not components:
             raise SspError(ssp, f"{SSD_NAME}: the system has no components")
@@ -556,7 +557,7 @@ def read_ssp(ssp: str | Path, workdir: str | Path) -> dict[str, Any]:
                     raise SspError(ssp, f"component {name!r}: osp:StepSizeHint {hint:g} s is not a whole multiple "
                                         f"of the base step {step:g} s")
                 if round(m) > 1:
-                    components[name]["step_multiple"] = int(round(m))
+                    components[name]["step_multiple"] = round(m)
     data: dict[str, Any] = {"name": extras.pop("name", None) or root.get("name") or ssp.stem,
                             "components": components, "connections": connections, "time": time}
     if root.get("description") and "description" not in extras:

@@ -23,7 +23,7 @@ import json
 import re
 import sys
 from pathlib import Path
-from typing import Any, Dict, Iterable, List, Optional, Tuple
+from typing import Any, Iterable
 
 __all__ = ["FILE", "collect", "problems", "check", "load_adapter", "project_requirements"]
 
@@ -36,13 +36,13 @@ _CLAUSE = re.compile(r"^\s*(==|!=|<=|>=|<|>|~=)\s*([0-9][0-9A-Za-z.+!-]*)\s*$")
 # --------------------------------------------------------------------------- build time
 
 
-def project_requirements(root: Path) -> Tuple[str, Dict[str, str]]:
+def project_requirements(root: Path) -> tuple[str, dict[str, str]]:
     """(requires-python, distribution name (normalised) -> version specifier) of the project.
 
     From ``root/pyproject.toml`` when the sources come from a checkout, else from the installed
     ``delta-cosim`` distribution's metadata; empty when neither is there.
     """
-    deps: List[str] = []
+    deps: list[str] = []
     python = ""
     pyproject = root / "pyproject.toml"
     if pyproject.exists():
@@ -58,7 +58,7 @@ def project_requirements(root: Path) -> Tuple[str, Dict[str, str]]:
             deps, python = list(dist.requires or []), dist.metadata.get("Requires-Python", "") or ""
         except metadata.PackageNotFoundError:
             pass
-    out: Dict[str, str] = {}
+    out: dict[str, str] = {}
     for dep in deps:
         dep = dep.split(";", 1)[0].split("#", 1)[0].strip()  # drop environment markers and comments
         m = re.match(r"^([A-Za-z0-9][A-Za-z0-9._-]*)\s*(?:\[[^\]]*\])?\s*(.*)$", dep)
@@ -71,7 +71,7 @@ def _normalise(name: str) -> str:
     return re.sub(r"[-_.]+", "-", name).lower()
 
 
-def _imported_modules(files: Iterable[Path]) -> List[str]:
+def _imported_modules(files: Iterable[Path]) -> list[str]:
     """Top-level names of every module the files import (at module level or inside functions)."""
     names = set()
     for path in files:
@@ -83,7 +83,7 @@ def _imported_modules(files: Iterable[Path]) -> List[str]:
     return sorted(names)
 
 
-def collect(files: Iterable[Path], root: Path, own_packages: Iterable[str]) -> Dict[str, Any]:
+def collect(files: Iterable[Path], root: Path, own_packages: Iterable[str]) -> dict[str, Any]:
     """The requirements record of an FMU bundling ``files`` (project packages ``own_packages``)."""
     from importlib import metadata
 
@@ -108,7 +108,7 @@ def collect(files: Iterable[Path], root: Path, own_packages: Iterable[str]) -> D
 # --------------------------------------------------------------------------- run time (inside the FMU)
 
 
-def _release(version: str) -> Tuple[int, ...]:
+def _release(version: str) -> tuple[int, ...]:
     """Numeric release part of a version: ``2.4.6rc1`` -> (2, 4, 6)."""
     parts = []
     for piece in version.split("+", 1)[0].split("."):
@@ -146,7 +146,7 @@ def _interpreter() -> str:
     return "Python {} at {}".format(".".join(map(str, sys.version_info[:3])), sys.prefix)
 
 
-def problems(record: Dict[str, Any]) -> List[str]:
+def problems(record: dict[str, Any]) -> list[str]:
     """What this interpreter lacks of ``record`` (empty: everything is there)."""
     import importlib.util
     from importlib import metadata
@@ -222,7 +222,7 @@ def _unavailable(message: str, fmi: int) -> type:
     if fmi == 2:
         from pythonfmu import Fmi2Slave  # shipped in the FMU's resources
 
-        bases: Tuple[type, ...] = (Fmi2Slave,)
+        bases: tuple[type, ...] = (Fmi2Slave,)
         namespace["do_step"] = lambda self, current_time, step_size: False  # abstract in Fmi2Slave; never called
     else:
         bases = (object,)  # the generated class adds Fmi3SlaveBase

@@ -262,7 +262,7 @@ BAD = {
 def test_bad_ssp_fails_with_one_line_and_exit_2(ssp, tmp_path, capsys, private_tmp, case):
     kwargs, expected = BAD[case]
     bad = _rewrite(ssp, tmp_path / f"{case}.ssp", **kwargs)
-    rc, out, err = _cli(capsys, "run", bad, "--no-log", "--quiet")
+    rc, _, err = _cli(capsys, "run", bad, "--no-log", "--quiet")
     print(err.strip())
     assert rc == 2, f"exit {rc}: {err}"
     lines = err.strip().splitlines()
