@@ -230,21 +230,21 @@ def test_model_exchange_plant_matches_cosimulation_plant_under_ctc(fmu_dir):
 
     info = load_fmu(_path(fmu_dir, "linear_analytic_plant_me"))
     me = make_slave("plant_me", info, "me", rtol=1e-10)
+    me.bind([info.variables[name] for name in U], [info.variables[name] for name in P])  # as the master does
     me.instantiate()
     me.set_start(start)
     me.enter_initialization(0.0, n * h)
     me.exit_initialization()
-    inputs = [info.variables[name] for name in U]
-    outputs = [info.variables[name] for name in P]
-    me.bind(inputs, outputs)
-    p_me = [me.read(outputs)]
+    me.get_outputs()
+    p_me = [list(me.out_bufs[0].values)]
     try:
         for k, u in enumerate(efforts):
             for j in range(3):
                 me.in_bufs[0].values[j] = u[j]
             me.set_inputs()
             me.step(k * h, h)
-            p_me.append(me.read(outputs))
+            me.get_outputs()
+            p_me.append(list(me.out_bufs[0].values))
     finally:
         me.terminate()
         me.free()
