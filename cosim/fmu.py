@@ -22,6 +22,7 @@ from __future__ import annotations
 import atexit
 import ctypes
 import math
+import os
 import shutil
 import tempfile
 from collections import deque
@@ -203,12 +204,30 @@ def load_fmu(path: str | Path) -> FMUInfo:
     return info
 
 
+_PREFIX = "cosim-fmu-"  # extraction directories: cosim-fmu-<pid>-<FMU stem>-<random>
+
+
+def _sweep_orphans() -> None:
+    """Remove extraction directories left by processes that no longer exist (killed with SIGKILL,
+    which no handler can catch). A directory whose process is alive, or not ours to see, stays."""
+    for d in Path(tempfile.gettempdir()).glob(_PREFIX + "*"):
+        try:
+            pid = int(d.name[len(_PREFIX):].split("-", 1)[0])
+            os.kill(pid, 0)
+        except ProcessLookupError:
+            shutil.rmtree(d, ignore_errors=True)
+        except (ValueError, PermissionError, OSError):
+            continue
+
+
 def _extract(path: Path) -> Path:
     import fmpy
 
     if path in _EXTRACTED:
         return _EXTRACTED[path]
-    unzipdir = Path(tempfile.mkdtemp(prefix=f"cosim_{path.stem}_"))
+    if not _EXTRACTED:
+        _sweep_orphans()
+    unzipdir = Path(tempfile.mkdtemp(prefix=f"{_PREFIX}{os.getpid()}-{path.stem}-"))
     try:
         fmpy.extract(str(path), str(unzipdir))
     except Exception as exc:  # a corrupt archive  # noqa: BLE001

@@ -31,6 +31,7 @@ import signal
 import sys
 import time as _time
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
 
 from . import fmu as _fmu
@@ -179,8 +180,11 @@ class Offload:
         self._closed = False
         self.layout = _Layout([[ctypes.sizeof(b.values) for b in t.out_bufs] for t in templates])
         index = {c: j for j, c in enumerate(comps)}
+        # The master extracts the group's FMUs and owns the directories: the worker uses them and
+        # never removes them, so a worker that is killed leaves nothing behind.
+        extracted = {str(plan.infos[c].path): str(plan.infos[c].unzipdir) for c in comps}
         spec = dict(
-            names=self.names, paths=[str(plan.infos[c].path) for c in comps],
+            names=self.names, paths=[str(plan.infos[c].path) for c in comps], extracted=extracted,
             kinds=[("me" if t.model_exchange else "cs", getattr(t, "rtol", 1e-6), getattr(t, "solver", "cvode"),
                     getattr(t, "max_step", None)) for t in templates],
             start_values=[plan.start_values[c] for c in comps],
@@ -390,7 +394,8 @@ def _free_count(sem: Any) -> int:
 def _worker(spec: dict, raw: Any, filled: list, free: list, stop: Any, conn: Any) -> None:
     """Entry point of the worker process: run the feed-forward group, publishing as it goes."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the master's to handle; it stops us
-    inherited = set(_fmu._EXTRACTED)  # a forked worker shares its parent's extracted FMUs: leave them
+    _fmu._EXTRACTED.update({Path(k): Path(v) for k, v in spec["extracted"].items()})
+    inherited = set(_fmu._EXTRACTED)  # the master's extractions (forked: all of them): the master removes them
     slaves: list[Any] = []
     pubs: list[_Publisher] = []
     code = 1

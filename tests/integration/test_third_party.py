@@ -340,11 +340,15 @@ def test_no_extracted_fmu_outlives_a_run_an_error_or_an_interrupt(tmp_path):
     bad.write_text(_yaml({"stair": one(build("Stair", 2), "cs", {"t_reject": 0.55})}, 1.0, 0.1))
     long = tmp_path / "long.yaml"
     long.write_text(_yaml({"m": one(fmu, "me")}, 1e5, 0.01))
+    dead = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"], capture_output=True, text=True)
+    orphan = tmpdir / f"cosim-fmu-{int(dead.stdout)}-Plant-x1y2z3"  # left by a run killed with SIGKILL
+    (orphan / "binaries").mkdir(parents=True)
     for path, code in ((good, 0), (bad, 2)):
         proc = _cosim(["run", str(path), "--out", str(tmp_path / "o.mcap")], tmpdir)
         _, err = proc.communicate(timeout=120)
         assert proc.returncode == code, err
-        assert list(tmpdir.iterdir()) == [], f"after {path.name}: {list(tmpdir.iterdir())}"
+        assert list(tmpdir.iterdir()) == [], f"after {path.name}: {list(tmpdir.iterdir())} (the orphan of a " \
+                                             f"dead process is swept at the first extraction)"
     proc = _cosim(["run", str(long), "--out", str(tmp_path / "long.mcap")], tmpdir)
     deadline = time.monotonic() + 60
     while not any(tmpdir.iterdir()) and time.monotonic() < deadline:  # wait until the run has extracted its FMU
