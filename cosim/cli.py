@@ -236,6 +236,15 @@ def _cosim_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--parallel", choices=("auto", "on", "off"),
                    help="override the scenario's parallel: run the feed-forward components (e.g. trajectory, IK) "
                         "ahead in a worker process (same values as serial)")
+    p.add_argument("--live", nargs="?", const="8765", default=None, metavar="PORT",
+                   help="serve the run over the Foxglove WebSocket protocol on PORT or HOST:PORT (default 8765, "
+                        "localhost): the log's channels and 3D scene while it runs; the log is still written")
+    p.add_argument("--realtime", nargs="?", const="1", default=None, metavar="FACTOR",
+                   help="pace simulated time to the wall clock, FACTOR simulated s per wall s (default 1); "
+                        "the summary gives the achieved factor and the lag")
+    p.add_argument("--sim-stamps", action="store_true",
+                   help="log times in pure simulation time (default: from the run's wall-clock start, so viewers "
+                        "show the real date; the message field t is simulation time either way)")
     p.add_argument("--quiet", action="store_true", help="no progress bar and no summary")
     p.add_argument("--json", action="store_true", help="summary as JSON on stdout")
     p.set_defaults(handler=_cmd_run)
@@ -434,9 +443,19 @@ def _cmd_run(args: argparse.Namespace) -> int:
     overrides = apply_overrides(args.set, args.stop_time)
     if args.parallel:
         overrides[("parallel",)] = args.parallel
+    live = realtime = None
+    if args.live is not None:
+        from .live import parse_address
+
+        live = parse_address(args.live)
+    if args.realtime is not None:
+        from .realtime import parse_factor
+
+        realtime = parse_factor(args.realtime)
     with _open_scenario(args, overrides) as scenario:
         res = run_scenario(scenario, out=args.out, log=False if args.no_log else None,
-                           progress=not (args.quiet or args.json))
+                           progress=not (args.quiet or args.json), live=live, realtime=realtime,
+                           stamps="simulation" if args.sim_stamps else "wall")
     if args.json:
         print(json.dumps(res.as_dict(), indent=2))
     elif not args.quiet:

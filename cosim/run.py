@@ -35,6 +35,7 @@ class RunResult:
     worker_time: dict[str, float] = field(default_factory=dict)  # s per component, inside the worker process
     terminated_by: str | None = None  # the component that ended the simulation before the stop time
     events: dict[str, int] = field(default_factory=dict)  # events handled per model-exchange component
+    realtime: dict[str, float] = field(default_factory=dict)  # with real-time pacing: factor, lag (cosim.realtime)
 
     @property
     def real_time_factor(self) -> float:
@@ -50,7 +51,7 @@ class RunResult:
                 "real_time_factor": self.real_time_factor, "component_time_s": self.component_time,
                 "errors": [e.__dict__ for e in self.errors], "checks": self.checks, "passed": self.passed,
                 "mcap": self.mcap, "notes": self.notes, "worker_time_s": self.worker_time,
-                "terminated_by": self.terminated_by, "events": self.events}
+                "terminated_by": self.terminated_by, "events": self.events, "realtime": self.realtime}
 
 
 def progress_bar():
@@ -134,6 +135,32 @@ def prepare(scenario: Scenario, log_signals: str | None = None):
     return plan, report
 
 
+def _publishing(scenario: Scenario, mcap_path: Path | None, live: tuple[str, int] | None,
+                stamps: str) -> list[Observer]:
+    """The MCAP recorder and/or the live view on one publisher of the run's channels, in start order."""
+    from .publish import Publisher, reference_path
+
+    robot = None
+    scene = scenario.logging.scene
+    if scene is not None and scenario.robot:
+        from delta.robots import get_preset
+
+        robot = get_preset(scenario.robot)
+    publisher = Publisher(robot, expand_signal(scene.position) if scene else None, scene.rate_hz if scene else 30.0,
+                          stamps, reference_path(scenario) if robot is not None else None,
+                          expand_signal(scenario.compare.reference) if scenario.compare is not None else None)
+    sinks: list[Observer] = []
+    if live is not None:  # first: a port in use fails before the log file is opened
+        from .live import LiveView
+
+        sinks.append(LiveView(publisher, live[1], live[0]))
+    if mcap_path is not None:
+        from .mcap_log import McapRecorder
+
+        sinks.append(McapRecorder(mcap_path, publisher, scenario, scenario.source, scenario.logging.flush_interval))
+    return sinks + [publisher]
+
+
 def check_scenario(path: str | Path, overrides: dict | None = None) -> tuple[Scenario, Any, str]:
     """Validate the scenario, resolve its FMUs and wiring and run the pre-flight."""
     scenario = load_scenario(path, overrides)
@@ -142,25 +169,30 @@ def check_scenario(path: str | Path, overrides: dict | None = None) -> tuple[Sce
 
 
 def run_scenario(scenario: Scenario | str | Path, out: str | Path | None = None, overrides: dict | None = None,
-                 log: bool | None = None, progress: bool = False, extra_observers: Sequence[Observer] = ()
+                 log: bool | None = None, progress: bool = False, extra_observers: Sequence[Observer] = (),
+                 live: tuple[str, int] | None = None, realtime: float | None = None, stamps: str = "wall"
                  ) -> RunResult:
     """Run a scenario end to end. Raises CosimError (bad input, FMU failure) or KeyboardInterrupt.
 
     The MCAP file, when logging, is finished whatever happens, and the FMUs extracted for the
-    run are removed (success, error or Ctrl-C).
+    run are removed (success, error or Ctrl-C). ``live``: (host, port) of a Foxglove WebSocket
+    server showing the run (:mod:`cosim.live`); ``realtime``: pace the run at this many simulated
+    seconds per wall second (:mod:`cosim.realtime`); ``stamps``: log times from the run's
+    ``"wall"``-clock start or pure ``"simulation"`` time (:mod:`cosim.publish`).
     """
     try:
-        return _run(scenario, out, overrides, log, progress, extra_observers)
+        return _run(scenario, out, overrides, log, progress, extra_observers, live, realtime, stamps)
     finally:
         cleanup_extracted()
 
 
 def _run(scenario: Scenario | str | Path, out: str | Path | None, overrides: dict | None, log: bool | None,
-         progress: bool, extra_observers: Sequence[Observer]) -> RunResult:
+         progress: bool, extra_observers: Sequence[Observer], live: tuple[str, int] | None = None,
+         realtime: float | None = None, stamps: str = "wall") -> RunResult:
     if not isinstance(scenario, Scenario):
         scenario = load_scenario(scenario, overrides)
     logging_on = scenario.logging.enabled if log is None else log
-    plan, _ = prepare(scenario, None if logging_on else "none")
+    plan, _ = prepare(scenario, None if logging_on or live is not None else "none")
     comps = scenario.components
     slaves = [make_slave(n, plan.infos[i], comps[n].interface, comps[n].rtol, comps[n].solver, comps[n].max_step)
               for i, n in enumerate(plan.names)]
@@ -177,8 +209,6 @@ def _run(scenario: Scenario | str | Path, out: str | Path | None, overrides: dic
         observers.append(comparison)
     mcap_path = None
     if logging_on:
-        from .mcap_log import McapRecorder
-
         if out is not None:
             mcap_path = Path(out)
         elif scenario.logging.out is not None:  # relative to the scenario file
@@ -186,16 +216,16 @@ def _run(scenario: Scenario | str | Path, out: str | Path | None, overrides: dic
             mcap_path = base / scenario.logging.out
         else:
             mcap_path = Path("runs") / f"{scenario.name}.mcap"
-        robot = None
-        scene = scenario.logging.scene
-        if scene is not None and scenario.robot:
-            from delta.robots import get_preset
+    if logging_on or live is not None:  # the log and the live view: the same channels (cosim.publish)
+        observers += _publishing(scenario, mcap_path, live, stamps)
+    pacing = None
+    if realtime is not None:
+        from .realtime import RealTime
 
-            robot = get_preset(scenario.robot)
-        observers.append(McapRecorder(mcap_path, scenario, scenario.source, scenario.logging.flush_interval,
-                                      robot, expand_signal(scene.position) if scene else None,
-                                      scene.rate_hz if scene else 30.0))
+        pacing = RealTime(realtime)
     observers += list(extra_observers)
+    if pacing is not None:  # last: every other observer has seen the step before it waits
+        observers.append(pacing)
     started: list[Observer] = []
     error: BaseException | None = None
     t_wall = time.perf_counter()
@@ -244,6 +274,9 @@ def _run(scenario: Scenario | str | Path, out: str | Path | None, overrides: dic
                        dict(zip(plan.names, rt.comp_time)), mcap=str(mcap_path) if mcap_path else None,
                        notes=[note] if note else [], worker_time=offload.worker_time if offload else {})
     result.events = {n: s.events for n, s in zip(plan.names, slaves) if getattr(s, "model_exchange", False)}
+    result.notes += [o.summary() for o in observers if hasattr(o, "summary")]  # live view, real time
+    if pacing is not None:
+        result.realtime = pacing.figures()
     if rt.terminated is not None:  # an FMU ended the simulation: a normal end, said in the summary
         result.message = str(rt.terminated)
         result.terminated_by = rt.terminated.component

@@ -4,7 +4,11 @@ A run log (see :mod:`cosim.mcap_log`) holds one JSON channel ``/<component>`` pe
 component, each message a flat object ``{"t": ..., "<variable>": value, ...}``. Here
 every logged variable becomes a :class:`Signal` named ``component.variable``
 (``plant.p.x``, ``ctl.u[1]``) with its time stamps, values, unit and causality. The
-``/scene`` channel (Foxglove drawing) is skipped.
+``/scene`` channels (Foxglove drawing) and ``/tf`` are skipped.
+
+Time stamps are simulation time: a log whose ``time`` metadata gives an offset (log times
+from the run's wall-clock start, see :mod:`cosim.publish`) has it subtracted here, so old
+logs (pure simulation time) and new ones read alike.
 
 A *baseline* is the same format decimated in time (``write_baseline``): small enough
 to keep in a repository, read by the same code, so comparing a run against its
@@ -23,10 +27,19 @@ import orjson
 
 from .errors import CosimError
 
-__all__ = ["Signal", "RunLog", "read_run", "write_baseline", "AXES"]
+__all__ = ["Signal", "RunLog", "read_run", "write_baseline", "time_offset_ns", "AXES"]
 
 AXES = ("x", "y", "z")
-_SKIP_TOPICS = {"/scene", "/events"}
+_SKIP_TOPICS = {"/scene", "/scene/reference", "/tf", "/events"}
+
+
+def time_offset_ns(metadata: dict[str, dict[str, str]]) -> int:
+    """Log time minus simulation time, ns, from a log's metadata records (see
+    :func:`cosim.publish.time_metadata`); 0 for logs without a ``time`` record (pure simulation time)."""
+    try:
+        return int(metadata.get("time", {}).get("offset_ns", 0))
+    except ValueError:
+        return 0
 
 
 @dataclass(frozen=True)
@@ -142,6 +155,9 @@ def read_run(path: str | Path, components: Iterable[str] | None = None) -> RunLo
                 schema = summary.schemas.get(ch.schema_id)
                 props[comp] = orjson.loads(schema.data).get("properties", {}) if schema is not None else {}
                 rows[comp], stamps[comp] = [], []
+            for rec in reader.iter_metadata():
+                metadata[rec.name] = dict(rec.metadata)
+            offset = time_offset_ns(metadata)
             has_events = any(ch.topic == "/events" for ch in summary.channels.values())
             for _, ch, msg in reader.iter_messages(topics=["/events"] if has_events else [], log_time_order=True):
                 events.append(orjson.loads(msg.data))
@@ -151,9 +167,7 @@ def read_run(path: str | Path, components: Iterable[str] | None = None) -> RunLo
                 if comp not in keys:
                     keys[comp] = list(d)
                 rows[comp].append(tuple(d.values()))
-                stamps[comp].append(msg.log_time)
-            for rec in reader.iter_metadata():
-                metadata[rec.name] = dict(rec.metadata)
+                stamps[comp].append(msg.log_time - offset)
             for att in reader.iter_attachments():
                 attachments[att.name] = bytes(att.data)
     except (McapError, OSError, ValueError, orjson.JSONDecodeError) as exc:
@@ -201,8 +215,8 @@ def write_baseline(source: str | Path, out: str | Path, period: float = 0.01,
 
     The baseline keeps the source's schemas, channels (minus ``/scene``), metadata and
     attachments, and adds a ``baseline`` metadata record (source, period). Messages are
-    kept where the stamp is a multiple of ``period`` (the run's stamps are integer ns, so
-    the pick is exact). Returns (path, messages written).
+    kept where the simulation time is a multiple of ``period`` (the run's stamps are integer
+    ns, so the pick is exact). Returns (path, messages written).
     """
     from mcap.reader import make_reader
     from mcap.writer import CompressionType, Writer
@@ -239,8 +253,9 @@ def write_baseline(source: str | Path, out: str | Path, period: float = 0.01,
                 missing = sorted(c[1:] for c in wanted - found)
                 if missing:
                     raise CosimError(f"{source}: no channel for component(s) {', '.join(missing)}")
+            offset = time_offset_ns({rec.name: dict(rec.metadata) for rec in reader.iter_metadata()})
             for _, ch, msg in reader.iter_messages(topics=[summary.channels[i].topic for i in channel_ids]):
-                if msg.log_time % period_ns == 0:
+                if (msg.log_time - offset) % period_ns == 0:
                     w.add_message(channel_ids[ch.id], msg.log_time, msg.data, msg.publish_time)
                     written += 1
             for rec in reader.iter_metadata():

@@ -38,14 +38,19 @@ logging: {{signals: all}}
 
 
 def _read_mcap(path: Path):
+    """(summary, messages by topic); ``_log_time`` is the simulation time (the log's time offset removed)."""
     from mcap.reader import make_reader
+
+    from cosim.runlog import time_offset_ns
 
     with open(path, "rb") as f:
         reader = make_reader(f)
         summary = reader.get_summary()
+        offset = time_offset_ns({m.name: dict(m.metadata) for m in reader.iter_metadata()})
         msgs: dict[str, list[dict]] = {}
         for schema, channel, message in reader.iter_messages():
-            msgs.setdefault(channel.topic, []).append(orjson.loads(message.data) | {"_log_time": message.log_time})
+            msgs.setdefault(channel.topic, []).append(orjson.loads(message.data)
+                                                      | {"_log_time": message.log_time - offset})
     return summary, msgs
 
 

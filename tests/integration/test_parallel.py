@@ -50,10 +50,14 @@ logging: {{signals: all, flush_interval: 0.1}}
 def _messages(path: Path) -> dict[str, list[tuple[int, bytes]]]:
     from mcap.reader import make_reader
 
+    from cosim.runlog import time_offset_ns
+
     with open(path, "rb") as f:
+        reader = make_reader(f)
+        offset = time_offset_ns({m.name: dict(m.metadata) for m in reader.iter_metadata()})  # wall-clock start
         out: dict[str, list[tuple[int, bytes]]] = {}
-        for _, channel, message in make_reader(f).iter_messages():
-            out.setdefault(channel.topic, []).append((message.log_time, bytes(message.data)))
+        for _, channel, message in reader.iter_messages():
+            out.setdefault(channel.topic, []).append((message.log_time - offset, bytes(message.data)))
     return out
 
 

@@ -1,0 +1,101 @@
+"""Live view: serve a running co-simulation over the Foxglove WebSocket protocol (``foxglove-sdk``).
+
+``python -m cosim run SCENARIO --live [PORT]`` adds a :class:`LiveView` to the run. It starts a
+Foxglove WebSocket server (subprotocol ``foxglove.sdk.v1``) on the context of the run's
+:class:`cosim.publish.Publisher`, so a viewer connected to ``ws://localhost:PORT`` (the Foxglove
+app: *Open connection*, *Foxglove WebSocket*) sees exactly the channels, schemas and 3D scene
+of the MCAP log, message for message, while the log is still written. The server also
+broadcasts the run's current log time (the *Time* capability), so the viewer's clock follows the
+simulation. Combine it with ``--realtime`` to watch at wall-clock pace; without it the run goes
+as fast as it can and the viewer sees it fast-forwarded.
+"""
+
+from __future__ import annotations
+
+import socket
+from collections.abc import Sequence
+
+from .algorithm import Runtime
+from .errors import CosimError
+from .publish import Publisher
+
+__all__ = ["DEFAULT_PORT", "LiveView", "parse_address"]
+
+DEFAULT_PORT = 8765
+_TIME_PERIOD_NS = 33_000_000  # viewer clock updates per simulated second: about 30
+
+
+def parse_address(text: str | int | None) -> tuple[str, int]:
+    """``"8765"``, ``"0.0.0.0:8765"`` or None (the default port) -> (host, port); CosimError when invalid."""
+    if text is None:
+        return "127.0.0.1", DEFAULT_PORT
+    host, _, port = str(text).rpartition(":")
+    try:
+        value = int(port)
+    except ValueError:
+        value = -1
+    if not 0 <= value <= 65535:
+        raise CosimError(f"--live: expected a port number 0..65535 (or HOST:PORT), got {text!r}")
+    return host or "127.0.0.1", value
+
+
+def _check_free(host: str, port: int) -> None:
+    """Raise CosimError now (before any FMU is loaded) when ``host:port`` cannot be bound."""
+    if port == 0:
+        return
+    with socket.socket(socket.AF_INET6 if ":" in host else socket.AF_INET, socket.SOCK_STREAM) as s:
+        s.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+        try:
+            s.bind((host, port))
+        except OSError as exc:
+            raise CosimError(f"--live: cannot serve on {host}:{port}: {exc.strerror or exc} "
+                             f"(choose another port: --live PORT)") from None
+
+
+class LiveView:
+    """Observer serving ``publisher``'s channels on a Foxglove WebSocket server during the run.
+
+    Place it before the publisher among the run's observers (the server then advertises every
+    channel as the publisher declares it). ``port=0`` picks a free port (:attr:`port` after
+    :meth:`start`).
+    """
+
+    def __init__(self, publisher: Publisher, port: int = DEFAULT_PORT, host: str = "127.0.0.1",
+                 name: str = "delta-cosim"):
+        _check_free(host, port)
+        self.publisher = publisher
+        self.host = host
+        self.port = port
+        self.name = name
+        self.server = None
+
+    @property
+    def url(self) -> str:
+        return f"ws://{'localhost' if self.host in ('127.0.0.1', '0.0.0.0') else self.host}:{self.port}"
+
+    def start(self, rt: Runtime) -> None:
+        import foxglove
+        from foxglove.websocket import Capability
+
+        try:
+            self.server = foxglove.start_server(name=self.name, host=self.host, port=self.port,
+                                                capabilities=[Capability.Time], context=self.publisher.context)
+        except RuntimeError as exc:
+            raise CosimError(f"--live: cannot serve on {self.host}:{self.port}: {exc}") from None
+        self.port = self.server.port
+        self._offset = self.publisher.origin(rt)
+        self._next_time = rt.start_ns
+        self.server.broadcast_time(rt.start_ns + self._offset)
+
+    def stepped(self, k: int, t_ns: int, active: Sequence[int]) -> None:
+        if t_ns >= self._next_time:
+            self._next_time = t_ns + _TIME_PERIOD_NS
+            self.server.broadcast_time(t_ns + self._offset)
+
+    def finish(self, rt: Runtime | None, error: BaseException | None) -> None:
+        if self.server is not None:
+            self.server.stop()
+            self.server = None
+
+    def summary(self) -> str:
+        return f"live view served on {self.url} (Foxglove WebSocket, subprotocol foxglove.sdk.v1)"
