@@ -6,7 +6,10 @@
 - ``path_3d.png``: the platform path, desired vs actual, in 3D;
 - ``position.png``: x, y, z desired vs actual over time;
 - ``errors.png``: position error per axis and, when the log has them, velocity error
-  per axis (actual ``plant.v`` vs ``traj.v_ref``), scaled to nm / um / mm as suits;
+  per axis (actual ``plant.v`` vs ``traj.v_ref``), scaled to mm / um / nm / pm / fm as suits
+  (tick labels are plain numbers: no offset, no exponent);
+- ``joints.png``: joint-space tracking: each joint ``q[i]`` of the plant against its reference
+  ``q_ref[i]`` (the IK's output, else the controller's input), and the error, in mm or deg;
 - ``efforts.png``: the actuator efforts ``u[1..3]`` in the log's unit;
 - ``report.md``: scenario, robot, status, duration, per-axis RMSE and max error (with
   its time) and the figures.
@@ -41,6 +44,7 @@ __all__ = ["ReportError", "AxisStats", "Pair", "Tracking", "Report", "TableRow",
            "controller_table", "register"]
 
 _DEFAULT_ACTUAL, _DEFAULT_REFERENCE = "plant.p", "traj.p_ref"
+_JOINTS = ["q[1]", "q[2]", "q[3]"]
 _DPI = 120
 _CONTROLLERS = {"pd": "PD", "pid": "PID", "pdplus": "PD+", "ctc": "CTC"}
 _CONTROLLER_FMU = re.compile(r"^(?:linear|rotary)_(pd|pid|pdplus|ctc)$")
@@ -109,6 +113,7 @@ class Tracking:
     position: Pair
     velocity: Pair | None
     efforts: tuple[list[str], str, np.ndarray, np.ndarray] | None  # names, unit, t (n,), values (n, k)
+    joints: Pair | None = None  # joint positions q[1..3] vs their references q_ref[1..3]
 
     @property
     def is_platform(self) -> bool:
@@ -121,6 +126,10 @@ class Tracking:
     def velocity_stats(self) -> list[AxisStats]:
         v = self.velocity
         return [] if v is None else _stats(self.axes, v.actual_names, v.reference_names, v.unit, v.t, v.error)
+
+    def joint_stats(self) -> list[AxisStats]:
+        q = self.joints
+        return [] if q is None else _stats(_JOINTS, q.actual_names, q.reference_names, q.unit, q.t, q.error)
 
 
 def _scenario_doc(run: RunLog) -> tuple[str | None, dict]:
@@ -208,6 +217,23 @@ def _efforts(run: RunLog, actual_component: str):
     return None
 
 
+def _joints(run: RunLog, actual_component: str) -> Pair | None:
+    """The plant's joint positions ``q[1..3]`` against their references ``q_ref[1..3]``.
+
+    The reference is the component that outputs ``q_ref`` (the inverse kinematics), else one
+    that receives it (the controller's input); None when the log has no such signals.
+    """
+    actual = [f"{actual_component}.{q}" for q in _JOINTS]
+    if not all(n in run for n in actual):
+        return None
+    candidates = sorted(run.find("q_ref[1]"), key=lambda n: run.signals[n].causality != "output")
+    for name in candidates:
+        reference = [f"{name.split('.', 1)[0]}.q_ref[{i}]" for i in range(1, 4)]
+        if all(n in run for n in reference):
+            return _pair(run, actual, reference, "joint signals")
+    return None
+
+
 def tracking(run: RunLog | str | Path) -> Tracking:
     """The signals a report shows, aligned in time. Raises ReportError naming the file and a missing signal."""
     run = run if isinstance(run, RunLog) else read_run(run)
@@ -220,21 +246,40 @@ def tracking(run: RunLog | str | Path) -> Tracking:
     velocity = None
     if all(v_act + v_ref) and all(n in run for n in v_act + v_ref):
         velocity = _pair(run, v_act, v_ref, "velocity of the compared signals")
-    return Tracking(run, source, axes, position, velocity, _efforts(run, actual[0].split(".", 1)[0]))
+    comp = actual[0].split(".", 1)[0]
+    return Tracking(run, source, axes, position, velocity, _efforts(run, comp), _joints(run, comp))
 
 
 # --------------------------------------------------------------------------- figures
 
+_PREFIXES = ((1.0, ""), (1e-3, "m"), (1e-6, "µ"), (1e-9, "n"), (1e-12, "p"), (1e-15, "f"))
+
+
 def _scaled_unit(values: np.ndarray, unit: str) -> tuple[float, str]:
-    """(factor, unit) showing ``values`` in m or m/s as mm / um / nm, so they read as 1..1000."""
-    if unit not in ("m", "m/s"):
+    """(factor, unit) showing ``values`` so that they read as 1..1000, with no offset or exponent.
+
+    m and m/s as mm / um / nm / pm / fm (never m: a delta's positions read best in mm); rad and
+    rad/s as deg / mdeg / udeg ...; other units unchanged.
+    """
+    scale = 1.0
+    if unit in ("rad", "rad/s"):
+        scale, unit, ladder = 180.0 / math.pi, unit.replace("rad", "deg"), _PREFIXES
+    elif unit in ("m", "m/s"):
+        ladder = _PREFIXES[1:]
+    else:
         return 1.0, unit
     finite = values[np.isfinite(values)]
-    peak = float(np.abs(finite).max()) if finite.size else 0.0
-    for size, prefix in ((1e-3, "m"), (1e-6, "µ")):
+    peak = float(np.abs(finite).max()) * scale if finite.size else 0.0
+    for size, prefix in ladder:
         if peak >= size:
-            return 1.0 / size, prefix + unit
-    return 1e9, "n" + unit
+            return scale / size, prefix + unit
+    size, prefix = ladder[-1]
+    return scale / size, prefix + unit
+
+
+def _plain(ax) -> None:
+    """Tick labels as plain numbers: no offset (``1e-5 +``) and no exponent above the axis."""
+    ax.ticklabel_format(axis="y", style="plain", useOffset=False)
 
 
 def _pretty_unit(unit: str) -> str:
@@ -254,29 +299,39 @@ def _auto(value: float, unit: str) -> str:
 
 
 def _plot_path(tr: Tracking, title: str, out: Path) -> Path:
+    from matplotlib.ticker import MaxNLocator, ScalarFormatter
+
     p = tr.position
     fig = _fig(7.5, 6.0, layout=None)  # constrained layout clips 3D axis labels
-    fig.subplots_adjust(left=0.0, right=0.93, bottom=0.02, top=0.9)
+    fig.subplots_adjust(left=0.02, right=0.9, bottom=0.06, top=0.9)
     ax = fig.add_subplot(projection="3d")
     ref_mm, act_mm = p.reference * 1e3, p.actual * 1e3
     ax.plot(*ref_mm.T, color="tab:blue", lw=2.5, alpha=0.45, label=f"desired ({p.reference_names[0][:-2]})")
     ax.plot(*act_mm.T, color="tab:red", lw=0.9, label=f"actual ({p.actual_names[0][:-2]})")
-    ax.scatter(*act_mm[0], color="k", marker="o", s=25, label="start")
-    ax.scatter(*act_mm[-1], color="k", marker="s", s=25, label="end")
     both = np.vstack([ref_mm, act_mm])
     lo, hi = np.nanmin(both, axis=0), np.nanmax(both, axis=0)
-    # true proportions, except that a flat axis (a planar path) keeps a quarter of the widest span
-    span = np.maximum(hi - lo, 0.25 * max(float((hi - lo).max()), 1e-6))
+    # true proportions, except that a flat axis (a planar path, a vertical stroke) keeps half of the
+    # widest span: a narrower box crowds its tick labels and pushes the axis labels out of the figure
+    span = np.maximum(hi - lo, 0.5 * max(float((hi - lo).max()), 1e-6))
+    # start and end: a hollow circle and a cross, both visible when the path is closed
+    closed = float(np.linalg.norm(act_mm[-1] - act_mm[0])) < 0.01 * float(span.max())
+    ax.scatter(*act_mm[0], s=90, facecolors="none", edgecolors="tab:green", linewidths=1.8, depthshade=False,
+               label=f"start (t = {p.t[0]:.3g} s)")
+    ax.scatter(*act_mm[-1], s=45, color="k", marker="x", linewidths=1.8, depthshade=False,
+               label=f"end (t = {p.t[-1]:.3g} s)" + (", back at the start" if closed else ""))
     mid = 0.5 * (lo + hi)
     ax.set_xlim(mid[0] - span[0] / 2, mid[0] + span[0] / 2)
     ax.set_ylim(mid[1] - span[1] / 2, mid[1] + span[1] / 2)
     ax.set_zlim(mid[2] - span[2] / 2, mid[2] + span[2] / 2)
-    ax.set_box_aspect(span.copy(), zoom=0.95)  # a copy: matplotlib scales it in place
-    from matplotlib.ticker import MaxNLocator
-
-    for axis, label in zip((ax.xaxis, ax.yaxis, ax.zaxis), AXES):
-        axis.set_major_locator(MaxNLocator(6 if label == "x" else 5))
+    ax.set_box_aspect(span.copy(), zoom=0.9)  # a copy: matplotlib scales it in place
+    for j, (axis, label) in enumerate(zip((ax.xaxis, ax.yaxis, ax.zaxis), AXES)):
+        # ticks in proportion to the axis's length on screen, so that narrow axes' labels do not overlap
+        axis.set_major_locator(MaxNLocator(max(1, round(5 * span[j] / span.max())), steps=[1, 2, 2.5, 5, 10]))
+        fmt = ScalarFormatter(useOffset=False)
+        fmt.set_scientific(False)
+        axis.set_major_formatter(fmt)
         axis.set_label_text(f"{label} (mm)")
+        axis.labelpad = 12  # clear of the tick labels
     err = float(np.nanmax(np.abs(p.error)))
     hint = ", not visible at this scale" if err * 1e3 < 0.005 * span.max() else ""
     fig.suptitle(f"{title}: platform path, desired vs actual\n(largest position error {_auto(err, p.unit)}{hint}; "
@@ -293,11 +348,7 @@ def _plot_position(tr: Tracking, title: str, out: Path) -> Path:
     fig = _fig(9, 2.2 * n + 1.0)
     axs = fig.subplots(n, 1, sharex=True, squeeze=False)[:, 0]
     f, unit = (1e3, "mm") if p.unit == "m" else (1.0, _pretty_unit(p.unit))
-    for j, ax in enumerate(axs):
-        ax.plot(p.t, p.reference[:, j] * f, color="tab:blue", lw=2.5, alpha=0.45)
-        ax.plot(p.t, p.actual[:, j] * f, color="tab:red", lw=0.9)
-        ax.set_ylabel(f"{tr.axes[j]} ({unit})")
-        ax.grid(True, alpha=0.3)
+    _values_column(axs, p, f, unit, tr.axes)
     axs[-1].set_xlabel("time (s)")
     names = (p.reference_names[0][:-2], p.actual_names[0][:-2]) if tr.is_platform else ("reference", "actual")
     axs[0].legend(axs[0].lines, [f"desired ({names[0]})", f"actual ({names[1]})"], loc="lower center",
@@ -306,6 +357,30 @@ def _plot_position(tr: Tracking, title: str, out: Path) -> Path:
     path = out / "position.png"
     fig.savefig(path)
     return path
+
+
+_FLAT = 0.05  # an axis whose values span less than this share of the widest axis's span is drawn at that share
+
+
+def _values_column(axs, pair: Pair, f: float, unit: str, labels: Sequence[str]) -> None:
+    """Reference (wide, pale) and actual (thin) values per row, ``f`` times the logged unit.
+
+    A coordinate that barely moves (the x and y of a vertical z-steps motion, constant up to
+    rounding) gets the same minimum span as a share of the widest one, so it reads as the
+    flat line it is rather than as its rounding noise magnified.
+    """
+    both = np.concatenate([pair.reference, pair.actual]) * f
+    spans = np.nanmax(both, axis=0) - np.nanmin(both, axis=0)
+    least = _FLAT * float(np.nanmax(spans)) if np.isfinite(spans).any() else 0.0
+    for j, ax in enumerate(axs):
+        ax.plot(pair.t, pair.reference[:, j] * f, color="tab:blue", lw=2.5, alpha=0.45)
+        ax.plot(pair.t, pair.actual[:, j] * f, color="tab:red", lw=0.9)
+        if least > 0 and spans[j] < least:
+            mid = 0.5 * (np.nanmax(both[:, j]) + np.nanmin(both[:, j]))
+            ax.set_ylim(mid - 0.6 * least, mid + 0.6 * least)
+        ax.set_ylabel(f"{labels[j]} ({unit})")
+        _plain(ax)
+        ax.grid(True, alpha=0.3)
 
 
 _ROUNDING = 1e-12  # m or m/s: below this an error is floating-point rounding of positions of order 0.1-1 m
@@ -326,8 +401,10 @@ def _error_column(axs, pair: Pair, stats: list[AxisStats], axes: list[str], what
         ax.axhline(0.0, color="0.5", lw=0.8)
         ax.plot(pair.t, col * f, color=colors[j % 3], lw=0.9)
         ax.set_ylabel(f"e_{axes[j]} ({unit})")
+        _plain(ax)
         ax.set_title(f"{what} {axes[j]}: RMSE {_auto(st.rmse, pair.unit)}, max |e| {_auto(st.max_error, pair.unit)} "
-                     f"at {st.t_max:.3g} s" + (" (rounding level)" if st.max_error < _ROUNDING else ""), fontsize=9)
+                     f"at {st.t_max:.3g} s" + (" (rounding level)" if st.max_error < _ROUNDING and pair.unit in
+                                              ("m", "m/s") else ""), fontsize=9)
         if clipped:
             lo, hi = min(lo, 0.0), max(hi, 0.0)
             pad = 0.15 * (hi - lo)
@@ -356,6 +433,27 @@ def _plot_errors(tr: Tracking, title: str, out: Path) -> Path:
     return path
 
 
+def _plot_joints(tr: Tracking, title: str, out: Path) -> Path | None:
+    """Joint space: q against q_ref per joint (left) and the error q - q_ref (right)."""
+    q = tr.joints
+    if q is None:
+        return None
+    fig = _fig(13, 7.4)
+    axs = fig.subplots(3, 2, sharex=True, squeeze=False)
+    f, unit = {"m": (1e3, "mm"), "rad": (180.0 / math.pi, "deg")}.get(q.unit, (1.0, _pretty_unit(q.unit)))
+    _values_column(axs[:, 0], q, f, unit, _JOINTS)
+    for j, ax in enumerate(axs[:, 0]):
+        ax.set_title(f"joint {j + 1}: {q.reference_names[j]} (desired) vs {q.actual_names[j]} (actual)", fontsize=9)
+    axs[-1, 0].set_xlabel("time (s)")
+    axs[0, 0].legend(axs[0, 0].lines[:2], ["desired", "actual"], loc="best", fontsize=8)
+    _error_column(axs[:, 1], q, tr.joint_stats(), _JOINTS, "joint error")
+    kind = {"m": "carriage travel", "rad": "arm angle"}.get(q.unit, "joint value")
+    fig.suptitle(f"{title}: joint-space tracking ({kind}), desired vs actual and error")
+    path = out / "joints.png"
+    fig.savefig(path)
+    return path
+
+
 def _plot_efforts(tr: Tracking, title: str, out: Path) -> Path | None:
     if tr.efforts is None:
         return None
@@ -367,6 +465,7 @@ def _plot_efforts(tr: Tracking, title: str, out: Path) -> Path | None:
         ax.plot(t, u[:, j], lw=1.0, color=colors[j % 3])
         ax.axhline(0.0, color="0.5", lw=0.8)
         ax.set_ylabel(f"{name.split('.', 1)[1]} ({_pretty_unit(unit)})")
+        _plain(ax)
         ax.set_title(f"{name} (leg {j + 1}): range {np.nanmin(u[:, j]):.3g} .. {np.nanmax(u[:, j]):.3g} "
                      f"{_pretty_unit(unit)}", fontsize=9)
         ax.grid(True, alpha=0.3)
@@ -395,12 +494,14 @@ class Report:
     position: list[AxisStats]
     velocity: list[AxisStats] = field(default_factory=list)
     source: str = ""
+    joints: list[AxisStats] = field(default_factory=list)
 
     def as_dict(self) -> dict[str, Any]:
         return {"run": self.run, "name": self.name, "robot": self.robot, "status": self.status,
                 "duration_s": self.duration, "out_dir": str(self.out_dir), "markdown": str(self.markdown),
                 "figures": {k: str(v) for k, v in self.figures.items()}, "compared": self.source,
-                "position": [s.as_dict() for s in self.position], "velocity": [s.as_dict() for s in self.velocity]}
+                "position": [s.as_dict() for s in self.position], "velocity": [s.as_dict() for s in self.velocity],
+                "joints": [s.as_dict() for s in self.joints]}
 
 
 def _stats_table(stats: list[AxisStats], unit: str) -> list[str]:
@@ -446,9 +547,12 @@ def _markdown(tr: Tracking, rep: Report) -> str:
     lines += _stats_table(rep.position, p.unit) + [""]
     if rep.velocity:
         lines += ["## Velocity error", ""] + _stats_table(rep.velocity, tr.velocity.unit) + [""]
+    if rep.joints:
+        lines += ["## Joint error", ""] + _stats_table(rep.joints, tr.joints.unit) + [""]
     lines += ["## Figures", ""]
     captions = {"path_3d": "Platform path, desired vs actual", "position": "Position, desired vs actual",
-                "errors": "Position and velocity errors", "efforts": "Actuator efforts"}
+                "errors": "Position and velocity errors", "joints": "Joint-space tracking, desired vs actual",
+                "efforts": "Actuator efforts"}
     for key, path in rep.figures.items():
         lines += [f"### {captions.get(key, key)}", "", f"![{captions.get(key, key)}]({path.name})", ""]
     if tr.efforts is None:
@@ -481,12 +585,15 @@ def make_report(run: RunLog | str | Path, out_dir: str | Path | None = None) -> 
         figures["path_3d"] = _plot_path(tr, title, out)
     figures["position"] = _plot_position(tr, title, out)
     figures["errors"] = _plot_errors(tr, title, out)
+    joints = _plot_joints(tr, title, out)
+    if joints is not None:
+        figures["joints"] = joints
     eff = _plot_efforts(tr, title, out)
     if eff is not None:
         figures["efforts"] = eff
     p = tr.position
     rep = Report(str(log.path), title, log.robot, log.status, float(p.t[-1] - p.t[0]), out, out / "report.md",
-                 figures, tr.position_stats(), tr.velocity_stats(), tr.source)
+                 figures, tr.position_stats(), tr.velocity_stats(), tr.source, tr.joint_stats())
     rep.markdown.write_text(_markdown(tr, rep))
     return rep
 

@@ -32,7 +32,7 @@ STOP_S = 1.0
 SUMMATION_RTOL = 1e-12
 # report.md prints RMSE as %.6e (7 significant digits): rounding is at most 5e-7 relative.
 MARKDOWN_RTOL = 5e-7
-FIGURES = {"path_3d", "position", "errors", "efforts"}
+FIGURES = {"path_3d", "position", "errors", "joints", "efforts"}
 # Figures are drawn at 120 dpi on 7.5 x 6 in and larger canvases: anything smaller is a
 # broken save, anything far larger a wrong dpi.
 MIN_PIXELS, MAX_PIXELS = (600, 400), (3000, 3000)
@@ -78,6 +78,9 @@ def test_report_writes_figures_and_markdown_with_the_run_summary_rmse(run, tmp_p
     assert rep.status == "completed" and rep.robot == "linear_delta_thesis", (rep.status, rep.robot)
     assert rep.duration == pytest.approx(STOP_S, abs=1e-12), f"duration {rep.duration} s vs {STOP_S} s"
     assert len(rep.velocity) == 3, "plant.v vs traj.v_ref are logged: velocity errors expected"
+    # joint space: the plant's q[i] against the IK's q_ref[i] output (preferred to the controller's input)
+    assert [(j.actual, j.reference, j.unit) for j in rep.joints] == \
+        [(f"plant.q[{i}]", f"ik.q_ref[{i}]", "m") for i in (1, 2, 3)], rep.joints
 
     text = rep.markdown.read_text()
     for fig in rep.figures.values():
@@ -150,3 +153,15 @@ def test_bad_inputs_give_one_line_errors_naming_the_file(run, tmp_path):
         _cli("report", str(only_traj), "--out", str(tmp_path / "rep"))
     with pytest.raises(ReportError, match="no run logs"):
         controller_table([])
+
+
+def test_units_read_plainly_from_millimetres_to_femtometres_and_degrees():
+    import numpy as np
+
+    from cosim.report import _scaled_unit
+
+    # the rotary z-steps run: x and y errors at rounding level (1.6e-14 m) read as 15.7 fm, not 1.57e-5 nm
+    for peak, unit, want in ((0.3, "m", "mm"), (1.6e-4, "m", "µm"), (7.5e-9, "m", "nm"), (5.5e-10, "m/s", "pm/s"),
+                             (1.57e-14, "m", "fm"), (0.66, "rad", "deg"), (7.9e-4, "rad", "mdeg"), (2.0, "N", "N")):
+        f, u = _scaled_unit(np.array([peak, -peak / 2]), unit)
+        assert u == want and (unit == "N" or 1.0 <= peak * f < 1000.0), f"{peak} {unit}: x{f} {u}, expected {want}"
