@@ -33,6 +33,8 @@ __all__ = [
     "scenario_from_data",
     "scenario_json_schema",
     "apply_overrides",
+    "Overrides",
+    "issue_at",
     "expand_signal",
     "NS_PER_S",
 ]
@@ -302,6 +304,23 @@ def _line_for(loc: tuple, lines: dict[tuple, int]) -> int | None:
     return None
 
 
+def issue_at(loc: tuple, message: str, file: str | None, lines: dict[tuple, int],
+             origins: dict[tuple, str] | None = None) -> Issue:
+    """An issue placed where the value came from: the command-line option that set it
+    (``--set ctl.gain.kp[1]=abc: ...``), else ``file:line`` of the scenario.
+
+    A location that contains an overridden value (``time`` holding ``--stop-time``) is placed
+    in the file and names the option too.
+    """
+    origins = origins or {}
+    for path, origin in origins.items():
+        if loc[:len(path)] == path:
+            return Issue("", message, origin)
+    inside = [o for p, o in origins.items() if p[:len(loc)] == loc]
+    tail = f" (with {', '.join(inside)})" if inside else ""
+    return Issue(_format_loc(loc), message + tail, file, _line_for(loc, lines))
+
+
 _ALIASES = {"src": "from", "dst": "to"}
 _UNION_TAG = re.compile(r"^(bool|int|float|str|list\[.*\]|union\[.*\])$")
 _PARAM_MSG = "expected a number, a boolean, a string, a list of them, or a list of lists (rows of a matrix)"
@@ -333,12 +352,18 @@ def scenario_from_data(data: dict[str, Any], file: str = "<string>", overrides: 
     """
     import copy
 
+    import difflib
+
     lines = lines if lines is not None else {}
+    origins = dict(getattr(overrides, "origins", {}))
     data = copy.deepcopy(data)  # the overrides must not change the caller's mapping
     for path, value in (overrides or {}).items():
-        if path[0] == "components" and path[1] not in (data.get("components") or {}):
-            raise ScenarioError(Issue("--set", f"unknown component {path[1]!r}; components: "
-                                      f"{', '.join(data.get('components') or {})}", file))
+        components = data.get("components") or {}
+        if path[0] == "components" and path[1] not in components:
+            close = difflib.get_close_matches(path[1], list(components), n=3)
+            hint = f"did you mean {', '.join(close)}? " if close else ""
+            raise ScenarioError(Issue("", f"unknown component {path[1]!r} in {file}; {hint}components: "
+                                      f"{', '.join(components)}", origins.get(path, "--set")))
         node = data
         for key in path[:-1]:
             node = node.setdefault(key, {})
@@ -356,13 +381,14 @@ def scenario_from_data(data: dict[str, Any], file: str = "<string>", overrides: 
             if err["type"] == "extra_forbidden":
                 msg = "unknown key"
             by_loc.setdefault(loc, []).append(msg)
-        issues = [Issue(_format_loc(loc), msgs[0] if len(msgs) == 1 else _PARAM_MSG, file, _line_for(loc, lines))
+        issues = [issue_at(loc, msgs[0] if len(msgs) == 1 else _PARAM_MSG, file, lines, origins)
                   for loc, msgs in by_loc.items()]
         raise ScenarioError(issues) from None
-    issues = [Issue(_format_loc(loc), msg, file, _line_for(loc, lines)) for loc, msg in _semantic_issues(scenario)]
+    issues = [issue_at(loc, msg, file, lines, origins) for loc, msg in _semantic_issues(scenario)]
     if issues:
         raise ScenarioError(issues)
     object.__setattr__(scenario, "_lines", lines)
+    object.__setattr__(scenario, "_origins", origins)
     return scenario
 
 
@@ -419,23 +445,59 @@ def load_scenario(path: str | Path, overrides: dict[tuple, Any] | None = None) -
     """Load a scenario file. ``overrides`` maps key paths to values (``--set``, ``--stop-time``)."""
     path = Path(path)
     try:
-        text = path.read_text()
+        raw = path.read_bytes()
     except OSError as exc:
         raise ScenarioError(Issue("", f"cannot read scenario: {exc.strerror}", str(path))) from None
+    try:
+        text = raw.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        line = raw[:exc.start].count(b"\n") + 1
+        raise ScenarioError(Issue("", f"not UTF-8 text (byte 0x{raw[exc.start]:02x} at offset {exc.start}); "
+                                      f"save the scenario as UTF-8", str(path), line)) from None
     return parse_scenario(text, str(path), overrides)
 
 
-def apply_overrides(sets: list[str], stop_time: float | None = None) -> dict[tuple, Any]:
+class Overrides(dict):
+    """Loader overrides (key path -> value) that remember the option each came from, so an
+    issue with an overridden value cites the option (``--set ctl.gain.kp[1]=abc``), not a
+    scenario line the user never wrote."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.origins: dict[tuple, str] = {}
+
+    def put(self, path: tuple, value: Any, origin: str) -> None:
+        self[path] = value
+        self.origins[path] = origin
+
+
+def _set_value(raw: str) -> Any:
+    """A ``--set`` value as YAML reads it, with numbers YAML 1.1 leaves as strings (``1e12``) as numbers."""
+    value = yaml.safe_load(raw)
+    if isinstance(value, str):
+        try:
+            return float(value)
+        except ValueError:
+            return value
+    return value
+
+
+def apply_overrides(sets: list[str], stop_time: float | None = None) -> Overrides:
     """Turn ``--set comp.param=value`` and ``--stop-time`` into loader overrides."""
-    out: dict[tuple, Any] = {}
+    out = Overrides()
     for item in sets:
         if "=" not in item or "." not in item.split("=", 1)[0]:
-            raise ScenarioError(Issue("--set", f"expected component.parameter=value, got {item!r}"))
+            raise ScenarioError(Issue("", f"expected component.parameter=value, got {item!r}", "--set"))
         key, raw = item.split("=", 1)
         comp, param = key.split(".", 1)
-        out[("components", comp, "parameters", param)] = yaml.safe_load(raw)
+        try:
+            value = _set_value(raw)
+        except yaml.YAMLError as exc:
+            raise ScenarioError(Issue("", f"invalid value: {getattr(exc, 'problem', None) or exc}",
+                                      f"--set {item}")) from None
+        out.put(("components", comp, "parameters", param), value, f"--set {item}")
     if stop_time is not None:
-        out[("time", "stop")] = stop_time
+        out.put(("time", "stop"), stop_time, f"--stop-time {stop_time:g}")
     return out
 
 

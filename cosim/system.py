@@ -13,7 +13,7 @@ from typing import Any, Mapping
 
 from .errors import AlgebraicLoopError, Issue, WiringError
 from .fmu import FMUInfo, Variable
-from .scenario import Scenario, _format_loc, _line_for, expand_signal
+from .scenario import Scenario, _line_for, expand_signal, issue_at
 
 __all__ = ["Port", "Link", "SystemPlan", "build_plan", "gauss_seidel_order", "find_variable_loop"]
 
@@ -89,6 +89,63 @@ def find_variable(info: FMUInfo, name: str) -> tuple[Variable | None, int | None
     return base, flat, ""
 
 
+# value ranges of FMI 3.0's fixed-width integers (FMI 2.0 Integer and Enumeration: 32 bits)
+_INT_RANGE = {"Int8": 8, "Int16": 16, "Int32": 32, "Int64": 64, "Integer": 32, "Enumeration": 64}
+_UINT_BITS = {"UInt8": 8, "UInt16": 16, "UInt32": 32, "UInt64": 64}
+
+
+def typed_value(var: Variable, value: Any) -> tuple[Any, str]:
+    """``value`` as ``var``'s declared type, or (None, what is wrong).
+
+    A number written in a way YAML 1.1 reads as a string (``1e12``) counts as a number;
+    a boolean is not a number, a number is not a boolean, an integer type needs a whole
+    number within its range.
+    """
+    want = var.fmi_type
+    if isinstance(value, (list, tuple)):
+        out = []
+        for v in value:
+            x, problem = typed_value(var, v)
+            if problem:
+                return None, problem
+            out.append(x)
+        return out, ""
+    bad = f"{var.name} is {want}: expected {{}}, got {value!r}"
+    if var.kind in ("Real", "Integer"):
+        x = value
+        if isinstance(value, str):
+            try:
+                x = float(value)
+            except ValueError:
+                return None, bad.format("a number")
+        if isinstance(x, bool) or not isinstance(x, (int, float)):
+            return None, bad.format("a number")
+        if var.kind == "Real":
+            return float(x), ""
+        if isinstance(x, float) and not x.is_integer():
+            return None, bad.format("a whole number")
+        x = int(x)
+        if want in _UINT_BITS:
+            lo, hi = 0, 2 ** _UINT_BITS[want] - 1
+        else:
+            bits = _INT_RANGE.get(want, 64)
+            lo, hi = -2 ** (bits - 1), 2 ** (bits - 1) - 1
+        if not lo <= x <= hi:
+            return None, bad.format(f"a whole number in {lo}..{hi}")
+        return x, ""
+    if var.kind == "Boolean":
+        if isinstance(value, bool):
+            return value, ""
+        if isinstance(value, int) and value in (0, 1):
+            return bool(value), ""
+        return None, bad.format("true or false")
+    if var.kind == "String":
+        if isinstance(value, (str, int, float)):
+            return value if isinstance(value, str) else str(value), ""
+        return None, bad.format("a string")
+    return value, ""  # Binary: hexadecimal text, checked when set
+
+
 def _flatten(value: Any) -> list:
     if isinstance(value, (list, tuple)):
         return [x for item in value for x in _flatten(item)]
@@ -136,10 +193,11 @@ def build_plan(scenario: Scenario, infos: Mapping[str, FMUInfo], log_signals: st
     names = list(scenario.components)
     idx = {n: i for i, n in enumerate(names)}
     lines = getattr(scenario, "_lines", {})
+    origins = getattr(scenario, "_origins", {})
     issues: list[Issue] = []
 
     def issue(loc: tuple, msg: str) -> None:
-        issues.append(Issue(_format_loc(loc), msg, scenario.source, _line_for(loc, lines)))
+        issues.append(issue_at(loc, msg, scenario.source, lines, origins))
 
     start_values: list[dict[str, Any]] = [dict() for _ in names]
     infos = dict(infos)
@@ -173,10 +231,12 @@ def build_plan(scenario: Scenario, infos: Mapping[str, FMUInfo], log_signals: st
                 elif var.variability == "constant" or var.causality in ("output", "calculatedParameter",
                                                                          "independent"):
                     issue(loc, f"{vname} is {var.causality}/{var.variability}: its value cannot be set")
-                elif var.kind in ("Real", "Integer") and any(isinstance(x, str) for x in _flatten(val)):
-                    issue(loc, f"{vname} is {var.fmi_type}: expected a number, got {val!r}")
                 else:
-                    start_values[idx[n]][vname] = val
+                    typed, problem = typed_value(var, val)
+                    if problem:
+                        issue(loc, problem)
+                    else:
+                        start_values[idx[n]][vname] = typed
 
     links: list[Link] = []
 
