@@ -5,7 +5,8 @@ function and prints the result (readable, or JSON with ``--json``). Heavy
 imports happen inside the command that needs them. Errors print one line on
 stderr (one line per issue for a scenario) and exit non-zero: 2 for an
 unreachable pose, bad input or a failed FMU, 1 for a failed acceptance check,
-130 on Ctrl-C (the MCAP log is finished first).
+130 on Ctrl-C and 143 on SIGTERM (the MCAP log is finished first). With ``--json`` an
+error is also a JSON object ``{"ok": false, "error": ...}`` on stdout.
 """
 
 from __future__ import annotations
@@ -48,17 +49,18 @@ def _robot_parser(sub: argparse._SubParsersAction) -> None:
 
     p = rsub.add_parser("ik", help="inverse kinematics: platform position -> joint values")
     common(p)
-    p.add_argument("xyz", nargs=3, type=float, metavar=("X", "Y", "Z"), help="platform position (m, or mm with --mm)")
-    p.add_argument("--mm", action="store_true", help="position given in millimetres")
+    _three(p, "xyz", ("X", "Y", "Z"), "platform position {} (m, or mm with --mm)")
+    p.add_argument("--mm", action="store_true", help="position given in millimetres (linear joints shown in mm)")
+    p.add_argument("--deg", action="store_true", help="rotary delta: joint angles in degrees in the JSON output too")
     p.add_argument("--margin", type=float, default=None, help="margin on the singularity proximity (0..1)")
     p.set_defaults(handler=_cmd_ik)
 
     p = rsub.add_parser("fk", help="forward kinematics: joint values -> platform position")
     common(p)
-    p.add_argument("q", nargs=3, type=float, metavar=("Q1", "Q2", "Q3"),
-                   help="joint values: carriage travel in m (mm with --mm) or arm angle in rad (deg with --deg)")
-    p.add_argument("--mm", action="store_true", help="linear joints given in millimetres")
-    p.add_argument("--deg", action="store_true", help="rotary joints given in degrees")
+    _three(p, "q", ("Q1", "Q2", "Q3"),
+           "joint value {}: carriage travel in m (mm with --mm) or arm angle in rad (deg with --deg)")
+    p.add_argument("--mm", action="store_true", help="linear delta: carriage travels given in millimetres")
+    p.add_argument("--deg", action="store_true", help="rotary delta: arm angles given in degrees")
     p.set_defaults(handler=_cmd_fk)
 
     p = rsub.add_parser("workspace", help="sampled workspace, or a cylinder check")
@@ -78,10 +80,34 @@ def _robot_parser(sub: argparse._SubParsersAction) -> None:
     p = rsub.add_parser("singularity", help="classify a pose (type 1 / type 2) and measure its proximity")
     common(p)
     g = p.add_mutually_exclusive_group(required=True)
-    g.add_argument("--q", nargs=3, type=float, metavar=("Q1", "Q2", "Q3"), help="joint values (SI)")
-    g.add_argument("--p", nargs=3, type=float, metavar=("X", "Y", "Z"), help="platform position, m")
+    g.add_argument("--q", nargs=3, type=float, metavar=("Q1", "Q2", "Q3"),
+                   help="joint values: m (mm with --mm) or rad (deg with --deg)")
+    g.add_argument("--p", nargs=3, type=float, metavar=("X", "Y", "Z"), help="platform position, m (mm with --mm)")
+    p.add_argument("--mm", action="store_true", help="--p, and a linear delta's --q, in millimetres")
+    p.add_argument("--deg", action="store_true", help="a rotary delta's --q in degrees")
     p.add_argument("--margin", type=float, default=0.01, help="margin on the singularity proximity (default 0.01)")
     p.set_defaults(handler=_cmd_singularity)
+
+
+def _three(p: argparse.ArgumentParser, dest: str, names: tuple[str, str, str], help: str) -> None:
+    """Three positional numbers as three arguments: argparse's help and its 'missing argument'
+    message cannot format one ``nargs=3`` positional with a tuple metavar."""
+    for i, name in enumerate(names):
+        p.add_argument(f"{dest}_{i}", type=float, metavar=name, help=help.format(name))
+
+
+def _units(args: argparse.Namespace, robot, lengths: bool) -> None:
+    """Reject a unit flag that applies to nothing in this command for this robot kind.
+
+    ``--mm``: lengths (positions when ``lengths``, a linear delta's carriage travels);
+    ``--deg``: a rotary delta's arm angles.
+    """
+    if getattr(args, "deg", False) and robot.kind != "rotary":
+        raise CosimError(f"--deg: {robot.name} is a linear delta: its joint values are carriage travels "
+                         f"(m, or mm with --mm), not angles")
+    if getattr(args, "mm", False) and robot.kind != "linear" and not lengths:
+        raise CosimError(f"--mm: {robot.name} is a rotary delta: its joint values are arm angles "
+                         f"(rad, or degrees with --deg), not lengths")
 
 
 def _cmd_presets(args: argparse.Namespace) -> int:
@@ -96,6 +122,19 @@ def _cmd_presets(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
+def _preset(name: str):
+    """The robot preset ``name``; an unknown name is one line with the closest presets."""
+    import difflib
+
+    from delta.robots import PRESETS
+
+    if name not in PRESETS:
+        close = difflib.get_close_matches(name, list(PRESETS), n=3)
+        hint = f"did you mean {', '.join(close)}? " if close else ""
+        raise CosimError(f"--robot: unknown preset {name!r}; {hint}valid presets: {', '.join(PRESETS)}")
+    return PRESETS[name]
+
+
 def _q_display(robot, q) -> tuple[list[float], str]:
     import numpy as np
 
@@ -107,17 +146,23 @@ def _q_display(robot, q) -> tuple[list[float], str]:
 def _cmd_ik(args: argparse.Namespace) -> int:
     import numpy as np
 
-    from delta.robots import get_preset
     from delta.workspace import check_point
 
-    robot = get_preset(args.robot)
-    p = np.array(args.xyz) * (1e-3 if args.mm else 1.0)
+    robot = _preset(args.robot)
+    _units(args, robot, lengths=True)
+    p = np.array([args.xyz_0, args.xyz_1, args.xyz_2]) * (1e-3 if args.mm else 1.0)
     res = check_point(robot, p, args.margin)
     if not res.ok:
         raise UnreachableError(f"{args.robot}: p = ({p[0]:.4f}, {p[1]:.4f}, {p[2]:.4f}) m: {res.reason}")
     shown, unit = _q_display(robot, res.q)
-    payload = {"robot": robot.name, "p": p.tolist(), "q": [float(x) for x in res.q],
-               "q_unit": robot.q_unit, "singularity_proximity": res.proximity}
+    q_out, q_unit = [float(x) for x in res.q], robot.q_unit
+    if args.deg:
+        q_out, q_unit = shown, "deg"
+    elif args.mm and robot.kind == "linear":
+        shown, unit = [x * 1e3 for x in res.q], "mm"
+        q_out, q_unit = shown, "mm"
+    payload = {"robot": robot.name, "p": p.tolist(), "q": q_out, "q_unit": q_unit,
+               "singularity_proximity": res.proximity}
     text = "q = (" + ", ".join(f"{x:.6g}" for x in shown) + f") {unit}"
     if robot.kind == "linear":
         text += "   [" + ", ".join(f"{x * 100:.2f}" for x in res.q) + "] cm"
@@ -130,10 +175,10 @@ def _cmd_fk(args: argparse.Namespace) -> int:
     import numpy as np
 
     from delta.kinematics import fk
-    from delta.robots import get_preset
 
-    robot = get_preset(args.robot)
-    q = np.array(args.q, dtype=float)
+    robot = _preset(args.robot)
+    _units(args, robot, lengths=False)
+    q = np.array([args.q_0, args.q_1, args.q_2], dtype=float)
     if args.mm:
         q = q * 1e-3
     if args.deg:
@@ -154,10 +199,9 @@ def _cmd_workspace(args: argparse.Namespace) -> int:
 
     import numpy as np
 
-    from delta.robots import get_preset
     from delta.workspace import check_cylinder, largest_cylinder, sample_workspace
 
-    robot = get_preset(args.robot)
+    robot = _preset(args.robot)
     scale = 1e-3 if args.mm else 1.0
     if args.cylinder is None:
         ws = sample_workspace(robot, args.spacing, args.margin)
@@ -195,13 +239,18 @@ def _cmd_workspace(args: argparse.Namespace) -> int:
 def _cmd_singularity(args: argparse.Namespace) -> int:
     import numpy as np
 
-    from delta.robots import get_preset
     from delta.singularity import analyse_pose
 
-    robot = get_preset(args.robot)
+    robot = _preset(args.robot)
+    _units(args, robot, lengths=args.p is not None)
+    q = p = None
+    if args.q is not None:
+        q = np.array(args.q, dtype=float)
+        q = np.radians(q) if args.deg else q * (1e-3 if args.mm else 1.0)
+    if args.p is not None:
+        p = np.array(args.p, dtype=float) * (1e-3 if args.mm else 1.0)
     try:
-        rep = analyse_pose(robot, q=None if args.q is None else np.array(args.q),
-                           p=None if args.p is None else np.array(args.p))
+        rep = analyse_pose(robot, q=q, p=p)
     except ValueError as exc:
         raise UnreachableError(f"{args.robot}: {exc}") from None
     payload = {"robot": robot.name, "q": rep.q.tolist(), "p": rep.p.tolist(), "kind": rep.kind,
@@ -498,8 +547,18 @@ def _cmd_recover(args: argparse.Namespace) -> int:
 # --------------------------------------------------------------------------- entry
 
 
+def _version() -> str:
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        return version("delta-cosim")
+    except PackageNotFoundError:  # run from a source tree that was never installed
+        return "unknown (not installed)"
+
+
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog="python -m cosim", description="Delta robot FMI co-simulation platform")
+    parser = _Parser(prog="python -m cosim", description="Delta robot FMI co-simulation platform")
+    parser.add_argument("--version", action="version", version=f"%(prog)s (delta-cosim) {_version()}")
     sub = parser.add_subparsers(dest="command", required=True)
     _robot_parser(sub)
     _cosim_parser(sub)
@@ -515,24 +574,102 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def _leaf(parser: argparse.ArgumentParser, argv: Sequence[str]) -> argparse.ArgumentParser:
+    """The (sub)parser the command line selected: ``run``, ``robot ik``, ..."""
+    while True:
+        subs = [a for a in parser._actions if isinstance(a, argparse._SubParsersAction)]
+        if not subs:
+            return parser
+        chosen = next((a.choices[w] for a in subs for w in argv if w in a.choices), None)
+        if chosen is None:
+            return parser
+        parser, argv = chosen, argv[list(argv).index(chosen.prog.split()[-1]) + 1:]
+
+
+def _unknown(parser: argparse.ArgumentParser, argv: Sequence[str], extra: list[str]) -> None:
+    """argparse's 'unrecognized arguments' with the closest options of the command (exit 2)."""
+    import difflib
+
+    leaf = _leaf(parser, argv)
+    options = [o for a in leaf._actions for o in a.option_strings]
+    hints = []
+    for word in extra:
+        if word.startswith("-"):
+            close = difflib.get_close_matches(word.split("=", 1)[0], options, n=2, cutoff=0.75)
+            if close:
+                hints.append(f"{word}: did you mean {' or '.join(close)}?")
+    leaf.error(f"unrecognized arguments: {' '.join(extra)}" + ("; " + "; ".join(hints) if hints else ""))
+
+
+class _Parser(argparse.ArgumentParser):
+    """argparse with a close-match hint for an invalid command (Python 3.14's suggest_on_error);
+    subparsers are of the same class (``add_subparsers`` uses ``type(self)``)."""
+
+    def error(self, message: str):
+        import difflib
+        import re
+
+        m = re.search(r"invalid choice: '([^']*)' \(choose from (.*)\)", message)
+        if m:
+            choices = re.findall(r"'([^']*)'", m.group(2)) or [c.strip() for c in m.group(2).split(",")]
+            close = difflib.get_close_matches(m.group(1), choices, n=2, cutoff=0.6)
+            if close:
+                message += f"; did you mean {' or '.join(close)}?"
+        super().error(message)
+
+
+class Interrupted(KeyboardInterrupt):
+    """SIGTERM (or SIGINT) outside the simulation loop; ``signum`` sets the exit code 128 + signum."""
+
+    def __init__(self, signum: int):
+        super().__init__()
+        self.signum = signum
+
+
+def _terminate_as_interrupt(signum, frame) -> None:
+    raise Interrupted(signum)
+
+
+def _error_json(args: argparse.Namespace | None, text: str, kind: str) -> None:
+    """With --json the error is a JSON object on stdout too, so a reader always gets one."""
+    if args is not None and getattr(args, "json", False):
+        print(json.dumps({"ok": False, "error": text, "kind": kind}, indent=2))
+
+
 def main(argv: Sequence[str] | None = None) -> int:
+    import signal
+
+    argv = list(sys.argv[1:] if argv is None else argv)
     parser = build_parser()
-    args = parser.parse_args(argv)
+    args, extra = parser.parse_known_args(argv)
+    if extra:
+        _unknown(parser, argv, extra)
     handler: Handler = args.handler
+    if threading_main():
+        signal.signal(signal.SIGTERM, _terminate_as_interrupt)  # the same shutdown path as Ctrl-C
     try:
         return handler(args)
     except UnreachableError as exc:
+        _error_json(args, str(exc), "unreachable")
         print(f"error: {exc}", file=sys.stderr)
         return EXIT_BAD_INPUT
     except CosimError as exc:
         text = str(exc)
+        _error_json(args, text, "error")
         print(f"error: {text}" if "\n" not in text else "error:\n" + text, file=sys.stderr)
         return EXIT_BAD_INPUT
-    except KeyboardInterrupt:
-        print("interrupted", file=sys.stderr)
-        return EXIT_INTERRUPTED
+    except KeyboardInterrupt as exc:
+        signum = getattr(exc, "signum", signal.SIGINT)
+        print(f"interrupted ({signal.Signals(signum).name})", file=sys.stderr)
+        return 128 + signum
     except BrokenPipeError:  # output piped into a reader that stopped early (e.g. `| head`)
         import os
 
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
         return EXIT_OK
+
+
+def threading_main() -> bool:
+    import threading
+
+    return threading.current_thread() is threading.main_thread()
