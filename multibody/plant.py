@@ -132,6 +132,8 @@ class DeltaPlant:
         self.fidelity = fidelity
         self.settings = settings or SolverSettings()
         self.prescribed = prescribed
+        # joint range (m or rad): the end stops; a step that ends past one fails naming the joint
+        self._q_lo, self._q_hi = float(robot.q_min), float(robot.q_max)
         self._h_nominal = float(h_nominal)
         self._output: PlantOutput | None = None
         self.reset(p0, v0, t0)
@@ -177,7 +179,6 @@ class DeltaPlant:
         p0 = np.asarray(p0, dtype=float).reshape(3)
         v0 = np.asarray(v0, dtype=float).reshape(3)
         self._t = float(t0)
-        self._lag = 0.0  # s the solver is behind self._t: steps absorbed below its resolution
         self._u = np.zeros(3)
         self._sc = exu.SystemContainer()
         self.mbs = self._sc.AddSystem()
@@ -214,6 +215,13 @@ class DeltaPlant:
             Current time and macro step, s.
         u : (3,) array
             Actuator efforts along +q (N or N*m); ignored in prescribed-motion mode.
+
+        Raises
+        ------
+        PlantError
+            Wrong ``t``, bad ``h`` or ``u``, a solver failure, or a joint that ends the step outside
+            ``[robot.q_min, robot.q_max]`` (carriage stroke / arm range: the end stops), named with
+            its value and the time.
         """
         if abs(t - self._t) > _time_tolerance(self._t):
             raise PlantError(f"{type(self).__name__}.step: t = {t!r} s does not equal the plant time "
@@ -228,10 +236,14 @@ class DeltaPlant:
                 raise PlantError(f"{type(self).__name__}.step at t = {t!r} s: non-finite effort u = {u}")
             self._apply_effort(values)
             self._u = u
-        span = h + self._lag  # exactly h unless steps were absorbed
+        # Integrate from the solver's own time to t_end, never by a fixed h: Exudyn advances its time
+        # by adding step sizes, which drifts from the caller's exact times (3.8e-16 s per 1 ms step,
+        # 1e-10 s after 260 s), and Exudyn's loop ends only within 1e-10 s of endTime: past that it
+        # adds a sliver step of ~1e-10 s whose Newton matrix (~1/h^2) cannot converge. Anchoring
+        # every macro step on t_end keeps the drift below a few ulps for any length of run.
+        span = t_end - self._it.currentTime  # h, plus any interval absorbed before
         if span < self.settings.min_step:  # below the resolution: absorbed (see the docstring)
             self._t = t_end
-            self._lag = span
             self._output = self._make_output(self._u if self.prescribed is None else self._read_prescribed_reaction())
             return self._output
         n = self._substeps
@@ -257,9 +269,22 @@ class DeltaPlant:
             raise PlantError(f"{type(self).__name__}: solver did not converge between t = {t!r} s and "
                              f"{t_end!r} s ({self._solver.GetErrorString()})")
         self._t = t_end
-        self._lag = 0.0
-        self._output = self._make_output(self._u if self.prescribed is None else self._read_prescribed_reaction())
-        return self._output
+        self._output = out = self._make_output(self._u if self.prescribed is None else self._read_prescribed_reaction())
+        q = out.q.tolist()
+        if not (self._q_lo <= min(q) and max(q) <= self._q_hi):
+            self._out_of_range(t_end, q)
+        return out
+
+    def _out_of_range(self, t: float, q: list[float]) -> None:
+        """Raise the error of a joint driven past its range (the robot's end stops)."""
+        unit, scale = ("m", 1.0) if self.kind == "linear" else ("deg", 180.0 / math.pi)
+        what = "carriage stroke" if self.kind == "linear" else "arm range"
+        for i, qi in enumerate(q):
+            if not self._q_lo <= qi <= self._q_hi:
+                raise PlantError(
+                    f"{type(self).__name__}: joint {i + 1} at q = {qi * scale:.6g} {unit} left its {what} "
+                    f"[{self._q_lo * scale:.6g}, {self._q_hi * scale:.6g}] {unit} at t = {t:.6f} s: the "
+                    "actuator was driven into its end stop (the plant stops here rather than pass through it)")
 
     def energy(self) -> tuple[float, float]:
         """Kinetic and gravitational potential energy of the model, J (potential zero at z = 0)."""
