@@ -1,9 +1,10 @@
 """Regression comparisons: two run logs, or one scenario run on two plants.
 
-``compare_logs(a, b)`` aligns every signal the two logs share on A's time stamps
-(exactly where B has the same stamps, by linear interpolation otherwise), over the
-time both cover, and reports per signal the RMSE, the largest absolute difference
-and when it happened. Signals with a tolerance (``Regression.tolerances`` in a
+``compare_logs(a, b)`` compares every signal the two logs share at the time stamps
+both logged (their common grid: a 1 ms run against a 20 ms baseline is compared at the
+baseline's stamps, in either order; logs that share no stamps are refused, never
+interpolated), over the time both cover, and reports per signal the RMSE, the largest
+absolute difference and when it happened. Signals with a tolerance (``Regression.tolerances`` in a
 scenario, or ``--tol`` options) pass or fail; the others are reported only.
 Comparing a run with its baseline, the tolerances default to the ``regression``
 section of the scenario attached to the baseline (``logged_tolerances``).
@@ -173,18 +174,19 @@ def logged_tolerances(log: RunLog) -> dict[str, float]:
 
 
 def _aligned(sa: Signal, sb: Signal, lo: int, hi: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """A's samples in [lo, hi] ns and B at the same stamps (exact where B has them)."""
-    keep = (sa.t_ns >= lo) & (sa.t_ns <= hi)
-    t_ns, ya = sa.t_ns[keep], sa.y[keep]
-    idx = np.searchsorted(sb.t_ns, t_ns)
-    idx_c = np.minimum(idx, len(sb.t_ns) - 1)
-    exact = sb.t_ns[idx_c] == t_ns
-    if exact.all():
-        yb = sb.y[idx_c]
-    else:
-        yb = np.interp(t_ns.astype(float), sb.t_ns.astype(float), sb.y)
-        yb[exact] = sb.y[idx_c[exact]]
-    return t_ns, ya, yb
+    """The samples of A and B at the time stamps both logged in [lo, hi] ns (exact, never interpolated).
+
+    On one grid that is every sample; a 1 ms run against a 20 ms baseline compares at the
+    baseline's stamps, whichever log comes first, so the verdict does not depend on the order.
+    """
+    keep_a = (sa.t_ns >= lo) & (sa.t_ns <= hi)
+    keep_b = (sb.t_ns >= lo) & (sb.t_ns <= hi)
+    t_ns, ia, ib = np.intersect1d(sa.t_ns[keep_a], sb.t_ns[keep_b], assume_unique=False, return_indices=True)
+    return t_ns, sa.y[keep_a][ia], sb.y[keep_b][ib]
+
+
+def _period(t_ns: np.ndarray) -> int:
+    return int(np.median(np.diff(t_ns))) if len(t_ns) > 1 else 0
 
 
 def compare_logs(a: RunLog | str | Path, b: RunLog | str | Path, tolerances: Mapping[str, float] | None = None,
@@ -193,8 +195,8 @@ def compare_logs(a: RunLog | str | Path, b: RunLog | str | Path, tolerances: Map
 
     ``signals``: patterns (as for tolerances) selecting what to compare; default all common
     signals. A tolerance pattern that matches no common signal is an error (a typo would
-    otherwise silently check nothing). B must cover A's time span (within one of A's steps),
-    else the comparison fails.
+    otherwise silently check nothing). Each log must cover the other's time span (within one
+    step of the coarser grid), else the comparison fails; the verdict is the same in either order.
     """
     a = a if isinstance(a, RunLog) else read_run(a)
     b = b if isinstance(b, RunLog) else read_run(b)
@@ -212,21 +214,29 @@ def compare_logs(a: RunLog | str | Path, b: RunLog | str | Path, tolerances: Map
     if not common:
         raise CosimError(f"{a.path} and {b.path} share no signal (components {', '.join(a.components)} vs "
                          f"{', '.join(b.components)})")
-    first = a.signals[common[0]]
-    lo = max(int(first.t_ns[0]), int(b.signals[common[0]].t_ns[0]))
-    hi = min(int(first.t_ns[-1]), int(b.signals[common[0]].t_ns[-1]))
+    first, other = a.signals[common[0]], b.signals[common[0]]
+    lo = max(int(first.t_ns[0]), int(other.t_ns[0]))
+    hi = min(int(first.t_ns[-1]), int(other.t_ns[-1]))
     problems = []
     if hi < lo:
         raise CosimError(f"{a.path} covers t = {first.t[0]:.3f} .. {first.t[-1]:.3f} s and {b.path} "
-                         f"t = {b.signals[common[0]].t[0]:.3f} .. {b.signals[common[0]].t[-1]:.3f} s: no overlap")
-    step = int(np.median(np.diff(first.t_ns))) if len(first.t_ns) > 1 else 0
-    if hi < first.t_ns[-1] - step or lo > first.t_ns[0] + step:
-        problems.append(f"B covers t = {lo * 1e-9:.3f} .. {hi * 1e-9:.3f} s of A's "
-                        f"{first.t[0]:.3f} .. {first.t[-1]:.3f} s (a run stopped early?)")
+                         f"t = {other.t[0]:.3f} .. {other.t[-1]:.3f} s: no overlap")
+    step = max(_period(first.t_ns), _period(other.t_ns))  # the coarser grid
+    for label, sig, them in (("B", other, first), ("A", first, other)):
+        if hi < them.t_ns[-1] - step or lo > them.t_ns[0] + step:
+            problems.append(f"{label} covers t = {sig.t[0]:.3f} .. {sig.t[-1]:.3f} s of "
+                            f"{'A' if label == 'B' else 'B'}'s {them.t[0]:.3f} .. {them.t[-1]:.3f} s "
+                            f"(a run stopped early?)")
+            break
     diffs = []
     for name in common:
         sa, sb = a.signals[name], b.signals[name]
         t_ns, ya, yb = _aligned(sa, sb, lo, hi)
+        if len(t_ns) < 2 and min(len(sa.t_ns), len(sb.t_ns)) >= 2:
+            raise CosimError(f"{name}: {a.path} (every {_period(sa.t_ns) * 1e-9:.6g} s) and {b.path} (every "
+                             f"{_period(sb.t_ns) * 1e-9:.6g} s) share {len(t_ns)} time stamp(s) over t = "
+                             f"{lo * 1e-9:.3f} .. {hi * 1e-9:.3f} s: no common grid to compare them on "
+                             f"(logs are compared where both have a sample, never interpolated)")
         e = ya - yb
         both_nan = np.isnan(ya) & np.isnan(yb)
         e[both_nan] = 0.0

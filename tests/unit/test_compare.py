@@ -93,24 +93,27 @@ def test_difference_size_time_and_rmse_are_exact(tmp_path):
     assert "FAILED: plant.p.x: max |A - B| = 0.002 m at t = 0.370 s" in text, text
 
 
-def test_b_on_a_finer_grid_is_interpolated_onto_a(tmp_path):
-    ta, tb = grid(11, 100_000_000), grid(21, 50_000_000)
-    a = write_log(tmp_path / "a.mcap", {"c.x": (ta, 2.0 * ta * 1e-9)})
-    b = write_log(tmp_path / "b.mcap", {"c.x": (tb, 2.0 * tb * 1e-9)})
-    cmp = compare_logs(a, b)
-    assert cmp.diffs[0].samples == 11 and cmp.diffs[0].max_abs <= 1e-15, cmp.text()
-    tb_off = tb[:-1] + 25_000_000  # stamps between A's: linear interpolation of a line is exact
-    c = write_log(tmp_path / "c.mcap", {"c.x": (np.r_[0, tb_off, ta[-1]], 2.0 * np.r_[0, tb_off, ta[-1]] * 1e-9)})
-    cmp = compare_logs(a, c)
-    assert cmp.diffs[0].max_abs <= 1e-15, cmp.text()
+def test_logs_on_different_grids_are_compared_at_their_common_stamps_in_either_order(tmp_path):
+    ta, tb = grid(11, 100_000_000), grid(201, 5_000_000)  # 100 ms and 5 ms over 1 s
+    curve = lambda t: np.sin(7.0 * t * 1e-9)  # noqa: E731 - curved: interpolation would differ from it
+    a = write_log(tmp_path / "a.mcap", {"c.x": (ta, curve(ta))})
+    b = write_log(tmp_path / "b.mcap", {"c.x": (tb, curve(tb))})
+    ab, ba = compare_logs(a, b, {"c.x": 1e-12}), compare_logs(b, a, {"c.x": 1e-12})
+    for cmp in (ab, ba):
+        assert cmp.ok and cmp.diffs[0].samples == 11 and cmp.diffs[0].max_abs <= EXACT, cmp.text()
+    off = tb[:-1] + 1_000_000  # shares no stamp with A: refused, not interpolated
+    c = write_log(tmp_path / "c.mcap", {"c.x": (off, curve(off))})
+    for x, y in ((a, c), (c, a)):
+        with pytest.raises(CosimError, match="no common grid"):
+            compare_logs(x, y)
 
 
 def test_a_shorter_b_fails_on_coverage(tmp_path):
     t = grid()
     a = write_log(tmp_path / "a.mcap", {"c.x": (t, np.zeros(101))})
     b = write_log(tmp_path / "b.mcap", {"c.x": (t[:50], np.zeros(50))})
-    cmp = compare_logs(a, b, {"c.x": 1.0})
-    assert not cmp.ok and "a run stopped early" in cmp.problems[0], cmp.problems
+    for cmp in (compare_logs(a, b, {"c.x": 1.0}), compare_logs(b, a, {"c.x": 1.0})):  # either order
+        assert not cmp.ok and "a run stopped early" in cmp.problems[0], cmp.problems
 
 
 def test_nan_on_one_side_fails_and_on_both_sides_agrees(tmp_path):
