@@ -68,7 +68,7 @@ def locate_fmus(scenario: Scenario) -> dict[str, FMUInfo]:
     lines = getattr(scenario, "_lines", {})
     infos: dict[str, FMUInfo] = {}
     issues: list[Issue] = []
-    built: dict[str, Path] = {}
+    built = {n: Path(p) for n, p in getattr(scenario, "_fmu_files", {}).items()}  # prebuilt (cosim.sweep)
     for name, comp in scenario.components.items():
         loc = ("components", name, "fmu" if comp.fmu else "path")
         where = dict(file=scenario.source, line=_line_for(loc, lines))
@@ -192,7 +192,7 @@ def _run(scenario: Scenario | str | Path, out: str | Path | None, overrides: dic
     if not isinstance(scenario, Scenario):
         scenario = load_scenario(scenario, overrides)
     logging_on = scenario.logging.enabled if log is None else log
-    plan, _ = prepare(scenario, None if logging_on or live is not None else "none")
+    plan, _ = prepare(scenario, None if logging_on or live is not None else getattr(scenario, "_read", "none"))
     comps = scenario.components
     slaves = [make_slave(n, plan.infos[i], comps[n].interface, comps[n].rtol, comps[n].solver, comps[n].max_step)
               for i, n in enumerate(plan.names)]

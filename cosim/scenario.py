@@ -33,6 +33,8 @@ __all__ = [
     "scenario_from_data",
     "scenario_json_schema",
     "apply_overrides",
+    "dotted_overrides",
+    "resolve_name",
     "Overrides",
     "issue_at",
     "expand_signal",
@@ -358,6 +360,10 @@ def scenario_from_data(data: dict[str, Any], file: str = "<string>", overrides: 
     origins = dict(getattr(overrides, "origins", {}))
     data = copy.deepcopy(data)  # the overrides must not change the caller's mapping
     for path, value in (overrides or {}).items():
+        if path[0] == DOTTED:  # a dotted name (--set NAME=VALUE, the Python API): resolved against this data
+            origin = origins.get(path, f"--set {path[1]}")
+            path = resolve_name(path[1], data, origin)
+            origins[path] = origin
         components = data.get("components") or {}
         if path[0] == "components" and path[1] not in components:
             close = difflib.get_close_matches(path[1], list(components), n=3)
@@ -414,6 +420,8 @@ def _semantic_issues(s: Scenario) -> list[tuple[tuple, str]]:
         if c.dst in seen:
             out.append((("connections", i, "to"), f"input {c.dst} is already driven by connections[{seen[c.dst]}]"))
         seen.setdefault(c.dst, i)
+    if s.trajectory is not None:
+        out += [(("trajectory", "params") + loc, msg) for loc, msg in trajectory_params_issues(s.trajectory)]
     if s.trajectory is not None and s.robot is None:
         out.append((("trajectory",), "a trajectory needs 'robot' (the preset to check it against)"))
     if s.robot is not None:
@@ -439,6 +447,58 @@ def _semantic_issues(s: Scenario) -> list[tuple[tuple, str]]:
     if s.checks is not None and s.compare is None:
         out.append((("checks",), "acceptance checks need a 'compare' section"))
     return out
+
+
+def trajectory_params_model(kind: str) -> type[BaseModel]:
+    """The typed parameters of trajectory type ``kind``: the constructor arguments of its
+    :data:`delta.trajectories.TYPES` class, with their types and defaults (unknown keys refused)."""
+    import dataclasses
+    import typing
+
+    from delta.trajectories import TYPES
+
+    if kind in _PARAM_MODELS:
+        return _PARAM_MODELS[kind]
+    from pydantic import create_model
+
+    cls = TYPES[kind]
+    hints = typing.get_type_hints(cls)
+    fields: dict[str, Any] = {}
+    for f in dataclasses.fields(cls):
+        if not f.init:
+            continue
+        default = ... if f.default is dataclasses.MISSING else f.default
+        fields[f.name] = (hints[f.name], Field(default))
+    model = create_model(f"{cls.__name__}Params", __config__=ConfigDict(extra="forbid", title=f"{kind} parameters"),
+                         __doc__=f"Parameters of the {kind} trajectory (delta.trajectories.{cls.__name__}), SI units.",
+                         **fields)
+    _PARAM_MODELS[kind] = model
+    return model
+
+
+_PARAM_MODELS: dict[str, type[BaseModel]] = {}
+
+
+def trajectory_params_issues(spec: TrajectorySpec) -> list[tuple[tuple, str]]:
+    """``trajectory.params`` checked against the type's parameters: (location under params, message)."""
+    import difflib
+
+    model = trajectory_params_model(spec.type)
+    valid = list(model.model_fields)
+    try:
+        model.model_validate(spec.params)
+    except ValidationError as exc:
+        out = []
+        for err in exc.errors():
+            loc = tuple(err["loc"])
+            if err["type"] == "extra_forbidden":
+                close = difflib.get_close_matches(str(loc[0]), valid, n=3, cutoff=0.5)
+                hint = f"did you mean {', '.join(close)}? " if close else ""
+                out.append((loc[:1], f"{spec.type} has no parameter {loc[0]!r}; {hint}valid: {', '.join(valid)}"))
+            else:
+                out.append((loc, err["msg"].removeprefix("Value error, ")))
+        return out
+    return []
 
 
 def load_scenario(path: str | Path, overrides: dict[tuple, Any] | None = None) -> Scenario:
@@ -482,20 +542,118 @@ def _set_value(raw: str) -> Any:
     return value
 
 
+DOTTED = "<dotted name>"
+"""Head of an override key path ``(DOTTED, "ctl.gain.kp[1]")``: a dotted name that
+:func:`scenario_from_data` resolves (:func:`resolve_name`) against the scenario it loads."""
+
+
+def _model_of(annotation: Any) -> type[BaseModel] | None:
+    """The pydantic model inside an annotation (``X``, ``X | None``), if any."""
+    import typing
+
+    if isinstance(annotation, type) and issubclass(annotation, BaseModel):
+        return annotation
+    for arg in typing.get_args(annotation):
+        found = _model_of(arg)
+        if found is not None:
+            return found
+    return None
+
+
+def _is_mapping(annotation: Any) -> tuple[bool, Any]:
+    """(is a dict, its value annotation)."""
+    import typing
+
+    if typing.get_origin(annotation) is dict:
+        return True, typing.get_args(annotation)[1]
+    for arg in typing.get_args(annotation):
+        if typing.get_origin(arg) is dict:
+            return True, typing.get_args(arg)[1]
+    return False, None
+
+
+def _unknown_name(name: str, prefix: str, candidates: list[str], origin: str) -> ScenarioError:
+    import difflib
+
+    wrong = name[len(prefix):].split(".", 1)[0] if prefix else name.split(".", 1)[0]
+    close = difflib.get_close_matches(wrong, candidates, n=3, cutoff=0.5)
+    hint = f"did you mean {', '.join(prefix + c for c in close)}? " if close else ""
+    return ScenarioError(Issue("", f"unknown name {prefix + wrong!r}; {hint}valid here: "
+                                   f"{', '.join(prefix + c for c in candidates)}", origin))
+
+
+def resolve_name(name: str, data: dict[str, Any], origin: str = "--set") -> tuple:
+    """The key path a dotted override name addresses in scenario ``data``.
+
+    ``COMP.PARAM`` (``ctl.gain.kp[1]``, ``plant.mass.payload``) is a component parameter;
+    otherwise the name walks the scenario's sections: ``time.stop``, ``trajectory.params.rx``,
+    ``algorithm``, ``logging.enabled``, ``components.ctl.parameters.gain.kp[1]``. A mapping
+    (parameters, ``trajectory.params``) takes the rest of the name as one key. An unknown
+    name raises :class:`ScenarioError`, one line citing ``origin``, with the close matches.
+    """
+    components = data.get("components") or {}
+    head, _, rest = name.partition(".")
+    if head in components:
+        if not rest:
+            raise ScenarioError(Issue("", f"{name!r} is a component: name one of its parameters, "
+                                          f"{name}.PARAM", origin))
+        return ("components", head, "parameters", rest)
+    model: type[BaseModel] = Scenario
+    parts = name.split(".")
+    path: tuple = ()
+    while parts:
+        fields = {(f.alias or n): f for n, f in model.model_fields.items() if n != "source"}
+        prefix = ".".join(map(str, path)) + "." if path else ""
+        key = parts.pop(0)
+        if key not in fields:
+            top = list(components) + list(fields) if not path else list(fields)
+            raise _unknown_name(name, prefix, top, origin)
+        path += (key,)
+        ann = fields[key].annotation
+        is_map, value_ann = _is_mapping(ann)
+        sub = _model_of(value_ann) if is_map else _model_of(ann)
+        if is_map and sub is not None:  # components: one key, then its model
+            if not parts:
+                return path
+            path += (parts.pop(0),)
+            model = sub
+        elif is_map:  # parameters, trajectory.params, tolerances: the rest is one key
+            return path + (".".join(parts),) if parts else path
+        elif sub is not None:
+            model = sub
+        elif parts:
+            raise ScenarioError(Issue("", f"{'.'.join(map(str, path))} is a value, it has no "
+                                          f"{'.'.join(parts)!r}", origin))
+    return path
+
+
+def dotted_overrides(values: dict[str, Any], origin: str = "override") -> Overrides:
+    """Loader overrides from ``{dotted name: value}`` (:func:`resolve_name`), e.g.
+    ``{"trajectory.params.rx": 0.05, "time.stop": 0.5, "ctl.gain.kp[1]": 4e4}``."""
+    out = Overrides()
+    for name, value in values.items():
+        if not isinstance(name, str) or not name or name.startswith(".") or name.endswith("."):
+            raise ScenarioError(Issue("", f"expected a dotted name (component.parameter, time.stop, "
+                                          f"trajectory.params.NAME), got {name!r}", origin))
+        out.put((DOTTED, name), value, f"{origin} {name}={value!r}")
+    return out
+
+
 def apply_overrides(sets: list[str], stop_time: float | None = None) -> Overrides:
-    """Turn ``--set comp.param=value`` and ``--stop-time`` into loader overrides."""
+    """Turn ``--set NAME=value`` (dotted names, :func:`resolve_name`) and ``--stop-time`` into loader overrides."""
     out = Overrides()
     for item in sets:
-        if "=" not in item or "." not in item.split("=", 1)[0]:
-            raise ScenarioError(Issue("", f"expected component.parameter=value, got {item!r}", "--set"))
-        key, raw = item.split("=", 1)
-        comp, param = key.split(".", 1)
+        key = item.split("=", 1)[0]
+        if "=" not in item or not key or key.startswith(".") or key.endswith("."):
+            raise ScenarioError(Issue("", f"expected NAME=value (component.parameter, time.stop, "
+                                          f"trajectory.params.NAME, ...), got {item!r}", "--set"))
+        raw = item.split("=", 1)[1]
         try:
             value = _set_value(raw)
         except yaml.YAMLError as exc:
             raise ScenarioError(Issue("", f"invalid value: {getattr(exc, 'problem', None) or exc}",
                                       f"--set {item}")) from None
-        out.put(("components", comp, "parameters", param), value, f"--set {item}")
+        out.put((DOTTED, key), value, f"--set {item}")
     if stop_time is not None:
         out.put(("time", "stop"), stop_time, f"--stop-time {stop_time:g}")
     return out

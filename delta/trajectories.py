@@ -31,6 +31,7 @@ __all__ = [
     "Waypoints",
     "seed004_z_steps",
     "PROFILES",
+    "TYPES",
     "G0",
 ]
 
@@ -415,3 +416,8 @@ def seed004_z_steps(segment_time: float = 1.0, dwell: float = 0.5, home: tuple[f
     x, y, _ = home
     return Waypoints(points=(tuple(home), (x, y, -0.561), (x, y, -0.311), tuple(home)),
                      segment_time=segment_time, dwell=dwell, profile=profile)
+
+
+TYPES: dict[str, type[Trajectory]] = {"helix": Helix, "pick_and_place": PickAndPlace,
+                                      "point_to_point": PointToPoint, "waypoints": Waypoints}
+"""A scenario's ``trajectory.type`` -> its class (constructor arguments: ``trajectory.params``)."""

@@ -1,0 +1,211 @@
+"""Python API: load a scenario with overrides by dotted name, run it, get metrics and signals.
+
+>>> from cosim import api
+>>> res = api.run("scenarios/helix_ctc_analytic.yaml",
+...               {"time.stop": 0.2, "trajectory.params.rx": 0.05, "ctl.gain.kp[1]": 2.0e4})  # doctest: +SKIP
+>>> res.metrics["rmse_x"], res["plant.p.x"][-1]  # doctest: +SKIP
+
+Dotted names (:func:`cosim.scenario.resolve_name`) are those of ``--set`` on the command line:
+``COMP.PARAM`` sets a component parameter (``ctl.gain.kp[1]``, ``plant.mass.payload``); other
+names walk the scenario's sections (``time.stop``, ``time.step``, ``trajectory.params.rx``,
+``algorithm``, ``parallel``). An unknown name raises :class:`~cosim.errors.ScenarioError`
+(a ``ValueError``) with the close matches.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Mapping, Sequence
+
+import numpy as np
+
+from .algorithm import Runtime
+from .fmu import BOOLEAN, INTEGER, REAL
+from .run import RunResult, run_scenario
+from .scenario import Scenario, dotted_overrides, expand_signal, load_scenario
+
+__all__ = ["load", "run", "Result", "SignalRecorder", "PeakEffort", "metrics", "metric_names"]
+
+_NUMERIC = (REAL, INTEGER, BOOLEAN)
+_EFFORT = re.compile(r"^u(\[\d+\])?$")  # actuator effort u[i] (conventions), N or N*m
+
+
+def load(scenario: str | Path | Scenario, overrides: Mapping[str, Any] | None = None) -> Scenario:
+    """The scenario at ``scenario`` (a YAML path), validated, with ``overrides`` applied.
+
+    Parameters
+    ----------
+    scenario : path of a scenario file (a :class:`Scenario` is returned as is when there are no overrides)
+    overrides : {dotted name: value}, e.g. ``{"trajectory.params.rx": 0.05, "time.stop": 0.5,
+        "ctl.gain.kp[1]": 4e4, "ctl.gain.kp": [4e4, 4e4, 4e4]}`` (a list sets ``name[1]..name[n]``)
+    """
+    if isinstance(scenario, Scenario):
+        if not overrides:
+            return scenario
+        if scenario.source is None or scenario.source == "<string>":
+            raise ValueError("overrides need the scenario's file: pass its path")
+        scenario = scenario.source
+    return load_scenario(scenario, dotted_overrides(dict(overrides or {})))
+
+
+def metric_names(scenario: Scenario) -> list[str]:
+    """Names of :func:`metrics`, in order: ``rmse_<axis>``..., ``max_error_<axis>``..., then the totals."""
+    axes = _axes(scenario)
+    return ([f"rmse_{a}" for a in axes] + [f"max_error_{a}" for a in axes]
+            + ["rmse", "max_error", "peak_effort", "sim_time_s", "steps", "wall_time_s"])
+
+
+def _axes(scenario: Scenario) -> list[str]:
+    if scenario.compare is None:
+        return []
+    actual = expand_signal(scenario.compare.actual)
+    short = [a.rsplit(".", 1)[-1] for a in actual]
+    return short if len(set(short)) == len(short) else actual
+
+
+def metrics(scenario: Scenario, result: RunResult, peak: float) -> dict[str, float]:
+    """Summary metrics of a run: per-axis RMSE and largest error of ``compare`` (signal units),
+    their largest over the axes, the peak |effort| (N or N*m), simulated and wall time (s), steps."""
+    out: dict[str, float] = {}
+    axes = _axes(scenario)
+    for a, e in zip(axes, result.errors):
+        out[f"rmse_{a}"] = e.rmse
+    for a, e in zip(axes, result.errors):
+        out[f"max_error_{a}"] = e.max_error
+    out["rmse"] = max((e.rmse for e in result.errors), default=math.nan)
+    out["max_error"] = max((e.max_error for e in result.errors), default=math.nan)
+    out["peak_effort"] = peak
+    out["sim_time_s"] = result.sim_time
+    out["steps"] = result.steps
+    out["wall_time_s"] = result.wall_time
+    return out
+
+
+class PeakEffort:
+    """Observer: the largest |u[i]| of every component output named ``u`` or ``u[i]``."""
+
+    def __init__(self) -> None:
+        self.peak = math.nan
+
+    def start(self, rt: Runtime) -> None:
+        from .system import Port
+
+        self._src = []
+        for c, outs in enumerate(rt.plan.outputs):
+            for var in outs:
+                if _EFFORT.match(var.name) and var.kind == REAL:
+                    arr, i = rt.where(Port(c, var))
+                    self._src += [(arr, i + e) for e in range(var.count)]
+        self.peak = 0.0 if self._src else math.nan
+        self.stepped(-1, rt.start_ns, ())
+
+    def stepped(self, k: int, t_ns: int, active: Sequence[int]) -> None:
+        for arr, i in self._src:
+            v = abs(arr[i])
+            if v > self.peak:
+                self.peak = v
+
+    def finish(self, rt: Runtime, error: BaseException | None) -> None:
+        return None
+
+
+class SignalRecorder:
+    """Observer: every numeric input and output the master reads, at every macro step, by name."""
+
+    def __init__(self) -> None:
+        self.t_ns: list[int] = []
+        self.names: list[str] = []
+        self._rows: list[list[float]] = []
+
+    def start(self, rt: Runtime) -> None:
+        from .system import Port, _index_text
+
+        self._src = []
+        for c, name in enumerate(rt.plan.names):
+            seen = set()
+            for var in list(rt.plan.inputs[c]) + list(rt.plan.outputs[c]):
+                if var.name in seen or var.kind not in _NUMERIC:
+                    continue
+                seen.add(var.name)
+                arr, i = rt.where(Port(c, var))
+                for e in range(var.count):
+                    label = _index_text(var, e) if var.shape else ""
+                    self.names.append(f"{name}.{var.name}{label}")
+                    self._src.append((arr, i + e))
+        self.stepped(-1, rt.start_ns, ())
+
+    def stepped(self, k: int, t_ns: int, active: Sequence[int]) -> None:
+        self.t_ns.append(t_ns)
+        self._rows.append([arr[i] for arr, i in self._src])
+
+    def finish(self, rt: Runtime, error: BaseException | None) -> None:
+        return None
+
+    def arrays(self) -> tuple[np.ndarray, dict[str, np.ndarray]]:
+        table = np.asarray(self._rows, dtype=float).reshape(len(self._rows), len(self.names))
+        return np.asarray(self.t_ns, dtype=np.int64) * 1e-9, {n: table[:, j] for j, n in enumerate(self.names)}
+
+
+@dataclass
+class Result:
+    """A finished run: ``metrics`` (:func:`metrics`), ``time`` (s) and ``signals`` (name -> array,
+    one value per macro step and the start), the full :class:`~cosim.run.RunResult` as ``run``."""
+
+    run: RunResult
+    metrics: dict[str, float]
+    time: np.ndarray
+    signals: dict[str, np.ndarray] = field(default_factory=dict)
+
+    @property
+    def status(self) -> str:
+        return self.run.status
+
+    @property
+    def mcap(self) -> str | None:
+        return self.run.mcap
+
+    def __getitem__(self, name: str) -> np.ndarray:
+        try:
+            return self.signals[name]
+        except KeyError:
+            import difflib
+
+            close = difflib.get_close_matches(name, list(self.signals), n=3)
+            hint = f"; did you mean {', '.join(close)}?" if close else ""
+            raise KeyError(f"no signal {name!r}{hint}") from None
+
+    def to_pandas(self):
+        """The signals as a pandas DataFrame indexed by time in s (needs pandas, not a dependency)."""
+        try:
+            import pandas as pd
+        except ImportError:
+            raise ImportError("Result.to_pandas needs pandas: pip install pandas") from None
+        return pd.DataFrame(self.signals, index=pd.Index(self.time, name="t"))
+
+
+def run(scenario: str | Path | Scenario, overrides: Mapping[str, Any] | None = None, *, log: bool = False,
+        out: str | Path | None = None, signals: bool = True, progress: bool = False) -> Result:
+    """Run a scenario (path or :func:`load`-ed) with ``overrides`` (dotted names) and return a :class:`Result`.
+
+    Parameters
+    ----------
+    log : write the MCAP log (to ``out``, else the scenario's ``logging.out``)
+    signals : keep every signal in memory (every output of every component, and the connected inputs)
+    progress : show the progress bar
+
+    Raises :class:`~cosim.errors.CosimError` subclasses (bad input, pre-flight, FMU failure).
+    """
+    sc = load(scenario, overrides).model_copy()
+    peak = PeakEffort()
+    observers: list[Any] = [peak]
+    recorder = None
+    if signals:
+        recorder = SignalRecorder()
+        observers.append(recorder)
+        object.__setattr__(sc, "_read", "all")  # every output read each step, also without a log
+    res = run_scenario(sc, out=out, log=log, progress=progress, extra_observers=observers)
+    t, values = recorder.arrays() if recorder is not None else (np.zeros(0), {})
+    return Result(res, metrics(sc, res, peak.peak), t, values)

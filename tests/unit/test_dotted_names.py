@@ -1,0 +1,71 @@
+"""Overrides by dotted name (``--set NAME=VALUE``, :mod:`cosim.api`): resolution, close matches,
+typed trajectory parameters (pure, no FMUs)."""
+
+import pytest
+
+from cosim.errors import ScenarioError
+from cosim.scenario import apply_overrides, dotted_overrides, parse_scenario, resolve_name
+
+TEXT = """name: t
+robot: linear_delta_thesis
+trajectory: {type: helix, params: {rx: 0.1}}
+components:
+  traj: {path: a.fmu}
+  plant: {path: c.fmu}
+  ctl: {path: b.fmu, parameters: {gain.kp: [1, 2, 3]}}
+connections:
+  - {from: traj.y, to: ctl.u}
+time: {stop: 1.0, step: 0.001}
+"""
+DATA = {"components": {"traj": {}, "ctl": {}}}
+
+
+@pytest.mark.parametrize("name, path", [
+    ("ctl.gain.kp[1]", ("components", "ctl", "parameters", "gain.kp[1]")),
+    ("trajectory.params.rx", ("trajectory", "params", "rx")),
+    ("time.stop", ("time", "stop")),
+    ("algorithm", ("algorithm",)),
+    ("components.ctl.parameters.gain.kp[1]", ("components", "ctl", "parameters", "gain.kp[1]")),
+    ("regression.tolerances.plant.p", ("regression", "tolerances", "plant.p")),
+])
+def test_names_resolve_to_key_paths(name, path):
+    assert resolve_name(name, DATA) == path, (name, resolve_name(name, DATA), path)
+
+
+@pytest.mark.parametrize("name, expected", [
+    ("ctll.gain", "unknown name 'ctll'; did you mean ctl?"),
+    ("trajectory.parms.rx", "unknown name 'trajectory.parms'; did you mean trajectory.params?"),
+    ("time.stp", "did you mean time.stop, time.step"),
+    ("ctl", "'ctl' is a component: name one of its parameters"),
+    ("time.stop.x", "time.stop is a value, it has no 'x'"),
+])
+def test_unknown_names_are_one_line_with_close_matches(name, expected):
+    with pytest.raises(ScenarioError) as exc:
+        resolve_name(name, DATA, f"--set {name}=1")
+    msg = str(exc.value)
+    assert expected in msg and "\n" not in msg and msg.startswith(f"--set {name}=1: "), msg
+
+
+def test_set_reaches_trajectory_time_and_parameters():
+    s = parse_scenario(TEXT, "x.yaml", apply_overrides(["trajectory.params.rx=0.05", "time.stop=0.5",
+                                                        "ctl.gain.kp[1]=4e4"]))
+    assert s.trajectory.params["rx"] == 0.05, s.trajectory.params
+    assert s.time.stop == 0.5, s.time
+    assert s.components["ctl"].parameters["gain.kp[1]"] == 4e4, s.components["ctl"].parameters
+
+
+def test_api_overrides_take_python_values():
+    s = parse_scenario(TEXT, "x.yaml", dotted_overrides({"ctl.gain.kp": [4.0, 5.0, 6.0], "time.step": 0.002}))
+    assert s.components["ctl"].parameters["gain.kp"] == [4.0, 5.0, 6.0], s.components["ctl"].parameters
+    assert s.time.step_ns == 2_000_000, s.time.step_ns
+
+
+def test_trajectory_parameters_are_typed_and_named():
+    with pytest.raises(ScenarioError) as exc:
+        parse_scenario(TEXT, "x.yaml", apply_overrides(["trajectory.params.radius=1"]))
+    msg = str(exc.value)
+    assert msg == ("--set trajectory.params.radius=1: helix has no parameter 'radius'; "
+                   "valid: centre, rx, ry, omega, z0, vz, duration"), msg
+    with pytest.raises(ScenarioError) as exc:
+        parse_scenario(TEXT.replace("rx: 0.1", "rx: abc"), "x.yaml")
+    assert "x.yaml:3: trajectory.params.rx: Input should be a valid number" in str(exc.value), str(exc.value)
