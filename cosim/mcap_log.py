@@ -8,7 +8,11 @@
   and attachments (the scenario file and each FMU's modelDescription.xml);
 - zstd chunks flushed every ``flush_interval`` wall seconds, so a killed run
   leaves every complete chunk readable (see :mod:`cosim.recover`);
-- ``finish`` always writes the summary and index, on success, error or Ctrl-C.
+- ``finish`` always writes the summary and index, on success, error or Ctrl-C, and the
+  ``outcome`` metadata (completed, error, interrupted, stalled; the message);
+- a write that fails (disk full) stops the run at the next step with one error naming the
+  file and the OS's reason; foxglove-sdk reports such failures through Python logging, so
+  they are caught there instead of being printed once per lost message.
 
 The writer was chosen by measurement (``benchmarks/mcap_writer.py``): foxglove-sdk writes
 helix_ctc's message stream 1.3 times as fast as the hand-packed mcap 1.x writer used before
@@ -17,6 +21,8 @@ helix_ctc's message stream 1.3 times as fast as the hand-packed mcap 1.x writer 
 
 from __future__ import annotations
 
+import logging
+import os
 import platform
 import sys
 import time
@@ -30,6 +36,31 @@ from .errors import CosimError
 from .publish import EVENTS_SCHEMA, Publisher, scene_update, time_metadata
 
 __all__ = ["McapRecorder", "scene_update", "EVENTS_SCHEMA"]
+
+
+class _WriteFailures(logging.Handler):
+    """Catches the MCAP writer's per-message failures, which foxglove-sdk reports through Python
+    logging (``foxglove.*`` loggers, one record per lost message) instead of raising: the first
+    is kept for the error, none is printed (a full disk would print one line per message)."""
+
+    LOGGERS = ("foxglove", "foxglove_py")  # the SDK's Rust side logs under both
+
+    def __init__(self) -> None:
+        super().__init__(logging.ERROR)
+        self.first: str | None = None
+        self._loggers = [(lg, lg.propagate) for lg in map(logging.getLogger, self.LOGGERS)]
+        for lg, _ in self._loggers:
+            lg.addHandler(self)
+            lg.propagate = False
+
+    def emit(self, record: logging.LogRecord) -> None:
+        if self.first is None:
+            self.first = record.getMessage()
+
+    def detach(self) -> None:
+        for lg, propagate in self._loggers:
+            lg.removeHandler(self)
+            lg.propagate = propagate
 
 
 class McapRecorder:
@@ -65,6 +96,7 @@ class McapRecorder:
         self.path.parent.mkdir(parents=True, exist_ok=True)
         options = MCAPWriteOptions(compression=MCAPCompression.Zstd, chunk_size=self.CHUNK_SIZE,
                                    compression_level=self.ZSTD_LEVEL)
+        self._failures = _WriteFailures()  # before opening: the writer reports failed writes through logging
         try:  # a path, not a Python file: the writer (Rust) then holds no Python object
             self._writer = foxglove.open_mcap(self.path, allow_overwrite=True, context=self.publisher.context,
                                               writer_options=options)
@@ -108,18 +140,40 @@ class McapRecorder:
                      media_type="application/xml", data=info.model_description_xml())
 
     def stepped(self, k: int, t_ns: int, active: Sequence[int]) -> None:
+        if self._failures.first is not None:  # the writer failed on a message (disk full): stop the run now
+            raise self._failure()
         if time.monotonic() - self._last_flush > self.flush_interval:
-            self._writer.flush()
+            try:
+                self._writer.flush()
+            except Exception as exc:  # noqa: BLE001 - foxglove raises a bare error type for I/O failures
+                raise self._failure(exc) from None
             self._last_flush = time.monotonic()
 
+    def _failure(self, exc: BaseException | None = None) -> CosimError:
+        """The writer's first I/O failure as one line (the OS's reason, e.g. no space left on device)."""
+        import re
+
+        text = self._failures.first or str(exc)
+        m = re.search(r'message: "([^"]+)"', text)
+        reason = m.group(1) if m else text
+        try:  # the writer's error often only says that an earlier write failed: look at the disk
+            fs = os.statvfs(self.path.parent)
+            if m is None and fs.f_bavail * fs.f_frsize < 2 * self.CHUNK_SIZE:
+                reason = f"no space left on device ({fs.f_bavail * fs.f_frsize} bytes free in {self.path.parent})"
+        except OSError:
+            pass
+        return CosimError(f"{self.path}: cannot write the MCAP log: {reason}")
+
     def finish(self, rt: Runtime | None, error: BaseException | None) -> None:
+        """Mark the outcome and close the file; raises CosimError when the file cannot be completed."""
         if self._writer is None:
             return
         try:
             if error is not None:
-                self._writer.write_metadata("outcome", {"status": "error" if not isinstance(
-                    error, KeyboardInterrupt) else "interrupted", "message": str(error) or type(error).__name__,
-                    "completed_steps": str(rt.k_done if rt else 0)})
+                status = "interrupted" if isinstance(error, KeyboardInterrupt) else getattr(error, "outcome", "error")
+                text = str(error) or type(error).__name__
+                self._writer.write_metadata("outcome", {"status": status, "message": text,
+                                                        "completed_steps": str(rt.k_done if rt else 0)})
             else:
                 outcome = {"status": "completed", "completed_steps": str(rt.k_done if rt else 0)}
                 if rt is not None and rt.terminated is not None:
@@ -127,5 +181,11 @@ class McapRecorder:
                                    message=str(rt.terminated))
                 self._writer.write_metadata("outcome", outcome)
             self._writer.close()
+            failed = None
+        except Exception as exc:  # noqa: BLE001 - the file cannot be completed (disk full): one clear error
+            failed = exc
         finally:
             self._writer = None
+            self._failures.detach()
+        if failed is not None or self._failures.first is not None:
+            raise self._failure(failed)

@@ -1,7 +1,8 @@
-"""Recover an unfinished MCAP log (killed writer): stream-read every complete record, rewrite indexed."""
+"""Recover an unfinished MCAP log (killed writer, full disk): stream-read every complete record, rewrite indexed."""
 
 from __future__ import annotations
 
+import os
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
@@ -24,23 +25,51 @@ class RecoveryReport:
 
 
 def recover(path: str | Path, out: str | Path | None = None) -> RecoveryReport:
-    """Copy every complete schema, channel, message, attachment and metadata record into a new file."""
+    """Copy every complete schema, channel, message, attachment and metadata record into a new file.
+
+    The copy is written under a temporary name next to ``out`` and renamed when complete: a
+    failure (disk full) leaves no output, not an empty or truncated one.
+    """
+    from .output import writable_parent
+
+    path = Path(path)
+    out = Path(out) if out else _default_out(path)
+    if not path.is_file():
+        raise CosimError(f"{path}: no such file")
+    if out.resolve() == path.resolve():
+        raise CosimError(f"{out}: the output must differ from the input")
+    writable_parent(out)
+    tmp = out.with_name(f".{out.name}.{os.getpid()}.tmp")  # renamed into place only when complete
+    try:
+        report = _copy(path, tmp, out)
+        os.replace(tmp, out)
+    except OSError as exc:
+        tmp.unlink(missing_ok=True)
+        raise CosimError(f"{out}: cannot write the recovered log: {exc.strerror or exc}; nothing was written "
+                         f"({path} is unchanged)") from None
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
+    return report
+
+
+def _default_out(path: Path) -> Path:
+    """``X.mcap`` and ``X.mcap.partial`` -> ``X.recovered.mcap``."""
+    name = path.name.removesuffix(".partial").removesuffix(".mcap")
+    return path.with_name(name + ".recovered.mcap")
+
+
+def _copy(path: Path, tmp: Path, out: Path) -> RecoveryReport:
     from mcap.exceptions import McapError
     from mcap.records import Attachment, Channel, Chunk, Message, Metadata, Schema
     from mcap.stream_reader import StreamReader, breakup_chunk
     from mcap.writer import CompressionType, Writer
 
-    path = Path(path)
-    out = Path(out) if out else path.with_suffix(".recovered.mcap")
-    if not path.exists():
-        raise CosimError(f"{path}: no such file")
-    if out.resolve() == path.resolve():
-        raise CosimError(f"{out}: the output must differ from the input")
     schemas: dict[int, int] = {}
     channels: dict[int, int] = {}
     counts = {"messages": 0, "attachments": 0, "metadata": 0}
     truncated = False
-    with open(path, "rb") as src, open(out, "wb") as dst:
+    with open(path, "rb") as src, open(tmp, "wb") as dst:
         w = Writer(dst, compression=CompressionType.ZSTD)
         w.start(profile="", library="cosim-recover")
 
@@ -67,13 +96,17 @@ def recover(path: str | Path, out: str | Path | None = None) -> RecoveryReport:
                         handle(inner)
                 else:
                     handle(rec)
-        except (McapError, EOFError, ValueError, OSError, Exception) as exc:  # noqa: B014
-            if isinstance(exc, KeyboardInterrupt):
+        except OSError as exc:
+            if exc.errno is not None:  # a real I/O failure (reading, or writing: disk full), not a short input
                 raise
+            truncated = True
+        except (McapError, EOFError, ValueError, Exception):  # noqa: B014 - any damage ends the usable input
             truncated = True
         if truncated:
             w.add_metadata("recovery", {"source": str(path), "note": "input ended inside a record; "
                                                                      "complete records kept"})
         w.finish()
+        dst.flush()
+        os.fsync(dst.fileno())
     return RecoveryReport(str(out), counts["messages"], len(channels), counts["attachments"], counts["metadata"],
                           truncated)

@@ -1,0 +1,142 @@
+"""Output files written safely: checked first, claimed by one run, renamed into place when finished.
+
+A run's log ``X.mcap`` is written as ``X.mcap.partial`` next to it and renamed to ``X.mcap``
+only once it is finished, so ``X.mcap`` is always a complete file (or the previous run's).
+An exclusive lock ``X.mcap.lock`` (``flock``, released by the kernel when its process ends,
+however it ends) keeps two runs off one path: the second fails at once naming the first
+(pid, start, command line). A ``.partial`` file without a live owner is what a killed run
+left behind; it is never overwritten (recover it with ``python -m cosim recover``, or delete
+it). :func:`claim` does all of this, including the writability check, before the run loads
+a single FMU.
+"""
+
+from __future__ import annotations
+
+import os
+import sys
+import time
+from pathlib import Path
+
+from .errors import CosimError
+
+__all__ = ["OutputError", "OutputClaim", "claim", "partial_path", "writable_parent"]
+
+
+class OutputError(CosimError, OSError):
+    """An output file cannot be written (directory, permission, lock held, disk full)."""
+
+
+def partial_path(target: str | Path) -> Path:
+    target = Path(target)
+    return target.with_name(target.name + ".partial")
+
+
+def writable_parent(target: Path) -> None:
+    """Raise OutputError (one line) unless ``target``'s directory exists or can be made, and takes files."""
+    if target.is_dir():
+        raise OutputError(f"{target}: is a directory; give a file path for the output")
+    for parent in [target.parent, *target.parent.parents]:
+        if parent.exists():
+            if not parent.is_dir():
+                raise OutputError(f"{target}: cannot write the output: {parent} is a file, not a directory")
+            break
+    try:
+        target.parent.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise OutputError(f"{target}: cannot create its directory {target.parent}: {exc.strerror}") from None
+
+
+class OutputClaim:
+    """The right to write ``target``: the held lock and the partial file the writer fills."""
+
+    def __init__(self, target: Path, lock_fd: int, lock: Path):
+        self.target = target
+        self.partial = partial_path(target)
+        self._fd: int | None = lock_fd
+        self._lock = lock
+
+    def commit(self) -> Path:
+        """The partial file becomes ``target`` (atomically, replacing an older one); the lock is released."""
+        try:
+            os.replace(self.partial, self.target)
+        except OSError as exc:
+            self.release()
+            raise OutputError(f"{self.target}: cannot rename the finished log {self.partial} into place: "
+                              f"{exc.strerror}") from None
+        self.release()
+        return self.target
+
+    def discard(self) -> None:
+        """Remove the partial file (nothing was written into it) and release the lock."""
+        try:
+            self.partial.unlink(missing_ok=True)
+        finally:
+            self.release()
+
+    def release(self) -> None:
+        """Release the lock, keeping whatever partial file there is; idempotent."""
+        if self._fd is None:
+            return
+        try:
+            self._lock.unlink(missing_ok=True)  # while still holding it: a waiting run re-checks the inode
+        except OSError:
+            pass
+        os.close(self._fd)
+        self._fd = None
+
+
+def _describe_owner(lock: Path) -> str:
+    try:
+        text = lock.read_text(errors="replace").strip()
+    except OSError:
+        return "another run"
+    fields = dict(line.split("=", 1) for line in text.splitlines() if "=" in line)
+    started = fields.get("started", "")
+    when = time.strftime("%H:%M:%S", time.localtime(float(started))) if started.replace(".", "").isdigit() else "?"
+    return f"another run (pid {fields.get('pid', '?')}, started {when}: {fields.get('command', '?')})"
+
+
+def claim(target: str | Path) -> OutputClaim:
+    """Check that ``target`` can be written and claim it for this process (see the module docstring).
+
+    Raises OutputError naming the problem: an unwritable directory, a parent that is a file, a
+    run already writing ``target``, or a partial file left by a run that did not finish.
+    """
+    import fcntl
+
+    target = Path(target)
+    writable_parent(target)
+    lock = target.with_name(target.name + ".lock")
+    while True:
+        try:
+            fd = os.open(lock, os.O_RDWR | os.O_CREAT, 0o644)
+        except OSError as exc:
+            raise OutputError(f"{target}: cannot write in {target.parent}: {exc.strerror}") from None
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            os.close(fd)
+            raise OutputError(f"{target}: {_describe_owner(lock)} is writing it; wait for it to end or "
+                              f"choose another --out") from None
+        try:
+            same = os.stat(lock).st_ino == os.fstat(fd).st_ino
+        except FileNotFoundError:  # its owner finished and removed it between our open and lock
+            same = False
+        if same:
+            break
+        os.close(fd)
+    out = OutputClaim(target, fd, lock)
+    partial = out.partial
+    if partial.exists():
+        out.release()
+        raise OutputError(f"{partial}: left by a run that did not finish; recover it "
+                          f"(python -m cosim recover {partial}) or delete it, then run again")
+    try:
+        os.ftruncate(fd, 0)
+        argv = ["python -m cosim" if sys.argv[0].endswith("__main__.py") else sys.argv[0], *sys.argv[1:]]
+        os.write(fd, f"pid={os.getpid()}\nstarted={time.time():.3f}\ncommand={' '.join(argv)}\n".encode())
+        os.close(os.open(partial, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o644))
+    except OSError as exc:
+        out.release()
+        raise OutputError(f"{target}: cannot write in {target.parent}: {exc.strerror}") from None
+    return out
