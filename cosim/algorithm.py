@@ -10,7 +10,8 @@ Jacobi: every active component reads the outputs of the previous macro step, the
 all step, then all outputs are read.
 
 Observers are called after each macro step with the components that stepped.
-A stop request (Ctrl-C) is honoured between macro steps, never inside an FMU call.
+A stop request (SIGINT, SIGTERM) is honoured between macro steps, never inside an FMU call;
+a component that never returns is the watchdog's (:mod:`cosim.watchdog`).
 """
 
 from __future__ import annotations
@@ -145,25 +146,42 @@ def _runs(links: list[tuple[Any, int, Any, int]]) -> tuple[list[tuple[memoryview
 
 
 class StopRequest:
-    """Turns SIGINT into a flag checked between macro steps (an FMU is never interrupted mid-call)."""
+    """Turns SIGINT and SIGTERM into a flag checked between macro steps (an FMU is never
+    interrupted mid-call); the step boundary then raises :class:`~cosim.errors.Interrupted`.
+    A second signal raises at once. ``signum`` and ``when`` (monotonic s) say which and when."""
+
+    SIGNALS = (signal.SIGINT, signal.SIGTERM)
 
     def __init__(self) -> None:
         self.requested = False
-        self._previous = None
+        self.signum: int | None = None
+        self.when: float | None = None
+        self._previous: dict[int, Any] = {}
 
     def __enter__(self) -> "StopRequest":
         if threading.current_thread() is threading.main_thread():
-            self._previous = signal.signal(signal.SIGINT, self._handle)
+            for s in self.SIGNALS:
+                self._previous[s] = signal.signal(s, self._handle)
         return self
 
+    def request(self, signum: int) -> None:
+        if not self.requested:
+            self.requested, self.signum, self.when = True, signum, _time.monotonic()
+
     def _handle(self, signum, frame) -> None:
-        if self.requested:  # second Ctrl-C: give up waiting
-            raise KeyboardInterrupt
-        self.requested = True
+        if self.requested:  # second signal: give up waiting for the step to end
+            raise self.interrupted()
+        self.request(signum)
+
+    def interrupted(self) -> BaseException:
+        from .errors import Interrupted
+
+        return Interrupted(self.signum or signal.SIGINT)
 
     def __exit__(self, *exc) -> None:
-        if self._previous is not None:
-            signal.signal(signal.SIGINT, self._previous)
+        for s, previous in self._previous.items():
+            signal.signal(s, previous)
+        self._previous.clear()
 
 
 def initialize(rt: Runtime) -> None:
@@ -192,7 +210,8 @@ def initialize(rt: Runtime) -> None:
 
 def simulate(rt: Runtime, observers: Sequence[Observer] = (), stop: StopRequest | None = None,
              progress: Callable[[int], None] | None = None, progress_every: int = 0) -> None:
-    """Run the macro steps from ``rt.k_done`` to the end. Raises KeyboardInterrupt on a stop request."""
+    """Run the macro steps from ``rt.k_done`` to the end. Raises Interrupted (a KeyboardInterrupt) on a
+    stop request."""
     schedule = rt.schedule()
     period = len(schedule)
     slaves = rt.slaves
@@ -240,7 +259,7 @@ def simulate(rt: Runtime, observers: Sequence[Observer] = (), stop: StopRequest 
             if progress is not None and progress_every and (k + 1) % progress_every == 0:
                 progress(k + 1)
             if stop is not None and stop.requested:
-                raise KeyboardInterrupt
+                raise stop.interrupted()
     except Terminated as term:
         _end_at(rt, term, k, schedule[k % period], stepped)
 

@@ -294,6 +294,9 @@ def _cosim_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--sim-stamps", action="store_true",
                    help="log times in pure simulation time (default: from the run's wall-clock start, so viewers "
                         "show the real date; the message field t is simulation time either way)")
+    p.add_argument("--watchdog", type=float, metavar="SECONDS",
+                   help="override watchdog_s: wall-clock seconds a step may take before the run stops naming the "
+                        "stalled component (0: no limit)")
     p.add_argument("--quiet", action="store_true", help="no progress bar and no summary")
     p.add_argument("--json", action="store_true", help="summary as JSON on stdout")
     p.set_defaults(handler=_cmd_run)
@@ -479,7 +482,7 @@ def _open_scenario(args: argparse.Namespace, overrides: dict):
     from .ssp import is_ssp, open_ssp
 
     if args.step is not None:
-        overrides[("time", "step")] = args.step
+        overrides.put(("time", "step"), args.step, f"--step {args.step:g}")
     if is_ssp(args.scenario):
         return open_ssp(args.scenario, overrides)
     return nullcontext(load_scenario(args.scenario, overrides))
@@ -491,7 +494,9 @@ def _cmd_run(args: argparse.Namespace) -> int:
 
     overrides = apply_overrides(args.set, args.stop_time)
     if args.parallel:
-        overrides[("parallel",)] = args.parallel
+        overrides.put(("parallel",), args.parallel, f"--parallel {args.parallel}")
+    if args.watchdog is not None:
+        overrides.put(("watchdog_s",), args.watchdog if args.watchdog > 0 else None, f"--watchdog {args.watchdog:g}")
     live = realtime = None
     if args.live is not None:
         from .live import parse_address
@@ -618,15 +623,10 @@ class _Parser(argparse.ArgumentParser):
         super().error(message)
 
 
-class Interrupted(KeyboardInterrupt):
-    """SIGTERM (or SIGINT) outside the simulation loop; ``signum`` sets the exit code 128 + signum."""
-
-    def __init__(self, signum: int):
-        super().__init__()
-        self.signum = signum
-
-
 def _terminate_as_interrupt(signum, frame) -> None:
+    """SIGTERM outside the simulation loop: unwind like Ctrl-C (logs finished, worker stopped)."""
+    from .errors import Interrupted
+
     raise Interrupted(signum)
 
 
@@ -660,7 +660,10 @@ def main(argv: Sequence[str] | None = None) -> int:
         return EXIT_BAD_INPUT
     except KeyboardInterrupt as exc:
         signum = getattr(exc, "signum", signal.SIGINT)
-        print(f"interrupted ({signal.Signals(signum).name})", file=sys.stderr)
+        detail = getattr(exc, "detail", "")
+        text = f"interrupted ({signal.Signals(signum).name})" + (f": {detail}" if detail else "")
+        _error_json(args, text, "interrupted")
+        print(text, file=sys.stderr)
         return 128 + signum
     except BrokenPipeError:  # output piped into a reader that stopped early (e.g. `| head`)
         import os

@@ -19,6 +19,8 @@ __all__ = [
     "AlgebraicLoopError",
     "PreflightError",
     "ComponentSourceError",
+    "Interrupted",
+    "StallError",
 ]
 
 
@@ -91,3 +93,28 @@ class FMIError(CosimError, RuntimeError):
             f" returned {_STATUS[status] if 0 <= status < len(_STATUS) else status}")
         tail = f": {detail}" if detail else ""
         super().__init__(f"component {component!r}: {function}{label} at t = {time:.6g} s{tail}")
+
+
+class Interrupted(KeyboardInterrupt):
+    """The run was stopped by a signal (SIGINT, SIGTERM); the exit code is 128 + ``signum``."""
+
+    def __init__(self, signum: int, detail: str = ""):
+        import signal
+
+        self.signum = signum
+        self.detail = detail
+        name = signal.Signals(signum).name
+        super().__init__(f"stopped by {name}{': ' + detail if detail else ''}")
+
+
+class StallError(CosimError, TimeoutError):
+    """A component made no progress within the wall-clock budget of one step (``watchdog_s``)."""
+
+    outcome = "stalled"  # the log's outcome status
+
+    def __init__(self, component: str, time: float, budget: float, where: str = ""):
+        self.component = component
+        self.time = time
+        self.budget = budget
+        super().__init__(f"component {component!r}{where}: no progress for {budget:g} s of wall-clock time in "
+                         f"its step at t = {time:.6g} s (watchdog_s = {budget:g}); run stopped")

@@ -17,7 +17,9 @@ free); in the steady state the worker is ahead, so the master's acquire and rele
 block and never make a system call. When the ring is full the worker naps until a quarter
 of it is free instead of waiting on the semaphore, for the same reason. A failure in the worker travels
 as an error entry plus the exception over a pipe, and is raised by the master where a serial
-run would have raised it: at that component's step. A dead worker is reported as such.
+run would have raised it: at that component's step. A dead worker is reported as such. A worker
+whose master dies (killed, even by SIGKILL) ends too: by the kernel's parent-death signal on
+Linux, and by checking its parent while it waits on a full ring everywhere.
 """
 
 from __future__ import annotations
@@ -194,7 +196,7 @@ class Offload:
                    for lk in plan.links if lk.dst.comp in index],
             order=[index[c] for c in plan.order if c in index],
             multiples=[multiples[c] for c in comps], algorithm=algorithm,
-            start_ns=start_ns, stop_ns=stop_ns, step_ns=step_ns, sizes=self.layout.sizes)
+            start_ns=start_ns, stop_ns=stop_ns, step_ns=step_ns, sizes=self.layout.sizes, parent=os.getpid())
         ctx = mp.get_context(_START_METHOD)
         self.raw = ctx.RawArray(ctypes.c_char, self.layout.total)
         self.filled = [ctx.Semaphore(0) for _ in comps]
@@ -339,8 +341,8 @@ class _Stopped(Exception):
 class _Publisher:
     """A worker slave whose every ``get_outputs`` also fills the next entry of its ring."""
 
-    def __init__(self, slave: Any, ring: _Ring, stop: Any):
-        self._slave, self._r, self._stop = slave, ring, stop
+    def __init__(self, slave: Any, ring: _Ring, stop: Any, parent: int):
+        self._slave, self._r, self._stop, self._parent = slave, ring, stop, parent
         self.napped = 0.0  # s asleep on a full ring (counted in the component's time by simulate)
 
     def __getattr__(self, name: str) -> Any:
@@ -351,7 +353,7 @@ class _Publisher:
         if not r.free.acquire(False):
             t0 = _time.perf_counter()
             while _free_count(r.free) < _BURST or not r.free.acquire(True, _NAP):
-                if self._stop.is_set():
+                if self._stop.is_set() or os.getppid() != self._parent:  # asked to stop, or the master is gone
                     raise _Stopped
                 _time.sleep(_NAP)
             self.napped += _time.perf_counter() - t0
@@ -391,9 +393,32 @@ def _free_count(sem: Any) -> int:
         return _BURST
 
 
+def _die_with(parent: int) -> None:
+    """End this process when ``parent`` (the master) ends, however it ends (SIGKILL included).
+
+    Linux: the kernel sends SIGKILL at the parent's death (``PR_SET_PDEATHSIG``); checked once
+    against a parent that died before the call. Elsewhere the worker notices it while waiting
+    (:meth:`_Publisher._claim` compares ``os.getppid()``, as its ring fills within a second).
+    """
+    if sys.platform.startswith("linux"):
+        try:
+            libc = ctypes.CDLL(None, use_errno=True)
+            libc.prctl(1, signal.SIGKILL, 0, 0, 0)  # PR_SET_PDEATHSIG = 1
+        except (OSError, AttributeError):
+            pass
+    if os.getppid() != parent:
+        os._exit(0)
+
+
 def _worker(spec: dict, raw: Any, filled: list, free: list, stop: Any, conn: Any) -> None:
     """Entry point of the worker process: run the feed-forward group, publishing as it goes."""
+    _die_with(spec["parent"])
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the master's to handle; it stops us
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)  # not the master's handler (forked): SIGTERM ends the worker
+    try:
+        signal.set_wakeup_fd(-1)  # the master's watchdog pipe (forked) is not ours to write
+    except ValueError:
+        pass
     _fmu._EXTRACTED.update({Path(k): Path(v) for k, v in spec["extracted"].items()})
     inherited = set(_fmu._EXTRACTED)  # the master's extractions (forked: all of them): the master removes them
     slaves: list[Any] = []
@@ -453,7 +478,7 @@ def _runtime(spec: dict, raw: Any, filled: list, free: list, stop: Any, slaves: 
             raise CosimError(f"component {s.name!r}: worker buffer layout {sizes} differs from the master's "
                              f"{layout.sizes[j]}")
         ring = _Ring(raw, layout, j, filled[j], free[j], [b.values for b in s.out_bufs], publish=True)
-        pubs.append(_Publisher(s, ring, stop))
+        pubs.append(_Publisher(s, ring, stop, spec["parent"]))
     variables = [info.variables for info in infos]
     links = [Link(Port(a, variables[a][av]), Port(b, variables[b][bv])) for a, av, b, bv in spec["links"]]
     plan = SystemPlan(spec["names"], infos, links, spec["order"], spec["start_values"],

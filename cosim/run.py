@@ -8,6 +8,7 @@ from pathlib import Path
 from typing import Any, Sequence
 
 from .algorithm import Observer, Runtime, StopRequest, initialize, simulate
+from .watchdog import Watchdog, hard_exit
 from .errors import ComponentSourceError, CosimError, Issue
 from .fmu import FMUInfo, cleanup_extracted, load_fmu, make_slave
 from .observers import AxisError, Comparison
@@ -172,7 +173,8 @@ def run_scenario(scenario: Scenario | str | Path, out: str | Path | None = None,
                  log: bool | None = None, progress: bool = False, extra_observers: Sequence[Observer] = (),
                  live: tuple[str, int] | None = None, realtime: float | None = None, stamps: str = "wall"
                  ) -> RunResult:
-    """Run a scenario end to end. Raises CosimError (bad input, FMU failure) or KeyboardInterrupt.
+    """Run a scenario end to end. Raises CosimError (bad input, FMU failure, a stalled component:
+    StallError) or Interrupted (a KeyboardInterrupt: SIGINT, SIGTERM).
 
     The MCAP file, when logging, is finished whatever happens, and the FMUs extracted for the
     run are removed (success, error or Ctrl-C). ``live``: (host, port) of a Foxglove WebSocket
@@ -186,12 +188,57 @@ def run_scenario(scenario: Scenario | str | Path, out: str | Path | None = None,
         cleanup_extracted()
 
 
+def _log_path(scenario: Scenario, out: str | Path | None) -> Path:
+    """``--out``, else the scenario's ``logging.out`` (relative to the scenario file), else runs/<name>.mcap."""
+    if out is not None:
+        return Path(out)
+    if scenario.logging.out is not None:
+        base = Path(scenario.source).parent if scenario.source and scenario.source != "<string>" else Path(".")
+        return base / scenario.logging.out
+    return Path("runs") / f"{scenario.name}.mcap"
+
+
 def _run(scenario: Scenario | str | Path, out: str | Path | None, overrides: dict | None, log: bool | None,
          progress: bool, extra_observers: Sequence[Observer], live: tuple[str, int] | None = None,
          realtime: float | None = None, stamps: str = "wall") -> RunResult:
+    """Claim the log's path (checked writable, locked, written as X.partial) before any FMU is
+    loaded, run, then rename the finished log into place (see :mod:`cosim.output`)."""
+    from .output import claim
+
     if not isinstance(scenario, Scenario):
         scenario = load_scenario(scenario, overrides)
     logging_on = scenario.logging.enabled if log is None else log
+    output = claim(_log_path(scenario, out)) if logging_on else None
+    try:
+        result = _run_claimed(scenario, output, progress, extra_observers, live, realtime, stamps)
+    except BaseException as exc:
+        _settle(output, exc)
+        raise
+    _settle(output, None)
+    return result
+
+
+def _settle(output, error: BaseException | None) -> None:
+    """A finished log (also one marked error or interrupted) takes its final name; a log never
+    started leaves nothing; a log that could not be finished stays as X.partial, and the error says so."""
+    if output is None:
+        return
+    state = getattr(output, "state", "none")
+    if state == "finished":
+        output.commit()
+    elif state == "none":
+        output.discard()
+    else:
+        output.release()
+        from .output import OutputError
+
+        raise OutputError(f"{state}; the log written so far is kept in {output.partial}: recover it with "
+                          f"`python -m cosim recover {output.partial}`") from None
+
+
+def _run_claimed(scenario: Scenario, output, progress: bool, extra_observers: Sequence[Observer],
+                 live: tuple[str, int] | None, realtime: float | None, stamps: str) -> RunResult:
+    logging_on = output is not None
     plan, _ = prepare(scenario, None if logging_on or live is not None else getattr(scenario, "_read", "none"))
     comps = scenario.components
     slaves = [make_slave(n, plan.infos[i], comps[n].interface, comps[n].rtol, comps[n].solver, comps[n].max_step)
@@ -207,17 +254,13 @@ def _run(scenario: Scenario | str | Path, out: str | Path | None, overrides: dic
     if scenario.compare is not None:
         comparison = Comparison(expand_signal(scenario.compare.actual), expand_signal(scenario.compare.reference))
         observers.append(comparison)
-    mcap_path = None
-    if logging_on:
-        if out is not None:
-            mcap_path = Path(out)
-        elif scenario.logging.out is not None:  # relative to the scenario file
-            base = Path(scenario.source).parent if scenario.source and scenario.source != "<string>" else Path(".")
-            mcap_path = base / scenario.logging.out
-        else:
-            mcap_path = Path("runs") / f"{scenario.name}.mcap"
+    mcap_path = output.target if output is not None else None
+    recorder = None
     if logging_on or live is not None:  # the log and the live view: the same channels (cosim.publish)
-        observers += _publishing(scenario, mcap_path, live, stamps)
+        sinks = _publishing(scenario, output.partial if output is not None else None, live, stamps)
+        recorder = next((o for o in sinks if output is not None and getattr(o, "path", None) == output.partial),
+                        None)
+        observers += sinks
     pacing = None
     if realtime is not None:
         from .realtime import RealTime
@@ -230,27 +273,57 @@ def _run(scenario: Scenario | str | Path, out: str | Path | None, overrides: dic
     error: BaseException | None = None
     t_wall = time.perf_counter()
     bar = None
+    stop = StopRequest()
+
+    def abort(err: BaseException) -> None:
+        """The watchdog's hard shutdown, from its thread: the main thread is stuck inside a component's
+        call and cannot unwind. Finish and mark the log, stop the worker, say why, leave the process."""
+        lines = []
+        for o in started:
+            try:
+                o.finish(rt, err)
+                if o is recorder:
+                    output.state = "finished"
+            except Exception as exc:  # noqa: BLE001 - nothing may stop the exit now
+                if o is recorder:
+                    output.state = str(exc)
+        try:
+            _settle(output, err)
+        except CosimError as exc:
+            lines.append(f"error: {exc}")
+        if offload is not None:
+            offload.close()
+        cleanup_extracted()
+        hard_exit(err, lines)
+
     try:
         if ahead:  # proxies take the feed-forward components' places, on the same buffers
             offload = Offload(plan, ahead, [slaves[c] for c in ahead], rt.multiples, rt.start_ns, rt.stop_ns,
                               rt.step_ns, rt.algorithm)
             for c, proxy in zip(ahead, offload.proxies):
                 slaves[c] = proxy
-        initialize(rt)
-        for o in observers:
-            o.start(rt)
-            started.append(o)
-        t_wall = time.perf_counter()
-        cb, every = None, 0
-        if progress and rt.n_steps >= 1000:
-            bar = progress_bar()
-            bar.start()
-            task = bar.add_task(scenario.name, total=rt.n_steps)
-            every = max(1, rt.n_steps // 200)
-            cb = lambda k: bar.update(task, completed=k)  # noqa: E731
-        with StopRequest() as stop:
-            simulate(rt, observers, stop, cb, every)
-    except BaseException as exc:  # finish the log on every failure, Ctrl-C included, then re-raise
+        watchdog = Watchdog(rt, scenario.watchdog_s, stop, abort)  # after the worker's fork: a thread of its own
+        with stop, watchdog:
+            try:
+                initialize(rt)
+                for o in observers:
+                    o.start(rt)
+                    started.append(o)
+                t_wall = time.perf_counter()
+                cb, every = None, 0
+                if progress and rt.n_steps >= 1000:
+                    bar = progress_bar()
+                    bar.start()
+                    task = bar.add_task(scenario.name, total=rt.n_steps)
+                    every = max(1, rt.n_steps // 200)
+                    cb = lambda k: bar.update(task, completed=k)  # noqa: E731
+                simulate(rt, observers, stop, cb, every)
+            except BaseException as exc:
+                replaced = watchdog.translate(exc)  # the watchdog's error, when it stopped the run
+                if replaced is not exc:
+                    raise replaced from None
+                raise
+    except BaseException as exc:  # finish the log on every failure, signals included, then re-raise
         error = exc
         raise
     finally:
@@ -266,7 +339,15 @@ def _run(scenario: Scenario | str | Path, out: str | Path | None, overrides: dic
             finally:
                 s.free()
         for o in started:
-            o.finish(rt, error)
+            try:
+                o.finish(rt, error)
+                if o is recorder:
+                    output.state = "finished"
+            except CosimError as exc:
+                if o is not recorder:
+                    raise
+                output.state = str(exc)  # the log could not be finished (disk full): kept as X.partial
+                error = error or exc
     if error is not None:  # a failure at the end (fmi2Terminate, the worker's report) fails the run too
         raise error
     t_end_ns = rt.t_end_ns if rt.t_end_ns is not None else rt.t_ns(rt.k_done)

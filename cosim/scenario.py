@@ -244,6 +244,10 @@ class Scenario(_Model):
                             "ahead in a worker process on another core; same values as serial. auto: when 2 CPUs "
                             "are available and the run has at least 2000 steps. YAML's bare on/off (booleans) "
                             "are accepted")
+    watchdog_s: float | None = Field(
+        60.0, gt=0, description="wall-clock seconds a macro step (or the initialization) may take before the run "
+                                "stops naming the stalled component and time; null: no limit (Ctrl-C and SIGTERM "
+                                "still end a stalled run, after 2 s)")
     trajectory: TrajectorySpec | None = None
     initial_state: InitialState = Field(default_factory=InitialState)
     logging: Logging = Field(default_factory=Logging)

@@ -215,9 +215,11 @@ def test_killed_writer_is_recovered(write_scenario, tmp_path):
     time.sleep(2.5)
     os.kill(proc.pid, signal.SIGKILL)
     proc.wait(timeout=10)
+    partial = out.with_name(out.name + ".partial")  # written under this name, renamed only when finished
+    assert not out.exists() and partial.exists(), sorted(p.name for p in tmp_path.iterdir())
     with pytest.raises(Exception):
-        _read_mcap(out)  # no summary: the indexed reader fails on an unfinished file
-    rep = recover(out, tmp_path / "fixed.mcap")
+        _read_mcap(partial)  # no summary: the indexed reader fails on an unfinished file
+    rep = recover(partial, tmp_path / "fixed.mcap")
     summary, msgs = _read_mcap(Path(rep.out))
     stamps = [m["_log_time"] for m in msgs["/g"]]
     assert rep.messages > 10 and len(stamps) > 5, f"recovered {rep.messages} messages"
