@@ -279,8 +279,8 @@ def _cosim_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--out", help="MCAP output path (default: the scenario's logging.out or runs/<name>.mcap)")
     p.add_argument("--stop-time", type=float, help="override time.stop, s")
     p.add_argument("--step", type=float, help="override time.step (the base communication step), s")
-    p.add_argument("--set", action="append", default=[], metavar="COMP.PARAM=VALUE",
-                   help="override a component parameter (repeatable)")
+    p.add_argument("--set", action="append", default=[], metavar="NAME=VALUE",
+                   help="override by dotted name (repeatable): a component parameter (ctl.gain.kp[1]=4e4), the trajectory (trajectory.params.rx=0.05), the time grid (time.stop=0.5), any scenario key")
     p.add_argument("--no-log", action="store_true", help="do not write an MCAP file")
     p.add_argument("--parallel", choices=("auto", "on", "off"),
                    help="override the scenario's parallel: run the feed-forward components (e.g. trajectory, IK) "
@@ -303,7 +303,8 @@ def _cosim_parser(sub: argparse._SubParsersAction) -> None:
 
     p = sub.add_parser("check", help="validate a scenario (YAML or SSP) and run the pre-flight only")
     p.add_argument("scenario")
-    p.add_argument("--set", action="append", default=[], metavar="COMP.PARAM=VALUE")
+    p.add_argument("--set", action="append", default=[], metavar="NAME=VALUE",
+                   help="override by dotted name (repeatable): a component parameter (ctl.gain.kp[1]=4e4), the trajectory (trajectory.params.rx=0.05), the time grid (time.stop=0.5), any scenario key")
     p.add_argument("--stop-time", type=float, help="override time.stop, s")
     p.add_argument("--step", type=float, help="override time.step, s")
     p.add_argument("--json", action="store_true")
@@ -337,8 +338,8 @@ def _regression_parser(sub: argparse._SubParsersAction) -> None:
                    help="compare only these signals (repeatable; default all common signals)")
     p.add_argument("--out-dir", default="runs", help="with a scenario: where the two logs go (default runs/)")
     p.add_argument("--stop-time", type=float, help="with a scenario: override time.stop, s")
-    p.add_argument("--set", action="append", default=[], metavar="COMP.PARAM=VALUE",
-                   help="with a scenario: override a component parameter (both runs)")
+    p.add_argument("--set", action="append", default=[], metavar="NAME=VALUE",
+                   help="with a scenario: override by dotted name, as for run (both runs)")
     p.add_argument("--checked-only", action="store_true", help="list only signals that have a tolerance")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.add_argument("--json", action="store_true", help="the comparison as JSON on stdout")
@@ -572,9 +573,11 @@ def build_parser() -> argparse.ArgumentParser:
 
     from .report import register as _register_report
     from .ssp import register as _register_ssp
+    from .sweep import register as _register_sweep
 
     _register_report(sub)
     _register_ssp(sub)
+    _register_sweep(sub)
     _register_fmus(sub)
     return parser
 

@@ -629,8 +629,8 @@ def register(sub) -> None:
     e.add_argument("scenario", help="scenario file (YAML)")
     e.add_argument("-o", "--out", required=True, help="the .ssp file to write")
     e.add_argument("--stop-time", type=float, help="override time.stop, s")
-    e.add_argument("--set", action="append", default=[], metavar="COMP.PARAM=VALUE",
-                   help="override a component parameter (repeatable)")
+    e.add_argument("--set", action="append", default=[], metavar="NAME=VALUE",
+                   help="override by dotted name (repeatable): a component parameter (ctl.gain.kp[1]=4e4), the trajectory (trajectory.params.rx=0.05), the time grid (time.stop=0.5), any scenario key")
     e.add_argument("--json", action="store_true")
     e.set_defaults(handler=_cmd_export)
 

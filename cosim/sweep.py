@@ -1,0 +1,501 @@
+"""Parameter sweeps on Dask: a grid or random samples of dotted-name overrides, one run per case.
+
+``python -m cosim sweep SCENARIO --grid ctl.gain.kp=1e4,4e4 --random plant.mass.payload=uniform(0,0.5) -n 8``
+
+- Cases are the cartesian product of the ``--grid`` axes, times ``-n`` random draws (seeded)
+  of the ``--random`` ones. Names are those of ``--set`` (:func:`cosim.scenario.resolve_name`).
+- Our FMUs are built once, before the sweep, and reach the workers as file paths (a case
+  description is plain data: scenario path, overrides, FMU files); FMU handles never leave
+  the process that ran the case.
+- Cases run on Dask: an embedded ``LocalCluster`` of single-threaded worker processes, or an
+  existing cluster (``--scheduler tcp://host:8786``). A dead worker's cases are rescheduled.
+- Every finished case is appended (and flushed) to ``DIR/results.csv`` as it arrives; running
+  the same command again skips the cases already there (``ok`` or ``failed``).
+
+``results.csv``: one row per case: ``case`` (a hash of its parameter values), ``status``
+(``ok``: the run completed; ``failed``: it raised, ``message`` says why), one column per swept
+name, then :func:`cosim.api.metric_names` (``rmse_x``... ``max_error_x``... in signal units,
+``rmse`` and ``max_error`` the largest over the axes, ``peak_effort`` N or N*m, ``sim_time_s``,
+``steps``, ``wall_time_s`` of the case), ``checks`` (the scenario's acceptance checks:
+``ok``/``FAILED``/empty), ``mcap`` (with ``--logs``) and ``message``. Floats are written with
+``repr`` (they read back to the same double).
+"""
+
+from __future__ import annotations
+
+import csv
+import hashlib
+import itertools
+import json
+import math
+import re
+import time
+from collections.abc import Callable, Iterable, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from .errors import CosimError
+
+__all__ = [
+    "RESULTS",
+    "Case",
+    "SweepError",
+    "SweepSpec",
+    "SweepSummary",
+    "make_cases",
+    "parse_grid",
+    "parse_random",
+    "read_results",
+    "run_case",
+    "run_sweep",
+]
+
+RESULTS = "results.csv"
+_RANDOM = re.compile(r"^(uniform|normal)\(\s*([^,()]+)\s*,\s*([^,()]+)\s*\)$")
+
+
+class SweepError(CosimError, ValueError):
+    """A bad sweep definition or output directory."""
+
+
+@dataclass(frozen=True)
+class Case:
+    """One run: overrides by dotted name, and its id (a hash of the names and values)."""
+
+    values: dict[str, Any]
+
+    @property
+    def id(self) -> str:
+        text = json.dumps(sorted((k, repr(v)) for k, v in self.values.items()))
+        return hashlib.sha256(text.encode()).hexdigest()[:12]
+
+
+def _value(text: str, where: str) -> Any:
+    import yaml
+
+    from .scenario import _set_value
+
+    try:
+        return _set_value(text.strip())
+    except yaml.YAMLError as exc:
+        raise SweepError(f"{where}: invalid value {text!r}: {getattr(exc, 'problem', exc)}") from None
+
+
+def parse_grid(items: Sequence[str]) -> dict[str, list[Any]]:
+    """``["ctl.gain.kp[1]=1e4,4e4"]`` -> ``{"ctl.gain.kp[1]": [1e4, 4e4]}`` (values as ``--set`` reads them)."""
+    out: dict[str, list[Any]] = {}
+    for item in items:
+        name, sep, values = item.partition("=")
+        if not sep or not name or not values.strip():
+            raise SweepError(f"--grid {item}: expected NAME=V1,V2,...")
+        if name in out:
+            raise SweepError(f"--grid {item}: {name} is given twice")
+        out[name] = [_value(v, f"--grid {item}") for v in values.split(",")]
+    return out
+
+
+def parse_random(items: Sequence[str]) -> dict[str, tuple[str, float, float]]:
+    """``["plant.mass.payload=uniform(0,0.5)"]`` -> ``{"plant.mass.payload": ("uniform", 0.0, 0.5)}``."""
+    out: dict[str, tuple[str, float, float]] = {}
+    for item in items:
+        name, sep, dist = item.partition("=")
+        m = _RANDOM.match(dist.strip())
+        if not sep or not name or m is None:
+            raise SweepError(f"--random {item}: expected NAME=uniform(A,B) or NAME=normal(MU,SIGMA)")
+        try:
+            a, b = float(m[2]), float(m[3])
+        except ValueError:
+            raise SweepError(f"--random {item}: the bounds must be numbers") from None
+        if m[1] == "uniform" and not a < b:
+            raise SweepError(f"--random {item}: uniform(A,B) needs A < B")
+        if m[1] == "normal" and not b >= 0:
+            raise SweepError(f"--random {item}: normal(MU,SIGMA) needs SIGMA >= 0")
+        out[name] = (m[1], a, b)
+    return out
+
+
+def make_cases(grid: dict[str, list[Any]], random: dict[str, tuple[str, float, float]], n: int | None,
+               seed: int | None) -> list[Case]:
+    """Cartesian product of ``grid``, each combined with ``n`` draws of ``random`` (numpy, ``seed``)."""
+    import numpy as np
+
+    if random and not n:
+        raise SweepError("--random needs -n N (the number of draws)")
+    if n and not random:
+        raise SweepError("-n needs at least one --random NAME=DIST")
+    if not grid and not random:
+        raise SweepError("nothing to sweep: give --grid NAME=V1,V2,... and/or --random NAME=DIST -n N")
+    both = set(grid) & set(random)
+    if both:
+        raise SweepError(f"{', '.join(sorted(both))}: both --grid and --random")
+    rng = np.random.default_rng(seed)
+    draws = [{name: float(rng.uniform(a, b) if kind == "uniform" else rng.normal(a, b))
+              for name, (kind, a, b) in random.items()} for _ in range(n or 1)]
+    names = list(grid)
+    cases = []
+    for combo in itertools.product(*(grid[k] for k in names)):
+        for draw in draws:
+            cases.append(Case({**dict(zip(names, combo)), **draw}))
+    ids = [c.id for c in cases]
+    if len(set(ids)) != len(ids):
+        raise SweepError("some cases repeat the same values (a grid value given twice?)")
+    return cases
+
+
+def run_case(scenario: str, values: dict[str, Any], fmu_files: dict[str, str], mcap: str | None = None
+             ) -> dict[str, Any]:
+    """Run one case (in a Dask worker, or here); never raises for a failing case.
+
+    ``fmu_files``: our FMUs by name, built beforehand. The run is serial in its process
+    (``parallel: off``: the sweep already uses the cores). Returns the row of ``results.csv``
+    without the parameter columns: status, message, metrics, checks, mcap.
+    """
+    from . import api
+    from .run import run_scenario
+    from .scenario import dotted_overrides, load_scenario
+
+    t0 = time.perf_counter()
+    row: dict[str, Any] = {"status": "failed", "message": "", "checks": "", "mcap": ""}
+    try:
+        over = dotted_overrides({**values, "parallel": "off"}, "sweep")
+        sc = load_scenario(scenario, over)
+        object.__setattr__(sc, "_fmu_files", dict(fmu_files))
+        peak = api.PeakEffort()
+        res = run_scenario(sc, out=mcap, log=mcap is not None, progress=False, extra_observers=[peak])
+        row.update(api.metrics(sc, res, peak.peak))
+        row["status"] = "ok" if res.status == "completed" else res.status
+        row["message"] = res.message
+        if res.checks:
+            row["checks"] = "ok" if res.passed else "FAILED"
+        row["mcap"] = res.mcap or ""
+    except Exception as exc:  # a failing case is a result, never the end of the sweep
+        msg = str(exc) if isinstance(exc, CosimError) else f"{type(exc).__name__}: {exc}"
+        row["message"] = " ".join(msg.split())  # one line in the table
+        row["wall_time_s"] = time.perf_counter() - t0
+    return row
+
+
+@dataclass
+class SweepSummary:
+    """What a sweep did: cases in the table, this time's runs, failures ("case (values)" -> message)."""
+
+    out: Path
+    total: int
+    ran: int
+    skipped: int
+    failed: dict[str, str] = field(default_factory=dict)
+    wall_time: float = 0.0
+    workers: str = ""
+
+    @property
+    def ok(self) -> bool:
+        return not self.failed
+
+    def text(self) -> str:
+        lines = [f"sweep: {self.total} cases, {self.total - len(self.failed)} ok, {len(self.failed)} failed "
+                 f"({self.ran} run now in {self.wall_time:.1f} s on {self.workers}, {self.skipped} already done) "
+                 f"-> {self.out / RESULTS}"]
+        for cid, msg in list(self.failed.items())[:10]:
+            lines.append(f"  FAILED {cid}: {msg}")
+        if len(self.failed) > 10:
+            lines.append(f"  ... and {len(self.failed) - 10} more (status column of {self.out / RESULTS})")
+        return "\n".join(lines)
+
+
+def read_results(out: str | Path) -> list[dict[str, str]]:
+    """The rows of ``out/results.csv`` (strings, as written)."""
+    path = Path(out) / RESULTS
+    if not path.exists():
+        return []
+    with path.open(newline="") as f:
+        return list(csv.DictReader(f))
+
+
+def _prebuild(scenarios: Iterable[Any]) -> dict[str, str]:
+    """Build each of our FMUs the cases use, once; name -> absolute path."""
+    from .run import _build_ours
+
+    names = sorted({c.fmu for sc in scenarios for c in sc.components.values() if c.fmu is not None})
+    return {n: str(Path(_build_ours(n)).resolve()) for n in names}
+
+
+def _check_names(scenarios: list[Any], fmu_files: dict[str, str]) -> None:
+    """Resolve every case's parameter names and values against the FMUs (no instantiation), so a
+    misspelt name stops the sweep before it starts (ScenarioError / WiringError, exit 2)."""
+    from .run import locate_fmus
+    from .system import build_plan
+
+    infos = None
+    for sc in scenarios:
+        object.__setattr__(sc, "_fmu_files", fmu_files)
+        if infos is None or set(infos) != set(sc.components):
+            infos = locate_fmus(sc)
+        build_plan(sc, infos)
+
+
+def _columns(params: list[str], metric_names: list[str]) -> list[str]:
+    return ["case", "status", *params, *metric_names, "checks", "mcap", "message"]
+
+
+def _cell(v: Any) -> str:
+    if isinstance(v, float):
+        return repr(v)
+    if isinstance(v, (list, dict)):
+        return json.dumps(v)
+    return "" if v is None else str(v)
+
+
+def run_sweep(scenario: str | Path, cases: list[Case], out: str | Path, *, workers: int | None = None,
+              scheduler: str | None = None, logs: bool = False,
+              on_progress: Callable[[int, int, int], None] | None = None) -> SweepSummary:
+    """Run ``cases`` of ``scenario`` on Dask, appending each result to ``out/results.csv``.
+
+    Cases already in the table are skipped. ``workers``: size of the embedded ``LocalCluster``
+    (default: the CPU count); ``scheduler``: address of an existing cluster instead.
+    ``on_progress(done, failed, total)`` after each case. Raises :class:`ScenarioError` for a bad
+    override name or value (checked for every case before anything runs).
+    """
+    from . import api
+    from .scenario import dotted_overrides, load_scenario
+
+    t_start = time.perf_counter()
+    scenario = str(Path(scenario).resolve())
+    out = Path(out)
+    loaded = [load_scenario(scenario, dotted_overrides(c.values, "sweep case")) for c in cases]
+    params = list(dict.fromkeys(k for c in cases for k in c.values))
+    columns = _columns(params, api.metric_names(loaded[0]))
+    out.mkdir(parents=True, exist_ok=True)
+    table = out / RESULTS
+    done_rows = read_results(out)
+    if done_rows and list(done_rows[0]) != columns:
+        raise SweepError(f"{table} holds another sweep (columns {', '.join(done_rows[0])}); use another --out")
+    finished = {r["case"]: r for r in done_rows if r["status"] in ("ok", "failed")}
+    failed = {f"{cid} ({', '.join(f'{k}={r[k]}' for k in params)})": r["message"]
+              for cid, r in finished.items() if r["status"] == "failed"}
+    todo = [c for c in cases if c.id not in finished]
+    (out / "sweep.json").write_text(json.dumps({"scenario": scenario, "parameters": params,
+                                                "cases": len(cases)}, indent=2))
+    summary = SweepSummary(out, len(cases), len(todo), len(cases) - len(todo), failed)
+    if on_progress is not None:
+        on_progress(len(finished), len(failed), len(cases))
+    if not todo:
+        summary.wall_time = time.perf_counter() - t_start
+        summary.workers = "no workers"
+        return summary
+    fmu_files = _prebuild(loaded)
+    _check_names(loaded, fmu_files)
+    if logs:
+        (out / "logs").mkdir(exist_ok=True)
+    new = not table.exists() or table.stat().st_size == 0
+    with table.open("a", newline="") as f, _client(workers, scheduler) as (client, label):
+        from distributed import as_completed
+
+        writer = csv.writer(f)
+        if new:
+            writer.writerow(columns)
+            f.flush()
+        futures = {}
+        for c in todo:
+            mcap = str((out / "logs" / f"{c.id}.mcap").resolve()) if logs else None
+            fut = client.submit(run_case, scenario, c.values, fmu_files, mcap, key=f"case-{c.id}", pure=False)
+            futures[fut] = c
+        n_done = len(finished)
+        for fut in as_completed(futures):
+            c = futures[fut]
+            try:
+                row = fut.result()
+            except Exception as exc:  # the task itself was lost (e.g. every worker it ran on died)
+                row = {"status": "lost", "message": f"{type(exc).__name__}: {exc}"}
+            row = {"case": c.id, **{k: c.values.get(k) for k in params}, **row}
+            writer.writerow([_cell(row.get(k)) for k in columns])
+            f.flush()
+            n_done += 1
+            if row["status"] != "ok":
+                label = f"{c.id} ({', '.join(f'{k}={_cell(v)}' for k, v in c.values.items())})"
+                failed[label] = row["message"] if row["status"] == "failed" else f"{row['status']}: {row['message']}"
+            if on_progress is not None:
+                on_progress(n_done, len(failed), len(cases))
+        summary.workers = label
+    summary.wall_time = time.perf_counter() - t_start
+    return summary
+
+
+class _client:
+    """A Dask client: on ``scheduler`` (an existing cluster) or on an embedded LocalCluster."""
+
+    def __init__(self, workers: int | None, scheduler: str | None):
+        self.workers, self.scheduler = workers, scheduler
+
+    def __enter__(self):
+        import logging
+        import os
+
+        from distributed import Client, LocalCluster
+
+        logging.getLogger("distributed").setLevel(logging.ERROR)
+        self.cluster = None
+        if self.scheduler is not None:
+            try:
+                self.client = Client(self.scheduler, timeout="10s")
+            except OSError as exc:
+                raise SweepError(f"--scheduler {self.scheduler}: cannot connect: {exc}") from None
+            n = len(self.client.scheduler_info().get("workers", {}))
+            return self.client, f"{self.scheduler} ({n} workers)"
+        n = self.workers or os.cpu_count() or 1
+        self.cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=None,
+                                    silence_logs=logging.ERROR)
+        self.client = Client(self.cluster)
+        return self.client, f"{n} local worker process{'es' if n > 1 else ''}"
+
+    def __exit__(self, *exc) -> None:
+        self.client.close()
+        if self.cluster is not None:
+            self.cluster.close()
+
+
+def report(out: str | Path, metric: str = "rmse", fig: str | Path | None = None) -> Path:
+    """A figure of ``metric`` over the swept parameters of ``out/results.csv``: a line against one
+    parameter (several lines when a second one has few values), a heatmap against two (a scatter
+    for random draws). Failed cases are left out (and counted in the title). Returns the PNG path."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    import numpy as np
+
+    rows = read_results(out)
+    if not rows:
+        raise SweepError(f"{Path(out) / RESULTS}: no results")
+    meta = json.loads((Path(out) / "sweep.json").read_text()) if (Path(out) / "sweep.json").exists() else {}
+    params = meta.get("parameters") or [c for c in rows[0] if c not in ("case", "status")][:0]
+    if metric not in rows[0]:
+        valid = [c for c in rows[0] if c not in ("case", "status", "checks", "mcap", "message", *params)]
+        raise SweepError(f"--metric {metric}: not a column; valid: {', '.join(valid)}")
+    ok = [r for r in rows if r["status"] == "ok"]
+    n_bad = len(rows) - len(ok)
+    swept = [p for p in params if len({r[p] for r in rows}) > 1] or params[:1]
+    fig_path = Path(fig) if fig is not None else Path(out) / f"sweep_{metric}.png"
+    f, ax = plt.subplots(figsize=(6.4, 4.6), layout="constrained")
+    y = np.array([float(r[metric]) for r in ok])
+    if len(swept) == 1:
+        x = np.array([float(r[swept[0]]) for r in ok])
+        order = np.argsort(x)
+        ax.plot(x[order], y[order], "o-")
+        ax.set_xlabel(swept[0])
+        ax.set_ylabel(metric)
+    else:
+        a, b = swept[:2]
+        xa = np.array([float(r[a]) for r in ok])
+        xb = np.array([float(r[b]) for r in ok])
+        ua, ub = np.unique(xa), np.unique(xb)
+        if len(ua) * len(ub) == len(ok):  # a full grid: heatmap
+            grid = np.full((len(ub), len(ua)), np.nan)
+            for va, vb, v in zip(xa, xb, y):
+                grid[np.searchsorted(ub, vb), np.searchsorted(ua, va)] = v
+            im = ax.imshow(grid, origin="lower", aspect="auto", cmap="viridis")
+            ax.set_xticks(range(len(ua)), [f"{v:g}" for v in ua])
+            ax.set_yticks(range(len(ub)), [f"{v:g}" for v in ub])
+            for i in range(len(ub)):
+                for j in range(len(ua)):
+                    if not math.isnan(grid[i, j]):
+                        ax.text(j, i, f"{grid[i, j]:.3g}", ha="center", va="center", color="w", fontsize=8)
+        else:
+            im = ax.scatter(xa, xb, c=y, cmap="viridis")
+        f.colorbar(im, ax=ax, label=metric)
+        ax.set_xlabel(a)
+        ax.set_ylabel(b)
+    scenario = Path(meta.get("scenario", "")).stem
+    ax.set_title(f"{scenario}: {metric}, {len(ok)} cases" + (f" ({n_bad} failed, not shown)" if n_bad else ""))
+    f.savefig(fig_path, dpi=120)
+    plt.close(f)
+    return fig_path
+
+
+def register(sub) -> None:
+    """The ``sweep`` and ``sweep-report`` commands."""
+    p = sub.add_parser("sweep", help="run a scenario over a grid or random samples of parameters, on Dask",
+                       description="Cases: the cartesian product of --grid, each with -n draws of --random. "
+                                   "Names as for --set (ctl.gain.kp[1], plant.mass.payload, "
+                                   "trajectory.params.rx, time.stop). Results go to DIR/results.csv as they "
+                                   "arrive; the same command again skips the finished cases. Exit 1 if a case "
+                                   "failed.")
+    p.add_argument("scenario", help="scenario file (.yaml)")
+    p.add_argument("--grid", action="append", default=[], metavar="NAME=V1,V2,...", help="values of NAME "
+                   "(repeatable: the cartesian product)")
+    p.add_argument("--random", action="append", default=[], metavar="NAME=uniform(A,B)|normal(MU,SIGMA)",
+                   help="draws of NAME (repeatable; needs -n)")
+    p.add_argument("-n", type=int, default=None, metavar="N", help="number of random draws")
+    p.add_argument("--seed", type=int, default=None, help="seed of the random draws (default: fresh each time)")
+    p.add_argument("--set", action="append", default=[], metavar="NAME=VALUE",
+                   help="fixed override for every case (repeatable)")
+    p.add_argument("--stop-time", type=float, help="override time.stop for every case, s")
+    g = p.add_mutually_exclusive_group()
+    g.add_argument("--workers", type=int, default=None, metavar="W",
+                   help="embedded Dask LocalCluster of W single-threaded worker processes (default: CPU count)")
+    g.add_argument("--scheduler", metavar="ADDRESS", help="run on an existing Dask cluster (tcp://host:8786)")
+    p.add_argument("--out", required=True, metavar="DIR", help="directory of results.csv (and logs/)")
+    p.add_argument("--logs", action="store_true", help="write each case's MCAP log to DIR/logs/<case>.mcap")
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.add_argument("--json", action="store_true", help="the summary as JSON on stdout")
+    p.set_defaults(handler=_cmd_sweep)
+
+    p = sub.add_parser("sweep-report", help="figure of a sweep's metric against its parameters")
+    p.add_argument("dir", metavar="DIR", help="the sweep's --out directory")
+    p.add_argument("--metric", default="rmse", help="column of results.csv (default rmse: the largest per-axis "
+                                                    "RMSE; rmse_x, max_error, peak_effort, wall_time_s, ...)")
+    p.add_argument("--out", help="PNG path (default DIR/sweep_<metric>.png)")
+    p.set_defaults(handler=_cmd_sweep_report)
+
+
+def _cmd_sweep(args) -> int:
+    from .scenario import _set_value
+
+    if args.n is not None and args.n < 1:
+        raise SweepError(f"-n must be >= 1, got {args.n}")
+    if args.workers is not None and args.workers < 1:
+        raise SweepError(f"--workers must be >= 1, got {args.workers}")
+    if not Path(args.scenario).is_file():
+        raise SweepError(f"{args.scenario}: no such scenario file")
+    fixed: dict[str, Any] = {}
+    for item in args.set:
+        name, sep, raw = item.partition("=")
+        if not sep or not name:
+            raise SweepError(f"--set {item}: expected NAME=VALUE")
+        fixed[name] = _set_value(raw)
+    if args.stop_time is not None:
+        fixed["time.stop"] = args.stop_time
+    cases = make_cases(parse_grid(args.grid), parse_random(args.random), args.n, args.seed)
+    cases = [Case({**fixed, **c.values}) for c in cases]
+    bar = task = None
+    progress = None
+    if not (args.quiet or args.json):
+        from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+
+        bar = Progress(TextColumn("[bold]sweep"), BarColumn(), MofNCompleteColumn(),
+                       TextColumn("[green]{task.fields[ok]} ok[/] [red]{task.fields[failed]} failed[/] "
+                                  "{task.fields[left]} remaining"), TimeElapsedColumn(), transient=True)
+        task = bar.add_task("sweep", total=len(cases), ok=0, failed=0, left=len(cases))
+        bar.start()
+
+        def progress(done: int, failed: int, total: int) -> None:
+            bar.update(task, completed=done, ok=done - failed, failed=failed, left=total - done)
+    try:
+        summary = run_sweep(args.scenario, cases, args.out, workers=args.workers, scheduler=args.scheduler,
+                            logs=args.logs, on_progress=progress)
+    finally:
+        if bar is not None:
+            bar.stop()
+    if args.json:
+        print(json.dumps({"ok": summary.ok, "out": str(summary.out / RESULTS), "total": summary.total,
+                          "ran": summary.ran, "skipped": summary.skipped, "failed": summary.failed,
+                          "wall_time_s": summary.wall_time}, indent=2))
+    else:
+        print(summary.text())
+    return 0 if summary.ok else 1
+
+
+def _cmd_sweep_report(args) -> int:
+    path = report(args.dir, args.metric, args.out)
+    print(f"{args.metric} -> {path}")
+    return 0

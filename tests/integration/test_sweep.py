@@ -1,0 +1,179 @@
+"""Sweeps on Dask (cosim.sweep): equal to serial runs, on a real scheduler and workers, a worker
+killed mid-sweep, a failing case, resumption. Short runs (0.2-0.5 s simulated) keep it fast."""
+
+from __future__ import annotations
+
+import csv
+import json
+import os
+import signal
+import socket
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+pytestmark = pytest.mark.integration
+ROOT = Path(__file__).parents[2]
+SCENARIO = str(ROOT / "scenarios" / "helix_ctc_analytic.yaml")
+BIN = Path(sys.executable).parent
+
+
+def _cosim(*args: str, timeout: float = 240) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "cosim", *args], capture_output=True, text=True, cwd=ROOT,
+                          timeout=timeout)
+
+
+def _rows(out: Path) -> list[dict[str, str]]:
+    with (out / "results.csv").open(newline="") as f:
+        return list(csv.DictReader(f))
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def _wait_for(predicate, timeout: float, what: str) -> None:
+    end = time.monotonic() + timeout
+    while time.monotonic() < end:
+        if predicate():
+            return
+        time.sleep(0.1)
+    raise AssertionError(f"timed out after {timeout} s waiting for {what}")
+
+
+class DaskCluster:
+    """A real Dask scheduler and worker processes (``dask scheduler``, ``dask worker``; the old ``dask-scheduler``) on localhost (random free ports)."""
+
+    def __init__(self, n_workers: int, tmp: Path):
+        self.port = _free_port()
+        self.address = f"tcp://127.0.0.1:{self.port}"
+        self.procs: list[subprocess.Popen] = []
+        self.tmp = tmp
+        self.scheduler = self._start([str(BIN / "dask"), "scheduler", "--host", "127.0.0.1", "--port", str(self.port),
+                                      "--dashboard-address", ":0", "--no-show"], "scheduler")
+        self.workers = [self._start([str(BIN / "dask"), "worker", self.address, "--nthreads", "1", "--no-nanny",
+                                     "--no-dashboard", "--local-directory", str(tmp / f"w{i}"), "--name", f"w{i}"],
+                                    f"worker{i}") for i in range(n_workers)]
+        from distributed import Client
+
+        with Client(self.address, timeout="30s") as c:
+            c.wait_for_workers(n_workers, timeout=60)
+
+    def _start(self, cmd: list[str], name: str) -> subprocess.Popen:
+        log = open(self.tmp / f"{name}.log", "w")
+        p = subprocess.Popen(cmd, stdout=log, stderr=subprocess.STDOUT, cwd=ROOT, start_new_session=True)
+        self.procs.append(p)
+        return p
+
+    def close(self) -> None:
+        for p in reversed(self.procs):
+            if p.poll() is None:
+                p.terminate()
+        for p in self.procs:
+            try:
+                p.wait(15)
+            except subprocess.TimeoutExpired:
+                p.kill()
+                p.wait()
+
+
+@pytest.fixture
+def cluster(tmp_path):
+    c = DaskCluster(2, tmp_path)
+    yield c
+    c.close()
+
+
+def test_sweep_metrics_equal_serial_runs_to_the_last_digit(tmp_path):
+    out = tmp_path / "sweep"
+    grid = ["--grid", "ctl.gain.kp[1]=1e4,4e4", "--grid", "trajectory.params.rx=0.05,0.1"]
+    r = _cosim("sweep", SCENARIO, *grid, "--stop-time", "0.2", "--workers", "2", "--out", str(out), "--quiet")
+    assert r.returncode == 0, r.stdout + r.stderr
+    rows = _rows(out)
+    assert len(rows) == 4 and all(x["status"] == "ok" for x in rows), rows
+    for row in rows[:2]:  # two serial runs against their sweep cases: every metric digit for digit
+        serial = _cosim("run", SCENARIO, "--no-log", "--json", "--stop-time", "0.2",
+                        "--set", f"ctl.gain.kp[1]={row['ctl.gain.kp[1]']}",
+                        "--set", f"trajectory.params.rx={row['trajectory.params.rx']}")
+        assert serial.returncode == 0, serial.stderr
+        errors = json.loads(serial.stdout)["errors"]
+        for e, axis in zip(errors, "xyz"):
+            for metric in ("rmse", "max_error"):
+                assert float(row[f"{metric}_{axis}"]) == e[metric], (row, axis, metric, e[metric])
+    # the same command again runs nothing and keeps the table
+    again = _cosim("sweep", SCENARIO, *grid, "--stop-time", "0.2", "--workers", "2", "--out", str(out), "--json")
+    assert again.returncode == 0, again.stderr
+    summary = json.loads(again.stdout)
+    assert (summary["ran"], summary["skipped"]) == (0, 4), summary
+    assert _rows(out) == rows, "the re-run changed the table"
+
+
+def test_sweep_on_an_existing_dask_cluster(cluster, tmp_path):
+    out = tmp_path / "sweep"
+    r = _cosim("sweep", SCENARIO, "--random", "trajectory.params.rx=uniform(0.04,0.1)", "-n", "3", "--seed", "7",
+               "--stop-time", "0.2", "--scheduler", cluster.address, "--out", str(out), "--quiet")
+    assert r.returncode == 0, r.stdout + r.stderr
+    assert "on tcp://127.0.0.1" in r.stdout and "(2 workers)" in r.stdout, r.stdout
+    rows = _rows(out)
+    assert len(rows) == 3 and all(x["status"] == "ok" for x in rows), rows
+
+
+def test_a_worker_killed_mid_sweep_loses_no_case(cluster, tmp_path):
+    out = tmp_path / "sweep"
+    n = 8
+    sweep = subprocess.Popen([sys.executable, "-m", "cosim", "sweep", SCENARIO,
+                              "--grid", "ctl.gain.kp[1]=" + ",".join(f"{1e4 + 1e3 * k:g}" for k in range(n)),
+                              "--stop-time", "0.5", "--scheduler", cluster.address, "--out", str(out), "--quiet"],
+                             cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        _wait_for(lambda: (out / "results.csv").exists() and len(_rows(out)) >= 1, 120, "the first case")
+        victim = cluster.workers[0]
+        os.killpg(victim.pid, signal.SIGKILL)
+        victim.wait(10)
+        stdout, stderr = sweep.communicate(timeout=240)
+    finally:
+        if sweep.poll() is None:
+            sweep.kill()
+    assert sweep.returncode == 0, stdout + stderr
+    rows = _rows(out)
+    assert victim.returncode == -signal.SIGKILL, victim.returncode
+    assert len(rows) == n and len({x["case"] for x in rows}) == n, [(x["case"], x["status"]) for x in rows]
+    assert all(x["status"] == "ok" for x in rows), [(x["case"], x["status"], x["message"]) for x in rows]
+
+
+def test_a_case_outside_the_workspace_fails_alone(tmp_path):
+    out = tmp_path / "sweep"
+    r = _cosim("sweep", SCENARIO, "--grid", "trajectory.params.rx=0.05,0.1,0.8", "--stop-time", "0.2",
+               "--workers", "2", "--out", str(out))
+    assert r.returncode == 1, r.stdout + r.stderr
+    rows = {float(x["trajectory.params.rx"]): x for x in _rows(out)}
+    assert rows[0.8]["status"] == "failed" and "out of workspace" in rows[0.8]["message"], rows[0.8]
+    assert rows[0.05]["status"] == rows[0.1]["status"] == "ok", rows
+    assert "3 cases, 2 ok, 1 failed" in r.stdout, r.stdout
+    assert f"FAILED {rows[0.8]['case']} (time.stop=0.2, trajectory.params.rx=0.8): out of workspace" in r.stdout, \
+        r.stdout
+
+
+def test_sweep_report_plots_one_and_two_parameters(tmp_path):
+    from cosim.sweep import report
+
+    out = tmp_path / "sweep"
+    out.mkdir()
+    cols = "case,status,a,b,rmse,checks,mcap,message\n"
+    rows = "".join(f"c{i}{j},ok,{i},{j},{i * 0.1 + j},,,\n" for i in range(3) for j in range(2))
+    (out / "results.csv").write_text(cols + rows)
+    (out / "sweep.json").write_text(json.dumps({"scenario": "x.yaml", "parameters": ["a", "b"]}))
+    assert report(out, "rmse").stat().st_size > 1000
+    r = _cosim("sweep-report", str(out), "--metric", "nope")
+    assert r.returncode == 2 and r.stderr.count("\n") == 1 and "valid: rmse" in r.stderr, r.stderr
+
+
+def test_bad_sweep_input_is_one_line_exit_2(tmp_path):
+    for args in (["--grid", "ctl.gain.kpp[1]=1,2"], ["--random", "x=gauss(1,2)", "-n", "2"], ["--grid", "time.stop"]):
+        r = _cosim("sweep", SCENARIO, *args, "--out", str(tmp_path / "o"))
+        assert r.returncode == 2 and r.stderr.count("\n") == 1, (args, r.stderr)
