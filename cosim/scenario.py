@@ -537,7 +537,13 @@ class Overrides(dict):
 
 def _set_value(raw: str) -> Any:
     """A ``--set`` value as YAML reads it, with numbers YAML 1.1 leaves as strings (``1e12``) as numbers."""
-    value = yaml.safe_load(raw)
+    return _numbers(yaml.safe_load(raw))
+
+
+def _numbers(value: Any) -> Any:
+    """YAML 1.1 strings that are numbers (``1e12``) as floats, also inside lists."""
+    if isinstance(value, list):
+        return [_numbers(v) for v in value]
     if isinstance(value, str):
         try:
             return float(value)

@@ -82,8 +82,22 @@ def _value(text: str, where: str) -> Any:
         raise SweepError(f"{where}: invalid value {text!r}: {getattr(exc, 'problem', exc)}") from None
 
 
+def _top_level_split(text: str) -> list[str]:
+    """Split at commas outside brackets: ``1,[2,3],4`` -> ``["1", "[2,3]", "4"]`` (list values)."""
+    parts, depth, cur = [], 0, ""
+    for ch in text:
+        depth += ch in "[(" and 1 or (-1 if ch in "])" else 0)
+        if ch == "," and depth == 0:
+            parts.append(cur)
+            cur = ""
+        else:
+            cur += ch
+    return parts + [cur]
+
+
 def parse_grid(items: Sequence[str]) -> dict[str, list[Any]]:
-    """``["ctl.gain.kp[1]=1e4,4e4"]`` -> ``{"ctl.gain.kp[1]": [1e4, 4e4]}`` (values as ``--set`` reads them)."""
+    """``["ctl.gain.kp[1]=1e4,4e4"]`` -> ``{"ctl.gain.kp[1]": [1e4, 4e4]}`` (values as ``--set`` reads them;
+    a list value in brackets, ``ctl.gain.kp=[1e4,1e4,1e4],[4e4,4e4,4e4]``, sets every element)."""
     out: dict[str, list[Any]] = {}
     for item in items:
         name, sep, values = item.partition("=")
@@ -91,7 +105,7 @@ def parse_grid(items: Sequence[str]) -> dict[str, list[Any]]:
             raise SweepError(f"--grid {item}: expected NAME=V1,V2,...")
         if name in out:
             raise SweepError(f"--grid {item}: {name} is given twice")
-        out[name] = [_value(v, f"--grid {item}") for v in values.split(",")]
+        out[name] = [_value(v, f"--grid {item}") for v in _top_level_split(values)]
     return out
 
 
@@ -378,24 +392,39 @@ def report(out: str | Path, metric: str = "rmse", fig: str | Path | None = None)
     fig_path = Path(fig) if fig is not None else Path(out) / f"sweep_{metric}.png"
     f, ax = plt.subplots(figsize=(6.4, 4.6), layout="constrained")
     y = np.array([float(r[metric]) for r in ok])
+
+    def axis(name: str) -> tuple[np.ndarray, list[str]]:
+        """Numbers, or the positions of list values (``[1e4, 1e4, 1e4]``) ordered by their first element."""
+        cells = [r[name] for r in ok]
+        try:
+            return np.array([float(c) for c in cells]), []
+        except ValueError:
+            labels = sorted(set(cells), key=lambda c: (json.loads(c)[0] if c.startswith("[") else c))
+            return np.array([labels.index(c) for c in cells], dtype=float), [_short(c) for c in labels]
+
     if len(swept) == 1:
-        x = np.array([float(r[swept[0]]) for r in ok])
+        x, labels = axis(swept[0])
         order = np.argsort(x)
         ax.plot(x[order], y[order], "o-")
+        if labels:
+            ax.set_xticks(range(len(labels)), labels)
         ax.set_xlabel(swept[0])
         ax.set_ylabel(metric)
     else:
         a, b = swept[:2]
-        xa = np.array([float(r[a]) for r in ok])
-        xb = np.array([float(r[b]) for r in ok])
+        (xa, la), (xb, lb) = axis(a), axis(b)
         ua, ub = np.unique(xa), np.unique(xb)
         if len(ua) * len(ub) == len(ok):  # a full grid: heatmap
             grid = np.full((len(ub), len(ua)), np.nan)
             for va, vb, v in zip(xa, xb, y):
                 grid[np.searchsorted(ub, vb), np.searchsorted(ua, va)] = v
-            im = ax.imshow(grid, origin="lower", aspect="auto", cmap="viridis")
-            ax.set_xticks(range(len(ua)), [f"{v:g}" for v in ua])
-            ax.set_yticks(range(len(ub)), [f"{v:g}" for v in ub])
+            finite = grid[np.isfinite(grid)]
+            log = finite.size and finite.min() > 0 and finite.max() > 100 * finite.min()
+            from matplotlib.colors import LogNorm
+
+            im = ax.imshow(grid, origin="lower", aspect="auto", cmap="viridis", norm=LogNorm() if log else None)
+            ax.set_xticks(range(len(ua)), la or [f"{v:g}" for v in ua])
+            ax.set_yticks(range(len(ub)), lb or [f"{v:g}" for v in ub])
             for i in range(len(ub)):
                 for j in range(len(ua)):
                     if not math.isnan(grid[i, j]):
@@ -410,6 +439,17 @@ def report(out: str | Path, metric: str = "rmse", fig: str | Path | None = None)
     f.savefig(fig_path, dpi=120)
     plt.close(f)
     return fig_path
+
+
+def _short(cell: str) -> str:
+    """A list value as a tick label: ``[2500.0, 2500.0, 2500.0]`` -> ``2500 (x3)``."""
+    try:
+        values = json.loads(cell)
+    except ValueError:
+        return cell
+    if isinstance(values, list) and values and len(set(map(str, values))) == 1:
+        return f"{values[0]:g} (x{len(values)})" if isinstance(values[0], (int, float)) else cell
+    return cell
 
 
 def register(sub) -> None:
