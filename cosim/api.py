@@ -16,9 +16,10 @@ from __future__ import annotations
 
 import math
 import re
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Mapping, Sequence
+from typing import Any
 
 import numpy as np
 
@@ -27,7 +28,7 @@ from .fmu import BOOLEAN, INTEGER, REAL
 from .run import RunResult, run_scenario
 from .scenario import Scenario, dotted_overrides, expand_signal, load_scenario
 
-__all__ = ["load", "run", "Result", "SignalRecorder", "PeakEffort", "metrics", "metric_names"]
+__all__ = ["PeakEffort", "Result", "SignalRecorder", "load", "metric_names", "metrics", "run"]
 
 _NUMERIC = (REAL, INTEGER, BOOLEAN)
 _EFFORT = re.compile(r"^u(\[\d+\])?$")  # actuator effort u[i] (conventions), N or N*m
@@ -105,8 +106,7 @@ class PeakEffort:
     def stepped(self, k: int, t_ns: int, active: Sequence[int]) -> None:
         for arr, i in self._src:
             v = abs(arr[i])
-            if v > self.peak:
-                self.peak = v
+            self.peak = max(self.peak, v)
 
     def finish(self, rt: Runtime, error: BaseException | None) -> None:
         return None
