@@ -20,21 +20,17 @@ from .scenario import Scenario, TrajectorySpec, _line_for
 
 __all__ = ["make_trajectory", "check_positions", "preflight", "initial_state_values", "trajectory_start_values"]
 
-_CLASSES = {"helix": "Helix", "pick_and_place": "PickAndPlace", "point_to_point": "PointToPoint",
-            "waypoints": "Waypoints"}
-
-
 def make_trajectory(spec: TrajectorySpec, source: str | None = None):
-    """Instantiate the delta.trajectories class named by ``spec.type`` with ``spec.params``."""
+    """Instantiate the class of ``spec.type`` (:data:`delta.trajectories.TYPES`) with ``spec.params``."""
     try:
-        from delta import trajectories
+        from delta.trajectories import TYPES
     except ImportError:
         raise ScenarioError(Issue("trajectory", "delta.trajectories is not available", source)) from None
-    cls = getattr(trajectories, _CLASSES[spec.type])
+    cls = TYPES[spec.type]
     try:
         return cls(**spec.params)
     except (TypeError, ValueError) as exc:
-        raise ScenarioError(Issue("trajectory.params", f"{_CLASSES[spec.type]}: {exc}", source)) from None
+        raise ScenarioError(Issue("trajectory.params", f"{cls.__name__}: {exc}", source)) from None
 
 
 def check_positions(robot_name: str, times: np.ndarray, positions: np.ndarray,

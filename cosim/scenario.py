@@ -16,6 +16,8 @@ from typing import Any, Literal, Union
 import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 
+from delta.trajectories import TYPES as TRAJECTORY_TYPES
+
 from .errors import Issue, ScenarioError
 
 __all__ = [
@@ -141,11 +143,12 @@ class TimeGrid(_Model):
 class TrajectorySpec(_Model):
     """The reference trajectory, for the pre-flight and the initial state.
 
-    ``type`` is one of delta.trajectories' classes (helix, pick_and_place,
-    point_to_point, waypoints); ``params`` are its constructor arguments.
+    ``type`` names one of :data:`delta.trajectories.TYPES` (helix, pick_and_place,
+    point_to_point, waypoints); ``params`` are its constructor arguments, typed
+    (:func:`trajectory_params_model`).
     """
 
-    type: Literal["helix", "pick_and_place", "point_to_point", "waypoints"]
+    type: Literal[tuple(TRAJECTORY_TYPES)] = Field(description="trajectory type (delta.trajectories.TYPES)")
     params: dict[str, Any] = Field(default_factory=dict)
     check_step: float = Field(0.01, gt=0, description="pre-flight sampling step, s")
     singularity_margin: float | None = Field(
@@ -671,8 +674,19 @@ def apply_overrides(sets: list[str], stop_time: float | None = None) -> Override
 
 def scenario_json_schema() -> dict:
     """JSON Schema of the scenario format, for editors (yaml-language-server)."""
+    from delta.trajectories import TYPES
+
     schema = Scenario.model_json_schema(by_alias=True)
     schema.get("properties", {}).pop("source", None)
+    spec = schema["$defs"]["TrajectorySpec"]
+    branches = []
+    for kind in TYPES:  # params typed per trajectory type: editors complete and check them
+        model = trajectory_params_model(kind).model_json_schema()
+        schema["$defs"].update(model.pop("$defs", {}))
+        schema["$defs"][model["title"].replace(" ", "_")] = model
+        branches.append({"if": {"properties": {"type": {"const": kind}}, "required": ["type"]},
+                         "then": {"properties": {"params": {"$ref": f"#/$defs/{model['title'].replace(' ', '_')}"}}}})
+    spec["allOf"] = branches
     schema["$schema"] = "https://json-schema.org/draft/2020-12/schema"
     return schema
 

@@ -69,3 +69,14 @@ def test_trajectory_parameters_are_typed_and_named():
     with pytest.raises(ScenarioError) as exc:
         parse_scenario(TEXT.replace("rx: 0.1", "rx: abc"), "x.yaml")
     assert "x.yaml:3: trajectory.params.rx: Input should be a valid number" in str(exc.value), str(exc.value)
+
+
+def test_schema_types_trajectory_parameters_per_type():
+    from cosim.scenario import scenario_json_schema
+
+    schema = scenario_json_schema()
+    helix = schema["$defs"]["helix_parameters"]
+    assert helix["additionalProperties"] is False and "rx" in helix["properties"], helix
+    branches = schema["$defs"]["TrajectorySpec"]["allOf"]
+    kinds = [b["if"]["properties"]["type"]["const"] for b in branches]
+    assert kinds == ["helix", "pick_and_place", "point_to_point", "waypoints"], kinds
