@@ -102,6 +102,8 @@ def _copy(path: Path, tmp: Path, out: Path) -> RecoveryReport:
             truncated = True
         except (McapError, EOFError, ValueError, Exception):  # noqa: B014 - any damage ends the usable input
             truncated = True
+        if truncated and not (schemas or channels or any(counts.values())):
+            raise CosimError(f"{path}: not an MCAP log (no complete record in it); nothing was written")
         if truncated:
             w.add_metadata("recovery", {"source": str(path), "note": "input ended inside a record; "
                                                                      "complete records kept"})

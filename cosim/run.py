@@ -8,12 +8,12 @@ from pathlib import Path
 from typing import Any, Sequence
 
 from .algorithm import Observer, Runtime, StopRequest, initialize, simulate
-from .watchdog import Watchdog, hard_exit
 from .errors import ComponentSourceError, CosimError, Issue
 from .fmu import FMUInfo, cleanup_extracted, load_fmu, make_slave
 from .observers import AxisError, Comparison
 from .offload import Offload, choose
 from .scenario import Scenario, _line_for, expand_signal, load_scenario
+from .watchdog import Watchdog, hard_exit
 
 __all__ = ["RunResult", "progress_bar", "locate_fmus", "prepare", "run_scenario", "check_scenario"]
 
