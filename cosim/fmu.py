@@ -19,12 +19,16 @@ turns into a normal end of the run.
 
 from __future__ import annotations
 
+import ast
 import atexit
 import ctypes
+import itertools
 import math
 import os
+import re
 import shutil
 import tempfile
+import weakref
 from collections import deque
 from ctypes import byref, c_double, c_int32, c_int64, c_size_t, c_uint32
 from dataclasses import dataclass, replace
@@ -171,6 +175,52 @@ _EXTRACTED: dict[Path, Path] = {}  # resolved FMU path -> its extraction directo
 # Callbacks and library handles handed to FMUs live as long as the process: an FMU may call its
 # logger while being freed, and pythonfmu libraries must not be unloaded (GC of their objects crashes).
 _KEEP_ALIVE: list[Any] = []
+
+# FMI 2.0 loggers are variadic; fmpy formats the message in a native proxy that keeps *one* global
+# target (the logger of the instance created last), so every instance gets the same dispatcher and
+# is told apart by the componentEnvironment it was instantiated with.
+_FMI2_LOG_TARGETS: weakref.WeakValueDictionary[int, "_Base"] = weakref.WeakValueDictionary()
+_FMI2_ENVIRONMENTS = itertools.count(1)
+_FMI2_LOGGER: Any = None
+
+
+def _fmi2_logger() -> Any:
+    global _FMI2_LOGGER
+    if _FMI2_LOGGER is None:
+        from fmpy.fmi2 import fmi2CallbackLoggerTYPE
+
+        def dispatch(env, instance, status, category, message):  # noqa: ANN001, ANN202
+            slave = _FMI2_LOG_TARGETS.get(env or 0)
+            if slave is not None:
+                slave._on_log(status, category, message)
+
+        _FMI2_LOGGER = fmi2CallbackLoggerTYPE(dispatch)
+    return _FMI2_LOGGER
+
+
+# pythonfmu / pythonfmu3 report a Python exception as this text and the exception's repr
+_PY_EXCEPTION = re.compile(r"Fatal py exception encountered: \[[^\]]*\][^\n]*\n(?P<repr>.*)", re.S)
+_REPR = re.compile(r"(?P<type>[A-Za-z_][\w.]*)\((?P<args>.*)\)", re.S)
+
+
+def log_text(message: str) -> str:
+    """An FMU's log message as shown to the user: a Python exception reported by pythonfmu as
+    ``Fatal py exception encountered: [where] ...\\nType('text')`` becomes ``Type: text``."""
+    m = _PY_EXCEPTION.match(message)
+    if m is None:
+        return message
+    rep = m["repr"].strip()
+    r = _REPR.fullmatch(rep)
+    if r is not None:
+        try:
+            args = ast.literal_eval(f"({r['args']},)") if r["args"].strip() else ()
+        except (ValueError, SyntaxError):
+            return rep
+        if len(args) == 1 and isinstance(args[0], str):
+            return f"{r['type']}: {args[0]}"
+        if not args:
+            return r["type"]
+    return rep
 
 
 def load_fmu(path: str | Path) -> FMUInfo:
@@ -344,6 +394,7 @@ class _Base:
         self._instantiated = False
         self._terminated = False
         self._fatal = False  # after fmi2Fatal/fmi3Fatal no FMI function may be called, freeInstance included
+        self._error_log: tuple[float, str] | None = None  # (time, text) of the last error-status log message
 
     # -- the one place where statuses are checked
     def _check(self, status: int, function: str) -> None:
@@ -370,9 +421,15 @@ class _Base:
             raise FMIError(self.name, function, self.time, None, self._last_log() or str(exc)) from None
 
     def _on_log(self, status: int, category: bytes | None, message: bytes | None) -> None:
-        text = (message or b"").decode("utf-8", "replace").strip()
+        text = log_text((message or b"").decode("utf-8", "replace").strip())
         if text:
             self.log.append(text)
+            if status is not None and status >= 3:  # error, fatal
+                self._error_log = (self.time, text)
+
+    def _error_logged_at(self, t: float) -> bool:
+        """Whether the FMU logged an error-status message while at time ``t`` (e.g. during a step from t)."""
+        return self._error_log is not None and self._error_log[0] == t
 
     # -- start values (parameters), before initialization
     def set_start(self, values: dict[str, Any]) -> None:
@@ -477,6 +534,21 @@ class _MEMixin:
         status = self._fn_get_dx(self._c, dx, self.nx)
         if status > 1:
             self._check(status, self._name_get_dx)
+        # NaN or inf in any element, one sum per call; dx may be a bare pointer (CVode's): slice it
+        if not math.isfinite(sum(dx[: self.nx])):
+            self._non_finite_dx(dx)
+
+    def _non_finite_dx(self, dx) -> None:
+        """Derivatives that are not finite: integrating them would only fail later and nameless (an
+        FMU may also report a failure so, with the reason logged: our pythonfmu3 adapters do)."""
+        if self._error_logged_at(self.time):
+            detail = self._error_log[1]
+        else:
+            names = [d.variable.name for d in self.info.md.derivatives]
+            bad = [f"{names[i] if i < len(names) else f'derivative {i + 1}'} = {dx[i]!r}"
+                   for i in range(self.nx) if not math.isfinite(dx[i])]
+            detail = "non-finite " + ", ".join(bad)
+        raise FMIError(self.name, self._name_get_dx, self.time, None, detail)
 
     def get_z(self, z):
         status = self._fn_get_z(self._c, z, self.nz)
@@ -628,13 +700,15 @@ class _FMI2(_Base):
             fmi2CallbackAllocateMemoryTYPE,
             fmi2CallbackFreeMemoryTYPE,
             fmi2CallbackFunctions,
-            fmi2CallbackLoggerTYPE,
         )
         from fmpy.logging import addLoggerProxy
 
         self.fmu = self._guard("load library", self._make)
         cb = fmi2CallbackFunctions()
-        cb.logger = fmi2CallbackLoggerTYPE(lambda env, inst, status, cat, msg: self._on_log(status, cat, msg))
+        environment = next(_FMI2_ENVIRONMENTS)
+        _FMI2_LOG_TARGETS[environment] = self
+        cb.logger = _fmi2_logger()
+        cb.componentEnvironment = environment
         cb.allocateMemory = fmi2CallbackAllocateMemoryTYPE(calloc)
         cb.freeMemory = fmi2CallbackFreeMemoryTYPE(free)
         addLoggerProxy(byref(cb))
@@ -725,13 +799,16 @@ class FMI2CoSimulation(_FMI2):
                 terminated = bool(self.fmu.getBooleanStatus(fmi2Terminated))
             except Exception:  # noqa: BLE001 - optional function: the FMU did not say it terminated
                 terminated = False
-            if terminated:
+            # pythonfmu sets fmi2Terminated on every rejected step: one that logged an error failed
+            if terminated and not self._error_logged_at(t):
                 try:
                     t_last = float(self.fmu.getRealStatus(fmi2LastSuccessfulTime))
                 except Exception:  # noqa: BLE001 - optional: the step's start is what we know succeeded
                     t_last = t
                 self.time = t_last
                 raise Terminated(self.name, "fmi2DoStep", t_last)
+            if terminated:
+                raise FMIError(self.name, "fmi2DoStep", t, status, f"the FMU rejected the step: {self._error_log[1]}")
             detail = "the FMU rejected the step and did not ask to terminate"
             if self._last_log():
                 detail += f" ({self._last_log()})"
@@ -804,7 +881,8 @@ class _FMI3(_Base):
         self._logger = logger
         _KEEP_ALIVE.append((logger, self.fmu))
         what = "fmi3InstantiateModelExchange" if self.model_exchange else "fmi3InstantiateCoSimulation"
-        self._guard(what, lambda: self.fmu.instantiate(logMessage=logger))
+        # loggingOn: pythonfmu3 (like pythonfmu) reports the exceptions of its Python code only then
+        self._guard(what, lambda: self.fmu.instantiate(loggingOn=True, logMessage=logger))
         self._instantiated = True
         self._c = self.fmu.component
         dll = self.fmu.dll
@@ -887,7 +965,8 @@ class FMI3CoSimulation(_FMI3):
     def step(self, t: float, h: float) -> None:
         self.time = t
         status = self._do_step(self._c, t, h, True, *self._refs)
-        if status == 2 and self._flags[1].value:  # fmi3Discard with terminateSimulation: the FMU ends the run
+        if status == 2 and self._flags[1].value and not self._error_logged_at(t):
+            # fmi3Discard with terminateSimulation: the FMU ends the run (unless it logged an error)
             t_last = self._flags[3].value if self._flags[2].value and self._flags[3].value > t else t
             self.time = t_last
             raise Terminated(self.name, "fmi3DoStep", t_last)
