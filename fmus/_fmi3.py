@@ -10,6 +10,7 @@ over-approximation the standard allows)."""
 
 from __future__ import annotations
 
+import math
 from functools import cached_property
 from typing import Any, Iterable
 from xml.etree.ElementTree import Element
@@ -20,6 +21,7 @@ from pythonfmu3 import (
     Fmi3Causality,
     Fmi3Initial,
     Fmi3SlaveBase,
+    Fmi3Status,
     Fmi3Variability,
     ModelExchange,
     Unit,
@@ -149,12 +151,23 @@ class AdapterME(ValueAccess, Fmi3SlaveBase, ModelExchange):
         self._initialized = True
 
     def get_continuous_state_derivatives(self) -> list[float]:
-        # one evaluation of the dynamics for every derivative (reading each derivative variable
-        # through its getter would evaluate them once per state)
-        self._build()
-        self.derivatives()
-        values = self.values
-        return [values[n] for n in self._derivative_names()]
+        """Every derivative from one evaluation of the dynamics (reading each derivative variable
+        through its getter would evaluate them once per state).
+
+        Never raises: pythonfmu3 (0.3.4) handles an exception from this one call by printing it
+        (``PyErr_Print``, which clears it), then finds no exception pending and reads the missing
+        result as a list, which crashes the whole process (exit 139). A failure is logged with
+        status error instead and the derivatives returned as NaN, which the importer must not
+        integrate (our master stops on them naming the component, the reason and the time).
+        """
+        try:
+            self._build()
+            self.derivatives()
+            values = self.values
+            return [values[n] for n in self._derivative_names()]
+        except Exception as exc:  # noqa: BLE001 - reported through the FMI logger (see above)
+            self.log(f"derivatives at t = {self.time!r} s failed: {type(exc).__name__}: {exc}", Fmi3Status.error)
+            return [math.nan] * len(self._derivative_names())
 
     def set_continuous_states(self, values: list[float]) -> None:
         # the states in ModelStructure order, set in one pass (pythonfmu3's generic version

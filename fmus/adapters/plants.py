@@ -41,11 +41,22 @@ def declare_plant_interface(fmu: Adapter, kind: str) -> None:
     fmu.outputs3(V, "m/s", "platform velocity", depends=())
 
 
+class _TooManyEvaluations(Exception):
+    pass
+
+
 class AnalyticPlant(Adapter):
     """Analytic virtual-work dynamics (delta.dynamics) integrated by DOP853 over each communication step,
-    with the effort u held constant over the step (zero-order hold)."""
+    with the effort u held constant over the step (zero-order hold).
+
+    A step needing more than :attr:`MAX_EVALUATIONS` evaluations of the dynamics fails (fmi2Discard,
+    the reason logged) instead of crawling on: an absurd effort (``u_max = 1e300``) makes the
+    model so stiff that DOP853's steps shrink to ~1e-12 s and never reach the step's end.
+    """
 
     EXPERIMENT = (0.0, 1.0, 1e-3)
+    MAX_EVALUATIONS = 20000
+    """Per communication step: a 1 ms step of the helix takes 12 to ~100; 20000 take ~0.5 s."""
 
     def __init__(self, **kwargs):
         super().__init__(**kwargs)
@@ -60,6 +71,9 @@ class AnalyticPlant(Adapter):
         self.state = initial_joint_state(self, robot)
 
     def _rhs(self, t: float, x: np.ndarray, u: np.ndarray) -> np.ndarray:
+        self._evaluations += 1
+        if self._evaluations > self.MAX_EVALUATIONS:
+            raise _TooManyEvaluations
         return np.concatenate([x[3:], self.model.forward_dynamics(x[:3], x[3:], u)])
 
     def advance(self, t: float, h: float) -> None:
@@ -67,8 +81,14 @@ class AnalyticPlant(Adapter):
         u = self.vec(U)
         if not np.all(np.isfinite(u)):
             raise ValueError(f"non-finite effort u = {u.tolist()}")
-        sol = solve_ivp(self._rhs, (t, t + h), self.state, method="DOP853", args=(u,),
-                        rtol=self.values["solver.rtol"], atol=self.values["solver.atol"])
+        self._evaluations = 0
+        try:
+            sol = solve_ivp(self._rhs, (t, t + h), self.state, method="DOP853", args=(u,),
+                            rtol=self.values["solver.rtol"], atol=self.values["solver.atol"])
+        except _TooManyEvaluations:
+            raise RuntimeError(f"{self.modelName} at t = {t:.6f} s: DOP853 needed more than {self.MAX_EVALUATIONS} "
+                               f"evaluations of the dynamics for a step of {h:g} s (stiff or diverging; effort "
+                               f"u = {u.tolist()})") from None
         if not sol.success or not np.all(np.isfinite(sol.y[:, -1])):
             raise RuntimeError(f"{self.modelName} at t = {t:.6f} s: integration failed: {sol.message}")
         self.state = sol.y[:, -1]
