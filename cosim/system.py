@@ -7,6 +7,7 @@ and the scenario, and produces a :class:`SystemPlan` the algorithm executes.
 from __future__ import annotations
 
 import difflib
+import math
 import re
 from dataclasses import dataclass, field
 from typing import Any, Mapping
@@ -121,7 +122,10 @@ def typed_value(var: Variable, value: Any) -> tuple[Any, str]:
         if isinstance(x, bool) or not isinstance(x, (int, float)):
             return None, bad.format("a number")
         if var.kind == "Real":
-            return float(x), ""
+            x = float(x)
+            if math.isnan(x):
+                return None, bad.format("a number")
+            return x, _out_of_range(var, x)
         if isinstance(x, float) and not x.is_integer():
             return None, bad.format("a whole number")
         x = int(x)
@@ -132,7 +136,7 @@ def typed_value(var: Variable, value: Any) -> tuple[Any, str]:
             lo, hi = -2 ** (bits - 1), 2 ** (bits - 1) - 1
         if not lo <= x <= hi:
             return None, bad.format(f"a whole number in {lo}..{hi}")
-        return x, ""
+        return x, _out_of_range(var, x)
     if var.kind == "Boolean":
         if isinstance(value, bool):
             return value, ""
@@ -144,6 +148,23 @@ def typed_value(var: Variable, value: Any) -> tuple[Any, str]:
             return value if isinstance(value, str) else str(value), ""
         return None, bad.format("a string")
     return value, ""  # Binary: hexadecimal text, checked when set
+
+
+def _out_of_range(var: Variable, x: float) -> str:
+    """What is wrong with ``x`` against ``var``'s declared ``min`` / ``max`` (inclusive), or ""."""
+    lo = _bound(var.min, -math.inf)
+    hi = _bound(var.max, math.inf)
+    if lo <= x <= hi:
+        return ""
+    unit = f" {var.unit}" if var.unit else ""
+    return f"{var.name} = {x!r}{unit} is outside its declared range [{var.min or '-inf'}, {var.max or 'inf'}]{unit}"
+
+
+def _bound(text: str | None, default: float) -> float:
+    try:
+        return default if text is None else float(text)
+    except ValueError:  # an enumeration's symbolic bound, or malformed: not checked
+        return default
 
 
 def _flatten(value: Any) -> list:
