@@ -86,7 +86,8 @@ class Component(_Model):
 
 
 class Connection(_Model):
-    """``from: comp.var`` -> ``to: comp.var``; a name without index expands nothing."""
+    """``from: comp.var`` -> ``to: comp.var``; a prefix (``traj.p_ref``: ``.x/.y/.z``, ``[1]..[n]``) or two
+    components (``from: traj, to: ik``: outputs to the inputs of the same names) wire several (cosim.wiring)."""
 
     model_config = ConfigDict(extra="forbid", frozen=True, populate_by_name=True)
     src: str = Field(alias="from", description="output, as component.variable")
@@ -95,8 +96,8 @@ class Connection(_Model):
     @field_validator("src", "dst")
     @classmethod
     def _dotted(cls, v: str) -> str:
-        if "." not in v or v.startswith(".") or v.endswith("."):
-            raise ValueError(f"expected 'component.variable', got {v!r}")
+        if v.startswith(".") or v.endswith(".") or ("." not in v and not v.isidentifier()):
+            raise ValueError(f"expected 'component.variable', a prefix 'component.p_ref' or a component, got {v!r}")
         return v
 
 

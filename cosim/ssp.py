@@ -217,11 +217,10 @@ def export_ssp(scenario: Scenario, out: str | Path) -> ExportReport:
         "description": scenario.description or None, "generationTool": "delta-cosim"})
     system = _el(root, "ssd:System", {"name": scenario.name})
     elements = _el(system, "ssd:Elements")
-    connected = {}  # (component, variable name) that a connection uses
-    for c in scenario.connections:
-        for ref in (c.src, c.dst):
-            comp, var = ref.split(".", 1)
-            connected[(comp, var)] = ref
+    connected = {}  # (component, variable name) that a connection uses (prefixes expanded: plan.links)
+    for link in plan.links:
+        for port in (link.src, link.dst):
+            connected[(names[port.comp], port.var.name)] = port.label(names)
     for link in plan.links:
         for port in (link.src, link.dst):
             if port.var.is_array:
@@ -268,10 +267,10 @@ def export_ssp(scenario: Scenario, out: str | Path) -> ExportReport:
         if comp.step_multiple != 1:
             ann = _el(_el(el, "ssd:Annotations"), "ssc:Annotation", {"type": OSP_ANNOTATION})
             _el(ann, "osp:StepSizeHint", {"value": _num(t.step * comp.step_multiple)})
-    if scenario.connections:
+    if plan.links:
         conns = _el(system, "ssd:Connections")
-        for cn in scenario.connections:
-            (se, sc), (ee, ec) = cn.src.split(".", 1), cn.dst.split(".", 1)
+        for link in plan.links:
+            (se, sc), (ee, ec) = link.src.label(names).split(".", 1), link.dst.label(names).split(".", 1)
             _el(conns, "ssd:Connection", {"startElement": se, "startConnector": sc, "endElement": ee,
                                           "endConnector": ec})
     units = _unit_definitions(infos)
@@ -297,7 +296,7 @@ def export_ssp(scenario: Scenario, out: str | Path) -> ExportReport:
         partial.replace(out)
     finally:
         partial.unlink(missing_ok=True)
-    return ExportReport(out, list(names), len(scenario.connections), n_params, t.step, t.stop)
+    return ExportReport(out, list(names), len(plan.links), n_params, t.step, t.stop)
 
 
 # --------------------------------------------------------------------------- import

@@ -278,21 +278,33 @@ def build_plan(scenario: Scenario, infos: Mapping[str, FMUInfo], log_signals: st
             return None
         return Port(idx[comp], var, element)
 
+    from .wiring import expand_connection
+
+    driven: dict[str, int] = {}
     for i, c in enumerate(scenario.connections):
-        src = resolve(c.src, ("connections", i, "from"), "output")
-        dst = resolve(c.dst, ("connections", i, "to"), "input")
-        if src is None or dst is None:
-            continue
-        if src.var.kind != dst.var.kind:
-            issue(("connections", i), f"type mismatch: {_describe(c.src, src.var)} -> {_describe(c.dst, dst.var)}")
-            continue
-        if src.count != dst.count:
-            issue(("connections", i), f"size mismatch: {c.src} has {src.count} element(s), {c.dst} has {dst.count}")
-            continue
-        if src.var.unit and dst.var.unit and src.var.unit != dst.var.unit:
-            issue(("connections", i), f"unit mismatch: {_describe(c.src, src.var)} -> {_describe(c.dst, dst.var)}")
-            continue
-        links.append(Link(src, dst))
+        pairs, problem = expand_connection(c.src, c.dst, infos)  # a prefix wires every matching suffix
+        if problem:
+            issue(("connections", i), problem)
+        for c_src, c_dst in pairs:
+            src = resolve(c_src, ("connections", i, "from"), "output")
+            dst = resolve(c_dst, ("connections", i, "to"), "input")
+            if src is None or dst is None:
+                continue
+            if src.var.kind != dst.var.kind:
+                issue(("connections", i), f"type mismatch: {_describe(c_src, src.var)} -> {_describe(c_dst, dst.var)}")
+                continue
+            if src.count != dst.count:
+                issue(("connections", i), f"size mismatch: {c_src} has {src.count} element(s), {c_dst} has "
+                                          f"{dst.count}")
+                continue
+            if src.var.unit and dst.var.unit and src.var.unit != dst.var.unit:
+                issue(("connections", i), f"unit mismatch: {_describe(c_src, src.var)} -> {_describe(c_dst, dst.var)}")
+                continue
+            if len(pairs) > 1 and c_dst in driven:
+                issue(("connections", i), f"input {c_dst} is already driven by connections[{driven[c_dst]}]")
+                continue
+            driven.setdefault(c_dst, i)
+            links.append(Link(src, dst))
 
     extra_reads: list[str] = []
     if scenario.compare is not None:

@@ -184,7 +184,8 @@ def test_exported_archive_holds_what_the_master_sets(ssp):
     assert set(plan.start_values[plan.names.index("plant")]) >= {"initial.p.x", "initial.v.y"}
     conns = [(c.get("startElement") + "." + c.get("startConnector"), c.get("endElement") + "." + c.get("endConnector"))
              for c in root.iterfind("ssd:System/ssd:Connections/ssd:Connection", NS)]
-    assert conns == [(c.src, c.dst) for c in scenario.connections], "connections differ from the scenario's"
+    expanded = [(lk.src.label(plan.names), lk.dst.label(plan.names)) for lk in plan.links]  # prefixes expanded
+    assert conns == expanded and len(conns) == 27, ("connections differ from the scenario's", conns, expanded)
     exp = root.find("ssd:DefaultExperiment", NS)
     assert (float(exp.get("startTime")), float(exp.get("stopTime"))) == (0.0, STOP)
     algo = exp.find("ssd:Annotations/ssc:Annotation/osp:Algorithm/osp:FixedStepAlgorithm", NS)

@@ -1,0 +1,61 @@
+"""Connections by prefix: ``{from: traj.p_ref, to: ik.p_ref}`` wires every element with a matching suffix.
+
+A connection end that names a variable (a scalar, a whole FMI 3.0 array or one element of it)
+is used as is. Otherwise it is a prefix: the variables named ``prefix.SUFFIX`` or
+``prefix[SUFFIX]`` of the wanted causality (``p_ref.x/.y/.z``, ``q_ref[1]..[3]``). Both ends
+must then have the same suffixes; the pairs are made suffix by suffix, in the source's order,
+and each pair is checked (kind, size, unit) as a connection written element by element.
+Two bare component names (``{from: traj, to: ik}``) wire every output of the first to the
+input of the same name of the second (at least one).
+"""
+
+from __future__ import annotations
+
+from .fmu import FMUInfo
+from .system import find_variable
+
+__all__ = ["expand_connection"]
+
+
+def _members(info: FMUInfo, prefix: str, causality: str) -> list[tuple[str, str]]:
+    """(suffix, variable name) of ``prefix.*`` / ``prefix[*]`` variables with ``causality``, in declaration order."""
+    out = []
+    for v in info.variables.values():
+        if v.causality != causality:
+            continue
+        if v.name.startswith(prefix + ".") or v.name.startswith(prefix + "["):
+            out.append((v.name[len(prefix):], v.name))
+    return out
+
+
+def expand_connection(src: str, dst: str, infos: dict[str, FMUInfo]) -> tuple[list[tuple[str, str]], str]:
+    """The element connections of ``src -> dst`` (``comp.name`` each), and a problem ('' if none).
+
+    Ends that resolve to variables give ``[(src, dst)]`` unchanged (the caller checks them).
+    """
+    if "." not in src and "." not in dst:  # component to component: every output with a same-named input
+        if src not in infos or dst not in infos:
+            return [], ""  # an unknown component: reported by the scenario validation
+        inputs = {v.name for v in infos[dst].variables.values() if v.causality == "input"}
+        names = [v.name for v in infos[src].variables.values() if v.causality == "output" and v.name in inputs]
+        if not names:
+            return [], f"{src} has no output named like an input of {dst}"
+        return [(f"{src}.{n}", f"{dst}.{n}") for n in names], ""
+    if "." not in src or "." not in dst:
+        return [], f"give both ends as components ({src.split('.')[0]} -> {dst.split('.')[0]}) or both as variables"
+    (sc, sname), (dc, dname) = src.split(".", 1), dst.split(".", 1)
+    if sc not in infos or dc not in infos:
+        return [(src, dst)], ""
+    s_var = find_variable(infos[sc], sname)[0]
+    d_var = find_variable(infos[dc], dname)[0]
+    if s_var is not None or d_var is not None:
+        return [(src, dst)], ""
+    s_mem, d_mem = _members(infos[sc], sname, "output"), _members(infos[dc], dname, "input")
+    if not s_mem or not d_mem:
+        return [(src, dst)], ""  # neither a variable nor a prefix: reported as an unknown variable
+    s_suf, d_suf = [s for s, _ in s_mem], [s for s, _ in d_mem]
+    if sorted(s_suf) != sorted(d_suf):
+        return [], (f"prefix connection: {src} has {len(s_suf)} output(s) ({' '.join(s_suf)}), {dst} has "
+                    f"{len(d_suf)} input(s) ({' '.join(d_suf)}); they must match suffix by suffix")
+    d_by = dict(d_mem)
+    return [(f"{sc}.{name}", f"{dc}.{d_by[suf]}") for suf, name in s_mem], ""

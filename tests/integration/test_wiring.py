@@ -1,0 +1,53 @@
+"""Connections by prefix and by component (cosim.wiring): same wiring as element by element,
+mismatches as file:line errors."""
+
+from pathlib import Path
+
+import pytest
+
+from cosim.errors import CosimError
+from cosim.run import prepare
+from cosim.scenario import load_scenario
+
+pytestmark = pytest.mark.integration
+ROOT = Path(__file__).parents[2]
+
+
+def _links(path) -> set[tuple[str, str]]:
+    plan, _ = prepare(load_scenario(path))
+    return {(lk.src.label(plan.names), lk.dst.label(plan.names)) for lk in plan.links}
+
+
+def test_prefixes_wire_what_element_lines_wired(tmp_path):
+    text = (ROOT / "scenarios" / "helix_ctc_analytic.yaml").read_text()
+    head, rest = text.split("connections:", 1)
+    tail = rest[rest.index("time:"):]
+    lines = [f'  - {{from: "{s}{suf}", to: "{d}{suf}"}}'
+             for s, d, sufs in (("traj.p_ref", "ik.p_ref", ".x .y .z"), ("traj.v_ref", "ik.v_ref", ".x .y .z"),
+                                ("traj.a_ref", "ik.a_ref", ".x .y .z"), ("ik.q_ref", "ctl.q_ref", "[1] [2] [3]"),
+                                ("ik.qd_ref", "ctl.qd_ref", "[1] [2] [3]"), ("ik.qdd_ref", "ctl.qdd_ref", "[1] [2] [3]"),
+                                ("plant.q", "ctl.q", "[1] [2] [3]"), ("plant.qd", "ctl.qd", "[1] [2] [3]"),
+                                ("ctl.u", "plant.u", "[1] [2] [3]"))
+             for suf in sufs.split()]
+    (tmp_path / "a.yaml").write_text(head + "connections:\n" + "\n".join(lines) + "\n" + tail)
+    (tmp_path / "a.yaml").write_text((tmp_path / "a.yaml").read_text().replace("../runs/", str(tmp_path) + "/"))
+    elementwise = _links(tmp_path / "a.yaml")
+    assert len(elementwise) == 27, len(elementwise)
+    assert _links(ROOT / "scenarios" / "helix_ctc_analytic.yaml") == elementwise
+    assert _links(ROOT / "scenarios" / "helix_ctc.yaml") == elementwise
+    n = sum(line.lstrip().startswith("- {from:") for line in (ROOT / "scenarios" / "helix_ctc.yaml").read_text().splitlines())
+    assert n <= 8, f"helix_ctc.yaml has {n} connection lines"
+
+
+@pytest.mark.parametrize("line, expected", [
+    ("{from: traj.p_ref, to: ctl.qd}", "connections[3]: prefix connection: traj.p_ref has 3 output(s) (.x .y .z), "
+                                       "ctl.qd has 3 input(s) ([1] [2] [3])"),
+    ("{from: traj, to: plant}", "connections[3]: traj has no output named like an input of plant"),
+    ("{from: traj, to: ctl.qd}", "connections[3]: give both ends as components"),
+])
+def test_mismatches_are_file_line_errors(tmp_path, line, expected):
+    text = (ROOT / "scenarios" / "helix_ctc.yaml").read_text().replace("{from: plant.qd, to: ctl.qd}", line)
+    (tmp_path / "s.yaml").write_text(text)
+    with pytest.raises(CosimError) as exc:
+        prepare(load_scenario(tmp_path / "s.yaml"))
+    assert f"s.yaml:20: {expected}" in str(exc.value), str(exc.value)
