@@ -38,6 +38,8 @@ from typing import Any, Iterable, Protocol
 
 from .errors import ComponentSourceError, FMIError, Issue
 
+isfinite = math.isfinite  # a module global: one lookup less per output buffer in the hot path
+
 __all__ = ["Variable", "FMUInfo", "load_fmu", "Slave", "make_slave", "Terminated", "cleanup_extracted",
            "REAL", "INTEGER", "BOOLEAN", "STRING", "BINARY"]
 
@@ -388,6 +390,7 @@ class _Base:
         self.log: deque[str] = deque(maxlen=20)
         self.in_bufs: list[_Buffers] = []
         self.out_bufs: list[_Buffers] = []
+        self._finite: list[tuple[memoryview, _Buffers]] = []
         self._set_calls: list | None = None
         self._get_calls: list | None = None
         self.fmu: Any = None
@@ -446,6 +449,23 @@ class _Base:
         self.in_bufs = self._group(inputs)
         self.out_bufs = self._group(outputs)
         self._set_calls = self._get_calls = None  # hot-path call lists, bound at first use
+        # the real outputs as flat memoryviews of their buffers: one sum per buffer and step tells
+        # whether a value is NaN or infinite (see _check_finite)
+        self._finite = [(memoryview(b.values).cast("B").cast("f" if b.fmi_type == "Float32" else "d"), b)
+                        for b in self.out_bufs if b.kind == REAL and not b.ctype_free]
+
+    def _check_finite(self) -> None:
+        """Stop on a NaN or infinite output, naming component, variable and time. The sum of finite values
+        overflows only near 1e308; then every element is looked at and nothing is raised."""
+        for view, b in self._finite:
+            if not math.isfinite(sum(view)):
+                for v, offset in zip(b.variables, b.offsets):
+                    for k in range(v.count):
+                        x = b.values[offset + k]
+                        if not math.isfinite(x):
+                            name = v.name if v.count == 1 else f"{v.name} (element {k + 1})"
+                            raise FMIError(self.name, f"fmi{self.fmi}Get{b.fmi_type}", self.time, None,
+                                           f"non-finite output {name} = {x!r}")
 
     def locate(self, var: Variable, output: bool = True) -> tuple[Any, int]:
         """(values array, index of the first element) where ``var``'s value lives after bind()."""
@@ -768,6 +788,9 @@ class _FMI2(_Base):
             status = fn(c, vrs, n, values)
             if status > 1:
                 self._check(status, name)
+        for view, b in self._finite:
+            if not isfinite(sum(view)):
+                self._check_finite()
         for b in self.out_bufs:
             if b.ctype_free:
                 got = self._guard("fmi2GetString", self.fmu.getString, list(b.vrs))
@@ -925,6 +948,9 @@ class _FMI3(_Base):
                 self._get_py(b)
             else:
                 self._check(self._getf[b.fmi_type](c, b.vrs, b.n, b.values, b.size), "fmi3Get" + b.fmi_type)
+        for view, b in self._finite:
+            if not isfinite(sum(view)):
+                self._check_finite()
 
     def _get_py(self, b: _Buffers) -> None:
         """Strings and binaries: copied out of the FMU's memory (valid only until its next call)."""
