@@ -1,8 +1,51 @@
-"""``python -m cosim``: see :mod:`cosim.cli`."""
+"""``python -m cosim``: see :mod:`cosim.cli`.
+
+Exit: once the command has finished (its log written and closed, its summary printed), a process
+that loaded Exudyn ends with ``os._exit`` after running the ``atexit`` handlers and flushing
+stdout and stderr, skipping the interpreter's finalization and the shared libraries' destructors.
+After an Exudyn solver failure about 1 run in 60 aborted there (``corrupted double-linked list``,
+exit 134): glibc found the heap already corrupted when a library destructor (libGLX's, loaded with
+Exudyn's GLFW, or libgfortran's, caught under gdb) freed its buffers in ``exit``, after the run had
+printed its error and finished its log and after the interpreter's finalization. The plant alone
+does not do it (0 aborts in 300 runs of the same solver failure without FMUs), so the likely writer
+is the finalization of the Exudyn objects still owned by a pythonfmu instance; it was not pinned
+down further. Nothing is left to do at that point, so finalization is skipped: the exit code and
+the output are always the run's (benchmarks/exit_stress.py: 200 runs, none abnormal).
+"""
 
 import sys
 
 from .cli import main
 
+
+def _exit(code: object) -> None:
+    """Leave with ``code`` (as ``sys.exit`` would); without Exudyn loaded, exactly ``sys.exit``."""
+    if "exudyn" not in sys.modules:
+        sys.exit(code)
+    import atexit
+    import os
+
+    if code is None:
+        status = 0
+    elif isinstance(code, int):
+        status = code
+    else:  # sys.exit("message"): printed, status 1
+        print(code, file=sys.stderr)
+        status = 1
+    try:
+        atexit._run_exitfuncs()  # e.g. removal of extracted FMUs
+    finally:
+        for stream in (sys.stdout, sys.stderr):
+            try:
+                stream.flush()
+            except (OSError, ValueError):  # closed or broken pipe: nothing more can be written
+                pass
+        os._exit(status)
+
+
 if __name__ == "__main__":  # also imported by multiprocessing's spawned workers
-    sys.exit(main())
+    try:
+        result = main()
+    except SystemExit as stop:
+        result = stop.code
+    _exit(result)
