@@ -50,8 +50,10 @@ def test_platform_matches_fk_and_stays_level(robot, p0, n):
 
 
 @pytest.mark.parametrize("robot,masses,fidelity,p0", [
-    (linear_delta_thesis, LinearDeltaMasses(gravity=0.0), "full", (0.0, 0.0, -0.45)),
-    (linear_delta_thesis, LinearDeltaMasses(gravity=0.0), "lumped", (0.0, 0.0, -0.45)),
+    # linear: from z = -0.5 m the coasting carriages stay within 0.10..0.19 m, clear of the end stop
+    # at q_min = 0.07 m, which a start at z = -0.45 m reaches after 0.8 s (the plant then stops)
+    (linear_delta_thesis, LinearDeltaMasses(gravity=0.0), "full", (0.0, 0.0, -0.5)),
+    (linear_delta_thesis, LinearDeltaMasses(gravity=0.0), "lumped", (0.0, 0.0, -0.5)),
     (rotary_delta_prototype, RotaryDeltaMasses(gravity=0.0), "full", (0.0, 0.0, -0.45)),
 ])
 def test_energy_conserved_without_actuation(robot, masses, fidelity, p0):
