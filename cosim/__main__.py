@@ -3,14 +3,16 @@
 Exit: once the command has finished (its log written and closed, its summary printed), a process
 that loaded Exudyn ends with ``os._exit`` after running the ``atexit`` handlers and flushing
 stdout and stderr, skipping the interpreter's finalization and the shared libraries' destructors.
-After an Exudyn solver failure about 1 run in 60 aborted there (``corrupted double-linked list``,
-exit 134): glibc found the heap already corrupted when a library destructor (libGLX's, loaded with
-Exudyn's GLFW, or libgfortran's, caught under gdb) freed its buffers in ``exit``, after the run had
-printed its error and finished its log and after the interpreter's finalization. The plant alone
-does not do it (0 aborts in 300 runs of the same solver failure without FMUs), so the likely writer
-is the finalization of the Exudyn objects still owned by a pythonfmu instance; it was not pinned
-down further. Nothing is left to do at that point, so finalization is skipped: the exit code and
-the output are always the run's (benchmarks/exit_stress.py: 200 runs, none abnormal).
+Runs that loaded Exudyn sometimes aborted there (``corrupted double-linked list``, exit 134) after
+printing their result and finishing their log: 2 in 129 in the issue, 1 in 60 here after a solver
+failure, and 1 in 200 of ``benchmarks/exit_stress.py --plain-exit`` (a *completed* run). glibc
+finds the heap already corrupted when a shared library's destructor (libGLX's, loaded with
+Exudyn's GLFW, or libgfortran's, caught under gdb) frees its buffers in ``exit``, after the
+interpreter's finalization. The write that corrupts it was not found: 300 runs of the bare plant
+(the same solver failure, no FMUs, no master) never aborted, and glibc's malloc checks (a few runs,
+``libc_malloc_debug``) caught nothing earlier. Nothing is left to do at that point, so
+finalization is skipped: the exit code and
+the output are always the run's (``benchmarks/exit_stress.py``: 200 runs, no abnormal exit).
 """
 
 import sys
