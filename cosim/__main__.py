@@ -11,8 +11,8 @@ Exudyn's GLFW, or libgfortran's, caught under gdb) frees its buffers in ``exit``
 interpreter's finalization. The write that corrupts it was not found: 300 runs of the bare plant
 (the same solver failure, no FMUs, no master) never aborted, and glibc's malloc checks (a few runs,
 ``libc_malloc_debug``) caught nothing earlier. Nothing is left to do at that point, so
-finalization is skipped: the exit code and
-the output are always the run's (``benchmarks/exit_stress.py``: 200 runs, no abnormal exit).
+finalization is skipped: the exit code and the output are always the run's
+(``benchmarks/exit_stress.py``: 200 runs, no abnormal exit).
 """
 
 import sys
