@@ -224,6 +224,8 @@ class CVodeIntegrator:
 class DOP853Integrator:
     """SciPy's DOP853, one step at a time, with state events located on its dense output."""
 
+    MAX_NUM_STEPS = 10_000  # steps per call (one call never passes a communication point; a healthy one takes 1-2)
+
     def __init__(self, model: OdeModel, t0: float, rtol: float, max_step: float) -> None:
         self.model = model
         self.rtol = rtol
@@ -285,11 +287,17 @@ class DOP853Integrator:
                 self.t, self._x = s.t, s.y
             self._start(t_stop)
             s = self._solver
+        steps = 0
         while s.t < t_stop:
             t_old = s.t
             msg = s.step()
             if s.status == "failed":
                 raise IntegratorError(f"DOP853 failed at t = {t_old:.9g} s: {msg}")
+            steps += 1
+            if steps > self.MAX_NUM_STEPS:
+                raise IntegratorError(
+                    f"DOP853 took {self.MAX_NUM_STEPS} steps without reaching t = {t_stop:.9g} s (at t = {s.t:.9g} s, "
+                    f"step {s.step_size:.3g} s): the model is stiff or diverging (solver: cvode handles stiff models)")
             self._h_last = s.h_abs  # the step size it proposes next: where the next start begins
             if self.model.nz:
                 z = self._indicators(s.t, s.y)

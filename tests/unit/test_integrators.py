@@ -78,3 +78,23 @@ def test_never_steps_past_the_stop_time(solver):
     m.set_time = lambda t: (seen.append(t), original(t))
     t, _ = integ.advance(0.25)
     assert t == 0.25 and max(seen) <= 0.25, f"{solver}: reached {t}, evaluated up to {max(seen)}"
+
+
+class Blowup(Decay):
+    """x' = x^2 from x0 = 1: x = 1 / (1 - t) leaves every bound before t = 1."""
+
+    nz = 0
+
+    def get_dx(self, dx):
+        self.rhs_calls += 1
+        dx[0] = self.x * self.x
+
+
+@pytest.mark.parametrize("solver", SOLVERS)
+def test_a_diverging_model_fails_with_a_reason_instead_of_stalling(solver):
+    from cosim.integrators import IntegratorError
+
+    integ = make_integrator(solver, Blowup(), 0.0, 1e-8, math.inf)
+    with pytest.raises(IntegratorError) as err:
+        integ.advance(2.0)
+    assert solver.upper()[:3] in str(err.value).upper(), f"{solver}: {err.value}"
