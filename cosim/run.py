@@ -272,6 +272,7 @@ def _run_claimed(scenario: Scenario, output, progress: bool, extra_observers: Se
     started: list[Observer] = []
     error: BaseException | None = None
     t_wall = time.perf_counter()
+    t_loop_end: float | None = None
     bar = None
     stop = StopRequest()
 
@@ -318,6 +319,7 @@ def _run_claimed(scenario: Scenario, output, progress: bool, extra_observers: Se
                     every = max(1, rt.n_steps // 200)
                     cb = lambda k: bar.update(task, completed=k)  # noqa: E731
                 simulate(rt, observers, stop, cb, every)
+                t_loop_end = time.perf_counter()  # the loop's wall time, without the shutdown below
             except BaseException as exc:
                 replaced = watchdog.translate(exc)  # the watchdog's error, when it stopped the run
                 if replaced is not exc:
@@ -327,7 +329,7 @@ def _run_claimed(scenario: Scenario, output, progress: bool, extra_observers: Se
         error = exc
         raise
     finally:
-        wall = time.perf_counter() - t_wall
+        wall = (t_loop_end if t_loop_end is not None else time.perf_counter()) - t_wall
         if bar is not None:
             bar.stop()
         for s in slaves:
