@@ -82,3 +82,17 @@ if __name__ == "__main__":
     target = Path(sys.argv[1]) if len(sys.argv) > 1 else Path(__file__).parent / "scenarios" / "fmus"
     for name, path in build_test_fmus(target).items():
         print(f"{name}: {path}")
+
+
+# A slow feed-forward pair for interruption, watchdog and concurrency tests: the ramp sleeps
+# ``delay`` s per step (``{CosimTSlow}`` / ``{CosimTGain}`` are replaced by the built FMUs' paths).
+SLOW_SCENARIO = """
+name: slow
+components:
+  ramp: {path: "{CosimTSlow}", parameters: {delay: 0.002}}
+  g: {path: "{CosimTGain}"}
+connections:
+  - {from: ramp.y, to: g.u}
+time: {stop: 20.0, step: 0.01}
+logging: {flush_interval: 0.1}
+"""

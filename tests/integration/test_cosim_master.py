@@ -11,6 +11,7 @@ from pathlib import Path
 
 import orjson
 import pytest
+from fmu_helpers import SLOW_SCENARIO
 
 from cosim.errors import AlgebraicLoopError, FMIError, WiringError
 from cosim.observers import Probe
@@ -176,16 +177,7 @@ time: {stop: 0.1, step: 0.001}
 
 
 def _slow_scenario(write_scenario) -> Path:
-    return write_scenario("""
-name: slow
-components:
-  ramp: {path: "{CosimTSlow}", parameters: {delay: 0.002}}
-  g: {path: "{CosimTGain}"}
-connections:
-  - {from: ramp.y, to: g.u}
-time: {stop: 20.0, step: 0.01}
-logging: {flush_interval: 0.1}
-""")
+    return write_scenario(SLOW_SCENARIO)
 
 
 def test_sigint_finishes_the_log(write_scenario, tmp_path):

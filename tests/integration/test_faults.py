@@ -22,6 +22,7 @@ import time
 from pathlib import Path
 
 import pytest
+from fmu_helpers import SLOW_SCENARIO
 
 from cosim.runlog import read_run
 
@@ -57,16 +58,7 @@ time: {stop: 400.0, step: 0.001}
 logging: {flush_interval: 0.1}
 """  # src and g are feed-forward (the worker's with --parallel on); 400k steps: stopped by the tests
 
-SLOW = """
-name: slow
-components:
-  ramp: {path: "{CosimTSlow}", parameters: {delay: 0.002}}
-  g: {path: "{CosimTGain}"}
-connections:
-  - {from: ramp.y, to: g.u}
-time: {stop: 20.0, step: 0.01}
-logging: {flush_interval: 0.1}
-"""
+SLOW = SLOW_SCENARIO
 
 
 def cosim(*args: str, timeout: float = TIMEOUT, **kw) -> subprocess.CompletedProcess:
