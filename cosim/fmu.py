@@ -344,7 +344,7 @@ class _Buffers:
     elements; variable ``variables[i]`` occupies ``values[offsets[i]:offsets[i] + count]``.
     """
 
-    __slots__ = ("vrs", "values", "n", "size", "kind", "fmi_type", "variables", "offsets", "applied")
+    __slots__ = ("vrs", "values", "n", "size", "kind", "fmi_type", "variables", "offsets", "applied", "ctype_free")
 
     def __init__(self, kind: str, fmi_type: str, variables: list[Variable], ctype: Any):
         self.kind = kind
@@ -359,14 +359,11 @@ class _Buffers:
         self.size = size
         self.vrs = (c_uint32 * self.n)(*[v.vr for v in variables])
         self.values = [b"" if kind == BINARY else ""] * size if ctype is None else (ctype * size)()
+        self.ctype_free = ctype is None  # a Python list (strings, binaries), copied through Python
         self.applied: bytes | list | None = None  # model exchange: the values last set (change detection)
 
     def snapshot(self) -> bytes | list:
         return list(self.values) if self.ctype_free else bytes(self.values)
-
-    @property
-    def ctype_free(self) -> bool:
-        return isinstance(self.values, list)
 
 
 def _number(kind: str, value: Any) -> Any:
@@ -449,6 +446,8 @@ class _Base:
         self.in_bufs = self._group(inputs)
         self.out_bufs = self._group(outputs)
         self._set_calls = self._get_calls = None  # hot-path call lists, bound at first use
+        self._py_in = [b for b in self.in_bufs if b.ctype_free]  # strings and binaries: through Python
+        self._py_out = [b for b in self.out_bufs if b.ctype_free]
         # the real outputs as flat memoryviews of their buffers: one sum per buffer and step tells
         # whether a value is NaN or infinite (see _check_finite)
         self._finite = [(memoryview(b.values).cast("B").cast("f" if b.fmi_type == "Float32" else "d"), b)
@@ -458,11 +457,11 @@ class _Base:
         """Stop on a NaN or infinite output, naming component, variable and time. The sum of finite values
         overflows only near 1e308; then every element is looked at and nothing is raised."""
         for view, b in self._finite:
-            if not math.isfinite(sum(view)):
+            if not isfinite(sum(view)):
                 for v, offset in zip(b.variables, b.offsets):
                     for k in range(v.count):
                         x = b.values[offset + k]
-                        if not math.isfinite(x):
+                        if not isfinite(x):
                             name = v.name if v.count == 1 else f"{v.name} (element {k + 1})"
                             raise FMIError(self.name, f"fmi{self.fmi}Get{b.fmi_type}", self.time, None,
                                            f"non-finite output {name} = {x!r}")
@@ -531,6 +530,7 @@ class _MEMixin:
     events = 0  # events handled (the initial event iteration excluded)
     next_event: float | None = None
     event_log: list[tuple[float, str]]  # (time, kind: state/time/step/input) not yet taken by an observer
+    _continuous = False  # in continuous-time mode (after the initial event iteration)
 
     # -- the integrator's view (cosim.integrators.OdeModel): a failing status raises FMIError,
     #    which the integrator re-raises from advance()
@@ -555,7 +555,7 @@ class _MEMixin:
         if status > 1:
             self._check(status, self._name_get_dx)
         # NaN or inf in any element, one sum per call; dx may be a bare pointer (CVode's): slice it
-        if not math.isfinite(sum(dx[: self.nx])):
+        if not isfinite(sum(dx[: self.nx])):
             self._non_finite_dx(dx)
 
     def _non_finite_dx(self, dx) -> None:
@@ -566,7 +566,7 @@ class _MEMixin:
         else:
             names = [d.variable.name for d in self.info.md.derivatives]
             bad = [f"{names[i] if i < len(names) else f'derivative {i + 1}'} = {dx[i]!r}"
-                   for i in range(self.nx) if not math.isfinite(dx[i])]
+                   for i in range(self.nx) if not isfinite(dx[i])]
             detail = "non-finite " + ", ".join(bad)
         raise FMIError(self.name, self._name_get_dx, self.time, None, detail)
 
@@ -626,7 +626,7 @@ class _MEMixin:
         self.integrator = make_integrator(self.solver, self, self.time, self.rtol, self.max_step)
 
     def set_inputs(self) -> None:
-        if not getattr(self, "_continuous", False):
+        if not self._continuous:
             super().set_inputs()  # initialization mode: plain setting
             return
         changed = [b for b in self.in_bufs if b.snapshot() != b.applied]
@@ -767,15 +767,17 @@ class _FMI2(_Base):
             status = fn(c, vrs, n, values)
             if status > 1:
                 self._check(status, name)
-        for b in self.in_bufs:
-            if b.ctype_free:  # strings, through fmpy
-                self._guard("fmi2SetString", self.fmu.setString, list(b.vrs), [str(s) for s in b.values])
+        for b in self._py_in:
+            self._set_strings(b)
+
+    def _set_strings(self, b: _Buffers) -> None:
+        self._guard("fmi2SetString", self.fmu.setString, list(b.vrs), [str(s) for s in b.values])
 
     def _set_buffers(self, bufs: list[_Buffers]) -> None:
         """Set the given input buffers only (model exchange: what changed)."""
         for b in bufs:
             if b.ctype_free:
-                self._guard("fmi2SetString", self.fmu.setString, list(b.vrs), [str(s) for s in b.values])
+                self._set_strings(b)
             else:
                 self._check(self._set[b.kind](self._c, b.vrs, b.n, b.values), "fmi2Set" + b.kind)
 
@@ -791,11 +793,10 @@ class _FMI2(_Base):
         for view, b in self._finite:
             if not isfinite(sum(view)):
                 self._check_finite()
-        for b in self.out_bufs:
-            if b.ctype_free:
-                got = self._guard("fmi2GetString", self.fmu.getString, list(b.vrs))
-                b.values[:] = [(s or b"").decode("utf-8", "replace") if isinstance(s, bytes) else (s or "")
-                               for s in got]
+        for b in self._py_out:
+            got = self._guard("fmi2GetString", self.fmu.getString, list(b.vrs))
+            b.values[:] = [(s or b"").decode("utf-8", "replace") if isinstance(s, bytes) else (s or "")
+                           for s in got]
 
 
 
