@@ -137,8 +137,9 @@ def prepare(scenario: Scenario, log_signals: str | None = None):
 
 
 def _publishing(scenario: Scenario, mcap_path: Path | None, live: tuple[str, int] | None,
-                stamps: str) -> list[Observer]:
-    """The MCAP recorder and/or the live view on one publisher of the run's channels, in start order."""
+                stamps: str) -> tuple[list[Observer], Observer | None]:
+    """The MCAP recorder and/or the live view on one publisher of the run's channels, in start order,
+    and the recorder (None without a log)."""
     from .publish import Publisher, reference_path
 
     robot = None
@@ -151,6 +152,7 @@ def _publishing(scenario: Scenario, mcap_path: Path | None, live: tuple[str, int
                           stamps, reference_path(scenario) if robot is not None else None,
                           expand_signal(scenario.compare.reference) if scenario.compare is not None else None)
     sinks: list[Observer] = []
+    recorder = None
     if live is not None:  # first: a port in use fails before the log file is opened
         from .live import LiveView
 
@@ -158,8 +160,9 @@ def _publishing(scenario: Scenario, mcap_path: Path | None, live: tuple[str, int
     if mcap_path is not None:
         from .mcap_log import McapRecorder
 
-        sinks.append(McapRecorder(mcap_path, publisher, scenario, scenario.source, scenario.logging.flush_interval))
-    return sinks + [publisher]
+        recorder = McapRecorder(mcap_path, publisher, scenario, scenario.source, scenario.logging.flush_interval)
+        sinks.append(recorder)
+    return sinks + [publisher], recorder
 
 
 def check_scenario(path: str | Path, overrides: dict | None = None) -> tuple[Scenario, Any, str]:
@@ -257,9 +260,7 @@ def _run_claimed(scenario: Scenario, output, progress: bool, extra_observers: Se
     mcap_path = output.target if output is not None else None
     recorder = None
     if logging_on or live is not None:  # the log and the live view: the same channels (cosim.publish)
-        sinks = _publishing(scenario, output.partial if output is not None else None, live, stamps)
-        recorder = next((o for o in sinks if output is not None and getattr(o, "path", None) == output.partial),
-                        None)
+        sinks, recorder = _publishing(scenario, output.partial if output is not None else None, live, stamps)
         observers += sinks
     pacing = None
     if realtime is not None:
