@@ -402,7 +402,7 @@ Status core_nominals(Instance *in, const char *fn, double *nominal, size_t n)
 void core_event_update(Instance *in, EventUpdate *ev)
 {
     memset(ev, 0, sizeof *ev);
-    MODEL.event(in->data, in->time, ev);
+    if (MODEL.event) MODEL.event(in->data, in->time, ev);
     in->next_time_defined = ev->next_time_defined;
     in->next_time = ev->next_time;
     if (ev->terminate) in->terminate_requested = true;

@@ -115,7 +115,8 @@ typedef struct {
     void (*indicators)(const void *d, double t, double *z);
     /* Bring every output and exposed local up to date with states, time and inputs. */
     void (*outputs)(void *d, double t);
-    /* The discrete update at an event instant t (state, time or input event). */
+    /* The discrete update at an event instant t (state, time or input event); NULL: the model
+       has no discrete state (an event changes nothing). */
     void (*event)(void *d, double t, EventUpdate *ev);
     /* After each completed integrator step (model exchange: CompletedIntegratorStep;
        co-simulation: each internal step): true to ask for an event at t (NULL: never,

@@ -114,18 +114,10 @@ static void initialize(void *p, double t)
     outputs(p, t);
 }
 
-static void event(void *p, double t, EventUpdate *ev)
-{
-    (void)p;
-    (void)t;
-    (void)ev;
-}
-
 const ModelClass MODEL = {
     .data_size = sizeof(ModelData),
     .defaults = defaults,
     .release = release,
     .initialize = initialize,
     .outputs = outputs,
-    .event = event,
 };

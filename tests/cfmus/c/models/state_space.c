@@ -141,13 +141,6 @@ static void outputs(void *p, double t)
     for (size_t i = 0; i < d->r && i < 3; i++) d->y[i] += d->offset[i];
 }
 
-static void event(void *p, double t, EventUpdate *ev)
-{
-    (void)p;
-    (void)t;
-    (void)ev;
-}
-
 const ModelClass MODEL = {
     .data_size = sizeof(ModelData),
     .defaults = defaults,
@@ -160,5 +153,4 @@ const ModelClass MODEL = {
     .nominals = nominals,
     .derivatives = derivatives,
     .outputs = outputs,
-    .event = event,
 };

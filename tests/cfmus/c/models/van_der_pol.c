@@ -70,13 +70,6 @@ static void outputs(void *p, double t)
     d->der_x1 = dx[1];
 }
 
-static void event(void *p, double t, EventUpdate *ev)
-{
-    (void)p;
-    (void)t;
-    (void)ev;
-}
-
 const ModelClass MODEL = {
     .data_size = sizeof(ModelData),
     .defaults = defaults,
@@ -87,5 +80,4 @@ const ModelClass MODEL = {
     .nominals = nominals,
     .derivatives = derivatives,
     .outputs = outputs,
-    .event = event,
 };
