@@ -87,16 +87,11 @@ def _trajectory_adapters(scenario: Scenario) -> dict[str, type]:
     if not ours:
         return {}
     try:
-        from fmus import registry
-        from fmus.adapters import trajectories
+        from fmus.adapters.trajectories import ADAPTERS
     except ImportError:  # our FMUs cannot be built either; locate_fmus reports that
         return {}
-    out = {}
-    for name, fmu in ours.items():
-        entry = registry.REGISTRY.get(fmu)
-        if entry is not None and entry.module == "trajectories":
-            out[name] = getattr(trajectories, entry.cls)
-    return out
+    by_fmu = {a.FMU: a for a in ADAPTERS.values()}
+    return {name: by_fmu[fmu] for name, fmu in ours.items() if fmu in by_fmu}
 
 
 def _same(given: Any, value: Any) -> bool:
@@ -136,14 +131,11 @@ def trajectory_start_values(scenario: Scenario) -> dict[str, dict[str, Any]]:
     for name, cls in adapters.items():
         comp = scenario.components[name]
         if cls.TYPE != spec.type:
-            from fmus import registry
-            from fmus.adapters import trajectories
+            from fmus.adapters.trajectories import ADAPTERS
 
-            wanted = [e.name for e in registry.REGISTRY.values() if e.module == "trajectories"
-                      and e.cls == trajectories.ADAPTERS[spec.type].__name__]
             issue(("components", name, "fmu"),
                   f"{comp.fmu} generates a {cls.TYPE} trajectory but trajectory.type is {spec.type}; "
-                  f"use fmu: {' or '.join(wanted)} or change trajectory.type")
+                  f"use fmu: {ADAPTERS[spec.type].FMU} or change trajectory.type")
             continue
         try:
             values = cls.parameters_of(traj)

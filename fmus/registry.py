@@ -60,10 +60,10 @@ def _entries() -> list[FmuEntry]:
             FmuEntry(f"{kind}_exudyn_plant", "plants", "ExudynPlant", kind, packages=("delta", "multibody"),
                      requires=("multibody",), summary=f"Exudyn multibody plant (full or lumped), {kind} delta"),
         ]
-    for name, cls in (("helix", "HelixTrajectory"), ("point_to_point", "PointToPointTrajectory"),
-                      ("pick_place", "PickAndPlaceTrajectory"), ("waypoints", "WaypointsTrajectory")):
-        out.append(FmuEntry(name, "trajectories", cls, None, requires=("delta.trajectories",),
-                            summary=f"{name.replace('_', ' ')} trajectory generator"))
+    from .adapters.trajectories import ADAPTERS  # one FMU per type of delta.trajectories.TYPES
+
+    out += [FmuEntry(a.FMU, "trajectories", a.__name__, None, requires=("delta.trajectories",),
+                     summary=f"{a.TYPE.replace('_', ' ')} trajectory generator") for a in ADAPTERS.values()]
     return out
 
 

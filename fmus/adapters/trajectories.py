@@ -3,6 +3,13 @@
 Robot-independent; the start values are the trajectory dataclasses' presets. Outputs are
 evaluated at the FMU's current time (after ``doStep(t, h)`` they describe ``t + h``).
 
+One adapter per entry of :data:`delta.trajectories.TYPES`, the single list of trajectory
+types: :data:`ADAPTERS` maps every type to its adapter, and :mod:`fmus.registry` lists one FMU
+per adapter. A type whose FMU interface is part of the platform's published names is declared
+below with :func:`serves` (its FMU name, preset and parameter names); any other type gets an
+adapter derived from its dataclass (:func:`derived_adapter`), so a new trajectory type needs
+no edit here or in the registry.
+
 Each adapter declares its parameters once, in ``PARAMS``: FMU name <-> dataclass field
 (and element of a tuple field). The same table declares the FMI variables, builds the
 trajectory from the parameter values (:meth:`_Trajectory.from_parameters`) and gives the
@@ -15,7 +22,8 @@ from __future__ import annotations
 from dataclasses import dataclass, fields
 from typing import Any, Callable, Mapping
 
-from delta.trajectories import Helix, PickAndPlace, PointToPoint, Waypoints, seed004_z_steps
+from delta.errors import ParameterError
+from delta.trajectories import TYPES, Helix, PickAndPlace, PointToPoint, Waypoints, seed004_z_steps
 
 from .._fmi import Adapter, axis_names, writer
 
@@ -42,16 +50,20 @@ def _xyz(prefix: str, field: str, description: str, outer: tuple[int, ...] = ())
 
 
 class _Trajectory(Adapter):
-    """Base: ``TYPE`` (the scenario's trajectory type), ``CLASS``, ``DEFAULT`` and ``PARAMS``."""
+    """Base: ``TYPE`` (the scenario's trajectory type, a key of TYPES), ``FMU`` (the FMU's name),
+    ``CLASS`` (``TYPES[TYPE]``), ``DEFAULT``, ``PARAMS`` and ``DESCRIPTION``."""
 
     TYPE: str
+    FMU: str
     CLASS: type
     DEFAULT: Any
     PARAMS: tuple[Param, ...]
+    DESCRIPTION: str
     LIMITS: str = ""  # what the FMU cannot represent, for error messages
 
     def __init__(self, **kwargs):
         super().__init__(**kwargs)
+        self.description = self.DESCRIPTION
         defaults = self.parameters_of(self.DEFAULT)
         for p in self.PARAMS:
             self.parameter(p.name, defaults[p.name], p.unit, p.description)
@@ -83,11 +95,13 @@ class _Trajectory(Adapter):
     def parameters_of(cls, trajectory) -> dict[str, Any]:
         """FMU parameter values (name -> value) that make this FMU generate ``trajectory``.
 
-        The inverse of :meth:`from_parameters`. Raises ValueError naming the field if the
-        FMU cannot represent the trajectory (e.g. a number of waypoints other than its own).
+        The inverse of :meth:`from_parameters`. Raises :class:`~delta.errors.ParameterError`
+        (a ValueError) naming the field if the FMU cannot represent the trajectory (e.g. a number
+        of waypoints other than its own), and :class:`TrajectoryTypeError` (a TypeError) for a
+        trajectory of another type.
         """
         if type(trajectory) is not cls.CLASS:
-            raise TypeError(f"{cls.__name__} generates {cls.CLASS.__name__}, got {type(trajectory).__name__}")
+            raise TrajectoryTypeError(f"{cls.__name__} generates {cls.CLASS.__name__}, got {type(trajectory).__name__}")
         out: dict[str, Any] = {}
         for p in cls.PARAMS:
             value = getattr(trajectory, p.field)
@@ -96,11 +110,11 @@ class _Trajectory(Adapter):
                     value = value[i]
                 out[p.name] = p.cast(value)
             except (IndexError, TypeError, ValueError):
-                raise ValueError(cls._unrepresentable(trajectory, p.field)) from None
+                raise ParameterError(cls._unrepresentable(trajectory, p.field)) from None
         back = cls.from_parameters(out)
         for f in fields(trajectory):
             if getattr(back, f.name) != getattr(trajectory, f.name):
-                raise ValueError(cls._unrepresentable(trajectory, f.name))
+                raise ParameterError(cls._unrepresentable(trajectory, f.name))
         return out
 
     @classmethod
@@ -119,14 +133,77 @@ class _Trajectory(Adapter):
         _WRITE_OUTPUTS(self.values, p, v, a)
 
 
+class TrajectoryTypeError(ParameterError, TypeError):
+    """An adapter was asked for the parameters of a trajectory of another type."""
+
+
 def _tuples(value):
     return tuple(_tuples(v) for v in value) if isinstance(value, list) else value
 
 
+ADAPTERS: dict[str, type[_Trajectory]] = {}
+"""Scenario trajectory type (every key of :data:`delta.trajectories.TYPES`, in its order) -> adapter."""
+
+
+def serves(kind: str, fmu: str | None = None):
+    """Class decorator: the adapter serves trajectory type ``kind`` (a key of TYPES) as FMU ``fmu``
+    (default: the type's name). Sets ``TYPE``, ``FMU`` and ``CLASS`` and records it in ADAPTERS."""
+
+    def declare(cls: type[_Trajectory]) -> type[_Trajectory]:
+        if kind not in TYPES:  # a developer error, caught when this module is imported
+            raise ParameterError(f"{cls.__name__}: {kind!r} is not a trajectory type; "
+                                 f"valid types (delta.trajectories.TYPES): {', '.join(TYPES)}")
+        cls.TYPE, cls.FMU, cls.CLASS = kind, fmu or kind, TYPES[kind]
+        ADAPTERS[kind] = cls
+        return cls
+
+    return declare
+
+
+def _params_of(prefix: str, field: str, value: Any, at: tuple[int, ...], unit: str | None,
+               description: str) -> tuple[Param, ...]:
+    """Parameters of one field value: a scalar is one parameter, a pair or triple of numbers
+    ``prefix.x/.y(/.z)``, any other tuple ``prefix[1..n]`` element by element."""
+    if isinstance(value, tuple):
+        if len(value) in (2, 3) and all(isinstance(v, (int, float)) for v in value):
+            names = [f"{prefix}.{axis}" for axis in "xyz"[:len(value)]]
+            return tuple(Param(n, field, at + (i,), unit, f"{description} ({n[-1]})") for i, n in enumerate(names))
+        return tuple(q for k, v in enumerate(value)
+                     for q in _params_of(f"{prefix}[{k + 1}]", field, v, at + (k,), unit, f"{description} {k + 1}"))
+    cast = str if isinstance(value, str) else int if isinstance(value, int) and not isinstance(value, bool) \
+        else bool if isinstance(value, bool) else float
+    return (Param(prefix, field, at, None if cast is str else unit, description, cast),)
+
+
+def derived_adapter(kind: str) -> type[_Trajectory]:
+    """An adapter for trajectory type ``kind`` derived from its dataclass: FMU ``kind``, preset
+    ``TYPES[kind]()``, one parameter ``kind.field`` per field (elements of tuple fields as
+    ``.x/.y/.z`` or ``[k]``), unit and description from the field's metadata (``unit``,
+    ``description``) when it gives them. Fields whose default is None are not parameters
+    (the FMU generates only trajectories that leave them None).
+    """
+    cls = TYPES[kind]
+    try:
+        default = cls()
+    except TypeError as exc:  # a developer error, caught when this module is imported
+        raise ParameterError(f"trajectory type {kind!r} ({cls.__name__}) has no preset ({exc}); give every field "
+                             f"a default or declare its FMU with @serves({kind!r}) in {__name__}") from None
+    params = tuple(p for f in fields(cls) if getattr(default, f.name) is not None
+                   for p in _params_of(f"{kind}.{f.name}", f.name, getattr(default, f.name), (),
+                                       f.metadata.get("unit"), f.metadata.get("description", f"{cls.__name__}.{f.name}")))
+    end = getattr(default, "end_time", getattr(default, "duration", 1.0))
+    namespace = {"DEFAULT": default, "PARAMS": params, "EXPERIMENT": (0.0, float(end), 1e-3),
+                 "DESCRIPTION": f"{cls.__name__} trajectory ({(cls.__doc__ or '').strip().splitlines()[0]})",
+                 "__doc__": f"{cls.__name__} trajectory generator (derived from its dataclass)."}
+    return serves(kind)(type(f"{cls.__name__}Trajectory", (_Trajectory,), namespace))
+
+
+@serves("helix")
 class HelixTrajectory(_Trajectory):
     """Helix of thesis eq. (27)."""
 
-    TYPE, CLASS, DEFAULT = "helix", Helix, Helix()
+    DEFAULT = Helix()
+    DESCRIPTION = "Helix reference (thesis eq. 27): x = cx + rx cos(w t), y = cy + ry sin(w t), z = z0 + vz t"
     EXPERIMENT = (0.0, DEFAULT.duration, 1e-3)
     PARAMS = (
         Param("helix.centre.x", "centre", (0,), "m", "helix axis x"),
@@ -139,15 +216,12 @@ class HelixTrajectory(_Trajectory):
         Param("helix.duration", "duration", (), "s", "duration of the motion"),
     )
 
-    def __init__(self, **kwargs):
-        super().__init__(**kwargs)
-        self.description = "Helix reference (thesis eq. 27): x = cx + rx cos(w t), y = cy + ry sin(w t), z = z0 + vz t"
 
-
+@serves("point_to_point")
 class PointToPointTrajectory(_Trajectory):
     """Rest-to-rest straight move (cubic or quintic time scaling)."""
 
-    TYPE, CLASS = "point_to_point", PointToPoint
+    DESCRIPTION = "Rest-to-rest point-to-point platform move"
     DEFAULT = PointToPoint(start=(0.0, 0.0, -0.5), end=(0.1, 0.05, -0.55), duration=1.0)
     EXPERIMENT = (0.0, DEFAULT.end_time + 0.5, 1e-3)
     PARAMS = (
@@ -158,15 +232,13 @@ class PointToPointTrajectory(_Trajectory):
         Param("move.profile", "profile", (), None, "time scaling: quintic or cubic", str),
     )
 
-    def __init__(self, **kwargs):
-        super().__init__(**kwargs)
-        self.description = "Rest-to-rest point-to-point platform move"
 
-
+@serves("pick_and_place", fmu="pick_place")
 class PickAndPlaceTrajectory(_Trajectory):
     """Pick-and-place cycle (up, across, down and back)."""
 
-    TYPE, CLASS, DEFAULT = "pick_and_place", PickAndPlace, PickAndPlace(start=(-0.1525, 0.0, -0.5))
+    DEFAULT = PickAndPlace(start=(-0.1525, 0.0, -0.5))
+    DESCRIPTION = "Pick-and-place cycle: up, across, down, and back"
     EXPERIMENT = (0.0, DEFAULT.end_time, 1e-3)
     PARAMS = (
         *_xyz("cycle.start", "start", "pick point"),
@@ -180,15 +252,13 @@ class PickAndPlaceTrajectory(_Trajectory):
         Param("cycle.profile", "profile", (), None, "time scaling: quintic or cubic", str),
     )
 
-    def __init__(self, **kwargs):
-        super().__init__(**kwargs)
-        self.description = "Pick-and-place cycle: up, across, down, and back"
 
-
+@serves("waypoints")
 class WaypointsTrajectory(_Trajectory):
     """Rest-to-rest moves through four waypoints (default: seed 004's z-steps)."""
 
-    TYPE, CLASS, DEFAULT = "waypoints", Waypoints, seed004_z_steps()
+    DEFAULT = seed004_z_steps()
+    DESCRIPTION = "Rest-to-rest moves through waypoints (default: seed 004 z-steps)"
     N_WAYPOINTS = len(DEFAULT.points)
     EXPERIMENT = (0.0, DEFAULT.end_time + 0.5, 1e-3)
     LIMITS = f"it takes {len(DEFAULT.points)} points with segment_time, dwell and profile; no times"
@@ -199,11 +269,9 @@ class WaypointsTrajectory(_Trajectory):
         Param("waypoints.profile", "profile", (), None, "time scaling: quintic or cubic", str),
     )
 
-    def __init__(self, **kwargs):
-        super().__init__(**kwargs)
-        self.description = "Rest-to-rest moves through waypoints (default: seed 004 z-steps)"
 
+for _kind in TYPES:  # every other type: an adapter derived from its dataclass, importable by its class name
+    if _kind not in ADAPTERS:
+        globals()[derived_adapter(_kind).__name__] = ADAPTERS[_kind]
+ADAPTERS = {kind: ADAPTERS[kind] for kind in TYPES}  # TYPES order
 
-ADAPTERS: dict[str, type[_Trajectory]] = {cls.TYPE: cls for cls in (
-    HelixTrajectory, PointToPointTrajectory, PickAndPlaceTrajectory, WaypointsTrajectory)}
-"""Scenario trajectory type -> adapter."""

@@ -149,3 +149,44 @@ def test_no_section_no_values():
     text = SCENARIO.replace("trajectory:\n  type: helix\n  params: {rx: 0.08, z0: -0.5}\n", "").replace(
         "{PARAMS}", "{helix.rx: 0.2}")
     assert trajectory_start_values(parse_scenario(text, "x.yaml")) == {}, "no trajectory section: nothing set"
+
+
+# ----------------------------------------------------------------------------- one list of types
+
+def test_every_trajectory_type_has_one_adapter_and_one_fmu():
+    from delta.trajectories import TYPES
+    from fmus import registry
+
+    assert list(ADAPTERS) == list(TYPES), f"{list(ADAPTERS)} vs {list(TYPES)}"
+    fmus = {e.name: e.cls for e in registry.REGISTRY.values() if e.module == "trajectories"}
+    expected = {a.FMU: a.__name__ for a in ADAPTERS.values()}
+    assert fmus == expected, f"{fmus} vs {expected}"
+    # the published FMU names (scenarios, golden runs) do not move
+    assert sorted(fmus) == ["helix", "pick_place", "point_to_point", "waypoints"], sorted(fmus)
+
+
+def test_a_new_trajectory_type_gets_a_derived_adapter(monkeypatch):
+    # adding a type to delta.trajectories.TYPES is the only edit: its adapter comes from its dataclass
+    from dataclasses import dataclass, field
+
+    import fmus.adapters.trajectories as traj
+    from delta.trajectories import TYPES
+
+    @dataclass(frozen=True)
+    class Tilted(Helix):
+        """Helix with a tilt (test type)."""
+
+        tilt: tuple[float, float, float] = field(default=(0.1, 0.2, 0.3), metadata={"unit": "rad"})
+        turns: int = 2
+
+    monkeypatch.setitem(TYPES, "tilted", Tilted)
+    monkeypatch.setitem(ADAPTERS, "tilted", None)  # restored (removed) after the test
+    cls = traj.derived_adapter("tilted")
+    assert (cls.TYPE, cls.FMU, cls.CLASS, ADAPTERS["tilted"]) == ("tilted", "tilted", Tilted, cls), cls
+    by_name = {p.name: p for p in cls.PARAMS}
+    assert {"tilted.centre.x", "tilted.centre.y", "tilted.rx", "tilted.tilt.z", "tilted.turns"} <= set(by_name), \
+        sorted(by_name)
+    assert (by_name["tilted.tilt.x"].unit, by_name["tilted.turns"].cast) == ("rad", int), by_name["tilted.tilt.x"]
+    other = Tilted(rx=0.05, tilt=(0.0, 0.5, 0.25), turns=3)
+    back = cls.from_parameters(cls.parameters_of(other))
+    assert back == other, f"{back} vs {other}"
