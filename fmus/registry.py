@@ -9,6 +9,7 @@ one more FMU to build, cache and validate per preset.
 
 from __future__ import annotations
 
+import importlib
 import importlib.util
 from dataclasses import dataclass
 from pathlib import Path
@@ -20,11 +21,12 @@ __all__ = ["FmuEntry", "REGISTRY", "names", "get", "build", "available"]
 class FmuEntry:
     """How to build one FMU.
 
-    ``module`` and ``cls`` name the adapter in :mod:`fmus.adapters`; ``kind`` is the
-    robot kind given to the adapter (None for robot-independent components);
-    ``packages`` are the project packages bundled (under a unique name) with it;
-    ``fmi`` is 2 (co-simulation, pythonfmu) or 3 (model exchange, pythonfmu3);
-    ``requires`` are core modules that must exist for the adapter to be buildable.
+    ``module`` and ``cls`` name the adapter class in :mod:`fmus.adapters` (``fmus.adapters.<module>``
+    has an attribute ``cls``); ``kind`` is the robot kind given to the adapter (None for
+    robot-independent components); ``packages`` are the project packages bundled (under a unique
+    name) with it; ``fmi`` is 2 (co-simulation, pythonfmu) or 3 (model exchange, pythonfmu3);
+    ``requires`` are further modules that must be importable for the adapter to run (those its
+    module imports lazily, such as ``multibody.plant``).
     """
 
     name: str
@@ -37,37 +39,36 @@ class FmuEntry:
     summary: str = ""
 
 
-def _entries() -> list[FmuEntry]:
-    out: list[FmuEntry] = []
-    for kind in ("linear", "rotary"):
-        out += [
-            FmuEntry(f"{kind}_ik", "kinematics", "InverseKinematics", kind,
-                     summary=f"inverse kinematics, {kind} delta"),
-            FmuEntry(f"{kind}_fk", "kinematics", "ForwardKinematics", kind,
-                     summary=f"forward kinematics, {kind} delta"),
-        ]
-        for ctrl, cls in (("pd", "PDController"), ("pid", "PIDController"), ("pdplus", "PDPlusController"),
-                          ("ctc", "CTCController")):
-            out.append(FmuEntry(f"{kind}_{ctrl}", "controllers", cls, kind,
-                                requires=("delta.control", "delta.dynamics"),
-                                summary=f"{ctrl.upper()} joint controller, {kind} delta"))
-        out += [
-            FmuEntry(f"{kind}_analytic_plant", "plants", "AnalyticPlant", kind, requires=("delta.dynamics",),
-                     summary=f"analytic dynamics plant (co-simulation), {kind} delta"),
-            FmuEntry(f"{kind}_analytic_plant_me", "plant_me", "AnalyticPlantME", kind, fmi=3,
-                     requires=("delta.dynamics",),
-                     summary=f"analytic dynamics plant (FMI 3.0 model exchange), {kind} delta"),
-            FmuEntry(f"{kind}_exudyn_plant", "plants", "ExudynPlant", kind, packages=("delta", "multibody"),
-                     requires=("multibody",), summary=f"Exudyn multibody plant (full or lumped), {kind} delta"),
-        ]
-    from .adapters.trajectories import ADAPTERS  # one FMU per type of delta.trajectories.TYPES
+_CONTROLLERS = {"pd": "PDController", "pid": "PIDController", "pdplus": "PDPlusController", "ctc": "CTCController"}
 
-    out += [FmuEntry(a.FMU, "trajectories", a.__name__, None, requires=("delta.trajectories",),
+
+def _robot_entries(kind: str) -> list[FmuEntry]:
+    """The FMUs of one robot kind: the declaration of which adapter class serves which FMU."""
+    return [
+        FmuEntry(f"{kind}_ik", "kinematics", "InverseKinematics", kind, summary=f"inverse kinematics, {kind} delta"),
+        FmuEntry(f"{kind}_fk", "kinematics", "ForwardKinematics", kind, summary=f"forward kinematics, {kind} delta"),
+        *(FmuEntry(f"{kind}_{ctrl}", "controllers", cls, kind, summary=f"{ctrl.upper()} joint controller, {kind} delta")
+          for ctrl, cls in _CONTROLLERS.items()),
+        FmuEntry(f"{kind}_analytic_plant", "plants", "AnalyticPlant", kind,
+                 summary=f"analytic dynamics plant (co-simulation), {kind} delta"),
+        FmuEntry(f"{kind}_analytic_plant_me", "plant_me", "AnalyticPlantME", kind, fmi=3,
+                 summary=f"analytic dynamics plant (FMI 3.0 model exchange), {kind} delta"),
+        FmuEntry(f"{kind}_exudyn_plant", "plants", "ExudynPlant", kind, packages=("delta", "multibody"),
+                 requires=("multibody.plant",), summary=f"Exudyn multibody plant (full or lumped), {kind} delta"),
+    ]
+
+
+def _trajectory_entries() -> list[FmuEntry]:
+    """One FMU per trajectory type of :data:`delta.trajectories.TYPES`, as its adapter declares it
+    (:data:`fmus.adapters.trajectories.ADAPTERS`: FMU name, class)."""
+    from .adapters.trajectories import ADAPTERS
+
+    return [FmuEntry(a.FMU, "trajectories", a.__name__, None,
                      summary=f"{a.TYPE.replace('_', ' ')} trajectory generator") for a in ADAPTERS.values()]
-    return out
 
 
-REGISTRY: dict[str, FmuEntry] = {e.name: e for e in _entries()}
+REGISTRY: dict[str, FmuEntry] = {e.name: e for e in [*_robot_entries("linear"), *_robot_entries("rotary"),
+                                                     *_trajectory_entries()]}
 
 
 def names() -> list[str]:
@@ -83,31 +84,39 @@ def get(name: str) -> FmuEntry:
         raise ParameterError(f"unknown FMU {name!r}; valid FMUs: {', '.join(REGISTRY)}") from None
 
 
-def _has_adapter(entry: FmuEntry) -> bool:
-    adapter = Path(__file__).parent / "adapters" / f"{entry.module}.py"
-    return adapter.exists() and f"class {entry.cls}(" in adapter.read_text() and all(_module_has_api(m) for m in entry.requires)
+def adapter(entry: FmuEntry) -> type:
+    """The adapter class that builds ``entry`` (``fmus.adapters.<module>.<cls>``), imported.
+
+    Raises ImportError if its module or the class is missing, or a module it needs cannot be imported.
+    """
+    module = importlib.import_module(f"{__package__}.adapters.{entry.module}")
+    cls = getattr(module, entry.cls, None)
+    if not isinstance(cls, type):
+        raise ImportError(f"FMU {entry.name}: {module.__name__} has no adapter class {entry.cls}")
+    missing = [m for m in entry.requires if not _importable(m)]
+    if missing:
+        raise ImportError(f"FMU {entry.name}: needs {', '.join(missing)}")
+    return cls
 
 
-def _module_has_api(module: str) -> bool:
-    """Whether a required core module exists (the analytic model lives in delta.dynamics)."""
+def _importable(module: str) -> bool:
     try:
-        spec = importlib.util.find_spec(module)
-    except ModuleNotFoundError:
+        return importlib.util.find_spec(module) is not None
+    except ModuleNotFoundError:  # its parent package is missing
         return False
-    if spec is None:
+
+
+def _buildable(entry: FmuEntry) -> bool:
+    try:
+        adapter(entry)
+    except ImportError:
         return False
-    if module == "delta.dynamics":
-        mod = importlib.import_module(module)
-        return hasattr(mod, "analytic_model")
-    if module == "multibody":
-        return importlib.util.find_spec("multibody.plant") is not None or hasattr(
-            importlib.import_module(module), "make_plant")
     return True
 
 
 def available() -> list[str]:
-    """FMUs whose adapter and core modules exist in this checkout."""
-    return [n for n, e in REGISTRY.items() if _has_adapter(e)]
+    """FMUs whose adapter class and the modules it needs import in this checkout."""
+    return [n for n, e in REGISTRY.items() if _buildable(e)]
 
 
 def build(name: str, out_dir: str | Path | None = None, *, force: bool = False) -> Path:
