@@ -189,11 +189,12 @@ def derived_adapter(kind: str) -> type[_Trajectory]:
         raise ParameterError(f"trajectory type {kind!r} ({cls.__name__}) has no preset ({exc}); give every field "
                              f"a default or declare its FMU with @serves({kind!r}) in {__name__}") from None
     params = tuple(p for f in fields(cls) if getattr(default, f.name) is not None
-                   for p in _params_of(f"{kind}.{f.name}", f.name, getattr(default, f.name), (),
-                                       f.metadata.get("unit"), f.metadata.get("description", f"{cls.__name__}.{f.name}")))
+                   for p in _params_of(f"{kind}.{f.name}", f.name, getattr(default, f.name), (), f.metadata.get("unit"),
+                                       f.metadata.get("description", f"{cls.__name__}.{f.name}")))
     end = getattr(default, "end_time", getattr(default, "duration", 1.0))
+    summary = (cls.__doc__ or kind).strip().splitlines()[0]
     namespace = {"DEFAULT": default, "PARAMS": params, "EXPERIMENT": (0.0, float(end), 1e-3),
-                 "DESCRIPTION": f"{cls.__name__} trajectory ({(cls.__doc__ or '').strip().splitlines()[0]})",
+                 "DESCRIPTION": f"{cls.__name__} trajectory ({summary})",
                  "__doc__": f"{cls.__name__} trajectory generator (derived from its dataclass)."}
     return serves(kind)(type(f"{cls.__name__}Trajectory", (_Trajectory,), namespace))
 
