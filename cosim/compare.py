@@ -19,7 +19,7 @@ from __future__ import annotations
 import functools
 import math
 import re
-from dataclasses import asdict, dataclass, field
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable, Mapping, Sequence
 
@@ -27,33 +27,10 @@ import numpy as np
 
 from .errors import CosimError, Issue, ScenarioError
 from .runlog import RunLog, Signal, read_run
+from .stats import ErrorStats
 
-__all__ = ["SignalDiff", "Comparison", "compare_logs", "compare_plants", "tolerance_for", "parse_tolerances",
+__all__ = ["Comparison", "compare_logs", "compare_plants", "tolerance_for", "parse_tolerances",
            "logged_tolerances", "PLANTS"]
-
-
-@dataclass(frozen=True)
-class SignalDiff:
-    """A - B for one signal over the compared samples."""
-
-    name: str
-    unit: str
-    rmse: float
-    max_abs: float
-    t_max: float  # s, time of max_abs
-    samples: int
-    tolerance: float | None = None
-
-    @property
-    def ok(self) -> bool:
-        """True without a tolerance; else max |A - B| <= tolerance (NaN fails)."""
-        return self.tolerance is None or self.max_abs <= self.tolerance
-
-    def message(self) -> str:
-        """One line: what differs, by how much, when, against which tolerance."""
-        tol = "" if self.tolerance is None else f" (tolerance {self.tolerance:.3g} {self.unit})".replace(" )", ")")
-        return (f"{self.name}: max |A - B| = {self.max_abs:.4g} {self.unit} at t = {self.t_max:.3f} s, "
-                f"RMSE {self.rmse:.4g}{tol}").replace("  ", " ")
 
 
 @dataclass
@@ -62,7 +39,7 @@ class Comparison:
 
     a: str
     b: str
-    diffs: list[SignalDiff]
+    diffs: list[ErrorStats]
     t_start: float
     t_stop: float
     only_a: list[str] = field(default_factory=list)
@@ -70,7 +47,7 @@ class Comparison:
     problems: list[str] = field(default_factory=list)  # failures that are not a signal's tolerance
 
     @property
-    def failed(self) -> list[SignalDiff]:
+    def failed(self) -> list[ErrorStats]:
         return [d for d in self.diffs if not d.ok]
 
     @property
@@ -79,7 +56,7 @@ class Comparison:
 
     def as_dict(self) -> dict:
         return {"a": self.a, "b": self.b, "ok": self.ok, "t_start": self.t_start, "t_stop": self.t_stop,
-                "signals": [asdict(d) | {"ok": d.ok} for d in self.diffs], "only_a": self.only_a,
+                "signals": [_signal_dict(d) for d in self.diffs], "only_a": self.only_a,
                 "only_b": self.only_b, "problems": self.problems,
                 "failed": [d.name for d in self.failed]}
 
@@ -96,7 +73,7 @@ class Comparison:
         for d in rows:
             tol = "-" if d.tolerance is None else f"{d.tolerance:.3g}"
             verdict = "" if d.tolerance is None else ("ok" if d.ok else "FAILED")
-            lines.append(f"{d.name:<{width}}  {d.unit:<5} {d.rmse:>10.4g} {d.max_abs:>10.4g} {d.t_max:>8.3f} "
+            lines.append(f"{d.name:<{width}}  {d.unit:<5} {d.rmse:>10.4g} {d.max_error:>10.4g} {d.t_max:>8.3f} "
                          f"{tol:>10}  {verdict}".rstrip())
         if self.only_a:
             lines.append(f"only in A: {', '.join(self.only_a)}")
@@ -108,6 +85,14 @@ class Comparison:
         lines.append(("ok" if self.ok else "FAILED") + f": {checked} signals checked against a tolerance, "
                      f"{len(self.failed)} exceeded")
         return "\n".join(lines)
+
+
+def _signal_dict(d: ErrorStats) -> dict:
+    """One signal in ``compare --json``: name, unit, rmse, max_abs, t_max, samples, tolerance, ok (its keys
+    since the first release; the sides are the logs ``a`` and ``b``, not signals)."""
+    out = d.as_dict(max_error="max_abs")
+    del out["actual"], out["reference"]
+    return out
 
 
 # --------------------------------------------------------------------------- tolerances
@@ -244,9 +229,10 @@ def compare_logs(a: RunLog | str | Path, b: RunLog | str | Path, tolerances: Map
         absd = np.abs(e)
         k = int(np.argmax(absd)) if len(absd) else 0
         rmse = float(np.sqrt(np.mean(e * e))) if len(e) else math.nan
-        diffs.append(SignalDiff(name, sa.unit or sb.unit, rmse, float(absd[k]) if len(absd) else math.nan,
-                                float(t_ns[k] * 1e-9) if len(t_ns) else math.nan, int(len(e)),
-                                tolerance_for(name, tolerances)))
+        diffs.append(ErrorStats(name=name, unit=sa.unit or sb.unit, rmse=rmse,
+                                max_error=float(absd[k]) if len(absd) else math.nan,
+                                t_max=float(t_ns[k] * 1e-9) if len(t_ns) else math.nan, samples=int(len(e)),
+                                tolerance=tolerance_for(name, tolerances)))
     la, lb = labels or (str(a.path), str(b.path))
     return Comparison(la, lb, diffs, lo * 1e-9, hi * 1e-9, [n for n in names_a if n not in names_b],
                       sorted(names_b.difference(names_a)), problems)

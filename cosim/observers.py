@@ -1,27 +1,19 @@
-"""Observers that only watch: comparison statistics (RMSE, max error) and progress."""
+"""Observers that only watch: tracking error statistics (RMSE, max error) and recorded values."""
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
 from typing import Sequence
 
 from .algorithm import Runtime
+from .stats import ErrorStats
 
-__all__ = ["Comparison", "AxisError", "Probe"]
-
-
-@dataclass(frozen=True)
-class AxisError:
-    actual: str
-    reference: str
-    rmse: float
-    max_error: float
-    samples: int
+__all__ = ["ErrorObserver", "Probe"]
 
 
-class Comparison:
-    """Accumulates actual - reference at every macro step (after it) and at the start."""
+class ErrorObserver:
+    """Accumulates actual - reference at every macro step (after it) and at the start;
+    :meth:`result` gives one :class:`~cosim.stats.ErrorStats` per pair."""
 
     def __init__(self, actual: list[str], reference: list[str]):
         self.actual = actual
@@ -29,12 +21,15 @@ class Comparison:
 
     def start(self, rt: Runtime) -> None:
         self._pairs = []
+        self.units = []
         for a, r in zip(self.actual, self.reference):
             pa, pr = rt.plan.port(a), rt.plan.port(r)
             self._pairs.append((rt.where(pa), rt.where(pr)))
+            self.units.append(pa.var.unit or pr.var.unit or "")
         n = len(self._pairs)
         self.sq = [0.0] * n
         self.mx = [0.0] * n
+        self.t_mx = [rt.start_ns] * n
         self.n = 0
         self.stepped(-1, rt.start_ns, ())
 
@@ -45,14 +40,17 @@ class Comparison:
             sq[j] += e * e
             if abs(e) > mx[j]:
                 mx[j] = abs(e)
+                self.t_mx[j] = t_ns
         self.n += 1
 
     def finish(self, rt: Runtime, error: BaseException | None) -> None:
         return None
 
-    def result(self) -> list[AxisError]:
-        return [AxisError(a, r, math.sqrt(s / self.n) if self.n else math.nan, m, self.n)
-                for a, r, s, m in zip(self.actual, self.reference, self.sq, self.mx)]
+    def result(self) -> list[ErrorStats]:
+        """Per pair, named by its actual signal."""
+        return [ErrorStats(name=a, actual=a, reference=r, unit=u, rmse=math.sqrt(s / self.n) if self.n else math.nan,
+                           max_error=m, t_max=t * 1e-9, samples=self.n)
+                for a, r, s, m, t, u in zip(self.actual, self.reference, self.sq, self.mx, self.t_mx, self.units)]
 
 
 class Probe:

@@ -22,7 +22,7 @@ The signals compared are those of the ``compare`` section of the scenario attach
 the log (``plant.p`` vs ``traj.p_ref`` when there is none). Errors are ``actual -
 reference`` at the time stamps both signals carry: for a single-rate run that is the
 start sample and every step, the samples the run's own summary
-(:class:`cosim.observers.Comparison`) used, so the RMSE here equals the summary's.
+(:class:`cosim.observers.ErrorObserver`) used, so the RMSE here equals the summary's.
 """
 
 from __future__ import annotations
@@ -39,8 +39,9 @@ import numpy as np
 
 from .errors import CosimError
 from .runlog import AXES, RunLog, read_run
+from .stats import ErrorStats
 
-__all__ = ["ReportError", "AxisStats", "Pair", "Tracking", "Report", "TableRow", "Table", "tracking", "make_report",
+__all__ = ["ReportError", "Pair", "Tracking", "Report", "TableRow", "Table", "tracking", "make_report",
            "controller_table", "register"]
 
 _DEFAULT_ACTUAL, _DEFAULT_REFERENCE = "plant.p", "traj.p_ref"
@@ -59,31 +60,14 @@ class ReportError(CosimError, ValueError):
 # --------------------------------------------------------------------------- data
 
 
-@dataclass(frozen=True)
-class AxisStats:
-    """Error statistics of one signal pair: ``actual - reference`` over ``samples`` stamps, in ``unit``."""
-
-    axis: str
-    actual: str
-    reference: str
-    unit: str
-    rmse: float
-    max_error: float  # largest |actual - reference|
-    t_max: float  # s, when it occurs
-    samples: int
-
-    def as_dict(self) -> dict[str, Any]:
-        return dict(self.__dict__)
-
-
 def _stats(axes: Sequence[str], actual: Sequence[str], reference: Sequence[str], unit: str, t: np.ndarray,
-           e: np.ndarray) -> list[AxisStats]:
+           e: np.ndarray) -> list[ErrorStats]:
     out = []
     for j, (ax, a, r) in enumerate(zip(axes, actual, reference)):
         col = e[:, j]
         k = int(np.argmax(np.abs(col)))
-        out.append(AxisStats(ax, a, r, unit, float(np.sqrt(np.mean(col * col))), float(abs(col[k])), float(t[k]),
-                             len(col)))
+        out.append(ErrorStats(name=ax, actual=a, reference=r, unit=unit, rmse=float(np.sqrt(np.mean(col * col))),
+                              max_error=float(abs(col[k])), t_max=float(t[k]), samples=len(col)))
     return out
 
 
@@ -119,15 +103,15 @@ class Tracking:
     def is_platform(self) -> bool:
         return self.axes == list(AXES)
 
-    def position_stats(self) -> list[AxisStats]:
+    def position_stats(self) -> list[ErrorStats]:
         p = self.position
         return _stats(self.axes, p.actual_names, p.reference_names, p.unit, p.t, p.error)
 
-    def velocity_stats(self) -> list[AxisStats]:
+    def velocity_stats(self) -> list[ErrorStats]:
         v = self.velocity
         return [] if v is None else _stats(self.axes, v.actual_names, v.reference_names, v.unit, v.t, v.error)
 
-    def joint_stats(self) -> list[AxisStats]:
+    def joint_stats(self) -> list[ErrorStats]:
         q = self.joints
         return [] if q is None else _stats(_JOINTS, q.actual_names, q.reference_names, q.unit, q.t, q.error)
 
@@ -387,7 +371,7 @@ _ROUNDING = 1e-12  # m or m/s: below this an error is floating-point rounding of
 _OFF_SCALE = 4.0  # a peak this many times the 0.5..99.5 percentile band is drawn off scale (a start transient)
 
 
-def _error_column(axs, pair: Pair, stats: list[AxisStats], axes: list[str], what: str) -> None:
+def _error_column(axs, pair: Pair, stats: list[ErrorStats], axes: list[str], what: str) -> None:
     e = pair.error
     colors = ("tab:red", "tab:green", "tab:blue")
     for j, (ax, st) in enumerate(zip(axs, stats)):
@@ -491,20 +475,27 @@ class Report:
     out_dir: Path
     markdown: Path
     figures: dict[str, Path]
-    position: list[AxisStats]
-    velocity: list[AxisStats] = field(default_factory=list)
+    position: list[ErrorStats]
+    velocity: list[ErrorStats] = field(default_factory=list)
     source: str = ""
-    joints: list[AxisStats] = field(default_factory=list)
+    joints: list[ErrorStats] = field(default_factory=list)
 
     def as_dict(self) -> dict[str, Any]:
         return {"run": self.run, "name": self.name, "robot": self.robot, "status": self.status,
                 "duration_s": self.duration, "out_dir": str(self.out_dir), "markdown": str(self.markdown),
                 "figures": {k: str(v) for k, v in self.figures.items()}, "compared": self.source,
-                "position": [s.as_dict() for s in self.position], "velocity": [s.as_dict() for s in self.velocity],
-                "joints": [s.as_dict() for s in self.joints]}
+                "position": [_stats_dict(s) for s in self.position],
+                "velocity": [_stats_dict(s) for s in self.velocity], "joints": [_stats_dict(s) for s in self.joints]}
 
 
-def _stats_table(stats: list[AxisStats], unit: str) -> list[str]:
+def _stats_dict(s: ErrorStats) -> dict[str, Any]:
+    """One axis in ``report --json`` (its keys since the first release: axis, not name; no tolerance)."""
+    out = s.as_dict(name="axis")
+    del out["tolerance"], out["ok"]
+    return out
+
+
+def _stats_table(stats: list[ErrorStats], unit: str) -> list[str]:
     """Markdown rows; lengths (m, m/s) also in um (um/s), other units as logged."""
     micro = unit in ("m", "m/s")
     u, small = unit or "-", f"u{unit}" if micro else unit or "-"
@@ -512,7 +503,7 @@ def _stats_table(stats: list[AxisStats], unit: str) -> list[str]:
             + f" max abs error ({small}) | at t (s) |", "|---|---|---|" + ("---|" if micro else "") + "---|---|"]
     scale = 1e6 if micro else 1.0
     for s in stats:
-        rows.append(f"| {s.axis} | {s.actual} - {s.reference} | {s.rmse:.6e} |"
+        rows.append(f"| {s.name} | {s.actual} - {s.reference} | {s.rmse:.6e} |"
                     + (f" {s.rmse * scale:.4g} |" if micro else "") + f" {s.max_error * scale:.4g} | {s.t_max:.4g} |")
     return rows
 
@@ -750,7 +741,7 @@ def _cmd_report(args: argparse.Namespace) -> int:
         return 0
     print(f"{rep.name}: {rep.status}, {rep.duration:.6g} s simulated -> {rep.markdown}")
     for s in rep.position:
-        print(f"  {s.axis}: RMSE {s.rmse:.4e} {s.unit}, max |e| {s.max_error:.4e} {s.unit} at t = {s.t_max:.4g} s")
+        print(f"  {s.name}: RMSE {s.rmse:.4e} {s.unit}, max |e| {s.max_error:.4e} {s.unit} at t = {s.t_max:.4g} s")
     print("  figures: " + ", ".join(p.name for p in rep.figures.values()))
     return 0
 

@@ -10,9 +10,10 @@ from typing import Any, Sequence
 from .algorithm import Observer, Runtime, StopRequest, initialize, simulate
 from .errors import ComponentSourceError, CosimError, Issue
 from .fmu import FMUInfo, cleanup_extracted, load_fmu, make_slave
-from .observers import AxisError, Comparison
+from .observers import ErrorObserver
 from .offload import Offload, choose
 from .scenario import Scenario, _line_for, expand_signal, load_scenario
+from .stats import ErrorStats
 from .watchdog import Watchdog, hard_exit
 
 __all__ = ["RunResult", "progress_bar", "locate_fmus", "prepare", "run_scenario", "check_scenario"]
@@ -27,7 +28,7 @@ class RunResult:
     sim_time: float  # s simulated
     wall_time: float  # s in the loop
     component_time: dict[str, float]  # s per component
-    errors: list[AxisError] = field(default_factory=list)
+    errors: list[ErrorStats] = field(default_factory=list)
     checks: dict[str, dict[str, Any]] = field(default_factory=dict)
     mcap: str | None = None
     status: str = "completed"  # completed | interrupted | error
@@ -50,9 +51,16 @@ class RunResult:
         return {"scenario": self.scenario, "status": self.status, "message": self.message, "steps": self.steps,
                 "sim_time_s": self.sim_time, "wall_time_s": self.wall_time,
                 "real_time_factor": self.real_time_factor, "component_time_s": self.component_time,
-                "errors": [e.__dict__ for e in self.errors], "checks": self.checks, "passed": self.passed,
+                "errors": [_error_dict(e) for e in self.errors], "checks": self.checks, "passed": self.passed,
                 "mcap": self.mcap, "notes": self.notes, "worker_time_s": self.worker_time,
                 "terminated_by": self.terminated_by, "events": self.events, "realtime": self.realtime}
+
+
+def _error_dict(e: ErrorStats) -> dict[str, Any]:
+    """One compared pair in the run summary: actual, reference, rmse, max_error, samples (as always), unit, t_max."""
+    out = e.as_dict()
+    del out["name"], out["tolerance"], out["ok"]  # name is the actual signal; the run's checks are ``checks``
+    return out
 
 
 def progress_bar():
@@ -253,10 +261,10 @@ def _run_claimed(scenario: Scenario, output, progress: bool, extra_observers: Se
     ahead, note = choose(plan, scenario.parallel, rt.n_steps)
     offload: Offload | None = None
     observers: list[Observer] = []
-    comparison = None
+    tracking = None
     if scenario.compare is not None:
-        comparison = Comparison(expand_signal(scenario.compare.actual), expand_signal(scenario.compare.reference))
-        observers.append(comparison)
+        tracking = ErrorObserver(expand_signal(scenario.compare.actual), expand_signal(scenario.compare.reference))
+        observers.append(tracking)
     mcap_path = output.target if output is not None else None
     recorder = None
     if logging_on or live is not None:  # the log and the live view: the same channels (cosim.publish)
@@ -364,8 +372,8 @@ def _run_claimed(scenario: Scenario, output, progress: bool, extra_observers: Se
     if rt.terminated is not None:  # an FMU ended the simulation: a normal end, said in the summary
         result.message = str(rt.terminated)
         result.terminated_by = rt.terminated.component
-    if comparison is not None:
-        result.errors = comparison.result()
+    if tracking is not None:
+        result.errors = tracking.result()
         if scenario.checks is not None:
             worst_rmse = max(e.rmse for e in result.errors)
             worst_max = max(e.max_error for e in result.errors)

@@ -1,7 +1,7 @@
 """``cosim report`` / ``cosim table``: figures and markdown of a run, RMSE table as thesis Table 5.
 
 One short run (1 s of the thesis helix under CTC on the analytic plant) is shared by the
-tests; its own summary (``cosim.observers.Comparison``, accumulated while it ran) is the
+tests; its own summary (``cosim.observers.ErrorObserver``, accumulated while it ran) is the
 reference the numbers read back from the log must reproduce.
 """
 
@@ -87,16 +87,16 @@ def test_report_writes_figures_and_markdown_with_the_run_summary_rmse(run, tmp_p
         assert f"]({fig.name})" in text, f"{fig.name} not embedded in report.md"
     for ours, theirs in zip(rep.position, result.errors):
         assert (ours.actual, ours.reference) == (theirs.actual, theirs.reference)
-        assert ours.samples == theirs.samples, f"{ours.axis}: {ours.samples} samples vs the summary's {theirs.samples}"
+        assert ours.samples == theirs.samples, f"{ours.name}: {ours.samples} samples vs the summary's {theirs.samples}"
         assert math.isclose(ours.rmse, theirs.rmse, rel_tol=SUMMATION_RTOL), \
-            f"{ours.axis}: RMSE from the log {ours.rmse!r} m vs the run's summary {theirs.rmse!r} m"
+            f"{ours.name}: RMSE from the log {ours.rmse!r} m vs the run's summary {theirs.rmse!r} m"
         assert ours.max_error == theirs.max_error, \
-            f"{ours.axis}: max error from the log {ours.max_error!r} m vs the summary {theirs.max_error!r} m"
-        row = re.search(rf"^\| {ours.axis} \| {re.escape(ours.actual)} - {re.escape(ours.reference)} \| "
+            f"{ours.name}: max error from the log {ours.max_error!r} m vs the summary {theirs.max_error!r} m"
+        row = re.search(rf"^\| {ours.name} \| {re.escape(ours.actual)} - {re.escape(ours.reference)} \| "
                         r"([0-9.e+-]+) \|", text, re.M)
-        assert row, f"no position row for axis {ours.axis} in report.md:\n{text}"
+        assert row, f"no position row for axis {ours.name} in report.md:\n{text}"
         assert math.isclose(float(row.group(1)), theirs.rmse, rel_tol=MARKDOWN_RTOL), \
-            f"{ours.axis}: report.md says {row.group(1)} m, the run's summary {theirs.rmse!r} m"
+            f"{ours.name}: report.md says {row.group(1)} m, the run's summary {theirs.rmse!r} m"
 
 
 def test_report_defaults_to_a_directory_next_to_the_log(run, tmp_path, capsys):

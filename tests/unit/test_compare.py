@@ -73,7 +73,7 @@ def test_identical_logs_agree_exactly(tmp_path):
     sig = {"plant.p.x": (t, np.cos(t * 1e-9)), "ctl.u[1]": (t, t * 1e-9)}
     a, b = write_log(tmp_path / "a.mcap", sig), write_log(tmp_path / "b.mcap", sig)
     cmp = compare_logs(a, b, {"plant": 1e-12, "ctl.u": 1e-12})
-    assert cmp.ok and all(d.max_abs == 0.0 and d.rmse == 0.0 for d in cmp.diffs), cmp.text()
+    assert cmp.ok and all(d.max_error == 0.0 and d.rmse == 0.0 for d in cmp.diffs), cmp.text()
     assert cmp.t_start == 0.0 and cmp.t_stop == pytest.approx(1.0, abs=1e-12), (cmp.t_start, cmp.t_stop)
 
 
@@ -86,7 +86,7 @@ def test_difference_size_time_and_rmse_are_exact(tmp_path):
     b = write_log(tmp_path / "b.mcap", {"plant.p.x": (t, bump), "plant.p.y": (t, y)})
     cmp = compare_logs(a, b, {"plant.p.x": 1e-3})
     d = {x.name: x for x in cmp.diffs}["plant.p.x"]
-    assert d.max_abs == 2e-3 and d.t_max == pytest.approx(0.37, abs=1e-12), (d.max_abs, d.t_max)
+    assert d.max_error == 2e-3 and d.t_max == pytest.approx(0.37, abs=1e-12), (d.max_error, d.t_max)
     assert d.rmse == pytest.approx(2e-3 / math.sqrt(101), rel=1e-12), d.rmse
     assert not cmp.ok and [x.name for x in cmp.failed] == ["plant.p.x"], cmp.text()
     text = cmp.text()
@@ -100,7 +100,7 @@ def test_logs_on_different_grids_are_compared_at_their_common_stamps_in_either_o
     b = write_log(tmp_path / "b.mcap", {"c.x": (tb, curve(tb))})
     ab, ba = compare_logs(a, b, {"c.x": 1e-12}), compare_logs(b, a, {"c.x": 1e-12})
     for cmp in (ab, ba):
-        assert cmp.ok and cmp.diffs[0].samples == 11 and cmp.diffs[0].max_abs <= EXACT, cmp.text()
+        assert cmp.ok and cmp.diffs[0].samples == 11 and cmp.diffs[0].max_error <= EXACT, cmp.text()
     off = tb[:-1] + 1_000_000  # shares no stamp with A: refused, not interpolated
     c = write_log(tmp_path / "c.mcap", {"c.x": (off, curve(off))})
     for x, y in ((a, c), (c, a)):
@@ -123,8 +123,8 @@ def test_nan_on_one_side_fails_and_on_both_sides_agrees(tmp_path):
     b = write_log(tmp_path / "b.mcap", {"c.x": (t, y), "c.y": (t, np.arange(5.0))})
     cmp = compare_logs(a, b, {"c": 1e-9})
     d = {x.name: x for x in cmp.diffs}
-    assert d["c.x"].ok and d["c.x"].max_abs == 0.0, d["c.x"]
-    assert not d["c.y"].ok and d["c.y"].max_abs == math.inf, d["c.y"]
+    assert d["c.x"].ok and d["c.x"].max_error == 0.0, d["c.x"]
+    assert not d["c.y"].ok and d["c.y"].max_error == math.inf, d["c.y"]
 
 
 def test_tolerance_patterns_most_specific_wins():
@@ -163,7 +163,7 @@ def test_baseline_keeps_every_period_sample_exactly(tmp_path):
     assert len(base.signal("plant.p.x").t_ns) == 51, base.signal("plant.p.x").t_ns
     assert base.metadata["baseline"]["period_s"] == "0.02", base.metadata
     cmp = compare_logs(base, src)
-    assert all(d.max_abs == 0.0 and d.samples == 51 for d in cmp.diffs), cmp.text()
+    assert all(d.max_error == 0.0 and d.samples == 51 for d in cmp.diffs), cmp.text()
     assert not (tmp_path / "base.mcap.part").exists()
 
 
@@ -194,3 +194,17 @@ def test_cli_exit_codes_and_default_tolerances_from_the_baseline(tmp_path, capsy
     assert main(["compare", str(a), str(b), "--json", "--tol", "plant=1e-3"]) == 1
     payload = orjson.loads(capsys.readouterr().out)
     assert payload["failed"] == ["plant.p.x"] and payload["signals"][0]["max_abs"] == 2e-3, payload
+
+
+def test_one_error_record_for_runs_reports_and_comparisons():
+    from cosim.stats import ErrorStats
+
+    s = ErrorStats(name="plant.p.x", unit="m", rmse=1e-3, max_error=2e-3, t_max=0.37, samples=11, tolerance=1e-3)
+    expected = "plant.p.x: max |A - B| = 0.002 m at t = 0.370 s, RMSE 0.001 (tolerance 0.001 m)"
+    assert not s.ok and s.message() == expected, f"{s.message()!r} vs {expected!r}"
+    keys = list(s.as_dict(max_error="max_abs"))
+    assert keys == ["name", "actual", "reference", "unit", "rmse", "max_abs", "t_max", "samples", "tolerance", "ok"], \
+        keys
+    nan = ErrorStats(name="x", actual="p.x", reference="p_ref.x", rmse=math.nan, max_error=math.nan, samples=0,
+                     tolerance=1.0)
+    assert not nan.ok and "max |p.x - p_ref.x| = nan" in nan.message(), nan.message()

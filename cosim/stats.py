@@ -1,0 +1,52 @@
+"""One record for the difference of two signals: what a run's error observer accumulates
+(:class:`cosim.observers.ErrorObserver`), what a report computes from the log
+(:mod:`cosim.report`) and what ``compare`` finds between two logs (:mod:`cosim.compare`)."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, fields
+from typing import Any
+
+__all__ = ["ErrorStats"]
+
+
+@dataclass(frozen=True, kw_only=True)
+class ErrorStats:
+    """Statistics of ``actual - reference`` over ``samples`` time stamps, in ``unit``.
+
+    ``name`` says what was compared: an axis (``x``), a signal (``plant.p.x``) or the actual
+    signal of a pair; ``actual`` and ``reference`` name the two sides when they are signals
+    (empty when the sides are two logs, A and B). ``max_error`` is the largest
+    |actual - reference| and ``t_max`` (s) when it occurs; ``tolerance`` bounds ``max_error``
+    (None: not checked).
+    """
+
+    name: str
+    actual: str = ""
+    reference: str = ""
+    unit: str = ""
+    rmse: float
+    max_error: float
+    t_max: float = math.nan
+    samples: int
+    tolerance: float | None = None
+
+    @property
+    def ok(self) -> bool:
+        """True without a tolerance; else ``max_error <= tolerance`` (NaN fails)."""
+        return self.tolerance is None or self.max_error <= self.tolerance
+
+    def message(self) -> str:
+        """One line: what differs, by how much, when, against which tolerance."""
+        diff = f"{self.actual} - {self.reference}" if self.actual else "A - B"
+        tol = "" if self.tolerance is None else f" (tolerance {self.tolerance:.3g} {self.unit})".replace(" )", ")")
+        return (f"{self.name}: max |{diff}| = {self.max_error:.4g} {self.unit} at t = {self.t_max:.3f} s, "
+                f"RMSE {self.rmse:.4g}{tol}").replace("  ", " ")
+
+    def as_dict(self, **keys: str) -> dict[str, Any]:
+        """Every field and ``ok``, by field name, or by the name ``keys`` gives a field
+        (``as_dict(max_error="max_abs")``: the key a JSON output has always used)."""
+        out = {keys.get(f.name, f.name): getattr(self, f.name) for f in fields(self)}
+        out[keys.get("ok", "ok")] = self.ok
+        return out
