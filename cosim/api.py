@@ -24,6 +24,7 @@ from typing import Any
 import numpy as np
 
 from .algorithm import Runtime
+from .errors import ScenarioError, UnknownSignalError
 from .fmu import BOOLEAN, INTEGER, REAL
 from .run import RunResult, run_scenario
 from .scenario import Scenario, dotted_overrides, expand_signal, load_scenario
@@ -47,7 +48,7 @@ def load(scenario: str | Path | Scenario, overrides: Mapping[str, Any] | None = 
         if not overrides:
             return scenario
         if scenario.source is None or scenario.source == "<string>":
-            raise ValueError("overrides need the scenario's file: pass its path")
+            raise ScenarioError("overrides need the scenario's file: pass its path, not a Scenario")
         scenario = scenario.source
     return load_scenario(scenario, dotted_overrides(dict(overrides or {})))
 
@@ -175,7 +176,7 @@ class Result:
 
             close = difflib.get_close_matches(name, list(self.signals), n=3)
             hint = f"; did you mean {', '.join(close)}?" if close else ""
-            raise KeyError(f"no signal {name!r}{hint}") from None
+            raise UnknownSignalError(f"no signal {name!r}{hint}") from None
 
     def to_pandas(self):
         """The signals as a pandas DataFrame indexed by time in s (needs pandas, not a dependency)."""

@@ -21,6 +21,7 @@ __all__ = [
     "ComponentSourceError",
     "Interrupted",
     "StallError",
+    "UnknownSignalError",
 ]
 
 
@@ -57,6 +58,14 @@ class WiringError(ScenarioError):
 
 class ComponentSourceError(ScenarioError):
     """A component's FMU cannot be found or built."""
+
+
+class UnknownSignalError(CosimError, KeyError):
+    """A signal or variable name that the run, log or system does not have; the message says which
+    (with close matches)."""
+
+    def __str__(self) -> str:  # the message as written, not KeyError's repr of it
+        return str(self.args[0]) if self.args else ""
 
 
 class PreflightError(CosimError, ValueError):

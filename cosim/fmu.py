@@ -36,7 +36,7 @@ from functools import cached_property
 from pathlib import Path
 from typing import Any, Iterable, Protocol
 
-from .errors import ComponentSourceError, FMIError, Issue
+from .errors import ComponentSourceError, FMIError, Issue, ScenarioError
 
 isfinite = math.isfinite  # a module global: one lookup less per output buffer in the hot path
 
@@ -977,7 +977,7 @@ def _binary(value: Any, name: str) -> bytes:
     try:
         return bytes.fromhex(str(value))
     except ValueError:
-        raise ValueError(f"{name}: a Binary value is given as hexadecimal digits, got {value!r}") from None
+        raise ScenarioError(f"{name}: a Binary value is given as hexadecimal digits, got {value!r}") from None
 
 
 class FMI3CoSimulation(_FMI3):

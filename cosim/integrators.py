@@ -30,12 +30,14 @@ from typing import Any, Protocol
 
 import numpy as np
 
+from delta.errors import CosimError, ParameterError
+
 __all__ = ["OdeModel", "Integrator", "make_integrator", "SOLVERS", "IntegratorError"]
 
 SOLVERS = ("cvode", "dop853")
 
 
-class IntegratorError(RuntimeError):
+class IntegratorError(CosimError, RuntimeError):
     """The integrator gave up (too many steps, step size underflow, repeated test failures)."""
 
 
@@ -70,7 +72,7 @@ def make_integrator(name: str, model: OdeModel, t0: float, rtol: float, max_step
         return CVodeIntegrator(model, t0, rtol, max_step)
     if name == "dop853":
         return DOP853Integrator(model, t0, rtol, max_step)
-    raise ValueError(f"unknown solver {name!r}; valid: {', '.join(SOLVERS)}")
+    raise ParameterError(f"unknown solver {name!r}; valid: {', '.join(SOLVERS)}")
 
 
 def _root_tolerance(t: float, h: float) -> float:

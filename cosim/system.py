@@ -12,7 +12,7 @@ import re
 from dataclasses import dataclass, field
 from typing import Any, Mapping
 
-from .errors import AlgebraicLoopError, Issue, WiringError
+from .errors import AlgebraicLoopError, Issue, UnknownSignalError, WiringError
 from .fmu import FMUInfo, Variable
 from .scenario import Scenario, _line_for, expand_signal, issue_at
 
@@ -192,7 +192,7 @@ class SystemPlan:
         i = self.names.index(comp)
         var, element, problem = find_variable(self.infos[i], name)
         if var is None:
-            raise KeyError(problem or f"{ref}: no such variable")
+            raise UnknownSignalError(problem or f"{ref}: no such variable")
         return Port(i, var, element)
 
 

@@ -27,6 +27,8 @@ from pythonfmu3 import (
     Unit,
 )
 
+from delta.errors import ParameterError
+
 from ._names import UNITS, ValueAccess, compensate_exporter_refcount
 
 __all__ = ["AdapterME"]
@@ -174,7 +176,8 @@ class AdapterME(ValueAccess, Fmi3SlaveBase, ModelExchange):
         # filters every variable on each call)
         names = self._state_names()
         if len(values) != len(names):
-            raise ValueError(f"{len(values)} continuous state values given, the model has {len(names)}")
+            raise ParameterError(f"{type(self).__name__}: {len(values)} continuous state values given, "
+                                 f"the model has {len(names)} ({', '.join(names)})")
         store = self.values
         for n, v in zip(names, values):
             store[n] = float(v)

@@ -24,6 +24,8 @@ import sys
 import tempfile
 from pathlib import Path
 
+from delta.errors import CosimError
+
 from . import requirements
 from .registry import FmuEntry
 
@@ -37,7 +39,7 @@ _IMPORT = re.compile(r"^(\s*)import\s+(delta|multibody|fmus)((?:\.\w+)*)(\s+as\s
 _LEFT = re.compile(r"^\s*(from|import)\s+(delta|multibody|fmus)\b", re.M)
 
 
-class BuildError(RuntimeError):
+class BuildError(CosimError, RuntimeError):
     """An FMU could not be built; the message names the FMU and the cause."""
 
 

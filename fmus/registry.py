@@ -14,7 +14,13 @@ import importlib.util
 from dataclasses import dataclass
 from pathlib import Path
 
-__all__ = ["FmuEntry", "REGISTRY", "names", "get", "build", "available"]
+from delta.errors import CosimError
+
+__all__ = ["FmuEntry", "AdapterError", "REGISTRY", "names", "get", "adapter", "build", "available"]
+
+
+class AdapterError(CosimError, ImportError):
+    """An FMU's adapter class, or a module it needs, cannot be imported in this checkout."""
 
 
 @dataclass(frozen=True)
@@ -87,15 +93,19 @@ def get(name: str) -> FmuEntry:
 def adapter(entry: FmuEntry) -> type:
     """The adapter class that builds ``entry`` (``fmus.adapters.<module>.<cls>``), imported.
 
-    Raises ImportError if its module or the class is missing, or a module it needs cannot be imported.
+    Raises :class:`AdapterError` (an ImportError) if its module or the class is missing, or a module it
+    needs cannot be imported.
     """
-    module = importlib.import_module(f"{__package__}.adapters.{entry.module}")
+    try:
+        module = importlib.import_module(f"{__package__}.adapters.{entry.module}")
+    except ImportError as exc:
+        raise AdapterError(f"FMU {entry.name}: cannot import its adapter module: {exc}") from exc
     cls = getattr(module, entry.cls, None)
     if not isinstance(cls, type):
-        raise ImportError(f"FMU {entry.name}: {module.__name__} has no adapter class {entry.cls}")
+        raise AdapterError(f"FMU {entry.name}: {module.__name__} has no adapter class {entry.cls}")
     missing = [m for m in entry.requires if not _importable(m)]
     if missing:
-        raise ImportError(f"FMU {entry.name}: needs {', '.join(missing)}")
+        raise AdapterError(f"FMU {entry.name}: needs {', '.join(missing)}")
     return cls
 
 

@@ -17,7 +17,7 @@ from delta.dynamics import LinearDeltaMasses, RotaryDeltaMasses
 from delta.robots import LinearDelta, Robot, RotaryDelta
 
 from .linear import LinearDeltaPlant
-from .plant import DeltaPlant, JointTrajectory, PlantError, PlantOutput, SolverSettings
+from .plant import DeltaPlant, JointTrajectory, PlantError, PlantOutput, RobotTypeError, SolverSettings
 from .rotary import RotaryDeltaPlant
 
 __all__ = [
@@ -27,6 +27,7 @@ __all__ = [
     "RotaryDeltaPlant",
     "PlantOutput",
     "PlantError",
+    "RobotTypeError",
     "SolverSettings",
     "JointTrajectory",
 ]
@@ -56,4 +57,4 @@ def make_plant(robot: Robot, masses: LinearDeltaMasses | RotaryDeltaMasses | Non
         return LinearDeltaPlant(robot, masses, **kwargs)
     if isinstance(robot, RotaryDelta):
         return RotaryDeltaPlant(robot, masses, **kwargs)
-    raise TypeError(f"make_plant: unknown robot type {type(robot).__name__}; expected LinearDelta or RotaryDelta")
+    raise RobotTypeError(f"make_plant: unknown robot type {type(robot).__name__}; expected LinearDelta or RotaryDelta")

@@ -28,7 +28,7 @@ from delta.dynamics import LinearDeltaMasses
 from delta.kinematics import actuator_points, joint_state_from_platform, leg_axes, platform_offsets
 from delta.robots import LinearDelta
 
-from .plant import MIN_ROD_MASS, DeltaPlant, JointTrajectory, SolverSettings, tilt_angle
+from .plant import MIN_ROD_MASS, DeltaPlant, JointTrajectory, RobotTypeError, SolverSettings, tilt_angle
 
 __all__ = ["LinearDeltaPlant", "MIN_ROD_MASS", "PLATFORM_THICKNESS"]
 
@@ -60,7 +60,7 @@ class LinearDeltaPlant(DeltaPlant):
                  settings: SolverSettings | None = None, p0=(0.0, 0.0, -0.5), v0=(0.0, 0.0, 0.0),
                  t0: float = 0.0, prescribed: JointTrajectory | None = None, h_nominal: float = 1e-3) -> None:
         if not isinstance(robot, LinearDelta):
-            raise TypeError(f"LinearDeltaPlant needs a LinearDelta robot, got {type(robot).__name__}")
+            raise RobotTypeError(f"LinearDeltaPlant needs a LinearDelta robot, got {type(robot).__name__}")
         super().__init__(robot, masses or LinearDeltaMasses(), fidelity, settings, prescribed, p0, v0, t0, h_nominal)
 
     # ------------------------------------------------------------------------------------

@@ -19,7 +19,7 @@ from typing import Callable
 
 import numpy as np
 
-from delta.errors import CosimError
+from delta.errors import CosimError, ParameterError
 
 __all__ = ["SolverSettings", "PlantOutput", "PlantError", "DeltaPlant", "JointTrajectory"]
 
@@ -33,6 +33,10 @@ MIN_ROD_MASS = 1e-6
 
 class PlantError(CosimError, RuntimeError):
     """A plant could not be stepped (wrong time, solver failure); the message names the time."""
+
+
+class RobotTypeError(CosimError, TypeError):
+    """A plant was asked for a robot of a kind it does not model."""
 
 
 @dataclass(frozen=True)
@@ -78,13 +82,13 @@ class SolverSettings:
 
     def __post_init__(self) -> None:
         if not 0.0 <= self.spectral_radius <= 1.0:
-            raise ValueError(f"SolverSettings.spectral_radius must be in [0, 1], got {self.spectral_radius!r}")
+            raise ParameterError(f"SolverSettings.spectral_radius must be in [0, 1], got {self.spectral_radius!r}")
         if self.substeps < 1:
-            raise ValueError(f"SolverSettings.substeps must be >= 1, got {self.substeps!r}")
+            raise ParameterError(f"SolverSettings.substeps must be >= 1, got {self.substeps!r}")
         if self.max_step is not None and not 0.0 < self.max_step < math.inf:
-            raise ValueError(f"SolverSettings.max_step must be a finite time > 0 s or None, got {self.max_step!r}")
+            raise ParameterError(f"SolverSettings.max_step must be a finite time > 0 s or None, got {self.max_step!r}")
         if not 0.0 <= self.min_step < math.inf:
-            raise ValueError(f"SolverSettings.min_step must be a finite time >= 0 s, got {self.min_step!r}")
+            raise ParameterError(f"SolverSettings.min_step must be a finite time >= 0 s, got {self.min_step!r}")
 
 
 @dataclass(frozen=True)
@@ -126,7 +130,7 @@ class DeltaPlant:
     def __init__(self, robot, masses, fidelity: str, settings: SolverSettings | None,
                  prescribed: JointTrajectory | None, p0, v0, t0: float, h_nominal: float) -> None:
         if fidelity not in ("full", "lumped"):
-            raise ValueError(f"fidelity must be 'full' or 'lumped', got {fidelity!r}")
+            raise ParameterError(f"{type(self).__name__}: fidelity must be 'full' or 'lumped', got {fidelity!r}")
         self.robot = robot
         self.masses = masses
         self.fidelity = fidelity

@@ -28,7 +28,7 @@ from delta.kinematics import actuator_points, actuator_tangents, joint_state_fro
 from delta.robots import RotaryDelta
 
 from .linear import PLATFORM_THICKNESS
-from .plant import DeltaPlant, JointTrajectory, SolverSettings, point_inertia, rod_inertia, tilt_angle
+from .plant import DeltaPlant, JointTrajectory, RobotTypeError, SolverSettings, point_inertia, rod_inertia, tilt_angle
 
 __all__ = ["RotaryDeltaPlant", "ARM_RADIUS"]
 
@@ -49,7 +49,7 @@ class RotaryDeltaPlant(DeltaPlant):
                  settings: SolverSettings | None = None, p0=None, v0=(0.0, 0.0, 0.0), t0: float = 0.0,
                  prescribed: JointTrajectory | None = None, h_nominal: float = 1e-3) -> None:
         if not isinstance(robot, RotaryDelta):
-            raise TypeError(f"RotaryDeltaPlant needs a RotaryDelta robot, got {type(robot).__name__}")
+            raise RobotTypeError(f"RotaryDeltaPlant needs a RotaryDelta robot, got {type(robot).__name__}")
         if p0 is None:
             p0 = (0.0, 0.0, robot.home_z)
         super().__init__(robot, masses or RotaryDeltaMasses(), fidelity, settings, prescribed, p0, v0, t0, h_nominal)
