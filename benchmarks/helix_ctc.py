@@ -4,7 +4,7 @@ The co-simulation is ``scenarios/helix_ctc.yaml`` run by the master (helix FMU -
 CTC FMU -> Exudyn plant FMU, Gauss-Seidel, 1 ms). The monolithic loop does the same
 computation without FMI: the same Exudyn plant (``multibody.make_plant``), the same
 helix (``delta.trajectories.Helix``), the same kinematics as the IK FMU
-(``delta.scalar_kinematics``) and the same CTC law (``delta.control.CTC`` on
+(``delta.kinematics.inverse_kinematics``) and the same CTC law (``delta.control.CTC`` on
 ``delta.dynamics``), called directly in a Python loop with the master's data flow
 (reference at t + h, effort computed from the state at t and held over the step).
 The co-simulation runs twice: serial (``parallel: off``) and parallel (``parallel: on``: the
@@ -35,9 +35,10 @@ STEP_NS = 1_000_000  # the scenario's 1 ms step
 def monolithic(stop_time: float) -> tuple[float, list[float], dict[str, float]]:
     """Wall seconds of the loop, RMSE per axis and time per part, for ``stop_time`` s."""
     from delta.control import DEFAULT_GAINS, CTC
-    from delta.dynamics import LinearDeltaMasses, analytic_model
+    from delta.dynamics import LinearDeltaMasses
+    from delta.kinematics import inverse_kinematics
+    from delta.model import build_model
     from delta.robots import get_preset
-    from delta.scalar_kinematics import ScalarKinematics
     from delta.trajectories import Helix
     from multibody import make_plant
 
@@ -46,15 +47,14 @@ def monolithic(stop_time: float) -> tuple[float, list[float], dict[str, float]]:
     helix = Helix()
     gains = DEFAULT_GAINS["linear"]
     h = STEP_NS * 1e-9
-    law = CTC(analytic_model(robot, masses), gains["ctc"]["kp"], gains["ctc"]["kd"], h, u_max=gains["u_max"]["u_max"])
-    kin = ScalarKinematics(robot)
+    model = build_model(robot, masses)
+    law = CTC(model, gains["ctc"]["kp"], gains["ctc"]["kd"], h, u_max=gains["u_max"]["u_max"])
 
     def reference(t: float):
         p, v, a = helix.evaluate_scalar(t)  # the trajectory FMU's per-step path
-        q, leg = kin.ik(p)
-        if leg:
-            raise RuntimeError(f"helix leaves the workspace at t = {t} s: leg {leg} has no solution")
-        qd, qdd = kin.joint_rates(q, p, v, a)
+        q, qd, qdd, fault = inverse_kinematics(model, p, v, a)
+        if fault:
+            raise SystemExit(f"helix leaves the workspace at t = {t} s (leg {abs(fault)})")
         return p, q, qd, qdd
 
     p0, v0, _ = helix.evaluate(0.0)

@@ -102,11 +102,11 @@ def _units(args: argparse.Namespace, robot, lengths: bool) -> None:
     ``--mm``: lengths (positions when ``lengths``, a linear delta's carriage travels);
     ``--deg``: a rotary delta's arm angles.
     """
-    if getattr(args, "deg", False) and robot.kind != "rotary":
-        raise CosimError(f"--deg: {robot.name} is a linear delta: its joint values are carriage travels "
+    if getattr(args, "deg", False) and robot.q_unit != "rad":
+        raise CosimError(f"--deg: {robot.name} is a {robot.kind} delta: its joint values are lengths "
                          f"(m, or mm with --mm), not angles")
-    if getattr(args, "mm", False) and robot.kind != "linear" and not lengths:
-        raise CosimError(f"--mm: {robot.name} is a rotary delta: its joint values are arm angles "
+    if getattr(args, "mm", False) and robot.q_unit != "m" and not lengths:
+        raise CosimError(f"--mm: {robot.name} is a {robot.kind} delta: its joint values are angles "
                          f"(rad, or degrees with --deg), not lengths")
 
 
@@ -135,17 +135,10 @@ def _preset(name: str):
     return PRESETS[name]
 
 
-def _q_display(robot, q) -> tuple[list[float], str]:
-    import numpy as np
-
-    if robot.kind == "linear":
-        return [float(x) for x in q], "m"
-    return [float(x) for x in np.degrees(q)], "deg"
-
-
 def _cmd_ik(args: argparse.Namespace) -> int:
     import numpy as np
 
+    from delta.actuators import actuator_for
     from delta.workspace import check_point
 
     robot = _preset(args.robot)
@@ -154,17 +147,17 @@ def _cmd_ik(args: argparse.Namespace) -> int:
     res = check_point(robot, p, args.margin)
     if not res.ok:
         raise UnreachableError(f"{args.robot}: p = ({p[0]:.4f}, {p[1]:.4f}, {p[2]:.4f}) m: {res.reason}")
-    shown, unit = _q_display(robot, res.q)
+    shown, unit = actuator_for(robot).shown(res.q)
     q_out, q_unit = [float(x) for x in res.q], robot.q_unit
     if args.deg:
         q_out, q_unit = shown, "deg"
-    elif args.mm and robot.kind == "linear":
+    elif args.mm and robot.q_unit == "m":
         shown, unit = [x * 1e3 for x in res.q], "mm"
         q_out, q_unit = shown, "mm"
     payload = {"robot": robot.name, "p": p.tolist(), "q": q_out, "q_unit": q_unit,
                "singularity_proximity": res.proximity}
     text = "q = (" + ", ".join(f"{x:.6g}" for x in shown) + f") {unit}"
-    if robot.kind == "linear":
+    if robot.q_unit == "m":  # the thesis's Table 4 is in cm
         text += "   [" + ", ".join(f"{x * 100:.2f}" for x in res.q) + "] cm"
     text += f"\nsingularity proximity = {res.proximity:.4f}"
     _emit(args, payload, text)
@@ -199,6 +192,7 @@ def _cmd_workspace(args: argparse.Namespace) -> int:
 
     import numpy as np
 
+    from delta.actuators import actuator_for
     from delta.workspace import check_cylinder, largest_cylinder, sample_workspace
 
     robot = _preset(args.robot)
@@ -213,10 +207,8 @@ def _cmd_workspace(args: argparse.Namespace) -> int:
         return EXIT_OK
     if args.centre is not None:
         centre = np.array(args.centre) * scale
-    elif robot.kind == "rotary":
-        centre = np.array([0.0, 0.0, robot.home_z])
     else:
-        centre = np.array([0.0, 0.0, -0.5 * (robot.q_min + robot.q_max) - 0.8 * robot.rod_length])
+        centre = np.array(actuator_for(robot).workspace_centre(robot))
     dims = [None if math.isnan(v) else v * scale for v in args.cylinder]
     options = {"surface_only": args.surface, "check_limits": not args.no_limits}
     if None in dims:

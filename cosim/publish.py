@@ -192,26 +192,18 @@ def scene_update(robot, p, t_ns: int, trail=None) -> dict | None:
     ``t_ns`` is the message's log time. None when ``p`` is unreachable (nothing sensible to draw).
     """
     from delta.kinematics import actuator_points, ik, leg_axes, platform_offsets
-    from delta.robots import LinearDelta
+    from delta.model import build_model
 
+    actuator = build_model(robot).actuator
     p = np.asarray(p, dtype=float)
     res = ik(robot, p)
     if not res.ok:
         return None
     joints_a = actuator_points(robot, res.q)  # carriage joints or elbows, (3, 3)
     joints_p = p + platform_offsets(robot)  # platform joints, (3, 3)
-    lines = []
-    if isinstance(robot, LinearDelta):
-        e = robot.rail_radius * leg_axes(robot)
-        top, bottom, base = e.copy(), e.copy(), e.copy()
-        top[:, 2] = -robot.q_min
-        bottom[:, 2] = -robot.q_max
-        base[:, 2] = 0.0
-        lines.append(_line(2, [x for pair in zip(top, bottom) for x in pair], (0.6, 0.6, 0.6, 1.0), 0.01))
-    else:
-        base = robot.base_radius * leg_axes(robot)
-        lines.append(_line(2, [x for pair in zip(base, joints_a) for x in pair], (0.2, 0.4, 0.9, 1.0), 0.015))
-    lines.append(_line(1, base, (0.5, 0.5, 0.5, 1.0)))
+    base = actuator.radius * leg_axes(robot)  # rail tops or motor axes, z = 0
+    colour, width = actuator.guide_style
+    lines = [_line(2, actuator.guides(robot, base, joints_a), colour, width), _line(1, base, (0.5, 0.5, 0.5, 1.0))]
     lines.append(_line(2, [x for pair in zip(joints_a, joints_p) for x in pair], (0.9, 0.6, 0.1, 1.0)))
     lines.append(_line(1, joints_p, (0.1, 0.7, 0.3, 1.0), 0.01))
     spheres = [{"pose": {"position": _vec(x), "orientation": _IDENTITY},

@@ -12,8 +12,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from .control import Controller
-from .dynamics import AnalyticModel, joint_references
+from .dynamics import AnalyticModel, joint_references, platform_state, rk4_step
 from .errors import ParameterError
+from .model import Data, Model
 from .robots import Robot
 from .trajectories import Trajectory
 
@@ -51,13 +52,13 @@ class ClosedLoopResult:
 
 def simulate(
     robot: Robot,
-    model: AnalyticModel,
+    model: AnalyticModel | Model,
     trajectory: Trajectory,
     controller: Controller,
     t_end: float,
     h: float = 1e-3,
     substeps: int = 1,
-    plant_model: AnalyticModel | None = None,
+    plant_model: AnalyticModel | Model | None = None,
     start_on_trajectory: bool = True,
     q0: np.ndarray | None = None,
 ) -> ClosedLoopResult:
@@ -81,6 +82,8 @@ def simulate(
     if n < 1:
         raise ParameterError(f"t_end = {t_end} s is shorter than one period h = {h} s")
     plant = model if plant_model is None else plant_model
+    plant = plant.model if isinstance(plant, AnalyticModel) else plant
+    data = Data()
     times = np.arange(n) * h
     p_ref, v_ref, a_ref = trajectory.sample(times)
     q_ref, qd_ref, qdd_ref = joint_references(model, p_ref, v_ref, a_ref)
@@ -93,33 +96,13 @@ def simulate(
     qs, qds, us = np.empty((n, 3)), np.empty((n, 3)), np.empty((n, 3))
     ps, vs = np.empty((n, 3)), np.empty((n, 3))
     dt = h / substeps
-    accel = plant.accel
     qr_l, qdr_l, qddr_l = q_ref.tolist(), qd_ref.tolist(), qdd_ref.tolist()
     for k in range(n):
         qs[k], qds[k] = q, qd
-        ps[k], vs[k] = plant.platform_state(q, qd)
+        ps[k], vs[k] = platform_state(plant, data, q, qd)
         u = controller.step(q, qd, qr_l[k], qdr_l[k], qddr_l[k])
         us[k] = u
         u = u.tolist()
         for _ in range(substeps):
-            q, qd = _rk4(accel, q, qd, u, dt)
+            q, qd = rk4_step(plant, data, q, qd, u, dt)
     return ClosedLoopResult(times, qs, qds, q_ref, qd_ref, ps, p_ref, vs, v_ref, us)
-
-
-def _rk4(accel, q: list[float], qd: list[float], u: list[float], dt: float) -> tuple[list[float], list[float]]:  # noqa: ANN001
-    """One classical RK4 step of ``q' = qd, qd' = accel(q, qd, u)``."""
-    half = 0.5 * dt
-    a1 = accel(q, qd, u)
-    q2 = [q[i] + half * qd[i] for i in range(3)]
-    v2 = [qd[i] + half * a1[i] for i in range(3)]
-    a2 = accel(q2, v2, u)
-    q3 = [q[i] + half * v2[i] for i in range(3)]
-    v3 = [qd[i] + half * a2[i] for i in range(3)]
-    a3 = accel(q3, v3, u)
-    q4 = [q[i] + dt * v3[i] for i in range(3)]
-    v4 = [qd[i] + dt * a3[i] for i in range(3)]
-    a4 = accel(q4, v4, u)
-    s = dt / 6.0
-    q_new = [q[i] + s * (qd[i] + 2.0 * v2[i] + 2.0 * v3[i] + v4[i]) for i in range(3)]
-    qd_new = [qd[i] + s * (a1[i] + 2.0 * a2[i] + 2.0 * a3[i] + a4[i]) for i in range(3)]
-    return q_new, qd_new

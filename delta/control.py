@@ -14,9 +14,10 @@ import math
 
 import numpy as np
 
-from .dynamics import AnalyticModel, _DeltaModel, _KinState
+from .dynamics import AnalyticModel, gravity, inverse_dynamics
 from .errors import ParameterError
-from .robots import LinearDelta, Robot
+from .model import Data, Model
+from .robots import Robot
 
 __all__ = ["Controller", "PD", "PID", "PDPlus", "CTC", "default_controller", "DEFAULT_GAINS", "KINDS"]
 
@@ -58,55 +59,8 @@ def _floats(x):  # noqa: ANN001, ANN202
     return x.tolist() if type(x) is np.ndarray else x
 
 
-def _effort(model: AnalyticModel, q, qd, w) -> _Vec:  # noqa: ANN001
-    """``M(q) w + C(q, qd) qd + G(q)`` (thesis eq. (38) with ``qdd = w``) on plain floats.
-
-    :meth:`AnalyticModel.terms` and the row products ``M[i] . w`` fused into one pass over
-    locals (no nested lists, no calls per term): the same IEEE operations in the same order
-    as ``_mass``, ``_cqd`` (``-m_p J^-T J^-1 [v^T H_i v]``, thesis eq. (37)) and ``_grav`` of
-    :mod:`delta.dynamics` followed by ``sum_k M[i][k] w[k] + C[i] + G[i]``, so the result
-    equals that evaluation of the model's terms to the last bit (tested). Models other than
-    the package's analytic ones go through their ``terms``.
-    """
-    if not isinstance(model, _DeltaModel):
-        m, c, g = model.terms(q, qd)
-        return tuple(m[i][0] * w[0] + m[i][1] * w[1] + m[i][2] * w[2] + c[i] + g[i] for i in range(3))
-    ks: _KinState = model._kin(q)
-    (j00, j01, j02), (j10, j11, j12), (j20, j21, j22) = ks.jinv
-    qd0, qd1, qd2 = float(qd[0]), float(qd[1]), float(qd[2])
-    # v = J^-1 qd (thesis eq. (31))
-    v0 = j00 * qd0 + j01 * qd1 + j02 * qd2
-    v1 = j10 * qd0 + j11 * qd1 + j12 * qd2
-    v2 = j20 * qd0 + j21 * qd1 + j22 * qd2
-    # [v^T H_i v] = (|v - B_i' qd_i|^2 - (l_i . B_i'') qd_i^2) / (l_i . B_i')  (thesis eq. (22))
-    quad = []
-    for d1, rod, d2, den, qi in zip(ks.d1, ks.rods, ks.d2, ks.denom, (qd0, qd1, qd2)):
-        w0, w1, w2 = v0 - d1[0] * qi, v1 - d1[1] * qi, v2 - d1[2] * qi
-        quad.append(((w0 * w0 + w1 * w1 + w2 * w2)
-                     - (rod[0] * d2[0] + rod[1] * d2[1] + rod[2] * d2[2]) * qi * qi) / den)
-    h0, h1, h2 = quad
-    mp = model._mp_inertia
-    nmp = -mp
-    # -m_p J^-1 [v^T H v], then J^-T of it: C qd
-    x0 = nmp * (j00 * h0 + j01 * h1 + j02 * h2)
-    x1 = nmp * (j10 * h0 + j11 * h1 + j12 * h2)
-    x2 = nmp * (j20 * h0 + j21 * h1 + j22 * h2)
-    c0 = j00 * x0 + j10 * x1 + j20 * x2
-    c1 = j01 * x0 + j11 * x1 + j21 * x2
-    c2 = j02 * x0 + j12 * x1 + j22 * x2
-    # M = D + m_p J^-T J^-1 (thesis eqs. (35)-(38)), symmetric
-    d = model._d
-    m00 = mp * (j00 * j00 + j10 * j10 + j20 * j20) + d
-    m01 = mp * (j00 * j01 + j10 * j11 + j20 * j21)
-    m02 = mp * (j00 * j02 + j10 * j12 + j20 * j22)
-    m11 = mp * (j01 * j01 + j11 * j11 + j21 * j21) + d
-    m12 = mp * (j01 * j02 + j11 * j12 + j21 * j22)
-    m22 = mp * (j02 * j02 + j12 * j12 + j22 * j22) + d
-    g0, g1, g2 = model._grav(ks)
-    a0, a1, a2 = w
-    return (m00 * a0 + m01 * a1 + m02 * a2 + c0 + g0,
-            m01 * a0 + m11 * a1 + m12 * a2 + c1 + g1,
-            m02 * a0 + m12 * a1 + m22 * a2 + c2 + g2)
+def _compiled(model: AnalyticModel | Model) -> Model:
+    return model.model if isinstance(model, AnalyticModel) else model
 
 
 class Controller:
@@ -214,8 +168,9 @@ class PID(Controller):
 class PDPlus(Controller):
     """PD with gravity compensation: ``u = Kp e + Kd e_dot + G(q)`` from the analytic model."""
 
-    def __init__(self, model: AnalyticModel, kp, kd, h: float, u_max=None) -> None:  # noqa: ANN001
-        self.model = model
+    def __init__(self, model: AnalyticModel | Model, kp, kd, h: float, u_max=None) -> None:  # noqa: ANN001
+        self.model = _compiled(model)
+        self.data = Data()
         self.kp = _per_joint("PDPlus", "kp", kp, positive=True)
         self.kd = _per_joint("PDPlus", "kd", kd)
         self.h = _period("PDPlus", h)
@@ -223,7 +178,7 @@ class PDPlus(Controller):
 
     def output_scalar(self, q, qd, q_ref, qd_ref, qdd_ref) -> _Vec:  # noqa: ANN001
         q, qd, q_ref, qd_ref = _floats(q), _floats(qd), _floats(q_ref), _floats(qd_ref)
-        g0, g1, g2 = self.model._grav(self.model._kin(q))
+        g0, g1, g2 = gravity(self.model, self.data, q)
         (kp0, kp1, kp2), (kd0, kd1, kd2) = self.kp, self.kd
         return _clip(kp0 * (q_ref[0] - q[0]) + kd0 * (qd_ref[0] - qd[0]) + g0,
                      kp1 * (q_ref[1] - q[1]) + kd1 * (qd_ref[1] - qd[1]) + g1,
@@ -241,8 +196,10 @@ class CTC(Controller):
     references are dropped (``qd_ref = qdd_ref = 0``: regulation to ``q_ref``).
     """
 
-    def __init__(self, model: AnalyticModel, kp, kd, h: float, u_max=None, feedforward: bool = True) -> None:  # noqa: ANN001
-        self.model = model
+    def __init__(self, model: AnalyticModel | Model, kp, kd, h: float, u_max=None,  # noqa: ANN001
+                 feedforward: bool = True) -> None:
+        self.model = _compiled(model)
+        self.data = Data()
         self.kp = _per_joint("CTC", "kp", kp, positive=True)
         self.kd = _per_joint("CTC", "kd", kd)
         self.h = _period("CTC", h)
@@ -260,7 +217,7 @@ class CTC(Controller):
             w = (kp0 * (q_ref[0] - q[0]) - kd0 * qd[0],
                  kp1 * (q_ref[1] - q[1]) - kd1 * qd[1],
                  kp2 * (q_ref[2] - q[2]) - kd2 * qd[2])
-        u0, u1, u2 = _effort(self.model, q, qd, w)  # thesis eq. (50)
+        u0, u1, u2 = inverse_dynamics(self.model, self.data, q, qd, w)  # thesis eq. (50)
         return _clip(u0, u1, u2, self.u_max)
 
     def step(self, q, qd, q_ref, qd_ref, qdd_ref) -> np.ndarray:  # noqa: ANN001
@@ -293,14 +250,15 @@ DEFAULT_GAINS: dict[str, dict[str, dict[str, float]]] = {
 }
 
 
-def default_controller(kind: str, robot: Robot, model: AnalyticModel | None = None, h: float = 1e-3) -> Controller:
+def default_controller(kind: str, robot: Robot, model: AnalyticModel | Model | None = None,
+                       h: float = 1e-3) -> Controller:
     """A controller of ``kind`` (``"pd"``, ``"pid"``, ``"pdplus"``, ``"ctc"``) with the tuned defaults.
 
     ``model`` is required by ``"pdplus"`` and ``"ctc"``.
     """
     if kind not in KINDS:
         raise ParameterError(f"unknown controller kind {kind!r}; valid kinds: {', '.join(KINDS)}")
-    table = DEFAULT_GAINS["linear" if isinstance(robot, LinearDelta) else "rotary"]
+    table = DEFAULT_GAINS[robot.kind]
     gains = table[kind]
     u_max = table["u_max"]["u_max"]
     if kind in ("pdplus", "ctc") and model is None:

@@ -1,43 +1,63 @@
 """Position, velocity and acceleration kinematics of linear and rotary deltas.
 
-Both robots share one formulation. Leg ``i`` joins the actuator point
-``B_i(q_i)`` (carriage joint or elbow) to the platform joint ``p + b_i`` by a
-parallelogram of length ``L``; its rod vector ``l_i = p + b_i - B_i(q_i)``
-satisfies ``l_i . l_i = L**2``. Differentiating once and twice gives the
-Jacobian and the Hessians for any actuator path ``B_i(q)``:
+Both robots share one formulation (:mod:`delta.actuators` gives the only per-kind part,
+the actuator path ``B_i(q_i)``). Leg ``i`` joins ``B_i(q_i)`` to the platform joint
+``p + b_i`` by a parallelogram of length ``L``; its rod vector ``l_i = p + b_i - B_i(q_i)``
+satisfies ``l_i . l_i = L**2``. Differentiating once and twice gives the Jacobian and the
+Hessians for any actuator path.
 
-* linear delta: ``B_i = (R e_i, -q_i)``, ``B_i' = u = (0, 0, -1)`` (thesis eqs. 4-23),
-* rotary delta: ``B_i = R e_i + La (cos q_i e_i - sin q_i z)`` (seed 003 eq. 2,
-  seed 004 eq. 35 with our sign convention: positive ``q`` = arm down).
+Three layers, one set of formulas:
 
-Shapes: ``p``, ``v``, ``a`` are (3,) platform position / velocity /
-acceleration in the base frame, m, m/s, m/s**2; ``q``, ``qd``, ``qdd`` are (3,)
-joint values (m or rad). Functions whose name ends in ``_batch`` take (N, 3).
+* the leg formulas (the actuator's ``leg``, :func:`leg_rates`, ``_proximity``) take floats or numpy
+  arrays;
+* the per-pose algorithms on plain floats: :func:`inverse_kinematics` (IK to second order, the
+  IK FMU's step), and over ``(model, data)`` :func:`update` (forward kinematics and ``J^-1``,
+  cached per ``q``: the controllers' and the analytic plant's step), :func:`set_pose`,
+  :func:`rates`, :func:`proximity`; no arrays allocated;
+* the batch path over (N, 3) arrays (:func:`ik_batch`, :func:`legs_batch`,
+  :func:`rates_batch`, :func:`proximity_batch`): workspace sampling, pre-flight, references.
+
+The numpy functions below them (:func:`ik`, :func:`fk`, :func:`jacobian`, ...) take a robot
+preset or a :class:`~delta.model.Model` and return arrays; they call the same algorithms.
+
+Shapes: ``p``, ``v``, ``a`` are (3,) platform position / velocity / acceleration in the base
+frame, m, m/s, m/s**2; ``q``, ``qd``, ``qdd`` are (3,) joint values (m or rad). Legs are
+0-based in code, 1-based in every message.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
+from math import sqrt
 
 import numpy as np
 
+from .actuators import ARRAY, SCALAR
 from .errors import RobotError, UnreachableError
-from .robots import LinearDelta, Robot, RotaryDelta
-
-_ROUNDING = 1e-12
-"""Relative slack on the real-solution tests so that exactly singular legs stay solvable."""
+from .model import Data, Model, as_model
+from .robots import Robot
 
 __all__ = [
     "IKResult",
     "FKResult",
+    "inv3",
+    "leg_rates",
+    "solve_ik",
+    "inverse_kinematics",
+    "limit_violation",
+    "update",
+    "set_pose",
+    "rates",
+    "proximity",
+    "ik_batch",
+    "legs_batch",
+    "rates_batch",
+    "proximity_batch",
     "leg_axes",
     "actuator_points",
-    "actuator_points_batch",
     "actuator_tangents",
-    "actuator_tangents_batch",
     "platform_offsets",
     "ik",
-    "ik_batch",
     "joint_limit_reason",
     "fk",
     "rod_vectors",
@@ -52,6 +72,262 @@ __all__ = [
     "joint_state_from_platform",
     "platform_state_from_joints",
 ]
+
+
+# ------------------------------------------------------------------------------ leg formulas
+# Each takes floats (one leg) or arrays (many poses and/or the three legs at once). A leg is the
+# 8-tuple of the actuator's ``leg``: (lx, ly, lz, B'x, B'y, B'z, l . B'', l . B').
+
+def leg_rates(leg, vx, vy, vz, ax, ay, az):  # noqa: ANN001, ANN201
+    """``qd_i = J_i v`` and ``qdd_i = J_i a + v^T H_i v`` of one leg.
+
+    ``J_i = l_i^T / (l_i . B_i')`` (thesis eq. (15); for the rotary delta it equals row i of
+    ``J_theta^-1 J_p``, seed 003 eq. (12)), ``qd_i = J_i v`` (thesis eq. (16)), and, differentiating
+    ``l_i . l_i = L^2`` twice, ``v^T H_i v = (|v - B_i' qd_i|^2 - (l_i . B_i'') qd_i^2) / (l_i . B_i')``
+    (thesis eqs. (22)-(23) for the linear delta, where ``B_i'' = 0``; eq. (25) for ``qdd``).
+    """
+    lx, ly, lz, d1x, d1y, d1z, l_d2, den = leg
+    jx, jy, jz = lx / den, ly / den, lz / den
+    qd = jx * vx + jy * vy + jz * vz
+    wx, wy, wz = vx - d1x * qd, vy - d1y * qd, vz - d1z * qd
+    return qd, jx * ax + jy * ay + jz * az + (wx * wx + wy * wy + wz * wz - l_d2 * qd * qd) / den
+
+
+def _serial(leg, xp):  # noqa: ANN001, ANN202
+    """Type 1 measure ``|l_i . B_i'| / (|l_i| |B_i'|)`` (seed 003 eq. (13)) and the unit rod."""
+    lx, ly, lz, d1x, d1y, d1z, _, den = leg
+    norm = xp.sqrt(lx * lx + ly * ly + lz * lz)
+    return abs(den) / (norm * xp.sqrt(d1x * d1x + d1y * d1y + d1z * d1z)), (lx / norm, ly / norm, lz / norm)
+
+
+def _proximity(legs, xp):  # noqa: ANN001, ANN202
+    """Singularity proximity in [0, 1], 0 = singular (see :mod:`delta.singularity`):
+    ``min(min_i serial_i, sigma_min / sigma_max of the unit-row J_p)``.
+
+    The singular values come from the eigenvalues of the Gram matrix ``U U^T`` of the unit rods:
+    the largest by the closed form for symmetric 3x3 matrices, the smallest from ``det(U)^2`` (the
+    product of all three), which keeps its relative accuracy near a type 2 singularity.
+    """
+    (s0, u0), (s1, u1), (s2, u2) = (_serial(leg, xp) for leg in legs)
+    serial = xp.minimum(xp.minimum(s0, s1), s2)
+
+    def dot(a, b):  # noqa: ANN001, ANN202
+        return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+
+    m00, m11, m22 = dot(u0, u0), dot(u1, u1), dot(u2, u2)
+    m01, m02, m12 = dot(u0, u1), dot(u0, u2), dot(u1, u2)
+    trace = m00 + m11 + m22
+    mean = trace / 3.0
+    a0, a1, a2 = m00 - mean, m11 - mean, m22 - mean
+    off = m01 * m01 + m02 * m02 + m12 * m12
+    scale = xp.sqrt((a0 * a0 + a1 * a1 + a2 * a2 + 2.0 * off) / 6.0)
+    safe = scale + (scale == 0.0)  # a multiple of the identity: lam_max = mean below
+    det_b = (a0 * (a1 * a2 - m12 * m12) - m01 * (m01 * a2 - m12 * m02) + m02 * (m01 * m12 - a1 * m02)) / safe**3
+    r = xp.minimum(xp.maximum(0.5 * det_b, -1.0), 1.0)
+    lam_max = mean + 2.0 * scale * xp.cos(xp.acos(r) / 3.0)
+    det_u = u0[0] * (u1[1] * u2[2] - u1[2] * u2[1]) - u0[1] * (u1[0] * u2[2] - u1[2] * u2[0]) \
+        + u0[2] * (u1[0] * u2[1] - u1[1] * u2[0])
+    rest = trace - lam_max  # lam_mid + lam_min
+    prod = det_u * det_u / lam_max  # lam_mid * lam_min
+    lam_mid = 0.5 * (rest + xp.sqrt(xp.maximum(rest * rest - 4.0 * prod, 0.0)))
+    lam_min = prod / (lam_mid + (lam_mid == 0.0)) * (lam_mid > 0.0)
+    return xp.minimum(serial, xp.sqrt(lam_min / lam_max))
+
+
+def inv3(a, b, c, d, e, f, g, h, i):  # noqa: ANN001, ANN201
+    """Inverse of the 3x3 matrix ``[[a, b, c], [d, e, f], [g, h, i]]`` by cofactors, row-major 9-tuple,
+    and its determinant (the caller checks it; the inverse is meaningless when it is 0)."""
+    c00, c01, c02 = e * i - f * h, f * g - d * i, d * h - e * g
+    det = a * c00 + b * c01 + c * c02
+    r = 1.0 / (det + (det == 0.0))
+    return (c00 * r, (c * h - b * i) * r, (b * f - c * e) * r,
+            c01 * r, (a * i - c * g) * r, (c * d - a * f) * r,
+            c02 * r, (b * g - a * h) * r, (a * e - b * d) * r), det
+
+
+# ------------------------------------------------------------------------------ one pose, floats
+
+def inverse_kinematics(model: Model, p, v, a):  # noqa: ANN001, ANN201
+    """Inverse kinematics to second order, the IK FMU's step: ``(q, qd, qdd, 0)`` for the platform
+    position, velocity and acceleration ``p, v, a`` in the working mode (platform below the carriages;
+    elbows out), with ``qd``, ``qdd`` from :func:`leg_rates`; or ``(None, None, None, leg)`` when the
+    1-based ``leg`` has no real solution; or ``(q, None, None, -leg)`` when ``q[leg - 1]`` is beyond the
+    joint limits. Raises :class:`RobotError` at a type 1 singularity."""
+    x, y, z = p
+    vx, vy, vz = v
+    ax, ay, az = a
+    actuator, lo, hi = model.actuator, model.q_min, model.q_max
+    solve, leg_at = actuator.solve, actuator.leg
+    q, qd, qdd = [], [], []
+    limit = 0
+    for c, s, bx, by in model.legs:
+        qi, ok = solve(x, y, z, c, s, SCALAR)
+        if not ok:
+            return None, None, None, len(q) + 1
+        q.append(qi)
+        if limit or qi < lo or qi > hi:
+            limit = limit or -len(q)
+            continue
+        leg = leg_at(qi, c, s, bx, by, x, y, z, SCALAR)
+        if leg[7] == 0.0:
+            raise RobotError(f"type 1 (serial) singularity: leg {len(q)} rod is orthogonal to its actuator motion")
+        qdi, qddi = leg_rates(leg, vx, vy, vz, ax, ay, az)
+        qd.append(qdi)
+        qdd.append(qddi)
+    if limit:
+        return q, None, None, limit
+    return q, qd, qdd, 0
+
+
+_ZERO = (0.0, 0.0, 0.0)
+
+
+def solve_ik(model: Model, p) -> tuple[list[float] | None, int]:  # noqa: ANN001
+    """Joint values for platform position ``p``: ``(q, 0)``, or ``(None, leg)`` with the 1-based first
+    leg that has no real solution. Joint limits are not checked here (:func:`limit_violation`)."""
+    q, _, _, fault = inverse_kinematics(model, p, _ZERO, _ZERO)
+    return (None, fault) if fault > 0 else (q, 0)
+
+
+def limit_violation(model: Model, q) -> int:  # noqa: ANN001
+    """1-based first leg whose joint value is outside ``[q_min, q_max]``, 0 when none."""
+    lo, hi = model.q_min, model.q_max
+    for i in range(3):
+        if q[i] < lo or q[i] > hi:
+            return i + 1
+    return 0
+
+
+def _legs(model: Model, q, x: float, y: float, z: float) -> list[tuple[float, ...]]:  # noqa: ANN001
+    leg_at = model.actuator.leg
+    return [leg_at(qi, c, s, bx, by, x, y, z, SCALAR) for qi, (c, s, bx, by) in zip(q, model.legs)]
+
+
+def set_pose(model: Model, data: Data, q, p) -> Data:  # noqa: ANN001
+    """Fill ``data`` with the legs of the pose ``(q, p)`` (from IK: no forward kinematics)."""
+    x, y, z = p
+    data.q, data.p, data.jinv = None, (x, y, z), None  # q unset: the FK cache stays cold
+    data.legs = _legs(model, q, x, y, z)
+    return data
+
+
+def update(model: Model, data: Data, q) -> Data:  # noqa: ANN001
+    """Forward kinematics of ``q`` into ``data``: ``p``, the legs and ``J^-1`` (cached: no work when
+    ``q`` is the pose ``data`` holds).
+
+    ``p`` is the lower intersection of the three spheres of radius ``L`` about ``B_i(q_i) - b_i``
+    (no working-mode check: :func:`fk` does it). Raises :class:`UnreachableError` when the spheres do
+    not meet or their centres are collinear, :class:`RobotError` at a type 1 or 2 singularity.
+    """
+    q0, q1, q2 = q
+    key = (q0, q1, q2)
+    if data.q == key:
+        return data
+    p, reason = _trilaterate(model, key)
+    if p is None:
+        raise UnreachableError(f"forward kinematics at q = {key}: {reason}")
+    legs = _legs(model, key, *p)
+    data.q, data.p, data.legs = None, p, legs
+    data.jinv = _jinv(legs, key)
+    data.q = key
+    return data
+
+
+def _trilaterate(model: Model, q) -> tuple[tuple[float, float, float] | None, str]:  # noqa: ANN001
+    """Lower intersection of the spheres of radius ``L`` about the centres ``B_i(q_i) - b_i`` (the rods
+    at ``p = 0``, negated), or the reason there is none."""
+    (l1x, l1y, l1z, *_), (l2x, l2y, l2z, *_), (l3x, l3y, l3z, *_) = _legs(model, q, 0.0, 0.0, 0.0)
+    ax, ay, az = l1x - l2x, l1y - l2y, l1z - l2z  # second centre minus the first
+    bx, by, bz = l1x - l3x, l1y - l3y, l1z - l3z  # third centre minus the first
+    nx, ny, nz = ay * bz - az * by, az * bx - ax * bz, ax * by - ay * bx
+    nn = nx * nx + ny * ny + nz * nz
+    aa, bb = ax * ax + ay * ay + az * az, bx * bx + by * by + bz * bz
+    if nn <= 1e-24 * max(aa, bb, 1e-300) ** 2:
+        return None, "sphere centres are collinear (degenerate configuration)"
+    sx, sy, sz = aa * bx - bb * ax, aa * by - bb * ay, aa * bz - bb * az
+    k = 0.5 / nn  # circumcentre of the centres' triangle, relative to the first: (s x n) / (2 |n|^2)
+    ox, oy, oz = (sy * nz - sz * ny) * k, (sz * nx - sx * nz) * k, (sx * ny - sy * nx) * k
+    h2 = model.rod * model.rod - (ox * ox + oy * oy + oz * oz)
+    if h2 < 0.0:
+        return None, "the three rods cannot meet (legs too far apart)"
+    down = sqrt(h2 / nn)
+    if nz > 0.0:
+        down = -down
+    return (ox + down * nx - l1x, oy + down * ny - l1y, oz + down * nz - l1z), ""
+
+
+def _jinv(legs, q) -> tuple[float, ...]:  # noqa: ANN001
+    """``J^-1`` from the legs: ``J = diag(1 / (l_i . B_i')) L`` with rows ``l_i^T`` (thesis eq. (15)), so
+    ``J^-1 = L^-1 diag(l_i . B_i')``."""
+    (ax, ay, az, _, _, _, _, da), (bx, by, bz, _, _, _, _, db), (cx, cy, cz, _, _, _, _, dc) = legs
+    if da == 0.0 or db == 0.0 or dc == 0.0:
+        leg = (da, db, dc).index(0.0) + 1
+        raise RobotError(f"type 1 (serial) singularity at q = {tuple(q)}: leg {leg} rod is orthogonal "
+                         "to its actuator motion")
+    (i00, i01, i02, i10, i11, i12, i20, i21, i22), det = inv3(ax, ay, az, bx, by, bz, cx, cy, cz)
+    if det == 0.0:
+        raise RobotError(f"type 2 (parallel) singularity at q = {tuple(q)}: J is singular")
+    return i00 * da, i01 * db, i02 * dc, i10 * da, i11 * db, i12 * dc, i20 * da, i21 * db, i22 * dc
+
+
+def rates(data: Data, v, a=None) -> tuple[tuple[float, float, float], tuple[float, float, float]]:  # noqa: ANN001
+    """``qd = J v`` and ``qdd = J a + [v^T H_i v]`` at the pose in ``data`` (``qdd`` = 0 when ``a`` is None).
+    Raises :class:`RobotError` at a type 1 singularity."""
+    vx, vy, vz = v
+    ax, ay, az = (0.0, 0.0, 0.0) if a is None else a
+    out = []
+    for i, leg in enumerate(data.legs):
+        if leg[7] == 0.0:
+            raise RobotError(f"type 1 (serial) singularity: leg {i + 1} rod is orthogonal to its actuator motion")
+        out.append(leg_rates(leg, vx, vy, vz, ax, ay, az))
+    (qd0, qdd0), (qd1, qdd1), (qd2, qdd2) = out
+    return (qd0, qd1, qd2), ((qdd0, qdd1, qdd2) if a is not None else (0.0, 0.0, 0.0))
+
+
+def proximity(data: Data) -> float:
+    """Singularity proximity of the pose in ``data`` (``_proximity``), 0 = singular."""
+    return float(_proximity(data.legs, SCALAR))
+
+
+# ------------------------------------------------------------------------------ batch (N, 3)
+
+def ik_batch(robot: Robot | Model, p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Inverse kinematics of (N, 3) positions: ``q`` (N, 3), NaN where a leg has no real solution,
+    and ``solvable`` (N, 3) bool."""
+    model = as_model(robot)
+    p = np.atleast_2d(np.asarray(p, dtype=float))
+    with np.errstate(invalid="ignore", divide="ignore"):
+        q, ok = model.actuator.solve(p[:, 0:1], p[:, 1:2], p[:, 2:3], model.ex_arr, model.ey_arr, ARRAY)
+    ok = np.broadcast_to(ok, q.shape)
+    return np.where(ok, q, np.nan), ok
+
+
+def legs_batch(model: Model, q: np.ndarray, p: np.ndarray) -> tuple[np.ndarray, ...]:
+    """The 8 leg components of the actuator's ``leg`` for (N, 3) ``q`` and ``p``, each (N, 3) (column = leg)."""
+    q = np.atleast_2d(np.asarray(q, dtype=float))
+    p = np.atleast_2d(np.asarray(p, dtype=float))
+    legs = model.actuator.leg(q, model.ex_arr, model.ey_arr, model.bx_arr, model.by_arr,
+                              p[:, 0:1], p[:, 1:2], p[:, 2:3], ARRAY)
+    return tuple(np.broadcast_to(c, q.shape) for c in legs)
+
+
+def rates_batch(model: Model, q: np.ndarray, p: np.ndarray, v: np.ndarray, a: np.ndarray
+                ) -> tuple[np.ndarray, np.ndarray]:
+    """``qd = J v``, ``qdd = J a + [v^T H_i v]`` for (N, 3) poses and platform rates."""
+    v = np.atleast_2d(np.asarray(v, dtype=float))
+    a = np.atleast_2d(np.asarray(a, dtype=float))
+    return leg_rates(legs_batch(model, q, p), v[:, 0:1], v[:, 1:2], v[:, 2:3], a[:, 0:1], a[:, 1:2], a[:, 2:3])
+
+
+def proximity_batch(robot: Robot | Model, q: np.ndarray, p: np.ndarray) -> np.ndarray:
+    """Singularity proximity (N,) of (N, 3) poses; 0 = singular."""
+    legs = legs_batch(as_model(robot), q, p)
+    per_leg = [tuple(c[:, i] for c in legs) for i in range(3)]
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return _proximity(per_leg, ARRAY)
+
+
+# ------------------------------------------------------------------------------ numpy API
 
 @dataclass(frozen=True)
 class IKResult:
@@ -97,262 +373,145 @@ class FKResult:
         return self.p
 
 
-def leg_axes(robot: Robot) -> np.ndarray:
+def leg_axes(robot: Robot | Model) -> np.ndarray:
     """Unit radial vectors ``e_i`` of the three legs, shape (3, 3) (row i = leg i)."""
-    angles = np.asarray(robot.leg_angles, dtype=float)
-    return np.stack([np.cos(angles), np.sin(angles), np.zeros(3)], axis=1)
+    model = as_model(robot)
+    return np.stack([model.ex_arr, model.ey_arr, np.zeros(3)], axis=1)
 
 
-def platform_offsets(robot: Robot) -> np.ndarray:
+def platform_offsets(robot: Robot | Model) -> np.ndarray:
     """Platform joint offsets ``b_i = r e_i`` in the base frame, (3, 3), m."""
-    return robot.platform_radius * leg_axes(robot)
+    model = as_model(robot)
+    return np.stack([model.bx_arr, model.by_arr, np.zeros(3)], axis=1)
 
 
-def actuator_points_batch(robot: Robot, q: np.ndarray) -> np.ndarray:
-    """Actuator-side joint positions ``B_i(q_i)`` for (N, 3) ``q``, shape (N, 3, 3), m."""
-    q = np.atleast_2d(np.asarray(q, dtype=float))
-    e = leg_axes(robot)[None]
-    if isinstance(robot, LinearDelta):
-        out = np.repeat(robot.rail_radius * e, len(q), axis=0)
-        out[:, :, 2] = -q
-        return out
-    la = robot.arm_length
-    out = (robot.base_radius + la * np.cos(q))[:, :, None] * e
-    out[:, :, 2] = -la * np.sin(q)
-    return out
+def actuator_points(robot: Robot | Model, q: np.ndarray) -> np.ndarray:
+    """Actuator-side joint positions ``B_i(q_i)`` (carriage joint or elbow), (3, 3), m: ``b_i - l_i`` at ``p = 0``."""
+    legs = legs_batch(as_model(robot), np.asarray(q, dtype=float).reshape(1, 3), np.zeros((1, 3)))
+    return platform_offsets(robot) - np.stack([c[0] for c in legs[0:3]], axis=1)
 
 
-def actuator_tangents_batch(robot: Robot, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """First and second derivatives ``B_i'(q_i)``, ``B_i''(q_i)`` for (N, 3) ``q``, each (N, 3, 3)."""
-    q = np.atleast_2d(np.asarray(q, dtype=float))
-    if isinstance(robot, LinearDelta):
-        d1 = np.zeros((len(q), 3, 3))
-        d1[:, :, 2] = -1.0
-        return d1, np.zeros_like(d1)
-    e = leg_axes(robot)[None]
-    la = robot.arm_length
-    d1 = (-la * np.sin(q))[:, :, None] * e
-    d1[:, :, 2] = -la * np.cos(q)
-    d2 = (-la * np.cos(q))[:, :, None] * e
-    d2[:, :, 2] = la * np.sin(q)
-    return d1, d2
+def actuator_tangents(robot: Robot | Model, q: np.ndarray) -> np.ndarray:
+    """Actuator tangents ``B_i'(q_i)`` (row i), (3, 3)."""
+    legs = legs_batch(as_model(robot), np.asarray(q, dtype=float).reshape(1, 3), np.zeros((1, 3)))
+    return np.stack([c[0] for c in legs[3:6]], axis=1)
 
 
-def actuator_points(robot: Robot, q: np.ndarray) -> np.ndarray:
-    """Actuator-side joint positions ``B_i(q_i)`` (carriage joint or elbow), (3, 3), m."""
-    return actuator_points_batch(robot, np.asarray(q, dtype=float).reshape(1, 3))[0]
-
-
-def actuator_tangents(robot: Robot, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """First and second derivatives ``B_i'(q_i)`` and ``B_i''(q_i)``, each (3, 3)."""
-    d1, d2 = actuator_tangents_batch(robot, np.asarray(q, dtype=float).reshape(1, 3))
-    return d1[0], d2[0]
-
-
-def _rod_length(robot: Robot) -> float:
-    return robot.rod_length if isinstance(robot, LinearDelta) else robot.forearm_length
-
-
-def ik_batch(robot: Robot, p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Vectorised inverse kinematics.
-
-    Parameters
-    ----------
-    p : (N, 3) array, m
-
-    Returns
-    -------
-    q : (N, 3) array
-        Joint values; NaN where the leg has no real solution.
-    solvable : (N, 3) bool array
-    """
-    p = np.atleast_2d(np.asarray(p, dtype=float))
-    e = leg_axes(robot)
-    big_l = _rod_length(robot)
-    x_loc = p @ e.T  # radial coordinate of p in each leg's plane, (N, 3)
-    y_loc = p[:, 0:1] * (-e[:, 1]) + p[:, 1:2] * e[:, 0]  # tangential coordinate
-    z = p[:, 2:3]
-    if isinstance(robot, LinearDelta):
-        # thesis eq. (9): d_i = lambda_iz +- sqrt(l^2 - lambda_ix^2 - lambda_iy^2), with the
-        # branch that keeps the platform below the carriage; q is measured downward.
-        dx = x_loc + robot.platform_radius - robot.rail_radius
-        h2 = big_l**2 - dx**2 - y_loc**2
-        solvable = h2 >= -_ROUNDING * big_l**2  # a rod exactly horizontal is a (singular) solution
-        q = -(z + np.sqrt(np.where(solvable, np.maximum(h2, 0.0), np.nan)))
-        return q, solvable
-    # Rotary leg in its own plane: dx cos q - z sin q = K (derived from |l|^2 = Lb^2;
-    # seed 003 eq. (8) is garbled in the text, so it is re-derived here).
-    la = robot.arm_length
-    dx = x_loc + robot.platform_radius - robot.base_radius
-    k = (dx**2 + y_loc**2 + z**2 + la**2 - big_l**2) / (2.0 * la)
-    rho = np.hypot(dx, z)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        c = k / rho
-    solvable = np.abs(c) <= 1.0 + _ROUNDING  # a stretched or folded leg is a (singular) solution
-    # Elbow-out branch: the arm points away from the base centre (the delta's working mode).
-    q = -np.arctan2(z, dx) - np.arccos(np.where(solvable, np.clip(c, -1.0, 1.0), np.nan))
-    q = (q + np.pi) % (2.0 * np.pi) - np.pi
-    return q, solvable
-
-
-def _fmt_q(robot: Robot, value: float) -> str:
-    if isinstance(robot, LinearDelta):
-        return f"{value:.4f} m"
-    return f"{np.degrees(value):.2f} deg"
-
-
-def joint_limit_reason(robot: Robot, leg: int, value: float) -> str:
+def joint_limit_reason(robot: Robot | Model, leg: int, value: float) -> str:
     """``leg 2 joint limit: q = ... < q_min = ...`` for joint ``leg`` (1-based) at ``value``."""
-    if value < robot.q_min:
-        return f"leg {leg} joint limit: q = {_fmt_q(robot, value)} < q_min = {_fmt_q(robot, robot.q_min)}"
-    return f"leg {leg} joint limit: q = {_fmt_q(robot, value)} > q_max = {_fmt_q(robot, robot.q_max)}"
+    model = as_model(robot)
+    fmt = model.actuator.format_q
+    if value < model.q_min:
+        return f"leg {leg} joint limit: q = {fmt(value)} < q_min = {fmt(model.q_min)}"
+    return f"leg {leg} joint limit: q = {fmt(value)} > q_max = {fmt(model.q_max)}"
 
 
-def ik(robot: Robot, p: np.ndarray) -> IKResult:
+def ik(robot: Robot | Model, p: np.ndarray) -> IKResult:
     """Inverse kinematics of one platform position ``p`` (3,), m."""
-    p = np.asarray(p, dtype=float).reshape(3)
-    q, solvable = ik_batch(robot, p[None, :])
-    q, solvable = q[0], solvable[0]
-    if not solvable.all():
-        leg = int(np.argmin(solvable)) + 1
+    model = as_model(robot)
+    q, leg = solve_ik(model, np.asarray(p, dtype=float).reshape(3).tolist())
+    if q is None:
         return IKResult(None, False, False, f"leg {leg} has no solution (rod cannot reach the platform joint)", leg)
-    for i in range(3):
-        if q[i] < robot.q_min or q[i] > robot.q_max:
-            return IKResult(q, True, False, joint_limit_reason(robot, i + 1, q[i]), i + 1)
-    return IKResult(q, True, True)
+    limit = limit_violation(model, q)
+    if limit:
+        return IKResult(np.array(q), True, False, joint_limit_reason(model, limit, q[limit - 1]), limit)
+    return IKResult(np.array(q), True, True)
 
 
-def _trilaterate_low(centres: np.ndarray, radius: float) -> tuple[np.ndarray | None, str | None]:
-    """Lower intersection point of three spheres of equal ``radius``, closed form."""
-    c1 = centres[0]
-    a = centres[1] - c1
-    b = centres[2] - c1
-    n = np.cross(a, b)
-    nn = float(n @ n)
-    scale = max(float(a @ a), float(b @ b), 1e-300)
-    if nn <= 1e-24 * scale**2:
-        return None, "sphere centres are collinear (degenerate configuration)"
-    # Circumcentre of the triangle (c1, c2, c3) relative to c1.
-    o = np.cross(float(a @ a) * b - float(b @ b) * a, n) / (2.0 * nn)
-    h2 = radius**2 - float(o @ o)
-    if h2 < 0.0:
-        return None, "the three rods cannot meet (legs too far apart)"
-    n_hat = n / np.sqrt(nn)
-    if n_hat[2] > 0.0:
-        n_hat = -n_hat
-    return c1 + o + np.sqrt(h2) * n_hat, None
+def fk(robot: Robot | Model, q: np.ndarray) -> FKResult:
+    """Closed-form forward kinematics (three-sphere intersection, :func:`update`), lower branch.
 
-
-def fk(robot: Robot, q: np.ndarray) -> FKResult:
-    """Closed-form forward kinematics (three-sphere intersection), lower branch.
-
-    The platform position is the point, below the plane of the three sphere
-    centres ``B_i(q_i) - b_i``, at rod length from each of them. The answer must
-    belong to the working mode that :func:`ik` solves for (linear: platform below
-    every carriage; rotary: elbows out); a ``q`` whose assembly needs another
-    branch is reported as such instead of returning a pose IK would not give back.
+    The answer must belong to the working mode that :func:`ik` solves for (linear: platform below
+    every carriage; rotary: elbows out); a ``q`` whose assembly needs another branch is reported
+    as such instead of returning a pose IK would not give back.
     """
+    model = as_model(robot)
     q = np.asarray(q, dtype=float).reshape(3)
-    centres = actuator_points(robot, q) - platform_offsets(robot)
-    p, reason = _trilaterate_low(centres, _rod_length(robot))
+    p, reason = _trilaterate(model, q.tolist())
     if p is None:
         return FKResult(None, reason)
-    q_back, solvable = ik_batch(robot, p[None, :])
-    mismatch = np.abs(q_back[0] - q)
-    scale = _rod_length(robot) if isinstance(robot, LinearDelta) else 1.0
-    if not solvable.all() or np.any(mismatch > 1e-6 * scale):
-        leg = int(np.nanargmax(np.where(solvable[0], mismatch, np.inf))) + 1
-        return FKResult(None, f"leg {leg} would be assembled outside the working mode "
-                              f"({'platform above its carriage' if isinstance(robot, LinearDelta) else 'elbow in'})")
-    return FKResult(p, None)
+    q_back, leg = solve_ik(model, p)
+    if q_back is None or any(abs(a - b) > 1e-6 * model.actuator.q_scale for a, b in zip(q_back, q)):
+        if q_back is not None:
+            leg = int(np.argmax(np.abs(np.array(q_back) - q))) + 1
+        return FKResult(None, f"leg {leg} would be assembled outside the working mode ({model.actuator.wrong_mode})")
+    return FKResult(np.array(p), None)
 
 
-def rod_vectors(robot: Robot, q: np.ndarray, p: np.ndarray) -> np.ndarray:
+def rod_vectors(robot: Robot | Model, q: np.ndarray, p: np.ndarray) -> np.ndarray:
     """Rod vectors ``l_i = p + b_i - B_i(q_i)`` (row i), (3, 3), m."""
-    return np.asarray(p, dtype=float)[None, :] + platform_offsets(robot) - actuator_points(robot, q)
+    data = set_pose(as_model(robot), Data(), np.asarray(q, dtype=float).tolist(), np.asarray(p, dtype=float).tolist())
+    return np.array([leg[0:3] for leg in data.legs])
 
 
-def _jacobian_parts(robot: Robot, q: np.ndarray, p: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    rods = rod_vectors(robot, q, p)
-    d1, d2 = actuator_tangents(robot, q)
-    denom = np.einsum("ij,ij->i", rods, d1)  # l_i . B_i'
-    return rods, d1, d2, denom
-
-
-def _jacobian_from_parts(rods: np.ndarray, denom: np.ndarray) -> np.ndarray:
-    if np.any(denom == 0.0):
-        leg = int(np.argmin(np.abs(denom))) + 1
-        raise RobotError(f"type 1 (serial) singularity: leg {leg} rod is orthogonal to its actuator motion")
-    return rods / denom[:, None]
-
-
-def jacobian(robot: Robot, q: np.ndarray, p: np.ndarray) -> np.ndarray:
+def jacobian(robot: Robot | Model, q: np.ndarray, p: np.ndarray) -> np.ndarray:
     """Task Jacobian ``J`` with ``qd = J v``, (3, 3).
 
     Row i is ``l_i^T / (l_i . B_i')`` (thesis eq. (15) for the linear delta, where
     ``B_i' = u_i``; for the rotary delta it equals ``J_theta^-1 J_p`` of seed 003 eq. (12)).
     """
-    rods, _, _, denom = _jacobian_parts(robot, q, p)
-    return _jacobian_from_parts(rods, denom)
+    return np.column_stack([joint_velocity(robot, q, p, e) for e in np.eye(3)])
 
 
-def jacobian_and_hessians(robot: Robot, q: np.ndarray, p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def jacobian_and_hessians(robot: Robot | Model, q: np.ndarray, p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """``J`` (3, 3) and the Hessians ``H_i`` (3, 3, 3) with ``qdd_i = J_i a + v^T H_i v`` (thesis eq. (22)).
 
-    ``H_i = [(I - B_i' J_i)^T (I - B_i' J_i) - (l_i . B_i'') J_i^T J_i] / (l_i . B_i')``;
-    for the linear delta ``B_i'' = 0`` and this is thesis eq. (23) (there ``l_i`` is
-    the unit rod vector and the factor ``1 / L`` appears explicitly).
+    ``H_i`` is the matrix of the quadratic form in :func:`leg_rates` (recovered by polarisation:
+    ``H[j, k] = (Q(e_j + e_k) - Q(e_j) - Q(e_k)) / 2``), so the formula lives in one place.
     """
-    rods, d1, d2, denom = _jacobian_parts(robot, q, p)
-    jac = _jacobian_from_parts(rods, denom)
-    out = np.empty((3, 3, 3))
+    data = set_pose(as_model(robot), Data(), np.asarray(q, dtype=float).tolist(), np.asarray(p, dtype=float).tolist())
     eye = np.eye(3)
-    for i in range(3):
-        m = eye - np.outer(d1[i], jac[i])
-        out[i] = (m.T @ m - float(rods[i] @ d2[i]) * np.outer(jac[i], jac[i])) / denom[i]
-    return jac, out
+    jac = np.column_stack([rates(data, e)[0] for e in eye])
+
+    def quad(v: np.ndarray) -> np.ndarray:
+        return np.array(rates(data, v, (0.0, 0.0, 0.0))[1])
+
+    diag = [quad(e) for e in eye]
+    hess = np.empty((3, 3, 3))
+    for j in range(3):
+        hess[:, j, j] = diag[j]
+        for k in range(j + 1, 3):
+            hess[:, j, k] = hess[:, k, j] = 0.5 * (quad(eye[j] + eye[k]) - diag[j] - diag[k])
+    return jac, hess
 
 
-def hessians(robot: Robot, q: np.ndarray, p: np.ndarray) -> np.ndarray:
+def hessians(robot: Robot | Model, q: np.ndarray, p: np.ndarray) -> np.ndarray:
     """Hessians ``H_i`` (3, 3, 3), see :func:`jacobian_and_hessians`."""
     return jacobian_and_hessians(robot, q, p)[1]
 
 
-def joint_velocity(robot: Robot, q: np.ndarray, p: np.ndarray, v: np.ndarray) -> np.ndarray:
-    """``qd = J v`` (thesis eq. (16))."""
-    return jacobian(robot, q, p) @ np.asarray(v, dtype=float)
-
-
-def platform_velocity(robot: Robot, q: np.ndarray, p: np.ndarray, qd: np.ndarray) -> np.ndarray:
-    """``v = J^-1 qd`` (thesis eq. (31))."""
-    return np.linalg.solve(jacobian(robot, q, p), np.asarray(qd, dtype=float))
-
-
-def joint_rates(robot: Robot, q: np.ndarray, p: np.ndarray, v: np.ndarray,
+def joint_rates(robot: Robot | Model, q: np.ndarray, p: np.ndarray, v: np.ndarray,
                 a: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
-    """``qd = J v`` and ``qdd = J a + [v^T H_i v]`` (thesis eqs. (16), (22)) from one evaluation
-    of ``J`` and ``H``; ``qdd`` is zero when ``a`` is None."""
-    v = np.asarray(v, dtype=float)
-    if a is None:
-        return jacobian(robot, q, p) @ v, np.zeros(3)
-    jac, hess = jacobian_and_hessians(robot, q, p)
-    return jac @ v, jac @ np.asarray(a, dtype=float) + np.einsum("j,ijk,k->i", v, hess, v)
+    """``qd = J v`` and ``qdd = J a + [v^T H_i v]`` (thesis eqs. (16), (22)); ``qdd`` is zero when ``a`` is None."""
+    data = set_pose(as_model(robot), Data(), np.asarray(q, dtype=float).tolist(), np.asarray(p, dtype=float).tolist())
+    qd, qdd = rates(data, np.asarray(v, dtype=float).tolist(), None if a is None else np.asarray(a, dtype=float).tolist())
+    return np.array(qd), np.array(qdd)
 
 
-def joint_acceleration(robot: Robot, q: np.ndarray, p: np.ndarray, v: np.ndarray, a: np.ndarray) -> np.ndarray:
+def joint_velocity(robot: Robot | Model, q: np.ndarray, p: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """``qd = J v`` (thesis eq. (16))."""
+    return joint_rates(robot, q, p, v)[0]
+
+
+def joint_acceleration(robot: Robot | Model, q: np.ndarray, p: np.ndarray, v: np.ndarray, a: np.ndarray) -> np.ndarray:
     """``qdd = J a + [v^T H_i v]`` (thesis eqs. (22), (25))."""
     return joint_rates(robot, q, p, v, a)[1]
 
 
-def platform_acceleration(robot: Robot, q: np.ndarray, p: np.ndarray, v: np.ndarray, qdd: np.ndarray) -> np.ndarray:
+def platform_velocity(robot: Robot | Model, q: np.ndarray, p: np.ndarray, qd: np.ndarray) -> np.ndarray:
+    """``v = J^-1 qd`` (thesis eq. (31))."""
+    return np.linalg.solve(jacobian(robot, q, p), np.asarray(qd, dtype=float))
+
+
+def platform_acceleration(robot: Robot | Model, q: np.ndarray, p: np.ndarray, v: np.ndarray,
+                          qdd: np.ndarray) -> np.ndarray:
     """``a = J^-1 (qdd - [v^T H_i v])`` (thesis eq. (37))."""
-    jac, hess = jacobian_and_hessians(robot, q, p)
-    v = np.asarray(v, dtype=float)
-    return np.linalg.solve(jac, np.asarray(qdd, dtype=float) - np.einsum("j,ijk,k->i", v, hess, v))
+    quad = joint_rates(robot, q, p, v, np.zeros(3))[1]
+    return np.linalg.solve(jacobian(robot, q, p), np.asarray(qdd, dtype=float) - quad)
 
 
 def joint_state_from_platform(
-    robot: Robot, p: np.ndarray, v: np.ndarray, a: np.ndarray | None = None
+    robot: Robot | Model, p: np.ndarray, v: np.ndarray, a: np.ndarray | None = None
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Joint position, velocity, acceleration for a platform state; raises if unreachable."""
     q = ik(robot, p).require()
@@ -360,7 +519,7 @@ def joint_state_from_platform(
     return q, qd, qdd
 
 
-def platform_state_from_joints(robot: Robot, q: np.ndarray, qd: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def platform_state_from_joints(robot: Robot | Model, q: np.ndarray, qd: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Platform position and velocity for a joint state; raises if FK has no solution."""
     p = fk(robot, q).require()
     return p, platform_velocity(robot, q, p, qd)

@@ -26,17 +26,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .kinematics import (
-    actuator_points_batch,
-    actuator_tangents,
-    actuator_tangents_batch,
-    fk,
-    ik,
-    leg_axes,
-    platform_offsets,
-    rod_vectors,
-)
-from .robots import Robot, RotaryDelta
+from .errors import ParameterError, UnreachableError
+from .kinematics import Data, ik, leg_axes, proximity, proximity_batch, set_pose
+from .model import Model, as_model
+from .robots import Robot
 
 __all__ = ["SingularityReport", "DEFAULT_TOLERANCE", "analyse", "analyse_pose", "proximity_batch"]
 
@@ -77,67 +70,39 @@ class SingularityReport:
         return self.proximity >= margin
 
 
-def _seed003_angles(robot: RotaryDelta, q: np.ndarray, rods: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """theta_2i (arm to forearm projection in the leg plane) and theta_3i (forearm to motor axis)."""
-    e = leg_axes(robot)
-    t = np.stack([-e[:, 1], e[:, 0], np.zeros(3)], axis=1)
-    unit = rods / np.linalg.norm(rods, axis=1, keepdims=True)
-    along_axis = np.einsum("ij,ij->i", unit, t)
-    theta3 = np.arccos(np.clip(along_axis, -1.0, 1.0))
-    radial = np.einsum("ij,ij->i", unit, e)
-    vertical = unit[:, 2]
-    # Arm direction in the leg plane is (cos q, -sin q) in (radial, vertical) coordinates.
-    cross = np.cos(q) * vertical - (-np.sin(q)) * radial
-    dot = np.cos(q) * radial + (-np.sin(q)) * vertical
-    theta2 = np.arctan2(cross, dot)
-    return theta2, theta3
-
-
-def analyse(robot: Robot, q: np.ndarray, p: np.ndarray, tolerance: float = DEFAULT_TOLERANCE) -> SingularityReport:
+def analyse(robot: Robot | Model, q: np.ndarray, p: np.ndarray, tolerance: float = DEFAULT_TOLERANCE
+            ) -> SingularityReport:
     """Classify the configuration (q, p) and measure its distance to singularity."""
+    model = as_model(robot)
     q = np.asarray(q, dtype=float)
     p = np.asarray(p, dtype=float)
-    rods = rod_vectors(robot, q, p)
-    d1, _ = actuator_tangents(robot, q)
+    data = set_pose(model, Data(), q.tolist(), p.tolist())
+    legs = np.array(data.legs)  # row i: l_i (3), B_i' (3), l_i . B_i'', l_i . B_i'
+    rods, d1, denom = legs[:, 0:3], legs[:, 3:6], legs[:, 7]
     rod_norm = np.linalg.norm(rods, axis=1)
-    serial = np.abs(np.einsum("ij,ij->i", rods, d1)) / (rod_norm * np.linalg.norm(d1, axis=1))
+    serial = np.abs(denom) / (rod_norm * np.linalg.norm(d1, axis=1))
     parallel = float(abs(np.linalg.det(rods / rod_norm[:, None])))
     type1 = tuple(int(i) + 1 for i in np.flatnonzero(serial <= tolerance))
     if type1:
         inv_cond = 0.0
     else:
-        jac = rods / np.einsum("ij,ij->i", rods, d1)[:, None]
-        s = np.linalg.svd(jac, compute_uv=False)
+        s = np.linalg.svd(rods / denom[:, None], compute_uv=False)
         inv_cond = float(s[-1] / s[0])
-    s_p = np.linalg.svd(rods / rod_norm[:, None], compute_uv=False)
-    proximity = float(min(serial.min(), s_p[-1] / s_p[0]))
-    theta2 = theta3 = None
-    if isinstance(robot, RotaryDelta):
-        theta2, theta3 = _seed003_angles(robot, q, rods)
-    return SingularityReport(q, p, serial, parallel, inv_cond, proximity, type1, parallel <= tolerance, theta2, theta3)
+    theta2, theta3 = model.actuator.leg_angles(q, rods, leg_axes(model))
+    return SingularityReport(q, p, serial, parallel, inv_cond, proximity(data), type1, parallel <= tolerance,
+                             theta2, theta3)
 
 
-def analyse_pose(robot: Robot, *, q: np.ndarray | None = None, p: np.ndarray | None = None,
+def analyse_pose(robot: Robot | Model, *, q: np.ndarray | None = None, p: np.ndarray | None = None,
                  tolerance: float = DEFAULT_TOLERANCE) -> SingularityReport:
     """Analyse a pose given by joint values ``q`` or platform position ``p`` (exactly one)."""
     if (q is None) == (p is None):
-        raise ValueError("give exactly one of q or p")
+        raise ParameterError("give exactly one of q or p")
     if q is None:
-        q = ik(robot, p).q
-        if q is None:
-            raise ValueError(ik(robot, p).reason)
+        res = ik(robot, p)
+        if res.q is None:
+            raise UnreachableError(res.reason)
+        q = res.q
     else:
         p = fk(robot, q).require()
     return analyse(robot, q, p, tolerance)
-
-
-def proximity_batch(robot: Robot, q: np.ndarray, p: np.ndarray) -> np.ndarray:
-    """Vectorised singularity proximity (see module docstring) for (N, 3) q and p; 0 = singular."""
-    q = np.atleast_2d(np.asarray(q, dtype=float))
-    p = np.atleast_2d(np.asarray(p, dtype=float))
-    rods = p[:, None, :] + platform_offsets(robot)[None] - actuator_points_batch(robot, q)
-    d1, _ = actuator_tangents_batch(robot, q)
-    rod_norm = np.linalg.norm(rods, axis=2)
-    serial = np.abs(np.einsum("nij,nij->ni", rods, d1)) / (rod_norm * np.linalg.norm(d1, axis=2))
-    s = np.linalg.svd(rods / rod_norm[:, :, None], compute_uv=False)
-    return np.minimum(serial.min(axis=1), s[:, -1] / s[:, 0])

@@ -14,9 +14,10 @@ from typing import Callable
 
 import numpy as np
 
-from .kinematics import ik_batch, joint_limit_reason
-from .robots import LinearDelta, Robot
-from .singularity import proximity_batch
+from .errors import ParameterError
+from .kinematics import ik_batch, joint_limit_reason, proximity_batch
+from .model import Model, as_model
+from .robots import Robot
 
 __all__ = [
     "Failure",
@@ -59,7 +60,7 @@ class Reachability:
 
 
 def reachability_batch(
-    robot: Robot, p: np.ndarray, singularity_margin: float | None = None, check_limits: bool = True
+    robot: Robot | Model, p: np.ndarray, singularity_margin: float | None = None, check_limits: bool = True
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Vectorised reachability of (N, 3) points.
 
@@ -99,7 +100,7 @@ def reachability_batch(
     return code, leg, q, prox
 
 
-def _explain(robot: Robot, p: np.ndarray, code: int, leg: int, q: np.ndarray, prox: float,
+def _explain(robot: Robot | Model, p: np.ndarray, code: int, leg: int, q: np.ndarray, prox: float,
              margin: float | None) -> Reachability:
     failure = list(Failure)[code]
     if failure is Failure.NONE:
@@ -120,7 +121,7 @@ def _explain(robot: Robot, p: np.ndarray, code: int, leg: int, q: np.ndarray, pr
     )
 
 
-def check_point(robot: Robot, p: np.ndarray, singularity_margin: float | None = None) -> Reachability:
+def check_point(robot: Robot | Model, p: np.ndarray, singularity_margin: float | None = None) -> Reachability:
     """Reachability of one platform position ``p`` (3,), m, with the reason when not reachable."""
     code, leg, q, prox = reachability_batch(robot, np.asarray(p, dtype=float).reshape(1, 3), singularity_margin)
     if code[0] == 0 and singularity_margin is None:
@@ -128,17 +129,10 @@ def check_point(robot: Robot, p: np.ndarray, singularity_margin: float | None = 
     return _explain(robot, p, int(code[0]), int(leg[0]), q[0], float(prox[0]), singularity_margin)
 
 
-def default_bounds(robot: Robot) -> tuple[np.ndarray, np.ndarray]:
+def default_bounds(robot: Robot | Model) -> tuple[np.ndarray, np.ndarray]:
     """An axis-aligned box that contains the whole workspace, (lower, upper), m."""
-    if isinstance(robot, LinearDelta):
-        reach = robot.rail_radius - robot.platform_radius + robot.rod_length
-        lo = np.array([-reach, -reach, -robot.q_max - robot.rod_length])
-        hi = np.array([reach, reach, -robot.q_min])
-    else:
-        reach = robot.base_radius + robot.arm_length + robot.forearm_length - robot.platform_radius
-        lo = np.array([-reach, -reach, -(robot.arm_length + robot.forearm_length)])
-        hi = np.array([reach, reach, robot.arm_length + robot.forearm_length])
-    return lo, hi
+    model = as_model(robot)
+    return model.actuator.bounds(model.robot)
 
 
 @dataclass(frozen=True)
@@ -154,7 +148,7 @@ class WorkspaceSample:
 
 
 def sample_workspace(
-    robot: Robot,
+    robot: Robot | Model,
     spacing: float = 0.01,
     singularity_margin: float | None = None,
     bounds: tuple[np.ndarray, np.ndarray] | None = None,
@@ -166,7 +160,7 @@ def sample_workspace(
     error shrinks with the grid step (first order in ``spacing`` at the boundary).
     """
     if spacing <= 0.0:
-        raise ValueError(f"spacing must be > 0, got {spacing}")
+        raise ParameterError(f"spacing must be > 0, got {spacing}")
     lo, hi = default_bounds(robot) if bounds is None else (np.asarray(bounds[0]), np.asarray(bounds[1]))
     axes = [np.arange(lo[k] + spacing / 2, hi[k], spacing) for k in range(3)]
     grid = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 3)
@@ -195,7 +189,7 @@ def _cylinder_points(centre: np.ndarray, z_below: float, z_above: float, radius:
 
 
 def check_cylinder(
-    robot: Robot,
+    robot: Robot | Model,
     centre: np.ndarray,
     z_below: float,
     z_above: float,
@@ -229,7 +223,7 @@ def check_cylinder(
 
 
 def largest_cylinder(
-    robot: Robot,
+    robot: Robot | Model,
     centre: np.ndarray,
     *,
     z_below: float | None = None,
@@ -248,7 +242,7 @@ def largest_cylinder(
     given = {"z_below": z_below, "z_above": z_above, "radius": radius}
     free = [k for k, v in given.items() if v is None]
     if len(free) != 1:
-        raise ValueError(f"leave exactly one of z_below, z_above, radius as None (got {free or 'none'})")
+        raise ParameterError(f"leave exactly one of z_below, z_above, radius as None (got {free or 'none'})")
     name = free[0]
     lo_b, hi_b = default_bounds(robot)
 
@@ -284,7 +278,7 @@ class TrajectoryCheck:
 
 
 def check_trajectory(
-    robot: Robot,
+    robot: Robot | Model,
     position: Callable[[np.ndarray], np.ndarray] | np.ndarray,
     times: np.ndarray,
     singularity_margin: float | None = None,
@@ -301,7 +295,7 @@ def check_trajectory(
     pts = position(times) if callable(position) else np.asarray(position, dtype=float)
     pts = np.atleast_2d(pts)
     if pts.shape != (len(times), 3):
-        raise ValueError(f"positions have shape {pts.shape}, expected ({len(times)}, 3)")
+        raise ParameterError(f"positions have shape {pts.shape}, expected ({len(times)}, 3)")
     code, leg, q, prox = reachability_batch(robot, pts, singularity_margin)
     bad = np.flatnonzero(code)
     if len(bad) == 0:

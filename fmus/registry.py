@@ -73,8 +73,13 @@ def _trajectory_entries() -> list[FmuEntry]:
                      summary=f"{a.TYPE.replace('_', ' ')} trajectory generator") for a in ADAPTERS.values()]
 
 
-REGISTRY: dict[str, FmuEntry] = {e.name: e for e in [*_robot_entries("linear"), *_robot_entries("rotary"),
-                                                     *_trajectory_entries()]}
+def _entries() -> list[FmuEntry]:
+    from delta.actuators import KINDS
+
+    return [e for kind in KINDS for e in _robot_entries(kind)] + _trajectory_entries()
+
+
+REGISTRY: dict[str, FmuEntry] = {e.name: e for e in _entries()}
 
 
 def names() -> list[str]:

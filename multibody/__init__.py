@@ -14,7 +14,7 @@ No renderer is ever started and no solution file is written.
 from __future__ import annotations
 
 from delta.dynamics import LinearDeltaMasses, RotaryDeltaMasses
-from delta.robots import LinearDelta, Robot, RotaryDelta
+from delta.robots import Robot
 
 from .linear import LinearDeltaPlant
 from .plant import DeltaPlant, JointTrajectory, PlantError, PlantOutput, RobotTypeError, SolverSettings
@@ -53,8 +53,11 @@ def make_plant(robot: Robot, masses: LinearDeltaMasses | RotaryDeltaMasses | Non
     kwargs = dict(fidelity=fidelity, settings=settings, v0=v0, t0=t0, prescribed=prescribed, h_nominal=h_nominal)
     if p0 is not None:
         kwargs["p0"] = p0
-    if isinstance(robot, LinearDelta):
-        return LinearDeltaPlant(robot, masses, **kwargs)
-    if isinstance(robot, RotaryDelta):
-        return RotaryDeltaPlant(robot, masses, **kwargs)
-    raise RobotTypeError(f"make_plant: unknown robot type {type(robot).__name__}; expected LinearDelta or RotaryDelta")
+    plant = PLANTS.get(getattr(robot, "kind", None))
+    if plant is None:
+        raise RobotTypeError(f"make_plant: unknown robot type {type(robot).__name__}; expected LinearDelta or RotaryDelta")
+    return plant(robot, masses, **kwargs)
+
+
+PLANTS = {"linear": LinearDeltaPlant, "rotary": RotaryDeltaPlant}
+"""Robot kind -> its Exudyn plant class."""

@@ -281,13 +281,15 @@ class DeltaPlant:
 
     def _out_of_range(self, t: float, q: list[float]) -> None:
         """Raise the error of a joint driven past its range (the robot's end stops)."""
-        unit, scale = ("m", 1.0) if self.kind == "linear" else ("deg", 180.0 / math.pi)
-        what = "carriage stroke" if self.kind == "linear" else "arm range"
+        from delta.actuators import kind_of
+
+        actuator = kind_of(self.robot.kind)
         for i, qi in enumerate(q):
             if not self._q_lo <= qi <= self._q_hi:
+                (value, lo, hi), unit = actuator.shown([qi, self._q_lo, self._q_hi])
                 raise PlantError(
-                    f"{type(self).__name__}: joint {i + 1} at q = {qi * scale:.6g} {unit} left its {what} "
-                    f"[{self._q_lo * scale:.6g}, {self._q_hi * scale:.6g}] {unit} at t = {t:.6f} s: the "
+                    f"{type(self).__name__}: joint {i + 1} at q = {value:.6g} {unit} left its {actuator.joint_range} "
+                    f"[{lo:.6g}, {hi:.6g}] {unit} at t = {t:.6f} s: the "
                     "actuator was driven into its end stop (the plant stops here rather than pass through it)")
 
     def energy(self) -> tuple[float, float]:

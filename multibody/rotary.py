@@ -72,7 +72,7 @@ class RotaryDeltaPlant(DeltaPlant):
         self._axes = np.cross(z[None, :], e)  # a_i = z x e_i
         b = platform_offsets(robot)
         elbows = actuator_points(robot, q0)
-        d_elbow = actuator_tangents(robot, q0)[0]
+        d_elbow = actuator_tangents(robot, q0)
         la, length = robot.arm_length, robot.forearm_length
         w_i, w_g = m.w_inertia, m.w_gravity
         self._ground = mbs.AddObject(ObjectGround())

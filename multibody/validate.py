@@ -48,9 +48,11 @@ from typing import Callable
 
 import numpy as np
 
-from delta.dynamics import LinearDeltaMasses, RotaryDeltaMasses, analytic_model
+from delta.actuators import kind_of
+from delta.dynamics import analytic_model
+from delta.errors import ParameterError, UnreachableError
 from delta.kinematics import joint_state_from_platform
-from delta.robots import LinearDelta, get_preset
+from delta.robots import get_preset
 from delta.trajectories import Helix, PickAndPlace
 
 from .plant import SolverSettings
@@ -118,7 +120,7 @@ class _JointMotion:
 
 
 def _default_masses(robot):
-    return LinearDeltaMasses() if isinstance(robot, LinearDelta) else RotaryDeltaMasses()
+    return kind_of(robot.kind).masses_type()
 
 
 def run_prescribed(robot, trajectory, masses=None, h: float = 2e-4, duration: float | None = None,
@@ -297,17 +299,17 @@ def validation_trajectory(robot, name: str):
 
     Raises
     ------
-    ValueError
+    ParameterError, UnreachableError
         Unknown name, or the motion leaves ``robot``'s workspace (the message says where and why).
     """
     try:
         trajectory = VALIDATION_TRAJECTORIES[(robot.kind, name)]
     except KeyError:
         valid = sorted({n for _, n in VALIDATION_TRAJECTORIES})
-        raise ValueError(f"unknown validation trajectory {name!r}; valid: {', '.join(valid)}") from None
+        raise ParameterError(f"unknown validation trajectory {name!r}; valid: {', '.join(valid)}") from None
     check = trajectory.check(robot)
     if not check.ok:
-        raise ValueError(f"{name} trajectory leaves the workspace of {robot.name} at t = {check.t} s, "
+        raise UnreachableError(f"{name} trajectory leaves the workspace of {robot.name} at t = {check.t} s, "
                          f"p = {check.p} m: {check.reason}")
     return trajectory
 
@@ -412,7 +414,7 @@ def validate_model(robot_preset: str, trajectory: str = "pick_place", ws=None, s
         split = _error(efforts(w_i, w_g), f_plant, w_i, w_g)
     elif separate:  # massless rods: w changes nothing, nothing to fit
         tick()
-    unit = "N" if robot.kind == "linear" else "N*m"
+    unit = kind_of(robot.kind).units[3].replace(".", "*")  # N or N*m
     return ValidationReport(
         robot=robot.name, trajectory=trajectory, fidelity=fidelity, effort_unit=unit, h=float(h), duration=end,
         samples=len(run.t), plant_rms=float(np.sqrt(np.mean(f_plant**2))), plant_peak=float(np.max(np.abs(f_plant))),

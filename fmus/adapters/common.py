@@ -4,14 +4,14 @@ from __future__ import annotations
 
 from dataclasses import fields
 
-from delta.dynamics import LinearDeltaMasses, RotaryDeltaMasses
-from delta.robots import LinearDelta, RotaryDelta, get_preset
+from delta.actuators import KINDS, kind_of
+from delta.robots import get_preset
 
 from .._names import axis_names, joint_names
 
 __all__ = ["PRESET", "declare_robot", "robot_from", "declare_masses", "masses_from", "q_units"]
 
-PRESET = {"linear": "linear_delta_thesis", "rotary": "rotary_delta_prototype"}
+PRESET = {kind: cls.preset for kind, cls in KINDS.items()}
 """Robot preset whose geometry gives the parameter start values of each robot kind's FMUs."""
 
 _GEOMETRY = {
@@ -40,7 +40,7 @@ _MASSES = {
 
 def q_units(kind: str) -> tuple[str, str, str, str]:
     """Units of q, qd, qdd and u for a robot kind."""
-    return ("m", "m/s", "m/s2", "N") if kind == "linear" else ("rad", "rad/s", "rad/s2", "N.m")
+    return kind_of(kind).units
 
 
 def declare_robot(fmu, kind: str) -> None:
@@ -58,7 +58,7 @@ def declare_robot(fmu, kind: str) -> None:
 
 def robot_from(fmu, kind: str) -> LinearDelta | RotaryDelta:
     """The robot described by the current ``geometry.*`` parameter values."""
-    cls = LinearDelta if kind == "linear" else RotaryDelta
+    cls = kind_of(kind).robot_type
     values = {f.name: fmu.values[f"geometry.{f.name}"] for f in fields(cls) if f.name in _GEOMETRY}
     return cls(name=f"{PRESET[kind]} (FMU {fmu.modelName})",
                leg_angles=tuple(fmu.vec(joint_names("geometry.leg_angle"))),
@@ -66,7 +66,7 @@ def robot_from(fmu, kind: str) -> LinearDelta | RotaryDelta:
 
 
 def _mass_class(kind: str):
-    return LinearDeltaMasses if kind == "linear" else RotaryDeltaMasses
+    return kind_of(kind).masses_type
 
 
 def declare_masses(fmu, kind: str) -> None:
@@ -82,23 +82,24 @@ def masses_from(fmu, kind: str):
     return cls(**{f.name: fmu.values[_MASSES[f.name][0]] for f in fields(cls)})
 
 
-HOME = {"linear": (0.1, 0.0, -0.45), "rotary": (0.0, 0.0, -0.4108)}
-"""Default platform position of each kind (plant initial state; linear = start of the default helix), m."""
+def home(kind: str) -> tuple[float, float, float]:
+    """Default platform position of each kind (plant initial state; linear = start of the default helix), m."""
+    return kind_of(kind).home
 
 
 def home_joints(kind: str) -> tuple[float, float, float]:
     """Joint values of the kind's home position for its preset (start values of the plant state)."""
     from delta.kinematics import ik
 
-    return tuple(float(x) for x in ik(get_preset(PRESET[kind]), HOME[kind]).require())
+    return tuple(float(x) for x in ik(get_preset(PRESET[kind]), home(kind)).require())
 
 
 def hold_effort(kind: str) -> tuple[float, float, float]:
     """Effort that holds the preset still at its home joints (start value of the plant inputs u)."""
-    from delta.dynamics import analytic_model
+    from delta.dynamics import gravity
+    from delta.model import Data, build_model
 
-    model = analytic_model(get_preset(PRESET[kind]), _mass_class(kind)())
-    return tuple(float(x) for x in model.gravity_term(home_joints(kind)))
+    return gravity(build_model(get_preset(PRESET[kind])), Data(), home_joints(kind))
 
 
 P0, V0 = axis_names("initial.p"), axis_names("initial.v")
@@ -106,15 +107,13 @@ P0, V0 = axis_names("initial.p"), axis_names("initial.v")
 
 def declare_initial_state(fmu, kind: str) -> None:
     """``initial.p.*`` and ``initial.v.*``: the plant starts at this platform state (joints through IK)."""
-    fmu.parameters3(P0, HOME[kind], "m", "initial platform position")
+    fmu.parameters3(P0, home(kind), "m", "initial platform position")
     fmu.parameters3(V0, (0.0, 0.0, 0.0), "m/s", "initial platform velocity")
 
 
-def initial_joint_state(fmu, robot):
-    """(q, qd) stacked, from the ``initial.p`` / ``initial.v`` parameters (raises if unreachable)."""
-    import numpy as np
-
+def initial_joint_state(fmu, model) -> tuple[tuple[float, float, float], tuple[float, float, float]]:
+    """(q, qd) from the ``initial.p`` / ``initial.v`` parameters (raises if unreachable)."""
     from delta.kinematics import joint_state_from_platform
 
-    q, qd, _ = joint_state_from_platform(robot, fmu.vec(P0), fmu.vec(V0))
-    return np.concatenate([q, qd])
+    q, qd, _ = joint_state_from_platform(model, fmu.vec(P0), fmu.vec(V0))
+    return tuple(q.tolist()), tuple(qd.tolist())

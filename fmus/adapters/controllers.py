@@ -13,7 +13,7 @@ from __future__ import annotations
 from operator import itemgetter
 
 from delta.control import CTC, DEFAULT_GAINS, PD, PID, PDPlus
-from delta.dynamics import analytic_model
+from delta.model import build_model
 
 from .._fmi import Adapter, joint_names, writer
 from .common import declare_masses, declare_robot, home_joints, masses_from, q_units, robot_from
@@ -59,9 +59,7 @@ class _Controller(Adapter):
         return Q[i], QD[i], Q_REF[i], QD_REF[i]
 
     def gain_unit(self, name: str, uu: str, qu: str) -> tuple[str, str]:
-        linear = uu == "N"
-        unit = {"kp": "N/m" if linear else "N.m/rad", "kd": "N.s/m" if linear else "N.m.s/rad",
-                "ki": "N/(m.s)" if linear else "N.m/(rad.s)"}[name]
+        unit = {"kp": f"{uu}/{qu}", "kd": f"{uu}.s/{qu}", "ki": f"{uu}/({qu}.s)"}[name]
         what = {"kp": "proportional", "kd": "derivative", "ki": "integral"}[name]
         return unit, f"{what} gain"
 
@@ -127,7 +125,7 @@ class PDPlusController(_Controller):
         return (*Q, QD[i], Q_REF[i], QD_REF[i])
 
     def make_law(self, h: float):
-        model = analytic_model(robot_from(self, self.KIND), masses_from(self, self.KIND))
+        model = build_model(robot_from(self, self.KIND), masses_from(self, self.KIND))
         return PDPlus(model, self.gains("kp"), self.gains("kd"), h, u_max=self.u_max)
 
 
@@ -146,5 +144,5 @@ class CTCController(_Controller):
                 {"kp": "outer-loop stiffness (natural frequency squared)", "kd": "outer-loop damping"}[name])
 
     def make_law(self, h: float):
-        model = analytic_model(robot_from(self, self.KIND), masses_from(self, self.KIND))
+        model = build_model(robot_from(self, self.KIND), masses_from(self, self.KIND))
         return CTC(model, self.gains("kp"), self.gains("kd"), h, u_max=self.u_max)

@@ -1,4 +1,4 @@
-"""Inverse and forward kinematics FMUs (delta.scalar_kinematics, delta.kinematics)."""
+"""Inverse and forward kinematics FMUs on the per-pose path of :mod:`delta.kinematics`."""
 
 from __future__ import annotations
 
@@ -6,12 +6,14 @@ from operator import itemgetter
 
 from pythonfmu.enums import Fmi2Status
 
-from delta.kinematics import fk, joint_limit_reason, platform_velocity
-from delta.scalar_kinematics import ScalarKinematics
-from delta.singularity import analyse
+from delta.actuators import kind_of
+from delta.dynamics import platform_state
+from delta.errors import RobotError
+from delta.kinematics import fk, inverse_kinematics, joint_limit_reason, proximity, set_pose, solve_ik
+from delta.model import Data, build_model
 
 from .._fmi import Adapter, axis_names, joint_names, writer
-from .common import declare_robot, q_units, robot_from
+from .common import declare_robot, home, home_joints, q_units, robot_from
 
 P_REF, V_REF, A_REF = axis_names("p_ref"), axis_names("v_ref"), axis_names("a_ref")
 Q_REF, QD_REF, QDD_REF = joint_names("q_ref"), joint_names("qd_ref"), joint_names("qdd_ref")
@@ -46,16 +48,16 @@ class InverseKinematics(Adapter):
         self.parameter("singularity.margin", 0.0, "1",
                        "minimum singularity proximity for a reachable point (0 = only exact singularities)",
                        tunable=True)
-        home = (0.0, 0.0, -0.5) if kind == "linear" else (0.0, 0.0, -0.4108)
-        self.inputs3(P_REF, "m", "desired platform position", home)
+        self.inputs3(P_REF, "m", "desired platform position", home(kind))
         self.inputs3(V_REF, "m/s", "desired platform velocity")
         self.inputs3(A_REF, "m/s2", "desired platform acceleration")
         # Each leg's IK needs the whole platform position; rates add v_ref, accelerations a_ref.
         # On vertical rails (linear delta) a vertical shift or velocity moves every carriage alike
         # and leaves the legs' geometry and relative velocities unchanged: the Jacobian, qd_ref
         # (no p_ref.z), qdd_ref (no p_ref.z, v_ref.z) and the proximity do not depend on them.
-        shape = P_REF[:2] if kind == "linear" else P_REF
-        shape_rate = V_REF[:2] if kind == "linear" else V_REF
+        vertical_invariant = kind_of(kind).vertical_invariant
+        shape = P_REF[:2] if vertical_invariant else P_REF
+        shape_rate = V_REF[:2] if vertical_invariant else V_REF
         self.outputs3(Q_REF, qu, "desired joint position", depends=P_REF)
         self.outputs3(QD_REF, qdu, "desired joint velocity", depends=shape + V_REF)
         self.outputs3(QDD_REF, qddu, "desired joint acceleration", depends=shape + shape_rate + A_REF)
@@ -80,8 +82,8 @@ class InverseKinematics(Adapter):
         """Compute the pending proximity of the last refreshed pose and store it."""
         q, p = self._pending_pose
         self._pending_pose = None
-        proximity = self.values[PROXIMITY] = self.kin.proximity(q, p)
-        return proximity
+        value = self.values[PROXIMITY] = proximity(set_pose(self.model, self.data, q, p))
+        return value
 
     def _get_plan(self, vrs):
         """fmi2GetReal plans that include the proximity settle it after the refresh, before reading."""
@@ -97,33 +99,37 @@ class InverseKinematics(Adapter):
         return reads_outputs, read_settled
 
     def start(self) -> None:
-        self.robot = robot_from(self, self.KIND)
-        self.kin = ScalarKinematics(self.robot)
+        self.model = build_model(robot_from(self, self.KIND))
+        self.data = Data()
         self._reachable = True
         self._pending_pose = None
 
-    def _unreachable_reason(self, p, q, leg: int) -> tuple[str | None, float | None]:
+    def _unreachable_reason(self, p, q, fault: int) -> tuple[str | None, float | None]:
         """Why ``p_ref`` is not reachable (None if it is) and its singularity proximity (0 when unknown,
         None when not needed yet: see the class docstring), with the checks and messages of
-        :func:`delta.workspace.check_point`."""
-        if leg:
-            return f"leg {leg} has no solution", 0.0
-        limit = self.kin.limit_violation(q)
-        if limit:
-            return joint_limit_reason(self.robot, limit, q[limit - 1]), 0.0
+        :func:`delta.workspace.check_point`; ``fault`` as :func:`delta.kinematics.inverse_kinematics` gives it."""
+        if fault > 0:
+            return f"leg {fault} has no solution", 0.0
+        if fault < 0:
+            return joint_limit_reason(self.model, -fault, q[-fault - 1]), 0.0
         margin = self.values["singularity.margin"]
         if margin <= 0.0:
             return None, None
-        proximity = self.kin.proximity(q, p)
-        if proximity < margin:
-            return f"too close to a singularity: proximity {proximity:.3g} < margin {margin:g}", proximity
-        return None, proximity
+        value = proximity(set_pose(self.model, self.data, q, p))
+        if value < margin:
+            return f"too close to a singularity: proximity {value:.3g} < margin {margin:g}", value
+        return None, value
 
     def refresh(self) -> None:
         x = _read_refs(self.values)
         p = x[0:3]
-        q, leg = self.kin.ik(p)
-        reason, proximity = self._unreachable_reason(p, q, leg)
+        try:
+            q, qd, qdd, fault = inverse_kinematics(self.model, p, x[3:6], x[6:9])
+        except RobotError:  # a type 1 singularity: unreachable under any margin > 0, an error without one
+            if self.values["singularity.margin"] <= 0.0:
+                raise
+            (q, fault), qd = solve_ik(self.model, p), None
+        reason, proximity = self._unreachable_reason(p, q, fault)
         values = self.values
         values["reachable"] = reason is None
         if proximity is None:
@@ -138,7 +144,6 @@ class InverseKinematics(Adapter):
             self._reachable = False
             return
         self._reachable = True
-        qd, qdd = self.kin.joint_rates(q, p, x[3:6], x[6:9])
         _WRITE_JOINT_REFS(values, q, qd, qdd)
 
 
@@ -153,7 +158,7 @@ class ForwardKinematics(Adapter):
         qu, qdu, _, _ = q_units(kind)
         self.description = f"Forward kinematics of the {kind} delta"
         declare_robot(self, kind)
-        self.inputs3(Q, qu, "joint position", (0.0,) * 3 if kind == "rotary" else (0.35, 0.35, 0.35))
+        self.inputs3(Q, qu, "joint position", home_joints(kind))
         self.inputs3(QD, qdu, "joint velocity")
         self.outputs3(P, "m", "platform position", depends=Q)
         self.outputs3(V, "m/s", "platform velocity", depends=Q + QD)
@@ -162,13 +167,15 @@ class ForwardKinematics(Adapter):
         self.output("singularity.proximity", "1", "singularity proximity of the pose (0 = singular)", depends=Q)
 
     def start(self) -> None:
-        self.robot = robot_from(self, self.KIND)
+        self.model = build_model(robot_from(self, self.KIND))
+        self.data = Data()
 
     def refresh(self) -> None:
         q, qd = self.vec(Q), self.vec(QD)
-        res = fk(self.robot, q)
-        self.values["valid"] = res.ok
-        if res.ok:
-            self.put(P, res.p)
-            self.put(V, platform_velocity(self.robot, q, res.p, qd))
-            self.values["singularity.proximity"] = analyse(self.robot, q, res.p).proximity
+        valid = fk(self.model, q).ok  # in the working mode IK solves for
+        self.values["valid"] = valid
+        if valid:
+            p, v = platform_state(self.model, self.data, q.tolist(), qd.tolist())
+            self.put(P, p)
+            self.put(V, v)
+            self.values["singularity.proximity"] = proximity(self.data)

@@ -2,7 +2,8 @@
 
 from __future__ import annotations
 
-from delta.dynamics import analytic_model
+from delta.dynamics import forward_dynamics, platform_state
+from delta.model import Data, build_model
 
 from .._names import axis_names, joint_names
 from .._fmi3 import AdapterME
@@ -48,18 +49,18 @@ class AnalyticPlantME(AdapterME):
             self.output(n, "m/s", f"platform velocity ({a})", depends=(*Q, *QD))
 
     def start(self) -> None:
-        robot = robot_from(self, self.KIND)
-        self.model = analytic_model(robot, masses_from(self, self.KIND))
-        x0 = initial_joint_state(self, robot)
-        self.put(Q, x0[:3])
-        self.put(QD, x0[3:])
+        self.model = build_model(robot_from(self, self.KIND), masses_from(self, self.KIND))
+        self.data = Data()
+        q, qd = initial_joint_state(self, self.model)
+        self.put(Q, q)
+        self.put(QD, qd)
 
     def derivatives(self) -> None:
-        q, qd = self.vec(Q), self.vec(QD)
+        qd = self.vec3(QD)
         self.put(DQ, qd)
-        self.put(DQD, self.model.forward_dynamics(q, qd, self.vec(U)))
+        self.put(DQD, forward_dynamics(self.model, self.data, self.vec3(Q), qd, self.vec3(U)))
 
     def outputs(self) -> None:
-        p, v = self.model.platform_state(self.vec(Q), self.vec(QD))
+        p, v = platform_state(self.model, self.data, self.vec3(Q), self.vec3(QD))
         self.put(P, p)
         self.put(V, v)

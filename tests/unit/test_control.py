@@ -191,11 +191,10 @@ def test_scalar_path_equals_array_path(kind, robot):
 
 @pytest.mark.parametrize("robot", [linear_delta_thesis, rotary_delta_prototype], ids=["linear", "rotary"])
 @pytest.mark.parametrize("feedforward", [True, False], ids=["feedforward", "regulation"])
-def test_ctc_fused_effort_equals_model_terms(robot, feedforward):
-    """The fused CTC effort performs the operations of the model's terms() and the row products
-    sum_k M[i][k] w[k] + C[i] + G[i] in the same order: equal exactly. Against numpy's
-    M @ w + C + G (another summation order) rounding only: rtol 1e-13 of the effort scale
-    (a few ulp times the ~1e2 dynamic range between the terms)."""
+def test_ctc_effort_is_the_inverse_dynamics_of_the_outer_loop(robot, feedforward):
+    """The CTC effort is inverse_dynamics(q, qd, w) with the outer-loop acceleration w (thesis
+    eq. (50)): equal exactly. Against numpy's M @ w + C + G (another summation order) rounding
+    only: rtol 1e-13 of the effort scale (a few ulp times the ~1e2 dynamic range between the terms)."""
     model = analytic_model(robot)
     gains = DEFAULT_GAINS[robot.kind]["ctc"]
     law = CTC(model, gains["kp"], gains["kd"], H, feedforward=feedforward)  # no saturation
@@ -205,13 +204,10 @@ def test_ctc_fused_effort_equals_model_terms(robot, feedforward):
             w = qdd_ref + kd * (qd_ref - qd) + kp * (q_ref - q)
         else:
             w = kp * (q_ref - q) - kd * qd
-        m, c, g = model.terms(q, qd)
-        w_list = w.tolist()
-        expected = tuple(m[i][0] * w_list[0] + m[i][1] * w_list[1] + m[i][2] * w_list[2] + c[i] + g[i]
-                         for i in range(3))
+        expected = tuple(model.inverse_dynamics(q, qd, w).tolist())
         u = law.output_scalar(q, qd, q_ref, qd_ref, qdd_ref)
-        assert u == expected, f"sample {k}: fused CTC {u} vs terms() {expected}"
+        assert u == expected, f"sample {k}: CTC {u} vs inverse_dynamics {expected}"
         vectorised = model.mass_matrix(q) @ w + model.velocity_term(q, qd) + model.gravity_term(q)
         scale = np.abs(model.mass_matrix(q)).max() * np.abs(w).max() + np.abs(vectorised).max()
         assert np.allclose(u, vectorised, rtol=0.0, atol=1e-13 * scale), \
-            f"sample {k}: fused CTC {u} vs M @ w + C + G {vectorised}"
+            f"sample {k}: CTC {u} vs M @ w + C + G {vectorised}"

@@ -1,0 +1,186 @@
+"""The kinematics and dynamics core per call, side by side with an earlier commit, and the analytic plant's run.
+
+Part 1, per call, both trees in one run: each tree (this checkout and ``--baseline``, by default the
+parent of the commit that replaced ``delta/scalar_kinematics.py`` by the model / data core) runs the
+same probe in its own Python process, alternately ``--rounds`` times, and the best of each is kept:
+
+* ``IK step``: what the IK FMU computes per step: inverse kinematics, the joint-limit check, joint
+  velocity and acceleration of 2000 poses of the default helix;
+* ``CTC law``: ``CTC.output_scalar`` on 2000 measured states near the helix (fresh ``q`` every call,
+  so the forward kinematics is never cached);
+* ``forward dynamics``: ``qdd = M^-1 (u - C qd - G)`` at the same states (the analytic plant's call).
+
+Part 2, this checkout: ``helix_ctc_analytic`` (analytic plant) against ``helix_ctc`` (full Exudyn plant),
+``--stop`` s simulated, no log, each timed on its stepping loop (``RunResult.wall_time``), alternately,
+best of ``--rounds``, with the CTC tracking RMSE per axis. ``--plant-baseline`` also runs
+``helix_ctc_analytic`` in the baseline tree.
+
+    python benchmarks/core.py [--rounds 5] [--stop 10] [--baseline REV] [--plant-baseline]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+SPEEDUP_TARGET = 4.0  # issue 16: helix_ctc_analytic at least 4x faster than helix_ctc
+RMSE_TARGET = 1e-7  # m per axis, CTC on the analytic plant
+
+# Runs inside either tree (PYTHONPATH = that tree): the new core if delta.model exists, else the
+# plain-float module it replaced. Prints {"ik": us, "ctc": us, "fwd": us} per robot.
+ISOLATE = r'''
+import sys
+# the project's editable install maps its packages to the main checkout: use the tree on PYTHONPATH only
+sys.meta_path[:] = [f for f in sys.meta_path if "__editable__" not in getattr(f, "__module__", "")]
+'''
+
+PROBE = ISOLATE + r'''
+import importlib.util, json, sys, timeit
+import numpy as np
+from delta.control import default_controller
+from delta.dynamics import joint_references, analytic_model
+from delta.robots import linear_delta_thesis, rotary_delta_prototype
+from delta.trajectories import Helix
+
+NEW = importlib.util.find_spec("delta.model") is not None
+N = 2000
+
+def per_call(fn, n):
+    return min(timeit.repeat(fn, number=1, repeat=7)) / n * 1e6
+
+out = {}
+for robot in (linear_delta_thesis, rotary_delta_prototype):
+    t = np.linspace(0.0, 10.0, N)
+    p, v, a = Helix().sample(t) if robot.kind == "linear" else Helix(z0=-0.45, rx=0.05, ry=0.05).sample(t)
+    model = analytic_model(robot)
+    q_ref, qd_ref, qdd_ref = joint_references(model, p, v, a)
+    rng = np.random.default_rng(1)
+    q = (q_ref + rng.normal(0.0, 1e-4, q_ref.shape)).tolist()
+    qd = (qd_ref + rng.normal(0.0, 1e-3, qd_ref.shape)).tolist()
+    refs = list(zip(q_ref.tolist(), qd_ref.tolist(), qdd_ref.tolist()))
+    poses = list(zip(map(tuple, p.tolist()), map(tuple, v.tolist()), map(tuple, a.tolist())))
+    u = [tuple(x) for x in np.tile(model.gravity_term(q_ref[0]), (N, 1)).tolist()]
+    ctc = default_controller("ctc", robot, model)
+    if NEW:
+        from delta.dynamics import forward_dynamics
+        from delta.kinematics import inverse_kinematics
+        from delta.model import Data
+        m, fd = model.model, Data()
+        def ik_step():
+            for pp, vv, aa in poses:
+                inverse_kinematics(m, pp, vv, aa)
+        def fwd():
+            for x, xd, f in zip(q, qd, u):
+                forward_dynamics(m, fd, x, xd, f)
+    else:
+        from delta.scalar_kinematics import ScalarKinematics
+        kin = ScalarKinematics(robot)
+        def ik_step():
+            for pp, vv, aa in poses:
+                qq, leg = kin.ik(pp)
+                kin.limit_violation(qq)
+                kin.joint_rates(qq, pp, vv, aa)
+        def fwd():
+            for x, xd, f in zip(q, qd, u):
+                model.accel(x, xd, f)
+    def law():
+        for x, xd, (qr, qdr, qddr) in zip(q, qd, refs):
+            ctc.output_scalar(x, xd, qr, qdr, qddr)
+    out[robot.kind] = {"ik": per_call(ik_step, N), "ctc": per_call(law, N), "fwd": per_call(fwd, N)}
+print(json.dumps(out))
+'''
+
+PLANT = ISOLATE + r'''
+import json, sys
+from cosim.run import run_scenario
+from cosim.scenario import load_scenario
+name, stop = sys.argv[1], float(sys.argv[2])
+res = run_scenario(load_scenario(f"scenarios/{name}.yaml", {("time", "stop"): stop}), log=False)
+print(json.dumps({"wall": res.wall_time, "rmse": [e.rmse for e in res.errors]}))
+'''
+
+
+def _git(*args: str, cwd: Path = ROOT) -> str:
+    return subprocess.run(["git", *args], cwd=cwd, check=True, capture_output=True, text=True).stdout.strip()
+
+
+def default_baseline() -> str:
+    """The parent of the commit that removed delta/scalar_kinematics.py (HEAD if none did)."""
+    removed = _git("log", "-1", "--format=%H", "--diff-filter=D", "--", "delta/scalar_kinematics.py")
+    return f"{removed}^" if removed else "HEAD"
+
+
+def run_in(tree: Path, code: str, *args: str) -> dict:
+    env = dict(os.environ, PYTHONPATH=str(tree))
+    out = subprocess.run([sys.executable, "-c", code, *args], cwd=tree, env=env, capture_output=True, text=True)
+    if out.returncode != 0:
+        raise SystemExit(f"benchmark probe failed in {tree}:\n{out.stderr[-2000:]}")
+    return json.loads(out.stdout.strip().splitlines()[-1])
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--rounds", type=int, default=5, help="alternations; the best of each is kept (default 5)")
+    ap.add_argument("--stop", type=float, default=10.0, help="simulated seconds of each scenario run (default 10)")
+    ap.add_argument("--baseline", default=None, help="git revision to compare with (default: before the core)")
+    ap.add_argument("--plant-baseline", action="store_true",
+                    help="also time helix_ctc_analytic in the baseline tree (builds its FMUs)")
+    args = ap.parse_args(argv)
+    rev = args.baseline or default_baseline()
+    sha = _git("rev-parse", "--short", rev)
+    print(f"baseline {rev} = {sha}; {os.cpu_count()} CPUs, load average {os.getloadavg()[0]:.2f}", flush=True)
+    with tempfile.TemporaryDirectory(prefix="cosim-bench-") as tmp:
+        base = Path(tmp) / "baseline"
+        _git("worktree", "add", "--detach", "--quiet", str(base), rev)
+        try:
+            best: dict[str, dict[str, dict[str, float]]] = {}
+            for r in range(args.rounds):
+                for label, tree in (("baseline", base), ("this tree", ROOT)):
+                    res = run_in(tree, PROBE)
+                    for kind, calls in res.items():
+                        slot = best.setdefault(label, {}).setdefault(kind, {})
+                        for k, us in calls.items():
+                            slot[k] = min(slot.get(k, float("inf")), us)
+                print(f"round {r + 1}/{args.rounds} done", flush=True)
+            print(f"\nper call, best of {args.rounds} (us)        baseline {sha}   this tree   ratio")
+            names = {"ik": "IK step (IK + limits + rates)", "ctc": "CTC law", "fwd": "forward dynamics"}
+            for kind in ("linear", "rotary"):
+                for k, text in names.items():
+                    old, new = best["baseline"][kind][k], best["this tree"][kind][k]
+                    verdict = "not slower" if new <= old else "SLOWER"
+                    print(f"  {kind:<6} {text:<30} {old:9.2f}   {new:9.2f}   {new / old:5.2f}  {verdict}")
+            plants = {}
+            labels = [("helix_ctc", ROOT), ("helix_ctc_analytic", ROOT)]
+            if args.plant_baseline:
+                labels.append(("helix_ctc_analytic", base))
+            for r in range(args.rounds):
+                for name, tree in labels:
+                    res = run_in(tree, PLANT, name, str(args.stop))
+                    key = (name, tree == base)
+                    if key not in plants or res["wall"] < plants[key]["wall"]:
+                        plants[key] = res
+            print(f"\n{args.stop:g} s simulated, loop wall time, best of {args.rounds}, no log, "
+                  "each scenario's own parallel setting")
+            for (name, is_base), res in plants.items():
+                where = f"baseline {sha}" if is_base else "this tree"
+                rmse = ", ".join(f"{x:.3g}" for x in res["rmse"])
+                print(f"  {name:<20} {where:<18} {res['wall']:7.3f} s   RMSE per axis {rmse} m")
+            full, analytic = plants[("helix_ctc", False)], plants[("helix_ctc_analytic", False)]
+            speedup = full["wall"] / analytic["wall"]
+            rmse_ok = max(analytic["rmse"]) < RMSE_TARGET
+            print(f"  helix_ctc_analytic is {speedup:.2f}x faster than helix_ctc "
+                  f"({'meets' if speedup >= SPEEDUP_TARGET else 'misses'} the {SPEEDUP_TARGET:g}x target); "
+                  f"CTC RMSE on the analytic plant {'<' if rmse_ok else '>='} {RMSE_TARGET:g} m per axis")
+        finally:
+            _git("worktree", "remove", "--force", str(base))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

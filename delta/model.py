@@ -1,0 +1,129 @@
+"""The robot model (immutable, compiled once) and its scratch data, in the style of Pinocchio.
+
+:func:`build_model` compiles a geometry preset (:mod:`delta.robots`) and its masses
+(:mod:`delta.masses`) into a :class:`Model`: per-leg directions and platform offsets,
+rod length, joint limits, the actuator path (:mod:`delta.actuators`) and the mass
+lumps of the analytic dynamics. A :class:`Data` holds the quantities of one pose that
+the algorithms of :mod:`delta.kinematics` and :mod:`delta.dynamics` compute and share
+(platform position, rods, Jacobian, its inverse), so a controller or an integrator that
+asks for several terms at one ``q`` computes the kinematics once.
+
+Both are plain objects of floats: the per-step path allocates no arrays.
+
+Mass lumps (thesis section 7, Codourey's lumping for the rotary delta): each actuator
+carries a constant inertia ``D`` (carriage or arm plus the actuator-side share ``1 - w``
+of its two rods); the platform carries ``m_p = platform + payload + 6 w rod`` (thesis
+eq. (28)). The inertial and the gravity lumps use ``w_inertia`` and ``w_gravity``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from functools import lru_cache
+from math import cos, sin
+
+import numpy as np
+
+from .actuators import Actuator, actuator_for
+from .errors import ParameterError
+from .masses import Masses
+from .robots import Robot
+
+__all__ = ["Model", "Data", "build_model", "as_model"]
+
+
+@dataclass(frozen=True, eq=False)
+class Model:
+    """Immutable description of one robot with its masses (build with :func:`build_model`).
+
+    Attributes
+    ----------
+    robot, masses : the geometry preset and the mass parameters it was compiled from.
+    actuator : the actuator path (:class:`delta.actuators.Rail` or :class:`~delta.actuators.Arm`).
+    kind : ``"linear"`` or ``"rotary"``.
+    ex, ey : per-leg unit radial direction ``e_i`` in the base plane (3 floats each).
+    bx, by : per-leg platform joint offsets ``b_i = r e_i``, m.
+    legs : ``(ex, ey, bx, by)`` of each leg.
+    ex_arr, ey_arr, bx_arr, by_arr : the same as (3,) arrays for the batch path.
+    rod : rod length ``L``, m.  q_min, q_max : joint limits (m or rad).
+    inertia : actuator lump ``D`` (kg or kg m^2).  platform_mass : ``m_p`` of the inertial terms, kg.
+    platform_weight : ``m_p g`` of the gravity terms, N.  actuator_weight : see the actuator's ``weight``.
+    """
+
+    robot: Robot
+    masses: Masses
+    actuator: Actuator
+    kind: str
+    ex: tuple[float, float, float]
+    ey: tuple[float, float, float]
+    bx: tuple[float, float, float]
+    by: tuple[float, float, float]
+    legs: tuple[tuple[float, float, float, float], ...]
+    ex_arr: np.ndarray
+    ey_arr: np.ndarray
+    bx_arr: np.ndarray
+    by_arr: np.ndarray
+    rod: float
+    q_min: float
+    q_max: float
+    inertia: float
+    platform_mass: float
+    platform_weight: float
+    actuator_weight: float
+
+    def create_data(self) -> "Data":
+        return Data()
+
+    @property
+    def name(self) -> str:
+        return self.robot.name
+
+
+class Data:
+    """Scratch quantities of the last pose an algorithm evaluated (see :func:`delta.kinematics.update`).
+
+    ``q`` (3 floats) is the pose key; ``p`` the platform position; ``legs[i]`` holds, for leg i,
+    ``(lx, ly, lz, d1x, d1y, d1z, l.B'', l.B')``: the rod ``l_i = p + b_i - B_i(q_i)``, the actuator
+    tangent ``B_i'``, and the products ``l_i . B_i''`` and ``l_i . B_i'``; ``jinv`` the inverse task
+    Jacobian ``J^-1`` row-major (9 floats) or None when not computed.
+    """
+
+    __slots__ = ("q", "p", "legs", "jinv")
+
+    def __init__(self) -> None:
+        self.q: tuple[float, float, float] | None = None
+        self.p: tuple[float, float, float] = (0.0, 0.0, 0.0)
+        self.legs: list[tuple[float, ...]] = []
+        self.jinv: tuple[float, ...] | None = None
+
+
+@lru_cache(maxsize=64)
+def build_model(robot: Robot, masses: Masses | None = None) -> Model:
+    """Compile ``robot`` and ``masses`` (default: the kind's mass defaults) into a :class:`Model`."""
+    actuator = actuator_for(robot)
+    if masses is None:
+        masses = actuator.masses_type()
+    elif not isinstance(masses, actuator.masses_type):
+        raise ParameterError(f"{actuator.kind} delta {robot.name!r} needs {actuator.masses_type.__name__}, "
+                             f"got {type(masses).__name__}")
+    angles = robot.leg_angles
+    ex = tuple(cos(a) for a in angles)
+    ey = tuple(sin(a) for a in angles)
+    r = robot.platform_radius
+    bx, by = tuple(r * c for c in ex), tuple(r * s for s in ey)
+    platform_lump = masses.platform + masses.payload  # + 6 w rod: three legs of two rods (thesis eq. (28))
+    return Model(
+        robot=robot, masses=masses, actuator=actuator, kind=actuator.kind,
+        ex=ex, ey=ey, bx=bx, by=by, legs=tuple(zip(ex, ey, bx, by)),
+        ex_arr=np.array(ex), ey_arr=np.array(ey), bx_arr=r * np.array(ex), by_arr=r * np.array(ey),
+        rod=actuator.rod, q_min=robot.q_min, q_max=robot.q_max,
+        inertia=actuator.inertia(masses),
+        platform_mass=platform_lump + 6.0 * masses.w_inertia * masses.rod,
+        platform_weight=(platform_lump + 6.0 * masses.w_gravity * masses.rod) * masses.gravity,
+        actuator_weight=actuator.weight(masses),
+    )
+
+
+def as_model(robot_or_model: Robot | Model) -> Model:
+    """A :class:`Model` for a robot preset (default masses) or the model itself."""
+    return robot_or_model if isinstance(robot_or_model, Model) else build_model(robot_or_model)
