@@ -8,7 +8,11 @@ same probe in its own Python process, alternately ``--rounds`` times, and the be
   velocity and acceleration of 2000 poses of the default helix;
 * ``CTC law``: ``CTC.output_scalar`` on 2000 measured states near the helix (fresh ``q`` every call,
   so the forward kinematics is never cached);
-* ``forward dynamics``: ``qdd = M^-1 (u - C qd - G)`` at the same states (the analytic plant's call).
+* ``forward dynamics``: ``qdd = M^-1 (u - C qd - G)`` at the same states (joint coordinates: the
+  model-exchange plant's derivative);
+* ``plant step``: what the co-simulation analytic plant does per 1 ms step under a held effort: before,
+  SciPy's DOP853 at rtol 1e-10 / atol 1e-12 over ``forward_dynamics`` (as its adapter called it); now
+  ``delta.dynamics.integrate`` (one RK4 step in platform coordinates), 500 steps along the helix.
 
 Part 2, this checkout: ``helix_ctc_analytic`` (analytic plant) against ``helix_ctc`` (full Exudyn plant),
 ``--stop`` s simulated, no log, each timed on its stepping loop (``RunResult.wall_time``), alternately,
@@ -67,8 +71,9 @@ for robot in (linear_delta_thesis, rotary_delta_prototype):
     poses = list(zip(map(tuple, p.tolist()), map(tuple, v.tolist()), map(tuple, a.tolist())))
     u = [tuple(x) for x in np.tile(model.gravity_term(q_ref[0]), (N, 1)).tolist()]
     ctc = default_controller("ctc", robot, model)
+    steps = list(zip(poses[::4][:500], q[::4][:500], qd[::4][:500], u[::4][:500]))
     if NEW:
-        from delta.dynamics import forward_dynamics
+        from delta.dynamics import forward_dynamics, integrate
         from delta.kinematics import inverse_kinematics
         from delta.model import Data
         m, fd = model.model, Data()
@@ -78,6 +83,9 @@ for robot in (linear_delta_thesis, rotary_delta_prototype):
         def fwd():
             for x, xd, f in zip(q, qd, u):
                 forward_dynamics(m, fd, x, xd, f)
+        def plant():
+            for (pp, vv, _), x, xd, f in steps:
+                integrate(m, pp, vv, f, 1e-3, 1e-3)
     else:
         from delta.scalar_kinematics import ScalarKinematics
         kin = ScalarKinematics(robot)
@@ -89,10 +97,17 @@ for robot in (linear_delta_thesis, rotary_delta_prototype):
         def fwd():
             for x, xd, f in zip(q, qd, u):
                 model.accel(x, xd, f)
+        from scipy.integrate import solve_ivp
+        def rhs(t, x, f):
+            return np.concatenate([x[3:], model.forward_dynamics(x[:3], x[3:], f)])
+        def plant():
+            for _, x, xd, f in steps:
+                solve_ivp(rhs, (0.0, 1e-3), np.array(x + xd), method="DOP853", args=(np.array(f),), rtol=1e-10, atol=1e-12)
     def law():
         for x, xd, (qr, qdr, qddr) in zip(q, qd, refs):
             ctc.output_scalar(x, xd, qr, qdr, qddr)
-    out[robot.kind] = {"ik": per_call(ik_step, N), "ctc": per_call(law, N), "fwd": per_call(fwd, N)}
+    out[robot.kind] = {"ik": per_call(ik_step, N), "ctc": per_call(law, N), "fwd": per_call(fwd, N),
+                       "plant": per_call(plant, len(steps))}
 print(json.dumps(out))
 '''
 
@@ -149,7 +164,8 @@ def main(argv: list[str] | None = None) -> int:
                             slot[k] = min(slot.get(k, float("inf")), us)
                 print(f"round {r + 1}/{args.rounds} done", flush=True)
             print(f"\nper call, best of {args.rounds} (us)        baseline {sha}   this tree   ratio")
-            names = {"ik": "IK step (IK + limits + rates)", "ctc": "CTC law", "fwd": "forward dynamics"}
+            names = {"ik": "IK step (IK + limits + rates)", "ctc": "CTC law", "fwd": "forward dynamics",
+                     "plant": "analytic plant, 1 ms step"}
             for kind in ("linear", "rotary"):
                 for k, text in names.items():
                     old, new = best["baseline"][kind][k], best["this tree"][kind][k]

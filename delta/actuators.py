@@ -34,6 +34,7 @@ __all__ = ["SCALAR", "ARRAY", "ROUNDING", "Rail", "Arm", "Actuator", "KINDS", "a
 ROUNDING = 1e-12
 """Relative slack on the real-solution tests so that exactly singular legs stay solvable."""
 _RATIO_MAX2 = (1.0 + ROUNDING) ** 2
+_PI = math.pi
 _TWO_PI = 2.0 * math.pi
 
 
@@ -176,7 +177,8 @@ class Arm:
     def leg(self, q, c, s, bx, by, x, y, z, xp):  # noqa: ANN001, ANN201
         """As :meth:`Rail.leg`, with ``B_i' = -La (sin q_i e_i + cos q_i z)`` and
         ``B_i'' = -La (cos q_i e_i - sin q_i z)``."""
-        lc, ls = self.arm * xp.cos(q), self.arm * xp.sin(q)
+        la = self.arm
+        lc, ls = la * xp.cos(q), la * xp.sin(q)
         r = self.radius + lc
         lx, ly, lz = x + bx - r * c, y + by - r * s, z + ls
         radial = lx * c + ly * s
@@ -193,7 +195,7 @@ class Arm:
         ratio = k / (rho + (rho == 0.0))
         clipped = ratio - (ratio > 1.0) * (ratio - 1.0) - (ratio < -1.0) * (ratio + 1.0)  # to [-1, 1]
         q = -xp.atan2(z, dx) - xp.acos(clipped)
-        return (q + math.pi) % _TWO_PI - math.pi, (rho > 0.0) & (ratio * ratio <= _RATIO_MAX2)
+        return (q + _PI) % _TWO_PI - _PI, (rho > 0.0) & (ratio * ratio <= _RATIO_MAX2)
 
     def inertia(self, masses: RotaryDeltaMasses) -> float:
         """``I = motor_inertia + arm La^2/3 + (elbow + 2 (1 - w) rod) La^2`` about the motor axis, kg m^2."""

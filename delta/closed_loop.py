@@ -12,7 +12,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .control import Controller
-from .dynamics import AnalyticModel, joint_references, platform_state, rk4_step
+from .dynamics import AnalyticModel, forward_dynamics, joint_references, platform_state, rk4_step
 from .errors import ParameterError
 from .model import Data, Model
 from .robots import Robot
@@ -103,6 +103,10 @@ def simulate(
         u = controller.step(q, qd, qr_l[k], qdr_l[k], qddr_l[k])
         us[k] = u
         u = u.tolist()
+
+        def accel(x, xd, u=u):  # noqa: ANN001, ANN202
+            return forward_dynamics(plant, data, x, xd, u)
+
         for _ in range(substeps):
-            q, qd = rk4_step(plant, data, q, qd, u, dt)
+            q, qd = rk4_step(accel, q, qd, dt)
     return ClosedLoopResult(times, qs, qds, q_ref, qd_ref, ps, p_ref, vs, v_ref, us)

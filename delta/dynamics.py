@@ -19,9 +19,13 @@ i.e. ``f = M(q) qdd + C(q, qd) qd + G(q)`` (thesis eq. (38)) with
 (tested as the power balance). The inertial and the gravity lumps may differ (``w_inertia``
 vs ``w_gravity``): T and V are then built from different lumps and the model stays conservative.
 
-The algorithms take any 3-sequences and return tuples of floats: :func:`inverse_dynamics` writes
-thesis eq. (35) once (``C qd + G`` is its value at ``qdd = 0``, ``G`` at rest), :func:`mass_matrix`
-writes ``M``, and :func:`forward_dynamics` solves ``M qdd = f - C qd - G`` with both.
+The algorithms take any 3-sequences and return tuples of floats. :func:`inverse_dynamics` writes
+thesis eq. (35) for the efforts (``C qd + G`` is its value at ``qdd = 0``, ``G`` at rest) and
+:func:`mass_matrix` writes ``M``; :func:`forward_dynamics` solves ``M qdd = f - C qd - G`` with
+both (joint coordinates: the model-exchange plant, :mod:`delta.closed_loop`).
+:func:`platform_dynamics` solves eq. (35) for the platform acceleration instead (platform
+coordinates, no forward kinematics: the co-simulation plant's right-hand side). The two routes are
+tested against each other (``tests/unit/test_dynamics.py``).
 :class:`AnalyticModel` is the same on numpy arrays, for scripts and tests.
 """
 
@@ -48,6 +52,7 @@ __all__ = [
     "gravity",
     "platform_state",
     "energy",
+    "platform_dynamics",
     "rk4_step",
     "integrate",
     "AnalyticModel",
@@ -101,16 +106,68 @@ def mass_matrix(model: Model, data: Data, q) -> tuple[float, ...]:  # noqa: ANN0
 _REST = (0.0, 0.0, 0.0)
 
 
+def _platform_acceleration(model: Model, legs, q, v, f) -> Vec:  # noqa: ANN001
+    """Platform acceleration ``a`` under the efforts ``f`` at the pose of ``legs`` (joint values ``q``)
+    moving at ``v``: thesis eq. (35) with ``qdd = J a + [v^T H_i v]`` (eq. (25)), multiplied by ``J^T``:
+
+        (D J^T J + m_p I) a = J^T (f - G_act - D [v^T H_i v]) - m_p,g g e_z
+
+    a symmetric positive definite 3x3 system in the platform coordinates: no ``J^-1``, no ``M``."""
+    d, mp = model.inertia, model.platform_mass
+    gravity, w = model.actuator.gravity, model.actuator_weight
+    vx, vy, vz = v
+    rows = []
+    for leg, qi, fi in zip(legs, q, f):
+        den = leg[7]
+        if den == 0.0:
+            raise RobotError(f"type 1 (serial) singularity at q = {tuple(q)}: leg {len(rows) + 1} rod is "
+                             "orthogonal to its actuator motion")
+        quad = leg_rates(leg, vx, vy, vz, 0.0, 0.0, 0.0)[1]
+        rows.append((leg[0] / den, leg[1] / den, leg[2] / den, fi - gravity(qi, w, SCALAR) - d * quad))
+    (j00, j01, j02, r0), (j10, j11, j12, r1), (j20, j21, j22, r2) = rows
+    b0 = j00 * r0 + j10 * r1 + j20 * r2
+    b1 = j01 * r0 + j11 * r1 + j21 * r2
+    b2 = j02 * r0 + j12 * r1 + j22 * r2 - model.platform_weight
+    a00 = d * (j00 * j00 + j10 * j10 + j20 * j20) + mp
+    a01 = d * (j00 * j01 + j10 * j11 + j20 * j21)
+    a02 = d * (j00 * j02 + j10 * j12 + j20 * j22)
+    a11 = d * (j01 * j01 + j11 * j11 + j21 * j21) + mp
+    a12 = d * (j01 * j02 + j11 * j12 + j21 * j22)
+    a22 = d * (j02 * j02 + j12 * j12 + j22 * j22) + mp
+    ai, det = inv3(a00, a01, a02, a01, a11, a12, a02, a12, a22)
+    if det == 0.0:
+        raise RobotError(f"type 2 (parallel) singularity at q = {tuple(q)}: J is singular")
+    return (ai[0] * b0 + ai[1] * b1 + ai[2] * b2,
+            ai[3] * b0 + ai[4] * b1 + ai[5] * b2,
+            ai[6] * b0 + ai[7] * b1 + ai[8] * b2)
+
+
 def forward_dynamics(model: Model, data: Data, q, qd, f) -> Vec:  # noqa: ANN001
     """Joint accelerations ``qdd = M^-1 (f - C qd - G)``, with ``C qd + G`` the inverse dynamics at
-    ``qdd = 0``."""
+    ``qdd = 0`` (the joint-coordinate model of the model-exchange plant and :mod:`delta.closed_loop`)."""
     n0, n1, n2 = inverse_dynamics(model, data, q, qd, _REST)
     m00, m01, m02, m11, m12, m22 = mass_matrix(model, data, q)
-    mi = inv3(m00, m01, m02, m01, m11, m12, m02, m12, m22)[0]
+    mi = inv3(m00, m01, m02, m01, m11, m12, m02, m12, m22)[0]  # M is positive definite
     r0, r1, r2 = f[0] - n0, f[1] - n1, f[2] - n2
     return (mi[0] * r0 + mi[1] * r1 + mi[2] * r2,
             mi[3] * r0 + mi[4] * r1 + mi[5] * r2,
             mi[6] * r0 + mi[7] * r1 + mi[8] * r2)
+
+
+def platform_dynamics(model: Model, p, v, f) -> Vec:  # noqa: ANN001
+    """Platform acceleration under the efforts ``f`` at the platform state ``(p, v)`` (inverse kinematics,
+    no forward kinematics): the right-hand side of the analytic plant, which integrates in platform
+    coordinates. Raises :class:`UnreachableError` when ``p`` leaves the workspace."""
+    x, y, z = p
+    solve, leg_at = model.actuator.solve, model.actuator.leg
+    q, legs = [], []
+    for c, s, bx, by in model.legs:
+        qi, ok = solve(x, y, z, c, s, SCALAR)
+        if not ok:
+            raise UnreachableError(f"p = ({x:.6g}, {y:.6g}, {z:.6g}) m: leg {len(q) + 1} has no solution")
+        q.append(qi)
+        legs.append(leg_at(qi, c, s, bx, by, x, y, z, SCALAR))
+    return _platform_acceleration(model, legs, q, v, f)
 
 
 def gravity(model: Model, data: Data, q) -> Vec:  # noqa: ANN001
@@ -136,43 +193,50 @@ def energy(model: Model, data: Data, q, qd) -> tuple[float, float]:  # noqa: ANN
     return kinetic, potential
 
 
-def rk4_step(model: Model, data: Data, q, qd, f, dt: float) -> tuple[Vec, Vec]:  # noqa: ANN001
-    """One classical Runge-Kutta step of ``q' = qd, qd' = forward_dynamics(q, qd, f)`` under the held effort ``f``."""
+def rk4_step(accel, x, xd, dt: float) -> tuple[Vec, Vec]:  # noqa: ANN001
+    """One classical Runge-Kutta step of the second-order system ``x'' = accel(x, x')`` (three coordinates)."""
     half = 0.5 * dt
-    q0, q1, q2 = q
-    v0, v1, v2 = qd
-    a = forward_dynamics(model, data, q, qd, f)
+    x0, x1, x2 = x
+    v0, v1, v2 = xd
+    a = accel(x, xd)
     b_v = (v0 + half * a[0], v1 + half * a[1], v2 + half * a[2])
-    b = forward_dynamics(model, data, (q0 + half * v0, q1 + half * v1, q2 + half * v2), b_v, f)
+    b = accel((x0 + half * v0, x1 + half * v1, x2 + half * v2), b_v)
     c_v = (v0 + half * b[0], v1 + half * b[1], v2 + half * b[2])
-    c = forward_dynamics(model, data, (q0 + half * b_v[0], q1 + half * b_v[1], q2 + half * b_v[2]), c_v, f)
+    c = accel((x0 + half * b_v[0], x1 + half * b_v[1], x2 + half * b_v[2]), c_v)
     d_v = (v0 + dt * c[0], v1 + dt * c[1], v2 + dt * c[2])
-    d = forward_dynamics(model, data, (q0 + dt * c_v[0], q1 + dt * c_v[1], q2 + dt * c_v[2]), d_v, f)
+    d = accel((x0 + dt * c_v[0], x1 + dt * c_v[1], x2 + dt * c_v[2]), d_v)
     s = dt / 6.0
-    return ((q0 + s * (v0 + 2.0 * (b_v[0] + c_v[0]) + d_v[0]),
-             q1 + s * (v1 + 2.0 * (b_v[1] + c_v[1]) + d_v[1]),
-             q2 + s * (v2 + 2.0 * (b_v[2] + c_v[2]) + d_v[2])),
+    return ((x0 + s * (v0 + 2.0 * (b_v[0] + c_v[0]) + d_v[0]),
+             x1 + s * (v1 + 2.0 * (b_v[1] + c_v[1]) + d_v[1]),
+             x2 + s * (v2 + 2.0 * (b_v[2] + c_v[2]) + d_v[2])),
             (v0 + s * (a[0] + 2.0 * (b[0] + c[0]) + d[0]),
              v1 + s * (a[1] + 2.0 * (b[1] + c[1]) + d[1]),
              v2 + s * (a[2] + 2.0 * (b[2] + c[2]) + d[2])))
 
 
-def integrate(model: Model, data: Data, q, qd, f, h: float, max_step: float) -> tuple[Vec, Vec]:  # noqa: ANN001
-    """Advance ``(q, qd)`` by ``h`` s under the held effort ``f`` in ``ceil(h / max_step)`` equal RK4 steps.
+def integrate(model: Model, p, v, f, h: float, max_step: float) -> tuple[Vec, Vec]:  # noqa: ANN001
+    """Advance the platform state ``(p, v)`` by ``h`` s under the held efforts ``f`` in ``ceil(h / max_step)``
+    equal RK4 steps of :func:`platform_dynamics` (the analytic plant's stepper).
 
-    Raises :class:`ParameterError` for a non-finite effort, :class:`UnreachableError` /
+    Platform coordinates need inverse kinematics only (three closed-form legs) where joint coordinates
+    need the forward kinematics (a sphere intersection) and ``J^-1`` at every stage; the two describe
+    the same motion. Raises :class:`ParameterError` for a non-finite effort, :class:`UnreachableError` /
     :class:`RobotError` when the state leaves the workspace or meets a singularity, and
     :class:`RobotError` when the result is not finite.
     """
     if not all(isfinite(x) for x in f):
         raise ParameterError(f"non-finite effort u = {list(f)}")
+
+    def accel(x, xd):  # noqa: ANN001, ANN202
+        return platform_dynamics(model, x, xd, f)
+
     n = max(1, -int(-h // max_step))
     dt = h / n
     for _ in range(n):
-        q, qd = rk4_step(model, data, q, qd, f, dt)
-    if not all(isfinite(x) for x in (*q, *qd)):
-        raise RobotError(f"the state diverged to q = {list(q)}, qd = {list(qd)} (effort u = {list(f)})")
-    return q, qd
+        p, v = rk4_step(accel, p, v, dt)
+    if not all(isfinite(x) for x in (*p, *v)):
+        raise RobotError(f"the state diverged to p = {list(p)}, v = {list(v)} (effort u = {list(f)})")
+    return p, v
 
 
 class AnalyticModel:

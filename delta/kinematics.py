@@ -28,7 +28,7 @@ frame, m, m/s, m/s**2; ``q``, ``qd``, ``qdd`` are (3,) joint values (m or rad). 
 from __future__ import annotations
 
 from dataclasses import dataclass
-from math import sqrt
+from math import inf, sqrt
 
 import numpy as np
 
@@ -147,33 +147,34 @@ def inv3(a, b, c, d, e, f, g, h, i):  # noqa: ANN001, ANN201
 
 # ------------------------------------------------------------------------------ one pose, floats
 
-def inverse_kinematics(model: Model, p, v, a):  # noqa: ANN001, ANN201
+def inverse_kinematics(model: Model, p, v, a, limits: bool = True):  # noqa: ANN001, ANN201
     """Inverse kinematics to second order, the IK FMU's step: ``(q, qd, qdd, 0)`` for the platform
     position, velocity and acceleration ``p, v, a`` in the working mode (platform below the carriages;
     elbows out), with ``qd``, ``qdd`` from :func:`leg_rates`; or ``(None, None, None, leg)`` when the
-    1-based ``leg`` has no real solution; or ``(q, None, None, -leg)`` when ``q[leg - 1]`` is beyond the
-    joint limits. Raises :class:`RobotError` at a type 1 singularity."""
+    1-based ``leg`` has no real solution; or, with ``limits``, ``(q, None, None, -leg)`` when
+    ``q[leg - 1]`` is beyond the joint limits. Raises :class:`RobotError` at a type 1 singularity."""
     x, y, z = p
     vx, vy, vz = v
     ax, ay, az = a
-    actuator, lo, hi = model.actuator, model.q_min, model.q_max
-    solve, leg_at = actuator.solve, actuator.leg
+    actuator = model.actuator
+    lo, hi = (model.q_min, model.q_max) if limits else (-inf, inf)
+    solve, leg_at, xp = actuator.solve, actuator.leg, SCALAR
     q, qd, qdd = [], [], []
     limit = 0
-    for c, s, bx, by in model.legs:
-        qi, ok = solve(x, y, z, c, s, SCALAR)
-        if not ok:
-            return None, None, None, len(q) + 1
-        q.append(qi)
-        if limit or qi < lo or qi > hi:
-            limit = limit or -len(q)
-            continue
-        leg = leg_at(qi, c, s, bx, by, x, y, z, SCALAR)
-        if leg[7] == 0.0:
-            raise RobotError(f"type 1 (serial) singularity: leg {len(q)} rod is orthogonal to its actuator motion")
-        qdi, qddi = leg_rates(leg, vx, vy, vz, ax, ay, az)
-        qd.append(qdi)
-        qdd.append(qddi)
+    try:
+        for c, s, bx, by in model.legs:
+            qi, ok = solve(x, y, z, c, s, xp)
+            if not ok:
+                return None, None, None, len(q) + 1
+            q.append(qi)
+            if limit or qi < lo or qi > hi:
+                limit = limit or -len(q)
+                continue
+            qdi, qddi = leg_rates(leg_at(qi, c, s, bx, by, x, y, z, xp), vx, vy, vz, ax, ay, az)
+            qd.append(qdi)
+            qdd.append(qddi)
+    except ZeroDivisionError:  # l_i . B_i' = 0
+        raise RobotError(f"type 1 (serial) singularity: leg {len(q)} rod is orthogonal to its actuator motion") from None
     if limit:
         return q, None, None, limit
     return q, qd, qdd, 0

@@ -27,7 +27,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .errors import ParameterError, UnreachableError
-from .kinematics import Data, ik, leg_axes, proximity, proximity_batch, set_pose
+from .kinematics import Data, fk, ik, leg_axes, proximity, proximity_batch, set_pose
 from .model import Model, as_model
 from .robots import Robot
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 from dataclasses import fields
 
 from delta.actuators import KINDS, kind_of
-from delta.robots import get_preset
+from delta.robots import Robot, get_preset
 
 from .._names import axis_names, joint_names
 
@@ -56,7 +56,7 @@ def declare_robot(fmu, kind: str) -> None:
     fmu.parameters3(joint_names("geometry.leg_angle"), robot.leg_angles, "rad", "leg angle about +z from +x")
 
 
-def robot_from(fmu, kind: str) -> LinearDelta | RotaryDelta:
+def robot_from(fmu, kind: str) -> Robot:
     """The robot described by the current ``geometry.*`` parameter values."""
     cls = kind_of(kind).robot_type
     values = {f.name: fmu.values[f"geometry.{f.name}"] for f in fields(cls) if f.name in _GEOMETRY}

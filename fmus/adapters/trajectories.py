@@ -23,7 +23,7 @@ from dataclasses import dataclass, fields
 from typing import Any, Callable, Mapping
 
 from delta.errors import ParameterError
-from delta.trajectories import TYPES, Helix, PickAndPlace, PointToPoint, Waypoints, seed004_z_steps
+from delta.trajectories import TYPES, Helix, PickAndPlace, PointToPoint, seed004_z_steps
 
 from .._fmi import Adapter, axis_names, writer
 

@@ -20,8 +20,8 @@ LIBCOSIM_TOL = 1e-12
 TABLE_4_TOL_M = 0.02e-2
 # Seed 004 angles are stated to 0.1 degree here (38.2 and -40.0 deg): half a digit.
 SEED_004_TOL_DEG = 0.05
-# CVode (rtol 1e-10) and DOP853 (rtol 1e-10, atol 1e-12) both integrate the same ODE
-# with the same held efforts; 1e-6 m is the issue's bound, orders above both errors.
+# CVode (rtol 1e-10) and the CS plant's fixed-step RK4 (1 ms: ~1e-14 m on the helix) both integrate
+# the same ODE with the same held efforts; 1e-6 m is the issue's bound, orders above both errors.
 ME_CS_TOL_M = 1e-6
 
 NAMES = registry.available()
@@ -187,7 +187,7 @@ def test_model_exchange_plant_matches_cosimulation_plant_under_ctc(fmu_dir):
     plant integrated by fmpy's CVode; the platform paths must agree."""
     from delta.trajectories import Helix
 
-    h, n = 1e-3, 1000  # first second of the default helix (the CS plant's DOP853 dominates the cost)
+    h, n = 1e-3, 1000  # first second of the default helix
     p0, v0, _ = Helix().evaluate(0.0)
     start = {**{f"initial.p.{a}": p0[i] for i, a in enumerate("xyz")},
              **{f"initial.v.{a}": v0[i] for i, a in enumerate("xyz")}}

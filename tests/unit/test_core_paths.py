@@ -71,7 +71,6 @@ def test_float_path_agrees_with_batch_path_and_references(name):
     robot = PRESETS[name]
     model = build_model(robot)
     poses = _poses(robot, seed=11)
-    q_all = np.array([x[0] for x in poses])
     p_all, v_all, a_all = (np.array([x[k] for x in poses]) for k in (1, 2, 3))
     q_batch, ok = ik_batch(model, p_all)
     assert ok.all()

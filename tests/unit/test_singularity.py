@@ -1,6 +1,7 @@
 """Singularity classification (seed 003)."""
 
 import numpy as np
+import pytest
 
 from scipy.optimize import brentq
 
@@ -71,3 +72,15 @@ def test_type_2_when_rods_are_coplanar():
     assert rep.type2, f"det of unit rods = {rep.parallel}"
     assert not rep.type1_legs, rep.serial
     assert rep.proximity < 1e-9
+
+
+@pytest.mark.parametrize("name", ["linear_delta_thesis", "rotary_delta_prototype"])
+def test_analyse_pose_by_joints_or_position_agree(name):
+    """A pose given by its joint values (forward kinematics) or by its position (inverse kinematics)."""
+    from delta.robots import PRESETS
+
+    robot = PRESETS[name]
+    q = ik(robot, [0.03, -0.02, -0.47 if robot.kind == "linear" else -0.45]).require()
+    by_q, by_p = analyse_pose(robot, q=q), analyse_pose(robot, p=fk(robot, q).require())
+    assert np.allclose(by_q.p, by_p.p, atol=1e-12) and np.allclose(by_q.q, q, atol=1e-12), (by_q, by_p)
+    assert abs(by_q.proximity - by_p.proximity) < 1e-12 and by_q.kind == by_p.kind == "regular"
