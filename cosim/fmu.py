@@ -178,6 +178,47 @@ _EXTRACTED: dict[Path, Path] = {}  # resolved FMU path -> its extraction directo
 # logger while being freed, and pythonfmu libraries must not be unloaded (GC of their objects crashes).
 _KEEP_ALIVE: list[Any] = []
 
+# PythonFMU's native wrapper (pythonfmu 0.7.0 and pythonfmu3 0.3.4, PySlaveInstance.cpp) keeps a
+# global std::shared_ptr<PyState>: made by the first fmiXInstantiate, reset by the exported
+# finalizePythonInterpreter(), which the library's __attribute__((destructor)) also calls. A
+# library still loaded when the process exits (the first pythonfmu library a process loads
+# stays: its STB_GNU_UNIQUE symbols make it NODELETE, so fmpy's dlclose in freeInstance leaves
+# it) is torn down in the wrong order: exit() runs the pointer's static destructor (it frees the
+# 128-byte control block), then _dl_fini runs that destructor function, whose reset decrements
+# the use count inside the freed block (``lock xadd`` at offset 8; valgrind: "Invalid read of
+# size 4 at finalizePythonInterpreter ... inside a block of size 128 free'd"). In a chunk of
+# glibc's unsorted bin that word is the low half of its bk pointer, so the next free or malloc
+# that walks the bin aborts: "corrupted double-linked list", "free(): corrupted unsorted chunks".
+# Resetting the state ourselves while the library is loaded (pythonfmu makes it again at the
+# next instantiation) leaves both destructors an empty pointer: no write to freed memory.
+_PYTHONFMU_LIBRARIES: set[str] = set()  # file names of the PythonFMU libraries this process instantiated
+
+
+def _release_pythonfmu_state(dll: Any) -> None:
+    """Reset a *loaded* PythonFMU library's global interpreter state (see above); other libraries: nothing."""
+    try:
+        release = dll.finalizePythonInterpreter
+    except AttributeError:  # not a PythonFMU library, or another version of its wrapper
+        return
+    release.argtypes, release.restype = [], None
+    release()
+
+
+def _release_pythonfmu_libraries() -> None:
+    """At interpreter exit (before ``exit`` runs the libraries' destructors): the PythonFMU libraries
+    still loaded, e.g. the process's first one or one whose instance was never freed."""
+    if not hasattr(os, "RTLD_NOLOAD"):  # Windows: pythonfmu resets it in DllMain, in order
+        return
+    for name in sorted(_PYTHONFMU_LIBRARIES):
+        try:  # found by the name it was loaded under (its file may be removed already); never loads it
+            dll = ctypes.CDLL(name, mode=os.RTLD_NOLOAD | os.RTLD_NOW)
+        except OSError:  # unloaded by fmpy's freeInstance: its destructors ran in order at dlclose
+            continue
+        _release_pythonfmu_state(dll)
+
+
+atexit.register(_release_pythonfmu_libraries)
+
 # FMI 2.0 loggers are variadic; fmpy formats the message in a native proxy that keeps *one* global
 # target (the logger of the instance created last), so every instance gets the same dispatcher and
 # is told apart by the componentEnvironment it was instantiated with.
@@ -483,6 +524,8 @@ class _Base:
         if self.fmu is None:
             return
         try:
+            if self.fmu.dll._name in _PYTHONFMU_LIBRARIES:  # while loaded: fmpy's freeInstance unloads it
+                _release_pythonfmu_state(self.fmu.dll)
             if self._instantiated and not self._fatal:
                 self.fmu.freeInstance()
         finally:
@@ -490,6 +533,12 @@ class _Base:
             # still holds objects it created crashes at garbage collection
             self._instantiated = False
             self.fmu = None
+
+    def _note_library(self) -> None:
+        """Remember a PythonFMU library, whose global state is reset before it is unloaded or the
+        process exits (see :func:`_release_pythonfmu_state`)."""
+        if (self.info.md.generationTool or "").startswith("PythonFMU"):
+            _PYTHONFMU_LIBRARIES.add(self.fmu.dll._name)
 
     def _hot_function(self, dll: Any, name: str) -> Any:
         """The C function ``name`` for the per-step path.
@@ -724,6 +773,7 @@ class _FMI2(_Base):
         from fmpy.logging import addLoggerProxy
 
         self.fmu = self._guard("load library", self._make)
+        self._note_library()
         cb = fmi2CallbackFunctions()
         environment = next(_FMI2_ENVIRONMENTS)
         _FMI2_LOG_TARGETS[environment] = self
@@ -901,6 +951,7 @@ class _FMI3(_Base):
 
     def instantiate(self) -> None:
         self.fmu = self._guard("load library", self._make)
+        self._note_library()
         logger = lambda env, status, cat, msg: self._on_log(status, cat, msg)  # noqa: E731
         self._logger = logger
         _KEEP_ALIVE.append((logger, self.fmu))
