@@ -1,18 +1,31 @@
 """``python -m cosim``: see :mod:`cosim.cli`.
 
-Exit: once the command has finished (its log written and closed, its summary printed), a process
-that loaded Exudyn ends with ``os._exit`` after running the ``atexit`` handlers and flushing
-stdout and stderr, skipping the interpreter's finalization and the shared libraries' destructors.
-Runs that loaded Exudyn sometimes aborted there (``corrupted double-linked list``, exit 134) after
-printing their result and finishing their log: 2 in 129 in the issue, 1 in 60 here after a solver
-failure, and 1 in 200 of ``benchmarks/exit_stress.py --plain-exit`` (a *completed* run). glibc
-finds the heap already corrupted when a shared library's destructor (libGLX's, loaded with
-Exudyn's GLFW, or libgfortran's, caught under gdb) frees its buffers in ``exit``, after the
-interpreter's finalization. The write that corrupts it was not found: 300 runs of the bare plant
-(the same solver failure, no FMUs, no master) never aborted, and glibc's malloc checks (a few runs,
-``libc_malloc_debug``) caught nothing earlier. Nothing is left to do at that point, so
-finalization is skipped: the exit code and the output are always the run's
-(``benchmarks/exit_stress.py``: 200 runs, no abnormal exit).
+Exit: once the command has finished (its log written and closed, its summary printed), the
+process ends with ``os._exit`` after running the ``atexit`` handlers and flushing stdout and
+stderr, skipping the interpreter's finalization and the shared libraries' destructors.
+
+Why: runs sometimes aborted there, after printing their result (``corrupted double-linked
+list``, ``free(): corrupted unsorted chunks``, exit 134), with Exudyn loaded and without it
+(``helix_ctc_analytic``). The write that corrupts the heap is PythonFMU's (0.7.0; pythonfmu3
+0.3.4 has the same code), in the process's first PythonFMU library, which stays loaded to the
+end: ``exit`` runs the static destructor of its global ``std::shared_ptr<PyState>`` (freeing the
+control block), then ``_dl_fini`` runs the library's destructor function,
+``finalizePythonInterpreter``, which decrements the use count inside the freed block. valgrind::
+
+    Invalid read of size 4
+       at finalizePythonInterpreter (in .../binaries/linux64/helix.so)
+       by _dl_call_fini / _dl_fini / __run_exit_handlers / exit
+     Address ... is 8 bytes inside a block of size 128 free'd
+       at operator delete / __run_exit_handlers / exit
+     Block was alloc'd at operator new / pythonfmu::createInstance / fmi2Instantiate
+
+(the instruction is ``lock xadd`` on that word: in a chunk of glibc's unsorted bin it is the bk
+pointer, which the next free walking the bin finds corrupt, e.g. in libGLX's or libgfortran's
+destructor when Exudyn is loaded). :mod:`cosim.fmu` now resets that state itself before the
+library is unloaded or the process exits, which removes the write (valgrind: no invalid access
+left). This exit stays as a second guard for what third-party destructors may still do after
+the command's work is done: nothing is left to finalize, and the exit code and the output are
+always the command's.
 """
 
 import sys
@@ -21,9 +34,7 @@ from .cli import main
 
 
 def _exit(code: object) -> None:
-    """Leave with ``code`` (as ``sys.exit`` would); without Exudyn loaded, exactly ``sys.exit``."""
-    if "exudyn" not in sys.modules:
-        sys.exit(code)
+    """Leave with ``code`` as ``sys.exit`` would, without the interpreter's finalization."""
     import atexit
     import os
 
@@ -35,6 +46,9 @@ def _exit(code: object) -> None:
         print(code, file=sys.stderr)
         status = 1
     try:
+        threading = sys.modules.get("threading")
+        if threading is not None and hasattr(threading, "_shutdown"):
+            threading._shutdown()  # as at a normal exit: non-daemon threads end first
         atexit._run_exitfuncs()  # e.g. removal of extracted FMUs
     finally:
         for stream in (sys.stdout, sys.stderr):
