@@ -122,7 +122,7 @@ class SignalRecorder:
         self._rows: list[list[float]] = []
 
     def start(self, rt: Runtime) -> None:
-        from .system import Port, _index_text
+        from .system import Port, index_text
 
         self._src = []
         for c, name in enumerate(rt.plan.names):
@@ -133,7 +133,7 @@ class SignalRecorder:
                 seen.add(var.name)
                 arr, i = rt.where(Port(c, var))
                 for e in range(var.count):
-                    label = _index_text(var, e) if var.shape else ""
+                    label = index_text(var, e) if var.shape else ""
                     self.names.append(f"{name}.{var.name}{label}")
                     self._src.append((arr, i + e))
         self.stepped(-1, rt.start_ns, ())

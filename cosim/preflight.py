@@ -16,9 +16,9 @@ from typing import Any
 import numpy as np
 
 from .errors import Issue, PreflightError, ScenarioError
-from .scenario import Scenario, TrajectorySpec, _line_for
+from .scenario import Scenario, TrajectorySpec, line_for
 
-__all__ = ["make_trajectory", "check_positions", "preflight", "initial_state_values", "trajectory_start_values"]
+__all__ = ["make_trajectory", "check_positions", "sampled_positions", "preflight", "initial_state_values", "trajectory_start_values"]
 
 def make_trajectory(spec: TrajectorySpec, source: str | None = None):
     """Instantiate the class of ``spec.type`` (:data:`delta.trajectories.TYPES`) with ``spec.params``."""
@@ -45,7 +45,8 @@ def check_positions(robot_name: str, times: np.ndarray, positions: np.ndarray,
         raise PreflightError(res.message())
 
 
-def _positions(traj, times: np.ndarray) -> np.ndarray:
+def sampled_positions(traj, times: np.ndarray) -> np.ndarray:
+    """Platform positions (N, 3), m, of a trajectory at ``times`` (N,), s."""
     sample = traj.sample(times)
     p = getattr(sample, "p", sample)
     if isinstance(sample, tuple):
@@ -62,7 +63,7 @@ def preflight(scenario: Scenario) -> str:
     t0, t1 = scenario.time.start, scenario.time.stop
     n = max(2, int(np.ceil((t1 - t0) / spec.check_step)) + 1)
     times = np.linspace(t0, t1, n)
-    check_positions(scenario.robot, times, _positions(traj, times), spec.singularity_margin)
+    check_positions(scenario.robot, times, sampled_positions(traj, times), spec.singularity_margin)
     return f"trajectory reachable ({n} samples, margin {spec.singularity_margin})"
 
 
@@ -125,7 +126,7 @@ def trajectory_start_values(scenario: Scenario) -> dict[str, dict[str, Any]]:
 
     def issue(loc: tuple, message: str) -> None:
         path = ".".join(str(p) for p in loc)
-        issues.append(Issue(path, message, scenario.source, _line_for(loc, lines)))
+        issues.append(Issue(path, message, scenario.source, line_for(loc, lines)))
 
     out: dict[str, dict[str, Any]] = {}
     for name, cls in adapters.items():

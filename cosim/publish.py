@@ -236,11 +236,11 @@ def reference_path(scenario) -> np.ndarray | None:
     spec = getattr(scenario, "trajectory", None)
     if spec is None:
         return None
-    from .preflight import _positions, make_trajectory
+    from .preflight import make_trajectory, sampled_positions
 
     t0, t1 = scenario.time.start, scenario.time.stop
     n = int(min(_REFERENCE_POINTS, max(2, round((t1 - t0) / scenario.time.step) + 1)))
-    return _positions(make_trajectory(spec, scenario.source), np.linspace(t0, t1, n))
+    return sampled_positions(make_trajectory(spec, scenario.source), np.linspace(t0, t1, n))
 
 
 # --------------------------------------------------------------------------- publisher

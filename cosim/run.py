@@ -12,7 +12,7 @@ from .errors import ComponentSourceError, CosimError, Issue
 from .fmu import FMUInfo, cleanup_extracted, load_fmu, make_slave
 from .observers import ErrorObserver
 from .offload import Offload, choose
-from .scenario import Scenario, _line_for, expand_signal, load_scenario
+from .scenario import Scenario, line_for, expand_signal, load_scenario
 from .stats import ErrorStats
 from .watchdog import Watchdog, hard_exit
 
@@ -80,7 +80,7 @@ def locate_fmus(scenario: Scenario) -> dict[str, FMUInfo]:
     built = {n: Path(p) for n, p in getattr(scenario, "_fmu_files", {}).items()}  # prebuilt (cosim.sweep)
     for name, comp in scenario.components.items():
         loc = ("components", name, "fmu" if comp.fmu else "path")
-        where = dict(file=scenario.source, line=_line_for(loc, lines))
+        where = dict(file=scenario.source, line=line_for(loc, lines))
         try:
             if comp.path is not None:
                 path = Path(comp.path)

@@ -307,7 +307,7 @@ def _format_loc(loc: tuple) -> str:
     return out
 
 
-def _line_for(loc: tuple, lines: dict[tuple, int]) -> int | None:
+def line_for(loc: tuple, lines: dict[tuple, int]) -> int | None:
     for n in range(len(loc), -1, -1):
         if loc[:n] in lines:
             return lines[loc[:n]]
@@ -328,7 +328,7 @@ def issue_at(loc: tuple, message: str, file: str | None, lines: dict[tuple, int]
             return Issue("", message, origin)
     inside = [o for p, o in origins.items() if p[:len(loc)] == loc]
     tail = f" (with {', '.join(inside)})" if inside else ""
-    return Issue(_format_loc(loc), message + tail, file, _line_for(loc, lines))
+    return Issue(_format_loc(loc), message + tail, file, line_for(loc, lines))
 
 
 _ALIASES = {"src": "from", "dst": "to"}

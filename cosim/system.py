@@ -14,7 +14,7 @@ from typing import Any, Mapping
 
 from .errors import AlgebraicLoopError, Issue, UnknownSignalError, WiringError
 from .fmu import FMUInfo, Variable
-from .scenario import Scenario, _line_for, expand_signal, issue_at
+from .scenario import Scenario, line_for, expand_signal, issue_at
 
 __all__ = ["Port", "Link", "SystemPlan", "build_plan", "gauss_seidel_order", "find_variable_loop"]
 
@@ -40,7 +40,7 @@ class Port:
         return self.var.count if self.element is None else 1
 
     def label(self, names: list[str]) -> str:
-        return f"{names[self.comp]}.{self.var.name}{_index_text(self.var, self.element)}"
+        return f"{names[self.comp]}.{self.var.name}{index_text(self.var, self.element)}"
 
 
 @dataclass(frozen=True)
@@ -56,7 +56,7 @@ class Link:
 _ELEMENT = re.compile(r"^(?P<base>.+)\[(?P<idx>\d+(?:\s*,\s*\d+)*)\]$")
 
 
-def _index_text(var: Variable, element: int | None) -> str:
+def index_text(var: Variable, element: int | None) -> str:
     if element is None:
         return ""
     idx, rest = [], element
@@ -359,10 +359,10 @@ def build_plan(scenario: Scenario, infos: Mapping[str, FMUInfo], log_signals: st
                         f"feedthrough, set components.<name>.feedthrough: none")
                 err = AlgebraicLoopError(labels)
                 err.issues[0] = Issue(err.issues[0].path, err.issues[0].message + hint, scenario.source,
-                                      _line_for(("connections",), lines))
+                                      line_for(("connections",), lines))
             else:
                 err.issues[0] = Issue(err.issues[0].path, err.issues[0].message, scenario.source,
-                                      _line_for(("connections",), lines))
+                                      line_for(("connections",), lines))
             err.args = ("\n".join(str(i) for i in err.issues),)
             raise err
     jacobi = scenario.algorithm == "jacobi"  # Jacobi reads the previous step only: the order is free
