@@ -41,7 +41,6 @@ __all__ = [
     "RESULTS",
     "Case",
     "SweepError",
-    "SweepSpec",
     "SweepSummary",
     "make_cases",
     "parse_grid",
@@ -297,12 +296,17 @@ def run_sweep(scenario: str | Path, cases: list[Case], out: str | Path, *, worke
         summary.wall_time = time.perf_counter() - t_start
         summary.workers = "no workers"
         return summary
-    fmu_files = _prebuild(loaded)
-    _check_names(loaded, fmu_files)
+    cluster = _client(workers, scheduler).start()  # its workers start while the FMUs are built and checked
+    try:
+        fmu_files = _prebuild(loaded)
+        _check_names(loaded, fmu_files)
+    except BaseException:
+        cluster.close()
+        raise
     if logs:
         (out / "logs").mkdir(exist_ok=True)
     new = not table.exists() or table.stat().st_size == 0
-    with table.open("a", newline="") as f, _client(workers, scheduler) as (client, label):
+    with cluster as (client, label), table.open("a", newline="") as f:
         from distributed import as_completed
 
         writer = csv.writer(f)
@@ -326,8 +330,8 @@ def run_sweep(scenario: str | Path, cases: list[Case], out: str | Path, *, worke
             f.flush()
             n_done += 1
             if row["status"] != "ok":
-                label = f"{c.id} ({', '.join(f'{k}={_cell(v)}' for k, v in c.values.items())})"
-                failed[label] = row["message"] if row["status"] == "failed" else f"{row['status']}: {row['message']}"
+                who = f"{c.id} ({', '.join(f'{k}={_cell(v)}' for k, v in c.values.items())})"
+                failed[who] = row["message"] if row["status"] == "failed" else f"{row['status']}: {row['message']}"
             if on_progress is not None:
                 on_progress(n_done, len(failed), len(cases))
         summary.workers = label
@@ -335,20 +339,65 @@ def run_sweep(scenario: str | Path, cases: list[Case], out: str | Path, *, worke
     return summary
 
 
+# Dask settings of the embedded cluster's workers. Each case is one long task in the worker's
+# single thread; the worker's own threads take the GIL from it. Dask's statistical profiler
+# samples the task's stack every 10 ms (with it the workers spent 9-12 % CPU on top of the cases'
+# own, without it 1-2 %; measured with 8 cases on 2 workers), and the event-loop tick (20 ms),
+# memory monitor (100 ms) and system monitor (500 ms) wake it more often than a sweep needs.
+WORKER_CONFIG = {
+    "distributed.worker.profile.enabled": False,
+    "distributed.admin.tick.interval": "1s",
+    "distributed.worker.memory.monitor-interval": "1s",
+    "distributed.admin.system-monitor.interval": "2s",
+}
+
+
 class _client:
-    """A Dask client: on ``scheduler`` (an existing cluster) or on an embedded LocalCluster."""
+    """A Dask client: on ``scheduler`` (an existing cluster) or on an embedded LocalCluster.
+
+    :meth:`start` starts the embedded cluster in a thread (the caller builds the FMUs meanwhile);
+    ``with`` waits for it and yields ``(client, label)``; :meth:`close` if ``with`` is never entered.
+    """
 
     def __init__(self, workers: int | None, scheduler: str | None):
         self.workers, self.scheduler = workers, scheduler
+        self.cluster = self.client = self._thread = None
+        self._error: BaseException | None = None
+
+    def start(self) -> "_client":
+        import threading
+
+        if self.scheduler is None:
+            self._thread = threading.Thread(target=self._start_local, name="sweep-cluster-start", daemon=True)
+            self._thread.start()
+        return self
+
+    def _start_local(self) -> None:
+        try:
+            import logging
+            import os
+
+            import dask
+            from distributed import LocalCluster
+
+            logging.getLogger("distributed").setLevel(logging.ERROR)
+            n = self.workers or os.cpu_count() or 1
+            with dask.config.set(WORKER_CONFIG):  # the nannies hand this configuration to their workers
+                self.cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
+                                            dashboard_address=None, silence_logs=logging.ERROR,
+                                            preload=[__name__],  # dask_setup below
+                                            scheduler_kwargs={"dashboard_address": "127.0.0.1:0"})  # not 8787
+        except BaseException as exc:  # noqa: BLE001 - raised in the caller's thread by __enter__
+            self._error = exc
 
     def __enter__(self):
         import logging
-        import os
 
-        from distributed import Client, LocalCluster
+        from distributed import Client
 
         logging.getLogger("distributed").setLevel(logging.ERROR)
-        self.cluster = None
+        if self._thread is None:
+            self.start()
         if self.scheduler is not None:
             try:
                 self.client = Client(self.scheduler, timeout="10s")
@@ -356,16 +405,72 @@ class _client:
                 raise SweepError(f"--scheduler {self.scheduler}: cannot connect: {exc}") from None
             n = len(self.client.scheduler_info().get("workers", {}))
             return self.client, f"{self.scheduler} ({n} workers)"
-        n = self.workers or os.cpu_count() or 1
-        self.cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=None,
-                                    silence_logs=logging.ERROR)
-        self.client = Client(self.cluster)
+        try:
+            self._thread.join()
+            if self._error is not None:
+                raise self._error
+            self.client = Client(self.cluster)
+        except BaseException:
+            self.close()
+            raise
+        n = len(self.cluster.workers)
         return self.client, f"{n} local worker process{'es' if n > 1 else ''}"
 
     def __exit__(self, *exc) -> None:
-        self.client.close()
+        self.close()
+
+    def close(self) -> None:
+        if self._thread is not None:
+            self._thread.join()
+        if self.client is not None:
+            self.client.close()
         if self.cluster is not None:
             self.cluster.close()
+
+
+# Worker preload (``LocalCluster(preload=["cosim.sweep"])``, or ``dask worker --preload cosim.sweep``).
+_TORN_DOWN = False
+
+
+def dask_setup(worker) -> None:  # noqa: ARG001 - Dask's preload hook
+    """Import what a case needs while the worker starts (not in its first case), and arrange a
+    quick exit for a nanny's worker process once the worker has closed (:func:`_exit_now`)."""
+    import atexit
+    import multiprocessing
+
+    if multiprocessing.parent_process() is not None:
+        atexit.register(_exit_now)
+    from . import api, run  # noqa: F401
+
+
+def dask_teardown(worker) -> None:  # noqa: ARG001 - Dask's preload hook
+    global _TORN_DOWN
+    _TORN_DOWN = True
+
+
+def _exit_now() -> None:
+    """At exit of a nanny's worker process whose worker closed normally: remove the extracted FMUs,
+    flush, and leave with ``os._exit(0)`` (as ``python -m cosim`` does, :mod:`cosim.__main__`): the
+    interpreter's finalization and the shared libraries' destructors sometimes abort there
+    ("free(): corrupted unsorted chunks") after every result was delivered."""
+    import logging
+    import os
+    import sys
+
+    if not _TORN_DOWN:
+        return
+    try:
+        fmu = sys.modules.get(f"{__package__}.fmu")
+        if fmu is not None:
+            fmu.cleanup_extracted()
+        logging.shutdown()
+    finally:
+        for stream in (sys.stdout, sys.stderr):
+            try:
+                stream.flush()
+            except (OSError, ValueError):
+                pass
+        os._exit(0)
 
 
 def report(out: str | Path, metric: str = "rmse", fig: str | Path | None = None) -> Path:
