@@ -164,7 +164,8 @@ def platform_dynamics(model: Model, p, v, f) -> Vec:  # noqa: ANN001
     for c, s, bx, by in model.legs:
         qi, ok = solve(x, y, z, c, s, SCALAR)
         if not ok:
-            raise UnreachableError(f"p = ({x:.6g}, {y:.6g}, {z:.6g}) m: leg {len(q) + 1} has no solution")
+            raise UnreachableError(f"the platform left the workspace at p = ({x:.6g}, {y:.6g}, {z:.6g}) m: "
+                                   f"leg {len(q) + 1} has no solution")
         q.append(qi)
         legs.append(leg_at(qi, c, s, bx, by, x, y, z, SCALAR))
     return _platform_acceleration(model, legs, q, v, f)

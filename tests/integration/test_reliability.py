@@ -118,7 +118,7 @@ def test_analytic_plant_bounds_a_stiff_step_instead_of_hanging():
                  "--set", "ctl.limit.u_max=1e300", "--no-log", timeout=60)
     assert proc.returncode == 2, f"exit {proc.returncode}, expected 2; stderr: {proc.stderr[-500:]}"
     assert re.search(r"component 'plant': fmi2DoStep returned discard at t = 0\.00\d+ s: .*"
-                     r"(forward kinematics at q = |singularity|diverged)", proc.stderr), proc.stderr[-500:]
+                     r"(left the workspace|singularity|diverged)", proc.stderr), proc.stderr[-500:]
 
 
 def test_me_derivative_failure_is_an_error_not_a_crash():
