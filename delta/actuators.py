@@ -188,14 +188,15 @@ class Arm:
         """Leg IK in the leg plane, with ``dx``, ``dy`` the radial and tangential parts of
         ``p + b_i - R e_i``: ``dx cos q - z sin q = K``, ``K = (dx^2 + dy^2 + z^2 + La^2 - L^2) / (2 La)``
         from ``|l_i| = L`` (seed 003 eq. (8) is garbled in the text, so it is re-derived here); the
-        elbow-out branch, wrapped to (-pi, pi]. A stretched or folded leg is a (singular) solution."""
+        elbow-out branch, wrapped to [-pi, pi). A stretched or folded leg is a (singular) solution."""
         dx, dy = x * c + y * s + self.offset, y * c - x * s
-        k = (dx * dx + dy * dy + z * z + self._k0) * self._half_inv_arm
-        rho = xp.hypot(dx, z)
+        rho2 = dx * dx + z * z
+        k = (rho2 + dy * dy + self._k0) * self._half_inv_arm
+        rho = xp.sqrt(rho2)
         ratio = k / (rho + (rho == 0.0))
         clipped = ratio - (ratio > 1.0) * (ratio - 1.0) - (ratio < -1.0) * (ratio + 1.0)  # to [-1, 1]
         q = -xp.atan2(z, dx) - xp.acos(clipped)
-        return (q + _PI) % _TWO_PI - _PI, (rho > 0.0) & (ratio * ratio <= _RATIO_MAX2)
+        return q + _TWO_PI * (q < -_PI), (rho > 0.0) & (ratio * ratio <= _RATIO_MAX2)  # to [-pi, pi)
 
     def inertia(self, masses: RotaryDeltaMasses) -> float:
         """``I = motor_inertia + arm La^2/3 + (elbow + 2 (1 - w) rod) La^2`` about the motor axis, kg m^2."""

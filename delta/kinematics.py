@@ -167,7 +167,7 @@ def inverse_kinematics(model: Model, p, v, a, limits: bool = True):  # noqa: ANN
             if not ok:
                 return None, None, None, len(q) + 1
             q.append(qi)
-            if limit or qi < lo or qi > hi:
+            if limit or not lo <= qi <= hi:
                 limit = limit or -len(q)
                 continue
             qdi, qddi = leg_rates(leg_at(qi, c, s, bx, by, x, y, z, xp), vx, vy, vz, ax, ay, az)
