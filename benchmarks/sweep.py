@@ -44,20 +44,20 @@ def main() -> int:
     args = ap.parse_args()
     sys.path.insert(0, str(ROOT))
     from cosim.scenario import dotted_overrides, load_scenario
-    from cosim.sweep import Case, _client, _prebuild, read_results, run_case, run_sweep
+    from cosim.sweep import Case, SweepCluster, prebuild, read_results, run_case, run_sweep
 
     import statistics
 
     scenario = str(Path(args.scenario).resolve())
     stop = args.stop if args.stop is not None else load_scenario(scenario).time.stop
     cases = [Case({"time.stop": stop, "ctl.gain.kp[1]": 1.0e4 + 2.5e3 * k}) for k in range(8)]
-    fmu_files = _prebuild([load_scenario(scenario, dotted_overrides(cases[0].values))])
+    fmu_files = prebuild([load_scenario(scenario, dotted_overrides(cases[0].values))])
     print(f"{len(cases)} cases of {Path(scenario).name}, {stop:g} s simulated each (the case length); "
           f"{os.cpu_count()} CPUs, load average {os.getloadavg()[0]:.2f} before")
     t_serial, t_sweep, t_warm, loops_serial, loops_worker = [], [], [], [], []
     warm = None
     if args.warm:
-        warm = _client(args.workers, None).start()
+        warm = SweepCluster(args.workers, None).start()
         warm.__enter__()
         address = warm.cluster.scheduler_address
         with tempfile.TemporaryDirectory() as tmp:  # warm-up: each worker imports and runs a case once

@@ -90,7 +90,7 @@ def locate_fmus(scenario: Scenario) -> dict[str, FMUInfo]:
                     continue
             else:
                 if comp.fmu not in built:
-                    built[comp.fmu] = _build_ours(comp.fmu)
+                    built[comp.fmu] = build_ours(comp.fmu)
                 path = built[comp.fmu]
             infos[name] = load_fmu(path)
         except ComponentSourceError as exc:
@@ -100,7 +100,7 @@ def locate_fmus(scenario: Scenario) -> dict[str, FMUInfo]:
     return infos
 
 
-def _build_ours(name: str) -> Path:
+def build_ours(name: str) -> Path:
     try:
         from fmus import registry
     except ImportError:

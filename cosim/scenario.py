@@ -539,7 +539,7 @@ class Overrides(dict):
         self.origins[path] = origin
 
 
-def _set_value(raw: str) -> Any:
+def parse_set_value(raw: str) -> Any:
     """A ``--set`` value as YAML reads it, with numbers YAML 1.1 leaves as strings (``1e12``) as numbers."""
     return _numbers(yaml.safe_load(raw))
 
@@ -663,7 +663,7 @@ def apply_overrides(sets: list[str], stop_time: float | None = None) -> Override
                                           f"trajectory.params.NAME, ...), got {item!r}", "--set"))
         raw = item.split("=", 1)[1]
         try:
-            value = _set_value(raw)
+            value = parse_set_value(raw)
         except yaml.YAMLError as exc:
             raise ScenarioError(Issue("", f"invalid value: {getattr(exc, 'problem', None) or exc}",
                                       f"--set {item}")) from None

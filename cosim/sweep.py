@@ -73,10 +73,10 @@ class Case:
 def _value(text: str, where: str) -> Any:
     import yaml
 
-    from .scenario import _set_value
+    from .scenario import parse_set_value
 
     try:
-        return _set_value(text.strip())
+        return parse_set_value(text.strip())
     except yaml.YAMLError as exc:
         raise SweepError(f"{where}: invalid value {text!r}: {getattr(exc, 'problem', exc)}") from None
 
@@ -225,12 +225,12 @@ def read_results(out: str | Path) -> list[dict[str, str]]:
         return list(csv.DictReader(f))
 
 
-def _prebuild(scenarios: Iterable[Any]) -> dict[str, str]:
+def prebuild(scenarios: Iterable[Any]) -> dict[str, str]:
     """Build each of our FMUs the cases use, once; name -> absolute path."""
-    from .run import _build_ours
+    from .run import build_ours
 
     names = sorted({c.fmu for sc in scenarios for c in sc.components.values() if c.fmu is not None})
-    return {n: str(Path(_build_ours(n)).resolve()) for n in names}
+    return {n: str(Path(build_ours(n)).resolve()) for n in names}
 
 
 def _check_names(scenarios: list[Any], fmu_files: dict[str, str]) -> None:
@@ -296,9 +296,9 @@ def run_sweep(scenario: str | Path, cases: list[Case], out: str | Path, *, worke
         summary.wall_time = time.perf_counter() - t_start
         summary.workers = "no workers"
         return summary
-    cluster = _client(workers, scheduler).start()  # its workers start while the FMUs are built and checked
+    cluster = SweepCluster(workers, scheduler).start()  # its workers start while the FMUs are built and checked
     try:
-        fmu_files = _prebuild(loaded)
+        fmu_files = prebuild(loaded)
         _check_names(loaded, fmu_files)
     except BaseException:
         cluster.close()
@@ -352,7 +352,7 @@ WORKER_CONFIG = {
 }
 
 
-class _client:
+class SweepCluster:
     """A Dask client: on ``scheduler`` (an existing cluster) or on an embedded LocalCluster.
 
     :meth:`start` starts the embedded cluster in a thread (the caller builds the FMUs meanwhile);
@@ -364,7 +364,7 @@ class _client:
         self.cluster = self.client = self._thread = None
         self._error: BaseException | None = None
 
-    def start(self) -> "_client":
+    def start(self) -> "SweepCluster":
         import threading
 
         if self.scheduler is None:
@@ -594,7 +594,7 @@ def register(sub) -> None:
 
 
 def _cmd_sweep(args) -> int:
-    from .scenario import _set_value
+    from .scenario import parse_set_value
 
     if args.n is not None and args.n < 1:
         raise SweepError(f"-n must be >= 1, got {args.n}")
@@ -607,7 +607,7 @@ def _cmd_sweep(args) -> int:
         name, sep, raw = item.partition("=")
         if not sep or not name:
             raise SweepError(f"--set {item}: expected NAME=VALUE")
-        fixed[name] = _set_value(raw)
+        fixed[name] = parse_set_value(raw)
     if args.stop_time is not None:
         fixed["time.stop"] = args.stop_time
     cases = make_cases(parse_grid(args.grid), parse_random(args.random), args.n, args.seed)
