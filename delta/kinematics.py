@@ -147,15 +147,17 @@ def inv3(a, b, c, d, e, f, g, h, i):  # noqa: ANN001, ANN201
 
 # ------------------------------------------------------------------------------ one pose, floats
 
-def inverse_kinematics(model: Model, p, v, a, limits: bool = True):  # noqa: ANN001, ANN201
+def inverse_kinematics(model: Model, p, v=None, a=None, limits: bool = True):  # noqa: ANN001, ANN201
     """Inverse kinematics to second order, the IK FMU's step: ``(q, qd, qdd, 0)`` for the platform
     position, velocity and acceleration ``p, v, a`` in the working mode (platform below the carriages;
-    elbows out), with ``qd``, ``qdd`` from :func:`leg_rates`; or ``(None, None, None, leg)`` when the
-    1-based ``leg`` has no real solution; or, with ``limits``, ``(q, None, None, -leg)`` when
-    ``q[leg - 1]`` is beyond the joint limits. Raises :class:`RobotError` at a type 1 singularity."""
+    elbows out), with ``qd``, ``qdd`` from :func:`leg_rates` (``v`` None: positions only, ``qd`` and
+    ``qdd`` None; ``a`` None: zero); or ``(None, None, None, leg)`` when the 1-based ``leg`` has no real
+    solution; or, with ``limits``, ``(q, None, None, -leg)`` when ``q[leg - 1]`` is beyond the joint
+    limits. Raises :class:`RobotError` at a type 1 singularity (rates only)."""
     x, y, z = p
-    vx, vy, vz = v
-    ax, ay, az = a
+    if v is not None:
+        vx, vy, vz = v
+        ax, ay, az = _ZERO if a is None else a
     actuator = model.actuator
     lo, hi = (model.q_min, model.q_max) if limits else (-inf, inf)
     solve, leg_at, xp = actuator.solve, actuator.leg, SCALAR
@@ -167,15 +169,16 @@ def inverse_kinematics(model: Model, p, v, a, limits: bool = True):  # noqa: ANN
             if not ok:
                 return None, None, None, len(q) + 1
             q.append(qi)
-            if limit or not lo <= qi <= hi:
+            if not lo <= qi <= hi:
                 limit = limit or -len(q)
+            if limit or v is None:
                 continue
             qdi, qddi = leg_rates(leg_at(qi, c, s, bx, by, x, y, z, xp), vx, vy, vz, ax, ay, az)
             qd.append(qdi)
             qdd.append(qddi)
     except ZeroDivisionError:  # l_i . B_i' = 0
         raise RobotError(f"type 1 (serial) singularity: leg {len(q)} rod is orthogonal to its actuator motion") from None
-    if limit:
+    if limit or v is None:
         return q, None, None, limit
     return q, qd, qdd, 0
 
@@ -186,8 +189,8 @@ _ZERO = (0.0, 0.0, 0.0)
 def solve_ik(model: Model, p) -> tuple[list[float] | None, int]:  # noqa: ANN001
     """Joint values for platform position ``p``: ``(q, 0)``, or ``(None, leg)`` with the 1-based first
     leg that has no real solution. Joint limits are not checked here (:func:`limit_violation`)."""
-    q, _, _, fault = inverse_kinematics(model, p, _ZERO, _ZERO)
-    return (None, fault) if fault > 0 else (q, 0)
+    q, _, _, fault = inverse_kinematics(model, p, limits=False)
+    return (None, fault) if fault else (q, 0)
 
 
 def limit_violation(model: Model, q) -> int:  # noqa: ANN001

@@ -81,11 +81,9 @@ class AnalyticPlant(Adapter):
             raise type(exc)(f"{self.modelName} at t = {t:.6f} s: {exc}") from None
 
     def refresh(self) -> None:
-        q, qd, _, _ = inverse_kinematics(self.model, self.p, self.v, _REST, limits=False)  # reachable: integrate()
+        q, qd, _, _ = inverse_kinematics(self.model, self.p, self.v, limits=False)  # reachable: integrate() checked
         _WRITE_STATE(self.values, q, qd, self.p, self.v)
 
-
-_REST = (0.0, 0.0, 0.0)
 
 
 class ExudynPlant(Adapter):

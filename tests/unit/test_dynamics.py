@@ -168,7 +168,7 @@ def test_plant_stepper_in_platform_coordinates_matches_joint_coordinates(robot, 
     worst = 0.0
     for k in range(n):
         refs = (q_ref[k].tolist(), qd_ref[k].tolist(), qdd_ref[k].tolist())
-        qp, qdp, _, _ = inverse_kinematics(model, p, v, (0.0, 0.0, 0.0), limits=False)
+        qp, qdp, _, _ = inverse_kinematics(model, p, v, limits=False)
         p, v = integrate(model, p, v, ctc_p.output_scalar(qp, qdp, *refs), h, h)
         u = ctc_q.output_scalar(q, qd, *refs)
         for _ in range(16):
