@@ -1,11 +1,15 @@
 """Pure domain core of the delta co-simulation platform.
 
-Geometry presets, kinematics, workspace, singularities (and, as they land,
-analytic dynamics, trajectories and control laws). numpy/scipy only: no I/O,
-no FMI, no Exudyn.
+Geometry presets (:mod:`delta.robots`) and masses (:mod:`delta.masses`) compile into an
+immutable :class:`~delta.model.Model` with a scratch :class:`~delta.model.Data`; free functions
+over them give the kinematics (:mod:`delta.kinematics`) and the analytic dynamics
+(:mod:`delta.dynamics`); the only per-kind code is the actuator path (:mod:`delta.actuators`).
+Singularities, workspace, trajectories and control laws build on them. numpy/scipy only: no
+I/O, no FMI, no Exudyn.
 """
 
 from .errors import CosimError, ParameterError, RobotError, UnreachableError
+from .model import Data, Model, build_model
 from .robots import PRESETS, LinearDelta, Robot, RotaryDelta, get_preset
 
 __all__ = [
@@ -18,4 +22,7 @@ __all__ = [
     "Robot",
     "RotaryDelta",
     "get_preset",
+    "Model",
+    "Data",
+    "build_model",
 ]

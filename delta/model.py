@@ -41,9 +41,8 @@ class Model:
     robot, masses : the geometry preset and the mass parameters it was compiled from.
     actuator : the actuator path (:class:`delta.actuators.Rail` or :class:`~delta.actuators.Arm`).
     kind : ``"linear"`` or ``"rotary"``.
-    ex, ey : per-leg unit radial direction ``e_i`` in the base plane (3 floats each).
-    bx, by : per-leg platform joint offsets ``b_i = r e_i``, m.
-    legs : ``(ex, ey, bx, by)`` of each leg.
+    legs : per leg ``(ex, ey, bx, by)``: the unit radial direction ``e_i`` in the base plane and the
+        platform joint offset ``b_i = r e_i``, m.
     ex_arr, ey_arr, bx_arr, by_arr : the same as (3,) arrays for the batch path.
     rod : rod length ``L``, m.  q_min, q_max : joint limits (m or rad).
     inertia : actuator lump ``D`` (kg or kg m^2).  platform_mass : ``m_p`` of the inertial terms, kg.
@@ -54,10 +53,6 @@ class Model:
     masses: Masses
     actuator: Actuator
     kind: str
-    ex: tuple[float, float, float]
-    ey: tuple[float, float, float]
-    bx: tuple[float, float, float]
-    by: tuple[float, float, float]
     legs: tuple[tuple[float, float, float, float], ...]
     ex_arr: np.ndarray
     ey_arr: np.ndarray
@@ -72,6 +67,8 @@ class Model:
     actuator_weight: float
 
     def create_data(self) -> "Data":
+        """A scratch :class:`Data` for this model. Use a Data with one model only: its forward-kinematics
+        cache is keyed by ``q`` alone."""
         return Data()
 
     @property
@@ -114,7 +111,7 @@ def build_model(robot: Robot, masses: Masses | None = None) -> Model:
     platform_lump = masses.platform + masses.payload  # + 6 w rod: three legs of two rods (thesis eq. (28))
     return Model(
         robot=robot, masses=masses, actuator=actuator, kind=actuator.kind,
-        ex=ex, ey=ey, bx=bx, by=by, legs=tuple(zip(ex, ey, bx, by)),
+        legs=tuple(zip(ex, ey, bx, by)),
         ex_arr=np.array(ex), ey_arr=np.array(ey), bx_arr=r * np.array(ex), by_arr=r * np.array(ey),
         rod=actuator.rod, q_min=robot.q_min, q_max=robot.q_max,
         inertia=actuator.inertia(masses),
