@@ -5,11 +5,11 @@ immutable :class:`~delta.model.Model` with a scratch :class:`~delta.model.Data`;
 over them give the kinematics (:mod:`delta.kinematics`) and the analytic dynamics
 (:mod:`delta.dynamics`); the only per-kind code is the actuator path (:mod:`delta.actuators`).
 Singularities, workspace, trajectories and control laws build on them. numpy/scipy only: no
-I/O, no FMI, no Exudyn.
+I/O, no FMI, no Exudyn. Importing the package itself loads no numpy (the CLI's errors come from
+:mod:`delta.errors`).
 """
 
 from .errors import CosimError, ParameterError, RobotError, UnreachableError
-from .model import Data, Model, build_model
 from .robots import PRESETS, LinearDelta, Robot, RotaryDelta, get_preset
 
 __all__ = [
@@ -22,7 +22,4 @@ __all__ = [
     "Robot",
     "RotaryDelta",
     "get_preset",
-    "Model",
-    "Data",
-    "build_model",
 ]
