@@ -200,12 +200,59 @@ def load_adapter(resources: str, fmu: str, module: str, cls: str, fmi: int) -> t
     """
     import importlib
 
+    _release_interpreter_state_at_exit(resources)
     try:
         check(resources, fmu)
         return getattr(importlib.import_module(module), cls)
     except ImportError as exc:
         message = str(exc) if str(exc).startswith("FMU ") else "FMU {}: cannot import its code: {}".format(fmu, exc)
     return _unavailable(message, fmi)
+
+
+def _release_interpreter_state_at_exit(resources: str) -> None:
+    """In a Python host on Linux: reset this FMU's PythonFMU library state before the process exits.
+
+    PythonFMU's wrapper (pythonfmu 0.7.0, pythonfmu3 0.3.4) keeps a global ``shared_ptr`` to its
+    interpreter state. When the library is still loaded at exit (the first PythonFMU library of a
+    process always is), ``exit`` frees that pointer's control block in a static destructor, then the
+    library's unload hook resets the pointer and writes into the freed block, and the next heap
+    operation aborts ("corrupted double-linked list"; found with valgrind, see ``cosim/fmu.py``). An
+    ``atexit`` handler runs before those destructors: calling the library's own
+    ``finalizePythonInterpreter`` there leaves both an empty pointer. This runs in any Python host
+    (FMPy, libcosimpy, our master). It is skipped where PythonFMU started the interpreter itself (a
+    C/C++ host: the process is not a Python executable), whose state ends the interpreter in order.
+    """
+    import atexit
+    import ctypes
+    import glob
+    import os
+
+    if not hasattr(os, "RTLD_NOLOAD"):  # Windows: the library resets it from DllMain, in order
+        return
+    try:
+        if os.path.realpath("/proc/self/exe") != os.path.realpath(sys.executable):
+            return  # the interpreter is embedded by the FMU's library: leave its shutdown alone
+    except (OSError, TypeError):
+        return
+    root = os.path.dirname(os.path.normpath(resources))
+    for library in glob.glob(os.path.join(root, "binaries", "*", "*.so")):
+        if library in _RELEASED_AT_EXIT:
+            continue
+        _RELEASED_AT_EXIT.add(library)
+
+        def release(library: str = library) -> None:
+            try:  # by the name it was loaded under; never loads it (unloaded: its hooks ran in order)
+                dll = ctypes.CDLL(library, mode=os.RTLD_NOLOAD | os.RTLD_NOW)
+                reset = dll.finalizePythonInterpreter
+            except (OSError, AttributeError):
+                return
+            reset.argtypes, reset.restype = [], None
+            reset()
+
+        atexit.register(release)
+
+
+_RELEASED_AT_EXIT = set()  # libraries with a handler
 
 
 def _unavailable(message: str, fmi: int) -> type:

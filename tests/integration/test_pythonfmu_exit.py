@@ -94,3 +94,56 @@ def test_pythonfmu_state_is_released_before_the_library_destructors_run(test_fmu
     assert seen["freed"] == [0, 0], f"state still held after free(): exit would write to freed memory: {seen}"
     assert all(seen["running_again"]), seen
     assert seen["at_exit"] == [0, 0], f"state still held at exit: exit would write to freed memory: {seen}"
+
+
+FMPY_CHILD = textwrap.dedent(r"""
+    import atexit, ctypes, json, subprocess, sys
+
+    import fmpy
+    from fmpy.fmi2 import FMU2Slave
+
+    def pystate(name, at):
+        for line in open("/proc/self/maps"):
+            parts = line.split()
+            if len(parts) >= 6 and parts[5] == name and int(parts[2], 16) == 0:
+                base = int(parts[0].split("-")[0], 16)
+                return [ctypes.c_void_p.from_address(base + at + 8 * i).value or 0 for i in range(2)]
+        return None
+
+    result = {}
+    # registered before the FMU's code is imported, so it runs after the FMU's own exit handler
+    atexit.register(lambda: print(json.dumps({**result, "at_exit": pystate(lib, at)}), flush=True))
+
+    path = sys.argv[1]
+    md = fmpy.read_model_description(path)
+    unzipped = fmpy.extract(path)
+    fmu = FMU2Slave(guid=md.guid, unzipDirectory=unzipped, modelIdentifier=md.coSimulation.modelIdentifier,
+                    instanceName="probe")
+    fmu.instantiate()
+    fmu.setupExperiment(startTime=0.0)
+    fmu.enterInitializationMode()
+    fmu.exitInitializationMode()
+    fmu.doStep(0.0, 0.01)
+    lib = fmu.dll._name
+    out = subprocess.run(["nm", "-C", lib], capture_output=True, text=True, check=True).stdout
+    at = next(int(l.split()[0], 16) for l in out.splitlines() if l.endswith("(anonymous namespace)::pyState"))
+    result["running"] = pystate(lib, at)
+    # not freed: the host leaves it to the end of the process, which our master never does
+""")
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux") or shutil.which("nm") is None,
+                    reason="reads the loaded library's memory: Linux with binutils' nm")
+def test_our_fmu_releases_the_state_in_any_python_host(tmp_path):
+    """Our FMUs in a host that is not our master (FMPy alone, nothing of cosim imported): the FMU's own
+    code (fmus.requirements, run when pythonfmu imports it) resets the state at the host's exit."""
+    from fmus import registry
+
+    script = tmp_path / "child.py"
+    script.write_text(FMPY_CHILD)
+    r = subprocess.run([sys.executable, str(script), str(registry.build("helix"))], capture_output=True,
+                       text=True, cwd=tmp_path, timeout=120)
+    assert r.returncode == 0, r.stdout + r.stderr
+    seen = json.loads(r.stdout.strip().splitlines()[-1])
+    assert all(seen["running"]), f"the probe does not see pythonfmu's state while the instance runs: {seen}"
+    assert seen["at_exit"] == [0, 0], f"state still held at exit: exit would write to freed memory: {seen}"
