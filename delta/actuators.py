@@ -80,21 +80,20 @@ class Rail:
         self._slack = -ROUNDING * self._rod2
         self.q_scale = robot.rod_length  # m: the size a joint error is measured against
 
-    def leg(self, q, c, s, bx, by, x, y, z, xp):  # noqa: ANN001, ANN201
+    def leg(self, q, c, s, ox, oy, x, y, z, xp):  # noqa: ANN001, ANN201
         """Leg i at joint value ``q`` and platform position ``(x, y, z)``: the rod ``l_i = p + b_i - B_i``,
         ``B_i'`` and the products ``l_i . B_i''``, ``l_i . B_i'`` (see :func:`delta.kinematics.leg_rates`).
-        ``(c, s)`` is ``e_i``, ``(bx, by)`` is ``b_i``. ``B_i = (R e_i, -q_i)``, ``B_i' = (0, 0, -1)``,
+        ``(c, s)`` is ``e_i``, ``(ox, oy)`` is ``b_i - R e_i``. ``B_i = (R e_i, -q_i)``, ``B_i' = (0, 0, -1)``,
         ``B_i'' = 0``."""
-        r = self.radius
         lz = z + q
-        return x + bx - r * c, y + by - r * s, lz, 0.0, 0.0, -1.0, 0.0, -lz
+        return x + ox, y + oy, lz, 0.0, 0.0, -1.0, 0.0, -lz
 
-    def solve(self, x, y, z, c, s, xp):  # noqa: ANN001, ANN201
+    def solve(self, x, y, z, c, s, ox, oy, xp):  # noqa: ANN001, ANN201
         """Leg IK for the platform position ``(x, y, z)``, leg direction ``e_i = (c, s)``: thesis eq. (9),
-        ``q_i = -(z + sqrt(L^2 - lx^2 - ly^2))`` with ``(lx, ly)`` the horizontal part of ``p + b_i - R e_i``
-        (the platform below the carriage). Returns ``(q, solvable)``; a rod exactly horizontal is a
-        (singular) solution."""
-        lx, ly = x + self.offset * c, y + self.offset * s
+        ``q_i = -(z + sqrt(L^2 - lx^2 - ly^2))`` with ``(lx, ly) = (x, y) + (ox, oy)`` the horizontal part of
+        ``p + b_i - R e_i`` (the platform below the carriage). Returns ``(q, solvable)``; a rod exactly
+        horizontal is a (singular) solution."""
+        lx, ly = x + ox, y + oy
         h2 = self._rod2 - lx * lx - ly * ly
         return -(z + xp.sqrt(h2 * (h2 > 0.0))), h2 >= self._slack  # h2 < 0 by rounding: sqrt(0)
 
@@ -174,17 +173,16 @@ class Arm:
         self._k0 = robot.arm_length ** 2 - robot.forearm_length ** 2
         self._half_inv_arm = 0.5 / robot.arm_length
 
-    def leg(self, q, c, s, bx, by, x, y, z, xp):  # noqa: ANN001, ANN201
-        """As :meth:`Rail.leg`, with ``B_i' = -La (sin q_i e_i + cos q_i z)`` and
-        ``B_i'' = -La (cos q_i e_i - sin q_i z)``."""
+    def leg(self, q, c, s, ox, oy, x, y, z, xp):  # noqa: ANN001, ANN201
+        """As :meth:`Rail.leg`, with ``B_i = R e_i + La (cos q_i e_i - sin q_i z)``,
+        ``B_i' = -La (sin q_i e_i + cos q_i z)`` and ``B_i'' = -La (cos q_i e_i - sin q_i z)``."""
         la = self.arm
         lc, ls = la * xp.cos(q), la * xp.sin(q)
-        r = self.radius + lc
-        lx, ly, lz = x + bx - r * c, y + by - r * s, z + ls
+        lx, ly, lz = x + ox - lc * c, y + oy - lc * s, z + ls
         radial = lx * c + ly * s
         return lx, ly, lz, -ls * c, -ls * s, -lc, ls * lz - lc * radial, -ls * radial - lc * lz
 
-    def solve(self, x, y, z, c, s, xp):  # noqa: ANN001, ANN201
+    def solve(self, x, y, z, c, s, ox, oy, xp):  # noqa: ANN001, ANN201
         """Leg IK in the leg plane, with ``dx``, ``dy`` the radial and tangential parts of
         ``p + b_i - R e_i``: ``dx cos q - z sin q = K``, ``K = (dx^2 + dy^2 + z^2 + La^2 - L^2) / (2 La)``
         from ``|l_i| = L`` (seed 003 eq. (8) is garbled in the text, so it is re-derived here); the

@@ -161,13 +161,13 @@ def platform_dynamics(model: Model, p, v, f) -> Vec:  # noqa: ANN001
     x, y, z = p
     solve, leg_at = model.actuator.solve, model.actuator.leg
     q, legs = [], []
-    for c, s, bx, by in model.legs:
-        qi, ok = solve(x, y, z, c, s, SCALAR)
+    for c, s, ox, oy in model.legs:
+        qi, ok = solve(x, y, z, c, s, ox, oy, SCALAR)
         if not ok:
             raise UnreachableError(f"the platform left the workspace at p = ({x:.6g}, {y:.6g}, {z:.6g}) m: "
                                    f"leg {len(q) + 1} has no solution")
         q.append(qi)
-        legs.append(leg_at(qi, c, s, bx, by, x, y, z, SCALAR))
+        legs.append(leg_at(qi, c, s, ox, oy, x, y, z, SCALAR))
     return _platform_acceleration(model, legs, q, v, f)
 
 

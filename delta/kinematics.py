@@ -164,8 +164,8 @@ def inverse_kinematics(model: Model, p, v=None, a=None, limits: bool = True):  #
     q, qd, qdd = [], [], []
     limit = 0
     try:
-        for c, s, bx, by in model.legs:
-            qi, ok = solve(x, y, z, c, s, xp)
+        for c, s, ox, oy in model.legs:
+            qi, ok = solve(x, y, z, c, s, ox, oy, xp)
             if not ok:
                 return None, None, None, len(q) + 1
             q.append(qi)
@@ -173,7 +173,7 @@ def inverse_kinematics(model: Model, p, v=None, a=None, limits: bool = True):  #
                 limit = limit or -len(q)
             if limit or v is None:
                 continue
-            qdi, qddi = leg_rates(leg_at(qi, c, s, bx, by, x, y, z, xp), vx, vy, vz, ax, ay, az)
+            qdi, qddi = leg_rates(leg_at(qi, c, s, ox, oy, x, y, z, xp), vx, vy, vz, ax, ay, az)
             qd.append(qdi)
             qdd.append(qddi)
     except ZeroDivisionError:  # l_i . B_i' = 0
@@ -204,7 +204,7 @@ def limit_violation(model: Model, q) -> int:  # noqa: ANN001
 
 def _legs(model: Model, q, x: float, y: float, z: float) -> list[tuple[float, ...]]:  # noqa: ANN001
     leg_at = model.actuator.leg
-    return [leg_at(qi, c, s, bx, by, x, y, z, SCALAR) for qi, (c, s, bx, by) in zip(q, model.legs)]
+    return [leg_at(qi, c, s, ox, oy, x, y, z, SCALAR) for qi, (c, s, ox, oy) in zip(q, model.legs)]
 
 
 def set_pose(model: Model, data: Data, q, p) -> Data:  # noqa: ANN001
@@ -301,7 +301,8 @@ def ik_batch(robot: Robot | Model, p: np.ndarray) -> tuple[np.ndarray, np.ndarra
     model = as_model(robot)
     p = np.atleast_2d(np.asarray(p, dtype=float))
     with np.errstate(invalid="ignore", divide="ignore"):
-        q, ok = model.actuator.solve(p[:, 0:1], p[:, 1:2], p[:, 2:3], model.ex_arr, model.ey_arr, ARRAY)
+        q, ok = model.actuator.solve(p[:, 0:1], p[:, 1:2], p[:, 2:3], model.ex_arr, model.ey_arr,
+                                     model.ox_arr, model.oy_arr, ARRAY)
     ok = np.broadcast_to(ok, q.shape)
     return np.where(ok, q, np.nan), ok
 
@@ -310,7 +311,7 @@ def legs_batch(model: Model, q: np.ndarray, p: np.ndarray) -> tuple[np.ndarray, 
     """The 8 leg components of the actuator's ``leg`` for (N, 3) ``q`` and ``p``, each (N, 3) (column = leg)."""
     q = np.atleast_2d(np.asarray(q, dtype=float))
     p = np.atleast_2d(np.asarray(p, dtype=float))
-    legs = model.actuator.leg(q, model.ex_arr, model.ey_arr, model.bx_arr, model.by_arr,
+    legs = model.actuator.leg(q, model.ex_arr, model.ey_arr, model.ox_arr, model.oy_arr,
                               p[:, 0:1], p[:, 1:2], p[:, 2:3], ARRAY)
     return tuple(np.broadcast_to(c, q.shape) for c in legs)
 

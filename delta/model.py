@@ -41,9 +41,11 @@ class Model:
     robot, masses : the geometry preset and the mass parameters it was compiled from.
     actuator : the actuator path (:class:`delta.actuators.Rail` or :class:`~delta.actuators.Arm`).
     kind : ``"linear"`` or ``"rotary"``.
-    legs : per leg ``(ex, ey, bx, by)``: the unit radial direction ``e_i`` in the base plane and the
-        platform joint offset ``b_i = r e_i``, m.
-    ex_arr, ey_arr, bx_arr, by_arr : the same as (3,) arrays for the batch path.
+    legs : per leg ``(ex, ey, ox, oy)``: the unit radial direction ``e_i`` in the base plane and the
+        horizontal offset ``o_i = b_i - R e_i = (r - R) e_i`` of the platform joint from the actuator
+        axis (rail or motor), m.
+    ex_arr, ey_arr, ox_arr, oy_arr : the same as (3,) arrays for the batch path; bx_arr, by_arr: the
+        platform joint offsets ``b_i = r e_i``, m.
     rod : rod length ``L``, m.  q_min, q_max : joint limits (m or rad).
     inertia : actuator lump ``D`` (kg or kg m^2).  platform_mass : ``m_p`` of the inertial terms, kg.
     platform_weight : ``m_p g`` of the gravity terms, N.  actuator_weight : see the actuator's ``weight``.
@@ -56,6 +58,8 @@ class Model:
     legs: tuple[tuple[float, float, float, float], ...]
     ex_arr: np.ndarray
     ey_arr: np.ndarray
+    ox_arr: np.ndarray
+    oy_arr: np.ndarray
     bx_arr: np.ndarray
     by_arr: np.ndarray
     rod: float
@@ -107,12 +111,14 @@ def build_model(robot: Robot, masses: Masses | None = None) -> Model:
     ex = tuple(cos(a) for a in angles)
     ey = tuple(sin(a) for a in angles)
     r = robot.platform_radius
-    bx, by = tuple(r * c for c in ex), tuple(r * s for s in ey)
+    offset = r - actuator.radius
+    ox, oy = tuple(offset * c for c in ex), tuple(offset * s for s in ey)
     platform_lump = masses.platform + masses.payload  # + 6 w rod: three legs of two rods (thesis eq. (28))
     return Model(
         robot=robot, masses=masses, actuator=actuator, kind=actuator.kind,
-        legs=tuple(zip(ex, ey, bx, by)),
-        ex_arr=np.array(ex), ey_arr=np.array(ey), bx_arr=r * np.array(ex), by_arr=r * np.array(ey),
+        legs=tuple(zip(ex, ey, ox, oy)),
+        ex_arr=np.array(ex), ey_arr=np.array(ey), ox_arr=np.array(ox), oy_arr=np.array(oy),
+        bx_arr=r * np.array(ex), by_arr=r * np.array(ey),
         rod=actuator.rod, q_min=robot.q_min, q_max=robot.q_max,
         inertia=actuator.inertia(masses),
         platform_mass=platform_lump + 6.0 * masses.w_inertia * masses.rod,
