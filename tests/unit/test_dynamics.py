@@ -175,3 +175,26 @@ def test_plant_stepper_in_platform_coordinates_matches_joint_coordinates(robot, 
             q, qd = rk4_step(lambda x, xd: forward_dynamics(model, data, x, xd, u), q, qd, h / 16)
         worst = max(worst, max(abs(a - b) for a, b in zip(p, platform_state(model, data, q, qd)[0])))
     assert worst < 1e-12, f"platform-coordinate RK4 (1 ms) vs joint-coordinate RK4 (1/16 ms): {worst:.3g} m"
+
+
+def test_plant_stepper_splits_long_steps_and_fails_with_the_reason():
+    """integrate(): a step longer than max_step is ceil(h / max_step) equal RK4 steps (the same floats as
+    taking them one by one); a non-finite effort and a state driven out of the workspace raise errors
+    that say so."""
+    from delta.dynamics import integrate, platform_dynamics, rk4_step
+    from delta.errors import CosimError
+    from delta.kinematics import inverse_kinematics
+    from delta.model import build_model
+
+    model = build_model(linear_delta_thesis)
+    p, v = (0.1, 0.0, -0.45), (0.0, 0.3, -0.01)
+    q = inverse_kinematics(model, p)[0]
+    u = tuple(analytic_model(linear_delta_thesis).gravity_term(q) + np.array([1.0, -2.0, 0.5]))
+    x, xd = p, v
+    for _ in range(3):
+        x, xd = rk4_step(lambda y, yd: platform_dynamics(model, y, yd, u), x, xd, 2.5e-3 / 3)
+    assert integrate(model, p, v, u, 2.5e-3, 1e-3) == (x, xd)
+    with pytest.raises(ParameterError, match="non-finite effort"):
+        integrate(model, p, v, (float("nan"), 0.0, 0.0), 1e-3, 1e-3)
+    with pytest.raises(CosimError, match="left the workspace|singularity|diverged"):
+        integrate(model, p, v, (1e9, -1e9, 1e9), 1e-3, 1e-3)
