@@ -44,7 +44,7 @@ __all__ = [
     "leg_rates",
     "solve_ik",
     "inverse_kinematics",
-    "limit_violation",
+    "working_mode_fault",
     "update",
     "set_pose",
     "rates",
@@ -188,18 +188,9 @@ _ZERO = (0.0, 0.0, 0.0)
 
 def solve_ik(model: Model, p) -> tuple[list[float] | None, int]:  # noqa: ANN001
     """Joint values for platform position ``p``: ``(q, 0)``, or ``(None, leg)`` with the 1-based first
-    leg that has no real solution. Joint limits are not checked here (:func:`limit_violation`)."""
+    leg that has no real solution. Joint limits are not checked here."""
     q, _, _, fault = inverse_kinematics(model, p, limits=False)
     return (None, fault) if fault else (q, 0)
-
-
-def limit_violation(model: Model, q) -> int:  # noqa: ANN001
-    """1-based first leg whose joint value is outside ``[q_min, q_max]``, 0 when none."""
-    lo, hi = model.q_min, model.q_max
-    for i in range(3):
-        if q[i] < lo or q[i] > hi:
-            return i + 1
-    return 0
 
 
 def _legs(model: Model, q, x: float, y: float, z: float) -> list[tuple[float, ...]]:  # noqa: ANN001
@@ -414,33 +405,39 @@ def joint_limit_reason(robot: Robot | Model, leg: int, value: float) -> str:
 def ik(robot: Robot | Model, p: np.ndarray) -> IKResult:
     """Inverse kinematics of one platform position ``p`` (3,), m."""
     model = as_model(robot)
-    q, leg = solve_ik(model, np.asarray(p, dtype=float).reshape(3).tolist())
-    if q is None:
-        return IKResult(None, False, False, f"leg {leg} has no solution (rod cannot reach the platform joint)", leg)
-    limit = limit_violation(model, q)
-    if limit:
-        return IKResult(np.array(q), True, False, joint_limit_reason(model, limit, q[limit - 1]), limit)
+    q, _, _, fault = inverse_kinematics(model, np.asarray(p, dtype=float).reshape(3).tolist())
+    if fault > 0:
+        return IKResult(None, False, False, f"leg {fault} has no solution (rod cannot reach the platform joint)", fault)
+    if fault < 0:
+        return IKResult(np.array(q), True, False, joint_limit_reason(model, -fault, q[-fault - 1]), -fault)
     return IKResult(np.array(q), True, True)
+
+
+def working_mode_fault(model: Model, q, p) -> str | None:  # noqa: ANN001
+    """Why the assembly ``(q, p)`` is not the one :func:`ik` solves for (linear: platform below every
+    carriage; rotary: elbows out), or None when it is."""
+    q_back, leg = solve_ik(model, p)
+    if q_back is None or any(abs(a - b) > 1e-6 * model.actuator.q_scale for a, b in zip(q_back, q)):
+        if q_back is not None:
+            leg = int(np.argmax(np.abs(np.array(q_back) - np.asarray(q, dtype=float)))) + 1
+        return f"leg {leg} would be assembled outside the working mode ({model.actuator.wrong_mode})"
+    return None
 
 
 def fk(robot: Robot | Model, q: np.ndarray) -> FKResult:
     """Closed-form forward kinematics (three-sphere intersection, :func:`update`), lower branch.
 
-    The answer must belong to the working mode that :func:`ik` solves for (linear: platform below
-    every carriage; rotary: elbows out); a ``q`` whose assembly needs another branch is reported
-    as such instead of returning a pose IK would not give back.
+    The answer must belong to the working mode that :func:`ik` solves for; a ``q`` whose assembly
+    needs another branch is reported as such (:func:`working_mode_fault`) instead of returning a
+    pose IK would not give back.
     """
     model = as_model(robot)
-    q = np.asarray(q, dtype=float).reshape(3)
-    p, reason = _trilaterate(model, q.tolist())
+    q = np.asarray(q, dtype=float).reshape(3).tolist()
+    p, reason = _trilaterate(model, q)
     if p is None:
         return FKResult(None, reason)
-    q_back, leg = solve_ik(model, p)
-    if q_back is None or any(abs(a - b) > 1e-6 * model.actuator.q_scale for a, b in zip(q_back, q)):
-        if q_back is not None:
-            leg = int(np.argmax(np.abs(np.array(q_back) - q))) + 1
-        return FKResult(None, f"leg {leg} would be assembled outside the working mode ({model.actuator.wrong_mode})")
-    return FKResult(np.array(p), None)
+    reason = working_mode_fault(model, q, p)
+    return FKResult(None, reason) if reason else FKResult(np.array(p), None)
 
 
 def rod_vectors(robot: Robot | Model, q: np.ndarray, p: np.ndarray) -> np.ndarray:

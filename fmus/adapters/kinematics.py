@@ -8,8 +8,15 @@ from pythonfmu.enums import Fmi2Status
 
 from delta.actuators import kind_of
 from delta.dynamics import platform_state
-from delta.errors import RobotError
-from delta.kinematics import fk, inverse_kinematics, joint_limit_reason, proximity, set_pose, solve_ik
+from delta.errors import RobotError, UnreachableError
+from delta.kinematics import (
+    inverse_kinematics,
+    joint_limit_reason,
+    proximity,
+    set_pose,
+    solve_ik,
+    working_mode_fault,
+)
 from delta.model import Data, build_model
 
 from .._fmi import Adapter, axis_names, joint_names, writer
@@ -171,11 +178,14 @@ class ForwardKinematics(Adapter):
         self.data = Data()
 
     def refresh(self) -> None:
-        q, qd = self.vec(Q), self.vec(QD)
-        valid = fk(self.model, q).ok  # in the working mode IK solves for
+        q, qd = self.vec3(Q), self.vec3(QD)
+        try:  # the forward kinematics once: p, legs and J^-1 for the velocity and the proximity
+            p, v = platform_state(self.model, self.data, q, qd)
+            valid = working_mode_fault(self.model, q, p) is None  # the assembly IK solves for
+        except UnreachableError:  # the rods cannot meet
+            valid = False
         self.values["valid"] = valid
         if valid:
-            p, v = platform_state(self.model, self.data, q.tolist(), qd.tolist())
             self.put(P, p)
             self.put(V, v)
             self.values["singularity.proximity"] = proximity(self.data)
