@@ -300,7 +300,7 @@ def build_plan(scenario: Scenario, infos: Mapping[str, FMUInfo], log_signals: st
             if src.var.unit and dst.var.unit and src.var.unit != dst.var.unit:
                 issue(("connections", i), f"unit mismatch: {_describe(c_src, src.var)} -> {_describe(c_dst, dst.var)}")
                 continue
-            if len(pairs) > 1 and c_dst in driven:
+            if c_dst in driven:  # after a prefix, or a prefix after an element line, or two prefixes
                 issue(("connections", i), f"input {c_dst} is already driven by connections[{driven[c_dst]}]")
                 continue
             driven.setdefault(c_dst, i)

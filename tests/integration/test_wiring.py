@@ -51,3 +51,18 @@ def test_mismatches_are_file_line_errors(tmp_path, line, expected):
     with pytest.raises(CosimError) as exc:
         prepare(load_scenario(tmp_path / "s.yaml"))
     assert f"s.yaml:20: {expected}" in str(exc.value), str(exc.value)
+
+
+@pytest.mark.parametrize("first, second", [
+    ("{from: traj.p_ref, to: ik.p_ref}", "{from: traj.p_ref.y, to: ik.p_ref.x}"),
+    ("{from: traj.p_ref.y, to: ik.p_ref.x}", "{from: traj.p_ref, to: ik.p_ref}"),
+])
+def test_an_input_driven_by_a_prefix_and_an_element_line_is_an_error(tmp_path, first, second):
+    """Whichever comes first, an element input gets one driver; the second connection is the error."""
+    text = (ROOT / "scenarios" / "helix_ctc_analytic.yaml").read_text()
+    assert "{from: traj.p_ref, to: ik.p_ref}" in text
+    text = text.replace("  - {from: traj.p_ref, to: ik.p_ref}", f"  - {first}\n  - {second}")
+    (tmp_path / "s.yaml").write_text(text)
+    with pytest.raises(CosimError) as exc:
+        prepare(load_scenario(tmp_path / "s.yaml"))
+    assert "input ik.p_ref.x is already driven by connections[" in str(exc.value), str(exc.value)
