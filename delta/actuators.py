@@ -46,10 +46,10 @@ def _namespace(name: str, **functions: object) -> ModuleType:
 
 
 SCALAR = _namespace("delta.scalar_math", cos=math.cos, sin=math.sin, sqrt=math.sqrt, atan2=math.atan2,
-                    acos=math.acos, hypot=math.hypot, maximum=max, minimum=min)
+                    acos=math.acos, maximum=max, minimum=min)
 """Functions of ``math`` for one pose on plain floats."""
 ARRAY = _namespace("delta.array_math", cos=np.cos, sin=np.sin, sqrt=np.sqrt, atan2=np.arctan2, acos=np.arccos,
-                   hypot=np.hypot, maximum=np.maximum, minimum=np.minimum)
+                   maximum=np.maximum, minimum=np.minimum)
 """The same functions from numpy, for arrays of poses."""
 
 

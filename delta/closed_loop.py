@@ -12,7 +12,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .control import Controller
-from .dynamics import AnalyticModel, forward_dynamics, joint_references, platform_state, rk4_step
+from .dynamics import AnalyticModel, compiled, forward_dynamics, joint_references, platform_state, rk4_step
 from .errors import ParameterError
 from .model import Data, Model
 from .robots import Robot
@@ -82,7 +82,7 @@ def simulate(
     if n < 1:
         raise ParameterError(f"t_end = {t_end} s is shorter than one period h = {h} s")
     plant = model if plant_model is None else plant_model
-    plant = plant.model if isinstance(plant, AnalyticModel) else plant
+    plant = compiled(plant)
     data = Data()
     times = np.arange(n) * h
     p_ref, v_ref, a_ref = trajectory.sample(times)

@@ -14,7 +14,7 @@ import math
 
 import numpy as np
 
-from .dynamics import AnalyticModel, gravity, inverse_dynamics
+from .dynamics import AnalyticModel, compiled, gravity, inverse_dynamics
 from .errors import ParameterError
 from .model import Data, Model
 from .robots import Robot
@@ -57,10 +57,6 @@ def _clip(u0: float, u1: float, u2: float, u_max: _Vec | None) -> _Vec:
 def _floats(x):  # noqa: ANN001, ANN202
     """A 3-sequence with plain float items (arrays through one ``tolist``; same values)."""
     return x.tolist() if type(x) is np.ndarray else x
-
-
-def _compiled(model: AnalyticModel | Model) -> Model:
-    return model.model if isinstance(model, AnalyticModel) else model
 
 
 class Controller:
@@ -169,7 +165,7 @@ class PDPlus(Controller):
     """PD with gravity compensation: ``u = Kp e + Kd e_dot + G(q)`` from the analytic model."""
 
     def __init__(self, model: AnalyticModel | Model, kp, kd, h: float, u_max=None) -> None:  # noqa: ANN001
-        self.model = _compiled(model)
+        self.model = compiled(model)
         self.data = Data()
         self.kp = _per_joint("PDPlus", "kp", kp, positive=True)
         self.kd = _per_joint("PDPlus", "kd", kd)
@@ -198,7 +194,7 @@ class CTC(Controller):
 
     def __init__(self, model: AnalyticModel | Model, kp, kd, h: float, u_max=None,  # noqa: ANN001
                  feedforward: bool = True) -> None:
-        self.model = _compiled(model)
+        self.model = compiled(model)
         self.data = Data()
         self.kp = _per_joint("CTC", "kp", kp, positive=True)
         self.kd = _per_joint("CTC", "kd", kd)

@@ -57,6 +57,7 @@ __all__ = [
     "integrate",
     "AnalyticModel",
     "analytic_model",
+    "compiled",
     "joint_references",
 ]
 
@@ -281,6 +282,11 @@ class AnalyticModel:
         return energy(*self._args(q, qd))
 
 
+def compiled(model: Model | AnalyticModel) -> Model:
+    """The compiled :class:`~delta.model.Model` of a model or of its numpy facade."""
+    return model.model if isinstance(model, AnalyticModel) else model
+
+
 def analytic_model(robot: Robot, masses: Masses | None = None) -> AnalyticModel:
     """The analytic model of ``robot`` (masses default to the kind's dataclass defaults)."""
     return AnalyticModel(build_model(robot, masses))
@@ -293,7 +299,7 @@ def joint_references(model: Model | AnalyticModel, p: np.ndarray, v: np.ndarray,
     ``q = IK(p)``, ``qd = J v`` (thesis eq. (16)), ``qdd = J a + [v^T H_i v]`` (thesis eq. (25)).
     Raises :class:`UnreachableError` at the first sample with no IK solution.
     """
-    model = model.model if isinstance(model, AnalyticModel) else model
+    model = compiled(model)
     p, v, a = (np.atleast_2d(np.asarray(x, dtype=float)) for x in (p, v, a))
     q, solvable = ik_batch(model, p)
     if not solvable.all():

@@ -378,7 +378,7 @@ def leg_axes(robot: Robot | Model) -> np.ndarray:
 def platform_offsets(robot: Robot | Model) -> np.ndarray:
     """Platform joint offsets ``b_i = r e_i`` in the base frame, (3, 3), m."""
     model = as_model(robot)
-    return np.stack([model.bx_arr, model.by_arr, np.zeros(3)], axis=1)
+    return model.robot.platform_radius * np.stack([model.ex_arr, model.ey_arr, np.zeros(3)], axis=1)
 
 
 def actuator_points(robot: Robot | Model, q: np.ndarray) -> np.ndarray:
@@ -452,7 +452,12 @@ def jacobian(robot: Robot | Model, q: np.ndarray, p: np.ndarray) -> np.ndarray:
     Row i is ``l_i^T / (l_i . B_i')`` (thesis eq. (15) for the linear delta, where
     ``B_i' = u_i``; for the rotary delta it equals ``J_theta^-1 J_p`` of seed 003 eq. (12)).
     """
-    return np.column_stack([joint_velocity(robot, q, p, e) for e in np.eye(3)])
+    data = set_pose(as_model(robot), Data(), np.asarray(q, dtype=float).tolist(), np.asarray(p, dtype=float).tolist())
+    legs = np.array(data.legs)
+    if np.any(legs[:, 7] == 0.0):
+        leg = int(np.argmin(np.abs(legs[:, 7]))) + 1
+        raise RobotError(f"type 1 (serial) singularity: leg {leg} rod is orthogonal to its actuator motion")
+    return legs[:, 0:3] / legs[:, 7:8]
 
 
 def jacobian_and_hessians(robot: Robot | Model, q: np.ndarray, p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -8,7 +8,8 @@ the algorithms of :mod:`delta.kinematics` and :mod:`delta.dynamics` compute and 
 (platform position, rods, Jacobian, its inverse), so a controller or an integrator that
 asks for several terms at one ``q`` computes the kinematics once.
 
-Both are plain objects of floats: the per-step path allocates no arrays.
+The per-pose fields are plain floats (the ``*_arr`` fields of the model serve the batch path): the
+per-step path allocates no arrays.
 
 Mass lumps (thesis section 7, Codourey's lumping for the rotary delta): each actuator
 carries a constant inertia ``D`` (carriage or arm plus the actuator-side share ``1 - w``
@@ -44,8 +45,7 @@ class Model:
     legs : per leg ``(ex, ey, ox, oy)``: the unit radial direction ``e_i`` in the base plane and the
         horizontal offset ``o_i = b_i - R e_i = (r - R) e_i`` of the platform joint from the actuator
         axis (rail or motor), m.
-    ex_arr, ey_arr, ox_arr, oy_arr : the same as (3,) arrays for the batch path; bx_arr, by_arr: the
-        platform joint offsets ``b_i = r e_i``, m.
+    ex_arr, ey_arr, ox_arr, oy_arr : the same as (3,) arrays for the batch path.
     rod : rod length ``L``, m.  q_min, q_max : joint limits (m or rad).
     inertia : actuator lump ``D`` (kg or kg m^2).  platform_mass : ``m_p`` of the inertial terms, kg.
     platform_weight : ``m_p g`` of the gravity terms, N.  actuator_weight : see the actuator's ``weight``.
@@ -60,8 +60,6 @@ class Model:
     ey_arr: np.ndarray
     ox_arr: np.ndarray
     oy_arr: np.ndarray
-    bx_arr: np.ndarray
-    by_arr: np.ndarray
     rod: float
     q_min: float
     q_max: float
@@ -69,15 +67,6 @@ class Model:
     platform_mass: float
     platform_weight: float
     actuator_weight: float
-
-    def create_data(self) -> "Data":
-        """A scratch :class:`Data` for this model. Use a Data with one model only: its forward-kinematics
-        cache is keyed by ``q`` alone."""
-        return Data()
-
-    @property
-    def name(self) -> str:
-        return self.robot.name
 
 
 class Data:
@@ -110,15 +99,13 @@ def build_model(robot: Robot, masses: Masses | None = None) -> Model:
     angles = robot.leg_angles
     ex = tuple(cos(a) for a in angles)
     ey = tuple(sin(a) for a in angles)
-    r = robot.platform_radius
-    offset = r - actuator.radius
+    offset = actuator.offset
     ox, oy = tuple(offset * c for c in ex), tuple(offset * s for s in ey)
     platform_lump = masses.platform + masses.payload  # + 6 w rod: three legs of two rods (thesis eq. (28))
     return Model(
         robot=robot, masses=masses, actuator=actuator, kind=actuator.kind,
         legs=tuple(zip(ex, ey, ox, oy)),
         ex_arr=np.array(ex), ey_arr=np.array(ey), ox_arr=np.array(ox), oy_arr=np.array(oy),
-        bx_arr=r * np.array(ex), by_arr=r * np.array(ey),
         rod=actuator.rod, q_min=robot.q_min, q_max=robot.q_max,
         inertia=actuator.inertia(masses),
         platform_mass=platform_lump + 6.0 * masses.w_inertia * masses.rod,
