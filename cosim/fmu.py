@@ -534,10 +534,15 @@ class _Base:
             self._instantiated = False
             self.fmu = None
 
+    @property
+    def _pythonfmu(self) -> bool:
+        """Whether PythonFMU exported this FMU (its binary runs Python in this process)."""
+        return (self.info.md.generationTool or "").startswith("PythonFMU")
+
     def _note_library(self) -> None:
         """Remember a PythonFMU library, whose global state is reset before it is unloaded or the
         process exits (see :func:`_release_pythonfmu_state`)."""
-        if (self.info.md.generationTool or "").startswith("PythonFMU"):
+        if self._pythonfmu:
             _PYTHONFMU_LIBRARIES.add(self.fmu.dll._name)
 
     def _hot_function(self, dll: Any, name: str) -> Any:
@@ -550,7 +555,7 @@ class _Base:
         call back into Python).
         """
         f = getattr(dll, name)
-        if not (self.info.md.generationTool or "").startswith("PythonFMU"):
+        if not self._pythonfmu:
             return f
         proto = ctypes.PYFUNCTYPE(f.restype, *f.argtypes)
         return proto(ctypes.cast(f, ctypes.c_void_p).value)

@@ -33,9 +33,9 @@ import orjson
 
 from .algorithm import Runtime
 from .errors import CosimError
-from .publish import EVENTS_SCHEMA, Publisher, scene_update, time_metadata
+from .publish import Publisher, time_metadata
 
-__all__ = ["McapRecorder", "scene_update", "EVENTS_SCHEMA"]
+__all__ = ["McapRecorder"]
 
 
 class _WriteFailures(logging.Handler):
@@ -83,10 +83,6 @@ class McapRecorder:
         self.scenario_file = Path(scenario_file) if scenario_file else None
         self.flush_interval = flush_interval
         self._writer = None
-
-    @property
-    def messages(self) -> int:
-        return self.publisher.messages
 
     # -- observer protocol
     def start(self, rt: Runtime) -> None:

@@ -416,7 +416,8 @@ def _worker(spec: dict, raw: Any, filled: list, free: list, stop: Any, conn: Any
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the master's to handle; it stops us
     signal.signal(signal.SIGTERM, signal.SIG_DFL)  # not the master's handler (forked): SIGTERM ends the worker
     try:
-        signal.set_wakeup_fd(-1)  # the master's watchdog pipe (forked) is not ours to write
+        signal.set_wakeup_fd(-1)  # a wakeup pipe of the master (the watchdog's) is never ours to write;
+        # none is set when the worker forks today (the watchdog starts after it): a guard against that order
     except ValueError:
         pass
     _fmu._EXTRACTED.update({Path(k): Path(v) for k, v in spec["extracted"].items()})

@@ -278,7 +278,6 @@ class Publisher:
         self.reference = None if reference is None else np.asarray(reference, dtype=float)
         self.reference_signals = list(reference_signals) if reference_signals else None
         self.offset_ns: int | None = None
-        self.messages = 0
         self._context = None
         self._opened: list[Any] = []
 
@@ -359,7 +358,6 @@ class Publisher:
             return
         log, groups, keys, values = ch
         log(orjson.dumps(dict(zip(keys, values(t_ns, groups)))), t_ns + off)
-        self.messages += 1
 
     def _draw(self, t_ns: int) -> None:
         if self._scene is None or t_ns < self._next_scene:
@@ -371,15 +369,15 @@ class Publisher:
         self._trail.append(p)
         if ref_sources is not None:
             self._ref_points.append([arr[i] for arr, i in ref_sources])
+            if len(self._ref_points) > 2 * _REFERENCE_POINTS:  # every other point: the resent line stays bounded
+                self._ref_points = self._ref_points[::2]
         msg = scene_update(self.scene_robot, p, stamp, self._trail)
         if msg is not None:
             scene_log(orjson.dumps(msg), stamp)
             tf_log(orjson.dumps(frame_transforms(p, stamp)), stamp)
-            self.messages += 2
         if t_ns >= self._next_reference and len(self._ref_points) > 1:
             self._next_reference = t_ns + _REFERENCE_PERIOD_NS
             ref_log(orjson.dumps(reference_update(self._ref_points, stamp)), stamp)
-            self.messages += 1
 
     def _log_events(self) -> None:
         names = self._rt.plan.names
@@ -391,7 +389,6 @@ class Publisher:
                 t = float(t)
                 self._events_log(orjson.dumps({"t": t, "component": names[c], "kind": kind}),
                                  round(t * 1e9) + self.offset_ns)
-                self.messages += 1
             events.clear()
 
     def stepped(self, k: int, t_ns: int, active: Sequence[int]) -> None:
@@ -409,7 +406,6 @@ class Publisher:
                 stamp = t_ns
             log, groups, keys, values = ch
             log(dumps(dict(zip(keys, values(stamp, groups)))), stamp + off)
-        self.messages += len(active)
         if self._events_log is not None:
             self._log_events()
         if self._scene is not None and t_ns >= self._next_scene:

@@ -119,7 +119,7 @@ class Watchdog:
                 except OSError:  # closed by __exit__
                     return
                 for b in data:
-                    if b in (signal.SIGINT, signal.SIGTERM) and signum is None:
+                    if b in self.stop.SIGNALS and signum is None:
                         signum, signalled_at = b, now
             if self._done.is_set():
                 return
@@ -132,7 +132,8 @@ class Watchdog:
                                                f"at t = {t:.6g} s within {self.grace:g} s"))
                 return
             if self.budget is not None and now - since > self.budget:
-                self._fire(StallError(*self._where()[:2], self.budget, self._where()[2]))
+                component, t, where = self._where()
+                self._fire(StallError(component, t, self.budget, where))
                 return
 
     def _where(self) -> tuple[str, float, str]:
