@@ -262,8 +262,6 @@ def _cmd_singularity(args: argparse.Namespace) -> int:
 
 # --------------------------------------------------------------------------- co-simulation
 
-EXIT_INTERRUPTED = 130
-
 
 def _cosim_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("run", help="run a co-simulation scenario (YAML or SSP archive) and log it to MCAP")

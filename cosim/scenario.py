@@ -539,9 +539,13 @@ class Overrides(dict):
         self.origins[path] = origin
 
 
-def parse_set_value(raw: str) -> Any:
-    """A ``--set`` value as YAML reads it, with numbers YAML 1.1 leaves as strings (``1e12``) as numbers."""
-    return _numbers(yaml.safe_load(raw))
+def parse_set_value(raw: str, origin: str = "--set") -> Any:
+    """A ``--set`` value as YAML reads it, with numbers YAML 1.1 leaves as strings (``1e12``) as numbers;
+    YAML that does not parse is a :class:`ScenarioError` citing ``origin`` (the option as given)."""
+    try:
+        return _numbers(yaml.safe_load(raw))
+    except yaml.YAMLError as exc:
+        raise ScenarioError(Issue("", f"invalid value: {getattr(exc, 'problem', None) or exc}", origin)) from None
 
 
 def _numbers(value: Any) -> Any:
@@ -661,12 +665,7 @@ def apply_overrides(sets: list[str], stop_time: float | None = None) -> Override
         if "=" not in item or not key or key.startswith(".") or key.endswith("."):
             raise ScenarioError(Issue("", f"expected NAME=value (component.parameter, time.stop, "
                                           f"trajectory.params.NAME, ...), got {item!r}", "--set"))
-        raw = item.split("=", 1)[1]
-        try:
-            value = parse_set_value(raw)
-        except yaml.YAMLError as exc:
-            raise ScenarioError(Issue("", f"invalid value: {getattr(exc, 'problem', None) or exc}",
-                                      f"--set {item}")) from None
+        value = parse_set_value(item.split("=", 1)[1], f"--set {item}")
         out.put((DOTTED, key), value, f"--set {item}")
     if stop_time is not None:
         out.put(("time", "stop"), stop_time, f"--stop-time {stop_time:g}")

@@ -71,14 +71,9 @@ class Case:
 
 
 def _value(text: str, where: str) -> Any:
-    import yaml
-
     from .scenario import parse_set_value
 
-    try:
-        return parse_set_value(text.strip())
-    except yaml.YAMLError as exc:
-        raise SweepError(f"{where}: invalid value {text!r}: {getattr(exc, 'problem', exc)}") from None
+    return parse_set_value(text.strip(), where)
 
 
 def _top_level_split(text: str) -> list[str]:
@@ -487,7 +482,10 @@ def report(out: str | Path, metric: str = "rmse", fig: str | Path | None = None)
     if not rows:
         raise SweepError(f"{Path(out) / RESULTS}: no results")
     meta = json.loads((Path(out) / "sweep.json").read_text()) if (Path(out) / "sweep.json").exists() else {}
-    params = meta.get("parameters") or [c for c in rows[0] if c not in ("case", "status")][:0]
+    params = meta.get("parameters")
+    if not params:
+        raise SweepError(f"{Path(out) / 'sweep.json'}: missing or without parameters; it is written by the sweep "
+                         "next to results.csv")
     if metric not in rows[0]:
         valid = [c for c in rows[0] if c not in ("case", "status", "checks", "mcap", "message", *params)]
         raise SweepError(f"--metric {metric}: not a column; valid: {', '.join(valid)}")
@@ -607,7 +605,7 @@ def _cmd_sweep(args) -> int:
         name, sep, raw = item.partition("=")
         if not sep or not name:
             raise SweepError(f"--set {item}: expected NAME=VALUE")
-        fixed[name] = parse_set_value(raw)
+        fixed[name] = parse_set_value(raw, f"--set {item}")
     if args.stop_time is not None:
         fixed["time.stop"] = args.stop_time
     cases = make_cases(parse_grid(args.grid), parse_random(args.random), args.n, args.seed)

@@ -177,3 +177,17 @@ def test_bad_sweep_input_is_one_line_exit_2(tmp_path):
     for args in (["--grid", "ctl.gain.kpp[1]=1,2"], ["--random", "x=gauss(1,2)", "-n", "2"], ["--grid", "time.stop"]):
         r = _cosim("sweep", SCENARIO, *args, "--out", str(tmp_path / "o"))
         assert r.returncode == 2 and r.stderr.count("\n") == 1, (args, r.stderr)
+
+
+@pytest.mark.parametrize("option", [["--set", "ctl.gain.kp[1]=[1"], ["--grid", "ctl.gain.kp[1]=[1,2"]])
+def test_a_value_that_is_not_yaml_is_one_line_naming_the_option(tmp_path, option):
+    """Before anything runs: exit 2, the option as given and YAML's reason, no traceback."""
+    r = _cosim("sweep", str(ROOT / "scenarios" / "helix_ctc_analytic.yaml"), *option, "--out", str(tmp_path / "s"))
+    assert r.returncode == 2, r.stderr
+    assert f"error: {option[0]} {option[1]}: invalid value: " in r.stderr and "Traceback" not in r.stderr, r.stderr
+
+
+def test_sweep_report_without_its_sweep_json_says_so(tmp_path):
+    (tmp_path / "results.csv").write_text("case,status,rmse\nabc,ok,1e-6\n")
+    r = _cosim("sweep-report", str(tmp_path))
+    assert r.returncode != 0 and "sweep.json: missing or without parameters" in r.stderr, r.stderr
