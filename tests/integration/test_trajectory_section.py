@@ -57,3 +57,14 @@ def test_check_reports_a_component_that_disagrees(tmp_path):
     ok = subprocess.run([sys.executable, "-m", "cosim", "check", str(path), "--set", "traj.helix.rx=0.05"], cwd=ROOT,
                         capture_output=True, text=True)
     assert ok.returncode == 0, f"equal values: exit {ok.returncode} vs 0: {ok.stderr}"
+
+
+def test_a_yaml_1_1_exponent_in_the_parameters_is_a_number(tmp_path):
+    """PyYAML reads '5e-2' as a string (YAML 1.1); the typed parameters make it the number it is checked as."""
+    text = (ROOT / "scenarios" / "helix_ctc_analytic.yaml").read_text()
+    text = text.replace("  type: helix                    #", "  params: {rx: 5e-2, ry: 5e-2}\n  type: helix  #")
+    (tmp_path / "s.yaml").write_text(text.replace("../runs/", str(tmp_path) + "/"))
+    probe = Probe(["traj.p_ref.x"])
+    res = run_scenario(load_scenario(tmp_path / "s.yaml", {("time", "stop"): 0.01}), log=False, extra_observers=[probe])
+    assert res.status == "completed", res.message
+    assert probe.values["traj.p_ref.x"][0] == pytest.approx(0.05, abs=1e-15)
