@@ -16,7 +16,7 @@ from typing import Any
 import numpy as np
 
 from .errors import Issue, PreflightError, ScenarioError
-from .scenario import Scenario, TrajectorySpec, issue_at, trajectory_params_model
+from .scenario import Scenario, TrajectorySpec, line_for, trajectory_params_model
 
 __all__ = ["make_trajectory", "check_positions", "sampled_positions", "preflight", "initial_state_values", "trajectory_start_values"]
 
@@ -126,7 +126,8 @@ def trajectory_start_values(scenario: Scenario) -> dict[str, dict[str, Any]]:
     issues: list[Issue] = []
 
     def issue(loc: tuple, message: str) -> None:
-        issues.append(issue_at(loc, message, scenario.source, lines, getattr(scenario, "_origins", {})))
+        path = ".".join(str(p) for p in loc)
+        issues.append(Issue(path, message, scenario.source, line_for(loc, lines)))
 
     out: dict[str, dict[str, Any]] = {}
     for name, cls in adapters.items():
