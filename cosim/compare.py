@@ -226,13 +226,8 @@ def compare_logs(a: RunLog | str | Path, b: RunLog | str | Path, tolerances: Map
         both_nan = np.isnan(ya) & np.isnan(yb)
         e[both_nan] = 0.0
         e[np.isnan(e)] = np.inf  # a value on one side only is an unbounded difference
-        absd = np.abs(e)
-        k = int(np.argmax(absd)) if len(absd) else 0
-        rmse = float(np.sqrt(np.mean(e * e))) if len(e) else math.nan
-        diffs.append(ErrorStats(name=name, unit=sa.unit or sb.unit, rmse=rmse,
-                                max_error=float(absd[k]) if len(absd) else math.nan,
-                                t_max=float(t_ns[k] * 1e-9) if len(t_ns) else math.nan, samples=int(len(e)),
-                                tolerance=tolerance_for(name, tolerances)))
+        diffs.append(ErrorStats.of(e, t_ns * 1e-9, name=name, unit=sa.unit or sb.unit,
+                                   tolerance=tolerance_for(name, tolerances)))
     la, lb = labels or (str(a.path), str(b.path))
     return Comparison(la, lb, diffs, lo * 1e-9, hi * 1e-9, [n for n in names_a if n not in names_b],
                       sorted(names_b.difference(names_a)), problems)

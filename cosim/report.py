@@ -62,13 +62,8 @@ class ReportError(CosimError, ValueError):
 
 def _stats(axes: Sequence[str], actual: Sequence[str], reference: Sequence[str], unit: str, t: np.ndarray,
            e: np.ndarray) -> list[ErrorStats]:
-    out = []
-    for j, (ax, a, r) in enumerate(zip(axes, actual, reference)):
-        col = e[:, j]
-        k = int(np.argmax(np.abs(col)))
-        out.append(ErrorStats(name=ax, actual=a, reference=r, unit=unit, rmse=float(np.sqrt(np.mean(col * col))),
-                              max_error=float(abs(col[k])), t_max=float(t[k]), samples=len(col)))
-    return out
+    return [ErrorStats.of(e[:, j], t, name=ax, actual=a, reference=r, unit=unit)
+            for j, (ax, a, r) in enumerate(zip(axes, actual, reference))]
 
 
 @dataclass(frozen=True)

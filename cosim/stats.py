@@ -32,6 +32,20 @@ class ErrorStats:
     samples: int
     tolerance: float | None = None
 
+    @classmethod
+    def of(cls, e: Any, t: Any, **fields: Any) -> "ErrorStats":
+        """The statistics of the differences ``e`` (n,) at times ``t`` (n,), s; ``fields`` name the rest.
+        No sample: NaN statistics."""
+        import numpy as np
+
+        e = np.asarray(e, dtype=float)
+        if not len(e):
+            return cls(rmse=math.nan, max_error=math.nan, t_max=math.nan, samples=0, **fields)
+        absd = np.abs(e)
+        k = int(np.argmax(absd))
+        return cls(rmse=float(np.sqrt(np.mean(e * e))), max_error=float(absd[k]), t_max=float(t[k]),
+                   samples=int(len(e)), **fields)
+
     @property
     def ok(self) -> bool:
         """True without a tolerance; else ``max_error <= tolerance`` (NaN fails)."""
