@@ -37,7 +37,7 @@ import numpy as np
 
 from .actuators import SCALAR
 from .errors import ParameterError, RobotError, UnreachableError
-from .kinematics import ik_batch, inv3, leg_rates, rates_batch, update
+from .kinematics import ik_batch, inv3, leg_rates, rates_batch, serial_singularity, update
 from .masses import GRAVITY, LinearDeltaMasses, Masses, RotaryDeltaMasses
 from .model import Data, Model, build_model
 from .robots import Robot
@@ -121,8 +121,7 @@ def _platform_acceleration(model: Model, legs, q, v, f) -> Vec:  # noqa: ANN001
     for leg, qi, fi in zip(legs, q, f):
         den = leg[7]
         if den == 0.0:
-            raise RobotError(f"type 1 (serial) singularity at q = {tuple(q)}: leg {len(rows) + 1} rod is "
-                             "orthogonal to its actuator motion")
+            raise serial_singularity(len(rows) + 1, q)
         quad = leg_rates(leg, vx, vy, vz, 0.0, 0.0, 0.0)[1]
         rows.append((leg[0] / den, leg[1] / den, leg[2] / den, fi - gravity(qi, w, SCALAR) - d * quad))
     (j00, j01, j02, r0), (j10, j11, j12, r1), (j20, j21, j22, r2) = rows

@@ -42,6 +42,7 @@ __all__ = [
     "FKResult",
     "inv3",
     "leg_rates",
+    "serial_singularity",
     "solve_ik",
     "inverse_kinematics",
     "working_mode_fault",
@@ -145,6 +146,12 @@ def inv3(a, b, c, d, e, f, g, h, i):  # noqa: ANN001, ANN201
             c02 * r, (b * g - a * h) * r, (a * e - b * d) * r), det
 
 
+def serial_singularity(leg: int, q=None) -> RobotError:  # noqa: ANN001
+    """The error of a type 1 singularity of the 1-based ``leg`` (``l_i . B_i' = 0``), at ``q`` when known."""
+    at = "" if q is None else f" at q = {tuple(q)}"
+    return RobotError(f"type 1 (serial) singularity{at}: leg {leg} rod is orthogonal to its actuator motion")
+
+
 # ------------------------------------------------------------------------------ one pose, floats
 
 def inverse_kinematics(model: Model, p, v=None, a=None, limits: bool = True):  # noqa: ANN001, ANN201
@@ -177,7 +184,7 @@ def inverse_kinematics(model: Model, p, v=None, a=None, limits: bool = True):  #
             qd.append(qdi)
             qdd.append(qddi)
     except ZeroDivisionError:  # l_i . B_i' = 0
-        raise RobotError(f"type 1 (serial) singularity: leg {len(q)} rod is orthogonal to its actuator motion") from None
+        raise serial_singularity(len(q)) from None
     if limit or v is None:
         return q, None, None, limit
     return q, qd, qdd, 0
@@ -257,8 +264,7 @@ def _jinv(legs, q) -> tuple[float, ...]:  # noqa: ANN001
     (ax, ay, az, _, _, _, _, da), (bx, by, bz, _, _, _, _, db), (cx, cy, cz, _, _, _, _, dc) = legs
     if da == 0.0 or db == 0.0 or dc == 0.0:
         leg = (da, db, dc).index(0.0) + 1
-        raise RobotError(f"type 1 (serial) singularity at q = {tuple(q)}: leg {leg} rod is orthogonal "
-                         "to its actuator motion")
+        raise serial_singularity(leg, q)
     (i00, i01, i02, i10, i11, i12, i20, i21, i22), det = inv3(ax, ay, az, bx, by, bz, cx, cy, cz)
     if det == 0.0:
         raise RobotError(f"type 2 (parallel) singularity at q = {tuple(q)}: J is singular")
@@ -273,7 +279,7 @@ def rates(data: Data, v, a=None) -> tuple[tuple[float, float, float], tuple[floa
     out = []
     for i, leg in enumerate(data.legs):
         if leg[7] == 0.0:
-            raise RobotError(f"type 1 (serial) singularity: leg {i + 1} rod is orthogonal to its actuator motion")
+            raise serial_singularity(i + 1)
         out.append(leg_rates(leg, vx, vy, vz, ax, ay, az))
     (qd0, qdd0), (qd1, qdd1), (qd2, qdd2) = out
     return (qd0, qd1, qd2), ((qdd0, qdd1, qdd2) if a is not None else (0.0, 0.0, 0.0))
@@ -456,7 +462,7 @@ def jacobian(robot: Robot | Model, q: np.ndarray, p: np.ndarray) -> np.ndarray:
     legs = np.array(data.legs)
     if np.any(legs[:, 7] == 0.0):
         leg = int(np.argmin(np.abs(legs[:, 7]))) + 1
-        raise RobotError(f"type 1 (serial) singularity: leg {leg} rod is orthogonal to its actuator motion")
+        raise serial_singularity(leg)
     return legs[:, 0:3] / legs[:, 7:8]
 
 
