@@ -19,6 +19,13 @@ Part 2, this checkout: ``helix_ctc_analytic`` (analytic plant) against ``helix_c
 best of ``--rounds``, with the CTC tracking RMSE per axis. ``--plant-baseline`` also runs
 ``helix_ctc_analytic`` in the baseline tree.
 
+Part 3, the ceiling: ``helix_ctc_analytic`` once more with the analytic plant FMU computing nothing (its
+``advance`` and ``refresh`` replaced by no-ops in the probe process; its FMI exchange, the trajectory, IK
+and CTC FMUs and the master unchanged). No plant computation can make the run faster than that, so the
+4x target leaves the plant ``(helix_ctc / 4 - ceiling) / steps`` per step for its whole computation. The
+ceiling is optimistic: with the plant frozen, the CTC FMU meets the same ``q`` every step and its forward
+kinematics is cached.
+
     python benchmarks/core.py [--rounds 5] [--stop 10] [--baseline REV] [--plant-baseline]
 """
 
@@ -35,6 +42,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 SPEEDUP_TARGET = 4.0  # issue 16: helix_ctc_analytic at least 4x faster than helix_ctc
 RMSE_TARGET = 1e-7  # m per axis, CTC on the analytic plant
+STEP = 1e-3  # s, the communication step of both scenarios
 
 # Runs inside either tree (PYTHONPATH = that tree): the new core if delta.model exists, else the
 # plain-float module it replaced. Prints {"ik": us, "ctc": us, "fwd": us} per robot.
@@ -115,7 +123,13 @@ PLANT = ISOLATE + r'''
 import json, sys
 from cosim.run import run_scenario
 from cosim.scenario import load_scenario
-name, stop = sys.argv[1], float(sys.argv[2])
+name, stop, idle = sys.argv[1], float(sys.argv[2]), sys.argv[3:] == ["idle"]
+if idle:  # the plant FMU's code, loaded by a one-step run, then kept by the process: make it compute nothing
+    run_scenario(load_scenario(f"scenarios/{name}.yaml", {("time", "stop"): 1e-3}), log=False)
+    plants = [m.AnalyticPlant for n, m in sys.modules.items() if n.endswith("fmus.adapters.plants")]
+    assert len(plants) == 1, plants
+    plants[0].advance = lambda self, t, h: None
+    plants[0].refresh = lambda self: None
 res = run_scenario(load_scenario(f"scenarios/{name}.yaml", {("time", "stop"): stop}), log=False)
 print(json.dumps({"wall": res.wall_time, "rmse": [e.rmse for e in res.errors]}))
 '''
@@ -172,27 +186,34 @@ def main(argv: list[str] | None = None) -> int:
                     verdict = "not slower" if new <= old else "SLOWER"
                     print(f"  {kind:<6} {text:<30} {old:9.2f}   {new:9.2f}   {new / old:5.2f}  {verdict}")
             plants = {}
-            labels = [("helix_ctc", ROOT), ("helix_ctc_analytic", ROOT)]
+            labels = [("helix_ctc", ROOT, ()), ("helix_ctc_analytic", ROOT, ()), ("helix_ctc_analytic", ROOT, ("idle",))]
             if args.plant_baseline:
-                labels.append(("helix_ctc_analytic", base))
+                labels.append(("helix_ctc_analytic", base, ()))
             for r in range(args.rounds):
-                for name, tree in labels:
-                    res = run_in(tree, PLANT, name, str(args.stop))
-                    key = (name, tree == base)
+                for name, tree, extra in labels:
+                    res = run_in(tree, PLANT, name, str(args.stop), *extra)
+                    key = (name, tree == base, bool(extra))
                     if key not in plants or res["wall"] < plants[key]["wall"]:
                         plants[key] = res
             print(f"\n{args.stop:g} s simulated, loop wall time, best of {args.rounds}, no log, "
                   "each scenario's own parallel setting")
-            for (name, is_base), res in plants.items():
-                where = f"baseline {sha}" if is_base else "this tree"
-                rmse = ", ".join(f"{x:.3g}" for x in res["rmse"])
-                print(f"  {name:<20} {where:<18} {res['wall']:7.3f} s   RMSE per axis {rmse} m")
-            full, analytic = plants[("helix_ctc", False)], plants[("helix_ctc_analytic", False)]
+            for (name, is_base, idle), res in plants.items():
+                where = f"baseline {sha}" if is_base else "this tree, plant idle" if idle else "this tree"
+                rmse = "" if idle else "   RMSE per axis " + ", ".join(f"{x:.3g}" for x in res["rmse"]) + " m"
+                print(f"  {name:<20} {where:<21} {res['wall']:7.3f} s{rmse}")
+            full, analytic = plants[("helix_ctc", False, False)], plants[("helix_ctc_analytic", False, False)]
+            idle = plants[("helix_ctc_analytic", False, True)]
             speedup = full["wall"] / analytic["wall"]
             rmse_ok = max(analytic["rmse"]) < RMSE_TARGET
             print(f"  helix_ctc_analytic is {speedup:.2f}x faster than helix_ctc "
                   f"({'meets' if speedup >= SPEEDUP_TARGET else 'misses'} the {SPEEDUP_TARGET:g}x target); "
                   f"CTC RMSE on the analytic plant {'<' if rmse_ok else '>='} {RMSE_TARGET:g} m per axis")
+            steps = round(args.stop / STEP)
+            budget = (full["wall"] / SPEEDUP_TARGET - idle["wall"]) / steps
+            used = (analytic["wall"] - idle["wall"]) / steps
+            print(f"  ceiling (plant computing nothing): {full['wall'] / idle['wall']:.2f}x. The {SPEEDUP_TARGET:g}x "
+                  f"target leaves the plant {budget * 1e6:.1f} us per step for its computation; it takes "
+                  f"{used * 1e6:.1f} us")
         finally:
             _git("worktree", "remove", "--force", str(base))
     return 0
