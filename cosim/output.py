@@ -47,11 +47,17 @@ def writable_parent(target: Path) -> None:
 
 
 class OutputClaim:
-    """The right to write ``target``: the held lock and the partial file the writer fills."""
+    """The right to write ``target``: the held lock and the partial file the writer fills.
+
+    ``state`` is what became of the log, set by the run that writes it: ``"none"`` (never
+    started: nothing to keep), ``"finished"`` (complete, possibly marked as an error or an
+    interruption), or why it could not be finished (kept as the partial file).
+    """
 
     def __init__(self, target: Path, lock_fd: int, lock: Path):
         self.target = target
         self.partial = partial_path(target)
+        self.state = "none"
         self._fd: int | None = lock_fd
         self._lock = lock
 

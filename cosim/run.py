@@ -234,7 +234,7 @@ def _settle(output, error: BaseException | None) -> None:
     started leaves nothing; a log that could not be finished stays as X.partial, and the error says so."""
     if output is None:
         return
-    state = getattr(output, "state", "none")
+    state = output.state
     if state == "finished":
         output.commit()
     elif state == "none":
