@@ -199,14 +199,14 @@ def run(scenario: str | Path | Scenario, overrides: Mapping[str, Any] | None = N
 
     Raises :class:`~cosim.errors.CosimError` subclasses (bad input, pre-flight, FMU failure).
     """
-    sc = load(scenario, overrides).model_copy()
+    sc = load(scenario, overrides)
     peak = PeakEffort()
     observers: list[Any] = [peak]
     recorder = None
     if signals:
         recorder = SignalRecorder()
         observers.append(recorder)
-        object.__setattr__(sc, "_read", "all")  # every output read each step, also without a log
-    res = run_scenario(sc, out=out, log=log, progress=progress, extra_observers=observers)
+    res = run_scenario(sc, out=out, log=log, progress=progress, extra_observers=observers,
+                       read_all=signals)  # every output read each step, also without a log
     t, values = recorder.arrays() if recorder is not None else (np.zeros(0), {})
     return Result(res, metrics(sc, res, peak.peak), t, values)

@@ -5,7 +5,7 @@ from __future__ import annotations
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Sequence
+from typing import Any, Mapping, Sequence
 
 from .algorithm import Observer, Runtime, StopRequest, initialize, simulate
 from .errors import ComponentSourceError, CosimError, Issue
@@ -71,13 +71,17 @@ def progress_bar():
                     TimeRemainingColumn(), transient=True)
 
 
-def locate_fmus(scenario: Scenario) -> dict[str, FMUInfo]:
-    """Each component's FMU: ``path`` relative to the scenario file, or ``fmu`` built by fmus.registry."""
+def locate_fmus(scenario: Scenario, fmu_files: Mapping[str, str | Path] | None = None) -> dict[str, FMUInfo]:
+    """Each component's FMU: ``path`` relative to the scenario file, or ``fmu`` built by fmus.registry.
+
+    ``fmu_files``: our FMUs already built, by name (a sweep builds them once for every case);
+    the others are built here.
+    """
     base = Path(scenario.source).parent if scenario.source and scenario.source != "<string>" else Path.cwd()
     lines = getattr(scenario, "_lines", {})
     infos: dict[str, FMUInfo] = {}
     issues: list[Issue] = []
-    built = {n: Path(p) for n, p in getattr(scenario, "_fmu_files", {}).items()}  # prebuilt (cosim.sweep)
+    built = {n: Path(p) for n, p in (fmu_files or {}).items()}
     for name, comp in scenario.components.items():
         loc = ("components", name, "fmu" if comp.fmu else "path")
         where = dict(file=scenario.source, line=line_for(loc, lines))
@@ -114,17 +118,20 @@ def build_ours(name: str) -> Path:
         raise ComponentSourceError(Issue("", f"unknown FMU {name!r}: {exc}{hint}")) from None
 
 
-def prepare(scenario: Scenario, log_signals: str | None = None):
+def prepare(scenario: Scenario, log_signals: str | None = None, *,
+            fmu_files: Mapping[str, str | Path] | None = None):
     """Pre-flight and plan (no FMU instantiated): returns (plan, preflight report).
 
     With a ``trajectory:`` section, our trajectory FMUs get their parameters from it.
+    ``log_signals`` overrides ``logging.signals`` (:func:`cosim.system.build_plan`);
+    ``fmu_files``: our FMUs already built (:func:`locate_fmus`).
     """
     from .preflight import initial_state_values, preflight, trajectory_start_values
     from .system import build_plan
 
     trajectory_values = trajectory_start_values(scenario)  # our trajectory FMUs follow the scenario's section
     report = preflight(scenario)
-    infos = locate_fmus(scenario)
+    infos = locate_fmus(scenario, fmu_files)
     plan = build_plan(scenario, infos, log_signals)
     for name, values in trajectory_values.items():
         c = plan.names.index(name)
@@ -182,8 +189,8 @@ def check_scenario(path: str | Path, overrides: dict | None = None) -> tuple[Sce
 
 def run_scenario(scenario: Scenario | str | Path, out: str | Path | None = None, overrides: dict | None = None,
                  log: bool | None = None, progress: bool = False, extra_observers: Sequence[Observer] = (),
-                 live: tuple[str, int] | None = None, realtime: float | None = None, stamps: str = "wall"
-                 ) -> RunResult:
+                 live: tuple[str, int] | None = None, realtime: float | None = None, stamps: str = "wall", *,
+                 read_all: bool = False, fmu_files: Mapping[str, str | Path] | None = None) -> RunResult:
     """Run a scenario end to end. Raises CosimError (bad input, FMU failure, a stalled component:
     StallError) or Interrupted (a KeyboardInterrupt: SIGINT, SIGTERM).
 
@@ -192,9 +199,13 @@ def run_scenario(scenario: Scenario | str | Path, out: str | Path | None = None,
     server showing the run (:mod:`cosim.live`); ``realtime``: pace the run at this many simulated
     seconds per wall second (:mod:`cosim.realtime`); ``stamps``: log times from the run's
     ``"wall"``-clock start or pure ``"simulation"`` time (:mod:`cosim.publish`).
+    ``read_all``: read every output of every component at every step, also without a log (for
+    an observer of every signal, :class:`cosim.api.SignalRecorder`); ``fmu_files``: our FMUs
+    already built, by name (:func:`locate_fmus`).
     """
     try:
-        return _run(scenario, out, overrides, log, progress, extra_observers, live, realtime, stamps)
+        return _run(scenario, out, overrides, log, progress, extra_observers, live, realtime, stamps, read_all,
+                    fmu_files)
     finally:
         cleanup_extracted()
 
@@ -210,8 +221,8 @@ def _log_path(scenario: Scenario, out: str | Path | None) -> Path:
 
 
 def _run(scenario: Scenario | str | Path, out: str | Path | None, overrides: dict | None, log: bool | None,
-         progress: bool, extra_observers: Sequence[Observer], live: tuple[str, int] | None = None,
-         realtime: float | None = None, stamps: str = "wall") -> RunResult:
+         progress: bool, extra_observers: Sequence[Observer], live: tuple[str, int] | None, realtime: float | None,
+         stamps: str, read_all: bool, fmu_files: Mapping[str, str | Path] | None) -> RunResult:
     """Claim the log's path (checked writable, locked, written as X.partial) before any FMU is
     loaded, run, then rename the finished log into place (see :mod:`cosim.output`)."""
     from .output import claim
@@ -221,7 +232,8 @@ def _run(scenario: Scenario | str | Path, out: str | Path | None, overrides: dic
     logging_on = scenario.logging.enabled if log is None else log
     output = claim(_log_path(scenario, out)) if logging_on else None
     try:
-        result = _run_claimed(scenario, output, progress, extra_observers, live, realtime, stamps)
+        result = _run_claimed(scenario, output, progress, extra_observers, live, realtime, stamps, read_all,
+                              fmu_files)
     except BaseException as exc:
         _settle(output, exc)
         raise
@@ -248,9 +260,11 @@ def _settle(output, error: BaseException | None) -> None:
 
 
 def _run_claimed(scenario: Scenario, output, progress: bool, extra_observers: Sequence[Observer],
-                 live: tuple[str, int] | None, realtime: float | None, stamps: str) -> RunResult:
+                 live: tuple[str, int] | None, realtime: float | None, stamps: str, read_all: bool,
+                 fmu_files: Mapping[str, str | Path] | None) -> RunResult:
     logging_on = output is not None
-    plan, _ = prepare(scenario, None if logging_on or live is not None else getattr(scenario, "_read", "none"))
+    published = logging_on or live is not None  # the log's and the live view's signals: logging.signals
+    plan, _ = prepare(scenario, None if published else ("all" if read_all else "none"), fmu_files=fmu_files)
     comps = scenario.components
     slaves = [make_slave(n, plan.infos[i], comps[n].interface, comps[n].rtol, comps[n].solver, comps[n].max_step)
               for i, n in enumerate(plan.names)]
@@ -267,7 +281,7 @@ def _run_claimed(scenario: Scenario, output, progress: bool, extra_observers: Se
         observers.append(tracking)
     mcap_path = output.target if output is not None else None
     recorder = None
-    if logging_on or live is not None:  # the log and the live view: the same channels (cosim.publish)
+    if published:  # the log and the live view: the same channels (cosim.publish)
         sinks, recorder = _publishing(scenario, output.partial if output is not None else None, live, stamps)
         observers += sinks
     pacing = None

@@ -168,9 +168,9 @@ def run_case(scenario: str, values: dict[str, Any], fmu_files: dict[str, str], m
     try:
         over = dotted_overrides({**values, "parallel": "off"}, "sweep")
         sc = load_scenario(scenario, over)
-        object.__setattr__(sc, "_fmu_files", dict(fmu_files))
         peak = api.PeakEffort()
-        res = run_scenario(sc, out=mcap, log=mcap is not None, progress=False, extra_observers=[peak])
+        res = run_scenario(sc, out=mcap, log=mcap is not None, progress=False, extra_observers=[peak],
+                           fmu_files=fmu_files)
         row.update(api.metrics(sc, res, peak.peak))
         row["status"] = "ok" if res.status == "completed" else res.status
         row["message"] = res.message
@@ -236,9 +236,8 @@ def _check_names(scenarios: list[Any], fmu_files: dict[str, str]) -> None:
 
     infos = None
     for sc in scenarios:
-        object.__setattr__(sc, "_fmu_files", fmu_files)
         if infos is None or set(infos) != set(sc.components):
-            infos = locate_fmus(sc)
+            infos = locate_fmus(sc, fmu_files)
         build_plan(sc, infos)
 
 
