@@ -122,7 +122,7 @@ def trajectory_start_values(scenario: Scenario) -> dict[str, dict[str, Any]]:
     if not adapters:
         return {}
     traj = make_trajectory(spec, scenario.source)
-    lines = getattr(scenario, "_lines", {})
+    lines = scenario._lines
     issues: list[Issue] = []
 
     def issue(loc: tuple, message: str) -> None:

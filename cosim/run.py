@@ -78,7 +78,7 @@ def locate_fmus(scenario: Scenario, fmu_files: Mapping[str, str | Path] | None =
     the others are built here.
     """
     base = Path(scenario.source).parent if scenario.source and scenario.source != "<string>" else Path.cwd()
-    lines = getattr(scenario, "_lines", {})
+    lines = scenario._lines
     infos: dict[str, FMUInfo] = {}
     issues: list[Issue] = []
     built = {n: Path(p) for n, p in (fmu_files or {}).items()}

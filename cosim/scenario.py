@@ -14,7 +14,7 @@ from pathlib import Path
 from typing import Any, Literal, Union
 
 import yaml
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
+from pydantic import BaseModel, ConfigDict, Field, PrivateAttr, ValidationError, field_validator, model_validator
 
 from delta.trajectories import TYPES as TRAJECTORY_TYPES
 
@@ -260,6 +260,10 @@ class Scenario(_Model):
     regression: Regression = Field(default_factory=Regression)
     # set by the loader, not part of the file format
     source: str | None = Field(None, exclude=True, json_schema_extra={"readOnly": True})
+    # where the values came from, for the messages (issue_at): the line of every key path in the
+    # file, and the command-line option of every overridden value
+    _lines: dict[tuple, int] = PrivateAttr(default_factory=dict)
+    _origins: dict[tuple, str] = PrivateAttr(default_factory=dict)
 
     @field_validator("parallel", mode="after")
     @classmethod
@@ -401,8 +405,8 @@ def scenario_from_data(data: dict[str, Any], file: str = "<string>", overrides: 
     issues = [issue_at(loc, msg, file, lines, origins) for loc, msg in _semantic_issues(scenario)]
     if issues:
         raise ScenarioError(issues)
-    object.__setattr__(scenario, "_lines", lines)
-    object.__setattr__(scenario, "_origins", origins)
+    scenario._lines = lines
+    scenario._origins = origins
     return scenario
 
 

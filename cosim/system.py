@@ -213,8 +213,8 @@ def build_plan(scenario: Scenario, infos: Mapping[str, FMUInfo], log_signals: st
     """Resolve every name in ``scenario`` against the FMUs; raise one error listing every problem."""
     names = list(scenario.components)
     idx = {n: i for i, n in enumerate(names)}
-    lines = getattr(scenario, "_lines", {})
-    origins = getattr(scenario, "_origins", {})
+    lines = scenario._lines
+    origins = scenario._origins
     issues: list[Issue] = []
 
     def issue(loc: tuple, msg: str) -> None:
