@@ -22,13 +22,12 @@ import time
 from pathlib import Path
 
 import pytest
+from cli_helpers import cosim, start_cosim, wait_for
 from fmu_helpers import SLOW_SCENARIO
 
 from cosim.runlog import read_run
 
 pytestmark = pytest.mark.integration
-ROOT = Path(__file__).resolve().parents[2]
-TIMEOUT = 120  # s, a hung case fails instead of hanging CI
 
 SMALL = """
 name: small
@@ -61,16 +60,6 @@ logging: {flush_interval: 0.1}
 SLOW = SLOW_SCENARIO
 
 
-def cosim(*args: str, timeout: float = TIMEOUT, **kw) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "cosim", *map(str, args)], cwd=ROOT, capture_output=True,
-                          text=True, timeout=timeout, **kw)
-
-
-def start(*args: str, **kw) -> subprocess.Popen:
-    return subprocess.Popen([sys.executable, "-m", "cosim", *map(str, args)], cwd=ROOT, stdout=subprocess.PIPE,
-                            stderr=subprocess.PIPE, text=True, **kw)
-
-
 def fails(r, code: int, *patterns: str, usage: bool = False) -> str:
     """Exit ``code``, no traceback, one message line matching every pattern (after argparse's usage)."""
     err = r.stderr
@@ -99,13 +88,6 @@ def scen(write_scenario):
         return write_scenario(template + extra, name)
 
     return write
-
-
-def _wait_for(predicate, timeout: float = 30.0, what: str = "") -> None:
-    deadline = time.monotonic() + timeout
-    while not predicate():
-        assert time.monotonic() < deadline, f"timed out waiting for {what}"
-        time.sleep(0.05)
 
 
 # --------------------------------------------------------------------------- options and the CLI
@@ -342,15 +324,15 @@ def test_stall_outside_python_finishes_the_log_and_exits(scen, tmp_path):
 
 
 def _started(proc: subprocess.Popen, partial: Path) -> None:
-    _wait_for(lambda: partial.exists() and partial.stat().st_size > 4096 or proc.poll() is not None,
-              what="the run to log")
+    wait_for(lambda: partial.exists() and partial.stat().st_size > 4096 or proc.poll() is not None,
+             what="the run to log")
     assert proc.poll() is None, f"run ended early: {proc.communicate()}"
 
 
 @pytest.mark.parametrize("sig, code", [(signal.SIGTERM, 143), (signal.SIGINT, 130)])
 def test_signal_finishes_and_marks_the_log(scen, tmp_path, sig, code):
     out = tmp_path / "int.mcap"
-    proc = start("run", scen(SLOW), "--out", out, "--quiet")
+    proc = start_cosim("run", scen(SLOW), "--out", out, "--quiet")
     _started(proc, out.with_name("int.mcap.partial"))
     proc.send_signal(sig)
     _, err = proc.communicate(timeout=30)
@@ -361,8 +343,8 @@ def test_signal_finishes_and_marks_the_log(scen, tmp_path, sig, code):
 
 def test_signal_during_a_stalled_step(scen, tmp_path):
     out = tmp_path / "st.mcap"
-    proc = start("run", scen(SLOW), "--out", out, "--quiet", "--set", "ramp.delay=100", "--watchdog", "0")
-    _wait_for(lambda: out.with_name("st.mcap.partial").exists(), what="the run to start")
+    proc = start_cosim("run", scen(SLOW), "--out", out, "--quiet", "--set", "ramp.delay=100", "--watchdog", "0")
+    wait_for(lambda: out.with_name("st.mcap.partial").exists(), what="the run to start")
     time.sleep(1.0)
     t0 = time.monotonic()
     proc.send_signal(signal.SIGTERM)
@@ -391,16 +373,16 @@ def _alive(pid: int) -> bool:
 @pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGKILL])
 def test_worker_does_not_outlive_its_master(scen, tmp_path, sig):
     out = tmp_path / "w.mcap"
-    proc = start("run", scen(LOOP), "--out", out, "--quiet", "--parallel", "on")
+    proc = start_cosim("run", scen(LOOP), "--out", out, "--quiet", "--parallel", "on")
     _started(proc, out.with_name("w.mcap.partial"))
     workers = _children(proc.pid)
     assert workers, "no worker process"
     partial = out.with_name("w.mcap.partial")
     size = partial.stat().st_size
-    _wait_for(lambda: partial.stat().st_size > size, what="a flushed chunk of messages")
+    wait_for(lambda: partial.stat().st_size > size, what="a flushed chunk of messages")
     proc.send_signal(sig)
     proc.communicate(timeout=30)
-    _wait_for(lambda: not any(_alive(w) for w in workers), timeout=10, what="the worker to exit")
+    wait_for(lambda: not any(_alive(w) for w in workers), timeout=10, what="the worker to exit")
     if sig == signal.SIGTERM:
         assert proc.returncode == 143 and outcome(out).get("status") == "interrupted", proc.returncode
     else:  # killed: the partial log stays, a new run refuses to overwrite it, recover reads it
@@ -447,7 +429,7 @@ def test_out_in_a_read_only_directory(scen, read_only_dir):
 
 def test_two_runs_on_one_path(scen, tmp_path):
     out = tmp_path / "c.mcap"
-    first = start("run", scen(SLOW.replace("stop: 20.0", "stop: 3.0")), "--out", out, "--quiet")
+    first = start_cosim("run", scen(SLOW.replace("stop: 20.0", "stop: 3.0")), "--out", out, "--quiet")
     _started(first, out.with_name("c.mcap.partial"))
     second = cosim("run", scen(SMALL, name="other.yaml"), "--out", out)
     fails(second, 2, f"another run \\(pid {first.pid}, started", "is writing it")

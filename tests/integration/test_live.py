@@ -25,6 +25,7 @@ from pathlib import Path
 
 import jsonschema
 import pytest
+from cli_helpers import free_port
 
 from cosim.cli import main
 from cosim.foxglove_schemas import FRAME_TRANSFORMS, SCENE_UPDATE
@@ -35,12 +36,6 @@ pytestmark = pytest.mark.integration
 
 REALTIME_TOLERANCE = 0.05  # the bound on wall time vs simulated time at factor 1
 NPM_PACKAGE = "@foxglove/schemas@2.1.0"  # the version vendored in cosim/foxglove_schemas.py
-
-
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
 
 
 @pytest.fixture(scope="module")
@@ -137,7 +132,7 @@ async def _watch(port: int, topics: set[str], want: int, deadline: float) -> tup
 
 
 def test_live_run_serves_the_log_channels_with_valid_messages(tmp_path, published_schemas):
-    port = _free_port()
+    port = free_port()
     out = tmp_path / "live.mcap"
     cmd = [sys.executable, "-m", "cosim", "run", str(SCENARIO), "--stop-time", "4", "--live", str(port),
            "--realtime", "--out", str(out), "--quiet"]

@@ -9,13 +9,13 @@ from __future__ import annotations
 
 import math
 import re
-import subprocess
 import sys
 import zipfile
 from ctypes import c_double
 from pathlib import Path
 
 import pytest
+from cli_helpers import cosim
 
 from cosim.errors import FMIError, ScenarioError
 from cosim.run import run_scenario
@@ -28,11 +28,6 @@ pytestmark = pytest.mark.integration
 
 ROOT = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(ROOT / "benchmarks"))
-
-
-def cosim(*args: str, timeout: float = 120) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "cosim", *args], cwd=ROOT, capture_output=True, text=True,
-                          timeout=timeout)
 
 
 # -- item 1: plants run indefinitely ------------------------------------------------------------

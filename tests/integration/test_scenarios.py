@@ -1,11 +1,11 @@
 """The shipped scenarios: every one validates and passes pre-flight; the main job runs."""
 
 import json
-import subprocess
-import sys
+from functools import partial
 from pathlib import Path
 
 import pytest
+from cli_helpers import cosim
 
 ROOT = Path(__file__).resolve().parents[2]
 SCENARIOS = sorted((ROOT / "scenarios").glob("*.yaml"))
@@ -15,9 +15,7 @@ SCENARIOS = sorted((ROOT / "scenarios").glob("*.yaml"))
 HELIX_CTC_RMSE_M = 1e-5
 
 
-def _cosim(*args, cwd=ROOT):
-    return subprocess.run([sys.executable, "-m", "cosim", *args], capture_output=True, text=True, cwd=cwd,
-                          timeout=600)
+_cosim = partial(cosim, timeout=600)
 
 
 @pytest.mark.integration

@@ -7,23 +7,19 @@ import csv
 import json
 import os
 import signal
-import socket
 import subprocess
 import sys
-import time
+from functools import partial
 from pathlib import Path
 
 import pytest
+from cli_helpers import cosim, free_port, start_cosim, wait_for
 
 pytestmark = pytest.mark.integration
 ROOT = Path(__file__).parents[2]
 SCENARIO = str(ROOT / "scenarios" / "helix_ctc_analytic.yaml")
 BIN = Path(sys.executable).parent
-
-
-def _cosim(*args: str, timeout: float = 240) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "cosim", *args], capture_output=True, text=True, cwd=ROOT,
-                          timeout=timeout)
+_cosim = partial(cosim, timeout=240)
 
 
 def _rows(out: Path) -> list[dict[str, str]]:
@@ -31,26 +27,11 @@ def _rows(out: Path) -> list[dict[str, str]]:
         return list(csv.DictReader(f))
 
 
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
-
-
-def _wait_for(predicate, timeout: float, what: str) -> None:
-    end = time.monotonic() + timeout
-    while time.monotonic() < end:
-        if predicate():
-            return
-        time.sleep(0.1)
-    raise AssertionError(f"timed out after {timeout} s waiting for {what}")
-
-
 class DaskCluster:
     """A real Dask scheduler and worker processes (``dask scheduler``, ``dask worker``; the old ``dask-scheduler``) on localhost (random free ports)."""
 
     def __init__(self, n_workers: int, tmp: Path):
-        self.port = _free_port()
+        self.port = free_port()
         self.address = f"tcp://127.0.0.1:{self.port}"
         self.procs: list[subprocess.Popen] = []
         self.tmp = tmp
@@ -126,12 +107,11 @@ def test_sweep_on_an_existing_dask_cluster(cluster, tmp_path):
 def test_a_worker_killed_mid_sweep_loses_no_case(cluster, tmp_path):
     out = tmp_path / "sweep"
     n = 8
-    sweep = subprocess.Popen([sys.executable, "-m", "cosim", "sweep", SCENARIO,
-                              "--grid", "ctl.gain.kp[1]=" + ",".join(f"{1e4 + 1e3 * k:g}" for k in range(n)),
-                              "--stop-time", "0.5", "--scheduler", cluster.address, "--out", str(out), "--quiet"],
-                             cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    sweep = start_cosim("sweep", SCENARIO,
+                        "--grid", "ctl.gain.kp[1]=" + ",".join(f"{1e4 + 1e3 * k:g}" for k in range(n)),
+                        "--stop-time", "0.5", "--scheduler", cluster.address, "--out", str(out), "--quiet")
     try:
-        _wait_for(lambda: (out / "results.csv").exists() and len(_rows(out)) >= 1, 120, "the first case")
+        wait_for(lambda: (out / "results.csv").exists() and len(_rows(out)) >= 1, 120, "the first case")
         victim = cluster.workers[0]
         os.killpg(victim.pid, signal.SIGKILL)
         victim.wait(10)

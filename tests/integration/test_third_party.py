@@ -29,6 +29,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from cfmus import build
+from cli_helpers import cosim, start_cosim
 
 from cosim.run import run_scenario
 from cosim.runlog import read_run
@@ -36,7 +37,6 @@ from cosim.scenario import parse_scenario
 
 pytestmark = pytest.mark.integration
 
-ROOT = Path(__file__).resolve().parents[2]
 CS_RTOL = 1e-12
 ME_RTOL = 1e-6
 EVENT_ATOL = 1e-8
@@ -186,8 +186,7 @@ def test_fmu_ending_the_simulation_ends_the_run_normally(tmp_path, fmi, interfac
     path = tmp_path / "stair.yaml"
     path.write_text(_yaml({"stair": one(fmu, interface)}, 15.0, 0.1))
     out = tmp_path / "stair.mcap"
-    proc = subprocess.run([sys.executable, "-m", "cosim", "run", str(path), "--out", str(out)],
-                          capture_output=True, text=True, cwd=ROOT, timeout=120)
+    proc = cosim("run", str(path), "--out", str(out))
     assert proc.returncode == 0, f"exit {proc.returncode}: {proc.stderr}"
     assert "'stair' ended the simulation at t = 10.5 s" in proc.stdout, proc.stdout
     log = read_run(out)
@@ -206,8 +205,7 @@ def test_rejected_step_is_an_error_naming_component_function_and_time(tmp_path, 
     fmu = build("Stair", fmi)
     path = tmp_path / "reject.yaml"
     path.write_text(_yaml({"stair": one(fmu, "cs", {"t_reject": 3.05})}, 5.0, 0.1))
-    proc = subprocess.run([sys.executable, "-m", "cosim", "run", str(path), "--no-log"],
-                          capture_output=True, text=True, cwd=ROOT, timeout=120)
+    proc = cosim("run", str(path), "--no-log")
     assert proc.returncode == 2, f"exit {proc.returncode}: {proc.stdout} {proc.stderr}"
     lines = proc.stderr.strip().splitlines()
     assert len(lines) == 1 and "Traceback" not in proc.stderr, proc.stderr
@@ -304,15 +302,13 @@ def test_state_space_arrays_structural_parameters_and_element_connections(tmp_pa
 def test_clock_variables_are_refused_with_a_clear_message(tmp_path):
     path = tmp_path / "clock.yaml"
     path.write_text(_yaml({"c": one(build("Clocked", 3), "cs")}, 0.1, 0.01))
-    proc = subprocess.run([sys.executable, "-m", "cosim", "run", str(path)], capture_output=True, text=True,
-                          cwd=ROOT, timeout=120)
+    proc = cosim("run", str(path))
     assert proc.returncode == 2 and "Traceback" not in proc.stderr, proc.stderr
     assert "declares Clock variables (tick" in proc.stderr and "not supported" in proc.stderr, proc.stderr
 
 
 def test_fmus_info_describes_any_fmu_path():
-    proc = subprocess.run([sys.executable, "-m", "cosim", "fmus", "info", str(build("StateSpace", 3)), "--json"],
-                          capture_output=True, text=True, cwd=ROOT, timeout=120)
+    proc = cosim("fmus", "info", str(build("StateSpace", 3)), "--json")
     assert proc.returncode == 0, proc.stderr
     info = json.loads(proc.stdout)
     assert set(info["interfaces"]) == {"cs", "me"}, info["interfaces"]
@@ -324,15 +320,10 @@ def test_fmus_info_describes_any_fmu_path():
 # --------------------------------------------------------------------------- no temp leftovers
 
 
-def _cosim(args: list[str], tmpdir: Path, **kw) -> subprocess.Popen:
-    env = {**os.environ, "TMPDIR": str(tmpdir)}
-    return subprocess.Popen([sys.executable, "-m", "cosim", *args], cwd=ROOT, env=env, stdout=subprocess.PIPE,
-                            stderr=subprocess.PIPE, text=True, **kw)
-
-
 def test_no_extracted_fmu_outlives_a_run_an_error_or_an_interrupt(tmp_path):
     tmpdir = tmp_path / "tmp"
     tmpdir.mkdir()
+    env = {**os.environ, "TMPDIR": str(tmpdir)}  # the runs extract their FMUs there
     fmu = build("VanDerPol", 2)
     good = tmp_path / "good.yaml"
     good.write_text(_yaml({"m": one(fmu, "me")}, 1.0, 0.01))
@@ -344,12 +335,12 @@ def test_no_extracted_fmu_outlives_a_run_an_error_or_an_interrupt(tmp_path):
     orphan = tmpdir / f"cosim-fmu-{int(dead.stdout)}-Plant-x1y2z3"  # left by a run killed with SIGKILL
     (orphan / "binaries").mkdir(parents=True)
     for path, code in ((good, 0), (bad, 2)):
-        proc = _cosim(["run", str(path), "--out", str(tmp_path / "o.mcap")], tmpdir)
+        proc = start_cosim("run", str(path), "--out", str(tmp_path / "o.mcap"), env=env)
         _, err = proc.communicate(timeout=120)
         assert proc.returncode == code, err
         assert list(tmpdir.iterdir()) == [], f"after {path.name}: {list(tmpdir.iterdir())} (the orphan of a " \
                                              f"dead process is swept at the first extraction)"
-    proc = _cosim(["run", str(long), "--out", str(tmp_path / "long.mcap")], tmpdir)
+    proc = start_cosim("run", str(long), "--out", str(tmp_path / "long.mcap"), env=env)
     deadline = time.monotonic() + 60
     while not any(tmpdir.iterdir()) and time.monotonic() < deadline:  # wait until the run has extracted its FMU
         time.sleep(0.05)

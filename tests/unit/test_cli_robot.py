@@ -1,32 +1,27 @@
 """`python -m cosim robot ...` end to end, in a subprocess like a user runs it."""
 
 import json
-import subprocess
-import sys
 
 import pytest
-
-
-def run(*args):
-    return subprocess.run([sys.executable, "-m", "cosim", *args], capture_output=True, text=True, timeout=120)
+from cli_helpers import cosim
 
 
 def test_ik_json_reproduces_thesis_table_4_row_6():
-    out = run("robot", "ik", "--robot", "linear_delta_thesis", "0", "-0.05", "-0.64", "--json")
+    out = cosim("robot", "ik", "--robot", "linear_delta_thesis", "0", "-0.05", "-0.64", "--json")
     assert out.returncode == 0, out.stderr
     q_cm = [round(x * 100, 2) for x in json.loads(out.stdout)["q"]]
     assert q_cm == [31.33, 31.33, 35.82], q_cm
 
 
 def test_unreachable_point_one_line_reason_exit_2():
-    out = run("robot", "ik", "--robot", "linear_delta_thesis", "0.5", "0", "-0.6")
+    out = cosim("robot", "ik", "--robot", "linear_delta_thesis", "0.5", "0", "-0.6")
     assert out.returncode == 2
     lines = out.stderr.strip().splitlines()
     assert len(lines) == 1 and "leg 1 has no solution" in lines[0], out.stderr
 
 
 def test_unknown_preset_lists_valid_names():
-    out = run("robot", "fk", "--robot", "nope", "0", "0", "0")
+    out = cosim("robot", "fk", "--robot", "nope", "0", "0", "0")
     assert out.returncode == 2 and "valid presets: linear_delta_thesis" in out.stderr, out.stderr
 
 
@@ -38,6 +33,6 @@ def test_unknown_preset_lists_valid_names():
     (("robot", "singularity", "--robot", "rotary_delta_3rrr", "--p", "0", "0", "-0.23473389188611"), "type 1"),
 ])
 def test_commands_print_expected_figures(args, expect):
-    out = run(*args)
+    out = cosim(*args)
     assert out.returncode == 0, out.stderr
     assert expect in out.stdout, out.stdout
