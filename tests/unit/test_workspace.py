@@ -1,7 +1,6 @@
 """Workspace checks: seed 004's cylinder limits, reasons, trajectory checks."""
 
 import numpy as np
-import pytest
 
 from delta.robots import linear_delta_thesis, rotary_delta_prototype
 from delta.workspace import (
