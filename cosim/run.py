@@ -202,12 +202,25 @@ def run_scenario(scenario: Scenario | str | Path, out: str | Path | None = None,
     ``read_all``: read every output of every component at every step, also without a log (for
     an observer of every signal, :class:`cosim.api.SignalRecorder`); ``fmu_files``: our FMUs
     already built, by name (:func:`locate_fmus`).
+
+    The log's path is claimed (checked writable, locked, written as X.partial) before any FMU is
+    loaded, and the finished log renamed into place at the end (see :mod:`cosim.output`).
     """
+    from .output import claim
+
+    output = None
     try:
-        return _run(scenario, out, overrides, log, progress, extra_observers, live, realtime, stamps, read_all,
-                    fmu_files)
-    finally:
-        cleanup_extracted()
+        if not isinstance(scenario, Scenario):
+            scenario = load_scenario(scenario, overrides)
+        logging_on = scenario.logging.enabled if log is None else log
+        output = claim(_log_path(scenario, out)) if logging_on else None
+        result = _run_claimed(scenario, output, progress, extra_observers, live, realtime, stamps, read_all,
+                              fmu_files)
+    except BaseException as exc:
+        _conclude(output, exc)
+        raise
+    _conclude(output, None)
+    return result
 
 
 def _log_path(scenario: Scenario, out: str | Path | None) -> Path:
@@ -220,25 +233,40 @@ def _log_path(scenario: Scenario, out: str | Path | None) -> Path:
     return Path("runs") / f"{scenario.name}.mcap"
 
 
-def _run(scenario: Scenario | str | Path, out: str | Path | None, overrides: dict | None, log: bool | None,
-         progress: bool, extra_observers: Sequence[Observer], live: tuple[str, int] | None, realtime: float | None,
-         stamps: str, read_all: bool, fmu_files: Mapping[str, str | Path] | None) -> RunResult:
-    """Claim the log's path (checked writable, locked, written as X.partial) before any FMU is
-    loaded, run, then rename the finished log into place (see :mod:`cosim.output`)."""
-    from .output import claim
-
-    if not isinstance(scenario, Scenario):
-        scenario = load_scenario(scenario, overrides)
-    logging_on = scenario.logging.enabled if log is None else log
-    output = claim(_log_path(scenario, out)) if logging_on else None
+def _conclude(output, error: BaseException | None, offload: Offload | None = None) -> None:
+    """The end of every run, the watchdog's hard shutdown included: the log settled (:func:`_settle`),
+    the worker process stopped (``offload``: only when the run was abandoned inside a component's
+    call; otherwise its proxies stopped it), the FMUs extracted for the run removed."""
     try:
-        result = _run_claimed(scenario, output, progress, extra_observers, live, realtime, stamps, read_all,
-                              fmu_files)
-    except BaseException as exc:
-        _settle(output, exc)
-        raise
-    _settle(output, None)
-    return result
+        _settle(output, error)
+    finally:
+        if offload is not None:
+            offload.close()
+        cleanup_extracted()
+
+
+def _finish_observers(started: Sequence[Observer], rt: Runtime, error: BaseException | None, recorder,
+                      output, hard: bool = False) -> BaseException | None:
+    """Finish the started observers with the run's ``error``, in order; returns the error the run ends with.
+
+    The recorder's outcome marks the log (``output.state``: ``"finished"``, or why it could not be
+    finished, e.g. a full disk: kept as X.partial); its failure becomes the run's error when the run
+    had none, and the observers after it see it. Another observer's CosimError is raised, except in
+    the watchdog's hard shutdown (``hard``), where no failure may stop the exit.
+    """
+    catch = Exception if hard else CosimError
+    for o in started:
+        try:
+            o.finish(rt, error)
+            if o is recorder:
+                output.state = "finished"
+        except catch as exc:
+            if o is recorder:
+                output.state = str(exc)
+                error = error or exc
+            elif not hard:
+                raise
+    return error
 
 
 def _settle(output, error: BaseException | None) -> None:
@@ -301,23 +329,14 @@ def _run_claimed(scenario: Scenario, output, progress: bool, extra_observers: Se
 
     def abort(err: BaseException) -> None:
         """The watchdog's hard shutdown, from its thread: the main thread is stuck inside a component's
-        call and cannot unwind. Finish and mark the log, stop the worker, say why, leave the process."""
+        call and cannot unwind. The end of the run without it (the stuck component is never freed),
+        then say why and leave the process."""
+        _finish_observers(started, rt, err, recorder, output, hard=True)
         lines = []
-        for o in started:
-            try:
-                o.finish(rt, err)
-                if o is recorder:
-                    output.state = "finished"
-            except Exception as exc:  # noqa: BLE001 - nothing may stop the exit now
-                if o is recorder:
-                    output.state = str(exc)
         try:
-            _settle(output, err)
+            _conclude(output, err, offload)
         except CosimError as exc:
             lines.append(f"error: {exc}")
-        if offload is not None:
-            offload.close()
-        cleanup_extracted()
         hard_exit(err, lines)
 
     try:
@@ -363,16 +382,7 @@ def _run_claimed(scenario: Scenario, output, progress: bool, extra_observers: Se
                 error = error or exc
             finally:
                 s.free()
-        for o in started:
-            try:
-                o.finish(rt, error)
-                if o is recorder:
-                    output.state = "finished"
-            except CosimError as exc:
-                if o is not recorder:
-                    raise
-                output.state = str(exc)  # the log could not be finished (disk full): kept as X.partial
-                error = error or exc
+        error = _finish_observers(started, rt, error, recorder, output)
     if error is not None:  # a failure at the end (fmi2Terminate, the worker's report) fails the run too
         raise error
     t_end_ns = rt.t_end_ns if rt.t_end_ns is not None else rt.t_ns(rt.k_done)
