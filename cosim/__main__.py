@@ -30,13 +30,12 @@ always the command's.
 
 import sys
 
-from .cli import main
+from .cli import exit_now, main
 
 
 def _exit(code: object) -> None:
     """Leave with ``code`` as ``sys.exit`` would, without the interpreter's finalization."""
     import atexit
-    import os
 
     if code is None:
         status = 0
@@ -51,12 +50,7 @@ def _exit(code: object) -> None:
             threading._shutdown()  # as at a normal exit: non-daemon threads end first
         atexit._run_exitfuncs()  # e.g. removal of extracted FMUs
     finally:
-        for stream in (sys.stdout, sys.stderr):
-            try:
-                stream.flush()
-            except (OSError, ValueError):  # closed or broken pipe: nothing more can be written
-                pass
-        os._exit(status)
+        exit_now(status)
 
 
 if __name__ == "__main__":  # also imported by multiprocessing's spawned workers

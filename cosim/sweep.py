@@ -448,8 +448,9 @@ def _exit_now() -> None:
     interpreter's finalization and the shared libraries' destructors sometimes abort there
     ("free(): corrupted unsorted chunks") after every result was delivered."""
     import logging
-    import os
     import sys
+
+    from .cli import exit_now
 
     if not _TORN_DOWN:
         return
@@ -459,12 +460,7 @@ def _exit_now() -> None:
             fmu.cleanup_extracted()
         logging.shutdown()
     finally:
-        for stream in (sys.stdout, sys.stderr):
-            try:
-                stream.flush()
-            except (OSError, ValueError):
-                pass
-        os._exit(0)
+        exit_now(0)
 
 
 def report(out: str | Path, metric: str = "rmse", fig: str | Path | None = None) -> Path:

@@ -163,18 +163,12 @@ class Watchdog:
 
 def hard_exit(error: BaseException, lines: list[str]) -> None:
     """Leave the process from the watchdog's thread after ``abort`` finished what it could: the error
-    line on stderr, exit code 2 (a stall) or 128 + signal, no interpreter finalisation (the main
-    thread is still inside a component's call)."""
-    if isinstance(error, Interrupted):
-        name = signal.Signals(error.signum).name
-        text, code = f"interrupted ({name}){': ' + error.detail if error.detail else ''}", 128 + error.signum
-    else:
-        text, code = f"error: {error}", 2
-    for line in [text, *lines]:
+    on stderr as the command line says it (:func:`cosim.cli.exit_status`; exit code 2 for a stall,
+    128 + signal), then ``lines``; no interpreter finalisation (the main thread is still inside a
+    component's call)."""
+    from .cli import exit_now, exit_status, exit_text
+
+    message, kind, code = exit_status(error)
+    for line in [exit_text(message, kind), *lines]:
         print(line, file=sys.stderr)
-    for stream in (sys.stdout, sys.stderr):
-        try:
-            stream.flush()
-        except (OSError, ValueError):
-            pass
-    os._exit(code)
+    exit_now(code)
