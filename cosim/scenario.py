@@ -10,6 +10,7 @@ Unknown keys are rejected. Every problem is reported at once as
 from __future__ import annotations
 
 import re
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Literal, Union
 
@@ -31,6 +32,8 @@ __all__ = [
     "Compare",
     "Checks",
     "load_scenario",
+    "read_scenario",
+    "ScenarioFile",
     "parse_scenario",
     "scenario_from_data",
     "scenario_json_schema",
@@ -340,8 +343,24 @@ _UNION_TAG = re.compile(r"^(bool|int|float|str|list\[.*\]|union\[.*\])$")
 _PARAM_MSG = "expected a number, a boolean, a string, a list of them, or a list of lists (rows of a matrix)"
 
 
-def parse_scenario(text: str, file: str = "<string>", overrides: dict[tuple, Any] | None = None) -> Scenario:
-    """Parse and validate scenario YAML; raise :class:`ScenarioError` with every issue."""
+@dataclass(frozen=True)
+class ScenarioFile:
+    """A scenario file read and parsed once (not validated): its data and the line of every key path.
+
+    :meth:`load` validates it with overrides as :func:`load_scenario` does, so variants of one
+    file (a sweep's cases) do not read and parse it again.
+    """
+
+    file: str
+    data: dict[str, Any]
+    lines: dict[tuple, int]
+
+    def load(self, overrides: dict[tuple, Any] | None = None) -> Scenario:
+        """The scenario with ``overrides`` applied (:func:`scenario_from_data`); raises :class:`ScenarioError`."""
+        return scenario_from_data(self.data, self.file, overrides, self.lines)
+
+
+def _parse_yaml(text: str, file: str) -> ScenarioFile:
     try:
         root = yaml.compose(text)
     except yaml.YAMLError as exc:
@@ -354,7 +373,12 @@ def parse_scenario(text: str, file: str = "<string>", overrides: dict[tuple, Any
     data = yaml.safe_load(text) or {}
     if not isinstance(data, dict):
         raise ScenarioError(Issue("", "a scenario is a mapping (components, connections, time, ...)", file, 1))
-    return scenario_from_data(data, file, overrides, lines)
+    return ScenarioFile(file, data, lines)
+
+
+def parse_scenario(text: str, file: str = "<string>", overrides: dict[tuple, Any] | None = None) -> Scenario:
+    """Parse and validate scenario YAML; raise :class:`ScenarioError` with every issue."""
+    return _parse_yaml(text, file).load(overrides)
 
 
 def scenario_from_data(data: dict[str, Any], file: str = "<string>", overrides: dict[tuple, Any] | None = None,
@@ -515,6 +539,12 @@ def trajectory_params_issues(spec: TrajectorySpec) -> list[tuple[tuple, str]]:
 
 def load_scenario(path: str | Path, overrides: dict[tuple, Any] | None = None) -> Scenario:
     """Load a scenario file. ``overrides`` maps key paths to values (``--set``, ``--stop-time``)."""
+    return read_scenario(path).load(overrides)
+
+
+def read_scenario(path: str | Path) -> ScenarioFile:
+    """Read and parse a scenario file, not yet validated (:meth:`ScenarioFile.load`); raises
+    :class:`ScenarioError` for a file that cannot be read, is not UTF-8 or not YAML."""
     path = Path(path)
     try:
         raw = path.read_bytes()
@@ -526,7 +556,7 @@ def load_scenario(path: str | Path, overrides: dict[tuple, Any] | None = None) -
         line = raw[:exc.start].count(b"\n") + 1
         raise ScenarioError(Issue("", f"not UTF-8 text (byte 0x{raw[exc.start]:02x} at offset {exc.start}); "
                                       f"save the scenario as UTF-8", str(path), line)) from None
-    return parse_scenario(text, str(path), overrides)
+    return _parse_yaml(text, str(path))
 
 
 class Overrides(dict):

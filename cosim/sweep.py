@@ -4,9 +4,13 @@
 
 - Cases are the cartesian product of the ``--grid`` axes, times ``-n`` random draws (seeded)
   of the ``--random`` ones. Names are those of ``--set`` (:func:`cosim.scenario.resolve_name`).
-- Our FMUs are built once, before the sweep, and reach the workers as file paths (a case
-  description is plain data: scenario path, overrides, FMU files); FMU handles never leave
-  the process that ran the case.
+- The scenario file is read once; each case is that scenario with its overrides, validated
+  (every case before anything runs) and sent to a worker as it is (a frozen Scenario, plain
+  data). Our FMUs are built once, before the sweep, and reach the workers as file paths; FMU
+  handles never leave the process that ran the case. Each case extracts its FMUs and removes
+  them at its end, as every run does (:func:`cosim.run.run_scenario`; tens of ms a case): a
+  worker ended between cases leaves nothing in the temporary directory, and a worker of a
+  long-lived cluster never runs an FMU rebuilt since from an older extraction.
 - Cases run on Dask: an embedded ``LocalCluster`` of single-threaded worker processes, or an
   existing cluster (``--scheduler tcp://host:8786``). A dead worker's cases are rescheduled.
 - Every finished case is appended (and flushed) to ``DIR/results.csv`` as it arrives; running
@@ -33,9 +37,12 @@ import time
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from .errors import CosimError
+
+if TYPE_CHECKING:
+    from .scenario import Scenario
 
 __all__ = [
     "RESULTS",
@@ -47,6 +54,7 @@ __all__ = [
     "parse_random",
     "read_results",
     "run_case",
+    "run_loaded_case",
     "run_sweep",
 ]
 
@@ -153,7 +161,27 @@ def make_cases(grid: dict[str, list[Any]], random: dict[str, tuple[str, float, f
 
 def run_case(scenario: str, values: dict[str, Any], fmu_files: dict[str, str], mcap: str | None = None
              ) -> dict[str, Any]:
-    """Run one case (in a Dask worker, or here); never raises for a failing case.
+    """Run one case, the scenario file ``scenario`` with ``values`` (dotted names), here; never
+    raises for a failing case (see :func:`run_loaded_case`, which the sweep's workers run)."""
+    from .scenario import dotted_overrides, load_scenario
+
+    t0 = time.perf_counter()
+    try:
+        sc = load_scenario(scenario, dotted_overrides(values, "sweep"))
+    except Exception as exc:  # a failing case is a result, never the end of the sweep
+        return _failed(exc, t0)
+    return run_loaded_case(sc, fmu_files, mcap)
+
+
+def _failed(exc: Exception, t0: float) -> dict[str, Any]:
+    msg = str(exc) if isinstance(exc, CosimError) else f"{type(exc).__name__}: {exc}"
+    return {"status": "failed", "message": " ".join(msg.split()),  # one line in the table
+            "checks": "", "mcap": "", "wall_time_s": time.perf_counter() - t0}
+
+
+def run_loaded_case(scenario: Scenario, fmu_files: dict[str, str], mcap: str | None = None) -> dict[str, Any]:
+    """Run one case, a loaded :class:`~cosim.scenario.Scenario` (in a Dask worker, or here); never
+    raises for a failing case.
 
     ``fmu_files``: our FMUs by name, built beforehand. The run is serial in its process
     (``parallel: off``: the sweep already uses the cores). Returns the row of ``results.csv``
@@ -161,13 +189,11 @@ def run_case(scenario: str, values: dict[str, Any], fmu_files: dict[str, str], m
     """
     from . import api
     from .run import run_scenario
-    from .scenario import dotted_overrides, load_scenario
 
     t0 = time.perf_counter()
     row: dict[str, Any] = {"status": "failed", "message": "", "checks": "", "mcap": ""}
     try:
-        over = dotted_overrides({**values, "parallel": "off"}, "sweep")
-        sc = load_scenario(scenario, over)
+        sc = scenario.model_copy(update={"parallel": "off"})  # a valid value: nothing to validate again
         peak = api.PeakEffort()
         res = run_scenario(sc, out=mcap, log=mcap is not None, progress=False, extra_observers=[peak],
                            fmu_files=fmu_files)
@@ -178,9 +204,7 @@ def run_case(scenario: str, values: dict[str, Any], fmu_files: dict[str, str], m
             row["checks"] = "ok" if res.passed else "FAILED"
         row["mcap"] = res.mcap or ""
     except Exception as exc:  # a failing case is a result, never the end of the sweep
-        msg = str(exc) if isinstance(exc, CosimError) else f"{type(exc).__name__}: {exc}"
-        row["message"] = " ".join(msg.split())  # one line in the table
-        row["wall_time_s"] = time.perf_counter() - t0
+        row.update(_failed(exc, t0))
     return row
 
 
@@ -264,12 +288,13 @@ def run_sweep(scenario: str | Path, cases: list[Case], out: str | Path, *, worke
     override name or value (checked for every case before anything runs).
     """
     from . import api
-    from .scenario import dotted_overrides, load_scenario
+    from .scenario import dotted_overrides, read_scenario
 
     t_start = time.perf_counter()
     scenario = str(Path(scenario).resolve())
     out = Path(out)
-    loaded = [load_scenario(scenario, dotted_overrides(c.values, "sweep case")) for c in cases]
+    source = read_scenario(scenario)  # read once: every case is derived from it
+    loaded = [source.load(dotted_overrides(c.values, "sweep case")) for c in cases]
     params = list(dict.fromkeys(k for c in cases for k in c.values))
     columns = _columns(params, api.metric_names(loaded[0]))
     out.mkdir(parents=True, exist_ok=True)
@@ -280,7 +305,7 @@ def run_sweep(scenario: str | Path, cases: list[Case], out: str | Path, *, worke
     finished = {r["case"]: r for r in done_rows if r["status"] in ("ok", "failed")}
     failed = {f"{cid} ({', '.join(f'{k}={r[k]}' for k in params)})": r["message"]
               for cid, r in finished.items() if r["status"] == "failed"}
-    todo = [c for c in cases if c.id not in finished]
+    todo = [(c, sc) for c, sc in zip(cases, loaded) if c.id not in finished]
     (out / "sweep.json").write_text(json.dumps({"scenario": scenario, "parameters": params,
                                                 "cases": len(cases)}, indent=2))
     summary = SweepSummary(out, len(cases), len(todo), len(cases) - len(todo), failed)
@@ -308,9 +333,9 @@ def run_sweep(scenario: str | Path, cases: list[Case], out: str | Path, *, worke
             writer.writerow(columns)
             f.flush()
         futures = {}
-        for c in todo:
+        for c, sc in todo:
             mcap = str((out / "logs" / f"{c.id}.mcap").resolve()) if logs else None
-            fut = client.submit(run_case, scenario, c.values, fmu_files, mcap, key=f"case-{c.id}", pure=False)
+            fut = client.submit(run_loaded_case, sc, fmu_files, mcap, key=f"case-{c.id}", pure=False)
             futures[fut] = c
         n_done = len(finished)
         for fut in as_completed(futures):
@@ -430,11 +455,13 @@ def dask_setup(worker) -> None:  # noqa: ARG001 - Dask's preload hook
     """Import what a case needs while the worker starts (not in its first case), and arrange a
     quick exit for a nanny's worker process once the worker has closed (:func:`_exit_now`)."""
     import atexit
+    import importlib
     import multiprocessing
 
     if multiprocessing.parent_process() is not None:
         atexit.register(_exit_now)
-    from . import api, run  # noqa: F401
+    for module in ("api", "run"):
+        importlib.import_module(f"{__package__}.{module}")
 
 
 def dask_teardown(worker) -> None:  # noqa: ARG001 - Dask's preload hook
@@ -606,7 +633,7 @@ def _cmd_sweep(args) -> int:
     cases = make_cases(parse_grid(args.grid), parse_random(args.random), args.n, args.seed)
     cases = [Case({**fixed, **c.values}) for c in cases]
     bar = task = None
-    progress = None
+    progress: Callable[[int, int, int], None] | None = None
     if not (args.quiet or args.json):
         from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
@@ -616,8 +643,10 @@ def _cmd_sweep(args) -> int:
         task = bar.add_task("sweep", total=len(cases), ok=0, failed=0, left=len(cases))
         bar.start()
 
-        def progress(done: int, failed: int, total: int) -> None:
+        def show(done: int, failed: int, total: int) -> None:
             bar.update(task, completed=done, ok=done - failed, failed=failed, left=total - done)
+
+        progress = show
     try:
         summary = run_sweep(args.scenario, cases, args.out, workers=args.workers, scheduler=args.scheduler,
                             logs=args.logs, on_progress=progress)
