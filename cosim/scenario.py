@@ -41,6 +41,7 @@ __all__ = [
     "dotted_overrides",
     "resolve_name",
     "Overrides",
+    "WrittenNumber",
     "issue_at",
     "expand_signal",
     "NS_PER_S",
@@ -267,6 +268,9 @@ class Scenario(_Model):
     # file, and the command-line option of every overridden value
     _lines: dict[tuple, int] = PrivateAttr(default_factory=dict)
     _origins: dict[tuple, str] = PrivateAttr(default_factory=dict)
+    # overridden component parameters as written, where they hold a WrittenNumber (its text): the
+    # values the FMU variables type (cosim.system.build_plan)
+    _written: dict[tuple, Any] = PrivateAttr(default_factory=dict)
 
     @field_validator("parallel", mode="after")
     @classmethod
@@ -394,6 +398,7 @@ def scenario_from_data(data: dict[str, Any], file: str = "<string>", overrides: 
 
     lines = lines if lines is not None else {}
     origins = dict(getattr(overrides, "origins", {}))
+    written: dict[tuple, Any] = {}
     data = copy.deepcopy(data)  # the overrides must not change the caller's mapping
     for path, value in (overrides or {}).items():
         if path[0] == DOTTED:  # a dotted name (--set NAME=VALUE, the Python API): resolved against this data
@@ -406,6 +411,8 @@ def scenario_from_data(data: dict[str, Any], file: str = "<string>", overrides: 
             hint = f"did you mean {', '.join(close)}? " if close else ""
             raise ScenarioError(Issue("", f"unknown component {path[1]!r} in {file}; {hint}components: "
                                       f"{', '.join(components)}", origins.get(path, "--set")))
+        if path[0] == "components" and len(path) == 4 and path[2] == "parameters" and _has_written(value):
+            written[path] = _as_written(value)
         node = data
         for key in path[:-1]:
             node = node.setdefault(key, {})
@@ -431,6 +438,7 @@ def scenario_from_data(data: dict[str, Any], file: str = "<string>", overrides: 
         raise ScenarioError(issues)
     scenario._lines = lines
     scenario._origins = origins
+    scenario._written = written
     return scenario
 
 
@@ -574,24 +582,58 @@ class Overrides(dict):
 
 
 def parse_set_value(raw: str, origin: str = "--set") -> Any:
-    """A ``--set`` value as YAML reads it, with numbers YAML 1.1 leaves as strings (``1e12``) as numbers;
-    YAML that does not parse is a :class:`ScenarioError` citing ``origin`` (the option as given)."""
+    """A ``--set`` value as YAML reads it, with numbers YAML 1.1 leaves as strings (``1e12``) as numbers
+    that keep their text (:class:`WrittenNumber`); YAML that does not parse is a :class:`ScenarioError`
+    citing ``origin`` (the option as given)."""
     try:
         return _numbers(yaml.safe_load(raw))
     except yaml.YAMLError as exc:
         raise ScenarioError(Issue("", f"invalid value: {getattr(exc, 'problem', None) or exc}", origin)) from None
 
 
+class WrittenNumber(float):
+    """A number written as text that YAML 1.1 reads as a string (``1e3``, ``-2.5E-4``), with that text.
+
+    It is the number everywhere (the scenario holds a float, a sweep's case id and table show it);
+    a component parameter given so is typed by its FMU variable from the text
+    (:func:`cosim.system.typed_value`): a Real or an Integer takes the number, a String the text as
+    written (``"1e3"``, not ``"1000.0"``).
+    """
+
+    __slots__ = ("text",)
+
+    def __new__(cls, text: str) -> "WrittenNumber":
+        number = super().__new__(cls, text)
+        number.text = text
+        return number
+
+    def __reduce__(self):
+        return WrittenNumber, (self.text,)
+
+
 def _numbers(value: Any) -> Any:
-    """YAML 1.1 strings that are numbers (``1e12``) as floats, also inside lists."""
+    """YAML 1.1 strings that are numbers (``1e12``) as :class:`WrittenNumber`, also inside lists."""
     if isinstance(value, list):
         return [_numbers(v) for v in value]
     if isinstance(value, str):
         try:
-            return float(value)
+            return WrittenNumber(value)
         except ValueError:
             return value
     return value
+
+
+def _has_written(value: Any) -> bool:
+    if isinstance(value, list):
+        return any(_has_written(v) for v in value)
+    return isinstance(value, WrittenNumber)
+
+
+def _as_written(value: Any) -> Any:
+    """``value`` with each :class:`WrittenNumber` as its text, also inside lists."""
+    if isinstance(value, list):
+        return [_as_written(v) for v in value]
+    return value.text if isinstance(value, WrittenNumber) else value
 
 
 DOTTED = "<dotted name>"

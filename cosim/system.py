@@ -98,9 +98,9 @@ _UINT_BITS = {"UInt8": 8, "UInt16": 16, "UInt32": 32, "UInt64": 64}
 def typed_value(var: Variable, value: Any) -> tuple[Any, str]:
     """``value`` as ``var``'s declared type, or (None, what is wrong).
 
-    A number written in a way YAML 1.1 reads as a string (``1e12``) counts as a number;
-    a boolean is not a number, a number is not a boolean, an integer type needs a whole
-    number within its range.
+    A number written in a way YAML 1.1 reads as a string (``1e12``) counts as a number for a
+    Real or an Integer, and stays the text as written for a String; a boolean is not a number,
+    a number is not a boolean, an integer type needs a whole number within its range.
     """
     want = var.fmi_type
     if isinstance(value, (list, tuple)):
@@ -215,6 +215,7 @@ def build_plan(scenario: Scenario, infos: Mapping[str, FMUInfo], log_signals: st
     idx = {n: i for i, n in enumerate(names)}
     lines = scenario._lines
     origins = scenario._origins
+    written = scenario._written
     issues: list[Issue] = []
 
     def issue(loc: tuple, msg: str) -> None:
@@ -230,6 +231,7 @@ def build_plan(scenario: Scenario, infos: Mapping[str, FMUInfo], log_signals: st
         info = infos[n]
         for pname, value in comp.parameters.items():
             loc = ("components", n, "parameters", pname)
+            value = written.get(loc, value)  # a number given as text (--set s=1e3): typed from it below
             whole = info.variables.get(pname)
             if whole is not None and whole.is_array:
                 flat = _flatten(value)
