@@ -28,8 +28,10 @@ import os
 import re
 import shutil
 import tempfile
+import threading
 import weakref
 from collections import deque
+from contextvars import ContextVar
 from ctypes import byref, c_double, c_int32, c_int64, c_size_t, c_uint32
 from dataclasses import dataclass, replace
 from functools import cached_property, partial
@@ -40,7 +42,7 @@ from .errors import ComponentSourceError, FMIError, Issue, ScenarioError
 
 isfinite = math.isfinite  # a module global: one lookup less per output buffer in the hot path
 
-__all__ = ["Variable", "FMUInfo", "load_fmu", "Slave", "make_slave", "Terminated", "cleanup_extracted",
+__all__ = ["Variable", "FMUInfo", "load_fmu", "Slave", "make_slave", "Terminated", "cleanup_extracted", "Extractions",
            "REAL", "INTEGER", "BOOLEAN", "STRING", "BINARY"]
 
 REAL, INTEGER, BOOLEAN, STRING, BINARY, CLOCK = "Real", "Integer", "Boolean", "String", "Binary", "Clock"
@@ -101,7 +103,7 @@ class FMUInfo:
     """A parsed FMU: model description, variables, interfaces, feedthrough.
 
     The archive is extracted (into a temporary directory) only when an instance needs its
-    binaries (:attr:`unzipdir`), and removed by :func:`cleanup_extracted` at the end of the run.
+    binaries (:attr:`unzipdir`), and removed at the end of the run (:class:`Extractions`).
     """
 
     path: Path
@@ -172,8 +174,10 @@ def _shape(dims, by_vr: dict[int, int], name: str) -> tuple[int, ...]:
     return tuple(shape)
 
 
-_CACHE: dict[Path, FMUInfo] = {}  # parsed model descriptions, per resolved path
+_CACHE: dict[Path, tuple[tuple[int, int], FMUInfo]] = {}  # resolved path -> ((mtime ns, size), its description)
 _EXTRACTED: dict[Path, Path] = {}  # resolved FMU path -> its extraction directory
+_USERS: dict[Path, int] = {}  # resolved FMU path -> how many running runs hold its extraction
+_LOCK = threading.RLock()  # _EXTRACTED, _USERS and library loading: runs may run in threads of one process
 # Callbacks and library handles handed to FMUs live as long as the process: an FMU may call its
 # logger while being freed, and pythonfmu libraries must not be unloaded (GC of their objects crashes).
 _KEEP_ALIVE: list[Any] = []
@@ -271,10 +275,16 @@ def load_fmu(path: str | Path) -> FMUInfo:
     import fmpy
 
     path = Path(path).resolve()
-    if path in _CACHE:
-        return _CACHE[path]
-    if not path.exists():
-        raise ComponentSourceError(Issue("", f"FMU not found: {path}"))
+    try:
+        st = path.stat()
+    except OSError:
+        raise ComponentSourceError(Issue("", f"FMU not found: {path}")) from None
+    stamp = (st.st_mtime_ns, st.st_size)
+    cached = _CACHE.get(path)
+    if cached is not None:
+        if cached[0] == stamp:
+            return cached[1]
+        _forget_extraction(path)  # the file was rebuilt in place: its old extraction is stale
     try:
         md = fmpy.read_model_description(str(path), validate=False)
     except Exception as exc:  # fmpy raises bare Exception for malformed files
@@ -293,7 +303,7 @@ def load_fmu(path: str | Path) -> FMUInfo:
             start=v.start, index=i, shape=tuple(v.shape or ()) if dims else (), dims=dims, initial=v.initial,
             min=_attr(v, "min"), max=_attr(v, "max"))
     info = FMUInfo(path, md, variables)
-    _CACHE[path] = info
+    _CACHE[path] = (stamp, info)
     return info
 
 
@@ -313,21 +323,72 @@ def _sweep_orphans() -> None:
             continue
 
 
+class Extractions:
+    """The FMU extractions one run uses, so that runs in threads of one process share them safely.
+
+    ``with Extractions() as held:`` makes ``held`` the current run's (a context variable: each thread
+    has its own); every extraction the run asks for is then held until ``held.release()``, which
+    removes each one that no other running run holds. Extractions made outside a run stay until
+    :func:`cleanup_extracted` (at the latest at interpreter exit).
+    """
+
+    def __init__(self) -> None:
+        self.paths: set[Path] = set()
+        self._token = None
+
+    def __enter__(self) -> "Extractions":
+        self._token = _RUN.set(self)
+        return self
+
+    def __exit__(self, *exc: Any) -> None:
+        _RUN.reset(self._token)
+
+    def hold(self, path: Path) -> None:
+        if path not in self.paths:
+            self.paths.add(path)
+            _USERS[path] = _USERS.get(path, 0) + 1
+
+    def release(self) -> None:
+        """Let go of this run's extractions (any thread: the watchdog's shutdown calls it too)."""
+        with _LOCK:
+            for path in self.paths:
+                users = _USERS.pop(path, 1) - 1
+                if users > 0:
+                    _USERS[path] = users
+                elif path in _EXTRACTED:
+                    shutil.rmtree(_EXTRACTED.pop(path), ignore_errors=True)
+            self.paths.clear()
+
+
+_RUN: ContextVar[Extractions | None] = ContextVar("cosim_run_extractions", default=None)
+
+
 def _extract(path: Path) -> Path:
     import fmpy
 
-    if path in _EXTRACTED:
-        return _EXTRACTED[path]
-    if not _EXTRACTED:
-        _sweep_orphans()
-    unzipdir = Path(tempfile.mkdtemp(prefix=f"{_PREFIX}{os.getpid()}-{path.stem}-"))
-    try:
-        fmpy.extract(str(path), str(unzipdir))
-    except Exception as exc:  # a corrupt archive  # noqa: BLE001
-        shutil.rmtree(unzipdir, ignore_errors=True)
-        raise ComponentSourceError(Issue("", f"{path}: cannot extract: {exc}")) from None
-    _EXTRACTED[path] = unzipdir
-    return unzipdir
+    with _LOCK:
+        held = _RUN.get()
+        unzipdir = _EXTRACTED.get(path)
+        if unzipdir is None:
+            if not _EXTRACTED:
+                _sweep_orphans()
+            unzipdir = Path(tempfile.mkdtemp(prefix=f"{_PREFIX}{os.getpid()}-{path.stem}-"))
+            try:
+                fmpy.extract(str(path), str(unzipdir))
+            except Exception as exc:  # a corrupt archive  # noqa: BLE001
+                shutil.rmtree(unzipdir, ignore_errors=True)
+                raise ComponentSourceError(Issue("", f"{path}: cannot extract: {exc}")) from None
+            _EXTRACTED[path] = unzipdir
+        if held is not None:
+            held.hold(path)
+        return unzipdir
+
+
+def _forget_extraction(path: Path) -> None:
+    """Remove the extraction of ``path`` unless a running run holds it."""
+    with _LOCK:
+        if not _USERS.get(path) and path in _EXTRACTED:
+            shutil.rmtree(_EXTRACTED.pop(path), ignore_errors=True)
 
 
 def _unit(v: Any) -> str | None:
@@ -345,15 +406,17 @@ def _attr(v: Any, name: str) -> str | None:
 
 
 def cleanup_extracted(keep: Iterable[Path] = ()) -> None:
-    """Remove every extracted FMU directory but those of the FMUs in ``keep``.
+    """Remove every extracted FMU directory of the process but those of the FMUs in ``keep``.
 
-    Called at the end of every run (success, error or Ctrl-C) and at interpreter exit. A
-    forked worker process keeps its parent's extractions (``keep``): they are still in use.
-    Libraries already loaded stay loaded (Linux keeps a removed file's mapping).
+    Called at interpreter exit and when a worker process ends (a run releases its own through
+    :class:`Extractions`). A forked worker process keeps its parent's extractions (``keep``): they
+    are still in use. Libraries already loaded stay loaded (Linux keeps a removed file's mapping).
     """
     keep = {Path(p).resolve() for p in keep}
-    for path in [p for p in _EXTRACTED if p not in keep]:
-        shutil.rmtree(_EXTRACTED.pop(path), ignore_errors=True)
+    with _LOCK:
+        for path in [p for p in _EXTRACTED if p not in keep]:
+            _USERS.pop(path, None)
+            shutil.rmtree(_EXTRACTED.pop(path), ignore_errors=True)
 
 
 atexit.register(cleanup_extracted)
@@ -536,6 +599,13 @@ class _Base:
             # still holds objects it created crashes at garbage collection
             self._instantiated = False
             self.fmu = None
+
+    def _load_library(self) -> Any:
+        """fmpy's FMU object with the library loaded. fmpy changes the process's working directory
+        around the load (to the library's folder and back): the lock keeps loads of concurrent runs
+        from interleaving, which would leave the process in another FMU's folder."""
+        with _LOCK:
+            return self._guard("load library", self._make)
 
     @property
     def _pythonfmu(self) -> bool:
@@ -810,7 +880,7 @@ class _FMI2(_Base):
         )
         from fmpy.logging import addLoggerProxy
 
-        self.fmu = self._guard("load library", self._make)
+        self.fmu = self._load_library()
         self._note_library()
         cb = fmi2CallbackFunctions()
         environment = next(_FMI2_ENVIRONMENTS)
@@ -984,7 +1054,7 @@ class _FMI3(_Base):
                    instanceName=self.name)
 
     def instantiate(self) -> None:
-        self.fmu = self._guard("load library", self._make)
+        self.fmu = self._load_library()
         self._note_library()
         logger = lambda env, status, cat, msg: self._on_log(status, cat, msg)  # noqa: E731
         self._logger = logger

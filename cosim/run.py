@@ -9,7 +9,7 @@ from typing import Any, Mapping, Sequence
 
 from .algorithm import Observer, Runtime, StopRequest, initialize, simulate
 from .errors import ComponentSourceError, CosimError, Issue
-from .fmu import FMUInfo, cleanup_extracted, load_fmu, make_slave
+from .fmu import Extractions, FMUInfo, load_fmu, make_slave
 from .observers import ErrorObserver
 from .offload import Offload, choose
 from .scenario import Scenario, line_for, expand_signal, load_scenario
@@ -209,17 +209,18 @@ def run_scenario(scenario: Scenario | str | Path, out: str | Path | None = None,
     from .output import claim
 
     output = None
-    try:
-        if not isinstance(scenario, Scenario):
-            scenario = load_scenario(scenario, overrides)
-        logging_on = scenario.logging.enabled if log is None else log
-        output = claim(_log_path(scenario, out)) if logging_on else None
-        result = _run_claimed(scenario, output, progress, extra_observers, live, realtime, stamps, read_all,
-                              fmu_files)
-    except BaseException as exc:
-        _conclude(output, exc)
-        raise
-    _conclude(output, None)
+    with Extractions() as held:  # this run's FMU extractions (other runs of the process keep theirs)
+        try:
+            if not isinstance(scenario, Scenario):
+                scenario = load_scenario(scenario, overrides)
+            logging_on = scenario.logging.enabled if log is None else log
+            output = claim(_log_path(scenario, out)) if logging_on else None
+            result = _run_claimed(scenario, output, held, progress, extra_observers, live, realtime, stamps,
+                                  read_all, fmu_files)
+        except BaseException as exc:
+            _conclude(output, exc, held)
+            raise
+        _conclude(output, None, held)
     return result
 
 
@@ -233,16 +234,17 @@ def _log_path(scenario: Scenario, out: str | Path | None) -> Path:
     return Path("runs") / f"{scenario.name}.mcap"
 
 
-def _conclude(output, error: BaseException | None, offload: Offload | None = None) -> None:
+def _conclude(output, error: BaseException | None, held: Extractions, offload: Offload | None = None) -> None:
     """The end of every run, the watchdog's hard shutdown included: the log settled (:func:`_settle`),
     the worker process stopped (``offload``: only when the run was abandoned inside a component's
-    call; otherwise its proxies stopped it), the FMUs extracted for the run removed."""
+    call; otherwise its proxies stopped it), the FMUs extracted for the run removed (``held``: those
+    another run of the process still uses stay)."""
     try:
         _settle(output, error)
     finally:
         if offload is not None:
             offload.close()
-        cleanup_extracted()
+        held.release()
 
 
 def _finish_observers(started: Sequence[Observer], rt: Runtime, error: BaseException | None, recorder,
@@ -287,7 +289,7 @@ def _settle(output, error: BaseException | None) -> None:
                           f"`python -m cosim recover {output.partial}`") from None
 
 
-def _run_claimed(scenario: Scenario, output, progress: bool, extra_observers: Sequence[Observer],
+def _run_claimed(scenario: Scenario, output, held: Extractions, progress: bool, extra_observers: Sequence[Observer],
                  live: tuple[str, int] | None, realtime: float | None, stamps: str, read_all: bool,
                  fmu_files: Mapping[str, str | Path] | None) -> RunResult:
     logging_on = output is not None
@@ -334,7 +336,7 @@ def _run_claimed(scenario: Scenario, output, progress: bool, extra_observers: Se
         _finish_observers(started, rt, err, recorder, output, hard=True)
         lines = []
         try:
-            _conclude(output, err, offload)
+            _conclude(output, err, held, offload)
         except CosimError as exc:
             lines.append(f"error: {exc}")
         hard_exit(err, lines)
