@@ -633,6 +633,48 @@ class _Base:
         proto = ctypes.PYFUNCTYPE(f.restype, *f.argtypes)
         return proto(ctypes.cast(f, ctypes.c_void_p).value)
 
+    # -- the per-step exchange: numbers through bound C calls, strings and binaries through fmpy
+    def set_inputs(self) -> None:
+        bufs = self._set_calls
+        if bufs is None:
+            bufs = self._set_calls = self._bound(self.in_bufs, "Set")
+        for b in bufs:
+            status = b.call()
+            if status > 1:
+                self._check(status, b.function)
+        for b in self._py_in:
+            self._set_text(b)
+
+    def _set_buffers(self, bufs: list[_Buffers]) -> None:
+        """Set the given input buffers only (model exchange: what changed)."""
+        for b in bufs:
+            if b.ctype_free:
+                self._set_text(b)
+            else:
+                self._check(self._bound([b], "Set")[0].call(), b.function)
+
+    def get_outputs(self) -> None:
+        bufs = self._get_calls
+        if bufs is None:
+            bufs = self._get_calls = self._bound(self.out_bufs, "Get")
+        for b in bufs:
+            status = b.call()
+            if status > 1:
+                self._check(status, b.function)
+        for b in self._py_out:
+            self._get_text(b)
+        for view, b in self._finite:
+            if not isfinite(sum(view)):
+                self._check_finite()
+
+    def _set_text(self, b: _Buffers) -> None:
+        """Set a String or Binary input buffer (through fmpy)."""
+        raise NotImplementedError
+
+    def _get_text(self, b: _Buffers) -> None:
+        """Read a String or Binary output buffer into ``b.values`` (through fmpy)."""
+        raise NotImplementedError
+
     def _bound(self, bufs: list[_Buffers], direction: str) -> list[_Buffers]:
         """The numeric buffers of ``bufs``, each with its ``fmiXSet``/``fmiXGet`` call (``direction``) bound."""
         numeric = [b for b in bufs if not b.ctype_free]
@@ -914,43 +956,12 @@ class _FMI2(_Base):
     def _exchange_args(self, b: _Buffers) -> tuple:
         return self._c, b.vrs, b.n, b.values
 
-    def set_inputs(self) -> None:
-        bufs = self._set_calls
-        if bufs is None:
-            bufs = self._set_calls = self._bound(self.in_bufs, "Set")
-        for b in bufs:
-            status = b.call()
-            if status > 1:
-                self._check(status, b.function)
-        for b in self._py_in:
-            self._set_strings(b)
-
-    def _set_strings(self, b: _Buffers) -> None:
+    def _set_text(self, b: _Buffers) -> None:
         self._guard("fmi2SetString", self.fmu.setString, list(b.vrs), [str(s) for s in b.values])
 
-    def _set_buffers(self, bufs: list[_Buffers]) -> None:
-        """Set the given input buffers only (model exchange: what changed)."""
-        for b in bufs:
-            if b.ctype_free:
-                self._set_strings(b)
-            else:
-                self._check(self._bound([b], "Set")[0].call(), b.function)
-
-    def get_outputs(self) -> None:
-        bufs = self._get_calls
-        if bufs is None:
-            bufs = self._get_calls = self._bound(self.out_bufs, "Get")
-        for b in bufs:
-            status = b.call()
-            if status > 1:
-                self._check(status, b.function)
-        for view, b in self._finite:
-            if not isfinite(sum(view)):
-                self._check_finite()
-        for b in self._py_out:
-            got = self._guard("fmi2GetString", self.fmu.getString, list(b.vrs))
-            b.values[:] = [(s or b"").decode("utf-8", "replace") if isinstance(s, bytes) else (s or "")
-                           for s in got]
+    def _get_text(self, b: _Buffers) -> None:
+        got = self._guard("fmi2GetString", self.fmu.getString, list(b.vrs))
+        b.values[:] = [(s or b"").decode("utf-8", "replace") if isinstance(s, bytes) else (s or "") for s in got]
 
 
 
@@ -1089,31 +1100,10 @@ class _FMI3(_Base):
         self.time = start
         self._guard("fmi3EnterInitializationMode", self.fmu.enterInitializationMode, None, start, stop)
 
-    def set_inputs(self) -> None:
-        self._set_buffers(self.in_bufs)
+    def _set_text(self, b: _Buffers) -> None:
+        self._guard(f"fmi3Set{b.fmi_type}", self._py_set, b.fmi_type, list(b.vrs), list(b.values))
 
-    def _set_buffers(self, bufs: list[_Buffers]) -> None:
-        for b in bufs:
-            if b.ctype_free:
-                self._guard(f"fmi3Set{b.fmi_type}", self._py_set, b.fmi_type, list(b.vrs), list(b.values))
-            else:
-                self._check(self._bound([b], "Set")[0].call(), b.function)
-
-    def get_outputs(self) -> None:
-        bufs = self._get_calls
-        if bufs is None:
-            bufs = self._get_calls = self._bound(self.out_bufs, "Get")
-        for b in bufs:
-            status = b.call()
-            if status > 1:
-                self._check(status, b.function)
-        for b in self._py_out:
-            self._get_py(b)
-        for view, b in self._finite:
-            if not isfinite(sum(view)):
-                self._check_finite()
-
-    def _get_py(self, b: _Buffers) -> None:
+    def _get_text(self, b: _Buffers) -> None:
         """Strings and binaries: copied out of the FMU's memory (valid only until its next call)."""
         c = self._c
         if b.kind == STRING:
