@@ -109,11 +109,12 @@ class FMUInfo:
     path: Path
     md: Any  # fmpy.model_description.ModelDescription
     variables: dict[str, Variable]
+    stamp: tuple[int, ...] = ()  # the file as read (:func:`_stamp`): a rebuilt file is another extraction
 
     @property
     def unzipdir(self) -> Path:
         """The extracted archive (extracted at first use, shared by every copy of this info)."""
-        return _extract(self.path)
+        return _extract((self.path, self.stamp))
 
     @property
     def fmi_major(self) -> int:
@@ -151,7 +152,7 @@ class FMUInfo:
                  for n, v in self.structural_parameters().items()}
         variables = {n: replace(v, shape=_shape(v.dims, by_vr, n)) if v.dims else v
                      for n, v in self.variables.items()}
-        return FMUInfo(self.path, self.md, variables)
+        return FMUInfo(self.path, self.md, variables, self.stamp)
 
 
 def _scalar_start(v: Variable) -> int:
@@ -174,10 +175,28 @@ def _shape(dims, by_vr: dict[int, int], name: str) -> tuple[int, ...]:
     return tuple(shape)
 
 
-_CACHE: dict[Path, tuple[tuple[int, int], FMUInfo]] = {}  # resolved path -> ((mtime ns, size), its description)
-_EXTRACTED: dict[Path, Path] = {}  # resolved FMU path -> its extraction directory
-_USERS: dict[Path, int] = {}  # resolved FMU path -> how many running runs hold its extraction
+Key = tuple  # (resolved FMU path, its stamp): one extraction per file as it was read
+_CACHE: dict[Path, FMUInfo] = {}  # resolved path -> its description, read from the file of info.stamp
+_EXTRACTED: dict[Key, Path] = {}  # FMU file -> its extraction directory
+_USERS: dict[Key, int] = {}  # FMU file -> how many running runs hold its extraction
 _LOCK = threading.RLock()  # _EXTRACTED, _USERS and library loading: runs may run in threads of one process
+
+
+def _fresh_lock() -> None:
+    """In a forked child: a new lock. The parent's may have been held by another thread at the
+    fork, and that thread does not exist in the child (an offload worker would wait for ever)."""
+    global _LOCK
+    _LOCK = threading.RLock()
+
+
+if hasattr(os, "register_at_fork"):  # POSIX
+    os.register_at_fork(after_in_child=_fresh_lock)
+
+
+def _stamp(st: os.stat_result) -> tuple[int, ...]:
+    """What tells one build of a file from the next at the same path: inode, size, mtime and ctime
+    (a copy that keeps the mtime still changes the ctime)."""
+    return st.st_ino, st.st_size, st.st_mtime_ns, st.st_ctime_ns
 # Callbacks and library handles handed to FMUs live as long as the process: an FMU may call its
 # logger while being freed, and pythonfmu libraries must not be unloaded (GC of their objects crashes).
 _KEEP_ALIVE: list[Any] = []
@@ -279,12 +298,12 @@ def load_fmu(path: str | Path) -> FMUInfo:
         st = path.stat()
     except OSError:
         raise ComponentSourceError(Issue("", f"FMU not found: {path}")) from None
-    stamp = (st.st_mtime_ns, st.st_size)
+    stamp = _stamp(st)
     cached = _CACHE.get(path)
     if cached is not None:
-        if cached[0] == stamp:
-            return cached[1]
-        _forget_extraction(path)  # the file was rebuilt in place: its old extraction is stale
+        if cached.stamp == stamp:
+            return cached
+        _forget_extractions(path)  # the file was rebuilt in place: its old extractions are stale
     try:
         md = fmpy.read_model_description(str(path), validate=False)
     except Exception as exc:  # fmpy raises bare Exception for malformed files
@@ -302,8 +321,8 @@ def load_fmu(path: str | Path) -> FMUInfo:
             causality=v.causality, variability=v.variability, unit=_unit(v), description=v.description,
             start=v.start, index=i, shape=tuple(v.shape or ()) if dims else (), dims=dims, initial=v.initial,
             min=_attr(v, "min"), max=_attr(v, "max"))
-    info = FMUInfo(path, md, variables)
-    _CACHE[path] = (stamp, info)
+    info = FMUInfo(path, md, variables, stamp)
+    _CACHE[path] = info
     return info
 
 
@@ -333,7 +352,7 @@ class Extractions:
     """
 
     def __init__(self) -> None:
-        self.paths: set[Path] = set()
+        self.keys: set[Key] = set()
         self._token = None
 
     def __enter__(self) -> "Extractions":
@@ -343,32 +362,34 @@ class Extractions:
     def __exit__(self, *exc: Any) -> None:
         _RUN.reset(self._token)
 
-    def hold(self, path: Path) -> None:
-        if path not in self.paths:
-            self.paths.add(path)
-            _USERS[path] = _USERS.get(path, 0) + 1
+    def hold(self, key: Key) -> None:
+        if key not in self.keys:
+            self.keys.add(key)
+            _USERS[key] = _USERS.get(key, 0) + 1
 
     def release(self) -> None:
         """Let go of this run's extractions (any thread: the watchdog's shutdown calls it too)."""
         with _LOCK:
-            for path in self.paths:
-                users = _USERS.pop(path, 1) - 1
+            for key in self.keys:
+                users = _USERS.pop(key, 1) - 1
                 if users > 0:
-                    _USERS[path] = users
-                elif path in _EXTRACTED:
-                    shutil.rmtree(_EXTRACTED.pop(path), ignore_errors=True)
-            self.paths.clear()
+                    _USERS[key] = users
+                elif key in _EXTRACTED:
+                    shutil.rmtree(_EXTRACTED.pop(key), ignore_errors=True)
+            self.keys.clear()
 
 
 _RUN: ContextVar[Extractions | None] = ContextVar("cosim_run_extractions", default=None)
 
 
-def _extract(path: Path) -> Path:
+def _extract(key: Key) -> Path:
+    """The extraction directory of the FMU file ``key`` = (path, stamp), held by the current run."""
     import fmpy
 
+    path = key[0]
     with _LOCK:
         held = _RUN.get()
-        unzipdir = _EXTRACTED.get(path)
+        unzipdir = _EXTRACTED.get(key)
         if unzipdir is None:
             if not _EXTRACTED:
                 _sweep_orphans()
@@ -378,17 +399,18 @@ def _extract(path: Path) -> Path:
             except Exception as exc:  # a corrupt archive  # noqa: BLE001
                 shutil.rmtree(unzipdir, ignore_errors=True)
                 raise ComponentSourceError(Issue("", f"{path}: cannot extract: {exc}")) from None
-            _EXTRACTED[path] = unzipdir
+            _EXTRACTED[key] = unzipdir
         if held is not None:
-            held.hold(path)
+            held.hold(key)
         return unzipdir
 
 
-def _forget_extraction(path: Path) -> None:
-    """Remove the extraction of ``path`` unless a running run holds it."""
+def _forget_extractions(path: Path) -> None:
+    """Remove the extractions of earlier builds of ``path`` that no running run holds (a run that
+    holds one removes it at its end)."""
     with _LOCK:
-        if not _USERS.get(path) and path in _EXTRACTED:
-            shutil.rmtree(_EXTRACTED.pop(path), ignore_errors=True)
+        for key in [k for k in _EXTRACTED if k[0] == path and not _USERS.get(k)]:
+            shutil.rmtree(_EXTRACTED.pop(key), ignore_errors=True)
 
 
 def _unit(v: Any) -> str | None:
@@ -405,18 +427,20 @@ def _attr(v: Any, name: str) -> str | None:
     return None if value is None else str(value)
 
 
-def cleanup_extracted(keep: Iterable[Path] = ()) -> None:
-    """Remove every extracted FMU directory of the process but those of the FMUs in ``keep``.
+def cleanup_extracted(keep: Iterable[Key] = ()) -> None:
+    """Remove every extracted FMU directory of the process but those of the FMU files in ``keep``
+    (keys of ``_EXTRACTED``).
 
-    Called at interpreter exit and when a worker process ends (a run releases its own through
-    :class:`Extractions`). A forked worker process keeps its parent's extractions (``keep``): they
-    are still in use. Libraries already loaded stay loaded (Linux keeps a removed file's mapping).
+    Called at interpreter exit, when a worker process ends and when the watchdog leaves the process
+    (a run releases its own through :class:`Extractions`). A forked worker process keeps its parent's
+    extractions (``keep``): they are still in use. Libraries already loaded stay loaded (Linux keeps
+    a removed file's mapping).
     """
-    keep = {Path(p).resolve() for p in keep}
+    keep = set(keep)
     with _LOCK:
-        for path in [p for p in _EXTRACTED if p not in keep]:
-            _USERS.pop(path, None)
-            shutil.rmtree(_EXTRACTED.pop(path), ignore_errors=True)
+        for key in [k for k in _EXTRACTED if k not in keep]:
+            _USERS.pop(key, None)
+            shutil.rmtree(_EXTRACTED.pop(key), ignore_errors=True)
 
 
 atexit.register(cleanup_extracted)
@@ -601,11 +625,28 @@ class _Base:
             self.fmu = None
 
     def _load_library(self) -> Any:
-        """fmpy's FMU object with the library loaded. fmpy changes the process's working directory
-        around the load (to the library's folder and back): the lock keeps loads of concurrent runs
-        from interleaving, which would leave the process in another FMU's folder."""
+        """fmpy's FMU object with the library loaded.
+
+        fmpy changes the process's working directory to the library's folder around the load, for
+        Windows, where a DLL's dependencies are looked up there; it does not change back when the
+        load fails. In a process where other threads run (runs in threads, a Dask worker) that would
+        move their relative paths into the FMU's folder. On POSIX systems, where ``dlopen`` does not
+        look in the working directory, the loading thread's ``chdir`` calls are skipped; elsewhere
+        the directory is restored when the load fails. Loads are serialised.
+        """
         with _LOCK:
-            return self._guard("load library", self._make)
+            cwd = os.getcwd()
+            if os.name == "posix":
+                _LOADING.add(threading.get_ident())
+                os.chdir = _chdir_unless_loading
+            try:
+                return self._guard("load library", self._make)
+            finally:
+                if os.name == "posix":
+                    os.chdir = _REAL_CHDIR
+                    _LOADING.discard(threading.get_ident())
+                elif not os.path.samefile(os.getcwd(), cwd):  # pragma: no cover - Windows
+                    os.chdir(cwd)
 
     @property
     def _pythonfmu(self) -> bool:
@@ -704,6 +745,16 @@ class _Base:
         c_args = [ctypes.c_void_p(a) if i == 0 else c_size_t(a) if isinstance(a, int) else a
                   for i, a in enumerate(args)]
         return partial(proto(ctypes.cast(f, ctypes.c_void_p).value), *c_args)
+
+
+_REAL_CHDIR = os.chdir
+_LOADING: set[int] = set()  # threads inside fmpy's library load (see _Base._load_library)
+
+
+def _chdir_unless_loading(path: Any) -> None:
+    """``os.chdir`` while a library loads: skipped for the loading thread, done for any other."""
+    if threading.get_ident() not in _LOADING:
+        _REAL_CHDIR(path)
 
 
 # --------------------------------------------------------------------------- model exchange

@@ -184,7 +184,7 @@ class Offload:
         index = {c: j for j, c in enumerate(comps)}
         # The master extracts the group's FMUs and owns the directories: the worker uses them and
         # never removes them, so a worker that is killed leaves nothing behind.
-        extracted = {str(plan.infos[c].path): str(plan.infos[c].unzipdir) for c in comps}
+        extracted = [(str(plan.infos[c].path), plan.infos[c].stamp, str(plan.infos[c].unzipdir)) for c in comps]
         spec = dict(
             names=self.names, paths=[str(plan.infos[c].path) for c in comps], extracted=extracted,
             kinds=[("me" if t.model_exchange else "cs", getattr(t, "rtol", 1e-6), getattr(t, "solver", "cvode"),
@@ -420,7 +420,7 @@ def _worker(spec: dict, raw: Any, filled: list, free: list, stop: Any, conn: Any
         # none is set when the worker forks today (the watchdog starts after it): a guard against that order
     except ValueError:
         pass
-    _fmu._EXTRACTED.update({Path(k): Path(v) for k, v in spec["extracted"].items()})
+    _fmu._EXTRACTED.update({(Path(p), tuple(stamp)): Path(d) for p, stamp, d in spec["extracted"]})
     inherited = set(_fmu._EXTRACTED)  # the master's extractions (forked: all of them): the master removes them
     slaves: list[Any] = []
     pubs: list[_Publisher] = []

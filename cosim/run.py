@@ -9,7 +9,7 @@ from typing import Any, Mapping, Sequence
 
 from .algorithm import Observer, Runtime, StopRequest, initialize, simulate
 from .errors import ComponentSourceError, CosimError, Issue
-from .fmu import Extractions, FMUInfo, load_fmu, make_slave
+from .fmu import Extractions, FMUInfo, cleanup_extracted, load_fmu, make_slave
 from .observers import ErrorObserver
 from .offload import Offload, choose
 from .scenario import Scenario, line_for, expand_signal, load_scenario
@@ -339,6 +339,7 @@ def _run_claimed(scenario: Scenario, output, held: Extractions, progress: bool, 
             _conclude(output, err, held, offload)
         except CosimError as exc:
             lines.append(f"error: {exc}")
+        cleanup_extracted()  # the process leaves without its exit handlers: other runs' extractions too
         hard_exit(err, lines)
 
     try:

@@ -1,21 +1,25 @@
 """Runs in threads of one process (the Python API, a threaded Dask worker) and FMUs rebuilt in place.
 
 Each run holds the FMU extractions it uses and removes them at its end unless another running
-run still holds them; library loading (where fmpy changes the working directory) is serialised.
-A file rebuilt at the same path is read again, not served from the description cache.
+run still holds them; library loading is serialised and does not move the process's working
+directory (fmpy's chdir); a worker forked while another thread holds the extraction lock does not
+wait for it. A file rebuilt at the same path is read again and extracted apart from the old build.
 """
 
 from __future__ import annotations
 
+import multiprocessing.context
 import os
 import shutil
 import tempfile
+import threading
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 import pytest
 
-from cosim.fmu import load_fmu
+from cosim import fmu
+from cosim.fmu import Extractions, load_fmu
 from cosim.run import run_scenario
 from cosim.scenario import load_scenario
 
@@ -33,6 +37,26 @@ connections:
 time: {stop: 0.5, step: 0.001}
 parallel: "off"
 compare: {actual: [plant.x], reference: [src.y]}
+"""
+
+# a feedback loop behind a source: the source and ref run ahead in the offload worker
+FEEDBACK = """
+name: feedback
+components:
+  src: {path: "{CosimTSource}"}
+  ref: {path: "{CosimTSum}"}
+  sum: {path: "{CosimTSum}"}
+  ctl: {path: "{CosimTGain}", parameters: {k: -5.0}}
+  plant: {path: "{CosimTIntegrator}", parameters: {x0: 0.5}}
+connections:
+  - {from: src.y, to: ref.a}
+  - {from: ref.y, to: sum.a}
+  - {from: ctl.y, to: sum.b}
+  - {from: sum.y, to: plant.u}
+  - {from: plant.x, to: ctl.u}
+time: {stop: 0.5, step: 0.001}
+parallel: "on"
+watchdog_s: 20
 """
 
 
@@ -66,3 +90,71 @@ def test_an_fmu_rebuilt_in_place_is_read_again(test_fmus, tmp_path):
     os.utime(fmu, ns=(st.st_atime_ns, st.st_mtime_ns + 1_000_000_000))  # a later build, whatever the clock
     rebuilt = load_fmu(fmu)
     assert "k" not in rebuilt.variables and rebuilt.md.modelName == "CosimTSource"
+
+
+def test_the_working_directory_stays_while_libraries_load(write_scenario):
+    """Another thread sees the process's working directory unchanged while runs load their FMUs."""
+    path = write_scenario(LOOP)
+    cwd, seen, done = os.getcwd(), set(), threading.Event()
+
+    def watch() -> None:
+        while not done.is_set():
+            seen.add(os.getcwd())
+
+    watcher = threading.Thread(target=watch)
+    watcher.start()
+    try:
+        for _ in range(5):
+            with fmu._LOCK:  # every run extracts and loads afresh
+                fmu.cleanup_extracted()
+            _fingerprint(path, 0.01)
+    finally:
+        done.set()
+        watcher.join()
+    assert seen == {cwd}
+
+
+def test_a_worker_forked_while_another_thread_holds_the_lock_runs(write_scenario, monkeypatch):
+    """The offload worker is forked while another thread holds the extraction lock (as a run extracting
+    a large FMU does): the child must not inherit a lock held by a thread it does not have."""
+    path = write_scenario(FEEDBACK)
+    grabbed, release = threading.Event(), threading.Event()
+
+    def hold() -> None:
+        with fmu._LOCK:
+            grabbed.set()
+            release.wait(10)
+
+    fork = multiprocessing.context.ForkProcess._Popen
+
+    def popen(process):  # noqa: ANN001, ANN202
+        threading.Thread(target=hold).start()
+        grabbed.wait(10)
+        try:
+            return fork(process)
+        finally:
+            threading.Timer(0.5, release.set).start()
+
+    monkeypatch.setattr(multiprocessing.context.ForkProcess, "_Popen", staticmethod(popen))
+    res = run_scenario(load_scenario(path), log=False)
+    assert grabbed.is_set(), "the worker was not forked (nothing offloaded?)"
+    assert res.steps == 500 and res.worker_time, res
+
+
+def test_an_fmu_rebuilt_while_a_run_holds_it_is_extracted_apart(test_fmus, tmp_path):
+    """A run still holds the old build's extraction; a new run gets the new build's files, not the old."""
+    path = tmp_path / "component.fmu"
+    shutil.copy(test_fmus["CosimTGain"], path)
+    with Extractions() as held:
+        old = load_fmu(path).unzipdir
+        shutil.copy(test_fmus["CosimTSource"], path)
+        st = path.stat()
+        os.utime(path, ns=(st.st_atime_ns, st.st_mtime_ns + 1_000_000_000))
+        with Extractions() as other:
+            new = load_fmu(path).unzipdir
+            assert new != old and (new / "modelDescription.xml").read_text() != (old / "modelDescription.xml").read_text()
+            assert "CosimTSource" in (new / "modelDescription.xml").read_text()
+            other.release()
+        assert old.is_dir() and not new.exists()  # each build removed by its own holder
+        held.release()
+    assert not old.exists()
