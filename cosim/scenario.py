@@ -411,8 +411,11 @@ def scenario_from_data(data: dict[str, Any], file: str = "<string>", overrides: 
             hint = f"did you mean {', '.join(close)}? " if close else ""
             raise ScenarioError(Issue("", f"unknown component {path[1]!r} in {file}; {hint}components: "
                                       f"{', '.join(components)}", origins.get(path, "--set")))
-        if path[0] == "components" and len(path) == 4 and path[2] == "parameters" and _has_written(value):
-            written[path] = _as_written(value)
+        if path[0] == "components" and len(path) == 4 and path[2] == "parameters":
+            if _has_written(value):
+                written[path] = _as_written(value)
+            else:  # a later override of the same parameter, written otherwise, replaces the text
+                written.pop(path, None)
         node = data
         for key in path[:-1]:
             node = node.setdefault(key, {})

@@ -66,3 +66,10 @@ def test_sweep_grid_value_reaches_a_string_as_written_with_the_case_id_of_the_nu
     plan, _ = prepare(load_scenario(_scenario(tmp_path), dotted_overrides(case.values, "sweep case")))
     got = plan.start_values[0]
     assert got == {"String_input": "1e3", "Real_input": 20.0}, f"start values {got}"
+
+
+def test_a_later_override_written_otherwise_replaces_the_text(tmp_path):
+    """Two overrides of one String parameter: the last one counts, whichever way it was written."""
+    overrides = apply_overrides(["a.String_input=1e3", "components.a.parameters.String_input=abc"])
+    plan, _ = prepare(load_scenario(_scenario(tmp_path), overrides))
+    assert plan.start_values[0] == {"String_input": "abc"}, plan.start_values[0]
