@@ -27,6 +27,14 @@ def _rows(out: Path) -> list[dict[str, str]]:
         return list(csv.DictReader(f))
 
 
+def _die_with_parent() -> None:
+    """In the child before exec: SIGTERM when pytest dies. A pytest killed mid-test (a CI timeout)
+    runs no fixture teardown, and a scheduler or worker in its own session would run on for ever."""
+    import ctypes
+
+    ctypes.CDLL(None, use_errno=True).prctl(1, signal.SIGTERM, 0, 0, 0)  # PR_SET_PDEATHSIG = 1 (Linux)
+
+
 class DaskCluster:
     """A real Dask scheduler and worker processes (``dask scheduler``, ``dask worker``; the old ``dask-scheduler``) on localhost (random free ports)."""
 
@@ -47,7 +55,8 @@ class DaskCluster:
 
     def _start(self, cmd: list[str], name: str) -> subprocess.Popen:
         log = open(self.tmp / f"{name}.log", "w")
-        p = subprocess.Popen(cmd, stdout=log, stderr=subprocess.STDOUT, cwd=ROOT, start_new_session=True)
+        p = subprocess.Popen(cmd, stdout=log, stderr=subprocess.STDOUT, cwd=ROOT, start_new_session=True,
+                             preexec_fn=_die_with_parent)
         self.procs.append(p)
         return p
 
