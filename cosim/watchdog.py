@@ -33,6 +33,7 @@ import threading
 import time
 from typing import Any, Callable
 
+from .cli import exit_now, exit_status, exit_text  # at import: the hard exit runs while the main thread is stuck
 from .errors import Interrupted, StallError
 
 __all__ = ["Watchdog", "GRACE_S"]
@@ -166,8 +167,6 @@ def hard_exit(error: BaseException, lines: list[str]) -> None:
     on stderr as the command line says it (:func:`cosim.cli.exit_status`; exit code 2 for a stall,
     128 + signal), then ``lines``; no interpreter finalisation (the main thread is still inside a
     component's call)."""
-    from .cli import exit_now, exit_status, exit_text
-
     message, kind, code = exit_status(error)
     for line in [exit_text(message, kind), *lines]:
         print(line, file=sys.stderr)
