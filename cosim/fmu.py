@@ -635,16 +635,17 @@ class _Base:
         the directory is restored when the load fails. Loads are serialised.
         """
         with _LOCK:
-            cwd = os.getcwd()
+            cwd, chdir, loader = os.getcwd(), os.chdir, threading.get_ident()
             if os.name == "posix":
-                _LOADING.add(threading.get_ident())
-                os.chdir = _chdir_unless_loading
+                def skip_for_loader(path: Any) -> None:
+                    if threading.get_ident() != loader:  # another thread's chdir is its own business
+                        chdir(path)
+                os.chdir = skip_for_loader
             try:
                 return self._guard("load library", self._make)
             finally:
                 if os.name == "posix":
-                    os.chdir = _REAL_CHDIR
-                    _LOADING.discard(threading.get_ident())
+                    os.chdir = chdir
                 elif not os.path.samefile(os.getcwd(), cwd):  # pragma: no cover - Windows
                     os.chdir(cwd)
 
@@ -745,16 +746,6 @@ class _Base:
         c_args = [ctypes.c_void_p(a) if i == 0 else c_size_t(a) if isinstance(a, int) else a
                   for i, a in enumerate(args)]
         return partial(proto(ctypes.cast(f, ctypes.c_void_p).value), *c_args)
-
-
-_REAL_CHDIR = os.chdir
-_LOADING: set[int] = set()  # threads inside fmpy's library load (see _Base._load_library)
-
-
-def _chdir_unless_loading(path: Any) -> None:
-    """``os.chdir`` while a library loads: skipped for the loading thread, done for any other."""
-    if threading.get_ident() not in _LOADING:
-        _REAL_CHDIR(path)
 
 
 # --------------------------------------------------------------------------- model exchange
