@@ -25,23 +25,9 @@ from cosim.scenario import load_scenario
 
 pytestmark = pytest.mark.integration
 
+# a feedback loop behind a source: with parallel on, src and ref run ahead in the offload worker
 LOOP = """
 name: loop
-components:
-  src: {path: "{CosimTSource}"}
-  ctl: {path: "{CosimTGain}", parameters: {k: -5.0}}
-  plant: {path: "{CosimTIntegrator}", parameters: {x0: 0.5}}
-connections:
-  - {from: src.y, to: ctl.u}
-  - {from: ctl.y, to: plant.u}
-time: {stop: 0.5, step: 0.001}
-parallel: "off"
-compare: {actual: [plant.x], reference: [src.y]}
-"""
-
-# a feedback loop behind a source: the source and ref run ahead in the offload worker
-FEEDBACK = """
-name: feedback
 components:
   src: {path: "{CosimTSource}"}
   ref: {path: "{CosimTSum}"}
@@ -55,8 +41,9 @@ connections:
   - {from: sum.y, to: plant.u}
   - {from: plant.x, to: ctl.u}
 time: {stop: 0.5, step: 0.001}
-parallel: "on"
+parallel: "off"
 watchdog_s: 20
+compare: {actual: [plant.x], reference: [src.y]}
 """
 
 
@@ -117,7 +104,7 @@ def test_the_working_directory_stays_while_libraries_load(write_scenario):
 def test_a_worker_forked_while_another_thread_holds_the_lock_runs(write_scenario, monkeypatch):
     """The offload worker is forked while another thread holds the extraction lock (as a run extracting
     a large FMU does): the child must not inherit a lock held by a thread it does not have."""
-    path = write_scenario(FEEDBACK)
+    path = write_scenario(LOOP.replace('parallel: "off"', 'parallel: "on"'))
     grabbed, release = threading.Event(), threading.Event()
 
     def hold() -> None:
