@@ -38,6 +38,8 @@ from functools import cached_property, partial
 from pathlib import Path
 from typing import Any, Callable, Iterable, Protocol
 
+from fmus.requirements import release_pythonfmu_state
+
 from .errors import ComponentSourceError, FMIError, Issue, ScenarioError
 
 isfinite = math.isfinite  # a module global: one lookup less per output buffer in the hot path
@@ -217,27 +219,11 @@ _KEEP_ALIVE: list[Any] = []
 _PYTHONFMU_LIBRARIES: set[str] = set()  # file names of the PythonFMU libraries this process instantiated
 
 
-def _release_pythonfmu_state(dll: Any) -> None:
-    """Reset a *loaded* PythonFMU library's global interpreter state (see above); other libraries: nothing."""
-    try:
-        release = dll.finalizePythonInterpreter
-    except AttributeError:  # not a PythonFMU library, or another version of its wrapper
-        return
-    release.argtypes, release.restype = [], None
-    release()
-
-
 def _release_pythonfmu_libraries() -> None:
     """At interpreter exit (before ``exit`` runs the libraries' destructors): the PythonFMU libraries
     still loaded, e.g. the process's first one or one whose instance was never freed."""
-    if not hasattr(os, "RTLD_NOLOAD"):  # Windows: pythonfmu resets it in DllMain, in order
-        return
     for name in sorted(_PYTHONFMU_LIBRARIES):
-        try:  # found by the name it was loaded under (its file may be removed already); never loads it
-            dll = ctypes.CDLL(name, mode=os.RTLD_NOLOAD | os.RTLD_NOW)
-        except OSError:  # unloaded by fmpy's freeInstance: its destructors ran in order at dlclose
-            continue
-        _release_pythonfmu_state(dll)
+        release_pythonfmu_state(name)
 
 
 atexit.register(_release_pythonfmu_libraries)
@@ -615,7 +601,7 @@ class _Base:
             return
         try:
             if self.fmu.dll._name in _PYTHONFMU_LIBRARIES:  # while loaded: fmpy's freeInstance unloads it
-                _release_pythonfmu_state(self.fmu.dll)
+                release_pythonfmu_state(self.fmu.dll._name)
             if self._instantiated and not self._fatal:
                 self.fmu.freeInstance()
         finally:
@@ -656,7 +642,7 @@ class _Base:
 
     def _note_library(self) -> None:
         """Remember a PythonFMU library, whose global state is reset before it is unloaded or the
-        process exits (see :func:`_release_pythonfmu_state`)."""
+        process exits (see :func:`fmus.requirements.release_pythonfmu_state`)."""
         if self._pythonfmu:
             _PYTHONFMU_LIBRARIES.add(self.fmu.dll._name)
 

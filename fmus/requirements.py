@@ -223,7 +223,6 @@ def _release_interpreter_state_at_exit(resources: str) -> None:
     C/C++ host: the process is not a Python executable), whose state ends the interpreter in order.
     """
     import atexit
-    import ctypes
     import glob
     import os
 
@@ -236,23 +235,30 @@ def _release_interpreter_state_at_exit(resources: str) -> None:
         return
     root = os.path.dirname(os.path.normpath(resources))
     for library in glob.glob(os.path.join(root, "binaries", "*", "*.so")):
-        if library in _RELEASED_AT_EXIT:
-            continue
-        _RELEASED_AT_EXIT.add(library)
-
-        def release(library: str = library) -> None:
-            try:  # by the name it was loaded under; never loads it (unloaded: its hooks ran in order)
-                dll = ctypes.CDLL(library, mode=os.RTLD_NOLOAD | os.RTLD_NOW)
-                reset = dll.finalizePythonInterpreter
-            except (OSError, AttributeError):
-                return
-            reset.argtypes, reset.restype = [], None
-            reset()
-
-        atexit.register(release)
+        if library not in _RELEASED_AT_EXIT:
+            _RELEASED_AT_EXIT.add(library)
+            atexit.register(release_pythonfmu_state, library)
 
 
 _RELEASED_AT_EXIT = set()  # libraries with a handler
+
+
+def release_pythonfmu_state(library: str) -> None:
+    """Reset the global interpreter state of the PythonFMU library ``library`` if it is loaded (see
+    above): found by the name it was loaded under and never loaded here (an unloaded library ran its
+    hooks in order). Any other library, or one without the function: nothing. The master calls it
+    too, for every PythonFMU library it loads (``cosim.fmu``)."""
+    import ctypes
+    import os
+
+    if not hasattr(os, "RTLD_NOLOAD"):  # Windows: pythonfmu resets it from DllMain, in order
+        return
+    try:
+        reset = ctypes.CDLL(library, mode=os.RTLD_NOLOAD | os.RTLD_NOW).finalizePythonInterpreter
+    except (OSError, AttributeError):
+        return
+    reset.argtypes, reset.restype = [], None
+    reset()
 
 
 def _unavailable(message: str, fmi: int) -> type:
