@@ -36,7 +36,7 @@ from ctypes import byref, c_double, c_int32, c_int64, c_size_t, c_uint32
 from dataclasses import dataclass, replace
 from functools import cached_property, partial
 from pathlib import Path
-from typing import Any, Callable, Iterable, Protocol
+from typing import Any, Callable, Iterable, Protocol, Sequence
 
 from fmus.requirements import release_pythonfmu_state
 
@@ -600,7 +600,7 @@ class _Base:
         if self.fmu is None:
             return
         try:
-            if self.fmu.dll._name in _PYTHONFMU_LIBRARIES:  # while loaded: fmpy's freeInstance unloads it
+            if self._pythonfmu:  # while loaded: fmpy's freeInstance unloads it
                 release_pythonfmu_state(self.fmu.dll._name)
             if self._instantiated and not self._fatal:
                 self.fmu.freeInstance()
@@ -656,9 +656,13 @@ class _Base:
         call back into Python).
         """
         f = getattr(dll, name)
-        if not self._pythonfmu:
-            return f
-        proto = ctypes.PYFUNCTYPE(f.restype, *f.argtypes)
+        return self._prototype(f, f.argtypes) if self._pythonfmu else f
+
+    def _prototype(self, f: Any, argtypes: Sequence[Any] | None) -> Any:
+        """``f`` through a prototype of its return type and ``argtypes`` (None: none declared): PYFUNCTYPE
+        for a PythonFMU library (the GIL kept, see :meth:`_hot_function`), CFUNCTYPE for any other."""
+        factory = ctypes.PYFUNCTYPE if self._pythonfmu else ctypes.CFUNCTYPE
+        proto = factory(f.restype) if argtypes is None else factory(f.restype, *argtypes)
         return proto(ctypes.cast(f, ctypes.c_void_p).value)
 
     # -- the per-step exchange: numbers through bound C calls, strings and binaries through fmpy
@@ -679,7 +683,11 @@ class _Base:
             if b.ctype_free:
                 self._set_text(b)
             else:
-                self._check(self._bound([b], "Set")[0].call(), b.function)
+                if b.call is None:
+                    self._bound([b], "Set")
+                status = b.call()
+                if status > 1:
+                    self._check(status, b.function)
 
     def get_outputs(self) -> None:
         bufs = self._get_calls
@@ -727,11 +735,9 @@ class _Base:
         argument types, so ctypes skips its ``from_param`` conversions on every call (0.36 us a call,
         measured on a GetReal of 9 values). GIL handling as in :meth:`_hot_function`.
         """
-        f = getattr(dll, name)
-        proto = (ctypes.PYFUNCTYPE if self._pythonfmu else ctypes.CFUNCTYPE)(f.restype)
         c_args = [ctypes.c_void_p(a) if i == 0 else c_size_t(a) if isinstance(a, int) else a
                   for i, a in enumerate(args)]
-        return partial(proto(ctypes.cast(f, ctypes.c_void_p).value), *c_args)
+        return partial(self._prototype(getattr(dll, name), None), *c_args)
 
 
 # --------------------------------------------------------------------------- model exchange
