@@ -5,7 +5,7 @@ from __future__ import annotations
 from math import isfinite
 
 from delta.dynamics import integrate
-from delta.errors import CosimError, ParameterError
+from delta.errors import CosimError, ParameterError, UnreachableError
 from delta.kinematics import inverse_kinematics
 from delta.model import build_model
 
@@ -71,18 +71,22 @@ class AnalyticPlant(Adapter):
         max_step = self.values["solver.max_step"]
         if not (max_step > 0.0 and isfinite(max_step)):
             raise ParameterError(f"solver.max_step must be a time > 0 s, got {max_step!r}")
-        initial_joint_state(self, self.model)  # the initial platform state must be reachable
+        self.q, self.qd = initial_joint_state(self, self.model)  # raises if the initial state is unreachable
         self.p, self.v = self.vec3(P0), self.vec3(V0)
 
     def advance(self, t: float, h: float) -> None:
         try:
-            self.p, self.v = integrate(self.model, self.p, self.v, self.vec3(U), h, self.values["solver.max_step"])
+            p, v = integrate(self.model, self.p, self.v, self.vec3(U), h, self.values["solver.max_step"])
+            q, qd, _, fault = inverse_kinematics(self.model, p, v, limits=False)  # the step's end is no RK stage
+            if fault:
+                raise UnreachableError(f"the platform left the workspace at p = ({p[0]:.6g}, {p[1]:.6g}, "
+                                       f"{p[2]:.6g}) m: leg {fault} has no solution")
         except CosimError as exc:
             raise type(exc)(f"{self.modelName} at t = {t:.6f} s: {exc}") from None
+        self.p, self.v, self.q, self.qd = p, v, q, qd
 
     def refresh(self) -> None:
-        q, qd, _, _ = inverse_kinematics(self.model, self.p, self.v, limits=False)  # reachable: integrate() checked
-        _WRITE_STATE(self.values, q, qd, self.p, self.v)
+        _WRITE_STATE(self.values, self.q, self.qd, self.p, self.v)
 
 
 
