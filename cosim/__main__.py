@@ -30,7 +30,8 @@ always the command's.
 
 import sys
 
-from .cli import exit_now, main
+from .cli import main
+from .errors import exit_now
 
 
 def _exit(code: object) -> None:

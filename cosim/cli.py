@@ -18,9 +18,10 @@ from typing import Callable, Sequence
 
 from delta.errors import CosimError, UnreachableError
 
+from .errors import exit_status, exit_text
+
 EXIT_OK = 0
 EXIT_CHECK_FAILED = 1
-EXIT_BAD_INPUT = 2
 
 Handler = Callable[[argparse.Namespace], int]
 
@@ -621,49 +622,6 @@ def _terminate_as_interrupt(signum, frame) -> None:
     from .errors import Interrupted
 
     raise Interrupted(signum)
-
-
-def exit_status(exc: BaseException) -> tuple[str, str, int]:
-    """How an error ends a command: (its message, its kind: ``"unreachable"``, ``"error"`` or
-    ``"interrupted"``, the exit code: 2, or 128 + the signal for an interruption).
-
-    ``exc``: a CosimError, or a KeyboardInterrupt (Ctrl-C, or :class:`~cosim.errors.Interrupted`,
-    which names its signal and what it stopped). The message is the ``error`` of ``--json``;
-    :func:`exit_text` is its line(s) on stderr.
-    """
-    import signal
-
-    if isinstance(exc, UnreachableError):
-        return str(exc), "unreachable", EXIT_BAD_INPUT
-    if isinstance(exc, KeyboardInterrupt):
-        signum = getattr(exc, "signum", signal.SIGINT)
-        detail = getattr(exc, "detail", "")
-        return (f"interrupted ({signal.Signals(signum).name})" + (f": {detail}" if detail else ""), "interrupted",
-                128 + signum)
-    return str(exc), "error", EXIT_BAD_INPUT
-
-
-def exit_text(message: str, kind: str) -> str:
-    """The stderr text of :func:`exit_status`'s ``message``: ``error: ...`` (a multi-line error below
-    ``error:``, one issue a line), an interruption as it is."""
-    if kind == "interrupted":
-        return message
-    if kind == "error" and "\n" in message:
-        return "error:\n" + message
-    return f"error: {message}"
-
-
-def exit_now(code: int) -> None:
-    """Flush stdout and stderr (a closed stream or a broken pipe is passed over) and end the process
-    with ``code`` at once: ``os._exit``, no interpreter finalization."""
-    import os
-
-    for stream in (sys.stdout, sys.stderr):
-        try:
-            stream.flush()
-        except (OSError, ValueError):  # closed or broken pipe: nothing more can be written
-            pass
-    os._exit(code)
 
 
 def _error_json(args: argparse.Namespace | None, text: str, kind: str) -> None:

@@ -6,9 +6,10 @@ and from the builtin that matches its meaning, so callers can catch either.
 
 from __future__ import annotations
 
+import sys
 from dataclasses import dataclass
 
-from delta.errors import CosimError
+from delta.errors import CosimError, UnreachableError
 
 __all__ = [
     "CosimError",
@@ -22,7 +23,13 @@ __all__ = [
     "Interrupted",
     "StallError",
     "UnknownSignalError",
+    "EXIT_BAD_INPUT",
+    "exit_status",
+    "exit_text",
+    "exit_now",
 ]
+
+EXIT_BAD_INPUT = 2  # the exit code of a command that ends on an error (bad input, a failed run)
 
 
 @dataclass(frozen=True)
@@ -127,3 +134,49 @@ class StallError(CosimError, TimeoutError):
         self.budget = budget
         super().__init__(f"component {component!r}{where}: no progress for {budget:g} s of wall-clock time in "
                          f"its step at t = {time:.6g} s (watchdog_s = {budget:g}); run stopped")
+
+
+# --------------------------------------------------------------------------- how an error ends a process
+# (the command line, the watchdog's hard exit, __main__ and the sweep's workers)
+
+def exit_status(exc: BaseException) -> tuple[str, str, int]:
+    """How an error ends a command: (its message, its kind: ``"unreachable"``, ``"error"`` or
+    ``"interrupted"``, the exit code: 2, or 128 + the signal for an interruption).
+
+    ``exc``: a CosimError, or a KeyboardInterrupt (Ctrl-C, or :class:`~cosim.errors.Interrupted`,
+    which names its signal and what it stopped). The message is the ``error`` of ``--json``;
+    :func:`exit_text` is its line(s) on stderr.
+    """
+    import signal
+
+    if isinstance(exc, UnreachableError):
+        return str(exc), "unreachable", EXIT_BAD_INPUT
+    if isinstance(exc, KeyboardInterrupt):
+        signum = getattr(exc, "signum", signal.SIGINT)
+        detail = getattr(exc, "detail", "")
+        return (f"interrupted ({signal.Signals(signum).name})" + (f": {detail}" if detail else ""), "interrupted",
+                128 + signum)
+    return str(exc), "error", EXIT_BAD_INPUT
+
+
+def exit_text(message: str, kind: str) -> str:
+    """The stderr text of :func:`exit_status`'s ``message``: ``error: ...`` (a multi-line error below
+    ``error:``, one issue a line), an interruption as it is."""
+    if kind == "interrupted":
+        return message
+    if kind == "error" and "\n" in message:
+        return "error:\n" + message
+    return f"error: {message}"
+
+
+def exit_now(code: int) -> None:
+    """Flush stdout and stderr (a closed stream or a broken pipe is passed over) and end the process
+    with ``code`` at once: ``os._exit``, no interpreter finalization."""
+    import os
+
+    for stream in (sys.stdout, sys.stderr):
+        try:
+            stream.flush()
+        except (OSError, ValueError):  # closed or broken pipe: nothing more can be written
+            pass
+    os._exit(code)

@@ -477,7 +477,7 @@ def _exit_now() -> None:
     import logging
     import sys
 
-    from .cli import exit_now
+    from .errors import exit_now
 
     if not _TORN_DOWN:
         return

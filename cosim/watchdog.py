@@ -33,8 +33,7 @@ import threading
 import time
 from typing import Any, Callable
 
-from .cli import exit_now, exit_status, exit_text  # at import: the hard exit runs while the main thread is stuck
-from .errors import Interrupted, StallError
+from .errors import Interrupted, StallError, exit_now, exit_status, exit_text
 
 __all__ = ["Watchdog", "GRACE_S"]
 
@@ -164,7 +163,7 @@ class Watchdog:
 
 def hard_exit(error: BaseException, lines: list[str]) -> None:
     """Leave the process from the watchdog's thread after ``abort`` finished what it could: the error
-    on stderr as the command line says it (:func:`cosim.cli.exit_status`; exit code 2 for a stall,
+    on stderr as the command line says it (:func:`cosim.errors.exit_status`; exit code 2 for a stall,
     128 + signal), then ``lines``; no interpreter finalisation (the main thread is still inside a
     component's call)."""
     message, kind, code = exit_status(error)
