@@ -56,7 +56,7 @@ class Comparison:
 
     def as_dict(self) -> dict:
         return {"a": self.a, "b": self.b, "ok": self.ok, "t_start": self.t_start, "t_stop": self.t_stop,
-                "signals": [_signal_dict(d) for d in self.diffs], "only_a": self.only_a,
+                "signals": [d.as_dict(*_SIGNAL_KEYS, max_error="max_abs") for d in self.diffs], "only_a": self.only_a,
                 "only_b": self.only_b, "problems": self.problems,
                 "failed": [d.name for d in self.failed]}
 
@@ -87,12 +87,9 @@ class Comparison:
         return "\n".join(lines)
 
 
-def _signal_dict(d: ErrorStats) -> dict:
-    """One signal in ``compare --json``: name, unit, rmse, max_abs, t_max, samples, tolerance, ok (its keys
-    since the first release; the sides are the logs ``a`` and ``b``, not signals)."""
-    out = d.as_dict(max_error="max_abs")
-    del out["actual"], out["reference"]
-    return out
+# one signal in ``compare --json`` (its keys since the first release, max_error as max_abs; the sides are
+# the logs ``a`` and ``b``, not signals)
+_SIGNAL_KEYS = ("name", "unit", "rmse", "max_error", "t_max", "samples", "tolerance", "ok")
 
 
 # --------------------------------------------------------------------------- tolerances

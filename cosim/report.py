@@ -476,18 +476,17 @@ class Report:
     joints: list[ErrorStats] = field(default_factory=list)
 
     def as_dict(self) -> dict[str, Any]:
+        def axes(stats: list[ErrorStats]) -> list[dict[str, Any]]:
+            return [s.as_dict(*_AXIS_KEYS, name="axis") for s in stats]
+
         return {"run": self.run, "name": self.name, "robot": self.robot, "status": self.status,
                 "duration_s": self.duration, "out_dir": str(self.out_dir), "markdown": str(self.markdown),
                 "figures": {k: str(v) for k, v in self.figures.items()}, "compared": self.source,
-                "position": [_stats_dict(s) for s in self.position],
-                "velocity": [_stats_dict(s) for s in self.velocity], "joints": [_stats_dict(s) for s in self.joints]}
+                "position": axes(self.position), "velocity": axes(self.velocity), "joints": axes(self.joints)}
 
 
-def _stats_dict(s: ErrorStats) -> dict[str, Any]:
-    """One axis in ``report --json`` (its keys since the first release: axis, not name; no tolerance)."""
-    out = s.as_dict(name="axis")
-    del out["tolerance"], out["ok"]
-    return out
+# one axis in ``report --json`` (its keys since the first release: name as axis; no tolerance)
+_AXIS_KEYS = ("name", "actual", "reference", "unit", "rmse", "max_error", "t_max", "samples")
 
 
 def _stats_table(stats: list[ErrorStats], unit: str) -> list[str]:

@@ -51,16 +51,13 @@ class RunResult:
         return {"scenario": self.scenario, "status": self.status, "message": self.message, "steps": self.steps,
                 "sim_time_s": self.sim_time, "wall_time_s": self.wall_time,
                 "real_time_factor": self.real_time_factor, "component_time_s": self.component_time,
-                "errors": [_error_dict(e) for e in self.errors], "checks": self.checks, "passed": self.passed,
+                "errors": [e.as_dict(*_SUMMARY_KEYS) for e in self.errors], "checks": self.checks, "passed": self.passed,
                 "mcap": self.mcap, "notes": self.notes, "worker_time_s": self.worker_time,
                 "terminated_by": self.terminated_by, "events": self.events, "realtime": self.realtime}
 
 
-def _error_dict(e: ErrorStats) -> dict[str, Any]:
-    """One compared pair in the run summary: actual, reference, rmse, max_error, samples (as always), unit, t_max."""
-    out = e.as_dict()
-    del out["name"], out["tolerance"], out["ok"]  # name is the actual signal; the run's checks are ``checks``
-    return out
+# one compared pair in the run summary (its name is the actual signal; the run's checks are ``checks``)
+_SUMMARY_KEYS = ("actual", "reference", "unit", "rmse", "max_error", "t_max", "samples")
 
 
 def progress_bar():

@@ -58,9 +58,10 @@ class ErrorStats:
         return (f"{self.name}: max |{diff}| = {self.max_error:.4g} {self.unit} at t = {self.t_max:.3f} s, "
                 f"RMSE {self.rmse:.4g}{tol}").replace("  ", " ")
 
-    def as_dict(self, **keys: str) -> dict[str, Any]:
-        """Every field and ``ok``, by field name, or by the name ``keys`` gives a field
-        (``as_dict(max_error="max_abs")``: the key a JSON output has always used)."""
-        out = {keys.get(f.name, f.name): getattr(self, f.name) for f in fields(self)}
-        out[keys.get("ok", "ok")] = self.ok
-        return out
+    def as_dict(self, *names: str, **keys: str) -> dict[str, Any]:
+        """The fields ``names`` (``ok`` among them if wanted; none given: every field and ``ok``), in that
+        order, each under its field name or the key ``keys`` gives it (``as_dict("name", "max_error",
+        max_error="max_abs")``: the keys a JSON output has always used). Each output names what it
+        publishes, so a new field is not published by accident."""
+        names = names or (*(f.name for f in fields(self)), "ok")
+        return {keys.get(n, n): getattr(self, n) for n in names}
