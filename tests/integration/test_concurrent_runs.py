@@ -51,6 +51,13 @@ def _extractions() -> set[str]:
     return {p.name for p in Path(tempfile.gettempdir()).glob(f"cosim-fmu-{os.getpid()}-*")}
 
 
+def _rebuild(path: Path, source: Path) -> None:
+    """``path`` replaced by another FMU, as a build in place does, with a later mtime whatever the clock."""
+    shutil.copy(source, path)
+    st = path.stat()
+    os.utime(path, ns=(st.st_atime_ns, st.st_mtime_ns + 1_000_000_000))
+
+
 def _fingerprint(path: Path, stop: float) -> tuple:
     res = run_scenario(load_scenario(path, {("time", "stop"): stop}), log=False)
     return res.steps, [(e.rmse, e.max_error) for e in res.errors]
@@ -64,18 +71,16 @@ def test_runs_in_threads_give_their_serial_results_and_leave_no_extraction(write
     with ThreadPoolExecutor(2) as pool:
         threaded = list(pool.map(lambda s: _fingerprint(path, s), stops))
     assert threaded == [serial[s] for s in stops]
-    assert os.getcwd() == cwd  # fmpy's chdir around each library load did not leak
+    assert os.getcwd() == cwd  # as it was (test_the_working_directory_stays_while_libraries_load looks closer)
     assert _extractions() == before  # every run removed what it extracted, none removed another's early
 
 
 def test_an_fmu_rebuilt_in_place_is_read_again(test_fmus, tmp_path):
-    fmu = tmp_path / "component.fmu"
-    shutil.copy(test_fmus["CosimTGain"], fmu)
-    assert "k" in load_fmu(fmu).variables
-    shutil.copy(test_fmus["CosimTSource"], fmu)
-    st = fmu.stat()
-    os.utime(fmu, ns=(st.st_atime_ns, st.st_mtime_ns + 1_000_000_000))  # a later build, whatever the clock
-    rebuilt = load_fmu(fmu)
+    path = tmp_path / "component.fmu"
+    shutil.copy(test_fmus["CosimTGain"], path)
+    assert "k" in load_fmu(path).variables
+    _rebuild(path, test_fmus["CosimTSource"])
+    rebuilt = load_fmu(path)
     assert "k" not in rebuilt.variables and rebuilt.md.modelName == "CosimTSource"
 
 
@@ -91,9 +96,7 @@ def test_the_working_directory_stays_while_libraries_load(write_scenario):
     watcher = threading.Thread(target=watch)
     watcher.start()
     try:
-        for _ in range(5):
-            with fmu._LOCK:  # every run extracts and loads afresh
-                fmu.cleanup_extracted()
+        for _ in range(5):  # each run extracts afresh (the last one removed its own) and loads from there
             _fingerprint(path, 0.01)
     finally:
         done.set()
@@ -134,9 +137,7 @@ def test_an_fmu_rebuilt_while_a_run_holds_it_is_extracted_apart(test_fmus, tmp_p
     shutil.copy(test_fmus["CosimTGain"], path)
     with Extractions() as held:
         old = load_fmu(path).unzipdir
-        shutil.copy(test_fmus["CosimTSource"], path)
-        st = path.stat()
-        os.utime(path, ns=(st.st_atime_ns, st.st_mtime_ns + 1_000_000_000))
+        _rebuild(path, test_fmus["CosimTSource"])
         with Extractions() as other:
             new = load_fmu(path).unzipdir
             assert new != old and (new / "modelDescription.xml").read_text() != (old / "modelDescription.xml").read_text()

@@ -171,7 +171,7 @@ def test_bad_sweep_input_is_one_line_exit_2(tmp_path):
 @pytest.mark.parametrize("option", [["--set", "ctl.gain.kp[1]=[1"], ["--grid", "ctl.gain.kp[1]=[1,2"]])
 def test_a_value_that_is_not_yaml_is_one_line_naming_the_option(tmp_path, option):
     """Before anything runs: exit 2, the option as given and YAML's reason, no traceback."""
-    r = _cosim("sweep", str(ROOT / "scenarios" / "helix_ctc_analytic.yaml"), *option, "--out", str(tmp_path / "s"))
+    r = _cosim("sweep", SCENARIO, *option, "--out", str(tmp_path / "s"))
     assert r.returncode == 2, r.stderr
     assert f"error: {option[0]} {option[1]}: invalid value: " in r.stderr and "Traceback" not in r.stderr, r.stderr
 

@@ -29,7 +29,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from cfmus import build
-from cli_helpers import cosim, start_cosim
+from cli_helpers import cosim, start_cosim, wait_for
 
 from cosim.run import run_scenario
 from cosim.runlog import read_run
@@ -341,9 +341,7 @@ def test_no_extracted_fmu_outlives_a_run_an_error_or_an_interrupt(tmp_path):
         assert list(tmpdir.iterdir()) == [], f"after {path.name}: {list(tmpdir.iterdir())} (the orphan of a " \
                                              f"dead process is swept at the first extraction)"
     proc = start_cosim("run", str(long), "--out", str(tmp_path / "long.mcap"), env=env)
-    deadline = time.monotonic() + 60
-    while not any(tmpdir.iterdir()) and time.monotonic() < deadline:  # wait until the run has extracted its FMU
-        time.sleep(0.05)
+    wait_for(lambda: any(tmpdir.iterdir()), 60, "the run to extract its FMU")
     time.sleep(0.5)
     proc.send_signal(signal.SIGINT)
     _, err = proc.communicate(timeout=60)
