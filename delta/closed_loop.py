@@ -12,9 +12,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from .control import Controller
-from .dynamics import AnalyticModel, compiled, forward_dynamics, joint_references, platform_state, rk4_step
+from .dynamics import AnalyticModel, forward_dynamics, joint_references, platform_state, rk4_step
 from .errors import ParameterError
-from .model import Data, Model
+from .model import Data, Model, as_model
 from .robots import Robot
 from .trajectories import Trajectory
 
@@ -82,7 +82,7 @@ def simulate(
     if n < 1:
         raise ParameterError(f"t_end = {t_end} s is shorter than one period h = {h} s")
     plant = model if plant_model is None else plant_model
-    plant = compiled(plant)
+    plant = as_model(plant)
     data = Data()
     times = np.arange(n) * h
     p_ref, v_ref, a_ref = trajectory.sample(times)

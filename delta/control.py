@@ -14,9 +14,9 @@ import math
 
 import numpy as np
 
-from .dynamics import AnalyticModel, compiled, gravity, inverse_dynamics
+from .dynamics import AnalyticModel, gravity, inverse_dynamics
 from .errors import ParameterError
-from .model import Data, Model
+from .model import Data, Model, as_model
 from .robots import Robot
 
 __all__ = ["Controller", "PD", "PID", "PDPlus", "CTC", "default_controller", "DEFAULT_GAINS", "KINDS"]
@@ -165,7 +165,7 @@ class PDPlus(Controller):
     """PD with gravity compensation: ``u = Kp e + Kd e_dot + G(q)`` from the analytic model."""
 
     def __init__(self, model: AnalyticModel | Model, kp, kd, h: float, u_max=None) -> None:  # noqa: ANN001
-        self.model = compiled(model)
+        self.model = as_model(model)
         self.data = Data()
         self.kp = _per_joint("PDPlus", "kp", kp, positive=True)
         self.kd = _per_joint("PDPlus", "kd", kd)
@@ -194,7 +194,7 @@ class CTC(Controller):
 
     def __init__(self, model: AnalyticModel | Model, kp, kd, h: float, u_max=None,  # noqa: ANN001
                  feedforward: bool = True) -> None:
-        self.model = compiled(model)
+        self.model = as_model(model)
         self.data = Data()
         self.kp = _per_joint("CTC", "kp", kp, positive=True)
         self.kd = _per_joint("CTC", "kd", kd)

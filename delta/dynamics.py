@@ -39,7 +39,7 @@ from .actuators import SCALAR
 from .errors import ParameterError, RobotError, UnreachableError
 from .kinematics import ik_batch, inv3, leg_rates, rates_batch, serial_singularity, update
 from .masses import GRAVITY, LinearDeltaMasses, Masses, RotaryDeltaMasses
-from .model import Data, Model, build_model
+from .model import Data, Model, as_model, build_model
 from .robots import Robot
 
 __all__ = [
@@ -57,7 +57,6 @@ __all__ = [
     "integrate",
     "AnalyticModel",
     "analytic_model",
-    "compiled",
     "joint_references",
 ]
 
@@ -281,11 +280,6 @@ class AnalyticModel:
         return energy(*self._args(q, qd))
 
 
-def compiled(model: Model | AnalyticModel) -> Model:
-    """The compiled :class:`~delta.model.Model` of a model or of its numpy facade."""
-    return model.model if isinstance(model, AnalyticModel) else model
-
-
 def analytic_model(robot: Robot, masses: Masses | None = None) -> AnalyticModel:
     """The analytic model of ``robot`` (masses default to the kind's dataclass defaults)."""
     return AnalyticModel(build_model(robot, masses))
@@ -298,7 +292,7 @@ def joint_references(model: Model | AnalyticModel, p: np.ndarray, v: np.ndarray,
     ``q = IK(p)``, ``qd = J v`` (thesis eq. (16)), ``qdd = J a + [v^T H_i v]`` (thesis eq. (25)).
     Raises :class:`UnreachableError` at the first sample with no IK solution.
     """
-    model = compiled(model)
+    model = as_model(model)
     p, v, a = (np.atleast_2d(np.asarray(x, dtype=float)) for x in (p, v, a))
     q, solvable = ik_batch(model, p)
     if not solvable.all():

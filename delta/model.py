@@ -21,6 +21,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from functools import lru_cache
+from typing import Any
 from math import cos, sin
 
 import numpy as np
@@ -114,6 +115,10 @@ def build_model(robot: Robot, masses: Masses | None = None) -> Model:
     )
 
 
-def as_model(robot_or_model: Robot | Model) -> Model:
-    """A :class:`Model` for a robot preset (default masses) or the model itself."""
-    return robot_or_model if isinstance(robot_or_model, Model) else build_model(robot_or_model)
+def as_model(robot_or_model: Any) -> Model:
+    """The :class:`Model` of a robot preset (default masses), the model itself, or the model of its
+    numpy facade (:class:`delta.dynamics.AnalyticModel`, whose ``model`` it is)."""
+    if isinstance(robot_or_model, Model):
+        return robot_or_model
+    inner = getattr(robot_or_model, "model", None)
+    return inner if isinstance(inner, Model) else build_model(robot_or_model)
