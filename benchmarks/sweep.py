@@ -1,8 +1,9 @@
 """Sweep speed-up (issue 17): 8 cases on 2 Dask worker processes against the same 8 cases serially.
 
 The 8 cases are a CTC gain grid on ``scenarios/helix_ctc_analytic.yaml``, each the scenario's
-whole run (the thesis helix, 10 s simulated; ``--stop`` for another length), no logs. Serially, :func:`cosim.sweep.run_case` runs them one after another in this process
-(the FMUs built beforehand, as the sweep does); the sweep is :func:`cosim.sweep.run_sweep` on an
+whole run (the thesis helix, 10 s simulated; ``--stop`` for another length), no logs. Serially,
+:func:`cosim.sweep.run_loaded_case` runs them one after another in this process (the file read once
+and the FMUs built beforehand, as the sweep does); the sweep is :func:`cosim.sweep.run_sweep` on an
 embedded ``LocalCluster`` of 2 single-threaded worker processes, timed from the call until
 :func:`cosim.sweep.run_sweep` returns (cluster start-up and shutdown included). Both produce the
 same metrics (checked here, digit for digit). ``--repeat N`` alternates the two N times and
@@ -43,8 +44,8 @@ def main() -> int:
                     help="also time the sweep on an already running, warmed-up cluster of the same workers")
     args = ap.parse_args()
     sys.path.insert(0, str(ROOT))
-    from cosim.scenario import dotted_overrides, load_scenario
-    from cosim.sweep import Case, SweepCluster, prebuild, read_results, run_case, run_sweep
+    from cosim.scenario import dotted_overrides, load_scenario, read_scenario
+    from cosim.sweep import Case, SweepCluster, prebuild, read_results, run_loaded_case, run_sweep
 
     import statistics
 
@@ -70,7 +71,8 @@ def main() -> int:
 
     for i in range(args.repeat):
         t0 = time.perf_counter()
-        serial = [run_case(scenario, c.values, fmu_files) for c in cases]
+        source = read_scenario(scenario)  # as run_sweep: the file read once, each case validated from it
+        serial = [run_loaded_case(source.load(dotted_overrides(c.values, "sweep case")), fmu_files) for c in cases]
         t_serial.append(time.perf_counter() - t0)
         assert all(r["status"] == "ok" for r in serial), [r["message"] for r in serial]
         with tempfile.TemporaryDirectory() as tmp:
@@ -99,7 +101,7 @@ def main() -> int:
     print(f"{'':24}{'serial (1 process)':>20}{f'Dask ({args.workers} workers)':>20}   ({what}, {stop:g} s cases)")
     print(f"{'wall time, s':24}{ts:20.2f}{tp:20.2f}")
     print(f"{'per case, s':24}{ts / len(cases):20.3f}{tp / len(cases):20.3f}")
-    print(f"{'one case (run_case), s':24}{statistics.median(loops_serial):20.3f}{statistics.median(loops_worker):20.3f}")
+    print(f"{'one case, s':24}{statistics.median(loops_serial):20.3f}{statistics.median(loops_worker):20.3f}")
     print(f"speed-up {ts / tp:.2f}x (target >= 1.7x on 2 cores) with {stop:g} s simulated per case; metrics "
           f"identical; load average {os.getloadavg()[0]:.2f} after")
     if t_warm:

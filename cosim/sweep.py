@@ -53,7 +53,6 @@ __all__ = [
     "parse_grid",
     "parse_random",
     "read_results",
-    "run_case",
     "run_loaded_case",
     "run_sweep",
 ]
@@ -157,20 +156,6 @@ def make_cases(grid: dict[str, list[Any]], random: dict[str, tuple[str, float, f
     if len(set(ids)) != len(ids):
         raise SweepError("some cases repeat the same values (a grid value given twice?)")
     return cases
-
-
-def run_case(scenario: str, values: dict[str, Any], fmu_files: dict[str, str], mcap: str | None = None
-             ) -> dict[str, Any]:
-    """Run one case, the scenario file ``scenario`` with ``values`` (dotted names), here; never
-    raises for a failing case (see :func:`run_loaded_case`, which the sweep's workers run)."""
-    from .scenario import dotted_overrides, load_scenario
-
-    t0 = time.perf_counter()
-    try:
-        sc = load_scenario(scenario, dotted_overrides(values, "sweep"))
-    except Exception as exc:  # a failing case is a result, never the end of the sweep
-        return _failed(exc, t0)
-    return run_loaded_case(sc, fmu_files, mcap)
 
 
 def _failed(exc: Exception, t0: float) -> dict[str, Any]:
@@ -384,8 +369,10 @@ class SweepCluster:
         self._error: BaseException | None = None
 
     def start(self) -> "SweepCluster":
+        import logging
         import threading
 
+        logging.getLogger("distributed").setLevel(logging.ERROR)  # the process's: the cluster's and the client's
         if self.scheduler is None:
             self._thread = threading.Thread(target=self._start_local, name="sweep-cluster-start", daemon=True)
             self._thread.start()
@@ -399,7 +386,6 @@ class SweepCluster:
             import dask
             from distributed import LocalCluster
 
-            logging.getLogger("distributed").setLevel(logging.ERROR)
             n = self.workers or os.cpu_count() or 1
             with dask.config.set(WORKER_CONFIG):  # the nannies hand this configuration to their workers
                 self.cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
@@ -410,12 +396,9 @@ class SweepCluster:
             self._error = exc
 
     def __enter__(self):
-        import logging
-
         from distributed import Client
 
-        logging.getLogger("distributed").setLevel(logging.ERROR)
-        if self._thread is None:
+        if self._thread is None:  # not started yet (an embedded cluster starts here; an existing one needs nothing)
             self.start()
         if self.scheduler is not None:
             try:
