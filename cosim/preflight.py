@@ -16,7 +16,7 @@ from typing import Any
 import numpy as np
 
 from .errors import Issue, PreflightError, ScenarioError
-from .scenario import Scenario, TrajectorySpec, line_for, trajectory_params_model
+from .scenario import Scenario, TrajectorySpec, line_for
 
 __all__ = ["make_trajectory", "check_positions", "sampled_positions", "preflight", "initial_state_values", "trajectory_start_values"]
 
@@ -27,9 +27,8 @@ def make_trajectory(spec: TrajectorySpec, source: str | None = None):
     except ImportError:
         raise ScenarioError(Issue("trajectory", "delta.trajectories is not available", source)) from None
     cls = TYPES[spec.type]
-    try:  # through the typed model the scenario was checked with: YAML 1.1's '5e-2' (a string) becomes 0.05
-        params = trajectory_params_model(spec.type).model_validate(spec.params).model_dump(exclude_unset=True)
-        return cls(**params)
+    try:  # spec.params are typed by the scenario's model (TrajectorySpec._typed)
+        return cls(**spec.params)
     except (TypeError, ValueError) as exc:  # pydantic's ValidationError is a ValueError
         raise ScenarioError(Issue("trajectory.params", f"{cls.__name__}: {exc}", source)) from None
 

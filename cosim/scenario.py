@@ -159,6 +159,20 @@ class TrajectorySpec(_Model):
     singularity_margin: float | None = Field(
         0.01, ge=0, description="minimum singularity proximity along the path (None: no check)")
 
+    @field_validator("params", mode="after")
+    @classmethod
+    def _typed(cls, params: dict[str, Any], info: Any) -> dict[str, Any]:
+        """The parameters as the type's model types them (YAML 1.1's ``5e-2``, a string, becomes 0.05), so
+        every reader gets what the check accepted; parameters the model refuses are kept as written and
+        reported, with their lines, by the scenario's checks (:func:`trajectory_params_issues`)."""
+        kind = info.data.get("type")
+        if kind is None:
+            return params
+        try:
+            return trajectory_params_model(kind).model_validate(params).model_dump(exclude_unset=True)
+        except ValidationError:
+            return params
+
 
 class InitialState(_Model):
     """Start the plant on the trajectory at t = start (position and velocity).
