@@ -194,14 +194,15 @@ def scene_update(robot, p, t_ns: int, trail=None) -> dict | None:
     from delta.kinematics import actuator_points, ik, leg_axes, platform_offsets
     from delta.model import build_model
 
-    actuator = build_model(robot).actuator
+    model = build_model(robot)  # once: every helper below takes the model
+    actuator = model.actuator
     p = np.asarray(p, dtype=float)
-    res = ik(robot, p)
+    res = ik(model, p)
     if not res.ok:
         return None
-    joints_a = actuator_points(robot, res.q)  # carriage joints or elbows, (3, 3)
-    joints_p = p + platform_offsets(robot)  # platform joints, (3, 3)
-    base = actuator.radius * leg_axes(robot)  # rail tops or motor axes, z = 0
+    joints_a = actuator_points(model, res.q)  # carriage joints or elbows, (3, 3)
+    joints_p = p + platform_offsets(model)  # platform joints, (3, 3)
+    base = actuator.radius * leg_axes(model)  # rail tops or motor axes, z = 0
     colour, width = actuator.guide_style
     lines = [_line(2, actuator.guides(robot, base, joints_a), colour, width), _line(1, base, (0.5, 0.5, 0.5, 1.0))]
     lines.append(_line(2, [x for pair in zip(joints_a, joints_p) for x in pair], (0.9, 0.6, 0.1, 1.0)))
