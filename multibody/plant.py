@@ -322,7 +322,6 @@ class DeltaPlant:
         ``m v.v / 2 + w.J w / 2``.
         """
         import exudyn as exu
-        import exudyn.utilities as eu
         from exudyn.itemInterface import MassPoint, NodePoint
 
         position = [float(x) for x in position]
