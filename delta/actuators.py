@@ -45,11 +45,33 @@ def _namespace(name: str, **functions: object) -> ModuleType:
     return module
 
 
+def _check(ok, reason):  # noqa: ANN001, ANN202
+    """``ok`` itself: on numbers the caller branches on it (see :data:`SCALAR`)."""
+    return ok
+
+
+def _where_scalar(cond, a, b):  # noqa: ANN001, ANN202
+    return a if cond else b
+
+
 SCALAR = _namespace("delta.scalar_math", cos=math.cos, sin=math.sin, sqrt=math.sqrt, atan2=math.atan2,
-                    acos=math.acos, maximum=max, minimum=min)
-"""Functions of ``math`` for one pose on plain floats."""
+                    acos=math.acos, maximum=max, minimum=min, both=lambda a, b: a and b,
+                    where=_where_scalar, check=_check, isfinite=math.isfinite, symbolic=False)
+"""Functions of ``math`` for one pose on plain floats.
+
+Besides the functions, a number namespace gives the per-pose algorithms what a branch on a computed
+value needs, so that the same code also runs on symbols (``fmus.native`` traces it to C):
+
+* ``where(cond, a, b)``: ``a if cond else b`` (both are evaluated; neither may raise);
+* ``check(ok, reason)``: a condition the algorithm needs to continue on its valid path, with its
+  ``reason`` when it fails (a string, or a callable giving it). On numbers it returns ``ok`` and the
+  caller branches on it (raises, or returns a fault); on symbols it records ``(ok, reason)`` for the
+  generated code and returns True, so the trace follows the valid path;
+* ``both(a, b)``: logical and of two conditions; ``isfinite``; ``symbolic`` (False here).
+"""
 ARRAY = _namespace("delta.array_math", cos=np.cos, sin=np.sin, sqrt=np.sqrt, atan2=np.arctan2, acos=np.arccos,
-                   maximum=np.maximum, minimum=np.minimum)
+                   maximum=np.maximum, minimum=np.minimum, both=np.logical_and, where=np.where,
+                   check=_check, isfinite=np.isfinite, symbolic=False)
 """The same functions from numpy, for arrays of poses."""
 
 
@@ -194,7 +216,7 @@ class Arm:
         ratio = k / (rho + (rho == 0.0))
         clipped = ratio - (ratio > 1.0) * (ratio - 1.0) - (ratio < -1.0) * (ratio + 1.0)  # to [-1, 1]
         q = -xp.atan2(z, dx) - xp.acos(clipped)
-        return q + _TWO_PI * (q < -_PI), (rho > 0.0) & (ratio * ratio <= _RATIO_MAX2)  # to [-pi, pi)
+        return q + _TWO_PI * (q < -_PI), xp.both(rho > 0.0, ratio * ratio <= _RATIO_MAX2)  # to [-pi, pi)
 
     def inertia(self, masses: RotaryDeltaMasses) -> float:
         """``I = motor_inertia + arm La^2/3 + (elbow + 2 (1 - w) rod) La^2`` about the motor axis, kg m^2."""

@@ -14,6 +14,7 @@ import math
 
 import numpy as np
 
+from .actuators import SCALAR
 from .dynamics import AnalyticModel, gravity, inverse_dynamics
 from .errors import ParameterError
 from .model import Data, Model, as_model
@@ -45,13 +46,14 @@ def _period(cls: str, h: float) -> float:
     return float(h)
 
 
-def _clip(u0: float, u1: float, u2: float, u_max: _Vec | None) -> _Vec:
+def _clip(u0: float, u1: float, u2: float, u_max: _Vec | None, xp=SCALAR) -> _Vec:  # noqa: ANN001
     if u_max is None:
         return u0, u1, u2
     m0, m1, m2 = u_max
-    return (m0 if u0 > m0 else (-m0 if u0 < -m0 else u0),
-            m1 if u1 > m1 else (-m1 if u1 < -m1 else u1),
-            m2 if u2 > m2 else (-m2 if u2 < -m2 else u2))
+    where = xp.where
+    return (where(u0 > m0, m0, where(u0 < -m0, -m0, u0)),
+            where(u1 > m1, m1, where(u1 < -m1, -m1, u1)),
+            where(u2 > m2, m2, where(u2 < -m2, -m2, u2)))
 
 
 def _floats(x):  # noqa: ANN001, ANN202
@@ -71,6 +73,15 @@ class Controller:
     h: float
     u_max: _Vec | None
     stateful = False
+    xp = SCALAR  # the number namespace (symbols when fmus.native traces the law)
+
+    @classmethod
+    def traced(cls, xp, **fields):  # noqa: ANN001, ANN206
+        """A law whose gains, limits and period are the symbols ``fields`` (names as the attributes set by
+        ``__init__``), evaluated in the namespace ``xp``; no checks (``fmus.native`` traces it to C)."""
+        law = object.__new__(cls)
+        law.__dict__.update(fields, xp=xp)
+        return law
 
     def reset(self) -> None:
         """Clear the internal state (nothing for stateless laws)."""
@@ -104,7 +115,7 @@ class PD(Controller):
         (kp0, kp1, kp2), (kd0, kd1, kd2) = self.kp, self.kd
         return _clip(kp0 * (q_ref[0] - q[0]) + kd0 * (qd_ref[0] - qd[0]),
                      kp1 * (q_ref[1] - q[1]) + kd1 * (qd_ref[1] - qd[1]),
-                     kp2 * (q_ref[2] - q[2]) + kd2 * (qd_ref[2] - qd[2]), self.u_max)
+                     kp2 * (q_ref[2] - q[2]) + kd2 * (qd_ref[2] - qd[2]), self.u_max, self.xp)
 
     def step(self, q, qd, q_ref, qd_ref, qdd_ref) -> np.ndarray:  # noqa: ANN001
         return np.array(self.output_scalar(q, qd, q_ref, qd_ref, qdd_ref))
@@ -135,6 +146,8 @@ class PID(Controller):
 
     def _evaluate(self, q, qd, q_ref, qd_ref, qdd_ref) -> tuple[_Vec, list[float]]:  # noqa: ANN001
         q, qd, q_ref, qd_ref = _floats(q), _floats(qd), _floats(q_ref), _floats(qd_ref)
+        xp = self.xp
+        where, both = xp.where, xp.both
         u = [0.0, 0.0, 0.0]
         integral = [0.0, 0.0, 0.0]
         for i in range(3):
@@ -142,16 +155,17 @@ class PID(Controller):
             pd = self.kp[i] * e + self.kd[i] * (qd_ref[i] - qd[i])
             old = self.integral[i]
             new = old + e * self.h
-            if self.i_max is not None:
-                bound = self.i_max[i] / self.ki[i] if self.ki[i] > 0.0 else math.inf
-                new = min(max(new, -bound), bound)
-            out = pd + self.ki[i] * new
-            if self.u_max is not None and abs(out) > self.u_max[i] and out * e > 0.0 and abs(new) > abs(old):
-                new = old  # conditional integration
-                out = pd + self.ki[i] * new
+            ki = self.ki[i]
+            if self.i_max is not None:  # ki + (ki <= 0) is ki where the quotient is used: no division by 0
+                bound = where(ki > 0.0, self.i_max[i] / (ki + (ki <= 0.0)), math.inf)
+                new = xp.minimum(xp.maximum(new, -bound), bound)
+            out = pd + ki * new
+            if self.u_max is not None:  # conditional integration
+                new = where(both(both(abs(out) > self.u_max[i], out * e > 0.0), abs(new) > abs(old)), old, new)
+                out = pd + ki * new
             integral[i] = new
             u[i] = out
-        return _clip(u[0], u[1], u[2], self.u_max), integral
+        return _clip(u[0], u[1], u[2], self.u_max, xp), integral
 
     def output_scalar(self, q, qd, q_ref, qd_ref, qdd_ref) -> _Vec:  # noqa: ANN001
         return self._evaluate(q, qd, q_ref, qd_ref, qdd_ref)[0]
@@ -178,7 +192,7 @@ class PDPlus(Controller):
         (kp0, kp1, kp2), (kd0, kd1, kd2) = self.kp, self.kd
         return _clip(kp0 * (q_ref[0] - q[0]) + kd0 * (qd_ref[0] - qd[0]) + g0,
                      kp1 * (q_ref[1] - q[1]) + kd1 * (qd_ref[1] - qd[1]) + g1,
-                     kp2 * (q_ref[2] - q[2]) + kd2 * (qd_ref[2] - qd[2]) + g2, self.u_max)
+                     kp2 * (q_ref[2] - q[2]) + kd2 * (qd_ref[2] - qd[2]) + g2, self.u_max, self.model.xp)
 
     def step(self, q, qd, q_ref, qd_ref, qdd_ref) -> np.ndarray:  # noqa: ANN001
         return np.array(self.output_scalar(q, qd, q_ref, qd_ref, qdd_ref))
@@ -214,7 +228,7 @@ class CTC(Controller):
                  kp1 * (q_ref[1] - q[1]) - kd1 * qd[1],
                  kp2 * (q_ref[2] - q[2]) - kd2 * qd[2])
         u0, u1, u2 = inverse_dynamics(self.model, self.data, q, qd, w)  # thesis eq. (50)
-        return _clip(u0, u1, u2, self.u_max)
+        return _clip(u0, u1, u2, self.u_max, self.model.xp)
 
     def step(self, q, qd, q_ref, qd_ref, qdd_ref) -> np.ndarray:  # noqa: ANN001
         return np.array(self.output_scalar(q, qd, q_ref, qd_ref, qdd_ref))

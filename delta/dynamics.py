@@ -35,9 +35,18 @@ from math import isfinite
 
 import numpy as np
 
-from .actuators import SCALAR
 from .errors import ParameterError, RobotError, UnreachableError
-from .kinematics import ik_batch, inv3, leg_rates, rates_batch, serial_singularity, update
+from .kinematics import (
+    PARALLEL,
+    NO_SOLUTION,
+    SERIAL,
+    ik_batch,
+    inv3,
+    leg_rates,
+    rates_batch,
+    serial_singularity,
+    update,
+)
 from .masses import GRAVITY, LinearDeltaMasses, Masses, RotaryDeltaMasses
 from .model import Data, Model, as_model, build_model
 from .robots import Robot
@@ -54,6 +63,8 @@ __all__ = [
     "energy",
     "platform_dynamics",
     "rk4_step",
+    "platform_step",
+    "substeps",
     "integrate",
     "AnalyticModel",
     "analytic_model",
@@ -85,11 +96,11 @@ def inverse_dynamics(model: Model, data: Data, q, qd, qdd) -> Vec:  # noqa: ANN0
     y0 = mp * (j00 * r0 + j01 * r1 + j02 * r2)  # m_p a + m_p,g g e_z
     y1 = mp * (j10 * r0 + j11 * r1 + j12 * r2)
     y2 = mp * (j20 * r0 + j21 * r1 + j22 * r2) + model.platform_weight
-    gravity, w = model.actuator.gravity, model.actuator_weight
+    gravity, w, xp = model.actuator.gravity, model.actuator_weight, model.xp
     q0, q1, q2 = data.q
-    return (d * a0 + j00 * y0 + j10 * y1 + j20 * y2 + gravity(q0, w, SCALAR),
-            d * a1 + j01 * y0 + j11 * y1 + j21 * y2 + gravity(q1, w, SCALAR),
-            d * a2 + j02 * y0 + j12 * y1 + j22 * y2 + gravity(q2, w, SCALAR))
+    return (d * a0 + j00 * y0 + j10 * y1 + j20 * y2 + gravity(q0, w, xp),
+            d * a1 + j01 * y0 + j11 * y1 + j21 * y2 + gravity(q1, w, xp),
+            d * a2 + j02 * y0 + j12 * y1 + j22 * y2 + gravity(q2, w, xp))
 
 
 def mass_matrix(model: Model, data: Data, q) -> tuple[float, ...]:  # noqa: ANN001
@@ -114,15 +125,15 @@ def _platform_acceleration(model: Model, legs, q, v, f) -> Vec:  # noqa: ANN001
 
     a symmetric positive definite 3x3 system in the platform coordinates: no ``J^-1``, no ``M``."""
     d, mp = model.inertia, model.platform_mass
-    gravity, w = model.actuator.gravity, model.actuator_weight
+    gravity, w, xp = model.actuator.gravity, model.actuator_weight, model.xp
     vx, vy, vz = v
     rows = []
     for leg, qi, fi in zip(legs, q, f):
         den = leg[7]
-        if den == 0.0:
+        if not xp.check(den != 0.0, SERIAL[len(rows)]):
             raise serial_singularity(len(rows) + 1, q)
         quad = leg_rates(leg, vx, vy, vz, 0.0, 0.0, 0.0)[1]
-        rows.append((leg[0] / den, leg[1] / den, leg[2] / den, fi - gravity(qi, w, SCALAR) - d * quad))
+        rows.append((leg[0] / den, leg[1] / den, leg[2] / den, fi - gravity(qi, w, xp) - d * quad))
     (j00, j01, j02, r0), (j10, j11, j12, r1), (j20, j21, j22, r2) = rows
     b0 = j00 * r0 + j10 * r1 + j20 * r2
     b1 = j01 * r0 + j11 * r1 + j21 * r2
@@ -134,7 +145,7 @@ def _platform_acceleration(model: Model, legs, q, v, f) -> Vec:  # noqa: ANN001
     a12 = d * (j01 * j02 + j11 * j12 + j21 * j22)
     a22 = d * (j02 * j02 + j12 * j12 + j22 * j22) + mp
     ai, det = inv3(a00, a01, a02, a01, a11, a12, a02, a12, a22)
-    if det == 0.0:
+    if not xp.check(det != 0.0, PARALLEL):
         raise RobotError(f"type 2 (parallel) singularity at q = {tuple(q)}: J is singular")
     return (ai[0] * b0 + ai[1] * b1 + ai[2] * b2,
             ai[3] * b0 + ai[4] * b1 + ai[5] * b2,
@@ -158,15 +169,15 @@ def platform_dynamics(model: Model, p, v, f) -> Vec:  # noqa: ANN001
     no forward kinematics): the right-hand side of the analytic plant, which integrates in platform
     coordinates. Raises :class:`UnreachableError` when ``p`` leaves the workspace."""
     x, y, z = p
-    solve, leg_at = model.actuator.solve, model.actuator.leg
+    solve, leg_at, xp = model.actuator.solve, model.actuator.leg, model.xp
     q, legs = [], []
     for c, s, ox, oy in model.legs:
-        qi, ok = solve(x, y, z, c, s, ox, oy, SCALAR)
-        if not ok:
+        qi, ok = solve(x, y, z, c, s, ox, oy, xp)
+        if not xp.check(ok, NO_SOLUTION[len(q)]):
             raise UnreachableError(f"the platform left the workspace at p = ({x:.6g}, {y:.6g}, {z:.6g}) m: "
                                    f"leg {len(q) + 1} has no solution")
         q.append(qi)
-        legs.append(leg_at(qi, c, s, ox, oy, x, y, z, SCALAR))
+        legs.append(leg_at(qi, c, s, ox, oy, x, y, z, xp))
     return _platform_acceleration(model, legs, q, v, f)
 
 
@@ -189,7 +200,7 @@ def energy(model: Model, data: Data, q, qd) -> tuple[float, float]:  # noqa: ANN
     p, v = platform_state(model, data, q, qd)
     act, w = model.actuator, model.actuator_weight
     kinetic = 0.5 * model.inertia * sum(x * x for x in qd) + 0.5 * model.platform_mass * sum(x * x for x in v)
-    potential = sum(act.potential(x, w, SCALAR) for x in data.q) + model.platform_weight * p[2]
+    potential = sum(act.potential(x, w, model.xp) for x in data.q) + model.platform_weight * p[2]
     return kinetic, potential
 
 
@@ -226,17 +237,23 @@ def integrate(model: Model, p, v, f, h: float, max_step: float) -> tuple[Vec, Ve
     """
     if not all(isfinite(x) for x in f):
         raise ParameterError(f"non-finite effort u = {list(f)}")
-
-    def accel(x, xd):  # noqa: ANN001, ANN202
-        return platform_dynamics(model, x, xd, f)
-
-    n = max(1, -int(-h // max_step))
+    n = substeps(h, max_step)
     dt = h / n
     for _ in range(n):
-        p, v = rk4_step(accel, p, v, dt)
+        p, v = platform_step(model, p, v, f, dt)
     if not all(isfinite(x) for x in (*p, *v)):
         raise RobotError(f"the state diverged to p = {list(p)}, v = {list(v)} (effort u = {list(f)})")
     return p, v
+
+
+def substeps(h: float, max_step: float) -> int:
+    """Number of equal steps no longer than ``max_step`` that make up ``h`` (at least one)."""
+    return max(1, -int(-h // max_step))
+
+
+def platform_step(model: Model, p, v, f, dt: float) -> tuple[Vec, Vec]:  # noqa: ANN001
+    """One RK4 step of :func:`platform_dynamics` under the held efforts ``f``: the analytic plant's stage."""
+    return rk4_step(lambda x, xd: platform_dynamics(model, x, xd, f), p, v, dt)
 
 
 class AnalyticModel:

@@ -28,7 +28,7 @@ frame, m, m/s, m/s**2; ``q``, ``qd``, ``qdd`` are (3,) joint values (m or rad). 
 from __future__ import annotations
 
 from dataclasses import dataclass
-from math import inf, sqrt
+from math import inf
 
 import numpy as np
 
@@ -165,22 +165,24 @@ def inverse_kinematics(model: Model, p, v=None, a=None, limits: bool = True):  #
     if v is not None:
         vx, vy, vz = v
         ax, ay, az = _ZERO if a is None else a
-    actuator = model.actuator
+    actuator, xp = model.actuator, model.xp
     lo, hi = (model.q_min, model.q_max) if limits else (-inf, inf)
-    solve, leg_at, xp = actuator.solve, actuator.leg, SCALAR
+    solve, leg_at, check, both = actuator.solve, actuator.leg, xp.check, xp.both
     q, qd, qdd = [], [], []
     limit = 0
     try:
         for c, s, ox, oy in model.legs:
             qi, ok = solve(x, y, z, c, s, ox, oy, xp)
-            if not ok:
+            if not check(ok, NO_SOLUTION[len(q)]):
                 return None, None, None, len(q) + 1
             q.append(qi)
-            if not lo <= qi <= hi:
+            if limits and not check(both(lo <= qi, qi <= hi), BEYOND_LIMITS[len(q) - 1]):
                 limit = limit or -len(q)
             if limit or v is None:
                 continue
-            qdi, qddi = leg_rates(leg_at(qi, c, s, ox, oy, x, y, z, xp), vx, vy, vz, ax, ay, az)
+            leg = leg_at(qi, c, s, ox, oy, x, y, z, xp)
+            check(leg[7] != 0.0, SERIAL[len(q) - 1])  # numbers raise ZeroDivisionError below instead
+            qdi, qddi = leg_rates(leg, vx, vy, vz, ax, ay, az)
             qd.append(qdi)
             qdd.append(qddi)
     except ZeroDivisionError:  # l_i . B_i' = 0
@@ -191,6 +193,13 @@ def inverse_kinematics(model: Model, p, v=None, a=None, limits: bool = True):  #
 
 
 _ZERO = (0.0, 0.0, 0.0)
+NO_SOLUTION = tuple(f"leg {i} has no solution" for i in (1, 2, 3))
+"""Reasons of the per-leg checks, as generated code reports them (``fmus.native``)."""
+BEYOND_LIMITS = tuple(f"leg {i} is beyond its joint limits" for i in (1, 2, 3))
+SERIAL = tuple(f"type 1 (serial) singularity: leg {i} rod is orthogonal to its actuator motion" for i in (1, 2, 3))
+PARALLEL = "type 2 (parallel) singularity: J is singular"
+_COLLINEAR = "sphere centres are collinear (degenerate configuration)"
+_APART = "the three rods cannot meet (legs too far apart)"
 
 
 def solve_ik(model: Model, p) -> tuple[list[float] | None, int]:  # noqa: ANN001
@@ -201,8 +210,8 @@ def solve_ik(model: Model, p) -> tuple[list[float] | None, int]:  # noqa: ANN001
 
 
 def _legs(model: Model, q, x: float, y: float, z: float) -> list[tuple[float, ...]]:  # noqa: ANN001
-    leg_at = model.actuator.leg
-    return [leg_at(qi, c, s, ox, oy, x, y, z, SCALAR) for qi, (c, s, ox, oy) in zip(q, model.legs)]
+    leg_at, xp = model.actuator.leg, model.xp
+    return [leg_at(qi, c, s, ox, oy, x, y, z, xp) for qi, (c, s, ox, oy) in zip(q, model.legs)]
 
 
 def set_pose(model: Model, data: Data, q, p) -> Data:  # noqa: ANN001
@@ -230,7 +239,7 @@ def update(model: Model, data: Data, q) -> Data:  # noqa: ANN001
         raise UnreachableError(f"forward kinematics at q = {key}: {reason}")
     legs = _legs(model, key, *p)
     data.q, data.p, data.legs = None, p, legs
-    data.jinv = _jinv(legs, key)
+    data.jinv = _jinv(legs, key, model.xp)
     data.q = key
     return data
 
@@ -244,29 +253,29 @@ def _trilaterate(model: Model, q) -> tuple[tuple[float, float, float] | None, st
     nx, ny, nz = ay * bz - az * by, az * bx - ax * bz, ax * by - ay * bx
     nn = nx * nx + ny * ny + nz * nz
     aa, bb = ax * ax + ay * ay + az * az, bx * bx + by * by + bz * bz
-    if nn <= 1e-24 * max(aa, bb, 1e-300) ** 2:
-        return None, "sphere centres are collinear (degenerate configuration)"
+    xp = model.xp
+    if not xp.check(nn > 1e-24 * xp.maximum(xp.maximum(aa, bb), 1e-300) ** 2, _COLLINEAR):
+        return None, _COLLINEAR
     sx, sy, sz = aa * bx - bb * ax, aa * by - bb * ay, aa * bz - bb * az
     k = 0.5 / nn  # circumcentre of the centres' triangle, relative to the first: (s x n) / (2 |n|^2)
     ox, oy, oz = (sy * nz - sz * ny) * k, (sz * nx - sx * nz) * k, (sx * ny - sy * nx) * k
     h2 = model.rod * model.rod - (ox * ox + oy * oy + oz * oz)
-    if h2 < 0.0:
-        return None, "the three rods cannot meet (legs too far apart)"
-    down = sqrt(h2 / nn)
-    if nz > 0.0:
-        down = -down
+    if not xp.check(h2 >= 0.0, _APART):
+        return None, _APART
+    down = xp.sqrt(h2 / nn)
+    down = xp.where(nz > 0.0, -down, down)
     return (ox + down * nx - l1x, oy + down * ny - l1y, oz + down * nz - l1z), ""
 
 
-def _jinv(legs, q) -> tuple[float, ...]:  # noqa: ANN001
+def _jinv(legs, q, xp) -> tuple[float, ...]:  # noqa: ANN001
     """``J^-1`` from the legs: ``J = diag(1 / (l_i . B_i')) L`` with rows ``l_i^T`` (thesis eq. (15)), so
     ``J^-1 = L^-1 diag(l_i . B_i')``."""
     (ax, ay, az, _, _, _, _, da), (bx, by, bz, _, _, _, _, db), (cx, cy, cz, _, _, _, _, dc) = legs
-    if da == 0.0 or db == 0.0 or dc == 0.0:
-        leg = (da, db, dc).index(0.0) + 1
-        raise serial_singularity(leg, q)
+    for leg, den in enumerate((da, db, dc)):
+        if not xp.check(den != 0.0, SERIAL[leg]):
+            raise serial_singularity(leg + 1, q)
     (i00, i01, i02, i10, i11, i12, i20, i21, i22), det = inv3(ax, ay, az, bx, by, bz, cx, cy, cz)
-    if det == 0.0:
+    if not xp.check(det != 0.0, PARALLEL):
         raise RobotError(f"type 2 (parallel) singularity at q = {tuple(q)}: J is singular")
     return i00 * da, i01 * db, i02 * dc, i10 * da, i11 * db, i12 * dc, i20 * da, i21 * db, i22 * dc
 
@@ -285,9 +294,10 @@ def rates(data: Data, v, a=None) -> tuple[tuple[float, float, float], tuple[floa
     return (qd0, qd1, qd2), ((qdd0, qdd1, qdd2) if a is not None else (0.0, 0.0, 0.0))
 
 
-def proximity(data: Data) -> float:
-    """Singularity proximity of the pose in ``data`` (``_proximity``), 0 = singular."""
-    return float(_proximity(data.legs, SCALAR))
+def proximity(data: Data, xp=SCALAR) -> float:  # noqa: ANN001
+    """Singularity proximity of the pose in ``data`` (``_proximity``), 0 = singular (``xp``: the model's)."""
+    value = _proximity(data.legs, xp)
+    return value if xp.symbolic else float(value)
 
 
 # ------------------------------------------------------------------------------ batch (N, 3)

@@ -22,16 +22,15 @@ from __future__ import annotations
 from dataclasses import dataclass
 from functools import lru_cache
 from typing import Any
-from math import cos, sin
 
 import numpy as np
 
-from .actuators import Actuator, actuator_for
+from .actuators import SCALAR, Actuator, actuator_for
 from .errors import ParameterError
 from .masses import Masses
 from .robots import Robot
 
-__all__ = ["Model", "Data", "build_model", "as_model"]
+__all__ = ["Model", "Data", "build_model", "compile_model", "as_model"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -68,6 +67,9 @@ class Model:
     platform_mass: float
     platform_weight: float
     actuator_weight: float
+    xp: Any = SCALAR
+    """The number namespace of the per-pose algorithms (:data:`delta.actuators.SCALAR`; symbols when
+    ``fmus.native`` traces the formulas to C)."""
 
 
 class Data:
@@ -97,21 +99,28 @@ def build_model(robot: Robot, masses: Masses | None = None) -> Model:
     elif not isinstance(masses, actuator.masses_type):
         raise ParameterError(f"{actuator.kind} delta {robot.name!r} needs {actuator.masses_type.__name__}, "
                              f"got {type(masses).__name__}")
+    return compile_model(robot, masses, actuator)
+
+
+def compile_model(robot: Any, masses: Any, actuator: Actuator, xp: Any = SCALAR) -> Model:
+    """The :class:`Model` of validated ``robot`` and ``masses`` (or of objects with their attributes holding
+    symbols, with the symbolic namespace ``xp``: ``fmus.native``), without the checks of :func:`build_model`."""
     angles = robot.leg_angles
-    ex = tuple(cos(a) for a in angles)
-    ey = tuple(sin(a) for a in angles)
+    ex = tuple(xp.cos(a) for a in angles)
+    ey = tuple(xp.sin(a) for a in angles)
     offset = actuator.offset
     ox, oy = tuple(offset * c for c in ex), tuple(offset * s for s in ey)
     platform_lump = masses.platform + masses.payload  # + 6 w rod: three legs of two rods (thesis eq. (28))
+    arrays = (None,) * 4 if xp.symbolic else (np.array(ex), np.array(ey), np.array(ox), np.array(oy))
     return Model(
         robot=robot, masses=masses, actuator=actuator, kind=actuator.kind,
         legs=tuple(zip(ex, ey, ox, oy)),
-        ex_arr=np.array(ex), ey_arr=np.array(ey), ox_arr=np.array(ox), oy_arr=np.array(oy),
+        ex_arr=arrays[0], ey_arr=arrays[1], ox_arr=arrays[2], oy_arr=arrays[3],
         rod=actuator.rod, q_min=robot.q_min, q_max=robot.q_max,
         inertia=actuator.inertia(masses),
         platform_mass=platform_lump + 6.0 * masses.w_inertia * masses.rod,
         platform_weight=(platform_lump + 6.0 * masses.w_gravity * masses.rod) * masses.gravity,
-        actuator_weight=actuator.weight(masses),
+        actuator_weight=actuator.weight(masses), xp=xp,
     )
 
 

@@ -18,6 +18,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .actuators import SCALAR
 from .errors import ParameterError
 from .robots import Robot
 from .workspace import TrajectoryCheck, check_trajectory
@@ -156,15 +157,17 @@ class Helix(Trajectory):
         a = np.stack([-self.rx * w * w * c, -self.ry * w * w * s, np.zeros_like(t)], axis=1)
         return p, v, a
 
-    def evaluate_scalar(self, t: float) -> tuple[_Vec, _Vec, _Vec]:
-        t = float(t)
+    def evaluate_scalar(self, t: float, xp=SCALAR) -> tuple[_Vec, _Vec, _Vec]:  # noqa: ANN001
+        """Thesis eq. (27) at ``t`` in the number namespace ``xp`` (symbols: ``fmus.native``)."""
+        if not xp.symbolic:
+            t = float(t)
         w = self.omega
         wt = w * t
-        c, s = math.cos(wt), math.sin(wt)
-        rx, ry = self.rx, self.ry
+        c, s = xp.cos(wt), xp.sin(wt)
+        rx, ry, vz = self.rx, self.ry, self.vz
         return (
-            (self.centre[0] + rx * c, self.centre[1] + ry * s, self.z0 + self.vz * t),
-            (-rx * w * s, ry * w * c, float(self.vz)),
+            (self.centre[0] + rx * c, self.centre[1] + ry * s, self.z0 + vz * t),
+            (-rx * w * s, ry * w * c, vz if xp.symbolic else float(vz)),
             (-rx * w * w * c, -ry * w * w * s, 0.0),
         )
 

@@ -9,7 +9,8 @@ from delta.robots import Robot, get_preset
 
 from .._names import axis_names, joint_names
 
-__all__ = ["PRESET", "declare_robot", "robot_from", "declare_masses", "masses_from", "q_units"]
+__all__ = ["PRESET", "declare_robot", "robot_values", "robot_from", "declare_masses", "mass_values", "masses_from",
+           "q_units"]
 
 PRESET = {kind: cls.preset for kind, cls in KINDS.items()}
 """Robot preset whose geometry gives the parameter start values of each robot kind's FMUs."""
@@ -56,13 +57,18 @@ def declare_robot(fmu, kind: str) -> None:
     fmu.parameters3(joint_names("geometry.leg_angle"), robot.leg_angles, "rad", "leg angle about +z from +x")
 
 
+def robot_values(kind: str, values) -> dict:  # noqa: ANN001
+    """The robot dataclass's geometry fields of ``kind`` from parameter values (FMU name -> value or symbol)."""
+    cls = kind_of(kind).robot_type
+    out = {f.name: values[f"geometry.{f.name}"] for f in fields(cls) if f.name in _GEOMETRY}
+    out.update(leg_angles=tuple(values[n] for n in joint_names("geometry.leg_angle")),
+               q_min=values["geometry.q_min"], q_max=values["geometry.q_max"])
+    return out
+
+
 def robot_from(fmu, kind: str) -> Robot:
     """The robot described by the current ``geometry.*`` parameter values."""
-    cls = kind_of(kind).robot_type
-    values = {f.name: fmu.values[f"geometry.{f.name}"] for f in fields(cls) if f.name in _GEOMETRY}
-    return cls(name=f"{PRESET[kind]} (FMU {fmu.modelName})",
-               leg_angles=tuple(fmu.vec(joint_names("geometry.leg_angle"))),
-               q_min=fmu.values["geometry.q_min"], q_max=fmu.values["geometry.q_max"], **values)
+    return kind_of(kind).robot_type(name=f"{PRESET[kind]} (FMU {fmu.modelName})", **robot_values(kind, fmu.values))
 
 
 def _mass_class(kind: str):
@@ -77,9 +83,13 @@ def declare_masses(fmu, kind: str) -> None:
         fmu.parameter(name, float(getattr(defaults, f.name)), unit, text)
 
 
+def mass_values(kind: str, values) -> dict:  # noqa: ANN001
+    """The mass dataclass's fields of ``kind`` from parameter values (FMU name -> value or symbol)."""
+    return {f.name: values[_MASSES[f.name][0]] for f in fields(_mass_class(kind))}
+
+
 def masses_from(fmu, kind: str):
-    cls = _mass_class(kind)
-    return cls(**{f.name: fmu.values[_MASSES[f.name][0]] for f in fields(cls)})
+    return _mass_class(kind)(**mass_values(kind, fmu.values))
 
 
 def home(kind: str) -> tuple[float, float, float]:

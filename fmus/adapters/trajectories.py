@@ -73,11 +73,12 @@ class _Trajectory(Adapter):
         self.outputs3(A_REF, "m/s2", "desired platform acceleration", depends=())
 
     @classmethod
-    def from_parameters(cls, values: Mapping[str, Any]):
-        """The trajectory whose FMU parameters are ``values`` (name -> value, every name of ``PARAMS``)."""
+    def from_parameters(cls, values: Mapping[str, Any], make: Callable[..., Any] | None = None):
+        """The trajectory whose FMU parameters are ``values`` (name -> value, every name of ``PARAMS``), made by
+        ``make(**fields)`` (default: the trajectory class; ``fmus.native`` passes symbols to an unchecked one)."""
         kwargs: dict[str, Any] = {}
         for p in cls.PARAMS:
-            value = p.cast(values[p.name])
+            value = values[p.name] if make is not None else p.cast(values[p.name])
             if not p.at:
                 kwargs[p.field] = value
                 continue
@@ -89,7 +90,7 @@ class _Trajectory(Adapter):
             while len(node) <= p.at[-1]:
                 node.append(None)
             node[p.at[-1]] = value
-        return cls.CLASS(**{k: _tuples(v) for k, v in kwargs.items()})
+        return (make or cls.CLASS)(**{k: _tuples(v) for k, v in kwargs.items()})
 
     @classmethod
     def parameters_of(cls, trajectory) -> dict[str, Any]:

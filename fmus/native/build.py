@@ -1,0 +1,290 @@
+"""Build native FMUs: trace the model on symbols, generate C with CasADi, compile, zip with the sources.
+
+For FMU ``name`` (a key of :data:`fmus.native.models.MODELS`) and FMI version 2 or 3:
+
+1. the interface comes from the python adapter (:func:`fmus.native.interface.interface`);
+2. each model function (start, refresh, advance, derivatives) is traced on ``SX`` symbols: time, step,
+   the values array (one element per value reference) and the internal state; CasADi's code generator
+   writes the four as one self-contained C file (``model_functions.c``);
+3. ``model.c`` binds them to the contract of ``c/model.h`` (the variable table, which values each
+   function sets, which of its checks are errors) and the FMI glue written once (``c/runtime.c``,
+   ``c/fmi2Functions.c`` or ``c/fmi3Functions.c``) makes the FMU;
+4. the sources go into ``sources/`` (FMI 2 ``SourceFiles``, FMI 3 ``buildDescription.xml``) with the FMI
+   headers, so a tool on another platform can compile them; a binary for this platform is compiled
+   with the system C compiler (``$CC``, default ``cc``).
+
+Generated code is built into the cache, never committed. The cache key hashes every source that goes
+into a native FMU (the ``delta`` formulas, the adapters that declare the interface, this package, the C
+glue) and the CasADi version.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import shutil
+import subprocess
+import tempfile
+import zipfile
+from dataclasses import dataclass
+from pathlib import Path
+
+from .errors import CompilerMissingError, NativeError
+from .interface import Interface, interface, model_description
+from .models import MODELS, NativeModel, Result, Symbols, native_model
+
+__all__ = ["build_native", "compiler", "fingerprint", "generate", "FMI_VERSIONS"]
+
+FMI_VERSIONS = (2, 3)
+_HERE = Path(__file__).resolve().parent
+_ROOT = _HERE.parent.parent
+_GLUE = {2: ("runtime.c", "fmi2Functions.c"), 3: ("runtime.c", "fmi3Functions.c")}
+_HEADERS = {2: ("fmi2Functions.h", "fmi2FunctionTypes.h", "fmi2TypesPlatform.h"),
+            3: ("fmi3Functions.h", "fmi3FunctionTypes.h", "fmi3PlatformTypes.h")}
+_FUNCTIONS = ("start", "refresh", "advance", "derivatives")
+CFLAGS = ("-std=c99", "-O2", "-fPIC", "-shared", "-Wall", "-Wextra")
+
+
+def compiler() -> str:
+    """The C compiler to use (``$CC`` or ``cc``); raises :class:`CompilerMissingError` when there is none."""
+    cc = os.environ.get("CC", "cc")
+    if shutil.which(cc) is None:
+        raise CompilerMissingError(f"native FMUs need a C compiler: {cc!r} is not on PATH (install gcc or clang, "
+                                   f"e.g. 'apt install gcc', or set CC); the python build (fmus: python) works without")
+    return cc
+
+
+def _fmi_headers() -> Path:
+    import fmpy
+
+    return Path(fmpy.__file__).resolve().parent / "c-code"
+
+
+def fingerprint() -> str:
+    """SHA-256 of everything a native FMU is made from (the same for every native FMU of this checkout)."""
+    import casadi
+
+    h = hashlib.sha256(f"casadi {casadi.__version__}".encode())
+    files = sorted([*(_ROOT / "delta").glob("*.py"), *(_ROOT / "fmus" / "adapters").glob("*.py"),
+                    *(_ROOT / "fmus").glob("_*.py"), *_HERE.glob("*.py"), *(_HERE / "c").glob("*.[ch]")])
+    for path in files:
+        h.update(path.relative_to(_ROOT).as_posix().encode() + b"\0" + path.read_bytes() + b"\0")
+    return h.hexdigest()
+
+
+# ----------------------------------------------------------------------------- code generation
+
+@dataclass
+class _Function:
+    name: str
+    sets: list[int]  # value references the function writes, in output order
+    checks: list[tuple[str, bool]]  # (reason, is error), in output order
+    n_w: int
+    n_iw: int
+    sets_state: bool
+
+
+def _trace(model: NativeModel, itf: Interface, which: str):  # noqa: ANN202
+    import casadi as ca
+
+    from .symbolic import tracing
+
+    variables = itf.variables
+    t, h = ca.SX.sym("t"), ca.SX.sym("h")
+    values = ca.SX.sym("v", len(variables))
+    state = ca.SX.sym("s", max(model.n_state, 1))
+    sym = Symbols(t, h, {v.name: values[v.vr] for v in variables}, [state[i] for i in range(model.n_state)])
+    with tracing() as trace:
+        result: Result = getattr(model, which)(sym, trace)
+    if trace.checks:
+        raise NativeError(f"FMU {itf.name}: {which} left checks unhandled: {[r for _, r in trace.checks]}")
+    vr = {v.name: v.vr for v in variables}
+    unknown = [n for n in result.values if n not in vr]
+    if unknown:
+        raise NativeError(f"FMU {itf.name}: {which} sets {unknown}, which are not variables of the FMU")
+    sets = sorted(vr[n] for n in result.values)
+    by_vr = {vr[n]: x for n, x in result.values.items()}
+    out_values = ca.vertcat(*[ca.SX(by_vr[k]) for k in sets]) if sets else ca.SX(1, 1)
+    new_state = result.state if result.state is not None else [state[i] for i in range(model.n_state)]
+    if len(new_state) != model.n_state:
+        raise NativeError(f"FMU {itf.name}: {which} gives {len(new_state)} state values, the model has {model.n_state}")
+    out_state = ca.vertcat(*[ca.SX(x) for x in new_state]) if new_state else ca.SX(1, 1)
+    checks = result.checks
+    out_checks = ca.vertcat(*[ca.SX(c.ok) for c in checks]) if checks else ca.SX(1, 1)
+    fn = ca.Function(f"{itf.name}_{which}", [t, h, values, state], [out_values, out_state, out_checks])
+    return fn, _Function(which, sets, [(c.reason, c.error) for c in checks], fn.sz_w(), fn.sz_iw(),
+                         result.state is not None)
+
+
+def _c_string(text: str) -> str:
+    return json.dumps(text)
+
+
+def _model_c(model: NativeModel, itf: Interface, token: str, functions: list[_Function]) -> str:
+    causality = {"parameter": "CAUSALITY_PARAMETER", "input": "CAUSALITY_INPUT", "output": "CAUSALITY_OUTPUT",
+                 "local": "CAUSALITY_LOCAL", "independent": "CAUSALITY_INDEPENDENT"}
+    variability = {"constant": "VARIABILITY_CONSTANT", "fixed": "VARIABILITY_FIXED", "tunable": "VARIABILITY_TUNABLE",
+                   "discrete": "VARIABILITY_DISCRETE", "continuous": "VARIABILITY_CONTINUOUS"}
+    vtype = {"real": "TYPE_REAL", "boolean": "TYPE_BOOLEAN", "integer": "TYPE_INTEGER"}
+    vr = {v.name: v.vr for v in itf.variables}
+    checks: list[tuple[str, bool]] = []
+    for f in functions:
+        checks += f.checks
+    lines = [
+        f"/* model.c of the native FMU {itf.name}: generated by fmus.native.build; do not edit. */",
+        '#include <string.h>', '#include "model.h"', '#include "model_functions.h"', "",
+        f"const char *const MODEL_IDENTIFIER = {_c_string(itf.name)};",
+        f"const char *const MODEL_TOKEN = {_c_string(token)};",
+        f"const size_t MODEL_N_VARIABLES = {len(itf.variables)};",
+        "const ModelVariable MODEL_VARIABLES[] = {",
+        *(f"    {{{_c_string(v.name)}, {vtype[v.type]}, {causality[v.causality]}, {variability[v.variability]}, "
+          f"{float(v.start or 0.0)!r}}}," for v in itf.variables),
+        "};",
+        f"const size_t MODEL_N_STATES = {model.n_state};",
+        *([f"static const double INITIAL_STATE[] = {{{', '.join(repr(float(x)) for x in model.initial_state())}}};"]
+          if model.n_state else []),
+        f"const size_t MODEL_N_CONTINUOUS = {len(itf.states)};",
+        f"const size_t MODEL_STATE_VRS[] = {{{', '.join(str(vr[s]) for s, _ in itf.states) or '0'}}};",
+        f"const size_t MODEL_DERIVATIVE_VRS[] = {{{', '.join(str(vr[d]) for _, d in itf.states) or '0'}}};",
+        f"const size_t MODEL_N_CHECKS = {len(checks)};",
+        f"const char *const MODEL_CHECKS[] = {{{', '.join(_c_string(r) for r, _ in checks) or _c_string('')}}};",
+        f"const int MODEL_CHECK_IS_ERROR[] = {{{', '.join('1' if e else '0' for _, e in checks) or '0'}}};",
+        f"const size_t MODEL_MAX_STEP_VR = {vr[model.max_step] if model.max_step else 0};",
+        f"const int MODEL_ME_ADVANCES = {1 if model.me_advances else 0};",
+        f"const double MODEL_DEFAULT_EXPERIMENT[3] = {{{', '.join(repr(float(x)) for x in itf.experiment)}}};",
+    ]
+    if checks:
+        lines += [
+            "",
+            "/* The first failed check: an error before any warning; 0 when all hold. */",
+            "static int first_failed(const double *ok, size_t n, size_t offset) {",
+            "    size_t k;",
+            "    int warning = 0;",
+            "    for (k = 0; k < n; k++) {",
+            "        if (ok[k] != 0.0) continue;",
+            "        if (MODEL_CHECK_IS_ERROR[offset + k]) return (int)(offset + k + 1);",
+            "        if (!warning) warning = (int)(offset + k + 1);",
+            "    }",
+            "    return warning;",
+            "}",
+        ]
+    offset = 0
+    for f in functions:
+        fn = f"{itf.name}_{f.name}"
+        n_sets, n_checks = len(f.sets), len(f.checks)
+        args = "double time, double h, double *values, double *state" if f.name == "advance" else \
+            "double time, double *values, double *state"
+        lines += [
+            "",
+            f"int model_{f.name}({args}) {{",
+            f"    static const size_t sets[] = {{{', '.join(map(str, f.sets)) or '0'}}};",
+            f"    double out[{max(n_sets, 1)}], new_state[{max(model.n_state, 1)}], ok[{max(n_checks, 1)}];",
+            f"    casadi_int iw[{max(f.n_iw, 1)}];",
+            f"    casadi_real w[{max(f.n_w, 1)}];",
+            "    double h_arg = " + ("h" if f.name == "advance" else "0.0") + ";",
+            "    double state_arg[" + str(max(model.n_state, 1)) + "] = {0.0};",
+            "    const casadi_real *arg[4];",
+            "    casadi_real *res[3];",
+            "    size_t k;",
+            "    (void)sets; (void)k;",
+            f"    memcpy(state_arg, state, sizeof(double) * {model.n_state});" if model.n_state else "    (void)state;",
+            "    arg[0] = &time; arg[1] = &h_arg; arg[2] = values; arg[3] = state_arg;",
+            "    res[0] = out; res[1] = new_state; res[2] = ok;",
+            f"    if ({fn}(arg, res, iw, w, 0)) return -1;",
+        ]
+        if n_sets:
+            lines.append(f"    for (k = 0; k < {n_sets}; k++) values[sets[k]] = out[k];")
+        if f.name == "start" and model.n_state:
+            lines.append(f"    memcpy(state, INITIAL_STATE, sizeof(double) * {model.n_state});")
+        if f.sets_state and model.n_state:
+            lines.append(f"    memcpy(state, new_state, sizeof(double) * {model.n_state});")
+        lines += [f"    return first_failed(ok, {n_checks}, {offset});" if n_checks else "    (void)ok;\n    return 0;", "}"]
+        offset += n_checks
+    return "\n".join(lines) + "\n"
+
+
+def generate(name: str, out: Path, token: str) -> tuple[Interface, list[str]]:
+    """Write the generated C of FMU ``name`` (``model.c``, ``model_functions.c/.h``) into ``out``; return the
+    interface and the generated file names."""
+    import casadi as ca
+
+    model = native_model(name)
+    itf = interface(name, model)
+    traced = [_trace(model, itf, which) for which in _FUNCTIONS]
+    gen = ca.CodeGenerator("model_functions.c", {"with_header": True, "casadi_real": "double",
+                                                 "casadi_int": "long long int"})
+    for fn, _ in traced:
+        gen.add(fn)
+    gen.generate(str(out) + os.sep)
+    (out / "model.c").write_text(_model_c(model, itf, token, [f for _, f in traced]))
+    return itf, ["model_functions.c", "model.c"]
+
+
+# ----------------------------------------------------------------------------- FMU assembly
+
+def _build_description(sources: list[str]) -> bytes:
+    files = "\n".join(f'      <SourceFile name="{s}"/>' for s in sources)
+    return (f'<?xml version="1.0" encoding="UTF-8"?>\n<fmiBuildDescription fmiVersion="3.0">\n'
+            f'  <BuildConfiguration modelIdentifier="{{id}}">\n    <SourceFileSet language="C99">\n{files}\n'
+            f'    </SourceFileSet>\n  </BuildConfiguration>\n</fmiBuildDescription>\n').encode()
+
+
+def _compile(cc: str, src: Path, sources: list[str], target: Path, name: str) -> None:
+    target.parent.mkdir(parents=True, exist_ok=True)
+    cmd = [cc, *CFLAGS, "-Wno-unused-parameter", "-I", str(src), *(str(src / s) for s in sources),
+           "-o", str(target), "-lm"]
+    proc = subprocess.run(cmd, capture_output=True, text=True)
+    if proc.returncode != 0:
+        text = (proc.stderr or proc.stdout).strip().splitlines()
+        raise NativeError(f"compiling native FMU {name} failed ({cc}): " + " | ".join(text[:6]))
+
+
+def build_native(name: str, fmi: int = 2, out_dir: str | Path | None = None, *, force: bool = False) -> Path:
+    """Build (or reuse from the cache) the native FMU ``name`` for FMI ``fmi`` (2 or 3); return its path.
+
+    The file is ``<out_dir>/native/fmi<fmi>/<name>.fmu`` (default ``out_dir``: ``.fmu_cache`` in the working
+    directory). Raises :class:`CompilerMissingError` without a C compiler and :class:`NativeError` when the
+    FMU has no native build or does not compile.
+    """
+    if fmi not in FMI_VERSIONS:
+        raise NativeError(f"native FMU {name}: FMI version must be 2 or 3, got {fmi!r}")
+    if name not in MODELS:
+        native_model(name)  # raises, listing the native FMUs
+    cc = compiler()
+    from ..builder import DEFAULT_CACHE
+
+    out = (Path(out_dir) if out_dir is not None else Path.cwd() / DEFAULT_CACHE) / "native" / f"fmi{fmi}"
+    out.mkdir(parents=True, exist_ok=True)
+    target, stamp = out / f"{name}.fmu", out / f"{name}.json"
+    digest = fingerprint()
+    if not force and target.exists() and stamp.exists():
+        try:
+            if json.loads(stamp.read_text()).get("fingerprint") == digest:
+                return target
+        except json.JSONDecodeError:
+            pass
+    token = "{" + f"{digest[:8]}-{digest[8:12]}-{digest[12:16]}-{digest[16:20]}-{hashlib.sha256((digest + name).encode()).hexdigest()[:12]}" + "}"
+    with tempfile.TemporaryDirectory(prefix=f"native_{name}_") as tmp:
+        root = Path(tmp) / "fmu"
+        src = root / "sources"
+        src.mkdir(parents=True)
+        itf, generated = generate(name, src, token)
+        for f in ("model.h", "runtime.h", *_GLUE[fmi]):
+            shutil.copy2(_HERE / "c" / f, src / f)
+        for f in _HEADERS[fmi]:
+            shutil.copy2(_fmi_headers() / f, src / f)
+        sources = [*generated, *_GLUE[fmi]]
+        (root / "modelDescription.xml").write_bytes(model_description(itf, fmi, token, sources))
+        if fmi == 3:
+            (src / "buildDescription.xml").write_bytes(_build_description(sources).replace(b"{id}", name.encode()))
+        binary = root / "binaries" / ("linux64" if fmi == 2 else "x86_64-linux") / f"{name}.so"
+        _compile(cc, src, sources, binary, name)
+        partial = out / f".{name}.partial.fmu"
+        with zipfile.ZipFile(partial, "w", zipfile.ZIP_DEFLATED) as zf:
+            for path in sorted(root.rglob("*")):
+                if path.is_file():
+                    zf.write(path, path.relative_to(root).as_posix())
+        partial.replace(target)
+    stamp.write_text(json.dumps({"name": name, "fingerprint": digest, "fmi": fmi, "build": "native"}, indent=2))
+    return target

@@ -1,0 +1,222 @@
+"""The interface of a native FMU, read from its python adapter, and its modelDescription.xml (FMI 2 and 3).
+
+Each FMU's variables (names, units, start values, causality, variability, ModelStructure
+dependencies) are declared once, in its adapter's ``__init__`` (:mod:`fmus.adapters`). The native
+build instantiates that adapter (without running it) and reads its declarations, so both builds have
+one interface. Value references: 0 is the time (FMI 3's independent variable; implicit in FMI 2), then
+the adapter's variables in declaration order, then the derivatives of the model-exchange states.
+"""
+
+from __future__ import annotations
+
+import importlib
+from dataclasses import dataclass
+from xml.etree.ElementTree import Element, SubElement, indent, tostring
+
+from .._names import UNITS
+from .models import NativeModel
+
+__all__ = ["Variable", "Interface", "interface", "model_description"]
+
+
+@dataclass(frozen=True)
+class Variable:
+    """One FMI variable of a native FMU; ``vr`` indexes the C model's values array."""
+
+    vr: int
+    name: str
+    type: str  # "real" | "boolean" | "integer"
+    causality: str  # "parameter" | "input" | "output" | "local" | "independent"
+    variability: str  # "fixed" | "tunable" | "discrete" | "continuous"
+    start: float | None
+    unit: str | None
+    description: str
+    depends: tuple[str, ...] | None = None  # outputs and derivatives: the knowns they depend on directly
+    derivative_of: str | None = None  # a derivative: the state it is the derivative of
+
+
+@dataclass(frozen=True)
+class Interface:
+    name: str
+    description: str
+    variables: tuple[Variable, ...]
+    experiment: tuple[float, float, float]
+    states: tuple[tuple[str, str], ...]  # (continuous state, its derivative), model exchange
+
+    def by_name(self) -> dict[str, Variable]:
+        return {v.name: v for v in self.variables}
+
+
+def _adapter(path: str, kind: str | None, name: str):  # noqa: ANN202
+    module, cls = path.split(".")
+    base = getattr(importlib.import_module(f"fmus.adapters.{module}"), cls)
+    return type(name, (base,), {"KIND": kind})(instance_name=name, resources="", visible=False)
+
+
+def interface(name: str, model: NativeModel) -> Interface:
+    """The interface of FMU ``name``: its adapter's variables, plus the model-exchange states' derivatives."""
+    adapter = _adapter(model.adapter, model.kind, name)
+    variables = [Variable(0, "time", "real", "independent", "continuous", None, "s", "simulation time")]
+    state_deps: dict[str, tuple[str, ...]] = {}
+    me = None
+    if model.continuous:
+        me = _adapter(model.me_adapter, model.kind, name)
+        state_deps = dict(me._depends)
+    for spec in adapter.specs:
+        depends = None
+        if spec.causality == "output":
+            extra = tuple(d for d in state_deps.get(spec.name, ()) if d not in spec.depends)
+            depends = tuple(spec.depends) + extra
+        variables.append(Variable(len(variables), spec.name, spec.kind, spec.causality, spec.variability,
+                                  None if spec.causality == "output" else float(spec.start), spec.unit,
+                                  spec.description, depends))
+    units = {v.name: v.unit for v in variables}
+    for state, der in model.continuous:
+        der_var = next((v for v in me.vars.values() if v.name == der), None)
+        variables.append(Variable(len(variables), der, "real", "local", "continuous", None,
+                                  getattr(der_var, "unit", None) or units.get(state),
+                                  f"time derivative of {state}", state_deps.get(der, ()), state))
+    missing = [s for s, _ in model.continuous if s not in units]
+    if missing:
+        raise ValueError(f"FMU {name}: model-exchange states {missing} are not variables of {model.adapter}")
+    return Interface(name, adapter.description, tuple(variables), tuple(adapter.EXPERIMENT), model.continuous)
+
+
+# ----------------------------------------------------------------------------- modelDescription.xml
+
+def _initial(v: Variable) -> str | None:
+    if v.causality in ("output", "local"):
+        return "calculated"
+    if v.causality == "parameter":
+        return "exact"
+    return None
+
+
+def _units(root: Element, variables) -> None:  # noqa: ANN001
+    used = sorted({v.unit for v in variables if v.unit is not None})
+    if not used:
+        return
+    defs = SubElement(root, "UnitDefinitions")
+    for unit in used:
+        SubElement(SubElement(defs, "Unit", name=unit), "BaseUnit", {k: str(e) for k, e in UNITS[unit].items() if e})
+
+
+def _fmt(x: float) -> str:
+    return repr(float(x))
+
+
+def model_description(itf: Interface, fmi: int, token: str, sources: list[str]) -> bytes:
+    """modelDescription.xml of the native FMU for FMI ``fmi`` (2 or 3): co-simulation and model exchange."""
+    if fmi == 2:
+        return _fmi2(itf, token, sources)
+    return _fmi3(itf, token)
+
+
+def _fmi2(itf: Interface, token: str, sources: list[str]) -> bytes:
+    variables = [v for v in itf.variables if v.causality != "independent"]
+    index = {v.name: i + 1 for i, v in enumerate(variables)}
+    root = Element("fmiModelDescription", fmiVersion="2.0", modelName=itf.name, guid=token,
+                   description=itf.description, generationTool="delta-cosim fmus.native (CasADi)",
+                   variableNamingConvention="structured", numberOfEventIndicators="0")
+    for element in ("ModelExchange", "CoSimulation"):
+        attrs = {"modelIdentifier": itf.name, "canGetAndSetFMUstate": "true", "canSerializeFMUstate": "true"}
+        if element == "CoSimulation":
+            attrs.update(canHandleVariableCommunicationStepSize="true")
+        node = SubElement(root, element, attrs)
+        files = SubElement(node, "SourceFiles")
+        for src in sources:
+            SubElement(files, "File", name=src)
+    _units(root, variables)
+    SubElement(root, "LogCategories")
+    SubElement(root, "DefaultExperiment", startTime=_fmt(itf.experiment[0]), stopTime=_fmt(itf.experiment[1]),
+               stepSize=_fmt(itf.experiment[2]))
+    mvars = SubElement(root, "ModelVariables")
+    for v in variables:
+        attrs = {"name": v.name, "valueReference": str(v.vr), "description": v.description,
+                 "causality": v.causality, "variability": v.variability}
+        if v.type == "real" and v.variability != "continuous" and v.causality == "output":
+            attrs["variability"] = "discrete"
+        initial = _initial(v)
+        if initial:
+            attrs["initial"] = initial
+        sv = SubElement(mvars, "ScalarVariable", attrs)
+        if v.type == "real":
+            real = {"unit": v.unit} if v.unit else {}
+            if v.start is not None:
+                real["start"] = _fmt(v.start)
+            if v.derivative_of is not None:
+                real["derivative"] = str(index[v.derivative_of])
+            SubElement(sv, "Real", real)
+        elif v.type == "boolean":
+            SubElement(sv, "Boolean", {} if v.start is None else {"start": "true" if v.start else "false"})
+        else:
+            SubElement(sv, "Integer", {} if v.start is None else {"start": str(int(v.start))})
+    structure = SubElement(root, "ModelStructure")
+    outputs = [v for v in variables if v.causality == "output"]
+    if outputs:
+        node = SubElement(structure, "Outputs")
+        for v in outputs:
+            deps = " ".join(str(index[d]) for d in sorted(v.depends or (), key=index.get))
+            SubElement(node, "Unknown", index=str(index[v.name]), dependencies=deps)
+    derivatives = [v for v in variables if v.derivative_of is not None]
+    if derivatives:
+        node = SubElement(structure, "Derivatives")
+        for v in derivatives:
+            deps = " ".join(str(index[d]) for d in sorted(v.depends or (), key=index.get))
+            SubElement(node, "Unknown", index=str(index[v.name]), dependencies=deps)
+    unknowns = sorted({index[v.name] for v in outputs + derivatives}
+                      | {index[s] for s, _ in itf.states})
+    if unknowns:
+        node = SubElement(structure, "InitialUnknowns")
+        for i in unknowns:
+            SubElement(node, "Unknown", index=str(i))
+    indent(root)
+    return b'<?xml version="1.0" encoding="UTF-8"?>\n' + tostring(root, encoding="utf-8") + b"\n"
+
+
+def _fmi3(itf: Interface, token: str) -> bytes:
+    vr = {v.name: v.vr for v in itf.variables}
+    root = Element("fmiModelDescription", fmiVersion="3.0", modelName=itf.name, instantiationToken=token,
+                   description=itf.description, generationTool="delta-cosim fmus.native (CasADi)",
+                   variableNamingConvention="structured")
+    common = {"modelIdentifier": itf.name, "canGetAndSetFMUState": "true", "canSerializeFMUState": "true"}
+    SubElement(root, "ModelExchange", common)
+    SubElement(root, "CoSimulation", dict(common, canHandleVariableCommunicationStepSize="true",
+                                          providesIntermediateUpdate="false", hasEventMode="false"))
+    _units(root, itf.variables)
+    SubElement(root, "DefaultExperiment", startTime=_fmt(itf.experiment[0]), stopTime=_fmt(itf.experiment[1]),
+               stepSize=_fmt(itf.experiment[2]))
+    mvars = SubElement(root, "ModelVariables")
+    for v in itf.variables:
+        attrs = {"name": v.name, "valueReference": str(v.vr), "description": v.description,
+                 "causality": v.causality, "variability": v.variability}
+        if v.type == "real" and v.variability != "continuous" and v.causality == "output":
+            attrs["variability"] = "discrete"
+        initial = _initial(v)
+        if initial:
+            attrs["initial"] = initial
+        if v.start is not None:
+            attrs["start"] = ("true" if v.start else "false") if v.type == "boolean" else (
+                _fmt(v.start) if v.type == "real" else str(int(v.start)))
+        if v.type == "real":
+            if v.unit:
+                attrs["unit"] = v.unit
+            if v.derivative_of is not None:
+                attrs["derivative"] = str(vr[v.derivative_of])
+        tag = {"real": "Float64", "boolean": "Boolean", "integer": "Int32"}[v.type]
+        if v.type == "boolean" and attrs["variability"] == "continuous":
+            attrs["variability"] = "discrete"
+        SubElement(mvars, tag, attrs)
+    structure = SubElement(root, "ModelStructure")
+    outputs = [v for v in itf.variables if v.causality == "output"]
+    derivatives = [v for v in itf.variables if v.derivative_of is not None]
+    for v in outputs:
+        SubElement(structure, "Output", valueReference=str(v.vr),
+                   dependencies=" ".join(str(vr[d]) for d in sorted(v.depends or (), key=vr.get)))
+    for v in derivatives:
+        SubElement(structure, "ContinuousStateDerivative", valueReference=str(v.vr),
+                   dependencies=" ".join(str(vr[d]) for d in sorted(v.depends or (), key=vr.get)))
+    for i in sorted({v.vr for v in outputs + derivatives} | {vr[s] for s, _ in itf.states}):
+        SubElement(structure, "InitialUnknown", valueReference=str(i))
+    indent(root)
+    return b'<?xml version="1.0" encoding="UTF-8"?>\n' + tostring(root, encoding="utf-8") + b"\n"

@@ -1,0 +1,314 @@
+"""What each native FMU computes, written as calls of the ``delta/`` formulas on symbols.
+
+A native model is the behaviour of one python adapter (:mod:`fmus.adapters`) over the same interface:
+its variables are the adapter's, read from the adapter itself (:mod:`fmus.native.interface`), and its
+functions call the same :mod:`delta` algorithms the adapter calls, with a model compiled on symbols
+(:func:`fmus.native.symbolic.symbolic_model`). They return :class:`Result` records:
+the variables they set, the new internal state, and the checks the formulas recorded, each an error
+(the FMI call fails with the reason logged) or a warning (logged once when it starts failing).
+
+The functions, as the C glue calls them (``fmus/native/c/model.h``):
+
+* ``start``: initial internal state (and model-exchange states) from the parameters;
+* ``refresh``: outputs from inputs, parameters, time and state (may update a held state);
+* ``advance``: the internal state over one co-simulation substep ``h``;
+* ``derivatives``: model exchange: state derivatives and outputs (default: ``refresh``).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any, Callable
+
+import casadi as ca
+
+from delta.actuators import kind_of
+from delta.control import CTC, DEFAULT_GAINS, PD, PID, PDPlus
+from delta.dynamics import forward_dynamics, platform_state, platform_step
+from delta.kinematics import inverse_kinematics, proximity, set_pose
+from delta.model import Data
+from delta.trajectories import TYPES
+
+from .._names import axis_names, joint_names
+from ..adapters.common import P0, V0, mass_values, robot_values
+from .symbolic import SYMBOLIC, Trace, instance, symbolic_model
+
+__all__ = ["Check", "Result", "Symbols", "NativeModel", "MODELS", "native_model"]
+
+P, V = tuple(axis_names("p")), tuple(axis_names("v"))
+P_REF, V_REF, A_REF = (tuple(axis_names(n)) for n in ("p_ref", "v_ref", "a_ref"))
+Q, QD, U = (tuple(joint_names(n)) for n in ("q", "qd", "u"))
+Q_REF, QD_REF, QDD_REF = (tuple(joint_names(n)) for n in ("q_ref", "qd_ref", "qdd_ref"))
+DQ, DQD = tuple(f"der({n})" for n in Q), tuple(f"der({n})" for n in QD)
+
+
+@dataclass(frozen=True)
+class Check:
+    """A condition (an ``SX``, 1 where it holds) and what it means when it fails."""
+
+    ok: Any
+    reason: str
+    error: bool = True
+
+
+@dataclass
+class Result:
+    """What one model function gives: variable values it sets, the new state (None: unchanged), checks."""
+
+    values: dict[str, Any] = field(default_factory=dict)
+    state: list[Any] | None = None
+    checks: list[Check] = field(default_factory=list)
+
+
+@dataclass
+class Symbols:
+    """The arguments of a traced function: time, step, every variable by name, the internal state."""
+
+    t: Any
+    h: Any
+    v: dict[str, Any]
+    s: list[Any]
+
+    def vec(self, names) -> tuple[Any, ...]:  # noqa: ANN001
+        return tuple(self.v[n] for n in names)
+
+
+def _errors(trace: Trace, prefix: str = "") -> list[Check]:
+    return [Check(ok, prefix + reason) for ok, reason in trace.take()]
+
+
+def _all(conditions) -> Any:  # noqa: ANN001
+    out = ca.SX(1)
+    for c in conditions:
+        out = ca.logic_and(out, c)
+    return out
+
+
+class NativeModel:
+    """Base: a model with no state, no substeps and no continuous states.
+
+    ``adapter`` names the python adapter whose interface the FMU has (``module.Class``, in
+    :mod:`fmus.adapters`); ``me_adapter`` the model-exchange adapter whose continuous states and
+    derivatives it adds (if any); ``kind`` the robot kind (None: robot-independent).
+    """
+
+    n_state = 0
+    max_step: str | None = None  # the parameter that bounds one advance, if any
+    me_advances = False
+    continuous: tuple[tuple[str, str], ...] = ()  # (state, derivative) variable names
+
+    def __init__(self, adapter: str, kind: str | None, me_adapter: str | None = None) -> None:
+        self.adapter, self.kind, self.me_adapter = adapter, kind, me_adapter
+
+    def initial_state(self) -> list[float]:
+        return [0.0] * self.n_state
+
+    def model(self, sym: Symbols, trace: Trace):  # noqa: ANN201
+        """The robot model compiled on the symbols of the ``geometry.*`` and ``mass.*`` parameters."""
+        masses = mass_values(self.kind, sym.v) if all(n in sym.v for n in ("mass.rod", "model.gravity")) else None
+        return symbolic_model(self.kind, robot_values(self.kind, sym.v), masses)
+
+    def start(self, sym: Symbols, trace: Trace) -> Result:
+        return Result()
+
+    def refresh(self, sym: Symbols, trace: Trace) -> Result:
+        return Result()
+
+    def advance(self, sym: Symbols, trace: Trace) -> Result:
+        return Result()
+
+    def derivatives(self, sym: Symbols, trace: Trace) -> Result:
+        return self.refresh(sym, trace)
+
+
+# ----------------------------------------------------------------------------- trajectories
+
+class Trajectory(NativeModel):
+    """``p_ref, v_ref, a_ref`` at the FMU's time from the trajectory's ``evaluate_scalar`` (no inputs)."""
+
+    def __init__(self, adapter: str, trajectory: str) -> None:
+        super().__init__(adapter, None)
+        self.trajectory = trajectory
+
+    def refresh(self, sym: Symbols, trace: Trace) -> Result:
+        from ..adapters.trajectories import ADAPTERS
+
+        adapter = ADAPTERS[self.trajectory]
+        traj = adapter.from_parameters(sym.v, make=lambda **f: instance(TYPES[self.trajectory], **f))
+        p, v, a = traj.evaluate_scalar(sym.t, SYMBOLIC)
+        return Result(dict(zip(P_REF + V_REF + A_REF, (*p, *v, *a))), checks=_errors(trace))
+
+
+# ----------------------------------------------------------------------------- kinematics
+
+class InverseKinematics(NativeModel):
+    """As :class:`fmus.adapters.kinematics.InverseKinematics`: the joint references of ``p_ref, v_ref,
+    a_ref``; an unreachable reference (no solution, a joint limit, or a singularity proximity below
+    ``singularity.margin`` > 0) drops ``reachable`` and holds the last reachable references (the state).
+    A type 1 singularity with ``singularity.margin`` <= 0 is an error, as in the python build."""
+
+    n_state = 9  # the last reachable q_ref, qd_ref, qdd_ref
+
+    def refresh(self, sym: Symbols, trace: Trace) -> Result:
+        model = self.model(sym, trace)
+        p = sym.vec(P_REF)
+        q, qd, qdd, _ = inverse_kinematics(model, p, sym.vec(V_REF), sym.vec(A_REF))
+        faults = trace.take()  # no solution / beyond the limits per leg, and the type 1 singularities
+        solvable = [c for c, r in faults if "singularity" not in r]
+        serial = [c for c, r in faults if "singularity" in r]
+        margin = sym.v["singularity.margin"]
+        fault = ca.logic_not(_all(solvable))
+        value = proximity(set_pose(model, Data(), q, p), SYMBOLIC)
+        near = ca.logic_and(margin > 0.0, value < margin)
+        reachable = ca.logic_and(ca.logic_not(fault), ca.logic_not(near))
+        new = (*q, *qd, *qdd)
+        held = [ca.if_else(reachable, x, s) for x, s in zip(new, sym.s)]
+        checks = [Check(ok, f"p_ref is unreachable: {reason}; joint references hold their last reachable values",
+                        error=False) for ok, reason in faults if "singularity" not in reason]
+        checks.append(Check(ca.logic_or(fault, ca.logic_not(near)),
+                            "p_ref is unreachable: too close to a singularity (proximity below singularity.margin); "
+                            "joint references hold their last reachable values", error=False))
+        checks += [Check(ca.logic_or(ca.logic_or(fault, margin > 0.0), ok), reason)
+                   for ok, reason in zip(serial, (r for _, r in faults if "singularity" in r))]
+        checks += _errors(trace)
+        values = dict(zip(Q_REF + QD_REF + QDD_REF, held))
+        values.update({"reachable": reachable, "singularity.proximity": ca.if_else(fault, 0.0, value)})
+        return Result(values, held, checks)
+
+
+# ----------------------------------------------------------------------------- controllers
+
+class Controller(NativeModel):
+    """As :class:`fmus.adapters.controllers._Controller`: ``u`` from the law's ``output_scalar`` on the inputs,
+    gains and ``limit.u_max`` (0 = no saturation) as parameters."""
+
+    LAW: type = PD
+    GAINS: tuple[str, ...] = ("kp", "kd")
+    MODEL_BASED = False
+    FIXED: dict[str, Any] = {}  # law attributes the FMU does not expose
+
+    def law(self, sym: Symbols, trace: Trace, h: Any, **state: Any):  # noqa: ANN201
+        u_max = sym.v["limit.u_max"]
+        bound = ca.if_else(u_max != 0.0, u_max, ca.inf)  # the python build: `u_max or None`
+        fields = {g: sym.vec(joint_names(f"gain.{g}")) for g in self.GAINS}
+        fields.update(h=h, u_max=(bound, bound, bound), **self.FIXED, **state)
+        if self.MODEL_BASED:
+            fields.update(model=self.model(sym, trace), data=Data())
+        return self.LAW.traced(SYMBOLIC, **fields)
+
+    def inputs(self, sym: Symbols) -> tuple[tuple[Any, ...], ...]:
+        return tuple(sym.vec(n) for n in (Q, QD, Q_REF, QD_REF, QDD_REF))
+
+    def refresh(self, sym: Symbols, trace: Trace) -> Result:
+        u = self.law(sym, trace, sym.h).output_scalar(*self.inputs(sym))
+        return Result(dict(zip(U, u)), checks=_errors(trace))
+
+
+class PDPlusController(Controller):
+    LAW, MODEL_BASED = PDPlus, True
+
+
+class CTCController(Controller):
+    LAW, MODEL_BASED, FIXED = CTC, True, {"feedforward": True}
+
+
+class PIDController(Controller):
+    """PID: the state is the integral and the period of the last step (the python build makes a new law,
+    with a zero integral, when the step size changes; before the first step it assumes the default step)."""
+
+    LAW, GAINS = PID, ("kp", "ki", "kd")
+    n_state = 4  # integral[3], h of the last step
+
+    def initial_state(self) -> list[float]:
+        from ..adapters.controllers import PIDController as Adapter
+
+        return [0.0, 0.0, 0.0, Adapter.EXPERIMENT[2]]
+
+    def law(self, sym: Symbols, trace: Trace, h: Any, **state: Any):  # noqa: ANN201
+        law = super().law(sym, trace, h, **state)
+        law.i_max = law.u_max
+        return law
+
+    def refresh(self, sym: Symbols, trace: Trace) -> Result:
+        u = self.law(sym, trace, sym.s[3], integral=list(sym.s[:3])).output_scalar(*self.inputs(sym))
+        return Result(dict(zip(U, u)), checks=_errors(trace))
+
+    def advance(self, sym: Symbols, trace: Trace) -> Result:
+        same = sym.h == sym.s[3]
+        integral = [ca.if_else(same, x, 0.0) for x in sym.s[:3]]
+        _, integral = self.law(sym, trace, sym.h, integral=integral)._evaluate(*self.inputs(sym))
+        return Result(state=[*integral, sym.h], checks=_errors(trace))
+
+
+# ----------------------------------------------------------------------------- analytic plant
+
+class AnalyticPlant(NativeModel):
+    """As :class:`fmus.adapters.plants.AnalyticPlant` (co-simulation: RK4 in platform coordinates, the state
+    ``p, v``, substeps of at most ``solver.max_step``) and :class:`fmus.adapters.plant_me.AnalyticPlantME`
+    (model exchange: states ``q, qd``, ``qdd`` from the forward dynamics) in one model."""
+
+    n_state = 6
+    max_step = "solver.max_step"
+    continuous = tuple(zip(Q + QD, DQ + DQD))
+
+    def start(self, sym: Symbols, trace: Trace) -> Result:
+        model = self.model(sym, trace)
+        p0, v0 = sym.vec(P0), sym.vec(V0)
+        q, qd, _, _ = inverse_kinematics(model, p0, v0)
+        checks = _errors(trace, "initial platform state: ")
+        max_step = sym.v["solver.max_step"]
+        checks.append(Check(ca.logic_and(max_step > 0.0, SYMBOLIC.isfinite(max_step)),
+                            "solver.max_step must be a time > 0 s"))
+        return Result(dict(zip(Q + QD, (*q, *qd))), [*p0, *v0], checks)
+
+    def refresh(self, sym: Symbols, trace: Trace) -> Result:
+        model = self.model(sym, trace)
+        p, v = sym.s[:3], sym.s[3:]
+        checks = [Check(_all(SYMBOLIC.isfinite(x) for x in sym.s), "the state diverged (not finite)")]
+        q, qd, _, _ = inverse_kinematics(model, p, v, limits=False)  # the step's end is no RK stage
+        checks += _errors(trace, "the platform left the workspace: ")
+        return Result(dict(zip(Q + QD + P + V, (*q, *qd, *p, *v))), checks=checks)
+
+    def advance(self, sym: Symbols, trace: Trace) -> Result:
+        model = self.model(sym, trace)
+        u = sym.vec(U)
+        checks = [Check(_all(SYMBOLIC.isfinite(x) for x in u), "non-finite effort u")]
+        p, v = platform_step(model, sym.s[:3], sym.s[3:], u, sym.h)
+        checks += _errors(trace)
+        return Result(state=[*p, *v], checks=checks)
+
+    def derivatives(self, sym: Symbols, trace: Trace) -> Result:
+        model, data = self.model(sym, trace), Data()
+        q, qd = sym.vec(Q), sym.vec(QD)
+        qdd = forward_dynamics(model, data, q, qd, sym.vec(U))
+        p, v = platform_state(model, data, q, qd)
+        values = dict(zip(DQ + DQD + P + V, (*qd, *qdd, *p, *v)))
+        return Result(values, checks=_errors(trace))
+
+
+def _entries() -> dict[str, Callable[[], NativeModel]]:
+    table: dict[str, Callable[[], NativeModel]] = {"helix": lambda: Trajectory("trajectories.HelixTrajectory", "helix")}
+    laws = {"pd": Controller, "pid": PIDController, "pdplus": PDPlusController, "ctc": CTCController}
+    classes = {"pd": "PDController", "pid": "PIDController", "pdplus": "PDPlusController", "ctc": "CTCController"}
+    for kind in ("linear", "rotary"):
+        kind_of(kind)
+        table[f"{kind}_ik"] = lambda k=kind: InverseKinematics("kinematics.InverseKinematics", k)
+        for law, cls in laws.items():
+            table[f"{kind}_{law}"] = lambda k=kind, c=cls, a=classes[law]: c(f"controllers.{a}", k)
+        for name in (f"{kind}_analytic_plant", f"{kind}_analytic_plant_me"):
+            table[name] = lambda k=kind: AnalyticPlant("plants.AnalyticPlant", k, "plant_me.AnalyticPlantME")
+    assert set(DEFAULT_GAINS["linear"]) >= set(laws)
+    return table
+
+
+MODELS = _entries()
+"""FMU name (as :mod:`fmus.registry` names it) -> its native model, for every FMU that has a native build."""
+
+
+def native_model(name: str) -> NativeModel:
+    from .errors import NativeError
+
+    try:
+        return MODELS[name]()
+    except KeyError:
+        raise NativeError(f"FMU {name!r} has no native build; native FMUs: {', '.join(MODELS)}") from None
