@@ -71,14 +71,14 @@ def progress_bar():
 def locate_fmus(scenario: Scenario, fmu_files: Mapping[str, str | Path] | None = None) -> dict[str, FMUInfo]:
     """Each component's FMU: ``path`` relative to the scenario file, or ``fmu`` built by fmus.registry.
 
-    ``fmu_files``: our FMUs already built, by name (a sweep builds them once for every case);
+    ``fmu_files``: our FMUs already built, by :func:`build_key` (a sweep builds them once for every case);
     the others are built here.
     """
     base = Path(scenario.source).parent if scenario.source and scenario.source != "<string>" else Path.cwd()
     lines = scenario._lines
     infos: dict[str, FMUInfo] = {}
     issues: list[Issue] = []
-    built = {n: Path(p) for n, p in (fmu_files or {}).items()}
+    built = {k: Path(p) for k, p in (fmu_files or {}).items()}
     for name, comp in scenario.components.items():
         loc = ("components", name, "fmu" if comp.fmu else "path")
         where = dict(file=scenario.source, line=line_for(loc, lines))
@@ -90,9 +90,10 @@ def locate_fmus(scenario: Scenario, fmu_files: Mapping[str, str | Path] | None =
                     issues.append(Issue(f"components.{name}.path", f"FMU file not found: {path}", **where))
                     continue
             else:
-                if comp.fmu not in built:
-                    built[comp.fmu] = build_ours(comp.fmu)
-                path = built[comp.fmu]
+                key = build_key(scenario, comp.fmu)
+                if key not in built:
+                    built[key] = build_ours(*key)
+                path = built[key]
             infos[name] = load_fmu(path)
         except ComponentSourceError as exc:
             issues += [Issue(f"components.{name}", i.message, **where) for i in exc.issues]
@@ -101,14 +102,27 @@ def locate_fmus(scenario: Scenario, fmu_files: Mapping[str, str | Path] | None =
     return infos
 
 
-def build_ours(name: str) -> Path:
+def build_key(scenario: Scenario, name: str) -> tuple[str, bool, int]:
+    """(FMU name, native, FMI version) of our FMU ``name`` in ``scenario``: the native build where the scenario asks
+    for it (``fmus: native``) and the FMU has one, else the python build (FMI 2 co-simulation, or 3 for ``*_me``)."""
+    if scenario.fmus == "native":
+        from fmus import registry
+
+        if name in registry.native_names():
+            return name, True, scenario.native_fmi
+    return name, False, 2
+
+
+def build_ours(name: str, native: bool = False, fmi: int = 2) -> Path:
+    """Our FMU ``name``, built (or taken from the cache): the python build, or with ``native`` the C build for FMI
+    ``fmi``. A native build that cannot be made (no C compiler) is one line naming what is missing."""
     try:
         from fmus import registry
     except ImportError:
         raise ComponentSourceError(Issue("", f"fmu: {name}: our FMU registry (fmus.registry) is not available; "
                                              "give 'path' to an .fmu instead")) from None
     try:
-        return Path(registry.build(name))
+        return Path(registry.build(name, native=native, fmi=fmi))
     except (KeyError, ValueError, LookupError) as exc:
         known = getattr(registry, "names", None)
         hint = f"; known: {', '.join(known())}" if callable(known) else ""

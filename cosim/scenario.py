@@ -261,6 +261,12 @@ class Scenario(_Model):
     connections: list[Connection] = Field(default_factory=list)
     time: TimeGrid
     algorithm: Literal["gauss_seidel", "jacobi"] = "gauss_seidel"
+    fmus: Literal["python", "native"] = Field(
+        "python", description="build of our FMUs (components given by 'fmu:'): 'python' (pythonfmu) or 'native' (C "
+                              "generated from the same formulas; FMUs without a native build, the Exudyn plants, stay "
+                              "python). Needs a C compiler")
+    native_fmi: Literal[2, 3] = Field(2, description="FMI version of the native FMUs (both have co-simulation and "
+                                                     "model exchange)")
     parallel: Union[Literal["auto", "on", "off"], bool] = Field(
         "auto", description="run the feed-forward components (inputs only from each other, e.g. trajectory -> IK) "
                             "ahead in a worker process on another core; same values as serial. auto: when 2 CPUs "

@@ -164,11 +164,12 @@ def _failed(exc: Exception, t0: float) -> dict[str, Any]:
             "checks": "", "mcap": "", "wall_time_s": time.perf_counter() - t0}
 
 
-def run_loaded_case(scenario: Scenario, fmu_files: dict[str, str], mcap: str | None = None) -> dict[str, Any]:
+def run_loaded_case(scenario: Scenario, fmu_files: dict[tuple[str, bool, int], str],
+                    mcap: str | None = None) -> dict[str, Any]:
     """Run one case, a loaded :class:`~cosim.scenario.Scenario` (in a Dask worker, or here); never
     raises for a failing case.
 
-    ``fmu_files``: our FMUs by name, built beforehand. The run is serial in its process
+    ``fmu_files``: our FMUs by :func:`cosim.run.build_key`, built beforehand. The run is serial in its process
     (``parallel: off``: the sweep already uses the cores). Returns the row of ``results.csv``
     without the parameter columns: status, message, metrics, checks, mcap.
     """
@@ -229,15 +230,15 @@ def read_results(out: str | Path) -> list[dict[str, str]]:
         return list(csv.DictReader(f))
 
 
-def prebuild(scenarios: Iterable[Any]) -> dict[str, str]:
-    """Build each of our FMUs the cases use, once; name -> absolute path."""
-    from .run import build_ours
+def prebuild(scenarios: Iterable[Any]) -> dict[tuple[str, bool, int], str]:
+    """Build each of our FMUs the cases use, once; :func:`cosim.run.build_key` -> absolute path."""
+    from .run import build_key, build_ours
 
-    names = sorted({c.fmu for sc in scenarios for c in sc.components.values() if c.fmu is not None})
-    return {n: str(Path(build_ours(n)).resolve()) for n in names}
+    keys = sorted({build_key(sc, c.fmu) for sc in scenarios for c in sc.components.values() if c.fmu is not None})
+    return {k: str(Path(build_ours(*k)).resolve()) for k in keys}
 
 
-def _check_names(scenarios: list[Any], fmu_files: dict[str, str]) -> None:
+def _check_names(scenarios: list[Any], fmu_files: dict[tuple[str, bool, int], str]) -> None:
     """Resolve every case's parameter names and values against the FMUs (no instantiation), so a
     misspelt name stops the sweep before it starts (ScenarioError / WiringError, exit 2)."""
     from .run import locate_fmus

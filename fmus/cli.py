@@ -18,9 +18,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     fmus = subparsers.add_parser("fmus", help="build and list the component FMUs")
     sub = fmus.add_subparsers(dest="fmus_command", required=True, metavar="{build,list}")
     p = sub.add_parser("build", help="build every FMU (or the named ones), cached by a hash of its sources")
-    p.add_argument("names", nargs="*", help="FMU names (default: every buildable FMU)")
-    p.add_argument("--out", default=None, help="cache directory (default .fmu_cache)")
+    p.add_argument("names", nargs="*", help="FMU names (default: every buildable FMU; with --native every FMU that "
+                                            "has a native build)")
+    p.add_argument("--out", default=None, help="cache directory (default .fmu_cache; native FMUs go to "
+                                               "OUT/native/fmi2 and OUT/native/fmi3)")
     p.add_argument("--force", action="store_true", help="rebuild even when the cache is current")
+    _build_options(p)
     p.add_argument("--json", action="store_true")
     p.set_defaults(handler=_cmd_build)
     p = sub.add_parser("list", help="list FMUs (ours by name, or any .fmu by path) with inputs, outputs and parameters")
@@ -33,7 +36,15 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("fmu", help="an .fmu path or one of our FMU names")
     p.add_argument("--out", default=None, help="cache directory for our FMUs (default .fmu_cache)")
     p.add_argument("--json", action="store_true")
+    _build_options(p)
     p.set_defaults(handler=_cmd_info)
+
+
+def _build_options(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--native", action="store_true",
+                   help="our FMUs as native C FMUs (no Python on the host; needs a C compiler to build)")
+    p.add_argument("--fmi", type=int, choices=(2, 3), default=None,
+                   help="FMI version of the native FMUs (default: both for build, 2 for info)")
 
 
 def _is_path(name: str) -> bool:
@@ -48,7 +59,7 @@ def _selection(args: argparse.Namespace) -> list[str]:
     return [n if _is_path(n) else registry.get(n).name for n in args.names]
 
 
-def _resolve(name: str, out: str | None):
+def _resolve(name: str, out: str | None, args: argparse.Namespace):
     """(path, summary) of an .fmu path or one of our FMUs (built if needed)."""
     from pathlib import Path
 
@@ -57,7 +68,8 @@ def _resolve(name: str, out: str | None):
     if _is_path(name):
         return Path(name), ""
     entry = registry.get(name)
-    return registry.build(name, out), entry.summary
+    native = getattr(args, "native", False)
+    return registry.build(name, out, native=native, fmi=getattr(args, "fmi", None) or 2), entry.summary
 
 
 def _cmd_build(args: argparse.Namespace) -> int:
@@ -66,15 +78,19 @@ def _cmd_build(args: argparse.Namespace) -> int:
     from . import registry
 
     rows = []
-    for name in _selection(args):
-        t0 = time.perf_counter()
-        path = registry.build(name, args.out, force=args.force)
-        rows.append({"name": name, "path": str(path), "seconds": round(time.perf_counter() - t0, 3)})
+    names = _selection(args) if args.names or not args.native else registry.native_names()
+    versions = [args.fmi] if args.fmi else [2, 3]
+    for name in names:
+        for fmi in versions if args.native else [None]:
+            t0 = time.perf_counter()
+            path = registry.build(name, args.out, force=args.force, native=args.native, fmi=fmi or 2)
+            rows.append({"name": name, "build": "native" if args.native else "python", "fmi": fmi,
+                         "path": str(path), "seconds": round(time.perf_counter() - t0, 3)})
     if args.json:
         print(json.dumps(rows, indent=2))
     else:
         for r in rows:
-            print(f"{r['name']:<28} {r['path']}  ({r['seconds']:.2f} s)")
+            print(f"{r['name']:<28} {r['build']:<6} {r['path']}  ({r['seconds']:.2f} s)")
     return 0
 
 
@@ -101,7 +117,7 @@ def describe(path) -> dict:
                 interfaces[key]["variable_step"] = bool(part.canHandleVariableCommunicationStepSize)
             else:
                 interfaces[key]["needs_completed_integrator_step"] = bool(part.needsCompletedIntegratorStep)
-    out: dict = {"path": str(path), "fmi": md.fmiVersion, "model_name": md.modelName,
+    out: dict = {"path": str(path), "fmi": md.fmiVersion, "model_name": md.modelName, "build": _build_of(md),
                  "description": md.description, "generation_tool": md.generationTool, "interfaces": interfaces,
                  "continuous_states": md.numberOfContinuousStates, "event_indicators": md.numberOfEventIndicators,
                  "inputs": [], "outputs": [], "parameters": [], "variables": []}
@@ -123,6 +139,20 @@ def describe(path) -> dict:
     return out
 
 
+def _build_of(md) -> str:  # noqa: ANN001
+    """Which build an FMU file is: ours native (C), ours or another pythonfmu FMU (Python on the host), or other."""
+    tool = md.generationTool or ""
+    if tool.startswith("delta-cosim fmus.native"):
+        return "native"
+    if "pythonfmu" in tool.lower():
+        return "python"
+    return "other"
+
+
+_BUILD_TEXT = {"native": "native C (runs without Python)", "python": "python (pythonfmu: needs Python and the "
+               "packages of resources/requirements.json on the host)", "other": "built by another tool"}
+
+
 def _variable_line(v: dict) -> str:
     shape = f"[{'x'.join(map(str, v['shape']))}]" if v.get("shape") else ""
     unit = f" [{v['unit']}]" if v["unit"] else ""
@@ -131,7 +161,7 @@ def _variable_line(v: dict) -> str:
 
 
 def _cmd_info(args: argparse.Namespace) -> int:
-    path, summary = _resolve(args.fmu, args.out)
+    path, summary = _resolve(args.fmu, args.out, args)
     info = describe(path)
     if summary:
         info["summary"] = summary
@@ -141,6 +171,7 @@ def _cmd_info(args: argparse.Namespace) -> int:
     lines = [f"{info['path']}: {info['model_name']} (FMI {info['fmi']}, generated by {info['generation_tool'] or '?'})"]
     if summary or info["description"]:
         lines.append(f"  {summary or info['description']}")
+    lines.append(f"  build: {_BUILD_TEXT[info['build']]}")
     for k, v in info["interfaces"].items():
         extra = ", ".join(f"{a}={b}" for a, b in v.items())
         lines.append(f"  interface {'co-simulation' if k == 'cs' else 'model exchange'}: {extra}")
@@ -158,7 +189,7 @@ def _cmd_info(args: argparse.Namespace) -> int:
 def _cmd_list(args: argparse.Namespace) -> int:
     payload = {}
     for name in _selection(args):
-        path, summary = _resolve(name, args.out)
+        path, summary = _resolve(name, args.out, args)
         info = describe(path)
         payload[name] = {"summary": summary or info["description"] or "", **info}
     if args.json:

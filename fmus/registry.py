@@ -16,7 +16,8 @@ from pathlib import Path
 
 from delta.errors import CosimError
 
-__all__ = ["FmuEntry", "AdapterError", "REGISTRY", "names", "get", "adapter", "build", "available"]
+__all__ = ["FmuEntry", "AdapterError", "REGISTRY", "BUILDS", "names", "get", "adapter", "build", "available",
+           "native_names"]
 
 
 class AdapterError(CosimError, ImportError):
@@ -134,8 +135,30 @@ def available() -> list[str]:
     return [n for n, e in REGISTRY.items() if _buildable(e)]
 
 
-def build(name: str, out_dir: str | Path | None = None, *, force: bool = False) -> Path:
-    """Build (or reuse from the cache) the FMU called ``name``; return its path."""
+BUILDS = ("python", "native")
+"""The two builds of our FMUs: ``python`` (pythonfmu, the adapters run in the host's Python) and ``native``
+(C generated from the same formulas, :mod:`fmus.native`; FMI 2 or 3, co-simulation and model exchange)."""
+
+
+def native_names() -> list[str]:
+    """Our FMUs that have a native build (all but the Exudyn plants and, for now, the segmented trajectories)."""
+    from .native.models import MODELS
+
+    return [n for n in REGISTRY if n in MODELS]
+
+
+def build(name: str, out_dir: str | Path | None = None, *, force: bool = False, native: bool = False,
+          fmi: int = 2) -> Path:
+    """Build (or reuse from the cache) the FMU called ``name``; return its path.
+
+    ``native``: the C build (:func:`fmus.native.build.build_native`, FMI ``fmi`` = 2 or 3); raises
+    :class:`fmus.native.errors.NativeError` if ``name`` has none or there is no C compiler.
+    """
+    entry = get(name)
+    if native:
+        from .native.build import build_native
+
+        return build_native(entry.name, fmi, out_dir, force=force)
     from .builder import build_entry
 
-    return build_entry(get(name), out_dir, force=force)
+    return build_entry(entry, out_dir, force=force)

@@ -84,6 +84,14 @@ def interface(name: str, model: NativeModel) -> Interface:
 
 # ----------------------------------------------------------------------------- modelDescription.xml
 
+LOG_CATEGORIES = (("logAll", "information"),
+                  ("logStatusWarning", "a check that failed without stopping the model (e.g. an unreachable "
+                                       "reference held)"),
+                  ("logStatusDiscard", "a step that could not be taken (the reason is given)"),
+                  ("logStatusError", "a call that failed (the reason is given)"))
+"""The categories of the C glue's log messages (``c/runtime.c``)."""
+
+
 def _initial(v: Variable) -> str | None:
     if v.causality in ("output", "local"):
         return "calculated"
@@ -127,7 +135,9 @@ def _fmi2(itf: Interface, token: str, sources: list[str]) -> bytes:
         for src in sources:
             SubElement(files, "File", name=src)
     _units(root, variables)
-    SubElement(root, "LogCategories")
+    categories = SubElement(root, "LogCategories")
+    for name, text in LOG_CATEGORIES:
+        SubElement(categories, "Category", name=name, description=text)
     SubElement(root, "DefaultExperiment", startTime=_fmt(itf.experiment[0]), stopTime=_fmt(itf.experiment[1]),
                stepSize=_fmt(itf.experiment[2]))
     mvars = SubElement(root, "ModelVariables")
@@ -184,6 +194,9 @@ def _fmi3(itf: Interface, token: str) -> bytes:
     SubElement(root, "CoSimulation", dict(common, canHandleVariableCommunicationStepSize="true",
                                           providesIntermediateUpdate="false", hasEventMode="false"))
     _units(root, itf.variables)
+    categories = SubElement(root, "LogCategories")
+    for name, text in LOG_CATEGORIES:
+        SubElement(categories, "Category", name=name, description=text)
     SubElement(root, "DefaultExperiment", startTime=_fmt(itf.experiment[0]), stopTime=_fmt(itf.experiment[1]),
                stepSize=_fmt(itf.experiment[2]))
     mvars = SubElement(root, "ModelVariables")

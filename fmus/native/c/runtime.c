@@ -97,6 +97,9 @@ Instance *rt_new(size_t size, const char *name, int is_me, const char *const *ty
 {
     Instance *inst = (Instance *)alloc(1, size);
     if (!inst) return NULL;
+    inst->values = inst->state = NULL;
+    inst->name = NULL;
+    inst->event_mode_used = inst->logging_on = 0;
     inst->alloc = alloc;
     inst->free = free_fn;
     inst->log = log;
@@ -316,7 +319,8 @@ RtStatus rt_get(Instance *inst, size_t vr, double *value)
         *value = inst->time;
         return RT_OK;
     }
-    if ((c == CAUSALITY_OUTPUT || c == CAUSALITY_LOCAL) && (inst->dirty || !inst->started) &&
+    /* after a failed step the outputs stay those of the last successful one */
+    if ((c == CAUSALITY_OUTPUT || c == CAUSALITY_LOCAL) && (inst->dirty || !inst->started) && !inst->failed &&
         rt_update(inst) != RT_OK)
         return RT_ERROR;
     *value = inst->values[vr];
