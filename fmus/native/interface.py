@@ -42,6 +42,7 @@ class Interface:
     variables: tuple[Variable, ...]
     experiment: tuple[float, float, float]
     states: tuple[tuple[str, str], ...]  # (continuous state, its derivative), model exchange
+    me_advances: bool = False  # model exchange commits the internal state at completed integrator steps
 
     def by_name(self) -> dict[str, Variable]:
         return {v.name: v for v in self.variables}
@@ -79,7 +80,8 @@ def interface(name: str, model: NativeModel) -> Interface:
     missing = [s for s, _ in model.continuous if s not in units]
     if missing:
         raise ValueError(f"FMU {name}: model-exchange states {missing} are not variables of {model.adapter}")
-    return Interface(name, adapter.description, tuple(variables), tuple(adapter.EXPERIMENT), model.continuous)
+    return Interface(name, adapter.description, tuple(variables), tuple(adapter.EXPERIMENT), model.continuous,
+                     model.me_advances)
 
 
 # ----------------------------------------------------------------------------- modelDescription.xml
@@ -130,6 +132,8 @@ def _fmi2(itf: Interface, token: str, sources: list[str]) -> bytes:
         attrs = {"modelIdentifier": itf.name, "canGetAndSetFMUstate": "true", "canSerializeFMUstate": "true"}
         if element == "CoSimulation":
             attrs.update(canHandleVariableCommunicationStepSize="true")
+        elif itf.me_advances:
+            attrs.update(completedIntegratorStepNotNeeded="false")
         node = SubElement(root, element, attrs)
         files = SubElement(node, "SourceFiles")
         for src in sources:
@@ -190,7 +194,7 @@ def _fmi3(itf: Interface, token: str) -> bytes:
                    description=itf.description, generationTool="delta-cosim fmus.native (CasADi)",
                    variableNamingConvention="structured")
     common = {"modelIdentifier": itf.name, "canGetAndSetFMUState": "true", "canSerializeFMUState": "true"}
-    SubElement(root, "ModelExchange", common)
+    SubElement(root, "ModelExchange", dict(common, needsCompletedIntegratorStep="true" if itf.me_advances else "false"))
     SubElement(root, "CoSimulation", dict(common, canHandleVariableCommunicationStepSize="true",
                                           providesIntermediateUpdate="false", hasEventMode="false"))
     _units(root, itf.variables)

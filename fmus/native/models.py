@@ -218,6 +218,7 @@ class PIDController(Controller):
 
     LAW, GAINS = PID, ("kp", "ki", "kd")
     n_state = 4  # integral[3], h of the last step
+    me_advances = True  # in model exchange the integral advances at each completed integrator step
 
     def initial_state(self) -> list[float]:
         from ..adapters.controllers import PIDController as Adapter
