@@ -1,0 +1,201 @@
+"""Native C FMUs: checked by FMPy (validation, simulate_fmu, its source-FMU build), equal to the python
+build on every shipped scenario, faults reported through the FMI logger, and a clear line without a C
+compiler.
+
+Equality (issue 23), sample by sample on every signal: positions (m, rad: ``p``, ``q`` and their
+references) to ATOL_POSITION = 1e-12; every other signal (efforts, velocities, accelerations) to
+RTOL = 1e-12 relative to its largest magnitude (at least 1). The native code evaluates the same
+formulas in CasADi's operation order; the differences are rounding (measured: at most 2.2e-12 N on
+10 N efforts, 3e-15 m on positions).
+
+With the Exudyn plant in the loop, velocities and efforts follow the plant's own response to rounding:
+its Newton iterations stop at a tolerance, so a change in the last bit of an input moves its velocities
+by ~1e-11 m/s and the efforts by ~3e-9 relative (``test_exudyn_plant_amplifies_rounding`` measures it on
+the python build alone, with a gain changed by one ulp). There, velocities and efforts are compared to
+RTOL_EXUDYN = 1e-8 relative; positions still to 1e-12 m.
+"""
+
+from __future__ import annotations
+
+import re
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from cosim import api
+from fmus import registry
+
+ROOT = Path(__file__).resolve().parents[2]
+pytestmark = pytest.mark.integration
+
+ATOL_POSITION = 1e-12
+RTOL = 1e-12
+RTOL_EXUDYN = 1e-8
+NATIVE = registry.native_names()
+_POSITION = re.compile(r"\.(p|p_ref)\.[xyz]$|\.(q|q_ref)\[\d\]$")
+
+
+@pytest.fixture(scope="module")
+def cache(tmp_path_factory):
+    return tmp_path_factory.mktemp("native_cache")
+
+
+@pytest.mark.parametrize("fmi", [2, 3])
+def test_every_native_fmu_validates_and_runs_in_fmpy(fmi, cache):
+    """fmpy.validation finds nothing, and FMPy's own master runs each FMU in both interfaces."""
+    from fmpy import simulate_fmu
+    from fmpy.validation import validate_fmu
+
+    for name in NATIVE:
+        path = registry.build(name, cache, native=True, fmi=fmi)
+        assert validate_fmu(str(path)) == [], f"{name} FMI {fmi}: {validate_fmu(str(path))}"
+        for interface in ("CoSimulation", "ModelExchange"):
+            result = simulate_fmu(str(path), fmi_type=interface, stop_time=0.2, output_interval=0.05)
+            values = np.array(result.tolist(), dtype=float)
+            assert np.all(np.isfinite(values)), f"{name} FMI {fmi} {interface}: non-finite output"
+
+
+def test_native_fmu_carries_its_sources_and_compiles_from_them(cache, tmp_path):
+    """A tool on another platform compiles the FMU from sources/ (FMPy's source-FMU build with CMake)."""
+    import zipfile
+
+    from fmpy import simulate_fmu
+    from fmpy.build import build_platform_binary
+
+    for fmi in (2, 3):
+        path = registry.build("linear_ctc", cache, native=True, fmi=fmi)
+        unzipped = tmp_path / f"fmi{fmi}"
+        with zipfile.ZipFile(path) as zf:
+            names = zf.namelist()
+            zf.extractall(unzipped)
+        assert "sources/model_functions.c" in names and "sources/model.c" in names, names
+        assert not any(n.endswith(".py") for n in names), "a native FMU carries no Python"
+        binaries = unzipped / "binaries"
+        for so in binaries.rglob("*.so"):
+            so.unlink()
+        (tmp_path / f"build{fmi}").mkdir()
+        build_platform_binary(unzipped, tmp_path / f"build{fmi}")
+        assert list(binaries.rglob("linear_ctc.so")), f"FMI {fmi}: no binary compiled from the sources"
+        result = simulate_fmu(str(unzipped), fmi_type="CoSimulation", stop_time=0.1)
+        assert np.isfinite(result["u[1]"][-1])
+
+
+def _signals(name: str, build: str, stop: float | None):
+    overrides = {"fmus": build, "parallel": "off"}
+    if stop is not None:
+        overrides["time.stop"] = stop
+    res = api.run(ROOT / "scenarios" / f"{name}.yaml", overrides)
+    assert res.status == "completed", (name, build, res.status)
+    return res
+
+
+SCENARIOS = sorted(p.stem for p in (ROOT / "scenarios").glob("*.yaml"))
+# the Exudyn plant dominates these runs: 2 s of each is enough to exercise every component
+STOP = {"helix_ctc": 2.0, "helix_ctc_level": 2.0, "rotary_helix_ctc_level": 2.0, "pick_place_ctc": 2.0,
+        "rotary_pick_place_ctc": 2.0, "rotary_z_steps_pid": 2.0}
+
+
+def _exudyn(name: str) -> bool:
+    from cosim.scenario import load_scenario
+
+    return any("exudyn" in (c.fmu or "") for c in load_scenario(ROOT / "scenarios" / f"{name}.yaml").components.values())
+
+
+def _worst(a: np.ndarray, b: np.ndarray, signal: str, rtol: float) -> tuple[float, float]:
+    """(difference, its tolerance) of one signal: absolute for positions, relative for the rest."""
+    diff = float(np.max(np.abs(a - b)))
+    if _POSITION.search(signal):
+        return diff, ATOL_POSITION
+    return diff / max(1.0, float(np.max(np.abs(a)))), rtol
+
+
+@pytest.mark.parametrize("name", SCENARIOS)
+def test_native_build_reproduces_the_python_build(name):
+    """Every shipped scenario, every signal, sample by sample: native against python."""
+    python, native = _signals(name, "python", STOP.get(name)), _signals(name, "native", STOP.get(name))
+    assert np.array_equal(python.time, native.time)
+    assert set(python.signals) == set(native.signals)
+    rtol = RTOL_EXUDYN if _exudyn(name) else RTOL
+    for signal, a in python.signals.items():
+        diff, tol = _worst(a, native.signals[signal], signal, rtol)
+        assert diff <= tol, f"{name} {signal}: native vs python differ by {diff:.3g} (tolerance {tol:g})"
+
+
+def test_exudyn_plant_amplifies_rounding():
+    """The python build against itself with one gain changed in its last bit: on the Exudyn plant the efforts
+    move by more than RTOL (so native-vs-python cannot be held to it there) but stay within RTOL_EXUDYN."""
+    base = _signals("helix_ctc", "python", 1.0)
+    nudged = api.run(ROOT / "scenarios" / "helix_ctc.yaml",
+                     {"fmus": "python", "parallel": "off", "time.stop": 1.0, "ctl.gain.kp[1]": float(np.nextafter(22500.0, 1e9))})
+    diff, _ = _worst(base.signals["ctl.u[1]"], nudged.signals["ctl.u[1]"], "ctl.u[1]", RTOL)
+    assert RTOL < diff <= RTOL_EXUDYN, f"effort change for a 1-ulp gain change: {diff:.3g} relative"
+
+
+def test_native_run_is_native_where_it_can_be(tmp_path):
+    """fmus: native builds the C FMUs; the Exudyn plant stays python (it has no native build)."""
+    from cosim.run import build_key
+    from cosim.scenario import load_scenario
+
+    scenario = load_scenario(ROOT / "scenarios" / "helix_ctc.yaml", api.dotted_overrides({"fmus": "native"})) \
+        if hasattr(api, "dotted_overrides") else api.load(ROOT / "scenarios" / "helix_ctc.yaml", {"fmus": "native"})
+    keys = {n: build_key(scenario, c.fmu) for n, c in scenario.components.items()}
+    assert keys["plant"][1] is False, keys
+    assert all(keys[n][1] for n in ("traj", "ik", "ctl")), keys
+
+
+def test_unreachable_reference_is_held_and_logged_once(cache):
+    """The IK holds its last reachable references and says why once, through the FMI logger."""
+    from fmpy import simulate_fmu
+
+    path = registry.build("linear_ik", cache, native=True, fmi=2)
+    messages: list[str] = []
+
+    def logger(*args):  # noqa: ANN002 - FMI 2 passes 5 arguments, FMI 3 four; the message is the last
+        messages.append(args[-1].decode())
+
+    inputs = np.array([(0.0, 0.1, 0.0, -0.45), (0.1, 3.0, 0.0, -0.45), (0.2, 3.0, 0.0, -0.45)],
+                      dtype=[("time", float), ("p_ref.x", float), ("p_ref.y", float), ("p_ref.z", float)])
+    result = simulate_fmu(str(path), stop_time=0.3, output_interval=0.01, input=inputs, logger=logger,
+                          debug_logging=True, output=["q_ref[1]", "reachable"])
+    reach = result["reachable"]
+    assert reach[0] and not reach[-1], reach
+    held = result["q_ref[1]"][reach == 0]
+    assert np.all(held == result["q_ref[1]"][np.argmin(reach) - 1]), "references must hold their last values"
+    unreachable = [m for m in messages if "unreachable" in m]
+    assert len(unreachable) == 1 and "leg" in unreachable[0], messages
+
+
+@pytest.mark.parametrize("fmi", [2, 3])
+def test_non_finite_effort_discards_the_step_with_its_reason(fmi, cache):
+    """A NaN effort is a discarded step (no NaN output), with the reason through the FMI logger."""
+    from fmpy import simulate_fmu
+
+    path = registry.build("linear_analytic_plant", cache, native=True, fmi=fmi)
+    messages: list[str] = []
+
+    def logger(*args):  # noqa: ANN002 - FMI 2 passes 5 arguments, FMI 3 four; the message is the last
+        messages.append(args[-1].decode())
+
+    inputs = np.array([(0.0, 0.0, 0.0, 0.0), (0.05, float("nan"), 0.0, 0.0)],
+                      dtype=[("time", float), ("u[1]", float), ("u[2]", float), ("u[3]", float)])
+    try:  # FMPy ends an FMI 2 run at a discarded step, and raises for FMI 3
+        result = simulate_fmu(str(path), stop_time=0.1, input=inputs, logger=logger, debug_logging=True)
+    except Exception as exc:  # noqa: BLE001 - FMPy raises a bare Exception
+        assert "Discard" in str(exc) or "discard" in str(exc), exc
+    else:
+        assert result["time"][-1] < 0.1, "the run must stop at the discarded step"
+        assert np.all(np.isfinite(np.array(result.tolist(), dtype=float))), "no NaN may reach an output"
+    assert any("non-finite effort" in m for m in messages), messages
+
+
+def test_native_without_compiler_is_one_line(monkeypatch, tmp_path):
+    """No C compiler: one line naming what is missing and how to get it; the python build still works."""
+    from fmus.native.errors import CompilerMissingError
+
+    monkeypatch.setenv("CC", "no-such-compiler-xyz")
+    with pytest.raises(CompilerMissingError) as exc:
+        registry.build("linear_ctc", tmp_path, native=True)
+    text = str(exc.value)
+    assert "\n" not in text and "no-such-compiler-xyz" in text and "gcc" in text, text
+    assert registry.build("linear_ctc", tmp_path).exists()
