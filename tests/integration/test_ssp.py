@@ -101,6 +101,30 @@ def test_libcosim_runs_the_exported_ssp_as_our_jacobi_master_from_t0(ssp):
         f"at t = {t_us[worst[0]] * 1e-9:g} s {P[worst[1]]}: ours {p_us[worst]!r} vs libcosim {p_lc[worst]!r}")
 
 
+def test_libcosim_runs_native_fmus_in_the_exported_ssp_as_our_master(tmp_path):
+    """The native C FMUs (issue 23), exported with ``fmus: native``: libcosim loads them (no Python in them) and
+    reproduces our Jacobi master from t = 0."""
+    out = tmp_path / "helix_ctc_analytic_native.ssp"
+    export_ssp(load_scenario(SCENARIO, {**OVERRIDES, ("fmus",): "native"}), out)
+    with zipfile.ZipFile(out) as zf:
+        tools = {n: zf.read(n) for n in zf.namelist() if n.endswith(".fmu")}
+    assert tools and all(b"python" not in _description(fmu).lower() for fmu in tools.values()), list(tools)
+    n = round(STOP / 1e-3)
+    t_lc, p_lc = _libcosim(out, 1_000_000, n)
+    t_us, p_us = _ours(out, {("algorithm",): "jacobi"})
+    assert t_us == t_lc
+    diff = np.abs(p_us - p_lc)
+    print(f"native FMUs: max |ours (jacobi) - libcosim| = {diff.max():.3e} m over {len(t_us)} samples")
+    assert diff.max() <= LIBCOSIM_TOL_M, f"native FMUs in libcosim differ from our master by {diff.max():.3g} m"
+
+
+def _description(fmu: bytes) -> bytes:
+    import io
+
+    with zipfile.ZipFile(io.BytesIO(fmu)) as zf:
+        return zf.read("modelDescription.xml")
+
+
 @pytest.mark.parametrize("algorithm", ["gauss_seidel", "jacobi"])
 def test_our_master_runs_the_ssp_as_the_yaml(ssp, algorithm):
     over = {**OVERRIDES, ("algorithm",): algorithm}
