@@ -198,6 +198,7 @@ NO_SOLUTION = tuple(f"leg {i} has no solution" for i in (1, 2, 3))
 BEYOND_LIMITS = tuple(f"leg {i} is beyond its joint limits" for i in (1, 2, 3))
 SERIAL = tuple(f"type 1 (serial) singularity: leg {i} rod is orthogonal to its actuator motion" for i in (1, 2, 3))
 PARALLEL = "type 2 (parallel) singularity: J is singular"
+WRONG_MODE = "the joints would be assembled outside the working mode"
 _COLLINEAR = "sphere centres are collinear (degenerate configuration)"
 _APART = "the three rods cannot meet (legs too far apart)"
 
@@ -433,11 +434,13 @@ def working_mode_fault(model: Model, q, p) -> str | None:  # noqa: ANN001
     """Why the assembly ``(q, p)`` is not the one :func:`ik` solves for (linear: platform below every
     carriage; rotary: elbows out), or None when it is."""
     q_back, leg = solve_ik(model, p)
-    if q_back is None or any(abs(a - b) > 1e-6 * model.actuator.q_scale for a, b in zip(q_back, q)):
-        if q_back is not None:
-            leg = int(np.argmax(np.abs(np.array(q_back) - np.asarray(q, dtype=float)))) + 1
-        return f"leg {leg} would be assembled outside the working mode ({model.actuator.wrong_mode})"
-    return None
+    if q_back is not None:
+        xp, tol = model.xp, 1e-6 * model.actuator.q_scale
+        d0, d1, d2 = (abs(a - b) for a, b in zip(q_back, q))
+        if xp.check(xp.both(xp.both(d0 <= tol, d1 <= tol), d2 <= tol), WRONG_MODE):
+            return None
+        leg = int(np.argmax(np.abs(np.array(q_back) - np.asarray(q, dtype=float)))) + 1
+    return f"leg {leg} would be assembled outside the working mode ({model.actuator.wrong_mode})"
 
 
 def fk(robot: Robot | Model, q: np.ndarray) -> FKResult:

@@ -25,7 +25,7 @@ import casadi as ca
 from delta.actuators import kind_of
 from delta.control import CTC, DEFAULT_GAINS, PD, PID, PDPlus
 from delta.dynamics import forward_dynamics, platform_state, platform_step
-from delta.kinematics import inverse_kinematics, proximity, set_pose
+from delta.kinematics import inverse_kinematics, proximity, set_pose, working_mode_fault
 from delta.model import Data
 from delta.trajectories import TYPES
 
@@ -176,6 +176,33 @@ class InverseKinematics(NativeModel):
         return Result(values, held, checks)
 
 
+class ForwardKinematics(NativeModel):
+    """As :class:`fmus.adapters.kinematics.ForwardKinematics`: ``p, v`` and the singularity proximity of ``q, qd``;
+    ``valid`` drops (and ``p, v``, the proximity hold their last valid values) when the rods cannot meet or ``q``
+    would be assembled outside the working mode. A type 1 or 2 singularity is an error, as in the python build."""
+
+    n_state = 7  # the last valid p, v and proximity
+
+    def refresh(self, sym: Symbols, trace: Trace) -> Result:
+        model, data = self.model(sym, trace), Data()
+        q = sym.vec(Q)
+        p, v = platform_state(model, data, q, sym.vec(QD))
+        assembled = trace.take()  # the spheres meet, then J^-1 exists (singularities)
+        working_mode_fault(model, q, p)
+        mode = trace.take()  # each leg solves at p, and the solution is q's
+        meet = _all(c for c, r in assembled if "singularity" not in r)
+        valid = ca.logic_and(meet, _all(c for c, _ in mode))
+        value = proximity(data, SYMBOLIC)
+        held = [ca.if_else(valid, x, s) for x, s in zip((*p, *v, value), sym.s)]
+        checks = [Check(ca.logic_or(ca.logic_not(meet), c), r) for c, r in assembled if "singularity" in r]
+        checks += [Check(c, f"q is not a valid assembly: {r}; p and v hold their last valid values", error=False)
+                   for c, r in assembled + mode if "singularity" not in r]
+        checks += _errors(trace)
+        values = dict(zip(P + V + ("singularity.proximity",), held))
+        values["valid"] = valid
+        return Result(values, held, checks)
+
+
 # ----------------------------------------------------------------------------- controllers
 
 class Controller(NativeModel):
@@ -294,6 +321,7 @@ def _entries() -> dict[str, Callable[[], NativeModel]]:
     for kind in ("linear", "rotary"):
         kind_of(kind)
         table[f"{kind}_ik"] = lambda k=kind: InverseKinematics("kinematics.InverseKinematics", k)
+        table[f"{kind}_fk"] = lambda k=kind: ForwardKinematics("kinematics.ForwardKinematics", k)
         for law, cls in laws.items():
             table[f"{kind}_{law}"] = lambda k=kind, c=cls, a=classes[law]: c(f"controllers.{a}", k)
         for name in (f"{kind}_analytic_plant", f"{kind}_analytic_plant_me"):

@@ -107,6 +107,32 @@ def test_ik_matches_python_and_holds_when_unreachable(kind):
             close(native.get(n), python.values[n], f"{name} {n} at p_ref = {p}")
 
 
+JOINTS = {"linear": [(0.5, 0.5, 0.5), (0.45, 0.52, 0.6), (0.1, 0.9, 0.5), (0.5, 0.5, 0.5)],
+          "rotary": [(0.3, 0.3, 0.3), (2.5, -2.5, 2.5), (0.2, 0.5, 0.35), (0.3, 0.3, 2.8), (1.5, -1.0, 0.2)]}
+
+
+@pytest.mark.parametrize("kind", ["linear", "rotary"])
+def test_fk_matches_python_and_holds_when_invalid(kind):
+    name = f"{kind}_fk"
+    native, python = Native(name), python_adapter(name)
+    python.start()
+    validity = []
+    for q in JOINTS[kind]:
+        for i, x in enumerate(q, 1):
+            python.values[f"q[{i}]"] = x
+            native.set(f"q[{i}]", x)
+            python.values[f"qd[{i}]"] = 0.1 * i
+            native.set(f"qd[{i}]", 0.1 * i)
+        python.refresh()
+        failed = native.call("refresh")
+        validity.append(python.values["valid"])
+        assert bool(native.get("valid")) == python.values["valid"], (kind, q, failed)
+        assert (failed == []) == python.values["valid"], (kind, q, failed)
+        for n in ("p.x", "p.y", "p.z", "v.x", "v.y", "v.z", "singularity.proximity"):
+            close(native.get(n), python.values[n], f"{name} {n} at q = {q}")
+    assert True in validity and False in validity, f"the poses must test both branches: {validity}"
+
+
 @pytest.mark.parametrize("name", [n for n in MODELS if n.endswith(("_pd", "_pid", "_pdplus", "_ctc"))])
 def test_controllers_match_python(name):
     native, python = Native(name), python_adapter(name)
