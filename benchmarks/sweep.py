@@ -1,6 +1,6 @@
-"""Sweep speed-up (issue 17): 8 cases on 2 Dask worker processes against the same 8 cases serially.
+"""Sweep speed-up (issue 17): N cases (default 8) on 2 Dask worker processes against the same cases serially.
 
-The 8 cases are a CTC gain grid on ``scenarios/helix_ctc_analytic.yaml``, each the scenario's
+The cases are a CTC gain grid on ``scenarios/helix_ctc_analytic.yaml``, each the scenario's
 whole run (the thesis helix, 10 s simulated; ``--stop`` for another length), no logs. Serially,
 :func:`cosim.sweep.run_loaded_case` runs them one after another in this process (the file read once
 and the FMUs built beforehand, as the sweep does); the sweep is :func:`cosim.sweep.run_sweep` on an
@@ -13,7 +13,8 @@ reports the median (the machine's other load moves single figures by 10-50 %).
 its own, warmed by one untimed sweep, reached with ``scheduler=``): what each sweep costs once a
 persistent cluster serves many (``cosim sweep --scheduler``), without the start-up a cold sweep pays.
 
-    python benchmarks/sweep.py [--stop S] [--repeat N] [--warm] [--scenario scenarios/helix_ctc_analytic.yaml]
+    python benchmarks/sweep.py [--stop S] [--repeat N] [--warm] [--cases N] [--set fmus=native]
+                               [--scenario scenarios/helix_ctc_analytic.yaml]
 
 The speed-up is bounded by 2 on 2 cores, and by less: the sweep pays once per sweep what serial
 runs do not (starting 2 worker processes that each import Dask, about 0.7 s of CPU each, and
@@ -39,6 +40,9 @@ def main() -> int:
     ap.add_argument("--stop", type=float, default=None,
                     help="simulated time per case, s (default: the scenario's own, 10 s for the helix)")
     ap.add_argument("--workers", type=int, default=2)
+    ap.add_argument("--cases", type=int, default=8, help="number of cases of the gain grid (default 8)")
+    ap.add_argument("--set", action="append", default=[], metavar="NAME=VALUE",
+                    help="a dotted override for every case, e.g. fmus=native (repeatable)")
     ap.add_argument("--repeat", type=int, default=1, help="alternate serial and sweep N times (median)")
     ap.add_argument("--warm", action="store_true",
                     help="also time the sweep on an already running, warmed-up cluster of the same workers")
@@ -51,9 +55,11 @@ def main() -> int:
 
     scenario = str(Path(args.scenario).resolve())
     stop = args.stop if args.stop is not None else load_scenario(scenario).time.stop
-    cases = [Case({"time.stop": stop, "ctl.gain.kp[1]": 1.0e4 + 2.5e3 * k}) for k in range(8)]
+    common = dict(item.split("=", 1) for item in args.set)
+    cases = [Case({**common, "time.stop": stop, "ctl.gain.kp[1]": 1.0e4 + 2.5e3 * k}) for k in range(args.cases)]
     fmu_files = prebuild([load_scenario(scenario, dotted_overrides(cases[0].values))])
-    print(f"{len(cases)} cases of {Path(scenario).name}, {stop:g} s simulated each (the case length); "
+    print(f"{len(cases)} cases of {Path(scenario).name}{' with ' + str(common) if common else ''}, {stop:g} s "
+          f"simulated each (the case length); "
           f"{os.cpu_count()} CPUs, load average {os.getloadavg()[0]:.2f} before")
     t_serial, t_sweep, t_warm, loops_serial, loops_worker = [], [], [], [], []
     warm = None
