@@ -1,0 +1,146 @@
+"""The master's per-step cost on C FMUs, side by side in one run, against issue 23's targets.
+
+1. helix_ctc_analytic on the native C FMUs (``fmus: native``), serial, no log, ``--stop-time`` s at
+   1 ms: each component's ``component_time_s`` / steps (target <= 2 us per FMU per step). A
+   component's time is what the master spends on it in a step: its links copied in, its inputs set,
+   its doStep, its outputs read and checked for NaN, measured by the master's own clock readings.
+   The master's own share of that run (loop wall time minus the components) is printed too.
+2. The master's own cost on two C FMUs (``tests/cfmus``: FMI 2 VanDerPol, its ``x0`` wired to
+   Feedthrough's ``Real_input``; serial, no log, ``--steps`` steps of 1 ms; target <= 2 us per step):
+   the master's loop wall time per step minus a bare loop making the same FMI calls on the same two
+   FMUs (GetReal of x0, SetReal of Real_input, both doSteps) in the cheapest way ctypes offers from
+   Python: prototypes without argument types, every argument converted to C beforehand, only the
+   time updated in place. What is left is what the master adds: its loop, the link copy, status and
+   NaN checks, component timing, method dispatch.
+
+Each figure is the best of ``--rounds`` rounds; in part 2 the bare loop and the master alternate so
+machine load drifts affect both alike.
+
+    python benchmarks/master_native.py [--stop-time 10] [--steps 20000] [--rounds 5]
+"""
+
+from __future__ import annotations
+
+import argparse
+import ctypes
+import math
+import os
+import sys
+import time
+from ctypes import c_double, c_int, c_size_t, c_uint32, c_void_p
+from functools import partial
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(ROOT / "tests"))  # cfmus, the C test FMUs
+
+TARGET_FMU_US = 2.0  # issue 23: each native FMU at most 2 us per 1 ms step in our master
+TARGET_MASTER_US = 2.0  # issue 23: the master's own cost at most 2 us per step on two C FMUs
+STEP = 1e-3
+
+TWO_C = """
+name: two_c_fmus
+components:
+  osc: {{path: "{osc}"}}
+  thru: {{path: "{thru}"}}
+connections:
+  - {{from: osc.x0, to: thru.Real_input}}
+time: {{stop: {stop}, step: 0.001}}
+parallel: "off"
+"""
+
+
+def helix_native(stop: float):
+    from cosim.run import run_scenario
+    from cosim.scenario import load_scenario
+
+    overrides = {("time", "stop"): stop, ("fmus",): "native", ("parallel",): "off"}
+    res = run_scenario(load_scenario(ROOT / "scenarios" / "helix_ctc_analytic.yaml", overrides), log=False)
+    if res.status != "completed":
+        sys.exit(f"helix_ctc_analytic (native) did not complete: {res.status} {res.message}")
+    return res
+
+
+def bare_calls(osc_path: Path, thru_path: Path, steps: int) -> float:
+    """Seconds per step of the two FMUs' per-step FMI calls in a bare Python loop."""
+    from cosim.fmu import load_fmu, make_slave
+
+    osc, thru = make_slave("osc", load_fmu(osc_path)), make_slave("thru", load_fmu(thru_path))
+    for s in (osc, thru):
+        s.bind([], [])
+        s.instantiate()
+        s.enter_initialization(0.0, steps * STEP)
+        s.exit_initialization()
+
+    def fn(s, name):  # the C function without argument types: ctypes converts nothing per call
+        return ctypes.CFUNCTYPE(c_int)(ctypes.cast(getattr(s.fmu.dll, name), c_void_p).value)
+
+    value = (c_double * 1)()
+    vr_x0 = (c_uint32 * 1)(osc.info.variables["x0"].vr)
+    vr_in = (c_uint32 * 1)(thru.info.variables["Real_input"].vr)
+    t_arg, h_arg, one = c_double(), c_double(STEP), c_int(1)
+    get_x0 = partial(fn(osc, "fmi2GetReal"), c_void_p(osc._c), vr_x0, c_size_t(1), value)
+    set_in = partial(fn(thru, "fmi2SetReal"), c_void_p(thru._c), vr_in, c_size_t(1), value)
+    step_osc = partial(fn(osc, "fmi2DoStep"), c_void_p(osc._c), t_arg, h_arg, one)
+    step_thru = partial(fn(thru, "fmi2DoStep"), c_void_p(thru._c), t_arg, h_arg, one)
+    t0 = time.perf_counter()
+    for k in range(steps):
+        t_arg.value = k * STEP
+        step_osc()
+        get_x0()
+        set_in()
+        step_thru()
+    per_step = (time.perf_counter() - t0) / steps
+    for s in (osc, thru):
+        s.terminate()
+        s.free()
+    return per_step
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--stop-time", type=float, default=10.0, help="simulated s of helix_ctc_analytic (default 10)")
+    ap.add_argument("--steps", type=int, default=20000, help="steps of the two-FMU runs (default 20000)")
+    ap.add_argument("--rounds", type=int, default=5, help="rounds, the best of each figure kept (default 5)")
+    args = ap.parse_args()
+    from cfmus import build
+
+    from cosim.run import run_scenario
+    from cosim.scenario import parse_scenario
+
+    helix_native(0.01)  # build and cache the native FMUs outside the measurement
+    osc, thru = build("VanDerPol", 2), build("Feedthrough", 2)
+    two = parse_scenario(TWO_C.format(osc=osc, thru=thru, stop=args.steps * STEP), str(ROOT / "two_c_fmus.yaml"))
+    per_comp: dict[str, float] = {}
+    helix_master = helix_wall = math.inf
+    bare = master = master_minus_comps = math.inf
+    for _ in range(args.rounds):
+        res = helix_native(args.stop_time)
+        for name, s in res.component_time.items():
+            per_comp[name] = min(per_comp.get(name, math.inf), s / res.steps)
+        helix_master = min(helix_master, (res.wall_time - sum(res.component_time.values())) / res.steps)
+        helix_wall = min(helix_wall, res.wall_time / res.steps)
+        bare = min(bare, bare_calls(osc, thru, args.steps))
+        res = run_scenario(two, log=False)
+        master = min(master, res.wall_time / res.steps)
+        master_minus_comps = min(master_minus_comps, (res.wall_time - sum(res.component_time.values())) / res.steps)
+    us = 1e6
+    print(f"{os.cpu_count()} CPUs, load average {os.getloadavg()[0]:.2f}; best of {args.rounds} rounds")
+    print(f"1. helix_ctc_analytic, native FMUs, serial, no log, {args.stop_time:g} s at 1 ms: "
+          f"component_time_s / steps")
+    for name, sec in per_comp.items():
+        verdict = "met" if sec * us <= TARGET_FMU_US else "NOT met"
+        print(f"   {name:<6} {sec * us:5.2f} us/step   (target <= {TARGET_FMU_US:g}: {verdict})")
+    print(f"   whole step {helix_wall * us:.2f} us, of which the master outside the components "
+          f"{helix_master * us:.2f} us (loop, observers)")
+    own = master - bare
+    verdict = "met" if own * us <= TARGET_MASTER_US else "NOT met"
+    print(f"2. two C FMUs (VanDerPol.x0 -> Feedthrough.Real_input, FMI 2 CS), serial, no log, {args.steps} steps")
+    print(f"   master {master * us:5.2f} us/step - bare FMI calls {bare * us:5.2f} us/step = master's own "
+          f"{own * us:5.2f} us/step   (target <= {TARGET_MASTER_US:g}: {verdict})")
+    print(f"   (the master's loop outside its component timings: {master_minus_comps * us:.2f} us/step)")
+
+
+if __name__ == "__main__":
+    main()
