@@ -29,7 +29,7 @@ from delta.errors import CosimError
 from . import requirements
 from .registry import FmuEntry
 
-__all__ = ["DEFAULT_CACHE", "source_files", "fingerprint", "bundle_name", "build_entry", "BuildError"]
+__all__ = ["DEFAULT_CACHE", "source_files", "fingerprint", "bundle_name", "is_current", "build_entry", "BuildError"]
 
 DEFAULT_CACHE = ".fmu_cache"
 _ROOT = Path(__file__).resolve().parent.parent
@@ -121,6 +121,16 @@ def _cache_dir(out_dir: str | Path | None) -> Path:
     return Path(out_dir) if out_dir is not None else Path.cwd() / DEFAULT_CACHE
 
 
+def is_current(target: Path, stamp: Path, digest: str) -> bool:
+    """Whether ``target`` exists and its ``stamp`` (the JSON written beside it) records ``digest``."""
+    if not (target.exists() and stamp.exists()):
+        return False
+    try:
+        return json.loads(stamp.read_text()).get("fingerprint") == digest
+    except json.JSONDecodeError:
+        return False
+
+
 def build_entry(entry: FmuEntry, out_dir: str | Path | None = None, *, force: bool = False) -> Path:
     """Build ``entry`` into ``out_dir`` unless an FMU with the same fingerprint is there."""
     out = _cache_dir(out_dir)
@@ -128,12 +138,8 @@ def build_entry(entry: FmuEntry, out_dir: str | Path | None = None, *, force: bo
     target = out / f"{entry.name}.fmu"
     stamp = out / f"{entry.name}.json"
     digest = fingerprint(entry)
-    if not force and target.exists() and stamp.exists():
-        try:
-            if json.loads(stamp.read_text()).get("fingerprint") == digest:
-                return target
-        except json.JSONDecodeError:
-            pass
+    if not force and is_current(target, stamp, digest):
+        return target
     bundle = bundle_name(digest)
     module = f"{entry.name}_{digest[:16]}"
     saved_path = list(sys.path)

@@ -252,19 +252,16 @@ def build_native(name: str, fmi: int = 2, out_dir: str | Path | None = None, *, 
     if name not in MODELS:
         native_model(name)  # raises, listing the native FMUs
     cc = compiler()
-    from ..builder import DEFAULT_CACHE
+    from ..builder import DEFAULT_CACHE, is_current
 
     out = (Path(out_dir) if out_dir is not None else Path.cwd() / DEFAULT_CACHE) / "native" / f"fmi{fmi}"
     out.mkdir(parents=True, exist_ok=True)
     target, stamp = out / f"{name}.fmu", out / f"{name}.json"
     digest = fingerprint()
-    if not force and target.exists() and stamp.exists():
-        try:
-            if json.loads(stamp.read_text()).get("fingerprint") == digest:
-                return target
-        except json.JSONDecodeError:
-            pass
-    token = "{" + f"{digest[:8]}-{digest[8:12]}-{digest[12:16]}-{digest[16:20]}-{hashlib.sha256((digest + name).encode()).hexdigest()[:12]}" + "}"
+    if not force and is_current(target, stamp, digest):
+        return target
+    own = hashlib.sha256((digest + name).encode()).hexdigest()
+    token = "{" + f"{own[:8]}-{own[8:12]}-{own[12:16]}-{own[16:20]}-{own[20:32]}" + "}"
     with tempfile.TemporaryDirectory(prefix=f"native_{name}_") as tmp:
         root = Path(tmp) / "fmu"
         src = root / "sources"

@@ -115,6 +115,29 @@ def _fmt(x: float) -> str:
     return repr(float(x))
 
 
+def _common(root: Element, itf: Interface, variables) -> Element:  # noqa: ANN001
+    """UnitDefinitions, LogCategories and DefaultExperiment (the same in FMI 2 and 3); returns ModelVariables."""
+    _units(root, variables)
+    categories = SubElement(root, "LogCategories")
+    for name, text in LOG_CATEGORIES:
+        SubElement(categories, "Category", name=name, description=text)
+    SubElement(root, "DefaultExperiment", startTime=_fmt(itf.experiment[0]), stopTime=_fmt(itf.experiment[1]),
+               stepSize=_fmt(itf.experiment[2]))
+    return SubElement(root, "ModelVariables")
+
+
+def _attributes(v: Variable) -> dict[str, str]:
+    """The attributes of a variable's element common to FMI 2 and 3 (only Reals may be continuous: a
+    boolean or integer that changes in time is discrete)."""
+    variability = "discrete" if v.type != "real" and v.variability == "continuous" else v.variability
+    attrs = {"name": v.name, "valueReference": str(v.vr), "description": v.description,
+             "causality": v.causality, "variability": variability}
+    initial = _initial(v)
+    if initial:
+        attrs["initial"] = initial
+    return attrs
+
+
 def model_description(itf: Interface, fmi: int, token: str, sources: list[str]) -> bytes:
     """modelDescription.xml of the native FMU for FMI ``fmi`` (2 or 3): co-simulation and model exchange."""
     if fmi == 2:
@@ -138,22 +161,9 @@ def _fmi2(itf: Interface, token: str, sources: list[str]) -> bytes:
         files = SubElement(node, "SourceFiles")
         for src in sources:
             SubElement(files, "File", name=src)
-    _units(root, variables)
-    categories = SubElement(root, "LogCategories")
-    for name, text in LOG_CATEGORIES:
-        SubElement(categories, "Category", name=name, description=text)
-    SubElement(root, "DefaultExperiment", startTime=_fmt(itf.experiment[0]), stopTime=_fmt(itf.experiment[1]),
-               stepSize=_fmt(itf.experiment[2]))
-    mvars = SubElement(root, "ModelVariables")
+    mvars = _common(root, itf, variables)
     for v in variables:
-        attrs = {"name": v.name, "valueReference": str(v.vr), "description": v.description,
-                 "causality": v.causality, "variability": v.variability}
-        if v.type == "real" and v.variability != "continuous" and v.causality == "output":
-            attrs["variability"] = "discrete"
-        initial = _initial(v)
-        if initial:
-            attrs["initial"] = initial
-        sv = SubElement(mvars, "ScalarVariable", attrs)
+        sv = SubElement(mvars, "ScalarVariable", _attributes(v))
         if v.type == "real":
             real = {"unit": v.unit} if v.unit else {}
             if v.start is not None:
@@ -197,21 +207,9 @@ def _fmi3(itf: Interface, token: str) -> bytes:
     SubElement(root, "ModelExchange", dict(common, needsCompletedIntegratorStep="true" if itf.me_advances else "false"))
     SubElement(root, "CoSimulation", dict(common, canHandleVariableCommunicationStepSize="true",
                                           providesIntermediateUpdate="false", hasEventMode="false"))
-    _units(root, itf.variables)
-    categories = SubElement(root, "LogCategories")
-    for name, text in LOG_CATEGORIES:
-        SubElement(categories, "Category", name=name, description=text)
-    SubElement(root, "DefaultExperiment", startTime=_fmt(itf.experiment[0]), stopTime=_fmt(itf.experiment[1]),
-               stepSize=_fmt(itf.experiment[2]))
-    mvars = SubElement(root, "ModelVariables")
+    mvars = _common(root, itf, itf.variables)
     for v in itf.variables:
-        attrs = {"name": v.name, "valueReference": str(v.vr), "description": v.description,
-                 "causality": v.causality, "variability": v.variability}
-        if v.type == "real" and v.variability != "continuous" and v.causality == "output":
-            attrs["variability"] = "discrete"
-        initial = _initial(v)
-        if initial:
-            attrs["initial"] = initial
+        attrs = _attributes(v)
         if v.start is not None:
             attrs["start"] = ("true" if v.start else "false") if v.type == "boolean" else (
                 _fmt(v.start) if v.type == "real" else str(int(v.start)))
@@ -220,10 +218,7 @@ def _fmi3(itf: Interface, token: str) -> bytes:
                 attrs["unit"] = v.unit
             if v.derivative_of is not None:
                 attrs["derivative"] = str(vr[v.derivative_of])
-        tag = {"real": "Float64", "boolean": "Boolean", "integer": "Int32"}[v.type]
-        if v.type == "boolean" and attrs["variability"] == "continuous":
-            attrs["variability"] = "discrete"
-        SubElement(mvars, tag, attrs)
+        SubElement(mvars, {"real": "Float64", "boolean": "Boolean", "integer": "Int32"}[v.type], attrs)
     structure = SubElement(root, "ModelStructure")
     outputs = [v for v in itf.variables if v.causality == "output"]
     derivatives = [v for v in itf.variables if v.derivative_of is not None]
