@@ -65,13 +65,19 @@ def _profile(cls: str, profile: str) -> None:
         raise ParameterError(f"{cls}.profile must be one of {PROFILES}, got {profile!r}")
 
 
-def _scaling(profile: str, tau):  # noqa: ANN001
+def _scaling(profile: str, tau, xp=SCALAR):  # noqa: ANN001
     """Time scaling s(tau) and its derivatives d/dtau, d2/dtau2 on tau in [0, 1].
 
     ``tau`` is an array or a float; the same IEEE operations in the same order either way
     (``(1 - tau)**2`` is written as a product, which is what NumPy's ``**2`` computes), so
-    the scalar and the vectorised paths agree bit for bit.
+    the scalar and the vectorised paths agree bit for bit. On symbols (``xp.symbolic``) ``profile``
+    is the index of the profile in :data:`PROFILES` (the native FMU's String parameter) and both
+    scalings are traced, selected by ``where``.
     """
+    if xp.symbolic:
+        cubic, quintic = _scaling("cubic", tau), _scaling("quintic", tau)
+        is_cubic = profile == PROFILES.index("cubic")
+        return tuple(xp.where(is_cubic, c, q) for c, q in zip(cubic, quintic))
     if profile == "cubic":
         return tau * tau * (3.0 - 2.0 * tau), 6.0 * tau * (1.0 - tau), 6.0 - 12.0 * tau
     t2 = tau * tau
@@ -180,7 +186,12 @@ class _Segments(Trajectory):
     _p0: np.ndarray
     _p1: np.ndarray
 
-    def _set_segments(self, knots: list[tuple[float, float, tuple, tuple]]) -> None:
+    def _set_segments(self, knots: list[tuple[float, float, tuple, tuple]], xp=SCALAR) -> None:  # noqa: ANN001
+        if xp.symbolic:  # the knots as rows only (evaluate_scalar's view; no arrays of symbols)
+            object.__setattr__(self, "_t1_list", [t1 for _, t1, _, _ in knots])
+            object.__setattr__(self, "_rows", [(t0, t1, tuple(p0), tuple(b - a for a, b in zip(p0, p1)))
+                                               for t0, t1, p0, p1 in knots])
+            return
         arr = list(zip(*knots))
         object.__setattr__(self, "_t0", np.array(arr[0], dtype=float))
         object.__setattr__(self, "_t1", np.array(arr[1], dtype=float))
@@ -217,22 +228,44 @@ class _Segments(Trajectory):
         a = np.where(moving, delta * (sdd / span**2)[:, None], 0.0)
         return p, v, a
 
-    def evaluate_scalar(self, t: float) -> tuple[_Vec, _Vec, _Vec]:
-        t = float(t)
-        t1s = self._t1_list
-        k = bisect_left(t1s, t)  # np.searchsorted(side="left")
-        if k > len(t1s) - 1:
-            k = len(t1s) - 1
-        t0, t1, p0, d = self._rows[k]
+    def evaluate_scalar(self, t: float, xp=SCALAR) -> tuple[_Vec, _Vec, _Vec]:  # noqa: ANN001
+        """The segment that ends at or after ``t`` (the last one after the end), at ``t``.
+
+        On symbols the segment is chosen by ``where`` over all of them (the number of knots below ``t``
+        is what ``bisect_left`` counts), and a segment of zero length (a hold or dwell of 0 s, which
+        the float path leaves out) evaluates to its start point at rest."""
+        t1s, where = self._t1_list, xp.where
+        if xp.symbolic:
+            k = sum(t1 < t for t1 in t1s)
+            last = len(t1s) - 1
+            rows = self._rows
+            t0, t1, p0, d = rows[last]
+            for i in range(last - 1, -1, -1):  # the row k (rows past the last: the last)
+                r0, r1, q0, e = rows[i]
+                pick = k == i
+                t0, t1 = where(pick, r0, t0), where(pick, r1, t1)
+                p0 = tuple(where(pick, a, b) for a, b in zip(q0, p0))
+                d = tuple(where(pick, a, b) for a, b in zip(e, d))
+        else:
+            t = float(t)
+            k = bisect_left(t1s, t)  # np.searchsorted(side="left")
+            if k > len(t1s) - 1:
+                k = len(t1s) - 1
+            t0, t1, p0, d = self._rows[k]
         span = t1 - t0
+        span = span + (span == 0.0)  # a zero-length segment (symbols only): tau = 0, at rest
         tau = (t - t0) / span
-        tau = 0.0 if tau < 0.0 else (1.0 if tau > 1.0 else tau)
-        s, sd, sdd = _scaling(self.profile, tau)
+        tau = where(tau < 0.0, 0.0, where(tau > 1.0, 1.0, tau))
+        s, sd, sdd = _scaling(self.profile, tau, xp)
         p = (p0[0] + d[0] * s, p0[1] + d[1] * s, p0[2] + d[2] * s)
-        if not t0 < t < t1:
+        if not xp.symbolic and not t0 < t < t1:
             return p, (0.0, 0.0, 0.0), (0.0, 0.0, 0.0)
         vs, as_ = sd / span, sdd / (span * span)
-        return p, (d[0] * vs, d[1] * vs, d[2] * vs), (d[0] * as_, d[1] * as_, d[2] * as_)
+        v, a = (d[0] * vs, d[1] * vs, d[2] * vs), (d[0] * as_, d[1] * as_, d[2] * as_)
+        if xp.symbolic:
+            moving = xp.both(t0 < t, t < t1)
+            v, a = tuple(where(moving, x, 0.0) for x in v), tuple(where(moving, x, 0.0) for x in a)
+        return p, v, a
 
 
 @dataclass(frozen=True)
@@ -272,18 +305,45 @@ class PointToPoint(_Segments):
         _profile("PointToPoint", self.profile)
         if not (math.isfinite(self.t0) and self.t0 >= 0.0):
             raise ParameterError(f"PointToPoint.t0 must be >= 0 s, got {self.t0!r}")
-        knots = [(0.0, self.t0, self.start, self.start)] if self.t0 > 0.0 else []
+        self._set_segments(self.knots())
+
+    def knots(self, xp=SCALAR) -> list:  # noqa: ANN001
+        """(t0, t1, p0, p1) of each segment: a rest at ``start`` until ``t0`` (on symbols always, of zero
+        length when ``t0`` = 0), then the move."""
+        knots = [(0.0, self.t0, self.start, self.start)] if xp.symbolic or self.t0 > 0.0 else []
         knots.append((self.t0, self.t0 + self.duration, self.start, self.end))
-        self._set_segments(knots)
+        return knots
 
 
-def _legs_with_dwell(points: np.ndarray, starts: list[float], moves: list[float], dwell: float
+def _unit2(d, xp):  # noqa: ANN001, ANN202
+    """The planar vector ``d`` scaled to unit length."""
+    dx, dy = d
+    n = xp.sqrt(dx * dx + dy * dy)
+    return dx / n, dy / n
+
+
+NATIVE_MAX_CYCLES = 16
+"""Pick-and-place cycles a native FMU can generate (its code holds the knots of that many cycles)."""
+
+
+def instance_like(obj, **changes):  # noqa: ANN001, ANN201
+    """A copy of the dataclass instance ``obj`` with ``changes``, without ``__post_init__`` (its checks and
+    derived fields): for formulas evaluated on symbols."""
+    new = object.__new__(type(obj))
+    new.__dict__.update(obj.__dict__)
+    new.__dict__.update(changes)
+    return new
+
+
+def _legs_with_dwell(points: np.ndarray, starts: list[float], moves: list[float], dwell: float, xp=SCALAR
                      ) -> list[tuple[float, float, tuple, tuple]]:
+    """Knots of the moves through ``points``, with a rest of ``dwell`` at each intermediate point (on symbols
+    always, of zero length when ``dwell`` = 0)."""
     knots = []
     for k in range(len(points) - 1):
         t0 = starts[k]
         knots.append((t0, t0 + moves[k], tuple(points[k]), tuple(points[k + 1])))
-        if dwell > 0.0 and k < len(points) - 2:
+        if (xp.symbolic or dwell > 0.0) and k < len(points) - 2:
             knots.append((t0 + moves[k], t0 + moves[k] + dwell, tuple(points[k + 1]), tuple(points[k + 1])))
     return knots
 
@@ -315,9 +375,7 @@ class Waypoints(_Segments):
             raise ParameterError(f"Waypoints.dwell must be >= 0 s, got {self.dwell!r}")
         if self.segment_time is not None:
             _positive("Waypoints", "segment_time", self.segment_time)
-            step = self.segment_time + self.dwell
-            starts = [k * step for k in range(len(pts) - 1)]
-            self._set_segments(_legs_with_dwell(pts, starts, [self.segment_time] * (len(pts) - 1), self.dwell))
+            self._set_segments(self.knots())
             return
         times = np.asarray(self.times, dtype=float).reshape(-1)
         if times.shape != (len(pts),) or times[0] < 0.0 or np.any(np.diff(times) <= 0.0):
@@ -328,6 +386,13 @@ class Waypoints(_Segments):
         knots = [(0.0, float(times[0]), tuple(pts[0]), tuple(pts[0]))] if times[0] > 0.0 else []
         knots += _legs_with_dwell(pts, list(times[:-1]), list(np.diff(times)), 0.0)
         self._set_segments(knots)
+
+    def knots(self, xp=SCALAR) -> list:  # noqa: ANN001
+        """(t0, t1, p0, p1) of each segment with ``segment_time`` per move and ``dwell`` at each intermediate point."""
+        pts = self.points
+        step = self.segment_time + self.dwell
+        starts = [k * step for k in range(len(pts) - 1)]
+        return _legs_with_dwell(pts, starts, [self.segment_time] * (len(pts) - 1), self.dwell, xp)
 
     @property
     def duration(self) -> float:
@@ -373,26 +438,61 @@ class PickAndPlace(_Segments):
         if not (isinstance(self.cycles, int) and self.cycles >= 1):
             raise ParameterError(f"PickAndPlace.cycles must be an integer >= 1, got {self.cycles!r}")
         _profile("PickAndPlace", self.profile)
-        d = d / np.linalg.norm(d)
-        object.__setattr__(self, "direction", (float(d[0]), float(d[1])))
-        pts, moves = self._cycle_plan()
-        starts = np.concatenate([[0.0], np.cumsum(moves)[:-1]])
-        knots = []
-        for c in range(self.cycles):
-            knots += _legs_with_dwell(pts, list(starts + c * self.cycle_time), list(moves), 0.0)
-        self._set_segments(knots)
+        object.__setattr__(self, "direction", tuple(float(x) for x in _unit2(self.direction, SCALAR)))
+        self._set_segments(self.knots())
 
-    def _cycle_plan(self) -> tuple[np.ndarray, np.ndarray]:
-        a = np.array(self.start)
-        ez = np.array([0.0, 0.0, 1.0])
-        h = np.array([self.direction[0], self.direction[1], 0.0])
-        b_up = a + self.up * ez
-        c_up = b_up + self.across * h
-        place = c_up - self.down * ez
-        pts = np.array([a, b_up, c_up, place, c_up, b_up, a])
-        dist = np.linalg.norm(np.diff(pts, axis=0), axis=1)
-        roots = np.sqrt(dist)
-        return pts, self.cycle_time * roots / roots.sum()
+    def knots(self, xp=SCALAR) -> list:  # noqa: ANN001
+        """(t0, t1, p0, p1) of each segment, cycle after cycle.
+
+        On symbols (``fmus.native``) ``cycles`` is a symbol too: the knots of :data:`NATIVE_MAX_CYCLES` cycles
+        are traced, those of cycles beyond ``cycles`` replaced by a rest at the final point from the start
+        of that cycle on (which is what the float path gives after the end), and ``direction`` is made a
+        unit vector here (the float path does it when the trajectory is made)."""
+        if not xp.symbolic:
+            pts, moves = self._cycle_plan()
+            starts = [0.0]
+            for m in moves[:-1]:
+                starts.append(starts[-1] + m)
+            knots = []
+            for c in range(self.cycles):
+                knots += _legs_with_dwell(pts, [t + c * self.cycle_time for t in starts], moves, 0.0)
+            return knots
+        xp.check(xp.both(self.cycles >= 1, self.cycles <= NATIVE_MAX_CYCLES),
+                 f"cycle.count must be a whole number from 1 to {NATIVE_MAX_CYCLES} in the native build")
+        plan = instance_like(self, direction=_unit2(self.direction, xp))
+        pts, moves = plan._cycle_plan(xp)
+        starts = [0.0]
+        for m in moves[:-1]:
+            starts.append(starts[-1] + m)
+        _, _, last0, last1 = _legs_with_dwell(pts, starts, moves, 0.0, xp)[-1]
+        end = tuple(a + (b - a) for a, b in zip(last0, last1))  # where the last move ends (its tau = 1)
+        knots = []
+        for c in range(NATIVE_MAX_CYCLES):  # as the float path, cycle by cycle (the same roundings)
+            active = c < self.cycles
+            rest = (c * self.cycle_time, math.inf, end, end)
+            for knot in _legs_with_dwell(pts, [t + c * self.cycle_time for t in starts], moves, 0.0, xp):
+                knots.append(tuple(xp.where(active, x, y) if not isinstance(x, tuple) else
+                                   tuple(xp.where(active, u, w) for u, w in zip(x, y))
+                                   for x, y in zip(knot, rest)))
+        return knots
+
+    def _cycle_plan(self, xp=SCALAR) -> tuple[list[tuple], list]:  # noqa: ANN001
+        """The seven stops of one cycle and the time of each move (proportional to sqrt(distance))."""
+        ax, ay, az = self.start
+        hx, hy = self.direction
+        a = (ax, ay, az)
+        b_up = (ax, ay, az + self.up)
+        c_up = (ax + self.across * hx, ay + self.across * hy, b_up[2])
+        place = (c_up[0], c_up[1], c_up[2] - self.down)
+        pts = [a, b_up, c_up, place, c_up, b_up, a]
+        roots = []
+        for p, q in zip(pts, pts[1:]):
+            dx, dy, dz = q[0] - p[0], q[1] - p[1], q[2] - p[2]
+            roots.append(xp.sqrt(xp.sqrt(dx * dx + dy * dy + dz * dz)))
+        total = roots[0]
+        for r in roots[1:]:
+            total = total + r
+        return pts, [self.cycle_time * r / total for r in roots]
 
     @property
     def duration(self) -> float:
@@ -401,7 +501,7 @@ class PickAndPlace(_Segments):
     @property
     def waypoints(self) -> np.ndarray:
         """The seven stops of one cycle (pick, up, across, place, up, back, pick), (7, 3) m."""
-        return self._cycle_plan()[0]
+        return np.array(self._cycle_plan()[0])
 
     @property
     def waypoint_times(self) -> np.ndarray:

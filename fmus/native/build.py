@@ -126,7 +126,7 @@ def _model_c(model: NativeModel, itf: Interface, token: str, functions: list[_Fu
                  "local": "CAUSALITY_LOCAL", "independent": "CAUSALITY_INDEPENDENT"}
     variability = {"constant": "VARIABILITY_CONSTANT", "fixed": "VARIABILITY_FIXED", "tunable": "VARIABILITY_TUNABLE",
                    "discrete": "VARIABILITY_DISCRETE", "continuous": "VARIABILITY_CONTINUOUS"}
-    vtype = {"real": "TYPE_REAL", "boolean": "TYPE_BOOLEAN", "integer": "TYPE_INTEGER"}
+    vtype = {"real": "TYPE_REAL", "boolean": "TYPE_BOOLEAN", "integer": "TYPE_INTEGER", "string": "TYPE_STRING"}
     vr = {v.name: v.vr for v in itf.variables}
     checks: list[tuple[str, bool]] = []
     for f in functions:
@@ -137,9 +137,12 @@ def _model_c(model: NativeModel, itf: Interface, token: str, functions: list[_Fu
         f"const char *const MODEL_IDENTIFIER = {_c_string(itf.name)};",
         f"const char *const MODEL_TOKEN = {_c_string(token)};",
         f"const size_t MODEL_N_VARIABLES = {len(itf.variables)};",
+        *(f"static const char *const CHOICES_{v.vr}[] = {{{', '.join(_c_string(c) for c in v.choices)}}};"
+          for v in itf.variables if v.choices),
         "const ModelVariable MODEL_VARIABLES[] = {",
         *(f"    {{{_c_string(v.name)}, {vtype[v.type]}, {causality[v.causality]}, {variability[v.variability]}, "
-          f"{float(v.start or 0.0)!r}}}," for v in itf.variables),
+          f"{float(v.start or 0.0)!r}, {f'CHOICES_{v.vr}, {len(v.choices)}' if v.choices else 'NULL, 0'}}},"
+          for v in itf.variables),
         "};",
         f"const size_t MODEL_N_STATES = {model.n_state};",
         *([f"static const double INITIAL_STATE[] = {{{', '.join(repr(float(x)) for x in model.initial_state())}}};"]

@@ -14,6 +14,7 @@ from dataclasses import dataclass
 from xml.etree.ElementTree import Element, SubElement, indent, tostring
 
 from .._names import UNITS
+from .errors import NativeError
 from .models import NativeModel
 
 __all__ = ["Variable", "Interface", "interface", "model_description"]
@@ -25,7 +26,7 @@ class Variable:
 
     vr: int
     name: str
-    type: str  # "real" | "boolean" | "integer"
+    type: str  # "real" | "boolean" | "integer" | "string"
     causality: str  # "parameter" | "input" | "output" | "local" | "independent"
     variability: str  # "fixed" | "tunable" | "discrete" | "continuous"
     start: float | None
@@ -33,6 +34,7 @@ class Variable:
     description: str
     depends: tuple[str, ...] | None = None  # outputs and derivatives: the knowns they depend on directly
     derivative_of: str | None = None  # a derivative: the state it is the derivative of
+    choices: tuple[str, ...] = ()  # a String: the values it may take (its start is their index)
 
 
 @dataclass(frozen=True)
@@ -68,9 +70,17 @@ def interface(name: str, model: NativeModel) -> Interface:
         if spec.causality == "output":
             extra = tuple(d for d in state_deps.get(spec.name, ()) if d not in spec.depends)
             depends = tuple(spec.depends) + extra
+        choices: tuple[str, ...] = ()
+        start = None if spec.causality == "output" else spec.start
+        if spec.kind == "string":
+            choices = tuple(model.choices.get(spec.name, ()))
+            if spec.start not in choices:
+                raise NativeError(f"FMU {name}: String variable {spec.name!r} has no closed set of values that "
+                                  f"holds its start {spec.start!r}: it cannot be native")
+            start = choices.index(spec.start)
         variables.append(Variable(len(variables), spec.name, spec.kind, spec.causality, spec.variability,
-                                  None if spec.causality == "output" else float(spec.start), spec.unit,
-                                  spec.description, depends))
+                                  None if start is None else float(start), spec.unit, spec.description, depends,
+                                  choices=choices))
     units = {v.name: v.unit for v in variables}
     for state, der in model.continuous:
         der_var = next((v for v in me.vars.values() if v.name == der), None)
@@ -173,6 +183,8 @@ def _fmi2(itf: Interface, token: str, sources: list[str]) -> bytes:
             SubElement(sv, "Real", real)
         elif v.type == "boolean":
             SubElement(sv, "Boolean", {} if v.start is None else {"start": "true" if v.start else "false"})
+        elif v.type == "string":
+            SubElement(sv, "String", {"start": v.choices[int(v.start)]})
         else:
             SubElement(sv, "Integer", {} if v.start is None else {"start": str(int(v.start))})
     structure = SubElement(root, "ModelStructure")
@@ -210,7 +222,7 @@ def _fmi3(itf: Interface, token: str) -> bytes:
     mvars = _common(root, itf, itf.variables)
     for v in itf.variables:
         attrs = _attributes(v)
-        if v.start is not None:
+        if v.start is not None and v.type != "string":
             attrs["start"] = ("true" if v.start else "false") if v.type == "boolean" else (
                 _fmt(v.start) if v.type == "real" else str(int(v.start)))
         if v.type == "real":
@@ -218,7 +230,10 @@ def _fmi3(itf: Interface, token: str) -> bytes:
                 attrs["unit"] = v.unit
             if v.derivative_of is not None:
                 attrs["derivative"] = str(vr[v.derivative_of])
-        SubElement(mvars, {"real": "Float64", "boolean": "Boolean", "integer": "Int32"}[v.type], attrs)
+        element = SubElement(mvars, {"real": "Float64", "boolean": "Boolean", "integer": "Int32",
+                                     "string": "String"}[v.type], attrs)
+        if v.type == "string":
+            SubElement(element, "Start", value=v.choices[int(v.start)])
     structure = SubElement(root, "ModelStructure")
     outputs = [v for v in itf.variables if v.causality == "output"]
     derivatives = [v for v in itf.variables if v.derivative_of is not None]

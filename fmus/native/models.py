@@ -27,7 +27,7 @@ from delta.control import CTC, DEFAULT_GAINS, PD, PID, PDPlus
 from delta.dynamics import forward_dynamics, platform_state, platform_step
 from delta.kinematics import inverse_kinematics, proximity, set_pose, working_mode_fault
 from delta.model import Data
-from delta.trajectories import TYPES
+from delta.trajectories import PROFILES, TYPES
 
 from .._names import axis_names, joint_names
 from ..adapters.common import P0, V0, mass_values, robot_values
@@ -93,6 +93,7 @@ class NativeModel:
     """
 
     n_state = 0
+    choices: dict[str, tuple[str, ...]] = {}  # String parameters: the values each may take
     max_step: str | None = None  # the parameter that bounds one advance, if any
     me_advances = False
     continuous: tuple[tuple[str, str], ...] = ()  # (state, derivative) variable names
@@ -124,17 +125,23 @@ class NativeModel:
 # ----------------------------------------------------------------------------- trajectories
 
 class Trajectory(NativeModel):
-    """``p_ref, v_ref, a_ref`` at the FMU's time from the trajectory's ``evaluate_scalar`` (no inputs)."""
+    """``p_ref, v_ref, a_ref`` at the FMU's time from the trajectory's ``evaluate_scalar`` (no inputs); a
+    segmented trajectory's knots from its ``knots`` (:mod:`delta.trajectories`), traced as well."""
 
     def __init__(self, adapter: str, trajectory: str) -> None:
         super().__init__(adapter, None)
         self.trajectory = trajectory
+        self.choices = {p.name: PROFILES for p in self._adapter().PARAMS if p.field == "profile"}
 
-    def refresh(self, sym: Symbols, trace: Trace) -> Result:
+    def _adapter(self):  # noqa: ANN202
         from ..adapters.trajectories import ADAPTERS
 
-        adapter = ADAPTERS[self.trajectory]
-        traj = adapter.from_parameters(sym.v, make=lambda **f: instance(TYPES[self.trajectory], **f))
+        return ADAPTERS[self.trajectory]
+
+    def refresh(self, sym: Symbols, trace: Trace) -> Result:
+        traj = self._adapter().from_parameters(sym.v, make=lambda **f: instance(TYPES[self.trajectory], **f))
+        if hasattr(traj, "knots"):
+            traj._set_segments(traj.knots(SYMBOLIC), SYMBOLIC)
         p, v, a = traj.evaluate_scalar(sym.t, SYMBOLIC)
         return Result(dict(zip(P_REF + V_REF + A_REF, (*p, *v, *a))), checks=_errors(trace))
 
@@ -315,7 +322,10 @@ class AnalyticPlant(NativeModel):
 
 
 def _entries() -> dict[str, Callable[[], NativeModel]]:
-    table: dict[str, Callable[[], NativeModel]] = {"helix": lambda: Trajectory("trajectories.HelixTrajectory", "helix")}
+    from ..adapters.trajectories import ADAPTERS
+
+    table: dict[str, Callable[[], NativeModel]] = {
+        a.FMU: (lambda a=a: Trajectory(f"trajectories.{a.__name__}", a.TYPE)) for a in ADAPTERS.values()}
     laws = {"pd": Controller, "pid": PIDController, "pdplus": PDPlusController, "ctc": CTCController}
     classes = {"pd": "PDController", "pid": "PIDController", "pdplus": "PDPlusController", "ctc": "CTCController"}
     for kind in ("linear", "rotary"):

@@ -9,7 +9,7 @@ typedef struct {
     fmi2CallbackFunctions cb;
 } Fmi2Instance;
 
-static const char *const TYPE_NAMES[] = { "Real", "Boolean", "Integer" };
+static const char *const TYPE_NAMES[] = { "Real", "Boolean", "Integer", "String" };
 
 static void forward_log(Instance *inst, RtStatus status, const char *category, const char *message)
 {
@@ -178,9 +178,11 @@ fmi2Status fmi2GetBoolean(fmi2Component c, const fmi2ValueReference vr[], size_t
 
 fmi2Status fmi2GetString(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, fmi2String value[])
 {
+    size_t i;
     BEGIN(fmi2GetString, GET_MODES);
-    (void)value;
-    return nvr == 0 ? fmi2OK : (fmi2Status)rt_type_error(inst, vr[0], "String", "fmi2GetString");
+    for (i = 0; i < nvr; i++)
+        if (rt_get_string(inst, vr[i], &value[i], "fmi2GetString") != RT_OK) return fmi2Error;
+    return fmi2OK;
 }
 
 fmi2Status fmi2SetReal(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, const fmi2Real value[])
@@ -203,9 +205,11 @@ fmi2Status fmi2SetBoolean(fmi2Component c, const fmi2ValueReference vr[], size_t
 
 fmi2Status fmi2SetString(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, const fmi2String value[])
 {
+    size_t i;
     BEGIN(fmi2SetString, SET_MODES);
-    (void)value;
-    return nvr == 0 ? fmi2OK : (fmi2Status)rt_type_error(inst, vr[0], "String", "fmi2SetString");
+    for (i = 0; i < nvr; i++)
+        if (rt_set_string(inst, vr[i], value[i], "fmi2SetString") != RT_OK) return fmi2Error;
+    return fmi2OK;
 }
 
 /* ------------------------------------------------------------------ FMU state */

@@ -12,7 +12,7 @@ typedef struct {
     fmi3LogMessageCallback logMessage;
 } Fmi3Instance;
 
-static const char *const TYPE_NAMES[] = { "Float64", "Boolean", "Int32" };
+static const char *const TYPE_NAMES[] = { "Float64", "Boolean", "Int32", "String" };
 
 static void forward_log(Instance *inst, RtStatus status, const char *category, const char *message)
 {
@@ -253,6 +253,36 @@ fmi3Status fmi3SetBoolean(fmi3Instance instance, const fmi3ValueReference valueR
     return set(inst, valueReferences, nValueReferences, nValues, TYPE_BOOLEAN, "fmi3SetBoolean", NULL, NULL, values);
 }
 
+fmi3Status fmi3GetString(fmi3Instance instance, const fmi3ValueReference valueReferences[], size_t nValueReferences,
+                         fmi3String values[], size_t nValues)
+{
+    size_t i;
+    BEGIN(fmi3GetString, MODES_ANY);
+    if (nValues != nValueReferences) {
+        rt_log(inst, RT_ERROR, "fmi3GetString: nValues (%lu) must equal nValueReferences (%lu): no arrays",
+               (unsigned long)nValues, (unsigned long)nValueReferences);
+        return fmi3Error;
+    }
+    for (i = 0; i < nValueReferences; i++)
+        if (rt_get_string(inst, valueReferences[i], &values[i], "fmi3GetString") != RT_OK) return fmi3Error;
+    return fmi3OK;
+}
+
+fmi3Status fmi3SetString(fmi3Instance instance, const fmi3ValueReference valueReferences[], size_t nValueReferences,
+                         const fmi3String values[], size_t nValues)
+{
+    size_t i;
+    BEGIN(fmi3SetString, SET_MODES);
+    if (nValues != nValueReferences) {
+        rt_log(inst, RT_ERROR, "fmi3SetString: nValues (%lu) must equal nValueReferences (%lu): no arrays",
+               (unsigned long)nValues, (unsigned long)nValueReferences);
+        return fmi3Error;
+    }
+    for (i = 0; i < nValueReferences; i++)
+        if (rt_set_string(inst, valueReferences[i], values[i], "fmi3SetString") != RT_OK) return fmi3Error;
+    return fmi3OK;
+}
+
 /* Types no variable has: an error naming the first value reference (nothing to do for none). */
 static fmi3Status no_type(fmi3Instance instance, const fmi3ValueReference vr[], size_t nvr, const char *type,
                           const char *function)
@@ -285,7 +315,6 @@ NO_GETTER(UInt16)
 NO_GETTER(UInt32)
 NO_GETTER(Int64)
 NO_GETTER(UInt64)
-NO_GETTER(String)
 NO_SETTER(Float32)
 NO_SETTER(Int8)
 NO_SETTER(UInt8)
@@ -294,7 +323,6 @@ NO_SETTER(UInt16)
 NO_SETTER(UInt32)
 NO_SETTER(Int64)
 NO_SETTER(UInt64)
-NO_SETTER(String)
 
 fmi3Status fmi3GetBinary(fmi3Instance instance, const fmi3ValueReference valueReferences[], size_t nValueReferences,
                          size_t valueSizes[], fmi3Binary values[], size_t nValues)

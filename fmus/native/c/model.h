@@ -5,7 +5,9 @@
  * Values: every variable of the model lives in one array of doubles indexed by its value
  * reference: values[vr], vr in [0, MODEL_N_VARIABLES). vr 0 is the independent variable "time"
  * (declared in FMI 3, implicit in FMI 2). Booleans and integers are stored as doubles
- * (0.0 / 1.0 for booleans); the glue converts at the FMI boundary.
+ * (0.0 / 1.0 for booleans); the glue converts at the FMI boundary. A String variable takes one of a
+ * closed set of values (its choices, e.g. a time-scaling profile "quintic" or "cubic") and is stored as
+ * the index of that choice, which is what the model's formulas see.
  *
  * Internal state: state[MODEL_N_STATES] holds what a model keeps between communication points
  * (the analytic plant's platform state, the PID integral, the last reachable IK references).
@@ -21,7 +23,7 @@
 
 #include <stddef.h>
 
-typedef enum { TYPE_REAL = 0, TYPE_BOOLEAN = 1, TYPE_INTEGER = 2 } VarType;
+typedef enum { TYPE_REAL = 0, TYPE_BOOLEAN = 1, TYPE_INTEGER = 2, TYPE_STRING = 3 } VarType;
 typedef enum { CAUSALITY_PARAMETER = 0, CAUSALITY_INPUT = 1, CAUSALITY_OUTPUT = 2, CAUSALITY_LOCAL = 3,
                CAUSALITY_INDEPENDENT = 4 } Causality;
 typedef enum { VARIABILITY_CONSTANT = 0, VARIABILITY_FIXED = 1, VARIABILITY_TUNABLE = 2,
@@ -33,6 +35,8 @@ typedef struct {
     Causality causality;
     Variability variability;
     double start;            /* start value of parameters and inputs (0 for the others) */
+    const char *const *choices; /* TYPE_STRING: the values it may take; its value is the index of one */
+    size_t n_choices;
 } ModelVariable;
 
 /* ---- constants defined by the generated model.c ---- */

@@ -312,6 +312,42 @@ int rt_check_var(Instance *inst, size_t vr, VarType type, int for_set, const cha
     return 0;
 }
 
+RtStatus rt_get_string(Instance *inst, size_t vr, const char **text, const char *function)
+{
+    const ModelVariable *v;
+    double value;
+    if (!rt_check_var(inst, vr, TYPE_STRING, 0, function)) return RT_ERROR;
+    if (rt_get(inst, vr, &value) != RT_OK) return RT_ERROR;
+    v = &MODEL_VARIABLES[vr];
+    *text = (value >= 0.0 && value < (double)v->n_choices) ? v->choices[(size_t)value] : "";
+    return RT_OK;
+}
+
+RtStatus rt_set_string(Instance *inst, size_t vr, const char *text, const char *function)
+{
+    const ModelVariable *v;
+    size_t k;
+    char valid[256];
+    size_t used = 0;
+    if (!rt_check_var(inst, vr, TYPE_STRING, 1, function)) return RT_ERROR;
+    v = &MODEL_VARIABLES[vr];
+    for (k = 0; text && k < v->n_choices; k++) {
+        if (strcmp(text, v->choices[k]) == 0) {
+            rt_set(inst, vr, (double)k);
+            return RT_OK;
+        }
+    }
+    valid[0] = '\0';
+    for (k = 0; k < v->n_choices && used + 1 < sizeof valid; k++) {
+        int n = snprintf(valid + used, sizeof valid - used, "%s\"%s\"", k ? ", " : "", v->choices[k]);
+        if (n < 0) break;
+        used += (size_t)n;
+    }
+    rt_log(inst, RT_ERROR, "%s: \"%s\" is not a value of \"%s\" (vr %lu); valid values: %s", function,
+           text ? text : "(null)", v->name, (unsigned long)vr, valid);
+    return RT_ERROR;
+}
+
 RtStatus rt_get(Instance *inst, size_t vr, double *value)
 {
     Causality c = MODEL_VARIABLES[vr].causality;

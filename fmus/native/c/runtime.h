@@ -46,7 +46,7 @@ struct Instance {
     int failed;                 /* a step failed: no further steps */
     int last_check[N_CALLS];    /* last result of each model function (warnings are logged once) */
     char *name;
-    const char *const *type_names; /* FMI names of TYPE_REAL, TYPE_BOOLEAN, TYPE_INTEGER */
+    const char *const *type_names; /* FMI names of TYPE_REAL, TYPE_BOOLEAN, TYPE_INTEGER, TYPE_STRING */
     LogFn log;
     AllocFn alloc;
     FreeFn free;
@@ -75,6 +75,10 @@ RtStatus rt_not_supported(Instance *inst, const char *function);
 int rt_check_var(Instance *inst, size_t vr, VarType type, int for_set, const char *function);
 RtStatus rt_get(Instance *inst, size_t vr, double *value);
 void rt_set(Instance *inst, size_t vr, double value);
+/* String variables (a closed set of choices, stored as the index of one): the text of the value, or the
+ * index of `text` set (an error listing the choices when it is none of them). */
+RtStatus rt_get_string(Instance *inst, size_t vr, const char **text, const char *function);
+RtStatus rt_set_string(Instance *inst, size_t vr, const char *text, const char *function);
 /* Logged error naming vr (and the variable, if it exists) for an access of a type no variable has. */
 RtStatus rt_type_error(Instance *inst, size_t vr, const char *type, const char *function);
 
