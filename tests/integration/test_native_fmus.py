@@ -199,3 +199,19 @@ def test_native_without_compiler_is_one_line(monkeypatch, tmp_path):
     text = str(exc.value)
     assert "\n" not in text and "no-such-compiler-xyz" in text and "gcc" in text, text
     assert registry.build("linear_ctc", tmp_path).exists()
+
+
+@pytest.mark.parametrize("fmi", [2, 3])
+def test_string_parameter_takes_its_declared_values(fmi, cache):
+    """A native String parameter (the time scaling) is set by its text; another text is an error naming both."""
+    from fmpy import simulate_fmu
+
+    path = str(registry.build("point_to_point", cache, native=True, fmi=fmi))
+    quintic = simulate_fmu(path, stop_time=1.0, output_interval=0.01)
+    cubic = simulate_fmu(path, stop_time=1.0, output_interval=0.01, start_values={"move.profile": "cubic"})
+    assert np.max(np.abs(quintic["a_ref.x"] - cubic["a_ref.x"])) > 0.01, "the profile must change the motion"
+    messages: list[str] = []
+    with pytest.raises(Exception):  # noqa: B017 - FMPy raises a bare Exception for the failed call
+        simulate_fmu(path, stop_time=1.0, start_values={"move.profile": "linear"},
+                     logger=lambda *args: messages.append(args[-1].decode()), debug_logging=True)
+    assert any('"linear"' in m and '"cubic"' in m and '"quintic"' in m for m in messages), messages
