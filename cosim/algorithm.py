@@ -211,53 +211,72 @@ def initialize(rt: Runtime) -> None:
 def simulate(rt: Runtime, observers: Sequence[Observer] = (), stop: StopRequest | None = None,
              progress: Callable[[int], None] | None = None, progress_every: int = 0) -> None:
     """Run the macro steps from ``rt.k_done`` to the end. Raises Interrupted (a KeyboardInterrupt) on a
-    stop request."""
+    stop request.
+
+    ``rt.comp_time`` gets each component's wall time: the clock is read once before a step's first
+    component and once after each component, and the time between two readings is the component's
+    (its links copied in, its FMI calls and checks); the observers run outside the readings.
+    """
     schedule = rt.schedule()
     period = len(schedule)
     slaves = rt.slaves
     h = [m * rt.step_ns * 1e-9 for m in rt.multiples]
-    pull = rt.pull
     ctime = rt.comp_time
     clock = _time.perf_counter
     stepped = [o.stepped for o in observers]
+    report = progress if progress is not None and progress_every else None
     jacobi = rt.algorithm == "jacobi"
     start_ns, step_ns = rt.start_ns, rt.step_ns
+    # per base step of the hyper-period, its active components in order, each with what its turn needs:
+    # the links copied into it (Runtime.pull), its one-call exchange, its step size
+    turns = [[(c, rt.moves[c], rt.copies[c], slaves[c], slaves[c].set_step_get, h[c]) for c in active]
+             for active in schedule]
     k = rt.k_done
     if rt.terminated is not None:  # ended before the first step
         return
     try:
         for k in range(rt.k_done, rt.n_steps):
             t = (start_ns + k * step_ns) * 1e-9
-            active = schedule[k % period]
+            t_prev = clock()
             if jacobi:
-                for c in active:
-                    t0 = clock()
-                    pull(c)
-                    slaves[c].set_inputs()
-                    ctime[c] += clock() - t0
-                for c in active:
-                    t0 = clock()
-                    slaves[c].step(t, h[c])
-                    ctime[c] += clock() - t0
-                for c in active:
-                    t0 = clock()
-                    slaves[c].get_outputs()
-                    ctime[c] += clock() - t0
-            else:
-                for c in active:
-                    t0 = clock()
-                    s = slaves[c]
-                    pull(c)
+                turn = turns[k % period]
+                for c, moves, copies, s, _, _ in turn:
+                    for d, src in moves:
+                        d[:] = src
+                    for dv, di, sv, si in copies:
+                        dv[di] = sv[si]
                     s.set_inputs()
-                    s.step(t, h[c])
+                    now = clock()
+                    ctime[c] += now - t_prev
+                    t_prev = now
+                for c, _, _, s, _, hc in turn:
+                    s.step(t, hc)
+                    now = clock()
+                    ctime[c] += now - t_prev
+                    t_prev = now
+                for c, _, _, s, _, _ in turn:
                     s.get_outputs()
-                    ctime[c] += clock() - t0
+                    now = clock()
+                    ctime[c] += now - t_prev
+                    t_prev = now
+            else:
+                for c, moves, copies, _, set_step_get, hc in turns[k % period]:
+                    for d, src in moves:
+                        d[:] = src
+                    for dv, di, sv, si in copies:
+                        dv[di] = sv[si]
+                    set_step_get(t, hc)
+                    now = clock()
+                    ctime[c] += now - t_prev
+                    t_prev = now
             rt.k_done = k + 1
-            t_end = start_ns + (k + 1) * step_ns
-            for f in stepped:
-                f(k, t_end, active)
-            if progress is not None and progress_every and (k + 1) % progress_every == 0:
-                progress(k + 1)
+            if stepped:
+                t_end = start_ns + (k + 1) * step_ns
+                active = schedule[k % period]
+                for f in stepped:
+                    f(k, t_end, active)
+            if report is not None and (k + 1) % progress_every == 0:
+                report(k + 1)
             if stop is not None and stop.requested:
                 raise stop.interrupted()
     except Terminated as term:

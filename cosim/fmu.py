@@ -447,6 +447,7 @@ class Slave(Protocol):
     def set_inputs(self) -> None: ...
     def get_outputs(self) -> None: ...
     def step(self, t: float, h: float) -> None: ...
+    def set_step_get(self, t: float, h: float) -> None: ...  # set_inputs, step, get_outputs
     def terminate(self) -> None: ...
     def free(self) -> None: ...
 
@@ -483,6 +484,13 @@ class _Buffers:
         return list(self.values) if self.ctype_free else bytes(self.values)
 
 
+def _status_ok(exchange: Callable[[_Buffers], None], b: _Buffers) -> int:
+    """``exchange(b)`` (a String or Binary exchange through fmpy, which raises on a failing status) as a call
+    returning a status like the bound C calls: OK."""
+    exchange(b)
+    return 0
+
+
 def _number(kind: str, value: Any) -> Any:
     if kind == REAL:
         return float(value)
@@ -504,7 +512,8 @@ class _Base:
         self.log: deque[str] = deque(maxlen=20)
         self.in_bufs: list[_Buffers] = []
         self.out_bufs: list[_Buffers] = []
-        self._finite: list[tuple[memoryview, _Buffers]] = []
+        self._finite: list[memoryview] = []  # the real output buffers' values (bind)
+        self._finite_bufs: list[_Buffers] = []  # their buffers
         self._set_calls: list | None = None
         self._get_calls: list | None = None
         self.fmu: Any = None
@@ -563,17 +572,16 @@ class _Base:
         self.in_bufs = self._group(inputs)
         self.out_bufs = self._group(outputs)
         self._set_calls = self._get_calls = None  # hot-path call lists, bound at first use
-        self._py_in = [b for b in self.in_bufs if b.ctype_free]  # strings and binaries: through Python
-        self._py_out = [b for b in self.out_bufs if b.ctype_free]
         # the real outputs as flat memoryviews of their buffers: one sum per buffer and step tells
         # whether a value is NaN or infinite (see _check_finite)
-        self._finite = [(memoryview(b.values).cast("B").cast("f" if b.fmi_type == "Float32" else "d"), b)
-                        for b in self.out_bufs if b.kind == REAL and not b.ctype_free]
+        self._finite_bufs = [b for b in self.out_bufs if b.kind == REAL and not b.ctype_free]
+        self._finite = [memoryview(b.values).cast("B").cast("f" if b.fmi_type == "Float32" else "d")
+                        for b in self._finite_bufs]
 
     def _check_finite(self) -> None:
         """Stop on a NaN or infinite output, naming component, variable and time. The sum of finite values
         overflows only near 1e308; then every element is looked at and nothing is raised."""
-        for view, b in self._finite:
+        for view, b in zip(self._finite, self._finite_bufs):
             if not isfinite(sum(view)):
                 for v, offset in zip(b.variables, b.offsets):
                     for k in range(v.count):
@@ -667,15 +675,13 @@ class _Base:
 
     # -- the per-step exchange: numbers through bound C calls, strings and binaries through fmpy
     def set_inputs(self) -> None:
-        bufs = self._set_calls
-        if bufs is None:
-            bufs = self._set_calls = self._bound(self.in_bufs, "Set")
-        for b in bufs:
-            status = b.call()
+        calls = self._set_calls
+        if calls is None:
+            calls = self._set_calls = self._exchange_calls(self.in_bufs, "Set")
+        for call, function in calls:
+            status = call()
             if status > 1:
-                self._check(status, b.function)
-        for b in self._py_in:
-            self._set_text(b)
+                self._check(status, function)
 
     def _set_buffers(self, bufs: list[_Buffers]) -> None:
         """Set the given input buffers only (model exchange: what changed)."""
@@ -690,18 +696,31 @@ class _Base:
                     self._check(status, b.function)
 
     def get_outputs(self) -> None:
-        bufs = self._get_calls
-        if bufs is None:
-            bufs = self._get_calls = self._bound(self.out_bufs, "Get")
-        for b in bufs:
-            status = b.call()
+        calls = self._get_calls
+        if calls is None:
+            calls = self._get_calls = self._exchange_calls(self.out_bufs, "Get")
+        for call, function in calls:
+            status = call()
             if status > 1:
-                self._check(status, b.function)
-        for b in self._py_out:
-            self._get_text(b)
-        for view, b in self._finite:
+                self._check(status, function)
+        for view in self._finite:
             if not isfinite(sum(view)):
                 self._check_finite()
+
+    def set_step_get(self, t: float, h: float) -> None:
+        """One Gauss-Seidel turn: :meth:`set_inputs`, :meth:`step` from ``t`` over ``h``, :meth:`get_outputs`.
+        The co-simulation wrappers do the same in one method (no dispatch per part)."""
+        self.set_inputs()
+        self.step(t, h)
+        self.get_outputs()
+
+    def _exchange_calls(self, bufs: list[_Buffers], direction: str) -> list[tuple[Callable[[], int], str]]:
+        """(call, FMI function name) per buffer of ``bufs``, in the order the exchange makes them: the numeric
+        buffers through their bound C calls, then strings and binaries through fmpy (a call returning OK:
+        fmpy raises on a failing status, which :meth:`_guard` translates)."""
+        text = self._set_text if direction == "Set" else self._get_text
+        text_calls = [(partial(_status_ok, text, b), self._exchange_name(direction, b)) for b in bufs if b.ctype_free]
+        return [(b.call, b.function) for b in self._bound(bufs, direction)] + text_calls
 
     def _set_text(self, b: _Buffers) -> None:
         """Set a String or Binary input buffer (through fmpy)."""
@@ -725,6 +744,15 @@ class _Base:
 
     def _exchange_args(self, b: _Buffers) -> tuple:
         raise NotImplementedError
+
+    def _step_call(self, name: str, *flags: Any) -> Callable[[], int]:
+        """The doStep function ``name`` as a call without arguments: instance, then the current time and step
+        size read from ``self._t`` and ``self._h`` (``c_double`` s the step updates in place), then ``flags``
+        (C values). Nothing is converted per call, as in :meth:`_bound_call`; an argument-typed call (fmpy's)
+        converts each of them, about 0.4 us more per step."""
+        self._t, self._h = c_double(), c_double()
+        f = getattr(self.fmu.dll, name)
+        return partial(self._prototype(f, None), ctypes.c_void_p(self._c), self._t, self._h, *flags)
 
     def _bound_call(self, dll: Any, name: str, *args: Any) -> Callable[[], int]:
         """``name(*args)`` as a call without arguments, for a per-step exchange whose arguments never
@@ -923,6 +951,44 @@ class _MEMixin:
         self.time = t_end
 
 
+# --------------------------------------------------------------------------- co-simulation
+
+
+class _CoSimulation:
+    """Co-simulation (FMI 2.0 and 3.0): a Gauss-Seidel turn (set, doStep, get, NaN check) in one method, without
+    a dispatch per part."""
+
+    _flags: list[Any] | None = None  # FMI 3.0 doStep's outputs
+
+    def _bind_turn(self) -> None:
+        """After initialization (``self._do_step`` bound): the per-step exchange calls of :meth:`set_step_get`."""
+        if self._set_calls is None:
+            self._set_calls = self._exchange_calls(self.in_bufs, "Set")
+        if self._get_calls is None:
+            self._get_calls = self._exchange_calls(self.out_bufs, "Get")
+
+    def set_step_get(self, t: float, h: float) -> None:
+        for call, function in self._set_calls:
+            status = call()
+            if status > 1:
+                self._check(status, function)
+        self.time = t
+        self._t.value = t
+        self._h.value = h
+        status = self._do_step()
+        flags = self._flags
+        if status > 1 or flags is not None and flags[1].value:  # FMI 3.0: terminateSimulation
+            self._step_failed(status, t, h)
+        self.time = t + h
+        for call, function in self._get_calls:
+            status = call()
+            if status > 1:
+                self._check(status, function)
+        for view in self._finite:
+            if not isfinite(sum(view)):
+                self._check_finite()
+
+
 # --------------------------------------------------------------------------- FMI 2.0
 
 
@@ -999,16 +1065,19 @@ class _FMI2(_Base):
 
 
 
-class FMI2CoSimulation(_FMI2):
+class FMI2CoSimulation(_CoSimulation, _FMI2):
     """FMI 2.0 co-simulation slave."""
 
     def exit_initialization(self) -> None:
         self._guard("fmi2ExitInitializationMode", self.fmu.exitInitializationMode)
-        self._do_step = self._hot_function(self.fmu.dll, "fmi2DoStep")
+        self._do_step = self._step_call("fmi2DoStep", ctypes.c_int(1))  # noSetFMUStatePriorToCurrentPoint: true
+        self._bind_turn()
 
     def step(self, t: float, h: float) -> None:
         self.time = t
-        status = self._do_step(self._c, t, h, 1)
+        self._t.value = t
+        self._h.value = h
+        status = self._do_step()
         if status > 1:
             self._step_failed(status, t, h)
         self.time = t + h
@@ -1164,18 +1233,28 @@ def _binary(value: Any, name: str) -> bytes:
         raise ScenarioError(f"{name}: a Binary value is given as hexadecimal digits, got {value!r}") from None
 
 
-class FMI3CoSimulation(_FMI3):
+class FMI3CoSimulation(_CoSimulation, _FMI3):
     """FMI 3.0 co-simulation instance (no event mode, no early return)."""
 
     def exit_initialization(self) -> None:
         self._guard("fmi3ExitInitializationMode", self.fmu.exitInitializationMode)
-        self._do_step = self.fmu.dll.fmi3DoStep
+        # eventHandlingNeeded, terminateSimulation, earlyReturn, lastSuccessfulTime: written by the FMU
         self._flags = [ctypes.c_bool(), ctypes.c_bool(), ctypes.c_bool(), c_double()]
-        self._refs = [byref(x) for x in self._flags]
+        # noSetFMUStatePriorToCurrentPoint = true, then the flags' addresses
+        self._do_step = self._step_call("fmi3DoStep", ctypes.c_bool(True), *[byref(x) for x in self._flags])
+        self._bind_turn()
 
     def step(self, t: float, h: float) -> None:
         self.time = t
-        status = self._do_step(self._c, t, h, True, *self._refs)
+        self._t.value = t
+        self._h.value = h
+        status = self._do_step()
+        if status > 1 or self._flags[1].value:
+            self._step_failed(status, t, h)
+        self.time = t + h
+
+    def _step_failed(self, status: int, t: float, h: float) -> None:
+        """A doStep that failed or asked to end the simulation (terminateSimulation): raise accordingly."""
         if status == 2 and self._flags[1].value and not self._error_logged_at(t):
             # fmi3Discard with terminateSimulation: the FMU ends the run (unless it logged an error)
             t_last = self._flags[3].value if self._flags[2].value and self._flags[3].value > t else t
@@ -1191,7 +1270,6 @@ class FMI3CoSimulation(_FMI3):
             t_last = self._flags[3].value if self._flags[2].value else t + h
             self.time = t_last
             raise Terminated(self.name, "fmi3DoStep", t_last)
-        self.time = t + h
 
 
 class FMI3ModelExchange(_MEMixin, _FMI3):

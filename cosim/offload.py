@@ -301,6 +301,10 @@ class Proxy:
     def step(self, t: float, h: float) -> None:
         self.time = t + h
 
+    def set_step_get(self, t: float, h: float) -> None:
+        self.step(t, h)
+        self.get_outputs()
+
     _ended: Terminated | None = None
 
     def get_outputs(self) -> None:
@@ -368,8 +372,20 @@ class _Publisher:
             self._ended = True
             raise
 
+    def set_step_get(self, t: float, h: float) -> None:
+        try:
+            self._slave.set_step_get(t, h)
+        except Terminated:
+            self._ended = True
+            raise
+        self._publish()
+
     def get_outputs(self) -> None:
         self._slave.get_outputs()
+        self._publish()
+
+    def _publish(self) -> None:
+        """The outputs just read into the next entry of the ring."""
         r = self._r
         slot = self._claim()
         for d, src in r.moves[slot]:
