@@ -1,10 +1,12 @@
 """Live view: serve a running co-simulation over the Foxglove WebSocket protocol (``foxglove-sdk``).
 
 ``python -m cosim run SCENARIO --live [PORT]`` adds a :class:`LiveView` to the run. It starts a
-Foxglove WebSocket server (subprotocol ``foxglove.sdk.v1``) on the context of the run's
-:class:`cosim.publish.Publisher`, so a viewer connected to ``ws://localhost:PORT`` (the Foxglove
-app: *Open connection*, *Foxglove WebSocket*) sees exactly the channels, schemas and 3D scene
-of the MCAP log, message for message, while the log is still written. The server also
+Foxglove WebSocket server (subprotocol ``foxglove.sdk.v1``) and attaches a sink to the run's
+:class:`cosim.publish.Publisher` that logs every channel into the server's ``foxglove.Context``
+(component samples in blocks encoded by :func:`cosim.log_writer.encode_block`, as for the log), so
+a viewer connected to ``ws://localhost:PORT`` (the Foxglove app: *Open connection*, *Foxglove
+WebSocket*) sees exactly the channels, schemas and 3D scene of the MCAP log, message for message,
+while the log is still written. The server also
 broadcasts the run's current log time (the *Time* capability), so the viewer's clock follows the
 simulation. Combine it with ``--realtime`` to watch at wall-clock pace; without it the run goes
 as fast as it can and the viewer sees it fast-forwarded.
@@ -52,11 +54,46 @@ def _check_free(host: str, port: int) -> None:
                              f"(choose another port: --live PORT)") from None
 
 
+class _ContextSink:
+    """A publisher's sink logging into a ``foxglove.Context`` (see :class:`cosim.publish.Publisher`)."""
+
+    def __init__(self, context) -> None:
+        self._context = context
+        self._channels: list = []
+        self._log: dict[int, object] = {}
+        self._layouts: dict = {}
+
+    def channel(self, cid: int, topic: str, schema_name: str, schema: bytes, metadata: dict[str, str],
+                layout) -> None:
+        import foxglove
+
+        ch = foxglove.Channel(topic, schema=foxglove.Schema(name=schema_name, encoding="jsonschema", data=schema),
+                              message_encoding="json", context=self._context, metadata=metadata)
+        self._channels.append(ch)
+        self._log[cid] = ch.base.log
+        if layout is not None:
+            self._layouts[cid] = layout
+
+    def blocks(self, offset_ns: int, blocks) -> None:
+        from .log_writer import encode_block
+
+        for cid, stamps, data in blocks:
+            self._log[cid](encode_block(self._layouts[cid], stamps, data), stamps[-1] + offset_ns)
+
+    def message(self, cid: int, log_time: int, data: bytes) -> None:
+        self._log[cid](data, log_time)
+
+    def close(self) -> None:
+        for ch in self._channels:
+            ch.close()
+        self._channels.clear()
+
+
 class LiveView:
     """Observer serving ``publisher``'s channels on a Foxglove WebSocket server during the run.
 
-    Place it before the publisher among the run's observers (the server then advertises every
-    channel as the publisher declares it). ``port=0`` picks a free port (:attr:`port` after
+    Place it before the publisher among the run's observers (its sink is then attached before the
+    publisher declares the channels, and the server advertises each as it is declared). ``port=0`` picks a free port (:attr:`port` after
     :meth:`start`).
     """
 
@@ -68,6 +105,7 @@ class LiveView:
         self.port = port
         self.name = name
         self.server = None
+        self._sink: _ContextSink | None = None
 
     @property
     def url(self) -> str:
@@ -77,12 +115,15 @@ class LiveView:
         import foxglove
         from foxglove.websocket import Capability
 
+        context = foxglove.Context()
         try:
             self.server = foxglove.start_server(name=self.name, host=self.host, port=self.port,
-                                                capabilities=[Capability.Time], context=self.publisher.context)
+                                                capabilities=[Capability.Time], context=context)
         except RuntimeError as exc:
             raise CosimError(f"--live: cannot serve on {self.host}:{self.port}: {exc}") from None
         self.port = self.server.port
+        self._sink = _ContextSink(context)
+        self.publisher.attach(self._sink)
         self._offset = self.publisher.origin(rt)
         self._next_time = rt.start_ns
         self.server.broadcast_time(rt.start_ns + self._offset)
@@ -93,6 +134,13 @@ class LiveView:
             self.server.broadcast_time(t_ns + self._offset)
 
     def finish(self, rt: Runtime | None, error: BaseException | None) -> None:
+        if self._sink is not None:
+            try:
+                self.publisher.flush()  # the last samples
+            except CosimError:  # the log's write failed: the recorder reports it when it finishes
+                pass
+            self._sink.close()
+            self._sink = None
         if self.server is not None:
             self.server.stop()
             self.server = None

@@ -2,26 +2,30 @@
 
 - the channels, schemas and messages are those of :class:`cosim.publish.Publisher` (one
   ``/<component>`` JSON channel per component, the ``/scene``, ``/scene/reference`` and
-  ``/tf`` Foxglove channels, ``/events``), written by ``foxglove-sdk``'s MCAP writer from the
-  publisher's ``foxglove.Context``, the same channels the live view (:mod:`cosim.live`) serves;
+  ``/tf`` Foxglove channels, ``/events``), the same channels the live view (:mod:`cosim.live`)
+  serves, written by :mod:`cosim.log_writer`;
+- a run of :attr:`McapRecorder.PROCESS_MIN_STEPS` steps or more writes through a writer process
+  (:class:`cosim.log_writer.WriterProcess`, started when the recorder is made, so it is ready
+  when the loop starts): the master only copies each step's values into blocks, and the child
+  encodes the JSON messages, compresses and writes on the other core. Shorter runs write in this
+  process (a child would cost more to start than it saves);
 - metadata (scenario, versions, platform, time stamps: see :func:`cosim.publish.time_metadata`)
   and attachments (the scenario file and each FMU's modelDescription.xml);
 - zstd chunks flushed every ``flush_interval`` wall seconds, so a killed run
   leaves every complete chunk readable (see :mod:`cosim.recover`);
 - ``finish`` always writes the summary and index, on success, error or Ctrl-C, and the
   ``outcome`` metadata (completed, error, interrupted, stalled; the message);
-- a write that fails (disk full) stops the run at the next step with one error naming the
-  file and the OS's reason; foxglove-sdk reports such failures through Python logging, so
-  they are caught there instead of being printed once per lost message.
+- a write that fails (disk full) stops the run at the next block of samples handed to the
+  writer with one error naming the file and the OS's reason.
 
-The writer was chosen by measurement (``benchmarks/mcap_writer.py``): foxglove-sdk writes
-helix_ctc's message stream 1.3 times as fast as the hand-packed mcap 1.x writer used before
-(both zstd level 3), 1.55 times at the level 1 used here.
+The writer was chosen by measurement (``benchmarks/native.py``, line 5): foxglove-sdk's MCAP
+writer, fed one message per sample built from a dict, cost helix_ctc_analytic about 50 us per
+1 ms step (4.6 times the unlogged run); blocks of samples encoded in a writer process cost the
+master a few us per step.
 """
 
 from __future__ import annotations
 
-import logging
 import os
 import platform
 import sys
@@ -33,72 +37,79 @@ import orjson
 
 from .algorithm import Runtime
 from .errors import CosimError
+from .log_writer import LogSink, WriterFailed, WriterProcess
 from .publish import Publisher, time_metadata
 
 __all__ = ["McapRecorder"]
 
 
-class _WriteFailures(logging.Handler):
-    """Catches the MCAP writer's per-message failures, which foxglove-sdk reports through Python
-    logging (``foxglove.*`` loggers, one record per lost message) instead of raising: the first
-    is kept for the error, none is printed (a full disk would print one line per message)."""
+class _Checked:
+    """The sink as the publisher calls it: a failed write becomes the recorder's CosimError."""
 
-    LOGGERS = ("foxglove", "foxglove_py")  # the SDK's Rust side logs under both
+    def __init__(self, recorder: "McapRecorder", sink) -> None:
+        self._recorder = recorder
+        self._sink = sink
 
-    def __init__(self) -> None:
-        super().__init__(logging.ERROR)
-        self.first: str | None = None
-        self._loggers = [(lg, lg.propagate) for lg in map(logging.getLogger, self.LOGGERS)]
-        for lg, _ in self._loggers:
-            lg.addHandler(self)
-            lg.propagate = False
+    def channel(self, *args) -> None:
+        self._call(self._sink.channel, args)
 
-    def emit(self, record: logging.LogRecord) -> None:
-        if self.first is None:
-            self.first = record.getMessage()
+    def blocks(self, *args) -> None:
+        self._call(self._sink.blocks, args)
 
-    def detach(self) -> None:
-        for lg, propagate in self._loggers:
-            lg.removeHandler(self)
-            lg.propagate = propagate
+    def message(self, *args) -> None:
+        self._call(self._sink.message, args)
+
+    def _call(self, f, args) -> None:
+        try:
+            f(*args)
+        except (OSError, WriterFailed) as exc:
+            raise self._recorder._failure(exc) from None
 
 
 class McapRecorder:
     """Observer writing the channels of ``publisher`` to an MCAP file (see the module docstring).
 
-    Place it before the publisher among the run's observers: it opens the file on the
-    publisher's context in :meth:`start`, before the publisher logs the first sample.
+    Place it before the publisher among the run's observers: it attaches its sink to the
+    publisher in :meth:`start`, before the publisher declares the channels. ``process``: write
+    through a writer process (True), in this process (False), or by the run's length (None; needs
+    ``scenario``).
     """
 
     CHUNK_SIZE = 256 * 1024
     """Uncompressed bytes per zstd chunk (a periodic flush ends a chunk earlier)."""
     ZSTD_LEVEL = 1
     """zstd level 1: on helix_ctc's messages faster than the default 3 and a smaller file (benchmarks/mcap_writer.py)."""
+    PROCESS_MIN_STEPS = 2000
+    """Runs this long or longer write through a writer process (its start costs about 0.1 s of a core)."""
 
     def __init__(self, path: str | Path, publisher: Publisher, scenario=None, scenario_file: str | Path | None = None,
-                 flush_interval: float = 1.0):
+                 flush_interval: float = 1.0, process: bool | None = None):
         self.path = Path(path)
         self.publisher = publisher
         self.scenario = scenario
         self.scenario_file = Path(scenario_file) if scenario_file else None
         self.flush_interval = flush_interval
-        self._writer = None
+        if process is None:
+            process = scenario is not None and _steps(scenario) >= self.PROCESS_MIN_STEPS
+        self._process = WriterProcess() if process else None  # now: it starts while the FMUs load
+        self._sink = None
 
     # -- observer protocol
     def start(self, rt: Runtime) -> None:
-        import foxglove
-        from foxglove.mcap import MCAPCompression, MCAPWriteOptions
-
         self.path.parent.mkdir(parents=True, exist_ok=True)
-        options = MCAPWriteOptions(compression=MCAPCompression.Zstd, chunk_size=self.CHUNK_SIZE,
-                                   compression_level=self.ZSTD_LEVEL)
-        self._failures = _WriteFailures()  # before opening: the writer reports failed writes through logging
-        try:  # a path, not a Python file: the writer (Rust) then holds no Python object
-            self._writer = foxglove.open_mcap(self.path, allow_overwrite=True, context=self.publisher.context,
-                                              writer_options=options)
-        except Exception as exc:  # foxglove raises a bare error type for I/O failures
-            raise CosimError(f"{self.path}: cannot write the MCAP log: {exc}") from None
-        self._metadata(rt)
+        try:
+            if self._process is not None:
+                self._process.open(self.path, self.CHUNK_SIZE, self.ZSTD_LEVEL)
+                self._sink = self._process
+            else:
+                self._sink = LogSink(self.path, self.CHUNK_SIZE, self.ZSTD_LEVEL)
+        except (OSError, WriterFailed) as exc:
+            raise self._failure(exc) from None
+        self.publisher.attach(_Checked(self, self._sink))
+        try:
+            self._metadata(rt)
+        except (OSError, WriterFailed) as exc:
+            raise self._failure(exc) from None
         self._last_flush = time.monotonic()
 
     def _metadata(self, rt: Runtime) -> None:
@@ -106,82 +117,84 @@ class McapRecorder:
 
         import fmpy
 
-        w = self._writer
+        w = self._sink
         versions = {"python": sys.version.split()[0], "fmpy": fmpy.__version__, "orjson": orjson.__version__}
         for dist in ("foxglove-sdk", "delta-cosim"):
             try:
                 versions[dist] = version(dist)
             except PackageNotFoundError:  # not installed as a distribution: leave it out
                 pass
-        w.write_metadata("versions", versions)
-        w.write_metadata("platform", {"system": platform.system(), "machine": platform.machine(),
-                                      "node": platform.node(),
-                                      "python_implementation": platform.python_implementation()})
+        w.metadata("versions", versions)
+        w.metadata("platform", {"system": platform.system(), "machine": platform.machine(), "node": platform.node(),
+                                "python_implementation": platform.python_implementation()})
         if self.scenario is not None:
             s = self.scenario
-            w.write_metadata("scenario", {
+            w.metadata("scenario", {
                 "name": s.name, "algorithm": s.algorithm, "step_s": repr(s.time.step), "stop_s": repr(s.time.stop),
                 "start_s": repr(s.time.start), "robot": str(s.robot), "components": ",".join(s.components),
                 "file": str(self.scenario_file or s.source or "")})
         pub = self.publisher
-        w.write_metadata("time", time_metadata(pub.stamps, pub.origin(rt), rt.start_ns))
+        w.metadata("time", time_metadata(pub.stamps, pub.origin(rt), rt.start_ns))
         now = time.time_ns()
         if self.scenario_file is not None and self.scenario_file.exists():
             ssp = self.scenario_file.suffix.lower() == ".ssp"  # an SSP archive (SSP 1.0 names its MIME type)
-            w.attach(log_time=now, create_time=now, name=f"scenario/{self.scenario_file.name}",
-                     media_type="application/x-ssp-package" if ssp else "application/yaml",
-                     data=self.scenario_file.read_bytes())
+            w.attachment(f"scenario/{self.scenario_file.name}", "application/x-ssp-package" if ssp else "application/yaml",
+                         self.scenario_file.read_bytes(), now, now)
         for name, info in zip(rt.plan.names, rt.plan.infos):
-            w.attach(log_time=now, create_time=now, name=f"fmu/{name}/modelDescription.xml",
-                     media_type="application/xml", data=info.model_description_xml())
+            w.attachment(f"fmu/{name}/modelDescription.xml", "application/xml", info.model_description_xml(), now, now)
 
     def stepped(self, k: int, t_ns: int, active: Sequence[int]) -> None:
-        if self._failures.first is not None:  # the writer failed on a message (disk full): stop the run now
-            raise self._failure()
-        if time.monotonic() - self._last_flush > self.flush_interval:
+        if time.monotonic() - self._last_flush > self.flush_interval:  # the blocks so far: the publisher's own
             try:
-                self._writer.flush()
-            except Exception as exc:  # noqa: BLE001 - foxglove raises a bare error type for I/O failures
+                self._sink.flush()
+            except (OSError, WriterFailed) as exc:
                 raise self._failure(exc) from None
             self._last_flush = time.monotonic()
 
-    def _failure(self, exc: BaseException | None = None) -> CosimError:
-        """The writer's first I/O failure as one line (the OS's reason, e.g. no space left on device)."""
-        import re
+    def _failure(self, exc: BaseException) -> CosimError:
+        """A failed write as one line: the file and the OS's reason (e.g. no space left on device)."""
+        from .log_writer import os_reason
 
-        text = self._failures.first or str(exc)
-        m = re.search(r'message: "([^"]+)"', text)
-        reason = m.group(1) if m else text
-        try:  # the writer's error often only says that an earlier write failed: look at the disk
-            fs = os.statvfs(self.path.parent)
-            if m is None and fs.f_bavail * fs.f_frsize < 2 * self.CHUNK_SIZE:
-                reason = f"no space left on device ({fs.f_bavail * fs.f_frsize} bytes free in {self.path.parent})"
-        except OSError:
-            pass
+        reason = os_reason(exc) if isinstance(exc, OSError) else str(exc)
+        if "space" not in reason:
+            try:  # a failed write may not say why: look at the disk
+                fs = os.statvfs(self.path.parent)
+                if fs.f_bavail * fs.f_frsize < 2 * self.CHUNK_SIZE:
+                    reason = f"no space left on device ({fs.f_bavail * fs.f_frsize} bytes free in {self.path.parent})"
+            except OSError:
+                pass
         return CosimError(f"{self.path}: cannot write the MCAP log: {reason}")
 
     def finish(self, rt: Runtime | None, error: BaseException | None) -> None:
         """Mark the outcome and close the file; raises CosimError when the file cannot be completed."""
-        if self._writer is None:
+        sink, self._sink = self._sink, None
+        if sink is None:
+            if self._process is not None:  # never started: the child ends without a file
+                self._process.abandon()
             return
         try:
+            self.publisher.flush()  # the rows not handed over yet
             if error is not None:
                 status = "interrupted" if isinstance(error, KeyboardInterrupt) else getattr(error, "outcome", "error")
                 text = str(error) or type(error).__name__
-                self._writer.write_metadata("outcome", {"status": status, "message": text,
-                                                        "completed_steps": str(rt.k_done if rt else 0)})
+                sink.metadata("outcome", {"status": status, "message": text,
+                                          "completed_steps": str(rt.k_done if rt else 0)})
             else:
                 outcome = {"status": "completed", "completed_steps": str(rt.k_done if rt else 0)}
                 if rt is not None and rt.terminated is not None:
                     outcome.update(terminated_by=rt.terminated.component, end_time_s=repr(rt.terminated.time),
                                    message=str(rt.terminated))
-                self._writer.write_metadata("outcome", outcome)
-            self._writer.close()
-            failed = None
-        except Exception as exc:  # noqa: BLE001 - the file cannot be completed (disk full): one clear error
-            failed = exc
-        finally:
-            self._writer = None
-            self._failures.detach()
-        if failed is not None or self._failures.first is not None:
-            raise self._failure(failed)
+                sink.metadata("outcome", outcome)
+            sink.finish()
+        except (OSError, WriterFailed, CosimError) as exc:  # the file cannot be completed (disk full)
+            if isinstance(sink, LogSink):
+                try:
+                    sink.abandon()
+                except OSError:
+                    pass
+            raise exc if isinstance(exc, CosimError) else self._failure(exc) from None
+
+
+def _steps(scenario) -> int:
+    t = scenario.time
+    return int(round((t.stop - t.start) / t.step))

@@ -1,15 +1,21 @@
 """What a run publishes: the channels, schemas and messages shared by the MCAP log and the live view.
 
-A :class:`Publisher` is an observer that declares the run's channels in a ``foxglove.Context``
-and logs every exchanged signal into it. Every sink attached to that context receives the
-same channels, schemas and messages: the MCAP file (:class:`cosim.mcap_log.McapRecorder`),
-the Foxglove WebSocket server (:class:`cosim.live.LiveView`), or both. One formula per
-message, in one place.
+A :class:`Publisher` is an observer that declares the run's channels and publishes every
+exchanged signal to its sinks. Every sink receives the same channels, schemas and messages:
+the MCAP file (:class:`cosim.mcap_log.McapRecorder`), the Foxglove WebSocket server
+(:class:`cosim.live.LiveView`), or both. One formula per message, in one place: a component's
+samples leave as rows of raw values, turned into JSON by :func:`cosim.log_writer.encode_block`
+(in the log's writer process, or for the live view).
 
 Channels (JSON encoding, each with a titled JSON Schema):
 
-- ``/<component>``: the component's logged variables, ``{"t": s, "<variable>": value, ...}``;
-  the schema lists each variable with unit, description and causality;
+- ``/<component>``: the component's logged variables in blocks of consecutive samples,
+  ``{"t": [s, ...], "<variable>": [value, ...], ...}``, one array element per sample (an array
+  variable's values are lists), one message per ``1 / scene_rate_hz`` of simulated time logged
+  at its last sample's stamp; the schema lists each variable with unit, description and
+  causality; the channel's metadata says ``layout: blocks``. Logs written before blocks (no
+  ``layout`` metadata) hold one message per sample, ``{"t": s, "<variable>": value, ...}``;
+  :mod:`cosim.runlog` reads both;
 - ``/scene``: ``foxglove.SceneUpdate`` at ``scene_rate_hz``: the robot (rails or arms,
   rods, platform) and the platform's trail over the last ``trail_s`` seconds;
 - ``/scene/reference``: ``foxglove.SceneUpdate``, the reference path as a line: the whole
@@ -33,8 +39,10 @@ their value at the stamp.
 
 from __future__ import annotations
 
+import ctypes
 import time
 from collections import deque
+from functools import lru_cache, partial
 from collections.abc import Sequence
 from typing import Any
 
@@ -60,6 +68,7 @@ STAMPS = ("wall", "simulation")
 _TRAIL_S = 3.0  # s of platform trail drawn in the scene
 _REFERENCE_PERIOD_NS = 1_000_000_000  # /scene/reference resent every simulated second
 _REFERENCE_POINTS = 600  # the whole reference path is drawn with at most this many points
+_BLOCK_ROWS = 256  # samples of a component channel handed over at once, at most
 
 _JSON_TYPE = {REAL: {"type": "number"}, INTEGER: {"type": "integer"}, BOOLEAN: {"type": "boolean"},
               STRING: {"type": "string"}, BINARY: {"type": "string", "contentEncoding": "base64"}}
@@ -108,38 +117,113 @@ def _converter(v):
     return bool if v.kind == BOOLEAN else None  # FMI 2.0 Booleans are C ints
 
 
-def _gather(sources: list[tuple[Any, int]]) -> list[tuple[Any, list[int] | None]]:
-    """Group ``(array, index)`` sources by array, in order: ``(array, None)`` when the group is the
-    whole array in order (read with one slice), else ``(array, indices)``."""
-    groups: list[tuple[Any, list[int]]] = []
-    for arr, i in sources:
-        if groups and groups[-1][0] is arr:
-            groups[-1][1].append(i)
-        else:
-            groups.append((arr, [i]))
-    return [(arr, None if idx == list(range(len(arr))) else idx) for arr, idx in groups]
-
-
-def _values(t_ns: int, groups) -> list:
-    """``[t in s, logged values...]`` read from the grouped buffers."""
-    vals = [t_ns * 1e-9]
-    for arr, idx in groups:
-        vals += arr[:] if idx is None else [arr[i] for i in idx]
-    return vals
-
-
-def _values_any(t_ns: int, readers) -> list:
-    """``[t in s, logged values...]`` for components with arrays or values needing conversion.
-
-    ``readers`` holds per variable ``(array, offset, count or None for a scalar, converter or None)``.
-    """
-    vals = [t_ns * 1e-9]
+def _values_any(readers) -> list:
+    """The logged values read one by one (components with strings or binaries). ``readers`` holds per
+    variable ``(array, offset, count or None for a scalar, converter or None)``."""
+    vals = []
     for arr, i, n, conv in readers:
         if n is None:
             vals.append(arr[i] if conv is None else conv(arr[i]))
         else:
             vals.append(arr[i:i + n] if conv is None else [conv(x) for x in arr[i:i + n]])
     return vals
+
+
+def block_layout(keys: Sequence[str], readers, kinds: Sequence[str]):
+    """``(BlockLayout, runs)`` of a component channel: ``runs`` (``(array, offset, count)`` per stretch of
+    consecutive elements of one ctypes array, in row order; a row is their bytes one after the other)
+    when every value lives in a ctypes array (numbers, Booleans), else None (values read one by one).
+    ``keys``: one JSON key per reader."""
+    from .log_writer import BlockLayout, row_format
+
+    if any(kind not in (REAL, INTEGER, BOOLEAN) for kind in kinds) or any(
+            not isinstance(getattr(arr, "_type_", None), type) or n == 0 for arr, _, n, _ in readers):
+        return BlockLayout(tuple(keys)), None
+    runs: list[list] = []
+    fmt, columns = [], []
+    at = 0
+    for (arr, i, n, _), kind in zip(readers, kinds):
+        count = 1 if n is None else n
+        if runs and runs[-1][0] is arr and runs[-1][1] + runs[-1][2] == i:
+            runs[-1][2] += count
+        else:
+            runs.append([arr, i, count])
+        fmt.append(row_format(arr._type_, count))
+        columns.append((at, 0 if n is None else n, kind == BOOLEAN and arr._type_ is not ctypes.c_bool))
+        at += count
+    return BlockLayout(tuple(keys), "".join(fmt), tuple(columns)), [tuple(r) for r in runs]
+
+
+class _Rows:
+    """A component channel's samples not yet handed to the sinks: their stamps, and their values as
+    rows of bytes copied from the FMU buffers (``runs``, see :func:`block_layout`) or, without runs,
+    as lists (``readers``, see :func:`_values_any`)."""
+
+    __slots__ = ("cid", "cap", "capture", "stamps", "data", "raw", "sources")
+
+    def __init__(self, cid: int, runs, readers, block_bytes: int):
+        from .algorithm import byte_view
+
+        self.cid = cid
+        self.stamps: list[int] = []
+        self.data: list = []
+        self.raw = runs is not None
+        self.sources = None
+        if runs is None:
+            self.capture = partial(_values_any, readers)
+            self.cap = _BLOCK_ROWS
+        else:  # one join per sample: the runs' bytes in one new bytes object
+            self.sources = [byte_view(arr, i, n) for arr, i, n in runs]
+            self.capture = partial(b"".join, self.sources)
+            self.cap = max(1, min(_BLOCK_ROWS, block_bytes // max(1, sum(len(v) for v in self.sources))))
+
+    def take(self) -> tuple[int, list[int], bytes | list]:
+        """The block so far; the lists are emptied in place (the publisher holds their ``append``)."""
+        block = (self.cid, self.stamps[:], b"".join(self.data) if self.raw else self.data[:])
+        self.stamps.clear()
+        self.data.clear()
+        return block
+
+
+class _Joint:
+    """The samples of every logged component at once, when all of them step at every macro step and log
+    numbers only (the common case): one join per step for all their rows, cut into each channel's
+    block when handed over (one numpy slice per channel)."""
+
+    def __init__(self, channels: list[_Rows], block_bytes: int):
+        self.parts = []  # (channel, byte offset in the joint row, bytes)
+        sources, at = [], 0
+        for rows in channels:
+            size = sum(len(v) for v in rows.sources)
+            self.parts.append((rows.cid, at, size))
+            sources += rows.sources
+            at += size
+        self.width = at
+        self.capture = partial(b"".join, sources)
+        self.cap = max(1, min(_BLOCK_ROWS, block_bytes // max(1, at)))
+        self.stamps: list[int] = []
+        self.data: list[bytes] = []
+
+    def take(self) -> list[tuple[int, list[int], bytes]]:
+        n = len(self.stamps)
+        rows = np.frombuffer(b"".join(self.data), dtype=np.uint8).reshape(n, self.width)
+        blocks = [(cid, self.stamps[:], rows[:, at:at + size].tobytes()) for cid, at, size in self.parts]
+        self.stamps.clear()
+        self.data.clear()
+        return blocks
+
+
+def block_schema(schema: dict) -> dict:
+    """The schema of a component channel's block messages from the schema of one sample (see
+    :func:`component_schema`): each property an array of the sample's values, with its unit,
+    description and causality."""
+    props = {}
+    for key, prop in schema["properties"].items():
+        item = {k: v for k, v in prop.items() if k not in ("description", "unit", "causality")}
+        props[key] = {"type": "array", "items": item,
+                      **{k: prop[k] for k in ("description", "unit", "causality") if k in prop}}
+    return {**schema, "description": schema["description"] + "; each message is a block of consecutive samples, "
+            "one array element per sample", "properties": props, "required": list(props)}
 
 
 def component_schema(rt: Runtime, c: int) -> tuple[dict, list]:
@@ -167,14 +251,24 @@ def _vec(p) -> dict[str, float]:
     return {"x": float(p[0]), "y": float(p[1]), "z": float(p[2])}
 
 
+def _point(p) -> orjson.Fragment:
+    """:func:`_vec` serialised once, for points that appear in many messages (trail, reference path)."""
+    return orjson.Fragment(orjson.dumps(_vec(p)))
+
+
 _IDENTITY = {"x": 0.0, "y": 0.0, "z": 0.0, "w": 1.0}
 _POSE = {"position": {"x": 0.0, "y": 0.0, "z": 0.0}, "orientation": _IDENTITY}
 
 
 def _line(kind: int, points, rgba, thickness=0.006) -> dict:
     """A ``foxglove.LinePrimitive``: kind 0 LINE_STRIP, 1 LINE_LOOP, 2 LINE_LIST."""
+    return _line_of(kind, [_vec(p) for p in points], rgba, thickness)
+
+
+def _line_of(kind: int, vecs: list, rgba, thickness=0.006) -> dict:
+    """:func:`_line` of points already in their JSON form (``{"x", "y", "z"}`` or its fragment)."""
     return {"type": kind, "pose": _POSE, "thickness": thickness, "scale_invariant": False,
-            "points": [_vec(p) for p in points], "color": dict(zip("rgba", rgba)), "colors": [], "indices": []}
+            "points": vecs, "color": dict(zip("rgba", rgba)), "colors": [], "indices": []}
 
 
 def _entity(entity_id: str, t_ns: int, lines: list, spheres: list = (), frame: str = "base") -> dict:
@@ -184,6 +278,54 @@ def _entity(entity_id: str, t_ns: int, lines: list, spheres: list = (), frame: s
             "cylinders": [], "lines": lines, "triangles": [], "texts": [], "models": []}
 
 
+class _Drawing:
+    """A robot's scene: what does not move computed once (the model, the base, the platform offsets),
+    what does per call, through the model's scalar formulas (about 30 us a scene)."""
+
+    _SPHERE = {"x": 0.02, "y": 0.02, "z": 0.02}
+    _RED = {"r": 0.9, "g": 0.1, "b": 0.1, "a": 1.0}
+
+    def __init__(self, robot) -> None:
+        from delta.kinematics import leg_axes, platform_offsets
+        from delta.model import build_model
+
+        self.robot = robot
+        self.model = model = build_model(robot)
+        self.offsets = platform_offsets(model).tolist()  # platform joints relative to the platform, (3, 3)
+        self.base = model.actuator.radius * leg_axes(model)  # rail tops or motor axes, z = 0
+        self.base_line = _line(1, self.base, (0.5, 0.5, 0.5, 1.0))
+
+    def update(self, p, t_ns: int, trail: list | None = None) -> dict | None:
+        """:func:`scene_update` with the trail's points in their JSON form (dicts or fragments)."""
+        from delta.kinematics import inverse_kinematics
+
+        model, actuator = self.model, self.model.actuator
+        x, y, z = (float(v) for v in p)
+        q, _, _, fault = inverse_kinematics(model, (x, y, z))
+        if fault > 0:  # a leg without solution: nothing sensible to draw (a joint beyond its limit is drawn)
+            return None
+        joints_a = []  # carriage joints or elbows B_i = b_i - l_i(q_i) at p = 0 (as delta.kinematics.actuator_points)
+        for qi, (c, s, ox, oy), (bx, by, bz) in zip(q, model.legs, self.offsets):
+            lx, ly, lz = actuator.leg(qi, c, s, ox, oy, 0.0, 0.0, 0.0, model.xp)[:3]
+            joints_a.append((bx - lx, by - ly, bz - lz))
+        joints_p = [(x + bx, y + by, z + bz) for bx, by, bz in self.offsets]  # platform joints
+        colour, width = actuator.guide_style
+        lines = [_line(2, actuator.guides(self.robot, self.base, np.array(joints_a)), colour, width), self.base_line,
+                 _line(2, [v for pair in zip(joints_a, joints_p) for v in pair], (0.9, 0.6, 0.1, 1.0)),
+                 _line(1, joints_p, (0.1, 0.7, 0.3, 1.0), 0.01)]
+        spheres = [{"pose": {"position": _vec(v), "orientation": _IDENTITY}, "size": self._SPHERE, "color": self._RED}
+                   for v in joints_a + [(x, y, z)]]
+        entities = [_entity("robot", t_ns, lines, spheres)]
+        if trail is not None and len(trail) > 1:
+            entities.append(_entity("trail", t_ns, [_line_of(0, trail, (0.85, 0.1, 0.1, 0.8), 0.003)]))
+        return {"deletions": [], "entities": entities}
+
+
+@lru_cache(maxsize=8)
+def _drawing(robot) -> _Drawing:
+    return _Drawing(robot)
+
+
 def scene_update(robot, p, t_ns: int, trail=None) -> dict | None:
     """A ``foxglove.SceneUpdate`` (JSON form) drawing ``robot`` with the platform at ``p`` (3,), m.
 
@@ -191,35 +333,17 @@ def scene_update(robot, p, t_ns: int, trail=None) -> dict | None:
     platform. ``trail`` (n, 3), m: the platform's recent positions, drawn as a line.
     ``t_ns`` is the message's log time. None when ``p`` is unreachable (nothing sensible to draw).
     """
-    from delta.kinematics import actuator_points, ik, leg_axes, platform_offsets
-    from delta.model import build_model
-
-    model = build_model(robot)  # once: every helper below takes the model
-    actuator = model.actuator
-    p = np.asarray(p, dtype=float)
-    res = ik(model, p)
-    if not res.ok:
-        return None
-    joints_a = actuator_points(model, res.q)  # carriage joints or elbows, (3, 3)
-    joints_p = p + platform_offsets(model)  # platform joints, (3, 3)
-    base = actuator.radius * leg_axes(model)  # rail tops or motor axes, z = 0
-    colour, width = actuator.guide_style
-    lines = [_line(2, actuator.guides(robot, base, joints_a), colour, width), _line(1, base, (0.5, 0.5, 0.5, 1.0))]
-    lines.append(_line(2, [x for pair in zip(joints_a, joints_p) for x in pair], (0.9, 0.6, 0.1, 1.0)))
-    lines.append(_line(1, joints_p, (0.1, 0.7, 0.3, 1.0), 0.01))
-    spheres = [{"pose": {"position": _vec(x), "orientation": _IDENTITY},
-                "size": {"x": 0.02, "y": 0.02, "z": 0.02}, "color": {"r": 0.9, "g": 0.1, "b": 0.1, "a": 1.0}}
-               for x in list(joints_a) + [p]]
-    entities = [_entity("robot", t_ns, lines, spheres)]
-    if trail is not None and len(trail) > 1:
-        entities.append(_entity("trail", t_ns, [_line(0, trail, (0.85, 0.1, 0.1, 0.8), 0.003)]))
-    return {"deletions": [], "entities": entities}
+    return _drawing(robot).update(p, t_ns, None if trail is None else [_vec(v) for v in trail])
 
 
 def reference_update(points, t_ns: int) -> dict:
     """A ``foxglove.SceneUpdate`` drawing the reference path ``points`` (n, 3), m, as a line."""
-    return {"deletions": [], "entities": [_entity("reference", t_ns, [_line(0, points, (0.1, 0.4, 0.95, 0.6),
-                                                                               0.004)])]}
+    return _reference_update([_vec(v) for v in points], t_ns)
+
+
+def _reference_update(vecs: list, t_ns: int) -> dict:
+    return {"deletions": [], "entities": [_entity("reference", t_ns, [_line_of(0, vecs, (0.1, 0.4, 0.95, 0.6),
+                                                                                0.004)])]}
 
 
 def frame_transforms(p, t_ns: int) -> dict:
@@ -248,7 +372,23 @@ def reference_path(scenario) -> np.ndarray | None:
 
 
 class Publisher:
-    """Observer logging the run's channels into a ``foxglove.Context`` (see the module docstring).
+    """Observer publishing the run's channels to its sinks (see the module docstring).
+
+    A sink (the MCAP log's :class:`cosim.log_writer.LogSink` or writer process, the live view's
+    Foxglove channels) is attached before :meth:`start` and receives, in the run's order:
+
+    - ``channel(cid, topic, schema_name, schema_json, metadata, layout)``: a channel ``cid`` (0, 1, ...);
+      ``layout`` (:class:`cosim.log_writer.BlockLayout`) for a component channel, else None;
+    - ``blocks(offset_ns, blocks)``: samples of component channels, ``(cid, stamps, rows)`` each
+      (simulation ns; raw values, see :class:`_Rows`): one message each, made by
+      :func:`cosim.log_writer.encode_block` and logged at its last stamp + ``offset_ns``;
+    - ``message(cid, log_time, data)``: any other message, JSON encoded.
+
+    Samples are copied from the FMU buffers at each step (about 0.2 us per component) and handed
+    over every ``1 / scene_rate_hz`` of simulated time (whether or not a scene is drawn), before
+    any other message (so the order is the run's), and when a block is full. Where blocks end
+    depends on the simulation alone: a run logs the same messages serial or parallel, with or
+    without a live view.
 
     Parameters
     ----------
@@ -257,7 +397,7 @@ class Publisher:
     scene_position
         The three signals of the platform position (``["plant.p.x", "plant.p.y", "plant.p.z"]``).
     scene_rate_hz
-        Scene and transform messages per simulated second.
+        Scene and transform messages, and blocks of samples, per simulated second.
     stamps
         ``"wall"`` (log time from the run's wall-clock start) or ``"simulation"``.
     reference
@@ -265,6 +405,9 @@ class Publisher:
     reference_signals
         Without ``reference``: three signals whose values so far are drawn as the reference path.
     """
+
+    BLOCK_BYTES = 64 * 1024
+    """Bytes of rows a component channel holds at most before they are handed over."""
 
     def __init__(self, scene_robot=None, scene_position: Sequence[str] | None = None, scene_rate_hz: float = 30.0,
                  stamps: str = "wall", reference=None, reference_signals: Sequence[str] | None = None):
@@ -279,17 +422,13 @@ class Publisher:
         self.reference = None if reference is None else np.asarray(reference, dtype=float)
         self.reference_signals = list(reference_signals) if reference_signals else None
         self.offset_ns: int | None = None
-        self._context = None
-        self._opened: list[Any] = []
+        self._sinks: list[Any] = []
+        self._pending: list[_Rows] = []
+        self._n = 0  # steps with samples not handed over
 
-    @property
-    def context(self):
-        """The ``foxglove.Context`` the channels live in; sinks attach to it before :meth:`start`."""
-        if self._context is None:
-            import foxglove
-
-            self._context = foxglove.Context()
-        return self._context
+    def attach(self, sink) -> None:
+        """Add a sink; it receives every channel and message from :meth:`start` on."""
+        self._sinks.append(sink)
 
     def origin(self, rt: Runtime) -> int:
         """Fix (once) and return the offset log time - simulation time, ns."""
@@ -297,36 +436,56 @@ class Publisher:
             self.offset_ns = time.time_ns() - rt.start_ns if self.stamps == "wall" else 0
         return self.offset_ns
 
-    def _channel(self, topic: str, schema_name: str, schema: dict, metadata: dict[str, str] | None = None):
-        import foxglove
+    def _channel(self, topic: str, schema_name: str, schema: dict, metadata: dict[str, str] | None = None,
+                 layout=None) -> int:
+        cid = self._n_channels
+        self._n_channels += 1
+        data = orjson.dumps(schema)
+        for sink in self._sinks:
+            sink.channel(cid, topic, schema_name, data, metadata or {}, layout)
+        return cid
 
-        ch = foxglove.Channel(topic, schema=foxglove.Schema(name=schema_name, encoding="jsonschema",
-                                                            data=orjson.dumps(schema)),
-                              message_encoding="json", context=self.context, metadata=metadata or {})
-        self._opened.append(ch)
-        return ch.base.log
+    def _send(self, cid: int, log_time: int, data: bytes) -> None:
+        """A message other than samples: the samples before it first, so the sinks see the run's order."""
+        self.flush()
+        for sink in self._sinks:
+            sink.message(cid, log_time, data)
+
+    def flush(self) -> None:
+        """Hand every pending sample to the sinks."""
+        if not self._n:
+            return
+        self._n = 0
+        blocks = self._joint.take() if self._joint is not None and self._joint.stamps else []
+        blocks += [rows.take() for rows in self._pending if rows.stamps]
+        for sink in self._sinks:
+            sink.blocks(self.offset_ns, blocks)
 
     # -- observer protocol
     def start(self, rt: Runtime) -> None:
         from .foxglove_schemas import FRAME_TRANSFORMS, SCENE_UPDATE
 
         plan = rt.plan
-        off = self.origin(rt)
-        # per component: the channel's log function, its sources (grouped), the JSON keys, the value reader
-        self._channels: list[tuple[Any, list, tuple[str, ...], Any] | None] = []
+        self.origin(rt)
+        self._n_channels = 0
+        self._pending = []
+        self._n = 0
+        # per component: None (not logged) or (add a row, read a row, add a stamp, own step in ns)
+        self._by_comp: list[tuple[Any, Any, Any, int] | None] = []
+        self._rows_of: dict[int, _Rows] = {}
         for c, name in enumerate(plan.names):
             if not (plan.logged and plan.logged[c]):
-                self._channels.append(None)
+                self._by_comp.append(None)
                 continue
             schema, readers = component_schema(rt, c)
-            log = self._channel(f"/{name}", f"cosim.{name}", schema,
-                                {"fmu": str(plan.infos[c].path.name), "step_multiple": str(rt.multiples[c])})
-            keys = tuple(schema["properties"])
-            if all(n is None and conv is None for _, _, n, conv in readers):  # plain scalars: grouped reads
-                self._channels.append((log, _gather([(arr, i) for arr, i, _, _ in readers]), keys, _values))
-            else:
-                self._channels.append((log, readers, keys, _values_any))
-        self._h_ns = [m * rt.step_ns for m in rt.multiples]
+            layout, runs = block_layout(tuple(schema["properties"])[1:], readers, [v.kind for v in plan.logged[c]])
+            cid = self._channel(f"/{name}", f"cosim.{name}", block_schema(schema),
+                                {"fmu": str(plan.infos[c].path.name), "step_multiple": str(rt.multiples[c]),
+                                 "layout": "blocks"}, layout)
+            rows = _Rows(cid, runs, readers, self.BLOCK_BYTES)
+            self._pending.append(rows)
+            self._rows_of[c] = rows
+            self._by_comp.append((rows.data.append, rows.capture, rows.stamps.append, rt.multiples[c] * rt.step_ns))
         self._step_ns = rt.step_ns
         self._t0 = rt.start_ns
         self._rt = rt
@@ -340,45 +499,57 @@ class Publisher:
                            self._channel("/tf", "foxglove.FrameTransforms", FRAME_TRANSFORMS),
                            self._channel("/scene/reference", "foxglove.SceneUpdate", SCENE_UPDATE), ref_sources)
             keep = max(2, round(_TRAIL_S * 1e9 / self.scene_period_ns) + 1)
-            self._trail: deque = deque(maxlen=keep)
-            self._ref_points: list = [] if self.reference is None else list(self.reference)
-            self._next_scene = rt.start_ns
+            self._trail: deque = deque(maxlen=keep)  # points as JSON fragments: each serialised once
+            self._ref_points: list = [] if self.reference is None else [_point(v) for v in self.reference]
             self._next_reference = rt.start_ns
+            self._drawing = _drawing(self.scene_robot)
         # model-exchange components report their events (time, kind) on one /events channel
         self._event_sources = [(c, s) for c, s in enumerate(rt.slaves) if hasattr(s, "event_log")]
-        self._events_log = None
+        self._events_cid = None
         if self._event_sources:
-            self._events_log = self._channel("/events", "cosim.events", EVENTS_SCHEMA)
-        for c in range(len(plan.names)):
-            self._log(c, rt.start_ns, off)
-        self._draw(rt.start_ns)
+            self._events_cid = self._channel("/events", "cosim.events", EVENTS_SCHEMA)
+        # a block is handed over before any channel's can be full (the fastest fills one sample a step)
+        self._cap = min((rows.cap for rows in self._pending), default=_BLOCK_ROWS)
+        logged = [c for c in plan.order if self._by_comp[c] is not None]
+        self._joint = None
+        if logged and all(rt.multiples[c] == 1 and self._rows_of[c].raw for c in logged):
+            self._joint = _Joint([self._rows_of[c] for c in logged], self.BLOCK_BYTES)
+            self._cap = min(self._cap, self._joint.cap)
+        self._n = 0
+        if self._joint is not None:
+            self._joint.data.append(self._joint.capture())
+            self._joint.stamps.append(rt.start_ns)
+            self._n = 1
+        else:
+            for entry in self._by_comp:
+                if entry is not None:
+                    entry[0](entry[1]())
+                    entry[2](rt.start_ns)
+                    self._n = 1
+        self._next_tick = rt.start_ns
+        self._tick(rt.start_ns)
 
-    def _log(self, c: int, t_ns: int, off: int) -> None:
-        ch = self._channels[c]
-        if ch is None:
+    def _tick(self, t_ns: int) -> None:
+        """Every scene period: the samples so far, then the scene."""
+        self._next_tick = t_ns + self.scene_period_ns
+        self.flush()
+        if self._scene is None:
             return
-        log, groups, keys, values = ch
-        log(orjson.dumps(dict(zip(keys, values(t_ns, groups)))), t_ns + off)
-
-    def _draw(self, t_ns: int) -> None:
-        if self._scene is None or t_ns < self._next_scene:
-            return
-        self._next_scene = t_ns + self.scene_period_ns
-        scene_log, sources, tf_log, ref_log, ref_sources = self._scene
+        scene_cid, sources, tf_cid, ref_cid, ref_sources = self._scene
         stamp = t_ns + self.offset_ns
         p = [arr[i] for arr, i in sources]
-        self._trail.append(p)
+        self._trail.append(_point(p))
         if ref_sources is not None:
-            self._ref_points.append([arr[i] for arr, i in ref_sources])
+            self._ref_points.append(_point([arr[i] for arr, i in ref_sources]))
             if len(self._ref_points) > 2 * _REFERENCE_POINTS:  # every other point: the resent line stays bounded
                 self._ref_points = self._ref_points[::2]
-        msg = scene_update(self.scene_robot, p, stamp, self._trail)
+        msg = self._drawing.update(p, stamp, list(self._trail))
         if msg is not None:
-            scene_log(orjson.dumps(msg), stamp)
-            tf_log(orjson.dumps(frame_transforms(p, stamp)), stamp)
+            self._send(scene_cid, stamp, orjson.dumps(msg))
+            self._send(tf_cid, stamp, orjson.dumps(frame_transforms(p, stamp)))
         if t_ns >= self._next_reference and len(self._ref_points) > 1:
             self._next_reference = t_ns + _REFERENCE_PERIOD_NS
-            ref_log(orjson.dumps(reference_update(self._ref_points, stamp)), stamp)
+            self._send(ref_cid, stamp, orjson.dumps(_reference_update(self._ref_points, stamp)))
 
     def _log_events(self) -> None:
         names = self._rt.plan.names
@@ -388,31 +559,35 @@ class Publisher:
                 continue
             for t, kind in events:
                 t = float(t)
-                self._events_log(orjson.dumps({"t": t, "component": names[c], "kind": kind}),
-                                 round(t * 1e9) + self.offset_ns)
+                self._send(self._events_cid, round(t * 1e9) + self.offset_ns,
+                           orjson.dumps({"t": t, "component": names[c], "kind": kind}))
             events.clear()
 
     def stepped(self, k: int, t_ns: int, active: Sequence[int]) -> None:
-        h = self._h_ns
-        t_start = self._t0 + k * self._step_ns
-        off = self.offset_ns
-        dumps = orjson.dumps
-        channels = self._channels
-        for c in active:
-            ch = channels[c]
-            if ch is None:
-                continue
-            stamp = t_start + h[c]  # the end of this component's own (possibly multi-rate) step
-            if stamp > t_ns and self._rt.t_end_ns is not None:  # an FMU ended the run: the time reached
-                stamp = t_ns
-            log, groups, keys, values = ch
-            log(dumps(dict(zip(keys, values(stamp, groups)))), stamp + off)
-        if self._events_log is not None:
+        joint = self._joint
+        if joint is not None and self._rt.t_end_ns is None:  # every logged component stepped, to t_ns
+            joint.data.append(joint.capture())
+            joint.stamps.append(t_ns)
+        else:
+            if joint is not None:  # the last step of a run an FMU ended: some components only
+                self.flush()
+            t_start = self._t0 + k * self._step_ns
+            by_comp = self._by_comp
+            ended = self._rt.t_end_ns is not None  # an FMU ended the run: no stamp past the time reached
+            for c in active:
+                entry = by_comp[c]
+                if entry is not None:
+                    add, read, stamp, h = entry
+                    add(read())
+                    # the end of this component's own (possibly multi-rate) step
+                    stamp(min(t_start + h, t_ns) if ended else t_start + h)
+        self._n += 1
+        if self._n >= self._cap:
+            self.flush()
+        if self._event_sources:
             self._log_events()
-        if self._scene is not None and t_ns >= self._next_scene:
-            self._draw(t_ns)
+        if t_ns >= self._next_tick:
+            self._tick(t_ns)
 
     def finish(self, rt: Runtime | None, error: BaseException | None) -> None:
-        for ch in self._opened:
-            ch.close()
-        self._opened.clear()
+        self.flush()  # normally done: each sink flushes the publisher before it closes

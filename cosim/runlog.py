@@ -1,8 +1,10 @@
 """Read a run's MCAP log back into arrays, and write decimated baselines of it.
 
 A run log (see :mod:`cosim.mcap_log`) holds one JSON channel ``/<component>`` per
-component, each message a flat object ``{"t": ..., "<variable>": value, ...}``. Here
-every logged variable becomes a :class:`Signal` named ``component.variable``
+component. Its messages are blocks of samples, ``{"t": [...], "<variable>": [...], ...}``
+(one array element per sample; the channel's metadata says ``layout: blocks``), or, in logs
+written before blocks, one sample each, ``{"t": ..., "<variable>": value, ...}``; both read
+alike. Here every logged variable becomes a :class:`Signal` named ``component.variable``
 (``plant.p.x``, ``ctl.u[1]``) with its time stamps, values, unit and causality. The
 ``/scene`` channels (Foxglove drawing) and ``/tf`` are skipped.
 
@@ -27,7 +29,7 @@ import orjson
 
 from .errors import CosimError
 
-__all__ = ["Signal", "RunLog", "read_run", "write_baseline", "time_offset_ns", "AXES"]
+__all__ = ["Signal", "RunLog", "read_run", "write_baseline", "time_offset_ns", "samples", "AXES"]
 
 AXES = ("x", "y", "z")
 _SKIP_TOPICS = {"/scene", "/scene/reference", "/tf", "/events"}
@@ -40,6 +42,15 @@ def time_offset_ns(metadata: dict[str, dict[str, str]]) -> int:
         return int(metadata.get("time", {}).get("offset_ns", 0))
     except ValueError:
         return 0
+
+
+def samples(message: dict) -> list[dict]:
+    """The samples of a component channel's decoded message, one ``{"t": s, "<variable>": value, ...}``
+    each: those of a block (``"t"`` a list), or the message itself (a log written before blocks)."""
+    if not isinstance(message.get("t"), list):
+        return [message]
+    keys = list(message)
+    return [dict(zip(keys, values)) for values in zip(*message.values())]
 
 
 @dataclass(frozen=True)
@@ -131,9 +142,8 @@ def read_run(path: str | Path, components: Iterable[str] | None = None) -> RunLo
     if not path.is_file():
         raise CosimError(f"{path}: no such file")
     wanted = None if components is None else {f"/{c}" for c in components}
-    rows: dict[str, list] = {}
+    columns: dict[str, dict[str, list]] = {}  # per component, per key (t included): the values in file order
     stamps: dict[str, list[int]] = {}
-    keys: dict[str, list[str]] = {}
     props: dict[str, dict] = {}
     metadata: dict[str, dict[str, str]] = {}
     attachments: dict[str, bytes] = {}
@@ -154,7 +164,7 @@ def read_run(path: str | Path, components: Iterable[str] | None = None) -> RunLo
                 channel_md[comp] = dict(ch.metadata)
                 schema = summary.schemas.get(ch.schema_id)
                 props[comp] = orjson.loads(schema.data).get("properties", {}) if schema is not None else {}
-                rows[comp], stamps[comp] = [], []
+                columns[comp], stamps[comp] = {}, []
             for rec in reader.iter_metadata():
                 metadata[rec.name] = dict(rec.metadata)
             offset = time_offset_ns(metadata)
@@ -164,30 +174,39 @@ def read_run(path: str | Path, components: Iterable[str] | None = None) -> RunLo
             for _, ch, msg in reader.iter_messages(topics=topics, log_time_order=False):
                 comp = ch.topic[1:]
                 d = orjson.loads(msg.data)
-                if comp not in keys:
-                    keys[comp] = list(d)
-                rows[comp].append(tuple(d.values()))
-                stamps[comp].append(msg.log_time - offset)
+                cols = columns[comp]
+                if isinstance(d.get("t"), list):  # a block of samples: the stamps from its times
+                    stamps[comp] += [round(t * 1e9) for t in d["t"]]
+                    for key, values in d.items():
+                        cols.setdefault(key, []).extend(values)
+                else:  # one sample
+                    stamps[comp].append(msg.log_time - offset)
+                    for key, value in d.items():
+                        cols.setdefault(key, []).append(value)
             for att in reader.iter_attachments():
                 attachments[att.name] = bytes(att.data)
     except (McapError, OSError, ValueError, orjson.JSONDecodeError) as exc:
         raise _open_error(path, exc) from None
     if wanted is not None:
-        missing = sorted(w[1:] for w in wanted if w[1:] not in rows)
+        missing = sorted(w[1:] for w in wanted if w[1:] not in columns)
         if missing:
             raise CosimError(f"{path}: no channel for component(s) {', '.join(missing)}; "
                              f"it has {', '.join(sorted(channel_md)) or 'none'}")
     signals: dict[str, Signal] = {}
-    for comp, data in rows.items():
-        if not data:
+    for comp, cols in columns.items():
+        if not stamps[comp]:
             continue
         order = np.argsort(np.asarray(stamps[comp], dtype=np.int64), kind="stable")
         t_ns = np.asarray(stamps[comp], dtype=np.int64)[order]
-        for j, key in enumerate(keys[comp]):
+        for key, values in cols.items():
             if key == "t":
                 continue
+            if len(values) != len(order):
+                raise CosimError(f"{path}: channel /{comp} has {len(values)} values of {key!r} for "
+                                 f"{len(order)} time stamps")
             meta = props[comp].get(key, {})
-            signals[f"{comp}.{key}"] = Signal(f"{comp}.{key}", t_ns, _column([data[i][j] for i in order], meta),
+            item = meta.get("items", {}) if channel_md[comp].get("layout") == "blocks" else meta
+            signals[f"{comp}.{key}"] = Signal(f"{comp}.{key}", t_ns, _column(values, item)[order],
                                               meta.get("unit", ""), meta.get("description", ""),
                                               meta.get("causality", ""))
     return RunLog(path, signals, metadata, attachments, channel_md, events)
@@ -211,12 +230,13 @@ def _column(values: list, meta: dict) -> np.ndarray:
 
 def write_baseline(source: str | Path, out: str | Path, period: float = 0.01,
                    components: Sequence[str] | None = None) -> tuple[Path, int]:
-    """Decimate a run log to one message per component every ``period`` s into ``out``.
+    """Decimate a run log to one sample per component every ``period`` s into ``out``.
 
-    The baseline keeps the source's schemas, channels (minus ``/scene``), metadata and
-    attachments, and adds a ``baseline`` metadata record (source, period). Messages are
-    kept where the simulation time is a multiple of ``period`` (the run's stamps are integer
-    ns, so the pick is exact). Returns (path, messages written).
+    The baseline keeps the source's schemas, channels (minus ``/scene``), layout, metadata and
+    attachments, and adds a ``baseline`` metadata record (source, period). Samples are kept
+    where the simulation time is a multiple of ``period`` (the run's stamps are integer ns, so
+    the pick is exact): whole messages of a log with one sample a message, the samples on the
+    period of each block otherwise. Returns (path, samples kept).
     """
     from mcap.reader import make_reader
     from mcap.writer import CompressionType, Writer
@@ -255,9 +275,18 @@ def write_baseline(source: str | Path, out: str | Path, period: float = 0.01,
                     raise CosimError(f"{source}: no channel for component(s) {', '.join(missing)}")
             offset = time_offset_ns({rec.name: dict(rec.metadata) for rec in reader.iter_metadata()})
             for _, ch, msg in reader.iter_messages(topics=[summary.channels[i].topic for i in channel_ids]):
-                if (msg.log_time - offset) % period_ns == 0:
-                    w.add_message(channel_ids[ch.id], msg.log_time, msg.data, msg.publish_time)
-                    written += 1
+                if ch.metadata.get("layout") != "blocks":  # one sample a message
+                    if (msg.log_time - offset) % period_ns == 0:
+                        w.add_message(channel_ids[ch.id], msg.log_time, msg.data, msg.publish_time)
+                        written += 1
+                    continue
+                block = orjson.loads(msg.data)  # the block's samples on the period, as a block
+                keep = [i for i, t in enumerate(block["t"]) if round(t * 1e9) % period_ns == 0]
+                if keep:
+                    stamp = round(block["t"][keep[-1]] * 1e9) + offset
+                    w.add_message(channel_ids[ch.id], stamp,
+                                  orjson.dumps({k: [v[i] for i in keep] for k, v in block.items()}), stamp)
+                    written += len(keep)
             for rec in reader.iter_metadata():
                 w.add_metadata(rec.name, dict(rec.metadata))
             w.add_metadata("baseline", {"source": str(source), "period_s": repr(period)})

@@ -39,10 +39,11 @@ logging: {{signals: all}}
 
 
 def _read_mcap(path: Path):
-    """(summary, messages by topic); ``_log_time`` is the simulation time (the log's time offset removed)."""
+    """(summary, messages by topic, a component channel's as one per sample); ``_log_time`` is the
+    simulation time of the sample (the log's time offset removed; a block's samples: from their ``t``)."""
     from mcap.reader import make_reader
 
-    from cosim.runlog import time_offset_ns
+    from cosim.runlog import samples, time_offset_ns
 
     with open(path, "rb") as f:
         reader = make_reader(f)
@@ -50,8 +51,12 @@ def _read_mcap(path: Path):
         offset = time_offset_ns({m.name: dict(m.metadata) for m in reader.iter_metadata()})
         msgs: dict[str, list[dict]] = {}
         for schema, channel, message in reader.iter_messages():
-            msgs.setdefault(channel.topic, []).append(orjson.loads(message.data)
-                                                      | {"_log_time": message.log_time - offset})
+            decoded = orjson.loads(message.data)
+            if channel.metadata.get("layout") == "blocks":
+                msgs.setdefault(channel.topic, []).extend(s | {"_log_time": round(s["t"] * 1e9)}
+                                                          for s in samples(decoded))
+            else:
+                msgs.setdefault(channel.topic, []).append(decoded | {"_log_time": message.log_time - offset})
     return summary, msgs
 
 

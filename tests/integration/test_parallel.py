@@ -15,6 +15,7 @@ import sys
 import time
 from pathlib import Path
 
+import orjson
 import pytest
 
 from cosim.errors import CosimError, FMIError
@@ -48,16 +49,21 @@ logging: {{signals: all, flush_interval: 0.1}}
 
 
 def _messages(path: Path) -> dict[str, list[tuple[int, bytes]]]:
+    """(simulation time, JSON) by topic, one per sample on a component channel (a block's samples each)."""
     from mcap.reader import make_reader
 
-    from cosim.runlog import time_offset_ns
+    from cosim.runlog import samples, time_offset_ns
 
     with open(path, "rb") as f:
         reader = make_reader(f)
         offset = time_offset_ns({m.name: dict(m.metadata) for m in reader.iter_metadata()})  # wall-clock start
         out: dict[str, list[tuple[int, bytes]]] = {}
         for _, channel, message in reader.iter_messages():
-            out.setdefault(channel.topic, []).append((message.log_time - offset, bytes(message.data)))
+            if channel.metadata.get("layout") == "blocks":
+                out.setdefault(channel.topic, []).extend((round(s["t"] * 1e9), orjson.dumps(s))
+                                                         for s in samples(orjson.loads(message.data)))
+            else:
+                out.setdefault(channel.topic, []).append((message.log_time - offset, bytes(message.data)))
     return out
 
 
