@@ -11,8 +11,10 @@ Binary, Enumeration, and arrays (buffers hold every element; ``Variable.shape`` 
 dimensions, fixed or from structural parameters). Clocks are rejected when loading.
 
 Every FMI status passes through :meth:`_Base._check` (the hot path calls the C functions
-directly with pre-built ctypes buffers); a failure raises :class:`~cosim.errors.FMIError`
-naming the component, the function, the simulation time and the FMU's last log message.
+directly with pre-built ctypes buffers; a co-simulation FMU's Gauss-Seidel turn, set, doStep
+and get, is one call into :mod:`cosim.turn` where that helper can be built); a failure raises
+:class:`~cosim.errors.FMIError` naming the component, the function, the simulation time and
+the FMU's last log message.
 An FMU that asks to end the simulation raises :class:`Terminated`, which the algorithm
 turns into a normal end of the run.
 """
@@ -41,6 +43,7 @@ from typing import Any, Callable, Iterable, Protocol, Sequence
 from fmus.requirements import release_pythonfmu_state
 
 from .errors import ComponentSourceError, FMIError, Issue, ScenarioError
+from .turn import GET, SET, STEP, Exchange, Finite, make_turn
 
 isfinite = math.isfinite  # a module global: one lookup less per output buffer in the hot path
 
@@ -955,26 +958,57 @@ class _MEMixin:
 
 
 class _CoSimulation:
-    """Co-simulation (FMI 2.0 and 3.0): a Gauss-Seidel turn (set, doStep, get, NaN check) in one method, without
-    a dispatch per part."""
+    """Co-simulation (FMI 2.0 and 3.0): a Gauss-Seidel turn (set, doStep, get, NaN check) in one C call
+    (:mod:`cosim.turn`) where the helper is available and the FMU exchanges numbers only."""
 
     _flags: list[Any] | None = None  # FMI 3.0 doStep's outputs
+    _c_turn: Callable[[], int] | None = None  # the C turn, bound after initialization (None: none for this FMU)
+    _turn_state: Any = None  # its cosim.turn.Turn
+
+    def bind(self, inputs: list[Variable], outputs: list[Variable]) -> None:
+        super().bind(inputs, outputs)
+        self._c_turn = self._turn_state = None  # a C turn points into the buffers: one of these is bound after init
 
     def _bind_turn(self) -> None:
-        """After initialization (``self._do_step`` bound): the per-step exchange calls of :meth:`set_step_get`."""
+        """After initialization (``self._do_step`` bound): the per-step exchange calls and the turn."""
         if self._set_calls is None:
             self._set_calls = self._exchange_calls(self.in_bufs, "Set")
         if self._get_calls is None:
             self._get_calls = self._exchange_calls(self.out_bufs, "Get")
+        made = None
+        if not any(b.ctype_free for b in (*self.in_bufs, *self.out_bufs)):  # strings, binaries: through fmpy
+            dll = self.fmu.dll
+
+            def exchanges(bufs: list[_Buffers]) -> list[Exchange]:
+                return [Exchange(ctypes.cast(getattr(dll, b.function), ctypes.c_void_p).value,
+                                 ctypes.addressof(b.vrs), b.n, ctypes.addressof(b.values), b.size) for b in bufs]
+
+            do_step = ctypes.cast(getattr(dll, f"fmi{self.fmi}DoStep"), ctypes.c_void_p).value
+            finite = [Finite(ctypes.addressof(b.values), b.size, b.fmi_type == "Float32")
+                      for b in self._finite_bufs]
+            made = make_turn(self.fmi, self._c, do_step, self._t, self._h, exchanges(self.in_bufs),
+                             exchanges(self.out_bufs), finite, self._flags, lambda f: self._prototype(f, None))
+        self._c_turn, self._turn_state = made if made is not None else (None, None)
 
     def set_step_get(self, t: float, h: float) -> None:
+        self.time = t
+        self._t.value = t
+        self._h.value = h
+        c_turn = self._c_turn
+        if c_turn is not None:
+            ended = c_turn()
+            if ended:
+                self._turn_ended(ended, t, h)
+        else:
+            self._turn_in_python(t, h)
+        self.time = t + h
+
+    def _turn_in_python(self, t: float, h: float) -> None:
+        """The C turn's calls made from Python one by one (no C turn for this FMU); raises where it ends."""
         for call, function in self._set_calls:
             status = call()
             if status > 1:
                 self._check(status, function)
-        self.time = t
-        self._t.value = t
-        self._h.value = h
         status = self._do_step()
         flags = self._flags
         if status > 1 or flags is not None and flags[1].value:  # FMI 3.0: terminateSimulation
@@ -987,6 +1021,18 @@ class _CoSimulation:
         for view in self._finite:
             if not isfinite(sum(view)):
                 self._check_finite()
+
+    def _turn_ended(self, ended: int, t: float, h: float) -> None:
+        """Raise for the call that ended a C turn early, as the same call made from Python raises."""
+        u = self._turn_state
+        if ended == SET:
+            self._check(u.status, self._set_calls[u.index][1])
+        if ended == STEP:
+            self._step_failed(u.status, t, h)
+        self.time = t + h
+        if ended == GET:
+            self._check(u.status, self._get_calls[u.index][1])
+        self._check_finite()  # NONFINITE
 
 
 # --------------------------------------------------------------------------- FMI 2.0
