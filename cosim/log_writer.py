@@ -418,13 +418,13 @@ class WriterProcess:
         except OSError:  # the child is gone (broken pipe): say why
             raise WriterFailed(self._reason()) from None
 
-    def _reason(self) -> str:
+    def _reason(self, out: bytes | None = None) -> str:
         try:
             self._proc.wait(timeout=10)
         except subprocess.TimeoutExpired:
             self._proc.kill()
             self._proc.wait()
-        out = self._proc.stdout.read().decode(errors="replace").strip()
+        out = (self._proc.stdout.read() if out is None else out).decode(errors="replace").strip()
         err = self._proc.stderr.read().decode(errors="replace").strip()
         lines = [ln for ln in out.splitlines() if ln.startswith("error: ")]
         self.failure = lines[-1][len("error: "):] if lines else (
@@ -465,7 +465,7 @@ class WriterProcess:
             raise WriterFailed(f"the writer process did not finish the file within {timeout:g} s") from None
         out = self._proc.stdout.read()
         if self._proc.returncode != 0 or not out.endswith(_SUCCESS):
-            raise WriterFailed(self._reason())
+            raise WriterFailed(self._reason(out))
 
     def abandon(self) -> None:
         """Leave the file unfinished (its chunks written) and let the child end."""
