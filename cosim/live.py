@@ -77,8 +77,8 @@ class _ContextSink:
     def blocks(self, offset_ns: int, blocks) -> None:
         from .log_writer import encode_block
 
-        for cid, stamps, data in blocks:
-            self._log[cid](encode_block(self._layouts[cid], stamps, data), stamps[-1] + offset_ns)
+        for cid, stamps, data, skip in blocks:
+            self._log[cid](encode_block(self._layouts[cid], stamps, data, skip), stamps[-1] + offset_ns)
 
     def message(self, cid: int, log_time: int, data: bytes) -> None:
         self._log[cid](data, log_time)

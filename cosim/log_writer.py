@@ -91,13 +91,15 @@ class BlockLayout:
     columns: tuple[tuple[int, int, bool], ...] = ()
     _cache: dict = field(default_factory=dict, compare=False, repr=False)
 
-    def rows_struct(self, n: int) -> struct.Struct:
-        """The struct of ``n`` rows (cached: blocks come in a few sizes)."""
-        found = self._cache.get(n)
+    def rows_struct(self, n: int, skip: tuple[int, int] | None = None) -> struct.Struct:
+        """The struct of ``n`` rows, each between ``skip`` = (bytes before, bytes after) of other
+        channels' values (cached: blocks come in a few sizes)."""
+        found = self._cache.get((n, skip))
         if found is None:
             if len(self._cache) > 64:
                 self._cache.clear()
-            found = self._cache[n] = struct.Struct("=" + self.fmt * n)
+            row = self.fmt if skip is None else f"{skip[0]}x{self.fmt}{skip[1]}x"
+            found = self._cache[(n, skip)] = struct.Struct("=" + row * n)
         return found
 
     def __getstate__(self):  # the cache stays behind (Structs do not pickle)
@@ -109,12 +111,15 @@ class BlockLayout:
         object.__setattr__(self, "_cache", {})
 
 
-def encode_block(layout: BlockLayout, stamps: list[int], data: bytes | list) -> bytes:
+def encode_block(layout: BlockLayout, stamps: list[int], data: bytes | list,
+                 skip: tuple[int, int] | None = None) -> bytes:
     """The block message of samples at ``stamps`` (simulation ns): ``{"t": [s, ...], "<key>": [value, ...]}``.
 
-    ``data``: the rows (``len(stamps)`` of ``layout.fmt``) or, without a format, one list of values per
-    sample. An array variable's values are lists (one per sample). Numbers are orjson's (NaN and
-    infinities as null), as in the per-sample messages of earlier logs.
+    ``data``: the rows (``len(stamps)`` of ``layout.fmt``, each between ``skip`` = (bytes before,
+    bytes after) of other channels' values when the rows of several channels come together) or,
+    without a format, one list of values per sample. An array variable's values are lists (one per
+    sample). Numbers are orjson's (NaN and infinities as null), as in the per-sample messages of
+    earlier logs.
     """
     msg: dict[str, Any] = {"t": [s * 1e-9 for s in stamps]}
     if layout.fmt is None:
@@ -122,7 +127,7 @@ def encode_block(layout: BlockLayout, stamps: list[int], data: bytes | list) -> 
             msg[key] = column
         return orjson.dumps(msg)
     n = len(stamps)
-    flat = layout.rows_struct(n).unpack(data)
+    flat = layout.rows_struct(n, skip).unpack(data)
     width = len(flat) // n
     for key, (at, count, fmi2_bool) in zip(layout.keys, layout.columns):
         if count == 0:
@@ -336,11 +341,12 @@ class LogSink:
         if layout is not None:
             self._layouts[cid] = layout
 
-    def blocks(self, offset_ns: int, blocks: list[tuple[int, list[int], bytes | list]]) -> None:
-        """Samples ``(cid, stamps, rows)`` of component channels: one message each, logged at its last stamp."""
+    def blocks(self, offset_ns: int, blocks: list[tuple[int, list[int], bytes | list, Any]]) -> None:
+        """Samples ``(cid, stamps, rows, skip)`` of component channels (see :func:`encode_block`): one
+        message each, logged at its last stamp."""
         layouts = self._layouts
-        self.file.messages([cid + 1 for cid, _, _ in blocks], [stamps[-1] + offset_ns for _, stamps, _ in blocks],
-                           [encode_block(layouts[cid], stamps, data) for cid, stamps, data in blocks])
+        self.file.messages([b[0] + 1 for b in blocks], [b[1][-1] + offset_ns for b in blocks],
+                           [encode_block(layouts[cid], stamps, data, skip) for cid, stamps, data, skip in blocks])
 
     def message(self, cid: int, log_time: int, data: bytes) -> None:
         self.file.messages([cid + 1], [log_time], [data])

@@ -177,9 +177,9 @@ class _Rows:
             self.capture = partial(b"".join, self.sources)
             self.cap = max(1, min(_BLOCK_ROWS, block_bytes // max(1, sum(len(v) for v in self.sources))))
 
-    def take(self) -> tuple[int, list[int], bytes | list]:
+    def take(self) -> tuple[int, list[int], bytes | list, None]:
         """The block so far; the lists are emptied in place (the publisher holds their ``append``)."""
-        block = (self.cid, self.stamps[:], b"".join(self.data) if self.raw else self.data[:])
+        block = (self.cid, self.stamps[:], b"".join(self.data) if self.raw else self.data[:], None)
         self.stamps.clear()
         self.data.clear()
         return block
@@ -187,8 +187,8 @@ class _Rows:
 
 class _Joint:
     """The samples of every logged component at once, when all of them step at every macro step and log
-    numbers only (the common case): one join per step for all their rows, cut into each channel's
-    block when handed over (one numpy slice per channel)."""
+    numbers only (the common case): one join per step for all their rows, handed over as one block
+    of bytes that each channel reads between the others' values (``skip``)."""
 
     def __init__(self, channels: list[_Rows], block_bytes: int):
         self.parts = []  # (channel, byte offset in the joint row, bytes)
@@ -204,10 +204,9 @@ class _Joint:
         self.stamps: list[int] = []
         self.data: list[bytes] = []
 
-    def take(self) -> list[tuple[int, list[int], bytes]]:
-        n = len(self.stamps)
-        rows = np.frombuffer(b"".join(self.data), dtype=np.uint8).reshape(n, self.width)
-        blocks = [(cid, self.stamps[:], rows[:, at:at + size].tobytes()) for cid, at, size in self.parts]
+    def take(self) -> list[tuple[int, list[int], bytes, tuple[int, int]]]:
+        rows, stamps = b"".join(self.data), self.stamps[:]  # one object: pickled once for every channel
+        blocks = [(cid, stamps, rows, (at, self.width - at - size)) for cid, at, size in self.parts]
         self.stamps.clear()
         self.data.clear()
         return blocks
@@ -379,8 +378,8 @@ class Publisher:
 
     - ``channel(cid, topic, schema_name, schema_json, metadata, layout)``: a channel ``cid`` (0, 1, ...);
       ``layout`` (:class:`cosim.log_writer.BlockLayout`) for a component channel, else None;
-    - ``blocks(offset_ns, blocks)``: samples of component channels, ``(cid, stamps, rows)`` each
-      (simulation ns; raw values, see :class:`_Rows`): one message each, made by
+    - ``blocks(offset_ns, blocks)``: samples of component channels, ``(cid, stamps, rows, skip)`` each
+      (simulation ns; raw values, see :class:`_Rows` and :class:`_Joint`): one message each, made by
       :func:`cosim.log_writer.encode_block` and logged at its last stamp + ``offset_ns``;
     - ``message(cid, log_time, data)``: any other message, JSON encoded.
 

@@ -45,6 +45,9 @@ def test_block_message_holds_every_sample_exactly():
     assert msg["n"] == [[7, -8], [2 ** 62, 0], [-1, 1]], msg["n"]
     one = orjson.loads(encode_block(LAYOUT, [5], _rows(SAMPLES[:1])))
     assert one["n"] == [[7, -8]] and one["t"] == [5e-9], one
+    # the same rows between other channels' bytes (3 before, 5 after each): the same message
+    joint = b"".join(b"abc" + _rows([s]) + b"defgh" for s in SAMPLES)
+    assert encode_block(LAYOUT, stamps, joint, (3, 5)) == encode_block(LAYOUT, stamps, _rows(SAMPLES))
 
 
 def test_values_read_one_by_one_make_the_same_block():
@@ -68,7 +71,7 @@ def _write(path, finish: bool = True) -> None:
     sink.channel(1, "/b", "cosim.a", b'{"title": "cosim.a"}', {}, None)  # the same schema: one record
     sink.metadata("time", {"offset_ns": "100"})
     for k in range(10):
-        sink.blocks(100, [(0, [3 * k, 3 * k + 1, 3 * k + 2], _rows(SAMPLES))])
+        sink.blocks(100, [(0, [3 * k, 3 * k + 1, 3 * k + 2], _rows(SAMPLES), None)])
         sink.message(1, 100 + 3 * k + 2, orjson.dumps({"k": k}))
     sink.attachment("scenario/x.yaml", "application/yaml", b"name: x\n", 5, 6)
     if finish:
@@ -119,7 +122,7 @@ def test_writer_process_writes_the_file_and_reports_a_failure(tmp_path):
     w = WriterProcess()
     w.open(path, 1024, 1)
     w.channel(0, "/a", "cosim.a", b'{"title": "cosim.a"}', {"layout": "blocks"}, LAYOUT)
-    w.blocks(0, [(0, [0, 1, 2], _rows(SAMPLES))])
+    w.blocks(0, [(0, [0, 1, 2], _rows(SAMPLES), None)])
     w.metadata("outcome", {"status": "completed"})
     w.finish()
     with open(path, "rb") as f:
