@@ -104,13 +104,23 @@ def locate_fmus(scenario: Scenario, fmu_files: Mapping[str, str | Path] | None =
 
 def build_key(scenario: Scenario, name: str) -> tuple[str, bool, int]:
     """(FMU name, native, FMI version) of our FMU ``name`` in ``scenario``: the native build where the scenario asks
-    for it (``fmus: native``) and the FMU has one, else the python build (FMI 2 co-simulation, or 3 for ``*_me``)."""
-    if scenario.fmus == "native":
-        from fmus import registry
+    for it (``fmus: native``, or ``auto`` with a C compiler on this machine) and the FMU has one, else the python
+    build (FMI 2 co-simulation, or 3 for ``*_me``)."""
+    if scenario.fmus == "python":
+        return name, False, 2
+    from fmus import registry
 
-        if name in registry.native_names():
-            return name, True, scenario.native_fmi
-    return name, False, 2
+    if name not in registry.native_names():
+        return name, False, 2
+    if scenario.fmus == "auto":
+        from fmus.native.build import compiler
+        from fmus.native.errors import CompilerMissingError
+
+        try:
+            compiler()
+        except CompilerMissingError:
+            return name, False, 2
+    return name, True, scenario.native_fmi
 
 
 def build_ours(name: str, native: bool = False, fmi: int = 2) -> Path:

@@ -261,10 +261,11 @@ class Scenario(_Model):
     connections: list[Connection] = Field(default_factory=list)
     time: TimeGrid
     algorithm: Literal["gauss_seidel", "jacobi"] = "gauss_seidel"
-    fmus: Literal["python", "native"] = Field(
-        "python", description="build of our FMUs (components given by 'fmu:'): 'python' (pythonfmu) or 'native' (C "
-                              "generated from the same formulas; FMUs without a native build, the Exudyn plants, stay "
-                              "python). Needs a C compiler")
+    fmus: Literal["auto", "python", "native"] = Field(
+        "auto", description="build of our FMUs (components given by 'fmu:'): 'native' (C generated from the same "
+                            "formulas, no Python in the FMU; needs a C compiler; the Exudyn plants have no native "
+                            "build and stay python), 'python' (pythonfmu), or 'auto': native when a C compiler is "
+                            "found, else python (the two give the same results)")
     native_fmi: Literal[2, 3] = Field(2, description="FMI version of the native FMUs (both have co-simulation and "
                                                      "model exchange)")
     parallel: Union[Literal["auto", "on", "off"], bool] = Field(

@@ -31,9 +31,17 @@ def _per_joint(cls: str, name: str, value: object, positive: bool = False) -> _V
         arr = np.repeat(arr, 3)
     if arr.shape != (3,) or not np.all(np.isfinite(arr)):
         raise ParameterError(f"{cls}.{name} must be a scalar or 3 finite values, got {value!r}")
-    if np.any(arr <= 0.0) if positive else np.any(arr < 0.0):
+    if not all(_gain_ok(x, positive) for x in arr.tolist()):
         raise ParameterError(f"{cls}.{name} must be {'> 0' if positive else '>= 0'} per joint, got {value!r}")
     return float(arr[0]), float(arr[1]), float(arr[2])
+
+
+def _gain_ok(x, positive: bool):  # noqa: ANN001, ANN202
+    """The condition on one joint's gain or limit: > 0 (``positive``) or >= 0."""
+    return x > 0.0 if positive else x >= 0.0
+
+
+_GAINS = {"kp": True, "ki": False, "kd": False}  # gain -> must be > 0 (else >= 0), as the constructors check
 
 
 def _limit(cls: str, name: str, value: object) -> _Vec | None:
@@ -81,6 +89,12 @@ class Controller:
         ``__init__``), evaluated in the namespace ``xp``; no checks (``fmus.native`` traces it to C)."""
         law = object.__new__(cls)
         law.__dict__.update(fields, xp=xp)
+        for name, positive in _GAINS.items():  # the constructors' checks, recorded for the generated code
+            for i, x in enumerate(fields.get(name, ())):
+                xp.check(xp.both(xp.isfinite(x), _gain_ok(x, positive)),
+                         f"{cls.__name__}.{name} must be {'> 0' if positive else '>= 0'} per joint (joint {i + 1})")
+        for i, x in enumerate(fields.get("u_max") or ()):
+            xp.check(_gain_ok(x, True), f"{cls.__name__}.u_max must be > 0 per joint (joint {i + 1})")
         return law
 
     def reset(self) -> None:

@@ -9,11 +9,25 @@ from __future__ import annotations
 from dataclasses import dataclass, fields, replace
 
 from .errors import ParameterError
+from .numbers import SCALAR
 
 __all__ = ["GRAVITY", "LinearDeltaMasses", "RotaryDeltaMasses", "Masses"]
 
 GRAVITY = 9.81
 """Standard gravity used by default, m/s^2 (acts along -z)."""
+
+
+def validate(masses, xp=SCALAR) -> None:  # noqa: ANN001
+    """Lumping shares in [0, 1], every other mass parameter >= 0. On symbols (``fmus.native``: ``masses`` is a
+    namespace of symbols) the conditions are recorded for the generated code (see :data:`delta.numbers.SCALAR`)."""
+    name = "masses" if xp.symbolic else type(masses).__name__
+    items = vars(masses).items() if xp.symbolic else ((f.name, getattr(masses, f.name)) for f in fields(masses))
+    for field, value in items:
+        if field.startswith("w_"):
+            if not xp.check(xp.both(0.0 <= value, value <= 1.0), f"{name}.{field} must be in [0, 1]"):
+                raise ParameterError(f"{name}.{field} must be in [0, 1], got {value!r}")
+        elif (xp.symbolic or isinstance(value, float)) and not xp.check(value >= 0.0, f"{name}.{field} must be >= 0"):
+            raise ParameterError(f"{name}.{field} must be >= 0, got {value!r}")
 
 
 @dataclass(frozen=True)
@@ -50,13 +64,7 @@ class _Masses:
     gravity: float = GRAVITY
 
     def __post_init__(self) -> None:
-        for f in fields(self):
-            value = getattr(self, f.name)
-            if f.name.startswith("w_"):
-                if not 0.0 <= value <= 1.0:
-                    raise ParameterError(f"{type(self).__name__}.{f.name} must be in [0, 1], got {value!r}")
-            elif isinstance(value, float) and value < 0.0:
-                raise ParameterError(f"{type(self).__name__}.{f.name} must be >= 0, got {value!r}")
+        validate(self)
 
     def with_(self, **changes: float):
         """A copy with ``changes`` applied (validated again)."""

@@ -19,6 +19,7 @@ from dataclasses import dataclass, fields
 from math import pi, radians, sqrt
 
 from .errors import RobotError
+from .numbers import SCALAR
 
 __all__ = [
     "LinearDelta",
@@ -35,17 +36,23 @@ MM = 1e-3
 _DEFAULT_ANGLES = (0.0, 2.0 * pi / 3.0, 4.0 * pi / 3.0)
 
 
-def _validate(robot: "LinearDelta | RotaryDelta", lengths: tuple[str, ...]) -> None:
-    """Lengths positive, three leg angles, a non-empty joint range; the error names the robot."""
-    where = f"{type(robot).__name__} {robot.name!r}"
-    for name in lengths:
+def validate(robot: "LinearDelta | RotaryDelta", xp=SCALAR) -> None:  # noqa: ANN001
+    """Lengths positive, three leg angles, a non-empty joint range; the error names the robot. On symbols
+    (``fmus.native``) the conditions are recorded for the generated code (see :data:`delta.actuators.SCALAR`)."""
+    where = f"{type(robot).__name__} {robot.name!r}" if not xp.symbolic else "geometry"
+    for name in LENGTHS[robot.kind]:
         value = getattr(robot, name)
-        if not value > 0.0:
+        if not xp.check(value > 0.0, f"{where}: {name} must be > 0"):
             raise RobotError(f"{where}: {name} must be > 0, got {value!r}")
     if len(robot.leg_angles) != 3:
         raise RobotError(f"{where}: leg_angles needs 3 angles, got {len(robot.leg_angles)}")
-    if not robot.q_min < robot.q_max:
+    if not xp.check(robot.q_min < robot.q_max, f"{where}: q_min must be < q_max"):
         raise RobotError(f"{where}: q_min {robot.q_min} must be < q_max {robot.q_max}")
+
+
+LENGTHS = {"linear": ("rail_radius", "platform_radius", "rod_length"),
+           "rotary": ("base_radius", "arm_length", "forearm_length", "platform_radius")}
+"""The lengths of each robot kind that must be positive."""
 
 
 @dataclass(frozen=True)
@@ -76,7 +83,7 @@ class LinearDelta:
     kind: str = "linear"
 
     def __post_init__(self) -> None:
-        _validate(self, ("rail_radius", "platform_radius", "rod_length"))
+        validate(self)
 
     @property
     def q_unit(self) -> str:
@@ -117,7 +124,7 @@ class RotaryDelta:
     kind: str = "rotary"
 
     def __post_init__(self) -> None:
-        _validate(self, ("base_radius", "arm_length", "forearm_length", "platform_radius"))
+        validate(self)
 
     @property
     def q_unit(self) -> str:

@@ -74,7 +74,9 @@ class Symbols:
 
 
 def _errors(trace: Trace, prefix: str = "") -> list[Check]:
-    return [Check(ok, prefix + reason) for ok, reason in trace.take()]
+    """Every recorded condition as an error: the parameters' first, then the formulas' (with ``prefix``)."""
+    params, trace.parameters = trace.parameters, []
+    return [Check(ok, reason) for ok, reason in params] + [Check(ok, prefix + reason) for ok, reason in trace.take()]
 
 
 def _all(conditions) -> Any:  # noqa: ANN001
@@ -107,7 +109,10 @@ class NativeModel:
     def model(self, sym: Symbols, trace: Trace):  # noqa: ANN201
         """The robot model compiled on the symbols of the ``geometry.*`` and ``mass.*`` parameters."""
         masses = mass_values(self.kind, sym.v) if all(n in sym.v for n in ("mass.rod", "model.gravity")) else None
-        return symbolic_model(self.kind, robot_values(self.kind, sym.v), masses)
+        before = trace.take()
+        model = symbolic_model(self.kind, robot_values(self.kind, sym.v), masses)
+        trace.set_aside(before)  # the parameter checks are errors wherever the model is used
+        return model
 
     def start(self, sym: Symbols, trace: Trace) -> Result:
         return Result()
@@ -228,7 +233,10 @@ class Controller(NativeModel):
         fields.update(h=h, u_max=(bound, bound, bound), **self.FIXED, **state)
         if self.MODEL_BASED:
             fields.update(model=self.model(sym, trace), data=Data())
-        return self.LAW.traced(SYMBOLIC, **fields)
+        before = trace.take()
+        law = self.LAW.traced(SYMBOLIC, **fields)
+        trace.set_aside(before)
+        return law
 
     def inputs(self, sym: Symbols) -> tuple[tuple[Any, ...], ...]:
         return tuple(sym.vec(n) for n in (Q, QD, Q_REF, QD_REF, QDD_REF))
@@ -309,7 +317,8 @@ class AnalyticPlant(NativeModel):
         u = sym.vec(U)
         checks = [Check(_all(SYMBOLIC.isfinite(x) for x in u), "non-finite effort u")]
         p, v = platform_step(model, sym.s[:3], sym.s[3:], u, sym.h)
-        checks += _errors(trace)
+        checks += [Check(c.ok, ("the platform left the workspace: " + c.reason) if "no solution" in c.reason
+                         else c.reason) for c in _errors(trace)]
         return Result(state=[*p, *v], checks=checks)
 
     def derivatives(self, sym: Symbols, trace: Trace) -> Result:

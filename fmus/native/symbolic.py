@@ -26,8 +26,11 @@ from typing import Any, Callable, Iterator
 
 import casadi as ca
 
-from delta.actuators import _namespace, kind_of
+from delta.actuators import kind_of
+from delta.numbers import namespace
+from delta.masses import validate as validate_masses
 from delta.model import Model, compile_model
+from delta.robots import validate as validate_robot
 
 __all__ = ["SYMBOLIC", "Trace", "tracing", "symbolic_model", "instance"]
 
@@ -37,6 +40,12 @@ class Trace:
     """The conditions ``check`` recorded while tracing: (condition, reason), 1 where it holds."""
 
     checks: list[tuple[Any, str]] = field(default_factory=list)
+    parameters: list[tuple[Any, str]] = field(default_factory=list)  # conditions on parameters alone (errors)
+
+    def set_aside(self, before: list[tuple[Any, str]]) -> None:
+        """Move what was recorded since ``before`` (the checks taken just before) to :attr:`parameters`."""
+        self.parameters += self.checks
+        self.checks = before
 
     def take(self) -> list[tuple[Any, str]]:
         """The conditions recorded so far, and forget them (a model keeps each group apart)."""
@@ -72,7 +81,7 @@ def _isfinite(x: Any) -> Any:
     return ca.logic_and(x == x, ca.fabs(x) < ca.inf)
 
 
-SYMBOLIC = _namespace("delta.symbolic_math", cos=ca.cos, sin=ca.sin, sqrt=ca.sqrt, atan2=ca.atan2, acos=ca.acos,
+SYMBOLIC = namespace("delta.symbolic_math", cos=ca.cos, sin=ca.sin, sqrt=ca.sqrt, atan2=ca.atan2, acos=ca.acos,
                       maximum=ca.fmax, minimum=ca.fmin, both=ca.logic_and, where=ca.if_else, check=_check,
                       isfinite=_isfinite, symbolic=True)
 """CasADi's functions on ``SX`` for the formulas of :mod:`delta` (see the module docstring)."""
@@ -84,9 +93,12 @@ def symbolic_model(kind: str, geometry: dict[str, Any], masses: dict[str, Any] |
     kind's defaults as numbers) are symbols, compiled by :func:`delta.model.compile_model` itself."""
     actuator_cls = kind_of(kind)
     robot = SimpleNamespace(kind=kind, name=f"{kind} delta (symbolic)", **geometry)
+    validate_robot(robot, SYMBOLIC)  # the checks of the robot and mass dataclasses, recorded
     if masses is None:
         defaults = actuator_cls.masses_type()
         masses = {f: getattr(defaults, f) for f in defaults.__dataclass_fields__}
+    else:
+        validate_masses(SimpleNamespace(**masses), SYMBOLIC)
     return compile_model(robot, SimpleNamespace(**masses), actuator_cls(robot), SYMBOLIC)
 
 

@@ -87,9 +87,12 @@ def test_diverging_run_is_an_error_not_completed():
 
 # -- item 3: errors keep their reason ------------------------------------------------------------
 
-def test_fmu_exception_text_reaches_the_error_of_the_right_component():
-    """The exception of the controller's Python code, not 'status 4 (fatal)', nor another component's log."""
-    proc = cosim("run", "scenarios/helix_pd.yaml", "--stop-time", "0.05", "--set", "ctl.gain.kp[1]=-1", "--no-log")
+@pytest.mark.parametrize("build", ["python", "native"])
+def test_fmu_exception_text_reaches_the_error_of_the_right_component(build):
+    """The reason the controller gives (the python build's exception, the native build's failed check), not
+    'status 4 (fatal)', nor another component's log."""
+    proc = cosim("run", "scenarios/helix_pd.yaml", "--stop-time", "0.05", "--set", "ctl.gain.kp[1]=-1", "--no-log",
+                 "--set", f"fmus={build}")
     err = proc.stderr.strip().splitlines()[-1] if proc.stderr.strip() else ""
     assert proc.returncode == 2, f"exit {proc.returncode}, expected 2; stderr: {proc.stderr[-500:]}"
     assert err.startswith("error: component 'ctl': ") and "PD.kp must be > 0 per joint" in err, \
@@ -104,13 +107,14 @@ def test_plant_solver_failure_names_component_reason_and_time():
         proc.stderr[-500:]
 
 
-def test_analytic_plant_bounds_a_stiff_step_instead_of_hanging():
+@pytest.mark.parametrize("build", ["python", "native"])
+def test_analytic_plant_bounds_a_stiff_step_instead_of_hanging(build):
     """An absurd effort: the fixed-step RK4 plant takes its four evaluations per step whatever the effort,
     so the state runs away instead of the step hanging, and the run ends at the step where it leaves the
     workspace, naming the plant, the time and why (the adaptive DOP853 it replaced needed a cap on its
     evaluations to end at all)."""
     proc = cosim("run", "scenarios/helix_ctc_analytic.yaml", "--stop-time", "0.05", "--set", "ctl.gain.kp[1]=1e12",
-                 "--set", "ctl.limit.u_max=1e300", "--no-log", timeout=60)
+                 "--set", "ctl.limit.u_max=1e300", "--no-log", "--set", f"fmus={build}", timeout=60)
     assert proc.returncode == 2, f"exit {proc.returncode}, expected 2; stderr: {proc.stderr[-500:]}"
     assert re.search(r"component 'plant': fmi2DoStep returned discard at t = 0\.00\d+ s: .*"
                      r"(left the workspace|singularity|diverged)", proc.stderr), proc.stderr[-500:]

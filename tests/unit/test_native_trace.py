@@ -252,3 +252,23 @@ def test_analytic_plant_faults_are_checks(kind):
     native.state[:3] = (5.0, 0.0, -0.4)  # far outside the workspace
     failed = native.call("refresh")
     assert failed and "has no solution" in failed[0], failed
+
+
+@pytest.mark.parametrize("name,parameter,value,reason", [
+    ("linear_pd", "gain.kp[2]", -1.0, "PD.kp must be > 0 per joint (joint 2)"),
+    ("rotary_pid", "gain.ki[1]", float("nan"), "PID.ki must be >= 0 per joint (joint 1)"),
+    ("linear_ctc", "limit.u_max", -5.0, "CTC.u_max must be > 0 per joint"),
+    ("linear_ik", "geometry.rod_length", 0.0, "rod_length must be > 0"),
+    ("rotary_fk", "geometry.q_max", -3.0, "q_min must be < q_max"),
+    ("linear_analytic_plant", "mass.platform", -0.1, "masses.platform must be >= 0"),
+    ("rotary_pdplus", "model.w_gravity", 1.5, "masses.w_gravity must be in [0, 1]"),
+])
+def test_parameters_are_checked_as_the_python_build_checks_them(name, parameter, value, reason):
+    """The dataclass and controller checks, traced: a bad parameter fails with its reason (an error)."""
+    native = Native(name)
+    native.set(parameter, value)
+    which = "start" if name.endswith("plant") else "refresh"
+    failed = native.call(which)
+    assert any(reason in f for f in failed), (failed, reason)
+    assert native.fns[which][1].checks[[r for r, _ in native.fns[which][1].checks].index(
+        next(f for f in failed if reason in f))][1], "a bad parameter must be an error"
