@@ -54,10 +54,22 @@ def _vec3(name: str, value: object) -> tuple[float, float, float]:
     return float(arr[0]), float(arr[1]), float(arr[2])
 
 
-def _positive(cls: str, name: str, value: float, allow_inf: bool = False) -> None:
-    ok = value > 0.0 and (allow_inf or math.isfinite(value))
-    if not ok:
-        raise ParameterError(f"{cls}.{name} must be > 0{'' if allow_inf else ' and finite'}, got {value!r}")
+def _positive(cls: str, name: str, value: float, allow_inf: bool = False, xp=SCALAR) -> None:  # noqa: ANN001
+    _require(xp.both(value > 0.0, True if allow_inf else xp.isfinite(value)),
+             f"{cls}.{name} must be > 0{'' if allow_inf else ' and finite'}", value, xp)
+
+
+def _require(ok, reason: str, value, xp) -> None:  # noqa: ANN001
+    """A condition on a trajectory's parameters: raises on numbers, recorded on symbols (``fmus.native``)."""
+    if not xp.check(ok, reason):
+        raise ParameterError(f"{reason}, got {value!r}")
+
+
+def _finite(name: str, values, xp) -> None:  # noqa: ANN001
+    """Finite coordinates (on numbers :func:`_vec3` checked them when the trajectory was made)."""
+    if xp.symbolic:
+        for x in values:
+            _require(xp.isfinite(x), f"{name} must be finite", x, xp)
 
 
 def _profile(cls: str, profile: str) -> None:
@@ -149,10 +161,13 @@ class Helix(Trajectory):
         if c.shape != (2,):
             raise ParameterError(f"Helix.centre must be (x, y) in m, got {self.centre!r}")
         object.__setattr__(self, "centre", (float(c[0]), float(c[1])))
+        self.validate()
+
+    def validate(self, xp=SCALAR) -> None:  # noqa: ANN001
+        """The conditions on the parameters (raised on numbers, recorded on symbols)."""
         for name in ("rx", "ry"):
-            if not getattr(self, name) >= 0.0:
-                raise ParameterError(f"Helix.{name} must be >= 0 m, got {getattr(self, name)!r}")
-        _positive("Helix", "duration", self.duration, allow_inf=True)
+            _require(getattr(self, name) >= 0.0, f"Helix.{name} must be >= 0 m", getattr(self, name), xp)
+        _positive("Helix", "duration", self.duration, allow_inf=True, xp=xp)
 
     def sample(self, times: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         t = np.asarray(times, dtype=float).reshape(-1)
@@ -301,11 +316,16 @@ class PointToPoint(_Segments):
     def __post_init__(self) -> None:
         object.__setattr__(self, "start", _vec3("PointToPoint.start", self.start))
         object.__setattr__(self, "end", _vec3("PointToPoint.end", self.end))
-        _positive("PointToPoint", "duration", self.duration)
         _profile("PointToPoint", self.profile)
-        if not (math.isfinite(self.t0) and self.t0 >= 0.0):
-            raise ParameterError(f"PointToPoint.t0 must be >= 0 s, got {self.t0!r}")
+        self.validate()
         self._set_segments(self.knots())
+
+    def validate(self, xp=SCALAR) -> None:  # noqa: ANN001
+        """The conditions on the parameters (raised on numbers, recorded on symbols)."""
+        _finite("PointToPoint.start", self.start, xp)
+        _finite("PointToPoint.end", self.end, xp)
+        _positive("PointToPoint", "duration", self.duration, xp=xp)
+        _require(xp.both(xp.isfinite(self.t0), self.t0 >= 0.0), "PointToPoint.t0 must be >= 0 s", self.t0, xp)
 
     def knots(self, xp=SCALAR) -> list:  # noqa: ANN001
         """(t0, t1, p0, p1) of each segment: a rest at ``start`` until ``t0`` (on symbols always, of zero
@@ -371,10 +391,8 @@ class Waypoints(_Segments):
         _profile("Waypoints", self.profile)
         if (self.segment_time is None) == (self.times is None):
             raise ParameterError("Waypoints: give exactly one of segment_time (s per move) or times (arrival times)")
-        if not (self.dwell >= 0.0 and math.isfinite(self.dwell)):
-            raise ParameterError(f"Waypoints.dwell must be >= 0 s, got {self.dwell!r}")
+        self.validate()
         if self.segment_time is not None:
-            _positive("Waypoints", "segment_time", self.segment_time)
             self._set_segments(self.knots())
             return
         times = np.asarray(self.times, dtype=float).reshape(-1)
@@ -386,6 +404,14 @@ class Waypoints(_Segments):
         knots = [(0.0, float(times[0]), tuple(pts[0]), tuple(pts[0]))] if times[0] > 0.0 else []
         knots += _legs_with_dwell(pts, list(times[:-1]), list(np.diff(times)), 0.0)
         self._set_segments(knots)
+
+    def validate(self, xp=SCALAR) -> None:  # noqa: ANN001
+        """The conditions on the parameters (raised on numbers, recorded on symbols)."""
+        for k, point in enumerate(self.points):
+            _finite(f"Waypoints.points[{k}]", point, xp)
+        _require(xp.both(self.dwell >= 0.0, xp.isfinite(self.dwell)), "Waypoints.dwell must be >= 0 s", self.dwell, xp)
+        if self.segment_time is not None:
+            _positive("Waypoints", "segment_time", self.segment_time, xp=xp)
 
     def knots(self, xp=SCALAR) -> list:  # noqa: ANN001
         """(t0, t1, p0, p1) of each segment with ``segment_time`` per move and ``dwell`` at each intermediate point."""
@@ -430,8 +456,7 @@ class PickAndPlace(_Segments):
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "start", _vec3("PickAndPlace.start", self.start))
-        for name in ("up", "across", "down", "cycle_time"):
-            _positive("PickAndPlace", name, getattr(self, name))
+        self.validate()
         d = np.asarray(self.direction, dtype=float).reshape(-1)
         if d.shape != (2,) or not np.linalg.norm(d) > 0.0:
             raise ParameterError(f"PickAndPlace.direction must be a non-zero (x, y) vector, got {self.direction!r}")
@@ -440,6 +465,17 @@ class PickAndPlace(_Segments):
         _profile("PickAndPlace", self.profile)
         object.__setattr__(self, "direction", tuple(float(x) for x in _unit2(self.direction, SCALAR)))
         self._set_segments(self.knots())
+
+    def validate(self, xp=SCALAR) -> None:  # noqa: ANN001
+        """The conditions on the numbers (raised on numbers, recorded on symbols); the direction's and the cycle
+        count's type and shape are checked where the trajectory is made."""
+        _finite("PickAndPlace.start", self.start, xp)
+        for name in ("up", "across", "down", "cycle_time"):
+            _positive("PickAndPlace", name, getattr(self, name), xp=xp)
+        if xp.symbolic:
+            dx, dy = self.direction
+            _require(dx * dx + dy * dy > 0.0, "PickAndPlace.direction must be a non-zero (x, y) vector", self.direction,
+                     xp)
 
     def knots(self, xp=SCALAR) -> list:  # noqa: ANN001
         """(t0, t1, p0, p1) of each segment, cycle after cycle.

@@ -145,6 +145,7 @@ class Trajectory(NativeModel):
 
     def refresh(self, sym: Symbols, trace: Trace) -> Result:
         traj = self._adapter().from_parameters(sym.v, make=lambda **f: instance(TYPES[self.trajectory], **f))
+        traj.validate(SYMBOLIC)  # the checks the trajectory makes when it is made from numbers
         if hasattr(traj, "knots"):
             traj._set_segments(traj.knots(SYMBOLIC), SYMBOLIC)
         p, v, a = traj.evaluate_scalar(sym.t, SYMBOLIC)

@@ -262,11 +262,18 @@ def test_analytic_plant_faults_are_checks(kind):
     ("rotary_fk", "geometry.q_max", -3.0, "q_min must be < q_max"),
     ("linear_analytic_plant", "mass.platform", -0.1, "masses.platform must be >= 0"),
     ("rotary_pdplus", "model.w_gravity", 1.5, "masses.w_gravity must be in [0, 1]"),
+    ("helix", "helix.rx", -0.1, "Helix.rx must be >= 0 m"),
+    ("point_to_point", "move.duration", 0.0, "PointToPoint.duration must be > 0 and finite"),
+    ("point_to_point", "move.start.x", float("inf"), "PointToPoint.start must be finite"),
+    ("waypoints", "waypoints.dwell", -1.0, "Waypoints.dwell must be >= 0 s"),
+    ("pick_place", "cycle.direction.x", 0.0, "PickAndPlace.direction must be a non-zero"),
 ])
 def test_parameters_are_checked_as_the_python_build_checks_them(name, parameter, value, reason):
     """The dataclass and controller checks, traced: a bad parameter fails with its reason (an error)."""
     native = Native(name)
     native.set(parameter, value)
+    if parameter == "cycle.direction.x":
+        native.set("cycle.direction.y", 0.0)
     which = "start" if name.endswith("plant") else "refresh"
     failed = native.call(which)
     assert any(reason in f for f in failed), (failed, reason)
