@@ -167,7 +167,7 @@ def inverse_kinematics(model: Model, p, v=None, a=None, limits: bool = True):  #
         ax, ay, az = _ZERO if a is None else a
     actuator, xp = model.actuator, model.xp
     lo, hi = (model.q_min, model.q_max) if limits else (-inf, inf)
-    solve, leg_at, check, both = actuator.solve, actuator.leg, xp.check, xp.both
+    solve, leg_at, check, both, symbolic = actuator.solve, actuator.leg, xp.check, xp.both, xp.symbolic
     q, qd, qdd = [], [], []
     limit = 0
     try:
@@ -181,7 +181,8 @@ def inverse_kinematics(model: Model, p, v=None, a=None, limits: bool = True):  #
             if limit or v is None:
                 continue
             leg = leg_at(qi, c, s, ox, oy, x, y, z, xp)
-            check(leg[7] != 0.0, SERIAL[len(q) - 1])  # numbers raise ZeroDivisionError below instead
+            if symbolic:  # numbers raise ZeroDivisionError below instead
+                check(leg[7] != 0.0, SERIAL[len(q) - 1])
             qdi, qddi = leg_rates(leg, vx, vy, vz, ax, ay, az)
             qd.append(qdi)
             qdd.append(qddi)
