@@ -3,13 +3,13 @@
 ``python -m cosim run SCENARIO --live [PORT]`` adds a :class:`LiveView` to the run. It starts a
 Foxglove WebSocket server (subprotocol ``foxglove.sdk.v1``) and attaches a sink to the run's
 :class:`cosim.publish.Publisher` that logs every channel into the server's ``foxglove.Context``
-(component samples in blocks encoded by :func:`cosim.log_writer.encode_block`, as for the log), so
-a viewer connected to ``ws://localhost:PORT`` (the Foxglove app: *Open connection*, *Foxglove
-WebSocket*) sees exactly the channels, schemas and 3D scene of the MCAP log, message for message,
-while the log is still written. The server also
-broadcasts the run's current log time (the *Time* capability), so the viewer's clock follows the
-simulation. Combine it with ``--realtime`` to watch at wall-clock pace; without it the run goes
-as fast as it can and the viewer sees it fast-forwarded.
+(component samples encoded by :func:`cosim.log_writer.encode_messages` in the scenario's
+``logging.layout``, one message per sample by default, as for the log), so a viewer connected to
+``ws://localhost:PORT`` (the Foxglove app: *Open connection*, *Foxglove WebSocket*) sees exactly
+the channels, schemas and 3D scene of the MCAP log, message for message, while the log is still
+written. The server also broadcasts the run's current log time (the *Time* capability), so the
+viewer's clock follows the simulation. Combine it with ``--realtime`` to watch at wall-clock pace;
+without it the run goes as fast as it can and the viewer sees it fast-forwarded.
 """
 
 from __future__ import annotations
@@ -75,10 +75,12 @@ class _ContextSink:
             self._layouts[cid] = layout
 
     def blocks(self, offset_ns: int, blocks) -> None:
-        from .log_writer import encode_block
+        from .log_writer import encode_messages
 
         for cid, stamps, data, skip in blocks:
-            self._log[cid](encode_block(self._layouts[cid], stamps, data, skip), stamps[-1] + offset_ns)
+            log = self._log[cid]
+            for t, message in zip(*encode_messages(self._layouts[cid], stamps, data, skip, offset_ns)):
+                log(message, t)
 
     def message(self, cid: int, log_time: int, data: bytes) -> None:
         self._log[cid](data, log_time)

@@ -1,13 +1,16 @@
-"""The run log's writer: component samples encoded as block messages and written to MCAP, in this
+"""The run log's writer: component samples encoded as JSON messages and written to MCAP, in this
 process or in a writer process on another core.
 
 :class:`cosim.publish.Publisher` hands its sinks each component channel's samples in blocks: the
 stamps and the *rows* (the bytes of the logged values as the FMU buffers hold them, one row per
 sample); every other message (scene, transforms, events) comes encoded. Here:
 
-- :class:`BlockLayout` and :func:`encode_block`: a block of samples becomes one JSON message,
-  ``{"t": [...], "<variable>": [...], ...}`` (one array element per sample), with one ``struct``
-  call for the rows and one orjson call for the message;
+- :class:`BlockLayout`, :func:`encode_samples` and :func:`encode_block`: a block of samples becomes
+  the channel's messages in its layout. ``samples`` (the default): one message per sample,
+  ``{"t": s, "<variable>": value, ...}``, what Foxglove and PlotJuggler plot as time series;
+  ``blocks``: one message per block, ``{"t": [...], "<variable>": [...], ...}`` (one array element
+  per sample), the cheapest to write. Either way one ``struct`` call reads the rows and orjson
+  writes the numbers;
 - :class:`McapFile`: an MCAP writer by lists of messages: message records packed into zstd chunks,
   message indexes after each chunk, and the summary (schemas, channels, statistics, chunk,
   metadata and attachment indexes) by :meth:`McapFile.finish`. A file never finished has every
@@ -40,7 +43,8 @@ from typing import Any
 
 import orjson
 
-__all__ = ["BlockLayout", "encode_block", "row_format", "McapFile", "LogSink", "WriterProcess", "WriterFailed"]
+__all__ = ["BlockLayout", "encode_block", "encode_messages", "encode_samples", "row_format", "McapFile", "LogSink",
+           "WriterProcess", "WriterFailed"]
 
 _MAGIC = b"\x89MCAP0\r\n"
 _MESSAGE = struct.Struct("<BQHIQQ")  # opcode, record length, channel id, sequence, log time, publish time
@@ -77,18 +81,20 @@ def row_format(ctype: Any, count: int) -> str:
 
 @dataclass(frozen=True)
 class BlockLayout:
-    """How a component channel's samples become one block message (see :mod:`cosim.publish`).
+    """How a component channel's samples become its messages (see :mod:`cosim.publish`).
 
     ``keys``: the JSON keys of the logged variables (``"t"`` comes first, not listed).
     ``fmt``: the :mod:`struct` format (``=``, no padding) of one sample's raw values, the row; None
     when each sample comes as a list of values instead (strings, binaries). ``columns``: per key
     ``(first element in the row, element count or 0 for a scalar, FMI 2 Boolean)``: a C int
-    written ``true``/``false``.
+    written ``true``/``false``. ``per_sample``: the channel's layout is ``samples`` (one message per
+    sample, :func:`encode_samples`), else ``blocks`` (one per block, :func:`encode_block`).
     """
 
     keys: tuple[str, ...]
     fmt: str | None = None
     columns: tuple[tuple[int, int, bool], ...] = ()
+    per_sample: bool = False
     _cache: dict = field(default_factory=dict, compare=False, repr=False)
 
     def rows_struct(self, n: int, skip: tuple[int, int] | None = None) -> struct.Struct:
@@ -102,13 +108,58 @@ class BlockLayout:
             found = self._cache[(n, skip)] = struct.Struct("=" + row * n)
         return found
 
+    def joints(self) -> list[bytes]:
+        """The bytes around a sample message's values (``fmt`` given): before ``t``, between ``t`` and
+        the row's first value, between consecutive values, after the last one, so that
+        ``{"t":T,"a":A,"b":[B1,B2]}`` is these parts and the values ``T, A, B1, B2`` taken in turn."""
+        found = self._cache.get("joints")
+        if found is None:
+            found, closing = [b'{"t":'], b""  # closing: the bracket of an array just ended
+            for key, (_, count, _) in zip(self.keys, self.columns):
+                name = closing + b"," + orjson.dumps(key) + b":"
+                found += [name] if count == 0 else [name + b"["] + [b","] * (count - 1)
+                closing = b"]" if count else b""
+            found.append(closing + b"}")
+            self._cache["joints"] = found
+        return found
+
     def __getstate__(self):  # the cache stays behind (Structs do not pickle)
-        return (self.keys, self.fmt, self.columns)
+        return (self.keys, self.fmt, self.columns, self.per_sample)
 
     def __setstate__(self, state) -> None:
-        for name, value in zip(("keys", "fmt", "columns"), state):
+        for name, value in zip(("keys", "fmt", "columns", "per_sample"), state):
             object.__setattr__(self, name, value)
         object.__setattr__(self, "_cache", {})
+
+
+def encode_samples(layout: BlockLayout, stamps: list[int], data: bytes | list,
+                   skip: tuple[int, int] | None = None) -> list[bytes]:
+    """One message per sample at ``stamps`` (simulation ns): ``{"t": s, "<key>": value, ...}``, byte for byte
+    what ``orjson.dumps`` writes of that dict (the messages of logs written before blocks).
+
+    ``data`` and ``skip`` as in :func:`encode_block`. With a row format, the numbers of the whole block
+    are written by one orjson call and cut at their commas (a number, ``true``, ``false`` or ``null``
+    has none), then joined with the keys (:meth:`BlockLayout.joints`): no dict and no Python loop per
+    sample.
+    """
+    times = [s * 1e-9 for s in stamps]
+    if layout.fmt is None:
+        keys = ("t", *layout.keys)
+        return [orjson.dumps(dict(zip(keys, (t, *values)))) for t, values in zip(times, data)]
+    n = len(stamps)
+    flat = layout.rows_struct(n, skip).unpack(data)
+    width = len(flat) // n
+    values = orjson.dumps(flat)[1:-1].split(b",")
+    joints = layout.joints()
+    columns = [repeat(joints[0], n), orjson.dumps(times)[1:-1].split(b",")]
+    fmi2 = {e for at, count, fmi2_bool in layout.columns if fmi2_bool for e in range(at, at + max(count, 1))}
+    for e in range(width):
+        column = values[e::width]
+        if e in fmi2:  # a C int: 0 is false, anything else true
+            column = [b"false" if v == b"0" else b"true" for v in column]
+        columns += (repeat(joints[e + 1], n), column)
+    columns.append(repeat(joints[-1], n))
+    return list(map(b"".join, zip(*columns)))
 
 
 def encode_block(layout: BlockLayout, stamps: list[int], data: bytes | list,
@@ -139,6 +190,15 @@ def encode_block(layout: BlockLayout, stamps: list[int], data: bytes | list,
                 elements = [[v != 0 for v in el] for el in elements]
             msg[key] = list(zip(*elements))
     return orjson.dumps(msg)
+
+
+def encode_messages(layout: BlockLayout, stamps: list[int], data: bytes | list, skip: tuple[int, int] | None,
+                    offset_ns: int) -> tuple[list[int], list[bytes]]:
+    """(log times, messages) of a block of samples in its channel's layout: one message per sample logged at
+    its stamp + ``offset_ns`` (``samples``), or one logged at its last stamp + ``offset_ns`` (``blocks``)."""
+    if layout.per_sample:
+        return [s + offset_ns for s in stamps], encode_samples(layout, stamps, data, skip)
+    return [stamps[-1] + offset_ns], [encode_block(layout, stamps, data, skip)]
 
 
 # --------------------------------------------------------------------------- MCAP file
@@ -342,11 +402,18 @@ class LogSink:
             self._layouts[cid] = layout
 
     def blocks(self, offset_ns: int, blocks: list[tuple[int, list[int], bytes | list, Any]]) -> None:
-        """Samples ``(cid, stamps, rows, skip)`` of component channels (see :func:`encode_block`): one
-        message each, logged at its last stamp."""
-        layouts = self._layouts
-        self.file.messages([b[0] + 1 for b in blocks], [b[1][-1] + offset_ns for b in blocks],
-                           [encode_block(layouts[cid], stamps, data, skip) for cid, stamps, data, skip in blocks])
+        """Samples ``(cid, stamps, rows, skip)`` of component channels (see :func:`encode_messages`), in the
+        order of their log times."""
+        ids, times, datas = [], [], []
+        for cid, stamps, data, skip in blocks:
+            t, d = encode_messages(self._layouts[cid], stamps, data, skip, offset_ns)
+            times += t
+            datas += d
+            ids += [cid + 1] * len(t)
+        if len(blocks) > 1:
+            order = sorted(range(len(times)), key=times.__getitem__)
+            ids, times, datas = [ids[i] for i in order], [times[i] for i in order], [datas[i] for i in order]
+        self.file.messages(ids, times, datas)
 
     def message(self, cid: int, log_time: int, data: bytes) -> None:
         self.file.messages([cid + 1], [log_time], [data])

@@ -3,12 +3,15 @@
 - the channels, schemas and messages are those of :class:`cosim.publish.Publisher` (one
   ``/<component>`` JSON channel per component, the ``/scene``, ``/scene/reference`` and
   ``/tf`` Foxglove channels, ``/events``), the same channels the live view (:mod:`cosim.live`)
-  serves, written by :mod:`cosim.log_writer`;
+  serves, written by :mod:`cosim.log_writer`; component channels in the scenario's
+  ``logging.layout``: one message per sample (``samples``, the default) or per block of samples
+  (``blocks``);
 - a run of :attr:`McapRecorder.PROCESS_MIN_STEPS` steps or more writes through a writer process
   (:class:`cosim.log_writer.WriterProcess`, started when the recorder is made, so it is ready
   when the loop starts): the master only copies each step's values into blocks, and the child
-  encodes the JSON messages, compresses and writes on the other core. Shorter runs write in this
-  process (a child would cost more to start than it saves);
+  encodes the JSON messages (one per sample in the ``samples`` layout), compresses and writes on
+  the other core. Shorter runs write in this process (a child would cost more to start than it
+  saves);
 - metadata (scenario, versions, platform, time stamps: see :func:`cosim.publish.time_metadata`)
   and attachments (the scenario file and each FMU's modelDescription.xml);
 - zstd chunks flushed every ``flush_interval`` wall seconds, so a killed run
@@ -18,10 +21,11 @@
 - a write that fails (disk full) stops the run at the next block of samples handed to the
   writer with one error naming the file and the OS's reason.
 
-The writer was chosen by measurement (``benchmarks/native.py``, line 5): foxglove-sdk's MCAP
-writer, fed one message per sample built from a dict, cost helix_ctc_analytic about 50 us per
-1 ms step (4.6 times the unlogged run); blocks of samples encoded in a writer process cost the
-master a few us per step.
+Measured (``benchmarks/native.py``, line 5): foxglove-sdk's MCAP writer fed one message per sample
+built from a dict in the master's loop cost helix_ctc_analytic about 50 us per 1 ms step (4.6
+times the unlogged run). Now the loop only copies each step's rows and hands blocks of them over,
+in either layout: the layouts differ in the writer process alone (one message per sample costs
+it more, see :class:`cosim.log_writer.LogSink`).
 """
 
 from __future__ import annotations

@@ -4,18 +4,26 @@ A :class:`Publisher` is an observer that declares the run's channels and publish
 exchanged signal to its sinks. Every sink receives the same channels, schemas and messages:
 the MCAP file (:class:`cosim.mcap_log.McapRecorder`), the Foxglove WebSocket server
 (:class:`cosim.live.LiveView`), or both. One formula per message, in one place: a component's
-samples leave as rows of raw values, turned into JSON by :func:`cosim.log_writer.encode_block`
-(in the log's writer process, or for the live view).
+samples leave the master as blocks of rows of raw values (cheap for the master's loop), turned
+into JSON messages by :func:`cosim.log_writer.encode_messages` in the sink (in the log's writer
+process, or for the live view).
 
 Channels (JSON encoding, each with a titled JSON Schema):
 
-- ``/<component>``: the component's logged variables in blocks of consecutive samples,
-  ``{"t": [s, ...], "<variable>": [value, ...], ...}``, one array element per sample (an array
-  variable's values are lists), one message per ``1 / scene_rate_hz`` of simulated time logged
-  at its last sample's stamp; the schema lists each variable with unit, description and
-  causality; the channel's metadata says ``layout: blocks``. Logs written before blocks (no
-  ``layout`` metadata) hold one message per sample, ``{"t": s, "<variable>": value, ...}``;
-  :mod:`cosim.runlog` reads both;
+- ``/<component>``: the component's logged variables; the schema lists each variable with unit,
+  description and causality; the channel's metadata says its ``layout`` (the scenario's
+  ``logging.layout``):
+
+  - ``samples`` (default): one message per sample, ``{"t": s, "<variable>": value, ...}`` (an
+    array variable's value is a list), logged at its stamp: what Foxglove and PlotJuggler plot
+    as time series as they are, the messages of logs written before blocks (which have no
+    ``layout`` metadata);
+  - ``blocks``: one message per block of consecutive samples, ``{"t": [s, ...], "<variable>":
+    [value, ...], ...}``, one array element per sample, one message per ``1 / scene_rate_hz`` of
+    simulated time (sooner when a block is full) logged at its last sample's stamp; each property of the
+    schema is an array of the sample's type. Cheaper to write; viewers see arrays.
+
+  :mod:`cosim.runlog` reads both alike;
 - ``/scene``: ``foxglove.SceneUpdate`` at ``scene_rate_hz``: the robot (rails or arms,
   rods, platform) and the platform's trail over the last ``trail_s`` seconds;
 - ``/scene/reference``: ``foxglove.SceneUpdate``, the reference path as a line: the whole
@@ -55,6 +63,7 @@ from .fmu import BINARY, BOOLEAN, INTEGER, REAL, STRING
 
 __all__ = [
     "EVENTS_SCHEMA",
+    "LAYOUTS",
     "STAMPS",
     "Publisher",
     "frame_transforms",
@@ -65,6 +74,7 @@ __all__ = [
 ]
 
 STAMPS = ("wall", "simulation")
+LAYOUTS = ("samples", "blocks")
 _TRAIL_S = 3.0  # s of platform trail drawn in the scene
 _REFERENCE_PERIOD_NS = 1_000_000_000  # /scene/reference resent every simulated second
 _REFERENCE_POINTS = 600  # the whole reference path is drawn with at most this many points
@@ -129,16 +139,16 @@ def _values_any(readers) -> list:
     return vals
 
 
-def block_layout(keys: Sequence[str], readers, kinds: Sequence[str]):
+def block_layout(keys: Sequence[str], readers, kinds: Sequence[str], per_sample: bool = False):
     """``(BlockLayout, runs)`` of a component channel: ``runs`` (``(array, offset, count)`` per stretch of
     consecutive elements of one ctypes array, in row order; a row is their bytes one after the other)
     when every value lives in a ctypes array (numbers, Booleans), else None (values read one by one).
-    ``keys``: one JSON key per reader."""
+    ``keys``: one JSON key per reader; ``per_sample``: the channel's layout is ``samples``."""
     from .log_writer import BlockLayout, row_format
 
     if any(kind not in (REAL, INTEGER, BOOLEAN) for kind in kinds) or any(
             not isinstance(getattr(arr, "_type_", None), type) or n == 0 for arr, _, n, _ in readers):
-        return BlockLayout(tuple(keys)), None
+        return BlockLayout(tuple(keys), per_sample=per_sample), None
     runs: list[list] = []
     fmt, columns = [], []
     at = 0
@@ -151,7 +161,7 @@ def block_layout(keys: Sequence[str], readers, kinds: Sequence[str]):
         fmt.append(row_format(arr._type_, count))
         columns.append((at, 0 if n is None else n, kind == BOOLEAN and arr._type_ is not ctypes.c_bool))
         at += count
-    return BlockLayout(tuple(keys), "".join(fmt), tuple(columns)), [tuple(r) for r in runs]
+    return BlockLayout(tuple(keys), "".join(fmt), tuple(columns), per_sample), [tuple(r) for r in runs]
 
 
 class _Rows:
@@ -379,8 +389,9 @@ class Publisher:
     - ``channel(cid, topic, schema_name, schema_json, metadata, layout)``: a channel ``cid`` (0, 1, ...);
       ``layout`` (:class:`cosim.log_writer.BlockLayout`) for a component channel, else None;
     - ``blocks(offset_ns, blocks)``: samples of component channels, ``(cid, stamps, rows, skip)`` each
-      (simulation ns; raw values, see :class:`_Rows` and :class:`_Joint`): one message each, made by
-      :func:`cosim.log_writer.encode_block` and logged at its last stamp + ``offset_ns``;
+      (simulation ns; raw values, see :class:`_Rows` and :class:`_Joint`), made into the channel's
+      messages in its layout by :func:`cosim.log_writer.encode_messages` (log times: stamps +
+      ``offset_ns``);
     - ``message(cid, log_time, data)``: any other message, JSON encoded.
 
     Samples are copied from the FMU buffers at each step (about 0.2 us per component) and handed
@@ -403,21 +414,28 @@ class Publisher:
         The whole reference path (n, 3), m (:func:`reference_path`); or None.
     reference_signals
         Without ``reference``: three signals whose values so far are drawn as the reference path.
+    layout
+        The component channels' layout (:data:`LAYOUTS`): ``"samples"``, one message per sample, or
+        ``"blocks"``, one per block of samples.
     """
 
     BLOCK_BYTES = 64 * 1024
     """Bytes of rows a component channel holds at most before they are handed over."""
 
     def __init__(self, scene_robot=None, scene_position: Sequence[str] | None = None, scene_rate_hz: float = 30.0,
-                 stamps: str = "wall", reference=None, reference_signals: Sequence[str] | None = None):
+                 stamps: str = "wall", reference=None, reference_signals: Sequence[str] | None = None,
+                 layout: str = "samples"):
         if stamps not in STAMPS:
             raise CosimError(f"time stamps must be one of {', '.join(STAMPS)}, got {stamps!r}")
+        if layout not in LAYOUTS:
+            raise CosimError(f"log layout must be one of {', '.join(LAYOUTS)}, got {layout!r}")
         if not scene_rate_hz > 0:
             raise CosimError(f"scene rate must be > 0 Hz, got {scene_rate_hz}")
         self.scene_robot = scene_robot
         self.scene_position = list(scene_position) if scene_position else None
         self.scene_period_ns = round(1e9 / scene_rate_hz)
         self.stamps = stamps
+        self.layout = layout
         self.reference = None if reference is None else np.asarray(reference, dtype=float)
         self.reference_signals = list(reference_signals) if reference_signals else None
         self.offset_ns: int | None = None
@@ -477,10 +495,12 @@ class Publisher:
                 self._by_comp.append(None)
                 continue
             schema, readers = component_schema(rt, c)
-            layout, runs = block_layout(tuple(schema["properties"])[1:], readers, [v.kind for v in plan.logged[c]])
-            cid = self._channel(f"/{name}", f"cosim.{name}", block_schema(schema),
+            per_sample = self.layout == "samples"
+            layout, runs = block_layout(tuple(schema["properties"])[1:], readers, [v.kind for v in plan.logged[c]],
+                                        per_sample)
+            cid = self._channel(f"/{name}", f"cosim.{name}", schema if per_sample else block_schema(schema),
                                 {"fmu": str(plan.infos[c].path.name), "step_multiple": str(rt.multiples[c]),
-                                 "layout": "blocks"}, layout)
+                                 "layout": self.layout}, layout)
             rows = _Rows(cid, runs, readers, self.BLOCK_BYTES)
             self._pending.append(rows)
             self._rows_of[c] = rows

@@ -186,7 +186,8 @@ def _publishing(scenario: Scenario, mcap_path: Path | None, live: tuple[str, int
         robot = get_preset(scenario.robot)
     publisher = Publisher(robot, expand_signal(scene.position) if scene else None, scene.rate_hz if scene else 30.0,
                           stamps, reference_path(scenario) if robot is not None else None,
-                          expand_signal(scenario.compare.reference) if scenario.compare is not None else None)
+                          expand_signal(scenario.compare.reference) if scenario.compare is not None else None,
+                          scenario.logging.layout)
     sinks: list[Observer] = []
     recorder = None
     if live is not None:  # first: a port in use fails before the log file is opened

@@ -1,12 +1,13 @@
 """Read a run's MCAP log back into arrays, and write decimated baselines of it.
 
 A run log (see :mod:`cosim.mcap_log`) holds one JSON channel ``/<component>`` per
-component. Its messages are blocks of samples, ``{"t": [...], "<variable>": [...], ...}``
-(one array element per sample; the channel's metadata says ``layout: blocks``), or, in logs
-written before blocks, one sample each, ``{"t": ..., "<variable>": value, ...}``; both read
-alike. Here every logged variable becomes a :class:`Signal` named ``component.variable``
-(``plant.p.x``, ``ctl.u[1]``) with its time stamps, values, unit and causality. The
-``/scene`` channels (Foxglove drawing) and ``/tf`` are skipped.
+component. Its messages are one sample each, ``{"t": ..., "<variable>": value, ...}`` (the
+channel's metadata says ``layout: samples``, the default; logs written before layouts have no
+``layout``), or blocks of samples, ``{"t": [...], "<variable>": [...], ...}`` (one array
+element per sample; ``layout: blocks``); both read alike. Here every logged variable becomes a
+:class:`Signal` named ``component.variable`` (``plant.p.x``, ``ctl.u[1]``) with its time
+stamps, values, unit and causality. The ``/scene`` channels (Foxglove drawing) and ``/tf`` are
+skipped.
 
 Time stamps are simulation time: a log whose ``time`` metadata gives an offset (log times
 from the run's wall-clock start, see :mod:`cosim.publish`) has it subtracted here, so old

@@ -202,12 +202,19 @@ class SceneSpec(_Model):
 
 
 class Logging(_Model):
-    """MCAP recording. ``signals``: all inputs and outputs, or outputs only."""
+    """MCAP recording. ``signals``: all inputs and outputs, or outputs only; ``layout``: one message per
+    sample or per block of samples on the component channels (:mod:`cosim.publish`)."""
 
     enabled: bool = True
     out: str | None = Field(None, description="MCAP path (default runs/<scenario name>.mcap)")
     signals: Literal["all", "outputs", "none"] = "all"
     flush_interval: float = Field(1.0, gt=0, description="wall-clock seconds between flushes")
+    layout: Literal["samples", "blocks"] = Field(
+        "samples", description="component channels' messages: 'samples', one per sample ({\"t\": s, \"<variable>\": "
+                               "value}), plotted as time series by Foxglove and PlotJuggler as they are; 'blocks', "
+                               "one per block of samples, every scene period ({\"t\": [...], \"<variable>\": "
+                               "[...]}), a cheaper log that viewers split into per-index series. Both read back "
+                               "alike (cosim compare, runlog)")
     scene: SceneSpec | None = None
 
 

@@ -1,11 +1,14 @@
-"""The run log's writer (cosim.log_writer): block messages from raw rows, the MCAP file it writes
-(read back by the ``mcap`` reader, indexes and statistics included), an unfinished file, and the
-writer process with its failure report."""
+"""The run log's writer (cosim.log_writer): sample and block messages from raw rows, the MCAP file it
+writes in both layouts (read back by the ``mcap`` reader, indexes and statistics included), the writer
+process with its failure report, and the unfinished file a killed or orphaned writer process leaves
+(recovered by ``cosim recover``)."""
 
 from __future__ import annotations
 
 import ctypes
+import dataclasses
 import struct
+import time
 
 import orjson
 import pytest
@@ -13,8 +16,10 @@ from mcap.reader import make_reader
 from mcap.stream_reader import StreamReader
 
 from cosim.fmu import BOOLEAN, REAL
-from cosim.log_writer import BlockLayout, LogSink, McapFile, WriterFailed, WriterProcess, encode_block, row_format
+from cosim.log_writer import (BlockLayout, LogSink, WriterFailed, WriterProcess, encode_block, encode_samples,
+                              row_format)
 from cosim.publish import block_layout
+from cosim.runlog import samples
 
 # a row: 2 doubles (p), an FMI 2 Boolean (C int), an FMI 3 Boolean (C bool), an Int64 array of 2
 FMT = row_format(ctypes.c_double, 2) + row_format(ctypes.c_int32, 1) + row_format(ctypes.c_bool, 1) \
@@ -50,10 +55,26 @@ def test_block_message_holds_every_sample_exactly():
     assert encode_block(LAYOUT, stamps, joint, (3, 5)) == encode_block(LAYOUT, stamps, _rows(SAMPLES))
 
 
-def test_values_read_one_by_one_make_the_same_block():
+def test_sample_messages_are_the_dicts_of_one_sample_each_as_orjson_writes_them():
+    """The samples layout writes, byte for byte, ``orjson.dumps({"t": s, "<key>": value, ...})`` (the messages
+    of logs written before blocks), from the same rows, alone or between other channels' bytes."""
+    stamps = [0, 1_000_000, 2_000_000_123]
+    expected = [orjson.dumps(sample) for sample in samples(orjson.loads(encode_block(LAYOUT, stamps, _rows(SAMPLES))))]
+    assert expected[0] == b'{"t":0.0,"p.x":0.1,"p.y":-0.0,"ok":true,"b":true,"n":[7,-8]}', expected[0]
+    got = encode_samples(LAYOUT, stamps, _rows(SAMPLES))
+    assert got == expected, f"{got} vs {expected}"
+    joint = b"".join(b"abc" + _rows([s]) + b"defgh" for s in SAMPLES)
+    assert encode_samples(LAYOUT, stamps, joint, (3, 5)) == expected
+    assert encode_samples(LAYOUT, [5], _rows(SAMPLES[:1])) == [orjson.dumps({"t": 5e-9, **dict(zip(
+        LAYOUT.keys, (0.1, -0.0, True, True, [7, -8])))})]
+
+
+def test_values_read_one_by_one_make_the_same_block_and_samples():
     layout = BlockLayout(("s", "x"))  # no row format: one list of values a sample (strings, binaries)
     msg = orjson.loads(encode_block(layout, [0, 10], [["a", 1.5], ["b\n", 2.5]]))
     assert msg == {"t": [0.0, 1e-8], "s": ["a", "b\n"], "x": [1.5, 2.5]}, msg
+    got = [orjson.loads(m) for m in encode_samples(layout, [0, 10], [["a", 1.5], ["b\n", 2.5]])]
+    assert got == [{"t": 0.0, "s": "a", "x": 1.5}, {"t": 1e-8, "s": "b\n", "x": 2.5}], got
 
 
 def test_layout_of_consecutive_buffer_elements_is_one_run():
@@ -65,56 +86,49 @@ def test_layout_of_consecutive_buffer_elements_is_one_run():
                                                            (4, 0, False)), layout
 
 
-def _write(path, finish: bool = True) -> None:
+def _write(path, per_sample: bool) -> None:
+    """Two channels of the same schema: /a samples (3 a block, 10 blocks), /b one message each time."""
     sink = LogSink(path, chunk_size=300)  # small chunks: several of them
-    sink.channel(0, "/a", "cosim.a", b'{"title": "cosim.a"}', {"layout": "blocks"}, LAYOUT)
+    layout = dataclasses.replace(LAYOUT, per_sample=per_sample)
+    sink.channel(0, "/a", "cosim.a", b'{"title": "cosim.a"}', {"layout": "samples" if per_sample else "blocks"},
+                 layout)
     sink.channel(1, "/b", "cosim.a", b'{"title": "cosim.a"}', {}, None)  # the same schema: one record
     sink.metadata("time", {"offset_ns": "100"})
     for k in range(10):
         sink.blocks(100, [(0, [3 * k, 3 * k + 1, 3 * k + 2], _rows(SAMPLES), None)])
         sink.message(1, 100 + 3 * k + 2, orjson.dumps({"k": k}))
     sink.attachment("scenario/x.yaml", "application/yaml", b"name: x\n", 5, 6)
-    if finish:
-        sink.finish()
-    else:
-        sink.abandon()
+    sink.finish()
 
 
-def test_file_reads_back_with_its_summary_indexes_and_statistics(tmp_path):
+@pytest.mark.parametrize("per_sample", [True, False], ids=["samples", "blocks"])
+def test_file_reads_back_with_its_summary_indexes_and_statistics(tmp_path, per_sample):
     path = tmp_path / "x.mcap"
-    _write(path)
+    _write(path, per_sample)
+    n_a = 30 if per_sample else 10
     with open(path, "rb") as f:
         reader = make_reader(f)
         summary = reader.get_summary()
         st = summary.statistics
         assert (st.message_count, st.schema_count, st.channel_count, st.attachment_count, st.metadata_count) == \
-            (20, 1, 2, 1, 1), st
-        assert st.channel_message_counts == {1: 10, 2: 10} and st.chunk_count == len(summary.chunk_indexes) > 1, st
-        assert (st.message_start_time, st.message_end_time) == (102, 129), st
-        assert {c.topic: c.metadata for c in summary.channels.values()} == {"/a": {"layout": "blocks"}, "/b": {}}
+            (n_a + 10, 1, 2, 1, 1), st
+        ids = {c.topic: c.id for c in summary.channels.values()}
+        assert st.channel_message_counts == {ids["/a"]: n_a, ids["/b"]: 10}, st
+        assert st.chunk_count == len(summary.chunk_indexes) > 1, st
+        assert (st.message_start_time, st.message_end_time) == (100 if per_sample else 102, 129), st
+        assert {c.topic: c.metadata for c in summary.channels.values()} == \
+            {"/a": {"layout": "samples" if per_sample else "blocks"}, "/b": {}}
         got = [(ch.topic, m.log_time, orjson.loads(m.data)) for _, ch, m in reader.iter_messages()]
         assert [t for _, t, _ in got] == sorted(t for _, t, _ in got), "not in log-time order"
         assert [d["k"] for topic, _, d in got if topic == "/b"] == list(range(10))
-        assert all(d["n"] == [[7, -8], [2 ** 62, 0], [-1, 1]] for topic, _, d in got if topic == "/a")
+        values = [s["n"] for topic, _, d in got if topic == "/a" for s in samples(d)]
+        assert values == [[7, -8], [2 ** 62, 0], [-1, 1]] * 10, values
+        if per_sample:  # each sample logged at its own stamp, its t the simulation time
+            assert all(t == 100 + round(d["t"] * 1e9) for topic, t, d in got if topic == "/a"), got[:4]
         assert [m.name for m in reader.iter_metadata()] == ["time"]
         assert [(a.name, a.data) for a in reader.iter_attachments()] == [("scenario/x.yaml", b"name: x\n")]
-        late = list(reader.iter_messages(starting_at=120))  # through the chunk and message indexes
-        assert [m.log_time for _, _, m in late] == [120, 120, 123, 123, 126, 126, 129, 129], late
-
-
-def test_unfinished_file_has_its_chunks_and_no_summary(tmp_path):
-    from mcap.exceptions import EndOfFile, McapError
-    from mcap.records import Message
-
-    path = tmp_path / "x.mcap"
-    _write(path, finish=False)
-    with open(path, "rb") as f, pytest.raises(McapError):  # no footer: the indexed reader fails
-        make_reader(f).get_summary()
-    messages = []
-    with open(path, "rb") as f, pytest.raises(EndOfFile):  # the stream reader reads up to the end
-        for record in StreamReader(f).records:
-            messages += [record] if isinstance(record, Message) else []
-    assert len(messages) == 20, f"{len(messages)} messages in the unfinished file vs 20 written"
+        late = [m.log_time for _, _, m in reader.iter_messages(starting_at=120)]  # through chunk and message indexes
+        assert late == [t for _, t, _ in got if t >= 120] and len(late) == (14 if per_sample else 8), late
 
 
 def test_writer_process_writes_the_file_and_reports_a_failure(tmp_path):
@@ -134,3 +148,73 @@ def test_writer_process_writes_the_file_and_reports_a_failure(tmp_path):
     with pytest.raises(WriterFailed, match="No such file or directory"):
         bad.channel(0, "/a", "cosim.a", b"{}", {}, None)
         bad.finish()
+
+
+def _started_writer(path, per_sample: bool) -> WriterProcess:
+    """A writer process that has written and flushed one block of /a (3 samples) and one /b message."""
+    w = WriterProcess()
+    w.open(path, 1024, 1)
+    w.channel(0, "/a", "cosim.a", b'{"title": "cosim.a"}', {"layout": "samples" if per_sample else "blocks"},
+              dataclasses.replace(LAYOUT, per_sample=per_sample))
+    w.channel(1, "/b", "cosim.b", b'{"title": "cosim.b"}', {}, None)
+    w.blocks(0, [(0, [0, 1, 2], _rows(SAMPLES), None)])
+    w.message(1, 2, b'{"k":0}')
+    w.flush()
+    return w
+
+
+def _messages_on_disk(path) -> int:
+    """Messages a stream reader finds in the file so far (its complete chunks)."""
+    from mcap.exceptions import McapError
+    from mcap.records import Message
+
+    count = 0
+    try:
+        with open(path, "rb") as f:
+            for record in StreamReader(f).records:
+                count += isinstance(record, Message)
+    except (OSError, McapError):  # not there yet, or ends inside a record
+        pass
+    return count
+
+
+def _recovered(path, tmp_path, messages: int) -> dict:
+    """Recover ``path`` (which the indexed reader refuses: no summary): its ``messages`` and the signals."""
+    from mcap.exceptions import McapError
+
+    from cosim.recover import recover
+    from cosim.runlog import read_run
+
+    with open(path, "rb") as f, pytest.raises(McapError):  # unfinished: no footer, no summary
+        make_reader(f).get_summary()
+    rep = recover(path, tmp_path / "fixed.mcap")
+    assert (rep.channels, rep.messages) == (2, messages), rep
+    return read_run(tmp_path / "fixed.mcap").signals
+
+
+@pytest.mark.parametrize("layout", ["samples", "blocks"])
+def test_log_of_a_killed_writer_process_is_recoverable(tmp_path, layout):
+    """SIGKILL on the child after a flush: every flushed sample comes back, in either layout."""
+    path = tmp_path / f"{layout}.mcap"
+    w = _started_writer(path, layout == "samples")
+    deadline = time.monotonic() + 30  # the child writes in its own time: wait for the flushed chunk
+    while _messages_on_disk(path) < (4 if layout == "samples" else 2) and time.monotonic() < deadline:
+        time.sleep(0.02)
+    w._proc.kill()
+    w._proc.wait(timeout=10)
+    signals = _recovered(path, tmp_path, 4 if layout == "samples" else 2)
+    assert list(signals["a.n"].y.tolist()) == [[7, -8], [2 ** 62, 0], [-1, 1]], signals["a.n"].y
+    assert signals["a.ok"].y.tolist() == [1.0, 0.0, 1.0] and signals["a.n"].t_ns.tolist() == [0, 1, 2]
+
+
+@pytest.mark.parametrize("layout", ["samples", "blocks"])
+def test_writer_process_left_by_its_master_leaves_an_unfinished_recoverable_log(tmp_path, layout):
+    """The pipe closes without ``finish`` (the master died): the child writes what it has and exits
+    without a summary, as a killed writer would; nothing it was sent is lost."""
+    path = tmp_path / f"{layout}.mcap"
+    w = _started_writer(path, layout == "samples")
+    w.blocks(0, [(0, [3, 4, 5], _rows(SAMPLES), None)])  # after the flush: written when the child abandons
+    w.abandon()
+    assert w._proc.returncode == 0, w._proc.stderr.read()
+    signals = _recovered(path, tmp_path, 7 if layout == "samples" else 3)
+    assert signals["a.p.y"].t_ns.tolist() == [0, 1, 2, 3, 4, 5], signals["a.p.y"].t_ns
