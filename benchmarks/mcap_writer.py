@@ -1,4 +1,4 @@
-"""MCAP writer choice (issue 18): replay helix_ctc's logged message stream through each writer.
+"""MCAP writer choice (issue 18; issue 23's log writer): replay helix_ctc's logged message stream through each writer.
 
 The messages (their bytes, channels and stamps, in the order the recorder wrote them) are read
 from a helix_ctc run log, then written again, side by side, by
@@ -9,7 +9,10 @@ from a helix_ctc run log, then written again, side by side, by
 - ``mcap-public``: the same ``Writer`` through its public ``add_message``;
 - ``foxglove-sdk``: ``foxglove.open_mcap`` on a ``foxglove.Context`` whose channels the recorder
   logs into (the channels the live view serves too), given a path, or an open Python file;
-  and with zstd level 1, which only this writer lets one choose.
+  and with zstd level 1, which only this writer lets one choose; and as ``cosim.log_writer.LogSink``
+  writes the log (path, level 1, compression in the calling thread: the writer process has one core).
+
+The log's layout is the run's (``logging.layout``; default ``samples``, one message per sample).
 
 Every writer gets the same chunk size (256 KiB) and zstd at its default level (3) unless said.
 The time counted is the writing loop plus closing the file (the summary and index), divided by
@@ -112,12 +115,14 @@ def _mcap_writer(path: Path, channels: dict, messages: list, sink: bool) -> floa
         return time.perf_counter() - t0
 
 
-def _foxglove(path: Path, channels: dict, messages: list, file_object: bool, level: int = 0) -> float:
+def _foxglove(path: Path, channels: dict, messages: list, file_object: bool, level: int = 0,
+              threads: int | None = None) -> float:
     import foxglove
     from foxglove.mcap import MCAPCompression, MCAPWriteOptions
 
     ctx = foxglove.Context()
-    options = MCAPWriteOptions(compression=MCAPCompression.Zstd, chunk_size=CHUNK, compression_level=level)
+    options = MCAPWriteOptions(compression=MCAPCompression.Zstd, chunk_size=CHUNK, compression_level=level,
+                               compression_threads=threads)
     f = open(path, "wb") if file_object else None
     w = foxglove.open_mcap(f if file_object else path, allow_overwrite=True, context=ctx, writer_options=options)
     logs = {}
@@ -141,6 +146,7 @@ WRITERS = {
     "foxglove-sdk (path)": lambda p, c, m: _foxglove(p, c, m, file_object=False),
     "foxglove-sdk (file)": lambda p, c, m: _foxglove(p, c, m, file_object=True),
     "foxglove-sdk (zstd 1)": lambda p, c, m: _foxglove(p, c, m, file_object=True, level=1),
+    "foxglove-sdk (as log)": lambda p, c, m: _foxglove(p, c, m, file_object=False, level=1, threads=0),
 }
 
 

@@ -3,9 +3,9 @@
 - the channels, schemas and messages are those of :class:`cosim.publish.Publisher` (one
   ``/<component>`` JSON channel per component, the ``/scene``, ``/scene/reference`` and
   ``/tf`` Foxglove channels, ``/events``), the same channels the live view (:mod:`cosim.live`)
-  serves, written by :mod:`cosim.log_writer`; component channels in the scenario's
-  ``logging.layout``: one message per sample (``samples``, the default) or per block of samples
-  (``blocks``);
+  serves, written by :mod:`cosim.log_writer` (foxglove-sdk's MCAP writer); component channels in
+  the scenario's ``logging.layout``: one message per sample (``samples``, the default) or per
+  block of samples (``blocks``);
 - a run of :attr:`McapRecorder.PROCESS_MIN_STEPS` steps or more writes through a writer process
   (:class:`cosim.log_writer.WriterProcess`, started when the recorder is made, so it is ready
   when the loop starts): the master only copies each step's values into blocks, and the child
