@@ -12,7 +12,8 @@ dimensions, fixed or from structural parameters). Clocks are rejected when loadi
 
 Every FMI status passes through :meth:`_Base._check` (the hot path calls the C functions
 directly with pre-built ctypes buffers; a co-simulation FMU's Gauss-Seidel turn, set, doStep
-and get, is one call into :mod:`cosim.turn` where that helper can be built); a failure raises
+and get, and a model-exchange FMU's right-hand side, set time, set states and get derivatives,
+are one call each into :mod:`cosim.turn` where that helper can be built); a failure raises
 :class:`~cosim.errors.FMIError` naming the component, the function, the simulation time and
 the FMU's last log message.
 An FMU that asks to end the simulation raises :class:`Terminated`, which the algorithm
@@ -43,7 +44,7 @@ from typing import Any, Callable, Iterable, Protocol, Sequence
 from fmus.requirements import release_pythonfmu_state
 
 from .errors import ComponentSourceError, FMIError, Issue, ScenarioError
-from .turn import GET, SET, STEP, Exchange, Finite, make_turn
+from .turn import DERIVATIVES, GET, SET, STATES, STEP, TIME, Exchange, Finite, make_rhs, make_turn
 
 isfinite = math.isfinite  # a module global: one lookup less per output buffer in the hot path
 
@@ -795,9 +796,50 @@ class _MEMixin:
     next_event: float | None = None
     event_log: list[tuple[float, str]]  # (time, kind: state/time/step/input) not yet taken by an observer
     _continuous = False  # in continuous-time mode (after the initial event iteration)
+    _c_rhs: Callable[[Any, Any], int] | None = None  # the C right-hand side (None: the Python calls)
+    _rhs_state: Any = None  # its cosim.turn.Rhs
 
     # -- the integrator's view (cosim.integrators.OdeModel): a failing status raises FMIError,
     #    which the integrator re-raises from advance()
+    def rhs(self, t, x, dx):
+        """The derivatives ``dx`` at time ``t`` and states ``x`` (``c_double`` arrays or pointers of ``nx``
+        values): :meth:`set_time`, :meth:`set_x`, :meth:`get_dx`, in one C call where the helper of
+        :mod:`cosim.turn` is available, raising as those do."""
+        c_rhs = self._c_rhs
+        if c_rhs is None:
+            self.set_time(t)
+            self.set_x(x)
+            self.get_dx(dx)
+            return
+        self.time = t
+        self._rhs_t.value = t
+        ended = c_rhs(x, dx)
+        if ended:
+            self._rhs_ended(ended, dx)
+
+    def _rhs_ended(self, ended: int, dx) -> None:
+        """Raise for the call that ended a C right-hand side, as the same call made from Python raises."""
+        status = self._rhs_state.status
+        if ended == TIME:
+            self._check(status, self._name_set_time)
+        if ended == STATES:
+            self._check(status, self._name_set_x)
+        if ended == DERIVATIVES:
+            self._check(status, self._name_get_dx)
+        self._non_finite_dx(dx)  # NONFINITE
+
+    def _bind_rhs(self) -> None:
+        """After initialization (``nx`` known): the C right-hand side, where the helper is available."""
+        dll = self.fmu.dll
+
+        def address(name: str) -> int:
+            return ctypes.cast(getattr(dll, name), ctypes.c_void_p).value
+
+        self._rhs_t = c_double()
+        made = make_rhs(self._c, address(self._name_set_time), address(self._name_set_x),
+                        address(self._name_get_dx), self.nx, self._rhs_t, lambda f: self._prototype(f, None))
+        self._c_rhs, self._rhs_state = made if made is not None else (None, None)
+
     def set_time(self, t):
         self.time = t
         status = self._fn_set_time(self._c, t)
@@ -824,14 +866,14 @@ class _MEMixin:
 
     def _non_finite_dx(self, dx) -> None:
         """Derivatives that are not finite: integrating them would only fail later and nameless (an
-        FMU may also report a failure so, with the reason logged: our pythonfmu3 adapters do)."""
-        if self._error_logged_at(self.time):
-            detail = self._error_log[1]
-        else:
-            names = [d.variable.name for d in self.info.md.derivatives]
-            bad = [f"{names[i] if i < len(names) else f'derivative {i + 1}'} = {dx[i]!r}"
-                   for i in range(self.nx) if not isfinite(dx[i])]
-            detail = "non-finite " + ", ".join(bad)
+        FMU may also report a failure so, with the reason logged: our pythonfmu3 adapters do). The sum of
+        finite values overflows only near 1e308; then every element is looked at and nothing is raised."""
+        names = [d.variable.name for d in self.info.md.derivatives]
+        bad = [f"{names[i] if i < len(names) else f'derivative {i + 1}'} = {dx[i]!r}"
+               for i in range(self.nx) if not isfinite(dx[i])]
+        if not bad:
+            return
+        detail = self._error_log[1] if self._error_logged_at(self.time) else "non-finite " + ", ".join(bad)
         raise FMIError(self.name, self._name_get_dx, self.time, None, detail)
 
     def get_z(self, z):
@@ -887,6 +929,7 @@ class _MEMixin:
         for b in self.in_bufs:
             b.applied = b.snapshot()
         self._restart = False
+        self._bind_rhs()
         self.integrator = make_integrator(self.solver, self, self.time, self.rtol, self.max_step)
 
     def set_inputs(self) -> None:

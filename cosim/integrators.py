@@ -47,6 +47,8 @@ class OdeModel(Protocol):
     nx: int
     nz: int
 
+    def rhs(self, t: float, x: Any, dx: Any) -> None:
+        """The derivatives ``dx`` at time ``t`` and states ``x``: set_time, set_x, get_dx in one."""
     def set_time(self, t: float) -> None: ...
     def get_x(self, x: Any) -> None: ...
     def set_x(self, x: Any) -> None: ...
@@ -179,12 +181,11 @@ class CVodeIntegrator:
 
     def _rhs(self, t: float, y: Any, ydot: Any, user_data: Any) -> int:
         try:
-            self.model.set_time(t)
             if self.discrete:
+                self.model.set_time(t)
                 self._NV_DATA_S(ydot)[0] = 0.0
             else:
-                self.model.set_x(self._NV_DATA_S(y))
-                self.model.get_dx(self._NV_DATA_S(ydot))
+                self.model.rhs(t, self._NV_DATA_S(y), self._NV_DATA_S(ydot))
             return 0
         except BaseException as exc:  # noqa: BLE001 - kept and raised from advance()
             self.error = self.error or exc
@@ -246,11 +247,8 @@ class DOP853Integrator:
         self.reset(t0)
 
     def _fun(self, t: float, x: np.ndarray) -> np.ndarray:
-        m = self.model
-        m.set_time(t)
         self._xbuf_np[:] = x
-        m.set_x(self._xbuf)
-        m.get_dx(self._dx)
+        self.model.rhs(t, self._xbuf, self._dx)
         return self._dx_np.copy()
 
     def _indicators(self, t: float, x: np.ndarray) -> np.ndarray:

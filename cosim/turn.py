@@ -1,4 +1,6 @@
-"""A co-simulation component's turn of a macro step in one C call: set inputs, doStep, get outputs, NaN check.
+"""The master's per-step FMI calls in one C call each: a co-simulation component's turn of a macro step
+(set inputs, doStep, get outputs, NaN check) and a model-exchange FMU's right-hand side (set time, set
+states, get derivatives, NaN check).
 
 The master calls an FMU's C functions through ctypes, and each crossing from Python into C costs about
 0.6 us in its loop (0.35 us in a tight micro-benchmark), whatever the function does. A Gauss-Seidel
@@ -8,11 +10,17 @@ module) makes the same calls in the same order from C, checks the outputs there,
 failed, if one did: one crossing per component and step. On helix_ctc_analytic with native FMUs that
 takes a component from 2.1-3.4 us to 0.9-1.6 us per step (``benchmarks/master_native.py``).
 
+A model-exchange FMU's right-hand side, which the master's integrator evaluates many times per step
+(fmiXSetTime, fmiXSetContinuousStates, fmiXGetDerivatives or fmi3GetContinuousStateDerivatives, then the
+derivatives checked for NaN), is one crossing the same way: ``cosim_rhs``, through :func:`make_rhs`
+(:meth:`cosim.fmu._MEMixin.rhs`).
+
 The helper is compiled at first use with the system C compiler (``$CC``, else ``cc``) into the user's
 cache (``$XDG_CACHE_HOME/cosim``, default ``~/.cache/cosim``), once per version of its source; processes
 building it at the same time each rename a complete file into place. Without a compiler, or when the
-build fails, :func:`helper` returns None, :func:`unavailable` says why, and the master makes the same
-calls from Python one by one (:meth:`cosim.fmu._CoSimulation.set_step_get`).
+build fails, :func:`helper` and :func:`rhs_helper` return None, :func:`unavailable` says why, and the
+master makes the same calls from Python one by one (:meth:`cosim.fmu._CoSimulation.set_step_get`,
+:meth:`cosim.fmu._MEMixin.rhs`).
 """
 
 from __future__ import annotations
@@ -30,11 +38,13 @@ from functools import partial
 from pathlib import Path
 from typing import Any, Callable, Sequence
 
-__all__ = ["Exchange", "Finite", "Turn", "helper", "unavailable", "make_turn", "SET", "STEP", "GET", "NONFINITE"]
+__all__ = ["Exchange", "Finite", "Turn", "Rhs", "helper", "rhs_helper", "unavailable", "make_turn", "make_rhs",
+           "SET", "STEP", "GET", "NONFINITE", "TIME", "STATES", "DERIVATIVES"]
 
 SOURCE = Path(__file__).with_name("turn.c")
 CFLAGS = ("-std=c99", "-O2", "-fPIC", "-shared")
 SET, STEP, GET, NONFINITE = 1, 2, 3, 4  # what ended a turn (cosim_turn's return value; 0: completed)
+TIME, STATES, DERIVATIVES = 1, 2, 3  # what ended a right-hand side (cosim_rhs's return value, or NONFINITE; 0: done)
 
 
 class Exchange(ctypes.Structure):
@@ -61,8 +71,16 @@ class Turn(ctypes.Structure):
                 ("status", c_int), ("index", c_size_t)]
 
 
+class Rhs(ctypes.Structure):
+    """A model-exchange FMU's right-hand side (``Rhs`` in turn.c); ``status`` says how the call that ended
+    it failed."""
+
+    _fields_ = [("instance", c_void_p), ("set_time", c_void_p), ("set_states", c_void_p),
+                ("get_derivatives", c_void_p), ("nx", c_size_t), ("t", POINTER(c_double)), ("status", c_int)]
+
+
 _LOCK = threading.Lock()
-_HELPER: list[Any] = []  # [the loaded cosim_turn, or None] once looked for (one look per process)
+_LIBRARY: list[Any] = []  # [the loaded library, or None] once looked for (one look per process)
 _REASON: list[str] = []  # why the helper is unavailable
 
 
@@ -104,20 +122,32 @@ def _build() -> Any:
     return ctypes.CDLL(str(path))
 
 
+def _library() -> Any:
+    """The helper's loaded library, or None when it cannot be built here."""
+    with _LOCK:
+        if not _LIBRARY:
+            try:
+                _LIBRARY.append(_build())
+            except (OSError, RuntimeError) as exc:
+                _LIBRARY.append(None)
+                _REASON.append(str(exc))
+        return _LIBRARY[0]
+
+
 def helper() -> Any:
     """The compiled ``cosim_turn`` (a ctypes function), or None when it cannot be built here."""
-    with _LOCK:
-        if not _HELPER:
-            try:
-                _HELPER.append(_build().cosim_turn)
-            except (OSError, RuntimeError) as exc:
-                _HELPER.append(None)
-                _REASON.append(str(exc))
-        return _HELPER[0]
+    lib = _library()
+    return None if lib is None else lib.cosim_turn
+
+
+def rhs_helper() -> Any:
+    """The compiled ``cosim_rhs`` (a ctypes function), or None when it cannot be built here."""
+    lib = _library()
+    return None if lib is None else lib.cosim_rhs
 
 
 def unavailable() -> str | None:
-    """Why :func:`helper` returned None (None: it did not, or was not asked yet)."""
+    """Why :func:`helper` and :func:`rhs_helper` returned None (None: they did not, or were not asked yet)."""
     return _REASON[0] if _REASON else None
 
 
@@ -146,3 +176,24 @@ def make_turn(fmi: int, instance: int, do_step: int, t: c_double, h: c_double, s
     if flags is not None:
         u.event, u.terminate, u.early, u.last = (ctypes.pointer(x) for x in flags)
     return partial(prototype(f), ctypes.byref(u)), u
+
+
+def make_rhs(instance: int, set_time: int, set_states: int, get_derivatives: int, nx: int, t: c_double,
+             prototype: Callable[[Any], Any]) -> tuple[Callable[[Any, Any], int], Rhs] | None:
+    """A model-exchange FMU's right-hand side as a call ``(x, dx)`` returning 0 or what ended it (TIME,
+    STATES, DERIVATIVES or NONFINITE; the :class:`Rhs`'s ``status`` says how the FMI call failed), and the
+    Rhs. None when the helper is unavailable.
+
+    ``instance`` and the three FMI functions (fmiXSetTime, fmiXSetContinuousStates, fmi2GetDerivatives or
+    fmi3GetContinuousStateDerivatives) are addresses, ``nx`` the number of continuous states, ``t`` the
+    ``c_double`` the caller writes the time into before each call; ``x`` and ``dx`` are ``c_double`` arrays
+    or pointers of ``nx`` values (passed as they are: no argument types are declared, which saves their
+    conversions, 0.7 us a call). ``prototype(f)`` is the ctypes prototype ``f`` is called through (the GIL
+    handling of the FMU's other calls). The call keeps the Rhs alive, and the Rhs ``t``.
+    """
+    f = rhs_helper()
+    if f is None:
+        return None
+    r = Rhs(instance=instance, set_time=set_time, set_states=set_states, get_derivatives=get_derivatives, nx=nx,
+            t=ctypes.pointer(t))
+    return partial(prototype(f), ctypes.byref(r)), r

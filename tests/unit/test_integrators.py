@@ -36,6 +36,11 @@ class Decay:
         self.rhs_calls += 1
         dx[0] = -self.x
 
+    def rhs(self, t, x, dx):
+        self.set_time(t)
+        self.set_x(x)
+        self.get_dx(dx)
+
     def get_z(self, z):
         z[0] = self.x - 0.5
 
