@@ -1057,13 +1057,7 @@ class _CoSimulation:
         if status > 1 or flags is not None and flags[1].value:  # FMI 3.0: terminateSimulation
             self._step_failed(status, t, h)
         self.time = t + h
-        for call, function in self._get_calls:
-            status = call()
-            if status > 1:
-                self._check(status, function)
-        for view in self._finite:
-            if not isfinite(sum(view)):
-                self._check_finite()
+        self.get_outputs()
 
     def _turn_ended(self, ended: int, t: float, h: float) -> None:
         """Raise for the call that ended a C turn early, as the same call made from Python raises."""
