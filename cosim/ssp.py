@@ -313,6 +313,11 @@ def _parse_xml(data: bytes, ssp: Path, member: str) -> ET.Element:
         raise SspError(ssp, f"{member}: not well-formed XML ({exc})") from None
 
 
+def _plain_file(name: str) -> bool:
+    """A file name without separators or dots alone (safe to join to a folder of ours)."""
+    return name not in ("", ".", "..") and "/" not in name and "\\" not in name and "\0" not in name
+
+
 def _member(base: str, uri: str, ssp: Path, what: str) -> str:
     """The archive member a relative URI in ``base`` (a member's directory) points at."""
     parsed = urlparse(uri)
@@ -465,6 +470,10 @@ def read_ssp(ssp: str | Path, workdir: str | Path) -> dict[str, Any]:
                 except json.JSONDecodeError as exc:
                     raise SspError(ssp, f"{SSD_NAME}: annotation {OUR_ANNOTATION}: not valid JSON ({exc})") from None
         options = extras.pop("component_options", {}) or {}
+        if isinstance(extras.get("logging"), dict) and extras["logging"].get("out") is not None:
+            raise SspError(ssp, f"{SSD_NAME}: annotation {OUR_ANNOTATION} sets logging.out "
+                                f"({extras['logging']['out']!r}): an archive cannot choose where the log is written; "
+                                "give --out")
 
         components: dict[str, dict[str, Any]] = {}
         connectors: dict[str, dict[str, str]] = {}  # component -> connector name -> kind
@@ -493,7 +502,10 @@ def read_ssp(ssp: str | Path, workdir: str | Path) -> dict[str, Any]:
             if impl not in _INTERFACE:
                 raise SspError(ssp, f"component {name!r}: implementation {impl!r} is not supported "
                                     f"({', '.join(_INTERFACE)})")
-            target = workdir / "fmus" / name / posixpath.basename(member)
+            # the component's name is the SSD's to choose and never a path here: each FMU goes to a folder
+            # numbered by its place in the system (a name such as "../../x" wrote outside the work folder)
+            base = posixpath.basename(member)
+            target = workdir / "fmus" / f"{len(components):04d}" / (base if _plain_file(base) else "component.fmu")
             target.parent.mkdir(parents=True, exist_ok=True)
             with zf.open(member) as src, open(target, "wb") as dst:
                 shutil.copyfileobj(src, dst)

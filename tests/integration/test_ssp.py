@@ -377,3 +377,39 @@ def test_another_tools_ssp_runs(tmp_path, test_fmus, capsys):
                                atol=1e-15, err_msg="gain.y != k * src.y")
     rc, out, err = _cli(capsys, "run", ssp, "--no-log", "--json", "--step", "0.1")
     assert rc == 0 and json.loads(out)["steps"] == 5, err
+
+
+@pytest.mark.parametrize("name", ["../../escaped", "/tmp/absolute_escape_of_ssp_test"])
+def test_component_names_are_not_paths(ssp, tmp_path, capsys, private_tmp, name, monkeypatch):
+    """A component's name never chooses where its FMU is unpacked (issue 25): "../../x" or an absolute name
+    wrote outside the work folder, before the name was even checked."""
+    monkeypatch.chdir(tmp_path)
+    bad = _rewrite(ssp, tmp_path / "names.ssp", edit=lambda s: s.replace('"plant"', f'"{name}"'))
+    before = set(Path("/tmp").iterdir())
+    rc, _, err = _cli(capsys, "run", bad, "--no-log", "--quiet", "--stop-time", "0.01")
+    assert rc == 2 and err.startswith("error:"), err  # the names are refused later, as component names
+    assert not (tmp_path.parent / "escaped").exists() and not Path("/tmp/absolute_escape_of_ssp_test").exists()
+    assert set(Path("/tmp").iterdir()) <= before | {private_tmp}, "something was written outside the work folder"
+    assert list(private_tmp.iterdir()) == [], f"left behind: {list(private_tmp.iterdir())}"
+
+
+def test_an_archive_cannot_choose_where_the_log_goes(ssp, tmp_path, capsys):
+    """Our annotation may carry the scenario's logging settings, never its output path (issue 25)."""
+    target = tmp_path / "notes.txt"
+    target.write_text("a user's notes\n")
+    bad = _rewrite(ssp, tmp_path / "out.ssp", edit=lambda s: re.sub(
+        r'("logging": \{)', r'\1"out": "' + str(target).replace("\\", "/") + '", ', s, count=1))
+    assert str(target) in zipfile.ZipFile(bad).read("SystemStructure.ssd").decode(), "the test did not plant logging.out"
+    rc, _, err = _cli(capsys, "run", bad, "--quiet", "--stop-time", "0.01")
+    assert rc == 2 and "cannot choose where the log is written" in err, err
+    assert target.read_text() == "a user's notes\n"
+
+
+def test_a_system_name_cannot_move_the_default_log(ssp, tmp_path, capsys, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    bad = _rewrite(ssp, tmp_path / "sysname.ssp", edit=lambda s: re.sub(
+        r'(<ssd:SystemStructureDescription[^>]*?) name="[^"]*"', r'\1 name="../../escaped_log"', s, count=1))
+    rc, out, err = _cli(capsys, "run", bad, "--quiet", "--json", "--stop-time", "0.01")
+    assert rc in (0, 1), err
+    assert not (tmp_path.parent / "escaped_log.mcap").exists()
+    assert list((tmp_path / "runs").glob("*.mcap")), list(tmp_path.rglob("*.mcap"))
