@@ -32,9 +32,13 @@ def partial_path(target: str | Path) -> Path:
 
 
 def writable_parent(target: Path) -> None:
-    """Raise OutputError (one line) unless ``target``'s directory exists or can be made, and takes files."""
+    """Raise OutputError (one line) unless ``target``'s directory exists or can be made, and takes files, and
+    ``target`` is a regular file or nothing (a finished log replaces it)."""
     if target.is_dir():
         raise OutputError(f"{target}: is a directory; give a file path for the output")
+    if target.exists() and not target.is_file():  # a device, a pipe, a socket: never replaced by a log
+        raise OutputError(f"{target}: is not a regular file (a device, pipe or socket); a log replaces only "
+                          "regular files: give another --out")
     for parent in [target.parent, *target.parent.parents]:
         if parent.exists():
             if not parent.is_dir():
@@ -102,15 +106,20 @@ def _describe_owner(lock: Path) -> str:
     return f"another run (pid {fields.get('pid', '?')}, started {when}: {fields.get('command', '?')})"
 
 
-def claim(target: str | Path) -> OutputClaim:
+def claim(target: str | Path, inputs: tuple[str | Path | None, ...] = ()) -> OutputClaim:
     """Check that ``target`` can be written and claim it for this process (see the module docstring).
 
     Raises OutputError naming the problem: an unwritable directory, a parent that is a file, a
-    run already writing ``target``, or a partial file left by a run that did not finish.
+    run already writing ``target``, a partial file left by a run that did not finish, or ``target``
+    being one of the run's ``inputs`` (its scenario or archive, which the log would replace).
     """
     import fcntl
 
     target = Path(target)
+    for source in inputs:
+        if source is not None and target.exists() and Path(source).exists() and os.path.samefile(target, source):
+            raise OutputError(f"{target}: is the run's own input ({source}); the log would replace it: give another "
+                              "--out")
     writable_parent(target)
     lock = target.with_name(target.name + ".lock")
     while True:

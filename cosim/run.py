@@ -236,7 +236,7 @@ def run_scenario(scenario: Scenario | str | Path, out: str | Path | None = None,
             if not isinstance(scenario, Scenario):
                 scenario = load_scenario(scenario, overrides)
             logging_on = scenario.logging.enabled if log is None else log
-            output = claim(_log_path(scenario, out)) if logging_on else None
+            output = claim(_log_path(scenario, out), (scenario.source,)) if logging_on else None
             result = _run_claimed(scenario, output, held, progress, extra_observers, live, realtime, stamps,
                                   read_all, fmu_files)
         except BaseException as exc:

@@ -1,0 +1,38 @@
+"""What ``--out`` may replace (issue 25): a regular file, never a device, a pipe or the run's own input."""
+
+from __future__ import annotations
+
+import os
+import shutil
+import stat
+from pathlib import Path
+
+import pytest
+
+from cosim.cli import main
+
+ROOT = Path(__file__).resolve().parents[2]
+pytestmark = pytest.mark.integration
+
+
+def _run(capsys, *argv) -> tuple[int, str]:
+    rc = main([str(a) for a in argv])
+    return rc, capsys.readouterr().err
+
+
+def test_out_never_replaces_a_pipe(tmp_path, capsys):
+    fifo = tmp_path / "pipe"
+    os.mkfifo(fifo)
+    rc, err = _run(capsys, "run", ROOT / "scenarios" / "helix_ctc_analytic.yaml", "--stop-time", "0.01", "--out", fifo)
+    assert rc == 2 and "is not a regular file" in err and len(err.strip().splitlines()) == 1, err
+    assert stat.S_ISFIFO(os.stat(fifo).st_mode), "the pipe was replaced"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["pipe"], "files left behind"
+
+
+def test_out_never_replaces_the_scenario_it_runs(tmp_path, capsys):
+    scenario = tmp_path / "helix.yaml"
+    shutil.copy(ROOT / "scenarios" / "helix_ctc_analytic.yaml", scenario)
+    text = scenario.read_text()
+    rc, err = _run(capsys, "run", scenario, "--stop-time", "0.01", "--out", scenario)
+    assert rc == 2 and "is the run's own input" in err, err
+    assert scenario.read_text() == text, "the scenario was replaced"
