@@ -392,6 +392,25 @@ class ScenarioFile:
         return scenario_from_data(self.data, self.file, overrides, self.lines)
 
 
+MAX_YAML_NODES = 200_000
+"""Values a scenario file may expand to, aliases counted at every use (the shipped ones have fewer than 500)."""
+
+
+def _expanded_nodes(root: yaml.Node) -> int:
+    """How many values ``root`` holds with every alias expanded, counted up to just past :data:`MAX_YAML_NODES`
+    (a composed graph shares aliased nodes, so nine levels of nine aliases are a few hundred nodes that expand
+    to 387 million values)."""
+    count, stack = 0, [root]
+    while stack and count <= MAX_YAML_NODES:
+        node = stack.pop()
+        count += 1
+        if isinstance(node, yaml.MappingNode):
+            stack.extend(v for pair in node.value for v in pair)
+        elif isinstance(node, yaml.SequenceNode):
+            stack.extend(node.value)
+    return count
+
+
 def _parse_yaml(text: str, file: str) -> ScenarioFile:
     try:
         root = yaml.compose(text)
@@ -399,6 +418,9 @@ def _parse_yaml(text: str, file: str) -> ScenarioFile:
         mark = getattr(exc, "problem_mark", None)
         raise ScenarioError(Issue("", f"invalid YAML: {getattr(exc, 'problem', exc)}", file,
                                   mark.line + 1 if mark else None)) from None
+    if root is not None and _expanded_nodes(root) > MAX_YAML_NODES:
+        raise ScenarioError(Issue("", f"the YAML expands to more than {MAX_YAML_NODES} values (aliases of aliases "
+                                      "nested too deep, a 'billion laughs'): refused", file, 1))
     lines: dict[tuple, int] = {}
     if root is not None:
         _collect_lines(root, (), lines)

@@ -55,3 +55,16 @@ def test_order_puts_non_feedthrough_first_in_a_loop():
     assert gauss_seidel_order(3, [(2, 1, True), (1, 0, True)]) == [2, 1, 0]
     with pytest.raises(AlgebraicLoopError):
         gauss_seidel_order(2, [(0, 1, True), (1, 0, True)])
+
+
+def test_a_yaml_alias_bomb_is_refused_at_once():
+    """Nine levels of nine aliases (a 1 kB file, 387 million values expanded) fail in one line (issue 25); before,
+    the loader expanded them (8 GB, over 90 s)."""
+    from cosim.errors import ScenarioError
+    from cosim.scenario import parse_scenario
+
+    levels = ["a0: &a0 [x, x, x, x, x, x, x, x, x]"]
+    levels += [f"a{i}: &a{i} [{', '.join([f'*a{i - 1}'] * 9)}]" for i in range(1, 10)]
+    text = "\n".join(levels) + "\ncomponents: {}\ntime: {stop: 1, step: 0.1}\n"
+    with pytest.raises(ScenarioError, match="expands to more than"):
+        parse_scenario(text, "bomb.yaml")
