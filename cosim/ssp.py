@@ -313,6 +313,19 @@ def _parse_xml(data: bytes, ssp: Path, member: str) -> ET.Element:
         raise SspError(ssp, f"{member}: not well-formed XML ({exc})") from None
 
 
+MAX_XML_BYTES = 64 * 1024 * 1024
+"""Largest .ssd or .ssv an archive may unpack to (ours are a few kB; a zip bomb inflated one to 2.5 GiB)."""
+
+
+def _read_member(zf: zipfile.ZipFile, member: str, ssp: Path) -> bytes:
+    """An XML member of the archive, read no further than :data:`MAX_XML_BYTES` (whatever its header claims)."""
+    with zf.open(member) as f:
+        data = f.read(MAX_XML_BYTES + 1)
+    if len(data) > MAX_XML_BYTES:
+        raise SspError(ssp, f"{member} unpacks to more than {MAX_XML_BYTES:,} bytes: refused")
+    return data
+
+
 def _plain_file(name: str) -> bool:
     """A file name without separators or dots alone (safe to join to a folder of ours)."""
     return name not in ("", ".", "..") and "/" not in name and "\\" not in name and "\0" not in name
@@ -383,7 +396,7 @@ def _bindings(el: ET.Element, zf: zipfile.ZipFile, ssp: Path, comp: str) -> dict
         if source is not None:
             member = _member("", source, ssp, f"component {comp!r}: parameter binding")
             try:
-                data = zf.read(member)
+                data = _read_member(zf, member, ssp)
             except KeyError:
                 raise SspError(ssp, f"component {comp!r}: parameter binding source {member} is not in the "
                                     "archive") from None
@@ -450,7 +463,7 @@ def read_ssp(ssp: str | Path, workdir: str | Path) -> dict[str, Any]:
         if SSD_NAME not in members:
             found = ", ".join(sorted(m for m in members if m.endswith(".ssd"))) or "none"
             raise SspError(ssp, f"no {SSD_NAME} at the top of the archive (.ssd files found: {found})")
-        root = _parse_xml(zf.read(SSD_NAME), ssp, SSD_NAME)
+        root = _parse_xml(_read_member(zf, SSD_NAME, ssp), ssp, SSD_NAME)
         if root.tag != _q("ssd", "SystemStructureDescription"):
             raise SspError(ssp, f"{SSD_NAME}: the root element is {root.tag}, expected ssd:SystemStructureDescription "
                                 f"in namespace {NS['ssd']}")

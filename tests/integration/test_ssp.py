@@ -413,3 +413,12 @@ def test_a_system_name_cannot_move_the_default_log(ssp, tmp_path, capsys, monkey
     assert rc in (0, 1), err
     assert not (tmp_path.parent / "escaped_log.mcap").exists()
     assert list((tmp_path / "runs").glob("*.mcap")), list(tmp_path.rglob("*.mcap"))
+
+
+def test_an_ssd_that_inflates_too_far_is_refused(ssp, tmp_path, capsys, monkeypatch):
+    """The .ssd is read no further than the limit, whatever the archive says (issue 25: a zip bomb's 2.5 GiB)."""
+    import cosim.ssp as ssp_module
+
+    monkeypatch.setattr(ssp_module, "MAX_XML_BYTES", 4096)  # our .ssd is larger than 4 kB: stands in for a bomb
+    rc, _, err = _cli(capsys, "run", ssp, "--no-log", "--quiet")
+    assert rc == 2 and "unpacks to more than" in err and len(err.strip().splitlines()) == 1, err
