@@ -130,6 +130,10 @@ def parse_random(items: Sequence[str]) -> dict[str, tuple[str, float, float]]:
     return out
 
 
+MAX_CASES = 1_000_000
+"""Cases one sweep may hold (its table and case list live in memory; at 0.1 s a case that is a day on 2 workers)."""
+
+
 def make_cases(grid: dict[str, list[Any]], random: dict[str, tuple[str, float, float]], n: int | None,
                seed: int | None) -> list[Case]:
     """Cartesian product of ``grid``, each combined with ``n`` draws of ``random`` (numpy, ``seed``)."""
@@ -144,6 +148,9 @@ def make_cases(grid: dict[str, list[Any]], random: dict[str, tuple[str, float, f
     both = set(grid) & set(random)
     if both:
         raise SweepError(f"{', '.join(sorted(both))}: both --grid and --random")
+    total = math.prod(len(v) for v in grid.values()) * (n or 1)
+    if total > MAX_CASES:
+        raise SweepError(f"the sweep has {total:.3g} cases (at most {MAX_CASES}): fewer grid values or draws")
     rng = np.random.default_rng(seed)
     draws = [{name: float(rng.uniform(a, b) if kind == "uniform" else rng.normal(a, b))
               for name, (kind, a, b) in random.items()} for _ in range(n or 1)]
@@ -600,8 +607,8 @@ def register(sub) -> None:
 def _cmd_sweep(args) -> int:
     from .scenario import parse_set_value
 
-    if args.n is not None and args.n < 1:
-        raise SweepError(f"-n must be >= 1, got {args.n}")
+    if args.n is not None and not 1 <= args.n <= MAX_CASES:
+        raise SweepError(f"-n must be from 1 to {MAX_CASES}, got {args.n}")
     if args.workers is not None and args.workers < 1:
         raise SweepError(f"--workers must be >= 1, got {args.workers}")
     if not Path(args.scenario).is_file():

@@ -147,6 +147,11 @@ class WorkspaceSample:
     counts: dict[str, int]  # grid points per failure kind
 
 
+MAX_GRID_POINTS = 20_000_000
+"""Grid points :func:`sample_workspace` takes (0.5 GB of coordinates; the default 10 mm grid of the thesis robot
+has about 0.6 million)."""
+
+
 def sample_workspace(
     robot: Robot | Model,
     spacing: float = 0.01,
@@ -159,9 +164,15 @@ def sample_workspace(
     The volume is the number of reachable grid points times ``spacing**3``; its
     error shrinks with the grid step (first order in ``spacing`` at the boundary).
     """
-    if spacing <= 0.0:
+    if not spacing > 0.0:
         raise ParameterError(f"spacing must be > 0, got {spacing}")
     lo, hi = default_bounds(robot) if bounds is None else (np.asarray(bounds[0]), np.asarray(bounds[1]))
+    counts_per_axis = [max(0, int(np.ceil((hi[k] - lo[k] - spacing / 2) / spacing))) for k in range(3)]
+    n_grid = counts_per_axis[0] * counts_per_axis[1] * counts_per_axis[2]
+    if n_grid > MAX_GRID_POINTS:
+        raise ParameterError(f"spacing {spacing:g} m gives about {n_grid:.3g} grid points in the robot's bounding box "
+                             f"(at most {MAX_GRID_POINTS:.0e}); use a spacing of at least "
+                             f"{spacing * (n_grid / MAX_GRID_POINTS) ** (1 / 3):.2g} m")
     axes = [np.arange(lo[k] + spacing / 2, hi[k], spacing) for k in range(3)]
     grid = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 3)
     kept = []

@@ -1,0 +1,25 @@
+"""Small inputs that asked for unbounded memory are refused in one line (issue 25)."""
+
+from __future__ import annotations
+
+import pytest
+
+from delta.errors import ParameterError
+
+
+def test_workspace_grid_too_fine_is_refused_with_the_spacing_that_fits():
+    from delta.robots import get_preset
+    from delta.workspace import MAX_GRID_POINTS, sample_workspace
+
+    with pytest.raises(ParameterError, match=r"use a spacing of at least") as info:
+        sample_workspace(get_preset("linear_delta_thesis"), spacing=0.0005)
+    assert f"{MAX_GRID_POINTS:.0e}" in str(info.value), info.value
+
+
+def test_sweep_with_too_many_cases_is_refused_before_they_are_made():
+    from cosim.sweep import MAX_CASES, SweepError, make_cases
+
+    with pytest.raises(SweepError, match=str(MAX_CASES)):
+        make_cases({}, {"ctl.gain.kp[1]": ("uniform", 1e4, 2e4)}, MAX_CASES + 1, 1)
+    with pytest.raises(SweepError, match="cases"):
+        make_cases({"a": list(range(1001)), "b": list(range(1001))}, {}, None, None)
