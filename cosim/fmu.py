@@ -259,6 +259,16 @@ _PY_EXCEPTION = re.compile(r"Fatal py exception encountered: \[[^\]]*\][^\n]*\n(
 _REPR = re.compile(r"(?P<type>[A-Za-z_][\w.]*)\((?P<args>.*)\)", re.S)
 
 
+_CONTROL = re.compile(r"[\x00-\x1f\x7f-\x9f]")
+
+
+def printable(text: str) -> str:
+    """Text of an FMU as it may reach a terminal or a log: control characters (escape sequences that clear the
+    screen or retitle the window, line breaks that fake a traceback) written as their escapes (``\\x1b``,
+    ``\\n``), tabs as spaces."""
+    return _CONTROL.sub(lambda m: " " if m.group() == "\t" else repr(m.group())[1:-1], text)
+
+
 def log_text(message: str) -> str:
     """An FMU's log message as shown to the user: a Python exception reported by pythonfmu as
     ``Fatal py exception encountered: [where] ...\\nType('text')`` becomes ``Type: text``."""
@@ -551,7 +561,7 @@ class _Base:
             raise FMIError(self.name, function, self.time, None, self._last_log() or str(exc)) from None
 
     def _on_log(self, status: int, category: bytes | None, message: bytes | None) -> None:
-        text = log_text((message or b"").decode("utf-8", "replace").strip())
+        text = printable(log_text((message or b"").decode("utf-8", "replace").strip()))
         if text:
             self.log.append(text)
             if status is not None and status >= 3:  # error, fatal
