@@ -12,7 +12,9 @@ error is also a JSON object ``{"ok": false, "error": ...}`` on stdout.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
+import os
 import sys
 from typing import Callable, Sequence
 
@@ -480,6 +482,25 @@ def _open_scenario(args: argparse.Namespace, overrides: dict):
     return nullcontext(load_scenario(args.scenario, overrides))
 
 
+@contextlib.contextmanager
+def _stdout_kept_for_json(on: bool):
+    """With ``--json``, what the run's FMUs (and worker processes) write to standard output goes to standard error
+    until the run is over, so the JSON on stdout stays the only thing there (issue 25: an FMU printing broke it)."""
+    if not on:
+        yield
+        return
+    sys.stdout.flush()
+    saved = os.dup(1)
+    os.dup2(2, 1)
+    try:
+        with contextlib.redirect_stdout(sys.stderr):
+            yield
+    finally:
+        sys.stdout.flush()
+        os.dup2(saved, 1)
+        os.close(saved)
+
+
 def _cmd_run(args: argparse.Namespace) -> int:
     from .run import run_scenario
     from .scenario import apply_overrides
@@ -498,7 +519,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
         from .realtime import parse_factor
 
         realtime = parse_factor(args.realtime)
-    with _open_scenario(args, overrides) as scenario:
+    with _stdout_kept_for_json(args.json), _open_scenario(args, overrides) as scenario:
         res = run_scenario(scenario, out=args.out, log=False if args.no_log else None,
                            progress=not (args.quiet or args.json), live=live, realtime=realtime,
                            stamps="simulation" if args.sim_stamps else "wall")

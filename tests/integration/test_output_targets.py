@@ -36,3 +36,25 @@ def test_out_never_replaces_the_scenario_it_runs(tmp_path, capsys):
     rc, err = _run(capsys, "run", scenario, "--stop-time", "0.01", "--out", scenario)
     assert rc == 2 and "is the run's own input" in err, err
     assert scenario.read_text() == text, "the scenario was replaced"
+
+
+def test_json_stays_the_only_thing_on_stdout_when_the_run_prints(capfd, monkeypatch):
+    """An FMU that writes to standard output (C printf: file descriptor 1; or Python's print) during the run
+    must not break --json (issue 25): its text goes to standard error."""
+    import json
+
+    import cosim.run as run_module
+
+    real = run_module.run_scenario
+
+    def noisy(*args, **kwargs):  # what a chatty FMU does from inside the run
+        os.write(1, b"FMU says hello on fd 1\n")
+        print("FMU says hello through print")
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(run_module, "run_scenario", noisy)
+    rc = main(["run", str(ROOT / "scenarios" / "helix_ctc_analytic.yaml"), "--stop-time", "0.01", "--no-log", "--json"])
+    out, err = capfd.readouterr()
+    assert rc == 0, err
+    assert json.loads(out)["status"] == "completed", out
+    assert "FMU says hello on fd 1" in err and "FMU says hello through print" in err, err
