@@ -146,11 +146,11 @@ def _runs(links: list[tuple[Any, int, Any, int]]) -> tuple[list[tuple[memoryview
 
 
 class StopRequest:
-    """Turns SIGINT and SIGTERM into a flag checked between macro steps (an FMU is never
-    interrupted mid-call); the step boundary then raises :class:`~cosim.errors.Interrupted`.
+    """Turns SIGINT, SIGTERM and SIGHUP (the terminal closed) into a flag checked between macro steps (an FMU is
+    never interrupted mid-call); the step boundary then raises :class:`~cosim.errors.Interrupted`.
     A second signal raises at once. ``signum`` and ``when`` (monotonic s) say which and when."""
 
-    SIGNALS = (signal.SIGINT, signal.SIGTERM)
+    SIGNALS = (signal.SIGINT, signal.SIGTERM, *((signal.SIGHUP,) if hasattr(signal, "SIGHUP") else ()))
 
     def __init__(self) -> None:
         self.requested = False

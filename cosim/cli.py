@@ -639,7 +639,7 @@ class _Parser(argparse.ArgumentParser):
 
 
 def _terminate_as_interrupt(signum, frame) -> None:
-    """SIGTERM outside the simulation loop: unwind like Ctrl-C (logs finished, worker stopped)."""
+    """SIGTERM or SIGHUP outside the simulation loop: unwind like Ctrl-C (logs finished, worker stopped)."""
     from .errors import Interrupted
 
     raise Interrupted(signum)
@@ -660,8 +660,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     if extra:
         _unknown(parser, argv, extra)
     handler: Handler = args.handler
-    if threading_main():
-        signal.signal(signal.SIGTERM, _terminate_as_interrupt)  # the same shutdown path as Ctrl-C
+    if threading_main():  # the same shutdown path as Ctrl-C (logs finished, worker stopped, temp files removed)
+        signal.signal(signal.SIGTERM, _terminate_as_interrupt)
+        if hasattr(signal, "SIGHUP"):
+            signal.signal(signal.SIGHUP, _terminate_as_interrupt)
     try:
         return handler(args)
     except (CosimError, KeyboardInterrupt) as exc:

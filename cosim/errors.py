@@ -112,7 +112,7 @@ class FMIError(CosimError, RuntimeError):
 
 
 class Interrupted(KeyboardInterrupt):
-    """The run was stopped by a signal (SIGINT, SIGTERM); the exit code is 128 + ``signum``."""
+    """The run was stopped by a signal (SIGINT, SIGTERM, SIGHUP); the exit code is 128 + ``signum``."""
 
     def __init__(self, signum: int, detail: str = ""):
         import signal

@@ -329,7 +329,7 @@ def _started(proc: subprocess.Popen, partial: Path) -> None:
     assert proc.poll() is None, f"run ended early: {proc.communicate()}"
 
 
-@pytest.mark.parametrize("sig, code", [(signal.SIGTERM, 143), (signal.SIGINT, 130)])
+@pytest.mark.parametrize("sig, code", [(signal.SIGTERM, 143), (signal.SIGINT, 130), (signal.SIGHUP, 129)])
 def test_signal_finishes_and_marks_the_log(scen, tmp_path, sig, code):
     out = tmp_path / "int.mcap"
     proc = start_cosim("run", scen(SLOW), "--out", out, "--quiet")
