@@ -185,6 +185,12 @@ def encode_messages(layout: BlockLayout, stamps: list[int], data: bytes | list, 
 # --------------------------------------------------------------------------- a log file fed by the publisher
 
 
+WRITER_LOGGER = "foxglove.log_sink_set"
+"""The logger under which foxglove-sdk reports a message its MCAP writer could not write (measured with 0.30:
+``error logging message: McapError(Io(Os { code: 28, ...``); its WebSocket server logs under
+``foxglove.websocket.server``."""
+
+
 class _WriteFailures(logging.Handler):
     """foxglove-sdk's MCAP writer reports a failed write through Python logging (a warning of its
     ``foxglove.*`` loggers, one per lost message) instead of raising. While a sink is open, one
@@ -230,8 +236,10 @@ class _WriteFailures(logging.Handler):
                 cls._handler = None
 
     def emit(self, record: logging.LogRecord) -> None:
-        self.count += 1
         text = record.getMessage()
+        if record.name != WRITER_LOGGER and "McapError" not in text:
+            return  # not the file's: e.g. the live view's server dropping a client (a port probe, a bad handshake)
+        self.count += 1
         if self.reason is None or "Os {" in text:  # the OS's error, not "a write after a failed one"
             self.reason = text
 

@@ -228,3 +228,36 @@ def test_wall_and_simulation_stamps_read_alike(tmp_path):
     assert x.t_ns[0] == 0 and x.t_ns[-1] == 300_000_000, f"wall log read as t = {x.t[0]} .. {x.t[-1]} s"
     cmp = compare_logs(a, b, {"*": 0.0})
     assert cmp.ok and len(cmp.diffs) > 30, cmp.text(only_checked=True)
+
+
+def test_port_probes_and_bad_handshakes_do_not_end_the_run(tmp_path):
+    """Anyone who reaches the --live port (a connect-and-close, a plain HTTP GET, garbage bytes) is dropped by
+    the server; the run goes on and its log is finished (issue 25: each of them ended the run with exit 2,
+    blamed on the log). The run is short enough for the log to be written in-process, where the server's
+    messages and the log's share the SDK's loggers."""
+    port = free_port()
+    out = tmp_path / "probed.mcap"
+    cmd = [sys.executable, "-m", "cosim", "run", str(SCENARIO), "--stop-time", "1.5", "--live", str(port),
+           "--realtime", "--out", str(out), "--quiet"]
+    proc = subprocess.Popen(cmd, cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    try:
+        deadline = time.monotonic() + 60
+        while True:
+            try:
+                probe = socket.create_connection(("127.0.0.1", port), timeout=1)
+                break
+            except OSError:
+                if time.monotonic() > deadline or proc.poll() is not None:
+                    raise
+                time.sleep(0.05)
+        probe.close()  # a port scan's connect-and-close
+        for payload in (b"GET / HTTP/1.1\r\nHost: x\r\n\r\n", b"\x00\xff garbage \x13\x37" * 50):
+            s = socket.create_connection(("127.0.0.1", port), timeout=2)
+            s.sendall(payload)
+            time.sleep(0.1)
+            s.close()
+        _, err = proc.communicate(timeout=120)
+    finally:
+        proc.kill()
+    assert proc.returncode == 0, f"exit {proc.returncode}: {err.decode()}"
+    assert out.exists() and not out.with_name(out.name + ".partial").exists()
