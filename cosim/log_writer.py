@@ -305,7 +305,8 @@ class LogSink:
     The writer was chosen by measurement: on helix_ctc's per-sample messages it writes about 2 us a
     message where the ``mcap`` package's ``Writer`` (pure Python) takes about 7
     (``benchmarks/mcap_writer.py``); the whole writer process of helix_ctc_analytic (10 s, samples
-    layout) costs about 19 us per step with it, 40 with the ``mcap`` package.
+    layout) costs about 17.5 us per step with it (``benchmarks/log_writer_process.py``), 40 with the ``mcap``
+    package.
     """
 
     def __init__(self, path: str | Path, chunk_size: int = 256 * 1024, zstd_level: int = 1):
