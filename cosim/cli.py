@@ -538,7 +538,11 @@ def _cmd_check(args: argparse.Namespace) -> int:
     with _open_scenario(args, apply_overrides(args.set, args.stop_time)) as scenario:
         plan, report = prepare(scenario)
     order = " -> ".join(plan.names[c] for c in plan.order)
-    _, parallel = choose(plan, scenario.parallel, scenario.time.n_steps)
+    from .mcap_log import McapRecorder
+
+    n_steps = scenario.time.n_steps  # a logged run of these steps writes through a writer process (cosim.mcap_log)
+    _, parallel = choose(plan, scenario.parallel, n_steps,
+                         scenario.logging.enabled and n_steps >= McapRecorder.PROCESS_MIN_STEPS)
     payload = {"scenario": scenario.name, "ok": True, "preflight": report, "order": [plan.names[c] for c in plan.order],
                "connections": len(plan.links), "parallel": parallel}
     _emit(args, payload, f"{scenario.name}: ok\n  pre-flight: {report}\n  order: {order}\n"

@@ -36,7 +36,7 @@ import sys
 import threading
 from dataclasses import dataclass, field
 from functools import partial
-from itertools import repeat
+from itertools import accumulate, repeat
 from pathlib import Path
 from typing import Any
 
@@ -104,6 +104,26 @@ class BlockLayout:
             self._cache["joints"] = found
         return found
 
+    def fmi2_elements(self) -> frozenset[int]:
+        """The row's elements that are FMI 2 Booleans (C ints written ``true``/``false``)."""
+        found = self._cache.get("fmi2")
+        if found is None:
+            found = self._cache["fmi2"] = frozenset(e for at, count, fmi2_bool in self.columns if fmi2_bool
+                                                    for e in range(at, at + max(count, 1)))
+        return found
+
+    def c_joints(self) -> tuple[bytes, Any, bytes]:
+        """:meth:`joints` as ``cosim_samples`` takes them (see cosim/turn.c): back to back, the end of each
+        (a ``size_t`` array), and a byte per element of the row, 1 for an FMI 2 Boolean."""
+        found = self._cache.get("c_joints")
+        if found is None:
+            joints = self.joints()
+            ends = (ctypes.c_size_t * len(joints))(*accumulate(map(len, joints)))
+            fmi2 = self.fmi2_elements()
+            found = self._cache["c_joints"] = (b"".join(joints), ends,
+                                               bytes(e in fmi2 for e in range(len(joints) - 2)))
+        return found
+
     def __getstate__(self):  # the cache stays behind (Structs do not pickle)
         return (self.keys, self.fmt, self.columns, self.per_sample)
 
@@ -119,9 +139,10 @@ def encode_samples(layout: BlockLayout, stamps: list[int], data: bytes | list,
     what ``orjson.dumps`` writes of that dict (the messages of logs written before blocks).
 
     ``data`` and ``skip`` as in :func:`encode_block`. With a row format, the numbers of the whole block
-    are written by one orjson call and cut at their commas (a number, ``true``, ``false`` or ``null``
-    has none), then joined with the keys (:meth:`BlockLayout.joints`): no dict and no Python loop per
-    sample.
+    are written by orjson, two calls (the times, the values), and joined with the keys
+    (:meth:`BlockLayout.joints`) between them: by ``cosim_samples`` (:func:`cosim.turn.samples_helper`), one
+    pass in C over orjson's output, else cut at their commas (a number, ``true``, ``false`` or ``null``
+    has none) and joined in Python. No dict and no Python loop per sample either way.
     """
     times = [s * 1e-9 for s in stamps]
     if layout.fmt is None:
@@ -129,11 +150,38 @@ def encode_samples(layout: BlockLayout, stamps: list[int], data: bytes | list,
         return [orjson.dumps(dict(zip(keys, (t, *values)))) for t, values in zip(times, data)]
     n = len(stamps)
     flat = layout.rows_struct(n, skip).unpack(data)
+    join = _samples_helper()
+    if join is None:
+        return _samples_py(layout, times, flat, n)
+    t_json, v_json = orjson.dumps(times), orjson.dumps(flat)
+    joints, ends, fmi2 = layout.c_joints()
+    width = len(flat) // n
+    out = ctypes.create_string_buffer(len(t_json) + len(v_json) + n * (ends[-1] + 1 + 4 * width))
+    size = join(t_json, len(t_json), v_json, len(v_json), n, width, joints, ends, fmi2, out)
+    if size < 0:
+        raise ValueError(f"cosim_samples: {n} samples of {width} values do not match orjson's output")
+    return ctypes.string_at(out, size).split(b"\n")
+
+
+_SAMPLES_HELPER: list = []  # [cosim_samples, or None without a C compiler], looked for once per process
+
+
+def _samples_helper():
+    if not _SAMPLES_HELPER:
+        from .turn import samples_helper
+
+        _SAMPLES_HELPER.append(samples_helper())
+    return _SAMPLES_HELPER[0]
+
+
+def _samples_py(layout: BlockLayout, times: list[float], flat: tuple, n: int) -> list[bytes]:
+    """:func:`encode_samples`'s messages without the C helper: orjson's numbers cut at their commas, one list
+    of them per element of the row, joined with the keys sample by sample."""
     width = len(flat) // n
     values = orjson.dumps(flat)[1:-1].split(b",")
     joints = layout.joints()
     columns = [repeat(joints[0], n), orjson.dumps(times)[1:-1].split(b",")]
-    fmi2 = {e for at, count, fmi2_bool in layout.columns if fmi2_bool for e in range(at, at + max(count, 1))}
+    fmi2 = layout.fmi2_elements()
     for e in range(width):
         column = values[e::width]
         if e in fmi2:  # a C int: 0 is false, anything else true
@@ -265,7 +313,8 @@ class LogSink:
     The writer was chosen by measurement: on helix_ctc's per-sample messages it writes about 2 us a
     message where the ``mcap`` package's ``Writer`` (pure Python) takes about 7
     (``benchmarks/mcap_writer.py``); the whole writer process of helix_ctc_analytic (10 s, samples
-    layout) costs about 19 us per step with it, 40 with the ``mcap`` package.
+    layout) costs about 17.5 us per step with it (``benchmarks/log_writer_process.py``), 40 with the ``mcap``
+    package.
     """
 
     def __init__(self, path: str | Path, chunk_size: int = 256 * 1024, zstd_level: int = 1):

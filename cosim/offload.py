@@ -80,8 +80,17 @@ def usable_cpus() -> int:
         return os.cpu_count() or 1
 
 
-def choose(plan: SystemPlan, mode: str, n_steps: int) -> tuple[list[int], str]:
-    """Components to offload under ``mode`` (auto, on, off) and a note saying why or why not."""
+def choose(plan: SystemPlan, mode: str, n_steps: int, writer_process: bool = False) -> tuple[list[int], str]:
+    """Components to offload under ``mode`` (auto, on, off) and a note saying why or why not.
+
+    ``writer_process``: the run's log is written by a writer process (:class:`cosim.log_writer.WriterProcess`),
+    which takes the other CPU too. With fewer than three CPUs, ``auto`` then runs serially when the
+    feed-forward group holds compiled FMUs only: each step of theirs costs the master about a microsecond,
+    which a worker hardly saves, while its own steps take CPU time from the writer (helix_ctc_analytic, native
+    FMUs, 10 s logged, ``benchmarks/native.py`` line 5: ``blocks`` 0.187 -> 0.150 s loop and 0.300 -> 0.218 s
+    whole run; ``samples`` 0.207 -> 0.217 s loop, 0.362 -> 0.335 s whole). A PythonFMU's step (the GIL, an
+    interpreter) costs tens of microseconds: those still run ahead.
+    """
     if mode == "off":
         return [], ""
     group = feedforward(plan)
@@ -103,11 +112,20 @@ def choose(plan: SystemPlan, mode: str, n_steps: int) -> tuple[list[int], str]:
             why = f"{n_steps} steps is too short to pay for starting a worker; auto needs {AUTO_MIN_STEPS}"
         elif mode == "auto" and usable_cpus() < 2:
             why = "one CPU available"
+        elif mode == "auto" and writer_process and usable_cpus() < 3 and not any(
+                _python_fmu(plan.infos[c]) for c in group):
+            why = (f"{usable_cpus()} CPUs: the log's writer process takes the other one; {names} are compiled FMUs, "
+                   f"whose steps a worker would hardly take off the master")
         elif not _main_importable():
             why = f"the main program {sys.modules['__main__'].__file__} is not a file a worker process can import"
     if why:
         return [], f"parallel: {mode}: serial run ({why})"
     return group, f"parallel: {names} run ahead in a worker process"
+
+
+def _python_fmu(info) -> bool:
+    """Whether PythonFMU exported the FMU (its steps run Python: tens of microseconds)."""
+    return info is not None and (info.md.generationTool or "").startswith("PythonFMU")
 
 
 def _main_importable() -> bool:

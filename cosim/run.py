@@ -331,7 +331,12 @@ def _run_claimed(scenario: Scenario, output, held: Extractions, progress: bool, 
         s.bind(plan.inputs[c], plan.outputs[c])
     rt = Runtime(plan, slaves, scenario.time.start_ns, scenario.time.stop_ns, scenario.time.step_ns,
                  [scenario.components[n].step_multiple for n in plan.names], scenario.algorithm)
-    ahead, note = choose(plan, scenario.parallel, rt.n_steps)
+    writer_process = False  # the log written by a writer process (as McapRecorder decides): it takes a CPU
+    if logging_on:
+        from .mcap_log import McapRecorder
+
+        writer_process = rt.n_steps >= McapRecorder.PROCESS_MIN_STEPS
+    ahead, note = choose(plan, scenario.parallel, rt.n_steps, writer_process)
     offload: Offload | None = None
     observers: list[Observer] = []
     tracking = None

@@ -15,6 +15,10 @@ A model-exchange FMU's right-hand side, which the master's integrator evaluates 
 derivatives checked for NaN), is one crossing the same way: ``cosim_rhs``, through :func:`make_rhs`
 (:meth:`cosim.fmu._MEMixin.rhs`).
 
+The same library holds ``cosim_samples`` for the log writer (:func:`samples_helper`,
+:func:`cosim.log_writer.encode_samples`): a block's sample messages joined from the numbers orjson wrote,
+one pass over them instead of a Python object per number.
+
 The helper is compiled at first use with the system C compiler (``$CC``, else ``cc``) into the user's
 cache (``$XDG_CACHE_HOME/cosim``, default ``~/.cache/cosim``), once per version of its source; processes
 building it at the same time each rename a complete file into place. Without a compiler, or when the
@@ -38,8 +42,8 @@ from functools import partial
 from pathlib import Path
 from typing import Any, Callable, Sequence
 
-__all__ = ["Exchange", "Finite", "Turn", "Rhs", "helper", "rhs_helper", "unavailable", "make_turn", "make_rhs",
-           "SET", "STEP", "GET", "NONFINITE", "TIME", "STATES", "DERIVATIVES"]
+__all__ = ["Exchange", "Finite", "Turn", "Rhs", "helper", "rhs_helper", "samples_helper", "unavailable", "make_turn",
+           "make_rhs", "SET", "STEP", "GET", "NONFINITE", "TIME", "STATES", "DERIVATIVES"]
 
 SOURCE = Path(__file__).with_name("turn.c")
 CFLAGS = ("-std=c99", "-O2", "-fPIC", "-shared")
@@ -146,8 +150,23 @@ def rhs_helper() -> Any:
     return None if lib is None else lib.cosim_rhs
 
 
+def samples_helper() -> Any:
+    """The compiled ``cosim_samples`` with its argument and result types (see turn.c), or None when it cannot be
+    built here."""
+    lib = _library()
+    if lib is None:
+        return None
+    f = lib.cosim_samples
+    if f.restype is not ctypes.c_ssize_t:
+        f.restype = ctypes.c_ssize_t
+        f.argtypes = [ctypes.c_char_p, c_size_t, ctypes.c_char_p, c_size_t, c_size_t, c_size_t, ctypes.c_char_p,
+                      c_void_p, ctypes.c_char_p, c_void_p]
+    return f
+
+
 def unavailable() -> str | None:
-    """Why :func:`helper` and :func:`rhs_helper` returned None (None: they did not, or were not asked yet)."""
+    """Why :func:`helper`, :func:`rhs_helper` and :func:`samples_helper` returned None (None: they did not, or
+    were not asked yet)."""
     return _REASON[0] if _REASON else None
 
 

@@ -69,6 +69,36 @@ def test_sample_messages_are_the_dicts_of_one_sample_each_as_orjson_writes_them(
         LAYOUT.keys, (0.1, -0.0, True, True, [7, -8])))})]
 
 
+def test_sample_messages_joined_in_c_and_in_python_are_the_same_bytes(monkeypatch):
+    """``cosim_samples`` (C, when a compiler is here) and the Python join write the same messages, for numbers
+    orjson writes in every form (exponents, -0.0, subnormals, NaN and infinities as null, 64-bit integers,
+    Booleans of both FMI versions, arrays), and the C join refuses arrays that do not hold the samples."""
+    import random
+
+    from cosim import log_writer
+    from cosim.turn import samples_helper
+
+    rnd = random.Random(23)
+    specials = [0.0, -0.0, 5e-324, 1e300, -1.5e-7, 1e16, 123456789.0, float("nan"), float("inf"), -float("inf")]
+    rows = [(rnd.choice(specials + [rnd.uniform(-1e3, 1e3)]), rnd.choice(specials), rnd.choice([0, 1, -2, 7]),
+             rnd.random() < 0.5, rnd.randint(-2 ** 63, 2 ** 63 - 1), rnd.choice([0, -1])) for _ in range(40)]
+    stamps = sorted(rnd.randrange(0, 10 ** 12) for _ in rows)
+    joint = b"".join(b"abc" + _rows([r]) + b"defgh" for r in rows)
+    expected = [orjson.dumps({"t": s * 1e-9, **dict(zip(LAYOUT.keys, (a, b, c != 0, d, [e, f])))})
+                for s, (a, b, c, d, e, f) in zip(stamps, rows)]
+    got = encode_samples(LAYOUT, stamps, joint, (3, 5))
+    assert got == expected, f"first difference: {next((g, x) for g, x in zip(got, expected) if g != x)}"
+    monkeypatch.setattr(log_writer, "_SAMPLES_HELPER", [None])  # no C compiler: the Python join
+    assert encode_samples(LAYOUT, stamps, joint, (3, 5)) == expected, "the Python join differs"
+    join = samples_helper()
+    if join is not None:
+        joints, ends, fmi2 = LAYOUT.c_joints()
+        out = ctypes.create_string_buffer(4096)
+        for times, values in ((b"[1.0,2.0]", b"[1,2,3,4,5,6]"), (b"[1.0]", b"[1,2,3,4,5,6,7]"), (b"[]", b"[]")):
+            assert join(times, len(times), values, len(values), 2 if b"2.0" in times else 1, 6, joints, ends, fmi2,
+                        out) == -1, f"{times} {values}: arrays not of 1 or 2 samples of 6 values accepted"
+
+
 def test_values_read_one_by_one_make_the_same_block_and_samples():
     layout = BlockLayout(("s", "x"))  # no row format: one list of values a sample (strings, binaries)
     msg = orjson.loads(encode_block(layout, [0, 10], [["a", 1.5], ["b\n", 2.5]]))

@@ -70,3 +70,25 @@ def test_choose_explains_why_not():
     assert "every component is feed-forward" in note, note
     _, note = choose(_plan(*HELIX, kind="String"), "on", 10**6)
     assert "traj.y, ik.y are strings" in note, note
+
+
+@pytest.mark.parametrize("cpus,tool,expect", [(2, None, []), (2, "PythonFMU 0.7.0", ["traj", "ik"]),
+                                              (3, None, ["traj", "ik"])])
+def test_auto_leaves_the_second_cpu_to_the_log_writer_when_the_worker_would_save_little(monkeypatch, cpus, tool,
+                                                                                       expect):
+    """A log written by a writer process on two CPUs: compiled feed-forward FMUs run in the master (their steps
+    cost it about a microsecond), PythonFMU ones still run ahead; ``on`` is obeyed, and without the writer
+    process auto offloads as before."""
+    from types import SimpleNamespace
+
+    monkeypatch.setattr(offload, "usable_cpus", lambda: cpus)
+    plan = _plan(*HELIX)
+    plan.infos[:] = [SimpleNamespace(md=SimpleNamespace(generationTool=tool),
+                                     structural_parameters=lambda: []) for _ in plan.names]
+    comps, note = choose(plan, "auto", 10**6, writer_process=True)
+    assert [plan.names[c] for c in comps] == expect, note
+    if not expect:
+        assert note == ("parallel: auto: serial run (2 CPUs: the log's writer process takes the other one; traj, ik "
+                        "are compiled FMUs, whose steps a worker would hardly take off the master)"), note
+    assert [plan.names[c] for c in choose(plan, "on", 10**6, writer_process=True)[0]] == ["traj", "ik"]
+    assert [plan.names[c] for c in choose(plan, "auto", 10**6)[0]] == ["traj", "ik"]
