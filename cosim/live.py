@@ -19,6 +19,7 @@ from collections.abc import Sequence
 
 from .algorithm import Runtime
 from .errors import CosimError
+from .log_writer import FoxgloveChannels
 from .publish import Publisher
 
 __all__ = ["DEFAULT_PORT", "LiveView", "parse_address"]
@@ -54,7 +55,7 @@ def _check_free(host: str, port: int) -> None:
                              f"(choose another port: --live PORT)") from None
 
 
-class _ContextSink:
+class _ContextSink(FoxgloveChannels):
     """A publisher's sink logging into a ``foxglove.Context`` (see :class:`cosim.publish.Publisher`)."""
 
     def __init__(self, context) -> None:
@@ -62,17 +63,6 @@ class _ContextSink:
         self._channels: list = []
         self._log: dict[int, object] = {}
         self._layouts: dict = {}
-
-    def channel(self, cid: int, topic: str, schema_name: str, schema: bytes, metadata: dict[str, str],
-                layout) -> None:
-        import foxglove
-
-        ch = foxglove.Channel(topic, schema=foxglove.Schema(name=schema_name, encoding="jsonschema", data=schema),
-                              message_encoding="json", context=self._context, metadata=metadata)
-        self._channels.append(ch)
-        self._log[cid] = ch.base.log
-        if layout is not None:
-            self._layouts[cid] = layout
 
     def blocks(self, offset_ns: int, blocks) -> None:
         from .log_writer import encode_messages

@@ -42,7 +42,7 @@ from typing import Any
 
 import orjson
 
-__all__ = ["BlockLayout", "encode_block", "encode_messages", "encode_samples", "row_format", "LogSink", "WriterProcess",
+__all__ = ["BlockLayout", "FoxgloveChannels", "encode_block", "encode_messages", "encode_samples", "row_format", "LogSink", "WriterProcess",
            "WriterFailed"]
 
 
@@ -304,7 +304,29 @@ def _os_error(text: str) -> OSError:
     return OSError(text)
 
 
-class LogSink:
+class FoxgloveChannels:
+    """The publisher's channels (by its channel ids) on one foxglove-sdk context: what a log file (:class:`LogSink`)
+    and the live view (:mod:`cosim.live`) have in common. Users set ``_context``, ``_channels`` (list), ``_log``
+    and ``_layouts`` (dicts)."""
+
+    _context: Any
+    _channels: list
+    _log: dict
+    _layouts: dict
+
+    def channel(self, cid: int, topic: str, schema_name: str, schema: bytes, metadata: dict[str, str],
+                layout: BlockLayout | None) -> None:
+        import foxglove
+
+        ch = foxglove.Channel(topic, schema=foxglove.Schema(name=schema_name, encoding="jsonschema", data=schema),
+                              message_encoding="json", context=self._context, metadata=metadata)
+        self._channels.append(ch)
+        self._log[cid] = ch.base.log
+        if layout is not None:
+            self._layouts[cid] = layout
+
+
+class LogSink(FoxgloveChannels):
     """One MCAP log fed by :class:`cosim.publish.Publisher` (see the module docstring), written by
     foxglove-sdk's MCAP writer on a ``foxglove.Context`` of its own (zstd chunks of ``chunk_size``
     uncompressed bytes at ``zstd_level``, compressed in the calling thread). Raises OSError when the
@@ -349,17 +371,6 @@ class LogSink:
         if self._failures.count != self._seen:
             self._seen = self._failures.count
             self._call(self._writer.flush)
-
-    def channel(self, cid: int, topic: str, schema_name: str, schema: bytes, metadata: dict[str, str],
-                layout: BlockLayout | None) -> None:
-        import foxglove
-
-        ch = foxglove.Channel(topic, schema=foxglove.Schema(name=schema_name, encoding="jsonschema", data=schema),
-                              message_encoding="json", context=self._context, metadata=metadata)
-        self._channels.append(ch)
-        self._log[cid] = ch.base.log
-        if layout is not None:
-            self._layouts[cid] = layout
 
     def blocks(self, offset_ns: int, blocks: list[tuple[int, list[int], bytes | list, Any]]) -> None:
         """Samples ``(cid, stamps, rows, skip)`` of component channels (see :func:`encode_messages`), in the
