@@ -85,8 +85,8 @@ class LiveView:
     """Observer serving ``publisher``'s channels on a Foxglove WebSocket server during the run.
 
     Place it before the publisher among the run's observers (its sink is then attached before the
-    publisher declares the channels, and the server advertises each as it is declared). ``port=0`` picks a free port (:attr:`port` after
-    :meth:`start`).
+    publisher declares the channels, and the server advertises each as it is declared). ``port=0`` picks a free
+    port (:attr:`port` after :meth:`start`).
     """
 
     def __init__(self, publisher: Publisher, port: int = DEFAULT_PORT, host: str = "127.0.0.1",

@@ -202,7 +202,8 @@ def _model_c(model: NativeModel, itf: Interface, token: str, functions: list[_Fu
             lines.append(f"    memcpy(state, INITIAL_STATE, sizeof(double) * {model.n_state});")
         if f.sets_state and model.n_state:
             lines.append(f"    memcpy(state, new_state, sizeof(double) * {model.n_state});")
-        lines += [f"    return first_failed(ok, {n_checks}, {offset});" if n_checks else "    (void)ok;\n    return 0;", "}"]
+        done = f"    return first_failed(ok, {n_checks}, {offset});" if n_checks else "    (void)ok;\n    return 0;"
+        lines += [done, "}"]
         offset += n_checks
     return "\n".join(lines) + "\n"
 
