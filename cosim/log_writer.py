@@ -42,8 +42,8 @@ from typing import Any
 
 import orjson
 
-__all__ = ["BlockLayout", "FoxgloveChannels", "encode_block", "encode_messages", "encode_samples", "row_format", "LogSink", "WriterProcess",
-           "WriterFailed"]
+__all__ = ["BlockLayout", "FoxgloveChannels", "encode_block", "encode_messages", "encode_samples", "row_format",
+           "LogSink", "WriterProcess", "WriterFailed"]
 
 
 # --------------------------------------------------------------------------- block messages
