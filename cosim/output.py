@@ -115,7 +115,9 @@ def claim(target: str | Path, inputs: tuple[str | Path | None, ...] = ()) -> Out
     """
     import fcntl
 
-    target = Path(target)
+    # absolute from here on: an FMU that changes the working directory (chdir) must not move the log, its
+    # partial file or its lock (issue 25)
+    target = Path(target).absolute()
     for source in inputs:
         if source is not None and target.exists() and Path(source).exists() and os.path.samefile(target, source):
             raise OutputError(f"{target}: is the run's own input ({source}); the log would replace it: give another "

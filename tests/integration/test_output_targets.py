@@ -58,3 +58,25 @@ def test_json_stays_the_only_thing_on_stdout_when_the_run_prints(capfd, monkeypa
     assert rc == 0, err
     assert json.loads(out)["status"] == "completed", out
     assert "FMU says hello on fd 1" in err and "FMU says hello through print" in err, err
+
+
+def test_a_relative_out_stays_where_the_run_started_when_the_working_directory_changes(tmp_path, monkeypatch):
+    """An FMU that calls chdir during the run must not move a relative --out (issue 25)."""
+    import cosim.run as run_module
+
+    run_dir, elsewhere = tmp_path / "here", tmp_path / "elsewhere"
+    run_dir.mkdir()
+    elsewhere.mkdir()
+    monkeypatch.chdir(run_dir)
+    real = run_module.initialize
+
+    def moving_initialize(rt):  # what such an FMU does while it is instantiated
+        os.chdir(elsewhere)
+        return real(rt)
+
+    monkeypatch.setattr(run_module, "initialize", moving_initialize)
+    rc = main(["run", str(ROOT / "scenarios" / "helix_ctc_analytic.yaml"), "--stop-time", "0.01",
+               "--out", "rel.mcap", "--quiet"])
+    assert rc == 0
+    assert (run_dir / "rel.mcap").exists(), sorted(p.name for p in tmp_path.rglob("*"))
+    assert not list(elsewhere.iterdir()), list(elsewhere.iterdir())
