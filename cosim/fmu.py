@@ -327,19 +327,21 @@ def load_fmu(path: str | Path) -> FMUInfo:
 
 
 _PREFIX = "cosim-fmu-"  # extraction directories: cosim-fmu-<pid>-<FMU stem>-<random>
+SSP_PREFIX = "cosim-ssp-"  # unpacked SSP archives (cosim.ssp.open_ssp): cosim-ssp-<pid>-<archive stem>-<random>
 
 
-def _sweep_orphans() -> None:
-    """Remove extraction directories left by processes that no longer exist (killed with SIGKILL,
-    which no handler can catch). A directory whose process is alive, or not ours to see, stays."""
-    for d in Path(tempfile.gettempdir()).glob(_PREFIX + "*"):
-        try:
-            pid = int(d.name[len(_PREFIX):].split("-", 1)[0])
-            os.kill(pid, 0)
-        except ProcessLookupError:
-            shutil.rmtree(d, ignore_errors=True)
-        except (ValueError, PermissionError, OSError):
-            continue
+def sweep_orphans() -> None:
+    """Remove extraction directories and unpacked archives left by processes that no longer exist (killed with
+    SIGKILL, which no handler can catch). A directory whose process is alive, or not ours to see, stays."""
+    for prefix in (_PREFIX, SSP_PREFIX):
+        for d in Path(tempfile.gettempdir()).glob(prefix + "*"):
+            try:
+                pid = int(d.name[len(prefix):].split("-", 1)[0])
+                os.kill(pid, 0)
+            except ProcessLookupError:
+                shutil.rmtree(d, ignore_errors=True)
+            except (ValueError, PermissionError, OSError):
+                continue
 
 
 class Extractions:
@@ -392,7 +394,7 @@ def _extract(key: Key) -> Path:
         unzipdir = _EXTRACTED.get(key)
         if unzipdir is None:
             if not _EXTRACTED:
-                _sweep_orphans()
+                sweep_orphans()
             unzipdir = Path(tempfile.mkdtemp(prefix=f"{_PREFIX}{os.getpid()}-{path.stem}-"))
             try:
                 fmpy.extract(str(path), str(unzipdir))

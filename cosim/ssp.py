@@ -45,6 +45,7 @@ from __future__ import annotations
 
 import json
 import math
+import os
 import posixpath
 import shutil
 import tempfile
@@ -617,8 +618,11 @@ def open_ssp(ssp: str | Path, overrides: dict[tuple, Any] | None = None) -> Iter
     ``overrides`` as for :func:`cosim.scenario.load_scenario` (``--set``, ``--stop-time``, and
     ``("time", "step")`` for ``--step``).
     """
+    from .fmu import SSP_PREFIX, sweep_orphans
+
     ssp = Path(ssp)
-    tmp = Path(tempfile.mkdtemp(prefix=f"cosim_ssp_{ssp.stem}_"))
+    sweep_orphans()  # archives unpacked by runs that were killed (SIGKILL) go now
+    tmp = Path(tempfile.mkdtemp(prefix=f"{SSP_PREFIX}{os.getpid()}-{ssp.stem}-"))
     try:
         data = read_ssp(ssp, tmp)
         overrides = dict(overrides or {})

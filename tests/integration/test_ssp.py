@@ -422,3 +422,19 @@ def test_an_ssd_that_inflates_too_far_is_refused(ssp, tmp_path, capsys, monkeypa
     monkeypatch.setattr(ssp_module, "MAX_XML_BYTES", 4096)  # our .ssd is larger than 4 kB: stands in for a bomb
     rc, _, err = _cli(capsys, "run", ssp, "--no-log", "--quiet")
     assert rc == 2 and "unpacks to more than" in err and len(err.strip().splitlines()) == 1, err
+
+
+def test_an_archive_unpacked_by_a_killed_run_is_removed_by_the_next(ssp, private_tmp):
+    """SIGKILL leaves an SSP run's unpacked archive behind (no handler runs); the next SSP run removes it
+    (issue 25), and leaves those of live processes alone."""
+    from cosim.fmu import SSP_PREFIX
+
+    dead = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"], capture_output=True, text=True)
+    orphan = private_tmp / f"{SSP_PREFIX}{int(dead.stdout)}-helix-abc"
+    (orphan / "fmus").mkdir(parents=True)
+    alive = private_tmp / f"{SSP_PREFIX}{os.getpid()}-other-xyz"
+    alive.mkdir()
+    _ours(ssp, {("time", "stop"): 0.01})
+    assert not orphan.exists(), "the killed run's archive is still there"
+    assert alive.exists(), "a live process's archive was removed"
+    alive.rmdir()
