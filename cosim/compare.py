@@ -141,10 +141,12 @@ def logged_tolerances(log: RunLog) -> dict[str, float]:
     """``regression.tolerances`` of the scenario attached to ``log`` ({} when it has none)."""
     import yaml
 
+    from .scenario import load_yaml
+
     for name, data in log.attachments.items():
         if name.startswith("scenario/") and not name.endswith(".ssp"):  # a YAML scenario, not an SSP archive
             try:
-                doc = yaml.safe_load(data) or {}
+                doc = load_yaml(data)[0] or {}
             except yaml.YAMLError:
                 return {}
             tol = (doc.get("regression") or {}).get("tolerances") or {}

@@ -115,10 +115,12 @@ def _scenario_doc(run: RunLog) -> tuple[str | None, dict]:
     """The attached scenario file (name, parsed YAML mapping), or (None, {})."""
     import yaml
 
+    from .scenario import load_yaml
+
     for name, data in run.attachments.items():
         if name.startswith("scenario/"):
             try:
-                doc = yaml.safe_load(data)
+                doc = load_yaml(data)[0]
             except yaml.YAMLError as exc:
                 raise ReportError(f"{run.path}: attachment {name} is not valid YAML ({exc})") from None
             return name, doc if isinstance(doc, dict) else {}

@@ -411,20 +411,41 @@ def _expanded_nodes(root: yaml.Node) -> int:
     return count
 
 
+class YamlTooLarge(yaml.YAMLError):
+    """YAML whose aliases expand past :data:`MAX_YAML_NODES` values."""
+
+
+def load_yaml(text: str | bytes) -> tuple[Any, yaml.Node | None]:
+    """``yaml.safe_load`` of ``text`` that refuses, before building anything, a document whose aliases expand past
+    :data:`MAX_YAML_NODES` values (:class:`YamlTooLarge`, a ``yaml.YAMLError``); also returns the composed node
+    tree (None for an empty document). Every YAML the platform reads from a file, a log or an option goes
+    through here."""
+    root = yaml.compose(text, Loader=yaml.SafeLoader)
+    if root is None:
+        return None, None
+    if _expanded_nodes(root) > MAX_YAML_NODES:
+        raise YamlTooLarge(f"the YAML expands to more than {MAX_YAML_NODES} values (aliases of aliases nested too "
+                           "deep, a 'billion laughs'): refused")
+    loader = yaml.SafeLoader("")
+    try:
+        return loader.construct_document(root), root
+    finally:
+        loader.dispose()
+
+
 def _parse_yaml(text: str, file: str) -> ScenarioFile:
     try:
-        root = yaml.compose(text)
+        data, root = load_yaml(text)
+    except YamlTooLarge as exc:
+        raise ScenarioError(Issue("", str(exc), file, 1)) from None
     except yaml.YAMLError as exc:
         mark = getattr(exc, "problem_mark", None)
         raise ScenarioError(Issue("", f"invalid YAML: {getattr(exc, 'problem', exc)}", file,
                                   mark.line + 1 if mark else None)) from None
-    if root is not None and _expanded_nodes(root) > MAX_YAML_NODES:
-        raise ScenarioError(Issue("", f"the YAML expands to more than {MAX_YAML_NODES} values (aliases of aliases "
-                                      "nested too deep, a 'billion laughs'): refused", file, 1))
     lines: dict[tuple, int] = {}
     if root is not None:
         _collect_lines(root, (), lines)
-    data = yaml.safe_load(text) or {}
+    data = data or {}
     if not isinstance(data, dict):
         raise ScenarioError(Issue("", "a scenario is a mapping (components, connections, time, ...)", file, 1))
     return ScenarioFile(file, data, lines)
@@ -639,7 +660,7 @@ def parse_set_value(raw: str, origin: str = "--set") -> Any:
     that keep their text (:class:`WrittenNumber`); YAML that does not parse is a :class:`ScenarioError`
     citing ``origin`` (the option as given)."""
     try:
-        return _numbers(yaml.safe_load(raw))
+        return _numbers(load_yaml(raw)[0])
     except yaml.YAMLError as exc:
         raise ScenarioError(Issue("", f"invalid value: {getattr(exc, 'problem', None) or exc}", origin)) from None
 

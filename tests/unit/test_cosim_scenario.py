@@ -68,3 +68,14 @@ def test_a_yaml_alias_bomb_is_refused_at_once():
     text = "\n".join(levels) + "\ncomponents: {}\ntime: {stop: 1, step: 0.1}\n"
     with pytest.raises(ScenarioError, match="expands to more than"):
         parse_scenario(text, "bomb.yaml")
+
+
+def test_a_set_value_alias_bomb_is_refused_as_a_file_is():
+    """Every YAML the platform reads goes through one loader with the same bound: a --set value too."""
+    from cosim.errors import ScenarioError
+    from cosim.scenario import parse_set_value
+
+    levels = "[&a0 [1, 1, 1, 1, 1, 1, 1, 1, 1]" + "".join(
+        f", &a{i} [{', '.join([f'*a{i - 1}'] * 9)}]" for i in range(1, 9)) + "]"
+    with pytest.raises(ScenarioError, match="expands to more than"):
+        parse_set_value(levels, "--set x")
