@@ -289,6 +289,31 @@ def log_text(message: str) -> str:
     return rep
 
 
+MAX_FMU_BYTES = 4 * 1024 ** 3
+"""What an FMU archive may unpack to, all members together (ours are under 100 kB, the Exudyn plant's a few MB)."""
+MAX_DESCRIPTION_BYTES = 64 * 1024 ** 2
+"""What its modelDescription.xml may unpack to."""
+
+
+def check_archive(path: Path) -> None:
+    """Refuse an FMU archive whose members unpack past :data:`MAX_FMU_BYTES` (or whose modelDescription.xml
+    does past :data:`MAX_DESCRIPTION_BYTES`) before anything is read or extracted: a zip bomb. Python's zip
+    reader reads no member past its declared size, so the declared sizes bound what is written."""
+    import zipfile
+
+    try:
+        with zipfile.ZipFile(path) as zf:
+            members = zf.infolist()
+    except (zipfile.BadZipFile, OSError) as exc:
+        raise ComponentSourceError(Issue("", f"{path}: not an FMU (a zip archive): {exc}")) from None
+    total = sum(m.file_size for m in members)
+    description = sum(m.file_size for m in members if m.filename == "modelDescription.xml")
+    if total > MAX_FMU_BYTES or description > MAX_DESCRIPTION_BYTES:
+        raise ComponentSourceError(Issue("", f"{path}: unpacks to {total:,} bytes (modelDescription.xml "
+                                             f"{description:,}); at most {MAX_FMU_BYTES:,} "
+                                             f"({MAX_DESCRIPTION_BYTES:,}) are accepted: refused"))
+
+
 def load_fmu(path: str | Path) -> FMUInfo:
     """Read the model description (once per path and process); nothing is extracted yet."""
     import fmpy
@@ -304,6 +329,8 @@ def load_fmu(path: str | Path) -> FMUInfo:
         if cached.stamp == stamp:
             return cached
         _forget_extractions(path)  # the file was rebuilt in place: its old extractions are stale
+    if path.is_file():
+        check_archive(path)
     try:
         md = fmpy.read_model_description(str(path), validate=False)
     except Exception as exc:  # fmpy raises bare Exception for malformed files

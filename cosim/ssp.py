@@ -58,6 +58,7 @@ from urllib.parse import unquote, urlparse
 from xml.etree import ElementTree as ET
 
 from .errors import Issue, ScenarioError
+from .fmu import MAX_FMU_BYTES, SSP_PREFIX, sweep_orphans
 
 if TYPE_CHECKING:  # the CLI imports this module to register its command: keep pydantic out of that
     from .scenario import Scenario
@@ -520,6 +521,9 @@ def read_ssp(ssp: str | Path, workdir: str | Path) -> dict[str, Any]:
             # numbered by its place in the system (a name such as "../../x" wrote outside the work folder)
             base = posixpath.basename(member)
             target = workdir / "fmus" / f"{len(components):04d}" / (base if _plain_file(base) else "component.fmu")
+            if zf.getinfo(member).file_size > MAX_FMU_BYTES:  # read no further than declared: this bounds it
+                raise SspError(ssp, f"component {name!r}: its FMU {member} unpacks to more than "
+                                    f"{MAX_FMU_BYTES:,} bytes: refused")
             target.parent.mkdir(parents=True, exist_ok=True)
             with zf.open(member) as src, open(target, "wb") as dst:
                 shutil.copyfileobj(src, dst)
@@ -618,8 +622,6 @@ def open_ssp(ssp: str | Path, overrides: dict[tuple, Any] | None = None) -> Iter
     ``overrides`` as for :func:`cosim.scenario.load_scenario` (``--set``, ``--stop-time``, and
     ``("time", "step")`` for ``--step``).
     """
-    from .fmu import SSP_PREFIX, sweep_orphans
-
     ssp = Path(ssp)
     sweep_orphans()  # archives unpacked by runs that were killed (SIGKILL) go now
     tmp = Path(tempfile.mkdtemp(prefix=f"{SSP_PREFIX}{os.getpid()}-{ssp.stem}-"))

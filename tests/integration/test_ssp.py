@@ -438,3 +438,27 @@ def test_an_archive_unpacked_by_a_killed_run_is_removed_by_the_next(ssp, private
     assert not orphan.exists(), "the killed run's archive is still there"
     assert alive.exists(), "a live process's archive was removed"
     alive.rmdir()
+
+
+def test_an_fmu_member_that_unpacks_too_far_is_refused(ssp, tmp_path, capsys, private_tmp, monkeypatch):
+    """Each archive member is bounded, the FMUs too, not only the .ssd (issue 25)."""
+    import cosim.ssp as ssp_module
+
+    monkeypatch.setattr(ssp_module, "MAX_FMU_BYTES", 1000)  # our FMUs are larger: stands in for a bomb
+    rc, _, err = _cli(capsys, "run", ssp, "--no-log", "--quiet")
+    assert rc == 2 and "unpacks to more than" in err and len(err.strip().splitlines()) == 1, err
+    assert list(private_tmp.iterdir()) == [], f"left behind: {list(private_tmp.iterdir())}"
+
+
+def test_an_fmu_file_that_unpacks_too_far_is_refused(tmp_path, monkeypatch):
+    """A zip bomb given as an FMU (a component's path, or extracted from an archive) is refused before it is read."""
+    import cosim.fmu as fmu_module
+    from cosim.errors import ComponentSourceError
+
+    bomb = tmp_path / "bomb.fmu"
+    with zipfile.ZipFile(bomb, "w", zipfile.ZIP_DEFLATED) as zf:
+        zf.writestr("modelDescription.xml", "<fmiModelDescription/>")
+        zf.writestr("resources/zeros.bin", b"\0" * 200_000)
+    monkeypatch.setattr(fmu_module, "MAX_FMU_BYTES", 100_000)
+    with pytest.raises(ComponentSourceError, match="unpacks to"):
+        fmu_module.load_fmu(bomb)
