@@ -19,7 +19,7 @@ from pathlib import Path
 
 from .errors import CosimError
 
-__all__ = ["OutputError", "OutputClaim", "claim", "partial_path", "writable_parent"]
+__all__ = ["OutputError", "OutputClaim", "check_output", "claim", "partial_path", "writable_parent"]
 
 
 class OutputError(CosimError, OSError):
@@ -106,6 +106,16 @@ def _describe_owner(lock: Path) -> str:
     return f"another run (pid {fields.get('pid', '?')}, started {when}: {fields.get('command', '?')})"
 
 
+def check_output(target: Path, inputs: tuple[str | Path | None, ...] = ()) -> None:
+    """Raise OutputError (one line) unless ``target`` can be written (:func:`writable_parent`) and is none of
+    ``inputs`` (the files the command reads: an output written over one would replace it)."""
+    writable_parent(target)
+    for source in inputs:
+        if source is not None and target.exists() and Path(source).exists() and os.path.samefile(target, source):
+            raise OutputError(f"{target}: is this command's own input ({source}); writing it would replace it: "
+                              "give another output path")
+
+
 def claim(target: str | Path, inputs: tuple[str | Path | None, ...] = ()) -> OutputClaim:
     """Check that ``target`` can be written and claim it for this process (see the module docstring).
 
@@ -118,11 +128,7 @@ def claim(target: str | Path, inputs: tuple[str | Path | None, ...] = ()) -> Out
     # absolute from here on: an FMU that changes the working directory (chdir) must not move the log, its
     # partial file or its lock (issue 25)
     target = Path(target).absolute()
-    for source in inputs:
-        if source is not None and target.exists() and Path(source).exists() and os.path.samefile(target, source):
-            raise OutputError(f"{target}: is the run's own input ({source}); the log would replace it: give another "
-                              "--out")
-    writable_parent(target)
+    check_output(target, inputs)
     lock = target.with_name(target.name + ".lock")
     while True:
         try:

@@ -30,15 +30,13 @@ def recover(path: str | Path, out: str | Path | None = None) -> RecoveryReport:
     The copy is written under a temporary name next to ``out`` and renamed when complete: a
     failure (disk full) leaves no output, not an empty or truncated one.
     """
-    from .output import writable_parent
+    from .output import check_output
 
     path = Path(path)
     out = Path(out) if out else _default_out(path)
     if not path.is_file():
         raise CosimError(f"{path}: no such file")
-    if out.resolve() == path.resolve():
-        raise CosimError(f"{out}: the output must differ from the input")
-    writable_parent(out)
+    check_output(out, (path,))
     tmp = out.with_name(f".{out.name}.{os.getpid()}.tmp")  # renamed into place only when complete
     try:
         report = _copy(path, tmp, out)

@@ -74,7 +74,7 @@ def locate_fmus(scenario: Scenario, fmu_files: Mapping[str, str | Path] | None =
     ``fmu_files``: our FMUs already built, by :func:`build_key` (a sweep builds them once for every case);
     the others are built here.
     """
-    base = Path(scenario.source).parent if scenario.source and scenario.source != "<string>" else Path.cwd()
+    base = _scenario_dir(scenario)
     lines = scenario._lines
     infos: dict[str, FMUInfo] = {}
     issues: list[Issue] = []
@@ -100,6 +100,19 @@ def locate_fmus(scenario: Scenario, fmu_files: Mapping[str, str | Path] | None =
     if issues:
         raise ComponentSourceError(issues)
     return infos
+
+
+def input_files(scenario: Scenario) -> tuple[Path, ...]:
+    """The files a run of ``scenario`` reads: its file (or archive) and the FMUs its components give by ``path``;
+    no output may be written over one of them."""
+    base = _scenario_dir(scenario)
+    paths = [Path(c.path) if Path(c.path).is_absolute() else base / c.path
+             for c in scenario.components.values() if c.path is not None]
+    return tuple(Path(p) for p in (scenario.source, *paths) if p is not None and p != "<string>")
+
+
+def _scenario_dir(scenario: Scenario) -> Path:
+    return Path(scenario.source).parent if scenario.source and scenario.source != "<string>" else Path.cwd()
 
 
 def build_key(scenario: Scenario, name: str) -> tuple[str, bool, int]:
@@ -236,7 +249,7 @@ def run_scenario(scenario: Scenario | str | Path, out: str | Path | None = None,
             if not isinstance(scenario, Scenario):
                 scenario = load_scenario(scenario, overrides)
             logging_on = scenario.logging.enabled if log is None else log
-            output = claim(_log_path(scenario, out), (scenario.source,)) if logging_on else None
+            output = claim(_log_path(scenario, out), input_files(scenario)) if logging_on else None
             result = _run_claimed(scenario, output, held, progress, extra_observers, live, realtime, stamps,
                                   read_all, fmu_files)
         except BaseException as exc:

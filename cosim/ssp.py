@@ -207,7 +207,8 @@ def export_ssp(scenario: Scenario, out: str | Path) -> ExportReport:
     :class:`cosim.errors.CosimError` subclasses for a bad scenario, :class:`SspError` for what SSP
     1.0 cannot express.
     """
-    from .run import prepare
+    from .output import check_output
+    from .run import input_files, prepare
 
     out = Path(out)
     plan, _ = prepare(scenario)
@@ -286,7 +287,7 @@ def export_ssp(scenario: Scenario, out: str | Path) -> ExportReport:
     _el(_el(ann, "osp:Algorithm"), "osp:FixedStepAlgorithm", {"baseStepSize": _num(t.step)})
     ours = _el(_el(root, "ssd:Annotations"), "ssc:Annotation", {"type": OUR_ANNOTATION})
     _el(ours, "dcs:Scenario").text = json.dumps(_extras(scenario), indent=1)
-    out.parent.mkdir(parents=True, exist_ok=True)
+    check_output(out, (*input_files(scenario), *(info.path for info in infos)))
     partial = out.with_name(f".{out.name}.partial")
     try:
         with zipfile.ZipFile(partial, "w", zipfile.ZIP_DEFLATED) as z:

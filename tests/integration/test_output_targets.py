@@ -34,7 +34,7 @@ def test_out_never_replaces_the_scenario_it_runs(tmp_path, capsys):
     shutil.copy(ROOT / "scenarios" / "helix_ctc_analytic.yaml", scenario)
     text = scenario.read_text()
     rc, err = _run(capsys, "run", scenario, "--stop-time", "0.01", "--out", scenario)
-    assert rc == 2 and "is the run's own input" in err, err
+    assert rc == 2 and "own input" in err, err
     assert scenario.read_text() == text, "the scenario was replaced"
 
 
@@ -80,3 +80,30 @@ def test_a_relative_out_stays_where_the_run_started_when_the_working_directory_c
     assert rc == 0
     assert (run_dir / "rel.mcap").exists(), sorted(p.name for p in tmp_path.rglob("*"))
     assert not list(elsewhere.iterdir()), list(elsewhere.iterdir())
+
+
+def test_no_command_writes_over_its_inputs(tmp_path, capsys):
+    """The class, not one command: `ssp export -o` the scenario or one of its FMU files, `recover --out` the log
+    it reads, `run --out` an FMU the run loads, each is refused and leaves the file as it was."""
+    scenario = tmp_path / "helix.yaml"
+    shutil.copy(ROOT / "scenarios" / "helix_ctc_analytic.yaml", scenario)
+    text = scenario.read_bytes()
+    rc, err = _run(capsys, "ssp", "export", scenario, "-o", scenario)
+    assert rc == 2 and "own input" in err, err
+    assert scenario.read_bytes() == text
+    fmu_file = tmp_path / "traj.fmu"
+    from fmus import registry
+
+    shutil.copy(registry.build("helix", tmp_path / "cache"), fmu_file)
+    with_path = tmp_path / "with_path.yaml"
+    with_path.write_text(text.decode().replace("traj: {fmu: helix}", "traj: {path: traj.fmu}"))
+    before = fmu_file.read_bytes()
+    for argv in (["ssp", "export", with_path, "-o", fmu_file],
+                 ["run", with_path, "--stop-time", "0.01", "--out", fmu_file]):
+        rc, err = _run(capsys, *argv)
+        assert rc == 2 and "own input" in err, (argv, err)
+        assert fmu_file.read_bytes() == before, argv
+    log = tmp_path / "run.mcap"
+    assert _run(capsys, "run", scenario, "--stop-time", "0.01", "--out", log, "--quiet")[0] == 0
+    rc, err = _run(capsys, "recover", log, "--out", log)
+    assert rc == 2 and "own input" in err, err
