@@ -24,6 +24,7 @@ import time as _time
 from dataclasses import dataclass, field
 from typing import Any, Callable, Protocol, Sequence
 
+from .errors import STOP_SIGNALS
 from .fmu import Slave, Terminated
 from .system import SystemPlan
 
@@ -150,7 +151,7 @@ class StopRequest:
     never interrupted mid-call); the step boundary then raises :class:`~cosim.errors.Interrupted`.
     A second signal raises at once. ``signum`` and ``when`` (monotonic s) say which and when."""
 
-    SIGNALS = (signal.SIGINT, signal.SIGTERM, *((signal.SIGHUP,) if hasattr(signal, "SIGHUP") else ()))
+    SIGNALS = STOP_SIGNALS
 
     def __init__(self) -> None:
         self.requested = False

@@ -20,7 +20,7 @@ from typing import Callable, Sequence
 
 from delta.errors import CosimError, UnreachableError
 
-from .errors import exit_status, exit_text
+from .errors import STOP_SIGNALS, exit_status, exit_text
 
 EXIT_OK = 0
 EXIT_CHECK_FAILED = 1
@@ -665,9 +665,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         _unknown(parser, argv, extra)
     handler: Handler = args.handler
     if threading_main():  # the same shutdown path as Ctrl-C (logs finished, worker stopped, temp files removed)
-        signal.signal(signal.SIGTERM, _terminate_as_interrupt)
-        if hasattr(signal, "SIGHUP"):
-            signal.signal(signal.SIGHUP, _terminate_as_interrupt)
+        for sig in STOP_SIGNALS:
+            if sig != signal.SIGINT:  # Ctrl-C raises KeyboardInterrupt by itself
+                signal.signal(sig, _terminate_as_interrupt)
     try:
         return handler(args)
     except (CosimError, KeyboardInterrupt) as exc:

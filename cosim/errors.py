@@ -6,10 +6,15 @@ and from the builtin that matches its meaning, so callers can catch either.
 
 from __future__ import annotations
 
+import signal
 import sys
 from dataclasses import dataclass
 
 from delta.errors import CosimError, UnreachableError
+
+STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM, *((signal.SIGHUP,) if hasattr(signal, "SIGHUP") else ()))
+"""The signals that stop a run cleanly (Ctrl-C, a termination request, a closed terminal): the master finishes the
+log and stops its processes; those processes ignore them (they reach the whole process group)."""
 
 __all__ = [
     "CosimError",

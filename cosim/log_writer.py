@@ -595,7 +595,10 @@ def os_reason(exc: OSError) -> str:
 def main() -> int:
     import signal
 
-    signal.signal(signal.SIGINT, signal.SIG_IGN)  # the master handles Ctrl-C and finishes the log
+    from .errors import STOP_SIGNALS
+
+    for sig in STOP_SIGNALS:  # the master handles Ctrl-C and a closed terminal and finishes the log
+        signal.signal(sig, signal.SIG_IGN)
     return _serve(sys.stdin.buffer, sys.stdout.buffer)
 
 

@@ -38,7 +38,7 @@ from typing import Any
 
 from . import fmu as _fmu
 from .algorithm import Runtime, byte_view, initialize, simulate
-from .errors import CosimError
+from .errors import STOP_SIGNALS, CosimError
 from .fmu import PY_KINDS, Terminated, Variable, cleanup_extracted, load_fmu, make_slave
 from .system import Link, Port, SystemPlan
 
@@ -447,7 +447,8 @@ def _die_with(parent: int) -> None:
 def _worker(spec: dict, raw: Any, filled: list, free: list, stop: Any, conn: Any) -> None:
     """Entry point of the worker process: run the feed-forward group, publishing as it goes."""
     _die_with(spec["parent"])
-    signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the master's to handle; it stops us
+    for sig in STOP_SIGNALS:  # Ctrl-C and a closed terminal (the whole process group) are the master's; it stops us
+        signal.signal(sig, signal.SIG_IGN)
     signal.signal(signal.SIGTERM, signal.SIG_DFL)  # not the master's handler (forked): SIGTERM ends the worker
     try:
         signal.set_wakeup_fd(-1)  # a wakeup pipe of the master (the watchdog's) is never ours to write;

@@ -505,3 +505,25 @@ def test_compare_same_verdict_either_order_and_bad_inputs(scen, tmp_path):
         f.truncate(os.path.getsize(fine) // 2)
     fails(cosim("compare", fine, tmp_path / "cut.mcap"), 2, "cut.mcap: cannot read the MCAP log",
           "python -m cosim recover")
+
+
+def test_a_closed_terminal_stops_every_process_of_the_run_cleanly(tmp_path):
+    """SIGHUP reaches the whole process group (master, worker, log writer): the master stops the run and
+    finishes the log; its processes leave that to it (issue 25: the class of signals, every process)."""
+    import os
+
+    out = tmp_path / "hup.mcap"
+    scenario = Path(__file__).resolve().parents[2] / "scenarios" / "helix_ctc_analytic.yaml"
+    proc = subprocess.Popen([sys.executable, "-m", "cosim", "run", str(scenario), "--stop-time", "30", "--parallel",
+                             "on", "--realtime", "--out", str(out), "--quiet"],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, start_new_session=True)
+    try:
+        _started(proc, out.with_name("hup.mcap.partial"))
+        os.killpg(proc.pid, signal.SIGHUP)
+        _, err = proc.communicate(timeout=60)
+    finally:
+        proc.kill()
+    assert proc.returncode == 129, err.decode()
+    assert "interrupted (SIGHUP)" in err.decode(), err.decode()
+    assert out.exists() and not out.with_name("hup.mcap.partial").exists(), sorted(p.name for p in tmp_path.iterdir())
+    assert outcome(out).get("status") == "interrupted", outcome(out)
