@@ -10,7 +10,7 @@ import signal
 import sys
 from dataclasses import dataclass
 
-from delta.errors import CosimError, UnreachableError
+from delta.errors import CosimError, UnreachableError, printable
 
 STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM, *((signal.SIGHUP,) if hasattr(signal, "SIGHUP") else ()))
 """The signals that stop a run cleanly (Ctrl-C, a termination request, a closed terminal): the master finishes the
@@ -166,7 +166,9 @@ def exit_status(exc: BaseException) -> tuple[str, str, int]:
 
 def exit_text(message: str, kind: str) -> str:
     """The stderr text of :func:`exit_status`'s ``message``: ``error: ...`` (a multi-line error below
-    ``error:``, one issue a line), an interruption as it is."""
+    ``error:``, one issue a line), an interruption as it is; each line :func:`printable`, since a message may
+    quote an FMU."""
+    message = "\n".join(printable(line) for line in message.split("\n"))
     if kind == "interrupted":
         return message
     if kind == "error" and "\n" in message:

@@ -43,7 +43,7 @@ from typing import Any, Callable, Iterable, Protocol, Sequence
 
 from fmus.requirements import release_pythonfmu_state
 
-from .errors import ComponentSourceError, FMIError, Issue, ScenarioError
+from .errors import ComponentSourceError, FMIError, Issue, ScenarioError, printable
 from .turn import DERIVATIVES, GET, SET, STATES, STEP, TIME, Exchange, Finite, make_rhs, make_turn
 
 isfinite = math.isfinite  # a module global: one lookup less per output buffer in the hot path
@@ -257,16 +257,6 @@ def _fmi2_logger() -> Any:
 # pythonfmu / pythonfmu3 report a Python exception as this text and the exception's repr
 _PY_EXCEPTION = re.compile(r"Fatal py exception encountered: \[[^\]]*\][^\n]*\n(?P<repr>.*)", re.S)
 _REPR = re.compile(r"(?P<type>[A-Za-z_][\w.]*)\((?P<args>.*)\)", re.S)
-
-
-_CONTROL = re.compile(r"[\x00-\x1f\x7f-\x9f]")
-
-
-def printable(text: str) -> str:
-    """Text of an FMU as it may reach a terminal or a log: control characters (escape sequences that clear the
-    screen or retitle the window, line breaks that fake a traceback) written as their escapes (``\\x1b``,
-    ``\\n``), tabs as spaces."""
-    return _CONTROL.sub(lambda m: " " if m.group() == "\t" else repr(m.group())[1:-1], text)
 
 
 def log_text(message: str) -> str:

@@ -161,6 +161,8 @@ def _variable_line(v: dict) -> str:
 
 
 def _cmd_info(args: argparse.Namespace) -> int:
+    from delta.errors import printable
+
     path, summary = _resolve(args.fmu, args.out, args)
     info = describe(path)
     if summary:
@@ -182,11 +184,13 @@ def _cmd_info(args: argparse.Namespace) -> int:
         lines.append("  default experiment: " + ", ".join(f"{k} {v}" for k, v in de.items() if v is not None))
     lines.append(f"  variables ({len(info['variables'])}):")
     lines += [_variable_line(v) for v in info["variables"]]
-    print("\n".join(lines))
+    print("\n".join(printable(line) for line in lines))  # names and descriptions come from the FMU
     return 0
 
 
 def _cmd_list(args: argparse.Namespace) -> int:
+    from delta.errors import printable
+
     payload = {}
     for name in _selection(args):
         path, summary = _resolve(name, args.out, args)
@@ -196,8 +200,9 @@ def _cmd_list(args: argparse.Namespace) -> int:
         print(json.dumps(payload, indent=2, default=str))
         return 0
     for name, info in payload.items():
-        print(f"{name} (FMI {info['fmi']}, {'+'.join(info['interfaces']) or 'no interface'}): {info['summary']}")
+        print(printable(f"{name} (FMI {info['fmi']}, {'+'.join(info['interfaces']) or 'no interface'}): "
+                        f"{info['summary']}"))
         for group in ("inputs", "outputs", "parameters"):
             items = ", ".join(f"{v['name']} [{v['unit'] or '-'}]" for v in info[group])
-            print(f"  {group}: {items or '-'}")
+            print(printable(f"  {group}: {items or '-'}"))
     return 0
