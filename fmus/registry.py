@@ -16,8 +16,7 @@ from pathlib import Path
 
 from delta.errors import CosimError
 
-__all__ = ["FmuEntry", "AdapterError", "REGISTRY", "BUILDS", "names", "get", "adapter", "build", "available",
-           "native_names"]
+__all__ = ["FmuEntry", "AdapterError", "REGISTRY", "names", "get", "adapter", "build", "available", "native_names"]
 
 
 class AdapterError(CosimError, ImportError):
@@ -133,11 +132,6 @@ def _buildable(entry: FmuEntry) -> bool:
 def available() -> list[str]:
     """FMUs whose adapter class and the modules it needs import in this checkout."""
     return [n for n, e in REGISTRY.items() if _buildable(e)]
-
-
-BUILDS = ("python", "native")
-"""The two builds of our FMUs: ``python`` (pythonfmu, the adapters run in the host's Python) and ``native``
-(C generated from the same formulas, :mod:`fmus.native`; FMI 2 or 3, co-simulation and model exchange)."""
 
 
 def native_names() -> list[str]:

@@ -67,7 +67,8 @@ def fingerprint() -> str:
 
     h = hashlib.sha256(f"casadi {casadi.__version__}".encode())
     files = sorted([*(_ROOT / "delta").glob("*.py"), *(_ROOT / "fmus" / "adapters").glob("*.py"),
-                    *(_ROOT / "fmus").glob("_*.py"), *_HERE.glob("*.py"), *(_HERE / "c").glob("*.[ch]")])
+                    *(_ROOT / "fmus").glob("_*.py"), _ROOT / "fmus" / "registry.py", *_HERE.glob("*.py"),
+                    *(_HERE / "c").glob("*.[ch]")])
     for path in files:
         h.update(path.relative_to(_ROOT).as_posix().encode() + b"\0" + path.read_bytes() + b"\0")
     return h.hexdigest()

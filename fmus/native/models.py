@@ -18,12 +18,12 @@ The functions, as the C glue calls them (``fmus/native/c/model.h``):
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from functools import partial
 from typing import Any, Callable
 
 import casadi as ca
 
-from delta.actuators import kind_of
-from delta.control import CTC, DEFAULT_GAINS, PD, PID, PDPlus
+from delta.control import CTC, PD, PID, PDPlus
 from delta.dynamics import forward_dynamics, platform_state, platform_step
 from delta.kinematics import inverse_kinematics, proximity, set_pose, working_mode_fault
 from delta.model import Data
@@ -331,22 +331,29 @@ class AnalyticPlant(NativeModel):
         return Result(values, checks=_errors(trace))
 
 
-def _entries() -> dict[str, Callable[[], NativeModel]]:
-    from ..adapters.trajectories import ADAPTERS
+_BY_ADAPTER: dict[str, type[NativeModel]] = {
+    "InverseKinematics": InverseKinematics, "ForwardKinematics": ForwardKinematics, "PDController": Controller,
+    "PIDController": PIDController, "PDPlusController": PDPlusController, "CTCController": CTCController,
+    "AnalyticPlant": AnalyticPlant, "AnalyticPlantME": AnalyticPlant}
+"""Adapter class (:mod:`fmus.registry`'s ``cls``) -> the native model of the same behaviour; every trajectory
+adapter is a :class:`Trajectory`. The Exudyn plant has none."""
 
-    table: dict[str, Callable[[], NativeModel]] = {
-        a.FMU: (lambda a=a: Trajectory(f"trajectories.{a.__name__}", a.TYPE)) for a in ADAPTERS.values()}
-    laws = {"pd": Controller, "pid": PIDController, "pdplus": PDPlusController, "ctc": CTCController}
-    classes = {"pd": "PDController", "pid": "PIDController", "pdplus": "PDPlusController", "ctc": "CTCController"}
-    for kind in ("linear", "rotary"):
-        kind_of(kind)
-        table[f"{kind}_ik"] = lambda k=kind: InverseKinematics("kinematics.InverseKinematics", k)
-        table[f"{kind}_fk"] = lambda k=kind: ForwardKinematics("kinematics.ForwardKinematics", k)
-        for law, cls in laws.items():
-            table[f"{kind}_{law}"] = lambda k=kind, c=cls, a=classes[law]: c(f"controllers.{a}", k)
-        for name in (f"{kind}_analytic_plant", f"{kind}_analytic_plant_me"):
-            table[name] = lambda k=kind: AnalyticPlant("plants.AnalyticPlant", k, "plant_me.AnalyticPlantME")
-    assert set(DEFAULT_GAINS["linear"]) >= set(laws)
+
+def _entries() -> dict[str, Callable[[], NativeModel]]:
+    """The native model of every registry entry whose adapter has one (the registry says which adapter and robot
+    kind each FMU has; the analytic plant's two entries share one model with both interfaces)."""
+    from ..adapters.trajectories import ADAPTERS
+    from ..registry import REGISTRY
+
+    trajectories = {a.__name__: a.TYPE for a in ADAPTERS.values()}
+    table: dict[str, Callable[[], NativeModel]] = {}
+    for e in REGISTRY.values():
+        if e.cls in trajectories:
+            table[e.name] = partial(Trajectory, f"{e.module}.{e.cls}", trajectories[e.cls])
+        elif _BY_ADAPTER.get(e.cls) is AnalyticPlant:
+            table[e.name] = partial(AnalyticPlant, "plants.AnalyticPlant", e.kind, "plant_me.AnalyticPlantME")
+        elif e.cls in _BY_ADAPTER:
+            table[e.name] = partial(_BY_ADAPTER[e.cls], f"{e.module}.{e.cls}", e.kind)
     return table
 
 

@@ -135,10 +135,8 @@ def test_exudyn_plant_amplifies_rounding():
 def test_native_run_is_native_where_it_can_be(tmp_path):
     """fmus: native builds the C FMUs; the Exudyn plant stays python (it has no native build)."""
     from cosim.run import build_key
-    from cosim.scenario import load_scenario
 
-    scenario = load_scenario(ROOT / "scenarios" / "helix_ctc.yaml", api.dotted_overrides({"fmus": "native"})) \
-        if hasattr(api, "dotted_overrides") else api.load(ROOT / "scenarios" / "helix_ctc.yaml", {"fmus": "native"})
+    scenario = api.load(ROOT / "scenarios" / "helix_ctc.yaml", {"fmus": "native"})
     keys = {n: build_key(scenario, c.fmu) for n, c in scenario.components.items()}
     assert keys["plant"][1] is False, keys
     assert all(keys[n][1] for n in ("traj", "ik", "ctl")), keys
