@@ -28,6 +28,7 @@ import subprocess
 import tempfile
 import zipfile
 from dataclasses import dataclass
+from functools import lru_cache
 from pathlib import Path
 
 from .errors import CompilerMissingError, NativeError
@@ -62,14 +63,20 @@ def _fmi_headers() -> Path:
 
 
 def fingerprint() -> str:
-    """SHA-256 of everything a native FMU is made from (the same for every native FMU of this checkout)."""
-    import casadi
-
-    h = hashlib.sha256(f"casadi {casadi.__version__}".encode())
+    """SHA-256 of everything a native FMU is made from (the same for every native FMU of this checkout). The
+    files are read again only when one of them changed (size or time), not for every FMU of every run."""
     files = sorted([*(_ROOT / "delta").glob("*.py"), *(_ROOT / "fmus" / "adapters").glob("*.py"),
                     *(_ROOT / "fmus").glob("_*.py"), _ROOT / "fmus" / "registry.py", *_HERE.glob("*.py"),
                     *(_HERE / "c").glob("*.[ch]")])
-    for path in files:
+    return _digest(tuple((p, p.stat().st_mtime_ns, p.stat().st_size) for p in files))
+
+
+@lru_cache(maxsize=4)
+def _digest(stats: tuple[tuple[Path, int, int], ...]) -> str:
+    import casadi
+
+    h = hashlib.sha256(f"casadi {casadi.__version__}".encode())
+    for path, _, _ in stats:
         h.update(path.relative_to(_ROOT).as_posix().encode() + b"\0" + path.read_bytes() + b"\0")
     return h.hexdigest()
 
