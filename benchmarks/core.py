@@ -123,10 +123,10 @@ print(json.dumps(out))
 PLANT = ISOLATE + r'''
 import json, sys
 from cosim.run import run_scenario
-from cosim.scenario import load_scenario
+from cosim.engine.scenario import load_scenario
 name, stop, idle = sys.argv[1], float(sys.argv[2]), sys.argv[3:] == ["idle"]
 # the python build of our FMUs (what this benchmark measures; a tree from before the native build has no key)
-from cosim.scenario import Scenario
+from cosim.engine.scenario import Scenario
 BUILD = {("fmus",): "python"} if "fmus" in Scenario.model_fields else {}
 if idle:  # the plant FMU's code, loaded by a one-step run, then kept by the process: make it compute nothing
     run_scenario(load_scenario(f"scenarios/{name}.yaml", {("time", "stop"): 1e-3, **BUILD}), log=False)

@@ -9,7 +9,7 @@ helix (``delta.trajectories.Helix``), the same kinematics as the IK FMU
 (reference at t + h, effort computed from the state at t and held over the step).
 The co-simulation runs twice: serial (``parallel: off``) and parallel (``parallel: on``: the
 helix and IK FMUs, which depend on time alone, run ahead in a worker process on the second
-core; same values, see cosim/offload.py). All are timed on their stepping loop only (no FMU
+core; same values, see cosim/engine/offload.py). All are timed on their stepping loop only (no FMU
 build, instantiation, worker start or plant assembly; the time of the whole call, start-up
 included, is printed too), alternated ``--rounds`` times so machine load drifts affect them
 alike; the best of each is kept. The platform RMSE of each is printed as a check that they
@@ -88,7 +88,7 @@ def monolithic(stop_time: float) -> tuple[float, list[float], dict[str, float]]:
 def cosim(stop_time: float, log: bool, out: Path, parallel: str = "off"):
     """The master's RunResult for helix_ctc over ``stop_time`` s, and the whole call's wall time."""
     from cosim.run import run_scenario
-    from cosim.scenario import load_scenario
+    from cosim.engine.scenario import load_scenario
 
     scenario = load_scenario(SCENARIO, {("time", "stop"): stop_time, ("parallel",): parallel})
     t0 = time.perf_counter()

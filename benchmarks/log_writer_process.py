@@ -1,15 +1,15 @@
 """The log's writer process, replayed in this process (issue 23): where its time per simulated step goes.
 
 helix_ctc_analytic on native FMUs is run once per layout (``samples``, ``blocks``) with every signal
-logged through :class:`cosim.log_writer.WriterProcess`; the bytes the master sends down the pipe (the
+logged through :class:`cosim.observers.log_writer.WriterProcess`; the bytes the master sends down the pipe (the
 pickled calls: channels, blocks of rows, scene messages, metadata, attachments) are captured on the
 way. Each stream is then replayed, ``--rounds`` times alternated, best kept, with no master beside it:
 
-- ``whole``: the child's loop itself (:func:`cosim.log_writer._serve`: unpickling, encoding, writing,
+- ``whole``: the child's loop itself (:func:`cosim.observers.log_writer._serve`: unpickling, encoding, writing,
   closing the file), what the writer process needs per step on a core of its own;
-- ``encode``: :func:`cosim.log_writer.encode_messages` over every block of samples (JSON messages);
+- ``encode``: :func:`cosim.observers.log_writer.encode_messages` over every block of samples (JSON messages);
 - ``write``: foxglove-sdk's MCAP writer given every message already encoded (the channels'
-  ``log`` calls in the order :class:`cosim.log_writer.LogSink` makes them, and ``close``), with zstd
+  ``log`` calls in the order :class:`cosim.observers.log_writer.LogSink` makes them, and ``close``), with zstd
   at the recorder's level and chunk size, and at the chunk sizes of ``--chunks``.
 
     python benchmarks/log_writer_process.py [--rounds 5] [--chunks 262144 1048576]
@@ -34,7 +34,7 @@ sys.path.insert(0, str(ROOT))
 def capture(layout: str, out: Path) -> list[tuple[str, tuple]]:
     """The calls the master sends to the writer process in a 10 s run of helix_ctc_analytic (native FMUs)."""
     from benchmarks.native import run
-    from cosim import log_writer
+    from cosim.observers import log_writer
 
     sent: list[bytes] = []
     original = log_writer.WriterProcess._write
@@ -75,8 +75,8 @@ def main() -> None:
     args = ap.parse_args()
 
     from benchmarks.native import run
-    from cosim import log_writer
-    from cosim.mcap_log import McapRecorder
+    from cosim.observers import log_writer
+    from cosim.observers.mcap_log import McapRecorder
 
     tmp = Path(tempfile.mkdtemp(prefix="writer_bench_"))
     run("helix_ctc_analytic", 0.01, fmus="native")  # build and cache the FMUs outside the capture

@@ -4,7 +4,7 @@
    1 ms: each component's ``component_time_s`` / steps (target <= 2 us per FMU per step). A
    component's time is what the master spends on it in a step: its links copied in, its inputs set,
    its doStep, its outputs read and checked for NaN; the master reads its clock once before a step's
-   first component and once after each component (cosim.algorithm.simulate). The master's own share
+   first component and once after each component (cosim.engine.algorithm.simulate). The master's own share
    of that run (loop wall time minus the components: step loop, observers) is printed too.
 2. The master's own cost on two C FMUs (``tests/cfmus``: FMI 2 VanDerPol, its ``x0`` wired to
    Feedthrough's ``Real_input``; serial, no log, ``--steps`` steps of 1 ms; target <= 2 us per step):
@@ -15,7 +15,7 @@
    NaN checks, component timing, method dispatch.
 
 Both parts run twice: as the master runs (each co-simulation component's turn in one C call,
-cosim.turn) and with that helper made unavailable (``cosim.turn.helper`` replaced here), so the
+cosim.fmi.turn) and with that helper made unavailable (``cosim.fmi.turn.helper`` replaced here), so the
 same FMI calls are made from Python one by one, as on a machine without a C compiler. Each figure is
 the best of ``--rounds`` rounds; the runs alternate so machine load drifts affect all alike.
 
@@ -56,7 +56,7 @@ parallel: "off"
 
 def helix_native(stop: float):
     from cosim.run import run_scenario
-    from cosim.scenario import load_scenario
+    from cosim.engine.scenario import load_scenario
 
     overrides = {("time", "stop"): stop, ("fmus",): "native", ("parallel",): "off"}
     res = run_scenario(load_scenario(ROOT / "scenarios" / "helix_ctc_analytic.yaml", overrides), log=False)
@@ -67,7 +67,7 @@ def helix_native(stop: float):
 
 def bare_calls(osc_path: Path, thru_path: Path, steps: int) -> float:
     """Seconds per step of the two FMUs' per-step FMI calls in a bare Python loop."""
-    from cosim.fmu import load_fmu, make_slave
+    from cosim.fmi.fmu import load_fmu, make_slave
 
     osc, thru = make_slave("osc", load_fmu(osc_path)), make_slave("thru", load_fmu(thru_path))
     for s in (osc, thru):
@@ -109,9 +109,9 @@ def main() -> None:
     args = ap.parse_args()
     from cfmus import build
 
-    from cosim import turn
+    from cosim.fmi import turn
     from cosim.run import run_scenario
-    from cosim.scenario import parse_scenario
+    from cosim.engine.scenario import parse_scenario
 
     helix_native(0.01)  # build and cache the native FMUs (and the C turn) outside the measurement
     if turn.helper() is None:
@@ -126,7 +126,7 @@ def main() -> None:
     for _ in range(args.rounds):
         bare = min(bare, bare_calls(osc, thru, args.steps))
         for mode, helper in modes.items():
-            turn.helper = helper  # what cosim.fmu's co-simulation wrappers get when they bind their turn
+            turn.helper = helper  # what cosim.fmi.fmu's co-simulation wrappers get when they bind their turn
             b = best[mode]
             res = helix_native(args.stop_time)
             for name, sec in res.component_time.items():

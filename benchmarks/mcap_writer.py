@@ -9,7 +9,7 @@ from a helix_ctc run log, then written again, side by side, by
 - ``mcap-public``: the same ``Writer`` through its public ``add_message``;
 - ``foxglove-sdk``: ``foxglove.open_mcap`` on a ``foxglove.Context`` whose channels the recorder
   logs into (the channels the live view serves too), given a path, or an open Python file;
-  and with zstd level 1, which only this writer lets one choose; and as ``cosim.log_writer.LogSink``
+  and with zstd level 1, which only this writer lets one choose; and as ``cosim.observers.log_writer.LogSink``
   writes the log (path, level 1, compression in the calling thread: the writer process has one core).
 
 The log's layout is the run's (``logging.layout``; default ``samples``, one message per sample).

@@ -3,7 +3,7 @@
 Both scenarios run the same helix, IK and CTC FMUs against the same analytic plant: in
 ``helix_ctc_analytic`` the plant is an FMI 2.0 co-simulation FMU that integrates itself with
 fixed-step RK4 (``delta.dynamics.integrate``, 1 ms); in ``helix_ctc_me`` it is the FMI 3.0 model-exchange FMU of the
-same dynamics, integrated by the master (``cosim/fmu.py`` ``_MEMixin``, ``cosim/integrators.py``)
+same dynamics, integrated by the master (``cosim/fmi/fmu.py`` ``_MEMixin``, ``cosim/fmi/integrators.py``)
 with the solver named in the scenario. Each run is timed on its stepping loop (``RunResult.wall_time``;
 no FMU build, instantiation or worker start) with logging off; the scenarios run alternately
 ``--rounds`` times so drifts in machine load affect both alike, and the best of each is kept.
@@ -30,7 +30,7 @@ TARGET_RATIO = 1.5  # issue 13: model exchange at most 1.5x the co-simulation ru
 def run(path: Path, stop: float, solver: str | None, parallel: str) -> tuple[float, float]:
     """(loop wall seconds, worst per-axis RMSE) of one run."""
     from cosim.run import run_scenario
-    from cosim.scenario import load_scenario
+    from cosim.engine.scenario import load_scenario
 
     overrides = {("time", "stop"): stop, ("parallel",): parallel}
     if solver is not None:
@@ -49,8 +49,8 @@ def main(argv: list[str] | None = None) -> int:
                     help="the scenarios' parallel key for every run (default off: one process, like for like)")
     args = ap.parse_args(argv)
     sys.path.insert(0, str(ROOT))
-    from cosim.integrators import SOLVERS
-    from cosim.scenario import load_scenario
+    from cosim.fmi.integrators import SOLVERS
+    from cosim.engine.scenario import load_scenario
 
     own = load_scenario(ME).components["plant"].solver
     solvers = args.solvers.split(",") if args.solvers else [own] + [s for s in SOLVERS if s != own]

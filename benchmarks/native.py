@@ -8,7 +8,7 @@ Printed, each with its target:
    helix_ctc_analytic; target <= 2 us) and the master's own time per step (the loop minus the components).
 3. Model exchange: one derivative evaluation of the native ME plant through our master's ME wrapper
    (set time, set states, get derivatives: ``rhs``, what the integrator calls per right-hand side, one C
-   call where ``cosim.turn``'s helper is built; target <= 2 us), beside the same three calls made from
+   call where ``cosim.fmi.turn``'s helper is built; target <= 2 us), beside the same three calls made from
    Python one by one (``set_time``, ``set_x``, ``get_dx``: what a machine without a C compiler gets), and
    helix_ctc_me on native FMUs against the native co-simulation run, with the split of its time (the
    plant component holds the integrator and the FMU calls it makes).
@@ -41,7 +41,7 @@ sys.path.insert(0, str(ROOT))
 def run(name: str, stop: float, *, fmus: str, parallel: str | None = None, log: bool = False,
         out: Path | None = None, layout: str | None = None):
     from cosim.run import run_scenario
-    from cosim.scenario import load_scenario
+    from cosim.engine.scenario import load_scenario
 
     overrides = {("time", "stop"): stop, ("fmus",): fmus}
     if parallel is not None:
@@ -55,11 +55,11 @@ def run(name: str, stop: float, *, fmus: str, parallel: str | None = None, log: 
 
 
 def derivative_call_us(n: int = 20000) -> tuple[float, float]:
-    """Microseconds of one derivative evaluation of the native ME plant through cosim.fmu's ME wrapper: its
+    """Microseconds of one derivative evaluation of the native ME plant through cosim.fmi.fmu's ME wrapper: its
     ``rhs`` (what the integrators call), and set_time + set_x + get_dx."""
     import ctypes
 
-    from cosim.fmu import load_fmu, make_slave
+    from cosim.fmi.fmu import load_fmu, make_slave
     from fmus import registry
 
     slave = make_slave("plant", load_fmu(registry.build("linear_analytic_plant_me", native=True, fmi=2)), "me")
@@ -88,7 +88,7 @@ def derivative_call_us(n: int = 20000) -> tuple[float, float]:
 
 def count_derivative_calls(stop: float) -> int:
     """Derivative evaluations of helix_ctc_me on native FMUs (a separate, untimed run with a counter)."""
-    from cosim import fmu
+    from cosim.fmi import fmu
 
     calls = 0
     original = fmu._MEMixin.rhs

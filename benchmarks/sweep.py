@@ -2,10 +2,10 @@
 
 The cases are a CTC gain grid on ``scenarios/helix_ctc_analytic.yaml``, each the scenario's
 whole run (the thesis helix, 10 s simulated; ``--stop`` for another length), no logs. Serially,
-:func:`cosim.sweep.run_loaded_case` runs them one after another in this process (the file read once
-and the FMUs built beforehand, as the sweep does); the sweep is :func:`cosim.sweep.run_sweep` on an
+:func:`cosim.analysis.sweep.run_loaded_case` runs them one after another in this process (the file read once
+and the FMUs built beforehand, as the sweep does); the sweep is :func:`cosim.analysis.sweep.run_sweep` on an
 embedded ``LocalCluster`` of 2 single-threaded worker processes, timed from the call until
-:func:`cosim.sweep.run_sweep` returns (cluster start-up and shutdown included). Both produce the
+:func:`cosim.analysis.sweep.run_sweep` returns (cluster start-up and shutdown included). Both produce the
 same metrics (checked here, digit for digit). ``--repeat N`` alternates the two N times and
 reports the median (the machine's other load moves single figures by 10-50 %).
 
@@ -48,8 +48,8 @@ def main() -> int:
                     help="also time the sweep on an already running, warmed-up cluster of the same workers")
     args = ap.parse_args()
     sys.path.insert(0, str(ROOT))
-    from cosim.scenario import dotted_overrides, load_scenario, read_scenario
-    from cosim.sweep import Case, SweepCluster, prebuild, read_results, run_loaded_case, run_sweep
+    from cosim.engine.scenario import dotted_overrides, load_scenario, read_scenario
+    from cosim.analysis.sweep import Case, SweepCluster, prebuild, read_results, run_loaded_case, run_sweep
 
     import statistics
 

@@ -5,7 +5,7 @@
 ...               {"time.stop": 0.2, "trajectory.params.rx": 0.05, "ctl.gain.kp[1]": 2.0e4})  # doctest: +SKIP
 >>> res.metrics["rmse_x"], res["plant.p.x"][-1]  # doctest: +SKIP
 
-Dotted names (:func:`cosim.scenario.resolve_name`) are those of ``--set`` on the command line:
+Dotted names (:func:`cosim.engine.scenario.resolve_name`) are those of ``--set`` on the command line:
 ``COMP.PARAM`` sets a component parameter (``ctl.gain.kp[1]``, ``plant.mass.payload``); other
 names walk the scenario's sections (``time.stop``, ``time.step``, ``trajectory.params.rx``,
 ``algorithm``, ``parallel``). An unknown name raises :class:`~cosim.errors.ScenarioError`
@@ -23,11 +23,11 @@ from typing import Any
 
 import numpy as np
 
-from .algorithm import Runtime
+from .engine.algorithm import Runtime
 from .errors import ScenarioError, UnknownSignalError
-from .fmu import BOOLEAN, INTEGER, REAL
+from .fmi.fmu import BOOLEAN, INTEGER, REAL
 from .run import RunResult, run_scenario
-from .scenario import Scenario, dotted_overrides, expand_signal, load_scenario
+from .engine.scenario import Scenario, dotted_overrides, expand_signal, load_scenario
 
 __all__ = ["PeakEffort", "Result", "SignalRecorder", "load", "metric_names", "metrics", "run"]
 
@@ -93,7 +93,7 @@ class PeakEffort:
         self.peak = math.nan
 
     def start(self, rt: Runtime) -> None:
-        from .system import Port
+        from .engine.system import Port
 
         self._src = []
         for c, outs in enumerate(rt.plan.outputs):
@@ -122,7 +122,7 @@ class SignalRecorder:
         self._rows: list[list[float]] = []
 
     def start(self, rt: Runtime) -> None:
-        from .system import Port, index_text
+        from .engine.system import Port, index_text
 
         self._src = []
         for c, name in enumerate(rt.plan.names):

@@ -403,8 +403,8 @@ def _cmd_validate_model(args: argparse.Namespace) -> int:
 def _cmd_compare(args: argparse.Namespace) -> int:
     from pathlib import Path
 
-    from .compare import compare_logs, compare_plants, logged_tolerances, parse_tolerances
-    from .scenario import apply_overrides
+    from .analysis.compare import compare_logs, compare_plants, logged_tolerances, parse_tolerances
+    from .engine.scenario import apply_overrides
 
     tol = parse_tolerances(args.tol)
     ins = args.inputs
@@ -421,7 +421,7 @@ def _cmd_compare(args: argparse.Namespace) -> int:
     elif len(ins) == 2 and all(Path(x).suffix == ".mcap" for x in ins):
         if args.set or args.stop_time is not None:
             raise CosimError("--set and --stop-time apply to a scenario, not to two logs")
-        from .runlog import read_run
+        from .io.runlog import read_run
 
         a, b = read_run(ins[0]), read_run(ins[1])
         if not tol and a.name == b.name:  # a run against its baseline: the scenario's own tolerances
@@ -436,7 +436,7 @@ def _cmd_compare(args: argparse.Namespace) -> int:
 
 
 def _cmd_baseline(args: argparse.Namespace) -> int:
-    from .runlog import write_baseline
+    from .io.runlog import write_baseline
 
     out, n = write_baseline(args.log, args.out, args.period, args.components)
     _emit(args, {"out": str(out), "messages": n, "period_s": args.period},
@@ -472,8 +472,8 @@ def _open_scenario(args: argparse.Namespace, overrides: dict):
     """The scenario of a YAML file, or of an SSP archive (unpacked for the ``with`` block only)."""
     from contextlib import nullcontext
 
-    from .scenario import load_scenario
-    from .ssp import is_ssp, open_ssp
+    from .engine.scenario import load_scenario
+    from .io.ssp import is_ssp, open_ssp
 
     if args.step is not None:
         overrides.put(("time", "step"), args.step, f"--step {args.step:g}")
@@ -503,7 +503,7 @@ def _stdout_kept_for_json(on: bool):
 
 def _cmd_run(args: argparse.Namespace) -> int:
     from .run import run_scenario
-    from .scenario import apply_overrides
+    from .engine.scenario import apply_overrides
 
     overrides = apply_overrides(args.set, args.stop_time)
     if args.parallel:
@@ -512,11 +512,11 @@ def _cmd_run(args: argparse.Namespace) -> int:
         overrides.put(("watchdog_s",), args.watchdog if args.watchdog > 0 else None, f"--watchdog {args.watchdog:g}")
     live = realtime = None
     if args.live is not None:
-        from .live import parse_address
+        from .observers.live import parse_address
 
         live = parse_address(args.live)
     if args.realtime is not None:
-        from .realtime import parse_factor
+        from .observers.realtime import parse_factor
 
         realtime = parse_factor(args.realtime)
     with _stdout_kept_for_json(args.json), _open_scenario(args, overrides) as scenario:
@@ -531,16 +531,16 @@ def _cmd_run(args: argparse.Namespace) -> int:
 
 
 def _cmd_check(args: argparse.Namespace) -> int:
-    from .offload import choose
+    from .engine.offload import choose
     from .run import prepare
-    from .scenario import apply_overrides
+    from .engine.scenario import apply_overrides
 
     with _open_scenario(args, apply_overrides(args.set, args.stop_time)) as scenario:
         plan, report = prepare(scenario)
     order = " -> ".join(plan.names[c] for c in plan.order)
-    from .mcap_log import McapRecorder
+    from .observers.mcap_log import McapRecorder
 
-    n_steps = scenario.time.n_steps  # a logged run of these steps writes through a writer process (cosim.mcap_log)
+    n_steps = scenario.time.n_steps  # a logged run of these steps writes through a writer process (cosim.observers.mcap_log)
     _, parallel = choose(plan, scenario.parallel, n_steps,
                          scenario.logging.enabled and n_steps >= McapRecorder.PROCESS_MIN_STEPS)
     payload = {"scenario": scenario.name, "ok": True, "preflight": report, "order": [plan.names[c] for c in plan.order],
@@ -551,14 +551,14 @@ def _cmd_check(args: argparse.Namespace) -> int:
 
 
 def _cmd_schema(args: argparse.Namespace) -> int:
-    from .scenario import scenario_json_schema
+    from .engine.scenario import scenario_json_schema
 
     print(json.dumps(scenario_json_schema(), indent=2))
     return EXIT_OK
 
 
 def _cmd_recover(args: argparse.Namespace) -> int:
-    from .recover import recover
+    from .io.recover import recover
 
     rep = recover(args.file, args.out)
     _emit(args, rep.as_dict(), f"recovered {rep.messages} messages on {rep.channels} channels "
@@ -587,9 +587,9 @@ def build_parser() -> argparse.ArgumentParser:
     _regression_parser(sub)
     from fmus.cli import register as _register_fmus
 
-    from .report import register as _register_report
-    from .ssp import register as _register_ssp
-    from .sweep import register as _register_sweep
+    from .analysis.report import register as _register_report
+    from .io.ssp import register as _register_ssp
+    from .analysis.sweep import register as _register_sweep
 
     _register_report(sub)
     _register_ssp(sub)

@@ -7,14 +7,14 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Mapping, Sequence
 
-from .algorithm import Observer, Runtime, StopRequest, initialize, simulate
+from .engine.algorithm import Observer, Runtime, StopRequest, initialize, simulate
 from .errors import ComponentSourceError, CosimError, Issue
-from .fmu import Extractions, FMUInfo, cleanup_extracted, load_fmu, make_slave
-from .observers import ErrorObserver
-from .offload import Offload, choose
-from .scenario import Scenario, line_for, expand_signal, load_scenario
-from .stats import ErrorStats
-from .watchdog import Watchdog, hard_exit
+from .fmi.fmu import Extractions, FMUInfo, cleanup_extracted, load_fmu, make_slave
+from .observers.recorders import ErrorObserver
+from .engine.offload import Offload, choose
+from .engine.scenario import Scenario, line_for, expand_signal, load_scenario
+from .observers.stats import ErrorStats
+from .engine.watchdog import Watchdog, hard_exit
 
 __all__ = ["RunResult", "progress_bar", "locate_fmus", "prepare", "run_scenario", "check_scenario"]
 
@@ -37,7 +37,7 @@ class RunResult:
     worker_time: dict[str, float] = field(default_factory=dict)  # s per component, inside the worker process
     terminated_by: str | None = None  # the component that ended the simulation before the stop time
     events: dict[str, int] = field(default_factory=dict)  # events handled per model-exchange component
-    realtime: dict[str, float] = field(default_factory=dict)  # with real-time pacing: factor, lag (cosim.realtime)
+    realtime: dict[str, float] = field(default_factory=dict)  # with real-time pacing: factor, lag (cosim.observers.realtime)
 
     @property
     def real_time_factor(self) -> float:
@@ -157,11 +157,11 @@ def prepare(scenario: Scenario, log_signals: str | None = None, *,
     """Pre-flight and plan (no FMU instantiated): returns (plan, preflight report).
 
     With a ``trajectory:`` section, our trajectory FMUs get their parameters from it.
-    ``log_signals`` overrides ``logging.signals`` (:func:`cosim.system.build_plan`);
+    ``log_signals`` overrides ``logging.signals`` (:func:`cosim.engine.system.build_plan`);
     ``fmu_files``: our FMUs already built (:func:`locate_fmus`).
     """
-    from .preflight import initial_state_values, preflight, trajectory_start_values
-    from .system import build_plan
+    from .engine.preflight import initial_state_values, preflight, trajectory_start_values
+    from .engine.system import build_plan
 
     trajectory_values = trajectory_start_values(scenario)  # our trajectory FMUs follow the scenario's section
     report = preflight(scenario)
@@ -189,7 +189,7 @@ def _publishing(scenario: Scenario, mcap_path: Path | None, live: tuple[str, int
                 stamps: str) -> tuple[list[Observer], Observer | None]:
     """The MCAP recorder and/or the live view on one publisher of the run's channels, in start order,
     and the recorder (None without a log)."""
-    from .publish import Publisher, reference_path
+    from .observers.publish import Publisher, reference_path
 
     robot = None
     scene = scenario.logging.scene
@@ -204,11 +204,11 @@ def _publishing(scenario: Scenario, mcap_path: Path | None, live: tuple[str, int
     sinks: list[Observer] = []
     recorder = None
     if live is not None:  # first: a port in use fails before the log file is opened
-        from .live import LiveView
+        from .observers.live import LiveView
 
         sinks.append(LiveView(publisher, live[1], live[0]))
     if mcap_path is not None:
-        from .mcap_log import McapRecorder
+        from .observers.mcap_log import McapRecorder
 
         recorder = McapRecorder(mcap_path, publisher, scenario, scenario.source, scenario.logging.flush_interval)
         sinks.append(recorder)
@@ -231,17 +231,17 @@ def run_scenario(scenario: Scenario | str | Path, out: str | Path | None = None,
 
     The MCAP file, when logging, is finished whatever happens, and the FMUs extracted for the
     run are removed (success, error or Ctrl-C). ``live``: (host, port) of a Foxglove WebSocket
-    server showing the run (:mod:`cosim.live`); ``realtime``: pace the run at this many simulated
-    seconds per wall second (:mod:`cosim.realtime`); ``stamps``: log times from the run's
-    ``"wall"``-clock start or pure ``"simulation"`` time (:mod:`cosim.publish`).
+    server showing the run (:mod:`cosim.observers.live`); ``realtime``: pace the run at this many simulated
+    seconds per wall second (:mod:`cosim.observers.realtime`); ``stamps``: log times from the run's
+    ``"wall"``-clock start or pure ``"simulation"`` time (:mod:`cosim.observers.publish`).
     ``read_all``: read every output of every component at every step, also without a log (for
     an observer of every signal, :class:`cosim.api.SignalRecorder`); ``fmu_files``: our FMUs
     already built, by name (:func:`locate_fmus`).
 
     The log's path is claimed (checked writable, locked, written as X.partial) before any FMU is
-    loaded, and the finished log renamed into place at the end (see :mod:`cosim.output`).
+    loaded, and the finished log renamed into place at the end (see :mod:`cosim.io.output`).
     """
-    from .output import claim
+    from .io.output import claim
 
     output = None
     with Extractions() as held:  # this run's FMU extractions (other runs of the process keep theirs)
@@ -325,7 +325,7 @@ def _settle(output, error: BaseException | None) -> None:
         output.discard()
     else:
         output.release()
-        from .output import OutputError
+        from .io.output import OutputError
 
         raise OutputError(f"{state}; the log written so far is kept in {output.partial}: recover it with "
                           f"`python -m cosim recover {output.partial}`") from None
@@ -346,7 +346,7 @@ def _run_claimed(scenario: Scenario, output, held: Extractions, progress: bool, 
                  [scenario.components[n].step_multiple for n in plan.names], scenario.algorithm)
     writer_process = False  # the log written by a writer process (as McapRecorder decides): it takes a CPU
     if logging_on:
-        from .mcap_log import McapRecorder
+        from .observers.mcap_log import McapRecorder
 
         writer_process = rt.n_steps >= McapRecorder.PROCESS_MIN_STEPS
     ahead, note = choose(plan, scenario.parallel, rt.n_steps, writer_process)
@@ -358,12 +358,12 @@ def _run_claimed(scenario: Scenario, output, held: Extractions, progress: bool, 
         observers.append(tracking)
     mcap_path = output.target if output is not None else None
     recorder = None
-    if published:  # the log and the live view: the same channels (cosim.publish)
+    if published:  # the log and the live view: the same channels (cosim.observers.publish)
         sinks, recorder = _publishing(scenario, output.partial if output is not None else None, live, stamps)
         observers += sinks
     pacing = None
     if realtime is not None:
-        from .realtime import RealTime
+        from .observers.realtime import RealTime
 
         pacing = RealTime(realtime)
     observers += list(extra_observers)

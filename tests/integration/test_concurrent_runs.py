@@ -18,10 +18,10 @@ from pathlib import Path
 
 import pytest
 
-from cosim import fmu
-from cosim.fmu import Extractions, load_fmu
+from cosim.fmi import fmu
+from cosim.fmi.fmu import Extractions, load_fmu
 from cosim.run import run_scenario
-from cosim.scenario import load_scenario
+from cosim.engine.scenario import load_scenario
 
 pytestmark = pytest.mark.integration
 

@@ -14,9 +14,9 @@ import pytest
 from fmu_helpers import SLOW_SCENARIO
 
 from cosim.errors import AlgebraicLoopError, FMIError, WiringError
-from cosim.observers import Probe
+from cosim.observers.recorders import Probe
 from cosim.run import run_scenario
-from cosim.scenario import load_scenario
+from cosim.engine.scenario import load_scenario
 
 pytestmark = pytest.mark.integration
 ROOT = Path(__file__).resolve().parents[2]
@@ -43,7 +43,7 @@ def _read_mcap(path: Path):
     simulation time of the sample (the log's time offset removed; a block's samples: from their ``t``)."""
     from mcap.reader import make_reader
 
-    from cosim.runlog import samples, time_offset_ns
+    from cosim.io.runlog import samples, time_offset_ns
 
     with open(path, "rb") as f:
         reader = make_reader(f)
@@ -203,7 +203,7 @@ def test_sigint_finishes_the_log(write_scenario, tmp_path):
 
 
 def test_killed_writer_is_recovered(write_scenario, tmp_path):
-    from cosim.recover import recover
+    from cosim.io.recover import recover
 
     path = _slow_scenario(write_scenario)
     out = tmp_path / "killed.mcap"

@@ -25,7 +25,7 @@ import pytest
 from cli_helpers import cosim, start_cosim, wait_for
 from fmu_helpers import SLOW_SCENARIO
 
-from cosim.runlog import read_run
+from cosim.io.runlog import read_run
 
 pytestmark = pytest.mark.integration
 

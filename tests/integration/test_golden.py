@@ -15,9 +15,9 @@ from pathlib import Path
 import pytest
 
 from cosim.cli import main
-from cosim.compare import compare_logs
+from cosim.analysis.compare import compare_logs
 from cosim.run import run_scenario
-from cosim.scenario import load_scenario
+from cosim.engine.scenario import load_scenario
 
 ROOT = Path(__file__).resolve().parents[2]
 GOLDEN = ROOT / "tests" / "golden"

@@ -5,7 +5,7 @@
   channels, and every message received validates against the schema the server advertised;
   scene and transform messages also against Foxglove's published JSON Schemas, taken from the
   npm package ``@foxglove/schemas`` at test time when the registry is reachable (else the copy
-  vendored in :mod:`cosim.foxglove_schemas`, MIT licence, which must then equal it).
+  vendored in :mod:`cosim.observers.foxglove_schemas`, MIT licence, which must then equal it).
 - A ``--realtime`` run of 2 s simulated takes 2 s of wall time within 5 % and prints its lag.
 - Logs stamped from the wall-clock start and in pure simulation time read back identically.
 """
@@ -28,14 +28,14 @@ import pytest
 from cli_helpers import free_port
 
 from cosim.cli import main
-from cosim.foxglove_schemas import FRAME_TRANSFORMS, SCENE_UPDATE
+from cosim.observers.foxglove_schemas import FRAME_TRANSFORMS, SCENE_UPDATE
 
 ROOT = Path(__file__).resolve().parents[2]
 SCENARIO = ROOT / "scenarios" / "helix_ctc_analytic.yaml"
 pytestmark = pytest.mark.integration
 
 REALTIME_TOLERANCE = 0.05  # the issue's bound on wall time vs simulated time at factor 1
-NPM_PACKAGE = "@foxglove/schemas@2.1.0"  # the version vendored in cosim/foxglove_schemas.py
+NPM_PACKAGE = "@foxglove/schemas@2.1.0"  # the version vendored in cosim/observers/foxglove_schemas.py
 
 
 @pytest.fixture(scope="module")
@@ -62,7 +62,7 @@ def test_vendored_schemas_equal_the_published_ones(published_schemas):
     schemas, source = published_schemas
     if source.startswith("vendored"):
         pytest.skip(f"published schemas not available: {source}")
-    assert schemas["SceneUpdate"] == SCENE_UPDATE, "cosim/foxglove_schemas.py SceneUpdate differs from npm's"
+    assert schemas["SceneUpdate"] == SCENE_UPDATE, "cosim/observers/foxglove_schemas.py SceneUpdate differs from npm's"
     assert schemas["FrameTransforms"] == FRAME_TRANSFORMS, "FrameTransforms differs from npm's"
 
 
@@ -70,7 +70,7 @@ def test_vendored_schemas_equal_the_published_ones(published_schemas):
 def test_scene_of_both_robot_kinds_validates(preset, published_schemas):
     import numpy as np
 
-    from cosim.publish import frame_transforms, reference_update, scene_update
+    from cosim.observers.publish import frame_transforms, reference_update, scene_update
     from delta.robots import get_preset
 
     robot = get_preset(preset)
@@ -215,8 +215,8 @@ def test_bad_live_port_and_realtime_factor_exit_2_with_one_line(capsys):
 
 
 def test_wall_and_simulation_stamps_read_alike(tmp_path):
-    from cosim.compare import compare_logs
-    from cosim.runlog import read_run
+    from cosim.analysis.compare import compare_logs
+    from cosim.io.runlog import read_run
 
     wall, sim = tmp_path / "wall.mcap", tmp_path / "sim.mcap"
     assert main(["run", str(SCENARIO), "--stop-time", "0.3", "--quiet", "--out", str(wall)]) == 0

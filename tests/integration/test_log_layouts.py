@@ -15,10 +15,10 @@ import pytest
 from mcap.reader import make_reader
 
 from cosim.cli import main
-from cosim.mcap_log import McapRecorder
+from cosim.observers.mcap_log import McapRecorder
 from cosim.run import run_scenario
-from cosim.runlog import read_run, time_offset_ns
-from cosim.scenario import load_scenario
+from cosim.io.runlog import read_run, time_offset_ns
+from cosim.engine.scenario import load_scenario
 
 ROOT = Path(__file__).resolve().parents[2]
 GOLDEN = ROOT / "tests" / "golden"

@@ -1,4 +1,4 @@
-"""A model-exchange FMU's right-hand side in one C call (cosim.turn's cosim_rhs) against the same calls
+"""A model-exchange FMU's right-hand side in one C call (cosim.fmi.turn's cosim_rhs) against the same calls
 made from Python.
 
 The C right-hand side makes the FMI calls the Python path makes (set time, set continuous states, get
@@ -19,12 +19,12 @@ import pytest
 import yaml
 from cfmus import build
 
-from cosim import turn
+from cosim.fmi import turn
 from cosim.errors import FMIError
-from cosim.fmu import _MEMixin, load_fmu, make_slave
-from cosim.observers import Probe
+from cosim.fmi.fmu import _MEMixin, load_fmu, make_slave
+from cosim.observers.recorders import Probe
 from cosim.run import run_scenario
-from cosim.scenario import load_scenario, parse_scenario
+from cosim.engine.scenario import load_scenario, parse_scenario
 from fmus import registry
 
 pytestmark = pytest.mark.integration

@@ -97,7 +97,7 @@ STOP = {"helix_ctc": 2.0, "helix_ctc_level": 2.0, "rotary_helix_ctc_level": 2.0,
 
 
 def _exudyn(name: str) -> bool:
-    from cosim.scenario import load_scenario
+    from cosim.engine.scenario import load_scenario
 
     return any("exudyn" in (c.fmu or "") for c in load_scenario(ROOT / "scenarios" / f"{name}.yaml").components.values())
 

@@ -19,10 +19,10 @@ import orjson
 import pytest
 
 from cosim.errors import CosimError, FMIError
-from cosim import offload
-from cosim.offload import RING
+from cosim.engine import offload
+from cosim.engine.offload import RING
 from cosim.run import run_scenario
-from cosim.scenario import load_scenario
+from cosim.engine.scenario import load_scenario
 
 pytestmark = pytest.mark.integration
 ROOT = Path(__file__).resolve().parents[2]
@@ -52,7 +52,7 @@ def _messages(path: Path) -> dict[str, list[tuple[int, bytes]]]:
     """(simulation time, JSON) by topic, one per sample on a component channel (a block's samples each)."""
     from mcap.reader import make_reader
 
-    from cosim.runlog import samples, time_offset_ns
+    from cosim.io.runlog import samples, time_offset_ns
 
     with open(path, "rb") as f:
         reader = make_reader(f)

@@ -1,7 +1,7 @@
 """``cosim report`` / ``cosim table``: figures and markdown of a run, RMSE table as thesis Table 5.
 
 One short run (1 s of the thesis helix under CTC on the analytic plant) is shared by the
-tests; its own summary (``cosim.observers.ErrorObserver``, accumulated while it ran) is the
+tests; its own summary (``cosim.observers.recorders.ErrorObserver``, accumulated while it ran) is the
 reference the numbers read back from the log must reproduce.
 """
 
@@ -16,10 +16,10 @@ from pathlib import Path
 import pytest
 
 from cosim.errors import CosimError
-from cosim.report import ReportError, controller_table, make_report, register
+from cosim.analysis.report import ReportError, controller_table, make_report, register
 from cosim.run import run_scenario
-from cosim.runlog import write_baseline
-from cosim.scenario import apply_overrides
+from cosim.io.runlog import write_baseline
+from cosim.engine.scenario import apply_overrides
 from delta.paper_data import THESIS_TABLE_5_M
 
 pytestmark = pytest.mark.integration
@@ -158,7 +158,7 @@ def test_bad_inputs_give_one_line_errors_naming_the_file(run, tmp_path):
 def test_units_read_plainly_from_millimetres_to_femtometres_and_degrees():
     import numpy as np
 
-    from cosim.report import _scaled_unit
+    from cosim.analysis.report import _scaled_unit
 
     # the rotary z-steps run: x and y errors at rounding level (1.6e-14 m) read as 15.7 fm, not 1.57e-5 nm
     for peak, unit, want in ((0.3, "m", "mm"), (1.6e-4, "m", "µm"), (7.5e-9, "m", "nm"), (5.5e-10, "m/s", "pm/s"),

@@ -18,10 +18,10 @@ import numpy as np
 import pytest
 
 from cosim.cli import main
-from cosim.observers import Probe
+from cosim.observers.recorders import Probe
 from cosim.run import prepare, run_scenario
-from cosim.scenario import load_scenario
-from cosim.ssp import NS, export_ssp, open_ssp
+from cosim.engine.scenario import load_scenario
+from cosim.io.ssp import NS, export_ssp, open_ssp
 
 pytestmark = pytest.mark.integration
 
@@ -417,7 +417,7 @@ def test_a_system_name_cannot_move_the_default_log(ssp, tmp_path, capsys, monkey
 
 def test_an_ssd_that_inflates_too_far_is_refused(ssp, tmp_path, capsys, monkeypatch):
     """The .ssd is read no further than the limit, whatever the archive says (issue 25: a zip bomb's 2.5 GiB)."""
-    import cosim.ssp as ssp_module
+    import cosim.io.ssp as ssp_module
 
     monkeypatch.setattr(ssp_module, "MAX_XML_BYTES", 4096)  # our .ssd is larger than 4 kB: stands in for a bomb
     rc, _, err = _cli(capsys, "run", ssp, "--no-log", "--quiet")
@@ -427,7 +427,7 @@ def test_an_ssd_that_inflates_too_far_is_refused(ssp, tmp_path, capsys, monkeypa
 def test_an_archive_unpacked_by_a_killed_run_is_removed_by_the_next(ssp, private_tmp):
     """SIGKILL leaves an SSP run's unpacked archive behind (no handler runs); the next SSP run removes it
     (issue 25), and leaves those of live processes alone."""
-    from cosim.fmu import SSP_PREFIX
+    from cosim.fmi.fmu import SSP_PREFIX
 
     dead = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"], capture_output=True, text=True)
     orphan = private_tmp / f"{SSP_PREFIX}{int(dead.stdout)}-helix-abc"
@@ -442,7 +442,7 @@ def test_an_archive_unpacked_by_a_killed_run_is_removed_by_the_next(ssp, private
 
 def test_an_fmu_member_that_unpacks_too_far_is_refused(ssp, tmp_path, capsys, private_tmp, monkeypatch):
     """Each archive member is bounded, the FMUs too, not only the .ssd (issue 25)."""
-    import cosim.ssp as ssp_module
+    import cosim.io.ssp as ssp_module
 
     monkeypatch.setattr(ssp_module, "MAX_FMU_BYTES", 1000)  # our FMUs are larger: stands in for a bomb
     rc, _, err = _cli(capsys, "run", ssp, "--no-log", "--quiet")
@@ -452,7 +452,7 @@ def test_an_fmu_member_that_unpacks_too_far_is_refused(ssp, tmp_path, capsys, pr
 
 def test_an_fmu_file_that_unpacks_too_far_is_refused(tmp_path, monkeypatch):
     """A zip bomb given as an FMU (a component's path, or extracted from an archive) is refused before it is read."""
-    import cosim.fmu as fmu_module
+    import cosim.fmi.fmu as fmu_module
     from cosim.errors import ComponentSourceError
 
     bomb = tmp_path / "bomb.fmu"

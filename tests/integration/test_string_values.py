@@ -16,9 +16,9 @@ from cfmus import build
 from cli_helpers import cosim
 
 from cosim.run import prepare
-from cosim.runlog import read_run
-from cosim.scenario import apply_overrides, dotted_overrides, load_scenario
-from cosim.sweep import Case, parse_grid
+from cosim.io.runlog import read_run
+from cosim.engine.scenario import apply_overrides, dotted_overrides, load_scenario
+from cosim.analysis.sweep import Case, parse_grid
 
 pytestmark = pytest.mark.integration
 

@@ -1,4 +1,4 @@
-"""Sweeps on Dask (cosim.sweep): equal to serial runs, on a real scheduler and workers, a worker
+"""Sweeps on Dask (cosim.analysis.sweep): equal to serial runs, on a real scheduler and workers, a worker
 killed mid-sweep, a failing case, resumption. Short runs (0.2-0.5 s simulated) keep it fast."""
 
 from __future__ import annotations
@@ -149,7 +149,7 @@ def test_a_case_outside_the_workspace_fails_alone(tmp_path):
 
 
 def test_sweep_report_plots_one_and_two_parameters(tmp_path):
-    from cosim.sweep import report
+    from cosim.analysis.sweep import report
 
     out = tmp_path / "sweep"
     out.mkdir()

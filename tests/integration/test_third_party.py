@@ -32,8 +32,8 @@ from cfmus import build
 from cli_helpers import cosim, start_cosim, wait_for
 
 from cosim.run import run_scenario
-from cosim.runlog import read_run
-from cosim.scenario import parse_scenario
+from cosim.io.runlog import read_run
+from cosim.engine.scenario import parse_scenario
 
 pytestmark = pytest.mark.integration
 

@@ -10,9 +10,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from cosim.observers import Probe
+from cosim.observers.recorders import Probe
 from cosim.run import run_scenario
-from cosim.scenario import load_scenario
+from cosim.engine.scenario import load_scenario
 from delta.trajectories import Helix
 
 pytestmark = pytest.mark.integration

@@ -1,4 +1,4 @@
-"""A co-simulation component's turn in one C call (cosim.turn) against the same calls made from Python.
+"""A co-simulation component's turn in one C call (cosim.fmi.turn) against the same calls made from Python.
 
 The C turn makes the FMI calls the Python path makes, in the same order, and ends where the Python
 path raises; so every run must give the same values bit for bit, and every early end the same
@@ -14,12 +14,12 @@ import pytest
 import yaml
 from cfmus import build
 
-from cosim import turn
+from cosim.fmi import turn
 from cosim.errors import FMIError
-from cosim.fmu import _CoSimulation, load_fmu, make_slave
-from cosim.observers import Probe
+from cosim.fmi.fmu import _CoSimulation, load_fmu, make_slave
+from cosim.observers.recorders import Probe
 from cosim.run import run_scenario
-from cosim.scenario import parse_scenario
+from cosim.engine.scenario import parse_scenario
 
 pytestmark = pytest.mark.integration
 

@@ -1,4 +1,4 @@
-"""Connections by prefix and by component (cosim.wiring): same wiring as element by element,
+"""Connections by prefix and by component (cosim.engine.wiring): same wiring as element by element,
 mismatches as file:line errors."""
 
 from pathlib import Path
@@ -7,7 +7,7 @@ import pytest
 
 from cosim.errors import CosimError
 from cosim.run import prepare
-from cosim.scenario import load_scenario
+from cosim.engine.scenario import load_scenario
 
 pytestmark = pytest.mark.integration
 ROOT = Path(__file__).parents[2]

@@ -1,4 +1,4 @@
-"""Run logs, baselines and log comparisons (cosim.runlog, cosim.compare) on small synthetic MCAP logs.
+"""Run logs, baselines and log comparisons (cosim.io.runlog, cosim.analysis.compare) on small synthetic MCAP logs.
 
 The logs are written here in the recorder's format (one JSON channel per component,
 ``t`` plus the variables, a titled JSON Schema with units), so every expected figure
@@ -14,9 +14,9 @@ import orjson
 import pytest
 
 from cosim.cli import main
-from cosim.compare import compare_logs, parse_tolerances, tolerance_for
+from cosim.analysis.compare import compare_logs, parse_tolerances, tolerance_for
 from cosim.errors import CosimError
-from cosim.runlog import read_run, write_baseline
+from cosim.io.runlog import read_run, write_baseline
 
 EXACT = 1e-15  # values go through JSON as shortest round-trip reprs: exact up to the arithmetic done here
 
@@ -197,7 +197,7 @@ def test_cli_exit_codes_and_default_tolerances_from_the_baseline(tmp_path, capsy
 
 
 def test_one_error_record_for_runs_reports_and_comparisons():
-    from cosim.stats import ErrorStats
+    from cosim.observers.stats import ErrorStats
 
     s = ErrorStats(name="plant.p.x", unit="m", rmse=1e-3, max_error=2e-3, t_max=0.37, samples=11, tolerance=1e-3)
     expected = "plant.p.x: max |A - B| = 0.002 m at t = 0.370 s, RMSE 0.001 (tolerance 0.001 m)"

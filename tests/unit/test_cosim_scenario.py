@@ -3,8 +3,8 @@
 import pytest
 
 from cosim.errors import AlgebraicLoopError, ScenarioError
-from cosim.scenario import parse_scenario, scenario_json_schema
-from cosim.system import gauss_seidel_order
+from cosim.engine.scenario import parse_scenario, scenario_json_schema
+from cosim.engine.system import gauss_seidel_order
 
 GOOD = """name: t
 components:
@@ -61,7 +61,7 @@ def test_a_yaml_alias_bomb_is_refused_at_once():
     """Nine levels of nine aliases (a 1 kB file, 387 million values expanded) fail in one line (issue 25); before,
     the loader expanded them (8 GB, over 90 s)."""
     from cosim.errors import ScenarioError
-    from cosim.scenario import parse_scenario
+    from cosim.engine.scenario import parse_scenario
 
     levels = ["a0: &a0 [x, x, x, x, x, x, x, x, x]"]
     levels += [f"a{i}: &a{i} [{', '.join([f'*a{i - 1}'] * 9)}]" for i in range(1, 10)]
@@ -73,7 +73,7 @@ def test_a_yaml_alias_bomb_is_refused_at_once():
 def test_a_set_value_alias_bomb_is_refused_as_a_file_is():
     """Every YAML the platform reads goes through one loader with the same bound: a --set value too."""
     from cosim.errors import ScenarioError
-    from cosim.scenario import parse_set_value
+    from cosim.engine.scenario import parse_set_value
 
     levels = "[&a0 [1, 1, 1, 1, 1, 1, 1, 1, 1]" + "".join(
         f", &a{i} [{', '.join([f'*a{i - 1}'] * 9)}]" for i in range(1, 9)) + "]"

@@ -13,7 +13,7 @@ from delta.errors import CosimError
 @pytest.mark.parametrize("module,name,builtin", [
     ("fmus.builder", "BuildError", RuntimeError),
     ("fmus.registry", "AdapterError", ImportError),
-    ("cosim.integrators", "IntegratorError", RuntimeError),
+    ("cosim.fmi.integrators", "IntegratorError", RuntimeError),
     ("cosim.errors", "UnknownSignalError", KeyError),
     ("multibody.plant", "PlantError", RuntimeError),
     ("multibody.plant", "RobotTypeError", TypeError),
@@ -40,7 +40,7 @@ def test_solver_settings_raise_a_parameter_error(settings):
 
 
 def test_unknown_solver_is_a_parameter_error():
-    from cosim.integrators import make_integrator
+    from cosim.fmi.integrators import make_integrator
     from delta.errors import ParameterError
 
     with pytest.raises(ParameterError, match="unknown solver 'euler'; valid: cvode, dop853"):

@@ -9,14 +9,14 @@ import math
 
 import pytest
 
-from cosim.integrators import SOLVERS, make_integrator
+from cosim.fmi.integrators import SOLVERS, make_integrator
 
 RTOL = 1e-10
 ROOT_ATOL = 1e-9  # s: both locate roots to ~100 eps (|t| + |h|); the state error at rtol 1e-10 dominates
 
 
 class Decay:
-    """An OdeModel (cosim.integrators) over ctypes-like arrays, counting right-hand-side calls."""
+    """An OdeModel (cosim.fmi.integrators) over ctypes-like arrays, counting right-hand-side calls."""
 
     nx, nz = 1, 1
 
@@ -97,7 +97,7 @@ class Blowup(Decay):
 
 @pytest.mark.parametrize("solver", SOLVERS)
 def test_a_diverging_model_fails_with_a_reason_instead_of_stalling(solver):
-    from cosim.integrators import IntegratorError
+    from cosim.fmi.integrators import IntegratorError
 
     integ = make_integrator(solver, Blowup(), 0.0, 1e-8, math.inf)
     with pytest.raises(IntegratorError) as err:

@@ -1,4 +1,4 @@
-"""The run log's writer (cosim.log_writer): sample and block messages from raw rows, the MCAP file it
+"""The run log's writer (cosim.observers.log_writer): sample and block messages from raw rows, the MCAP file it
 writes in both layouts (read back by the ``mcap`` reader, indexes and statistics included), the writer
 process with its failure report, and the unfinished file a killed or orphaned writer process leaves
 (recovered by ``cosim recover``)."""
@@ -15,11 +15,11 @@ import pytest
 from mcap.reader import make_reader
 from mcap.stream_reader import StreamReader
 
-from cosim.fmu import BOOLEAN, REAL
-from cosim.log_writer import (BlockLayout, LogSink, WriterFailed, WriterProcess, encode_block, encode_samples,
+from cosim.fmi.fmu import BOOLEAN, REAL
+from cosim.observers.log_writer import (BlockLayout, LogSink, WriterFailed, WriterProcess, encode_block, encode_samples,
                               row_format)
-from cosim.publish import block_layout
-from cosim.runlog import samples
+from cosim.observers.publish import block_layout
+from cosim.io.runlog import samples
 
 # a row: 2 doubles (p), an FMI 2 Boolean (C int), an FMI 3 Boolean (C bool), an Int64 array of 2
 FMT = row_format(ctypes.c_double, 2) + row_format(ctypes.c_int32, 1) + row_format(ctypes.c_bool, 1) \
@@ -75,8 +75,8 @@ def test_sample_messages_joined_in_c_and_in_python_are_the_same_bytes(monkeypatc
     Booleans of both FMI versions, arrays), and the C join refuses arrays that do not hold the samples."""
     import random
 
-    from cosim import log_writer
-    from cosim.turn import samples_helper
+    from cosim.observers import log_writer
+    from cosim.fmi.turn import samples_helper
 
     rnd = random.Random(23)
     specials = [0.0, -0.0, 5e-324, 1e300, -1.5e-7, 1e16, 123456789.0, float("nan"), float("inf"), -float("inf")]
@@ -212,8 +212,8 @@ def _recovered(path, tmp_path, messages: int) -> dict:
     """Recover ``path`` (which the indexed reader refuses: no summary): its ``messages`` and the signals."""
     from mcap.exceptions import McapError
 
-    from cosim.recover import recover
-    from cosim.runlog import read_run
+    from cosim.io.recover import recover
+    from cosim.io.runlog import read_run
 
     with open(path, "rb") as f, pytest.raises(McapError):  # unfinished: no footer, no summary
         make_reader(f).get_summary()

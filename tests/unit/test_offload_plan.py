@@ -4,10 +4,10 @@ from __future__ import annotations
 
 import pytest
 
-from cosim import offload
-from cosim.fmu import Variable
-from cosim.offload import AUTO_MIN_STEPS, choose, feedforward
-from cosim.system import Link, Port, SystemPlan
+from cosim.engine import offload
+from cosim.fmi.fmu import Variable
+from cosim.engine.offload import AUTO_MIN_STEPS, choose, feedforward
+from cosim.engine.system import Link, Port, SystemPlan
 
 
 def _var(name: str, causality: str, kind: str = "Real") -> Variable:

@@ -1,5 +1,5 @@
 """Trajectory FMU parameters <-> delta.trajectories dataclasses, and the scenario's trajectory section
-as the one source of the trajectory component's parameters (cosim.preflight.trajectory_start_values)."""
+as the one source of the trajectory component's parameters (cosim.engine.preflight.trajectory_start_values)."""
 
 from __future__ import annotations
 
@@ -10,8 +10,8 @@ import pytest
 pytest.importorskip("pythonfmu")
 
 from cosim.errors import ScenarioError  # noqa: E402
-from cosim.preflight import trajectory_start_values  # noqa: E402
-from cosim.scenario import apply_overrides, parse_scenario  # noqa: E402
+from cosim.engine.preflight import trajectory_start_values  # noqa: E402
+from cosim.engine.scenario import apply_overrides, parse_scenario  # noqa: E402
 from delta.trajectories import Helix, PickAndPlace, PointToPoint, Waypoints  # noqa: E402
 from fmus.adapters.trajectories import (  # noqa: E402
     ADAPTERS,

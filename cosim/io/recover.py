@@ -6,7 +6,7 @@ import os
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
-from .errors import CosimError
+from ..errors import CosimError
 
 __all__ = ["recover", "RecoveryReport"]
 

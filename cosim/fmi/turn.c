@@ -1,4 +1,4 @@
-/* The master's per-step FMI calls in one call from Python each (see cosim/turn.py):
+/* The master's per-step FMI calls in one call from Python each (see cosim/fmi/turn.py):
  * - cosim_turn: one co-simulation component's turn of a Gauss-Seidel macro step: set its inputs,
  *   doStep, get its outputs, check its real outputs for NaN and infinity;
  * - cosim_rhs: one right-hand side of a model-exchange FMU for the master's integrator: set the time,
@@ -135,7 +135,7 @@ int cosim_rhs(Rhs *r, const double *x, double *dx)
     return RHS_OK;
 }
 
-/* The log writer's messages of a block of samples in the samples layout (cosim/log_writer.py,
+/* The log writer's messages of a block of samples in the samples layout (cosim/observers/log_writer.py,
  * encode_samples): the block's times and values as orjson wrote them, two JSON arrays (times: n
  * elements; values: n * width, sample after sample) whose elements are numbers, true, false or null,
  * none holding a comma, joined with the channel's joints (the bytes before the time, between the

@@ -14,14 +14,14 @@ scenario as an SSP archive that any SSP tool can run:
   :func:`cosim.run.prepare`: explicit parameters, our trajectory FMUs' parameters from the
   ``trajectory:`` section and the plant's initial state), bound through ``ssd:ParameterBinding``;
 - ``resources/<name>.fmu``: the FMUs;
-- a root annotation of type ``org.delta-cosim.scenario`` holding what SSP has no place for
+- a root annotation of type ``org.delta-cosim.engine.scenario`` holding what SSP has no place for
   (algorithm, robot, trajectory for the pre-flight, comparison, checks, logging, per-component
   solver options) as JSON, so our master runs the archive exactly as the YAML. Other tools ignore
   it. ``initial_state.from_trajectory`` is written false: its values are in the plant's .ssv.
 
 Import (:func:`open_ssp`, ``python -m cosim run|check SYSTEM.ssp``) reads any SSP 1.0 archive with
 FMU components (ours or another tool's): the .ssd, its parameter bindings (.ssv files or inline
-parameter sets), the FMUs from the archive, and builds the same :class:`cosim.scenario.Scenario`
+parameter sets), the FMUs from the archive, and builds the same :class:`cosim.engine.scenario.Scenario`
 the YAML loader builds, run by the normal :func:`cosim.run.run_scenario`. The base step comes from
 the OSP annotation, else from the FMUs' default experiments (the smallest), else ``--step``; the
 stop time from the default experiment, else the FMUs', else ``--stop-time``. The archive is
@@ -57,11 +57,11 @@ from typing import TYPE_CHECKING, Any, Iterator
 from urllib.parse import unquote, urlparse
 from xml.etree import ElementTree as ET
 
-from .errors import Issue, ScenarioError
-from .fmu import MAX_FMU_BYTES, SSP_PREFIX, sweep_orphans
+from ..errors import Issue, ScenarioError
+from ..fmi.fmu import MAX_FMU_BYTES, SSP_PREFIX, sweep_orphans
 
 if TYPE_CHECKING:  # the CLI imports this module to register its command: keep pydantic out of that
-    from .scenario import Scenario
+    from ..engine.scenario import Scenario
 
 __all__ = ["SspError", "ExportReport", "export_ssp", "read_ssp", "open_ssp", "is_ssp", "NS", "SSD_NAME", "register"]
 
@@ -76,7 +76,7 @@ NS = {
 }
 SSD_NAME = "SystemStructure.ssd"
 OSP_ANNOTATION = "com.opensimulationplatform"
-OUR_ANNOTATION = "org.delta-cosim.scenario"
+OUR_ANNOTATION = "org.delta-cosim.engine.scenario"
 FMU_TYPE = "application/x-fmu-sharedlibrary"
 PARAMETER_SET_TYPE = "application/x-ssp-parameter-set"
 _IMPLEMENTATION = {"cs": "CoSimulation", "me": "ModelExchange"}
@@ -188,7 +188,7 @@ def _extras(scenario: Scenario) -> dict[str, Any]:
     data["logging"] = logging
     if data.get("initial_state"):
         data["initial_state"] = {**data["initial_state"], "from_trajectory": False}  # values are in the .ssv
-    from .scenario import Component
+    from ..engine.scenario import Component
 
     defaults = {k: Component.model_fields[k].default for k in _COMPONENT_OPTIONS}
     options = {}
@@ -208,7 +208,7 @@ def export_ssp(scenario: Scenario, out: str | Path) -> ExportReport:
     1.0 cannot express.
     """
     from .output import check_output
-    from .run import input_files, prepare
+    from ..run import input_files, prepare
 
     out = Path(out)
     plan, _ = prepare(scenario)
@@ -448,7 +448,7 @@ def _time(x: float) -> float:
 
 
 def read_ssp(ssp: str | Path, workdir: str | Path) -> dict[str, Any]:
-    """Read ``ssp`` into scenario data (the mapping :func:`cosim.scenario.scenario_from_data` takes).
+    """Read ``ssp`` into scenario data (the mapping :func:`cosim.engine.scenario.scenario_from_data` takes).
 
     The FMUs are unpacked into ``workdir`` (component ``path`` entries point there). The time
     grid may lack ``step`` or ``stop`` when neither the SSD nor the FMUs give one (the caller's
@@ -620,7 +620,7 @@ def open_ssp(ssp: str | Path, overrides: dict[tuple, Any] | None = None) -> Iter
     """The scenario of an SSP archive, valid inside the ``with`` block (its FMUs are unpacked into a
     temporary directory removed when the block ends, also on error).
 
-    ``overrides`` as for :func:`cosim.scenario.load_scenario` (``--set``, ``--stop-time``, and
+    ``overrides`` as for :func:`cosim.engine.scenario.load_scenario` (``--set``, ``--stop-time``, and
     ``("time", "step")`` for ``--step``).
     """
     ssp = Path(ssp)
@@ -635,7 +635,7 @@ def open_ssp(ssp: str | Path, overrides: dict[tuple, Any] | None = None) -> Iter
             what = " and ".join(f"the {'base step' if k == 'step' else 'stop time'}" for k, _ in missing)
             raise SspError(ssp, f"{what}: neither the SSD's default experiment nor the FMUs give it; "
                                 f"pass {' and '.join(f for _, f in missing)}")
-        from .scenario import scenario_from_data
+        from ..engine.scenario import scenario_from_data
 
         yield scenario_from_data(data, str(ssp), overrides)
     finally:
@@ -667,7 +667,7 @@ def register(sub) -> None:
 
 
 def _cmd_export(args) -> int:
-    from .scenario import apply_overrides, load_scenario
+    from ..engine.scenario import apply_overrides, load_scenario
 
     rep = export_ssp(load_scenario(args.scenario, apply_overrides(args.set, args.stop_time)), args.out)
     if args.json:

@@ -3,7 +3,7 @@
 ``python -m cosim sweep SCENARIO --grid ctl.gain.kp=1e4,4e4 --random plant.mass.payload=uniform(0,0.5) -n 8``
 
 - Cases are the cartesian product of the ``--grid`` axes, times ``-n`` random draws (seeded)
-  of the ``--random`` ones. Names are those of ``--set`` (:func:`cosim.scenario.resolve_name`).
+  of the ``--random`` ones. Names are those of ``--set`` (:func:`cosim.engine.scenario.resolve_name`).
 - The scenario file is read once; each case is that scenario with its overrides, validated
   (every case before anything runs) and sent to a worker as it is (a frozen Scenario, plain
   data). Our FMUs are built once, before the sweep, and reach the workers as file paths; FMU
@@ -39,10 +39,10 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from .errors import CosimError
+from ..errors import CosimError
 
 if TYPE_CHECKING:
-    from .scenario import Scenario
+    from ..engine.scenario import Scenario
 
 __all__ = [
     "RESULTS",
@@ -78,7 +78,7 @@ class Case:
 
 
 def _value(text: str, where: str) -> Any:
-    from .scenario import parse_set_value
+    from ..engine.scenario import parse_set_value
 
     return parse_set_value(text.strip(), where)
 
@@ -173,15 +173,15 @@ def _failed(exc: Exception, t0: float) -> dict[str, Any]:
 
 def run_loaded_case(scenario: Scenario, fmu_files: dict[tuple[str, bool, int], str],
                     mcap: str | None = None) -> dict[str, Any]:
-    """Run one case, a loaded :class:`~cosim.scenario.Scenario` (in a Dask worker, or here); never
+    """Run one case, a loaded :class:`~cosim.engine.scenario.Scenario` (in a Dask worker, or here); never
     raises for a failing case.
 
     ``fmu_files``: our FMUs by :func:`cosim.run.build_key`, built beforehand. The run is serial in its process
     (``parallel: off``: the sweep already uses the cores). Returns the row of ``results.csv``
     without the parameter columns: status, message, metrics, checks, mcap.
     """
-    from . import api
-    from .run import run_scenario
+    from .. import api
+    from ..run import run_scenario
 
     t0 = time.perf_counter()
     row: dict[str, Any] = {"status": "failed", "message": "", "checks": "", "mcap": ""}
@@ -239,7 +239,7 @@ def read_results(out: str | Path) -> list[dict[str, str]]:
 
 def prebuild(scenarios: Iterable[Any]) -> dict[tuple[str, bool, int], str]:
     """Build each of our FMUs the cases use, once; :func:`cosim.run.build_key` -> absolute path."""
-    from .run import build_key, build_ours
+    from ..run import build_key, build_ours
 
     keys = sorted({build_key(sc, c.fmu) for sc in scenarios for c in sc.components.values() if c.fmu is not None})
     return {k: str(Path(build_ours(*k)).resolve()) for k in keys}
@@ -248,8 +248,8 @@ def prebuild(scenarios: Iterable[Any]) -> dict[tuple[str, bool, int], str]:
 def _check_names(scenarios: list[Any], fmu_files: dict[tuple[str, bool, int], str]) -> None:
     """Resolve every case's parameter names and values against the FMUs (no instantiation), so a
     misspelt name stops the sweep before it starts (ScenarioError / WiringError, exit 2)."""
-    from .run import locate_fmus
-    from .system import build_plan
+    from ..run import locate_fmus
+    from ..engine.system import build_plan
 
     infos = None
     for sc in scenarios:
@@ -280,8 +280,8 @@ def run_sweep(scenario: str | Path, cases: list[Case], out: str | Path, *, worke
     ``on_progress(done, failed, total)`` after each case. Raises :class:`ScenarioError` for a bad
     override name or value (checked for every case before anything runs).
     """
-    from . import api
-    from .scenario import dotted_overrides, read_scenario
+    from .. import api
+    from ..engine.scenario import dotted_overrides, read_scenario
 
     t_start = time.perf_counter()
     scenario = str(Path(scenario).resolve())
@@ -438,7 +438,7 @@ class SweepCluster:
             self.cluster.close()
 
 
-# Worker preload (``LocalCluster(preload=["cosim.sweep"])``, or ``dask worker --preload cosim.sweep``).
+# Worker preload (``LocalCluster(preload=["cosim.analysis.sweep"])``, or ``dask worker --preload cosim.analysis.sweep``).
 _TORN_DOWN = False
 
 
@@ -468,7 +468,7 @@ def _exit_now() -> None:
     import logging
     import sys
 
-    from .errors import exit_now
+    from ..errors import exit_now
 
     if not _TORN_DOWN:
         return
@@ -605,7 +605,7 @@ def register(sub) -> None:
 
 
 def _cmd_sweep(args) -> int:
-    from .scenario import parse_set_value
+    from ..engine.scenario import parse_set_value
 
     if args.n is not None and not 1 <= args.n <= MAX_CASES:
         raise SweepError(f"-n must be from 1 to {MAX_CASES}, got {args.n}")

@@ -4,7 +4,7 @@ One protocol, :class:`Slave`, over four wrappers: FMI 2.0 and 3.0, co-simulation
 and model exchange. Model-exchange FMUs are integrated by the master as FMPy's and
 OMSimulator's loops do it (one continuous integration across communication points,
 re-started only after an event or an input change; time, state and step events;
-event iteration; termination); the numerics live in :mod:`cosim.integrators`.
+event iteration; termination); the numerics live in :mod:`cosim.fmi.integrators`.
 
 Every FMI 3.0 variable type is exchanged: Float32/64, Int8..UInt64, Boolean, String,
 Binary, Enumeration, and arrays (buffers hold every element; ``Variable.shape`` gives the
@@ -13,7 +13,7 @@ dimensions, fixed or from structural parameters). Clocks are rejected when loadi
 Every FMI status passes through :meth:`_Base._check` (the hot path calls the C functions
 directly with pre-built ctypes buffers; a co-simulation FMU's Gauss-Seidel turn, set, doStep
 and get, and a model-exchange FMU's right-hand side, set time, set states and get derivatives,
-are one call each into :mod:`cosim.turn` where that helper can be built); a failure raises
+are one call each into :mod:`cosim.fmi.turn` where that helper can be built); a failure raises
 :class:`~cosim.errors.FMIError` naming the component, the function, the simulation time and
 the FMU's last log message.
 An FMU that asks to end the simulation raises :class:`Terminated`, which the algorithm
@@ -43,7 +43,7 @@ from typing import Any, Callable, Iterable, Protocol, Sequence
 
 from fmus.requirements import release_pythonfmu_state
 
-from .errors import ComponentSourceError, FMIError, Issue, ScenarioError, printable
+from ..errors import ComponentSourceError, FMIError, Issue, ScenarioError, printable
 from .turn import DERIVATIVES, GET, SET, STATES, STEP, TIME, Exchange, Finite, make_rhs, make_turn
 
 isfinite = math.isfinite  # a module global: one lookup less per output buffer in the hot path
@@ -344,7 +344,7 @@ def load_fmu(path: str | Path) -> FMUInfo:
 
 
 _PREFIX = "cosim-fmu-"  # extraction directories: cosim-fmu-<pid>-<FMU stem>-<random>
-SSP_PREFIX = "cosim-ssp-"  # unpacked SSP archives (cosim.ssp.open_ssp): cosim-ssp-<pid>-<archive stem>-<random>
+SSP_PREFIX = "cosim-ssp-"  # unpacked SSP archives (cosim.io.ssp.open_ssp): cosim-ssp-<pid>-<archive stem>-<random>
 
 
 def sweep_orphans() -> None:
@@ -826,14 +826,14 @@ class _MEMixin:
     event_log: list[tuple[float, str]]  # (time, kind: state/time/step/input) not yet taken by an observer
     _continuous = False  # in continuous-time mode (after the initial event iteration)
     _c_rhs: Callable[[Any, Any], int] | None = None  # the C right-hand side (None: the Python calls)
-    _rhs_state: Any = None  # its cosim.turn.Rhs
+    _rhs_state: Any = None  # its cosim.fmi.turn.Rhs
 
-    # -- the integrator's view (cosim.integrators.OdeModel): a failing status raises FMIError,
+    # -- the integrator's view (cosim.fmi.integrators.OdeModel): a failing status raises FMIError,
     #    which the integrator re-raises from advance()
     def rhs(self, t, x, dx):
         """The derivatives ``dx`` at time ``t`` and states ``x`` (``c_double`` arrays or pointers of ``nx``
         values): :meth:`set_time`, :meth:`set_x`, :meth:`get_dx`, in one C call where the helper of
-        :mod:`cosim.turn` is available, raising as those do."""
+        :mod:`cosim.fmi.turn` is available, raising as those do."""
         c_rhs = self._c_rhs
         if c_rhs is None:
             self.set_time(t)
@@ -1031,11 +1031,11 @@ class _MEMixin:
 
 class _CoSimulation:
     """Co-simulation (FMI 2.0 and 3.0): a Gauss-Seidel turn (set, doStep, get, NaN check) in one C call
-    (:mod:`cosim.turn`) where the helper is available and the FMU exchanges numbers only."""
+    (:mod:`cosim.fmi.turn`) where the helper is available and the FMU exchanges numbers only."""
 
     _flags: list[Any] | None = None  # FMI 3.0 doStep's outputs
     _c_turn: Callable[[], int] | None = None  # the C turn, bound after initialization (None: none for this FMU)
-    _turn_state: Any = None  # its cosim.turn.Turn
+    _turn_state: Any = None  # its cosim.fmi.turn.Turn
 
     def bind(self, inputs: list[Variable], outputs: list[Variable]) -> None:
         super().bind(inputs, outputs)

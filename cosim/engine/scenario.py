@@ -19,7 +19,7 @@ from pydantic import BaseModel, ConfigDict, Field, PrivateAttr, ValidationError,
 
 from delta.trajectories import TYPES as TRAJECTORY_TYPES
 
-from .errors import Issue, ScenarioError
+from ..errors import Issue, ScenarioError
 
 __all__ = [
     "Scenario",
@@ -91,7 +91,7 @@ class Component(_Model):
 
 class Connection(_Model):
     """``from: comp.var`` -> ``to: comp.var``; a prefix (``traj.p_ref``: ``.x/.y/.z``, ``[1]..[n]``) or two
-    components (``from: traj, to: ik``: outputs to the inputs of the same names) wire several (cosim.wiring)."""
+    components (``from: traj, to: ik``: outputs to the inputs of the same names) wire several (cosim.engine.wiring)."""
 
     model_config = ConfigDict(extra="forbid", frozen=True, populate_by_name=True)
     src: str = Field(alias="from", description="output, as component.variable")
@@ -203,7 +203,7 @@ class SceneSpec(_Model):
 
 class Logging(_Model):
     """MCAP recording. ``signals``: all inputs and outputs, or outputs only; ``layout``: one message per
-    sample or per block of samples on the component channels (:mod:`cosim.publish`)."""
+    sample or per block of samples on the component channels (:mod:`cosim.observers.publish`)."""
 
     enabled: bool = True
     out: str | None = Field(None, description="MCAP path (default runs/<scenario name>.mcap)")
@@ -297,7 +297,7 @@ class Scenario(_Model):
     _lines: dict[tuple, int] = PrivateAttr(default_factory=dict)
     _origins: dict[tuple, str] = PrivateAttr(default_factory=dict)
     # overridden component parameters as written, where they hold a WrittenNumber (its text): the
-    # values the FMU variables type (cosim.system.build_plan)
+    # values the FMU variables type (cosim.engine.system.build_plan)
     _written: dict[tuple, Any] = PrivateAttr(default_factory=dict)
 
     @field_validator("parallel", mode="after")
@@ -670,7 +670,7 @@ class WrittenNumber(float):
 
     It is the number everywhere (the scenario holds a float, a sweep's case id and table show it);
     a component parameter given so is typed by its FMU variable from the text
-    (:func:`cosim.system.typed_value`): a Real or an Integer takes the number, a String the text as
+    (:func:`cosim.engine.system.typed_value`): a Real or an Integer takes the number, a String the text as
     written (``"1e3"``, not ``"1000.0"``).
     """
 

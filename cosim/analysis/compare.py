@@ -25,9 +25,9 @@ from typing import Callable, Mapping, Sequence
 
 import numpy as np
 
-from .errors import CosimError, Issue, ScenarioError
-from .runlog import RunLog, Signal, read_run
-from .stats import ErrorStats
+from ..errors import CosimError, Issue, ScenarioError
+from ..io.runlog import RunLog, Signal, read_run
+from ..observers.stats import ErrorStats
 
 __all__ = ["Comparison", "compare_logs", "compare_plants", "tolerance_for", "parse_tolerances",
            "logged_tolerances", "PLANTS"]
@@ -141,7 +141,7 @@ def logged_tolerances(log: RunLog) -> dict[str, float]:
     """``regression.tolerances`` of the scenario attached to ``log`` ({} when it has none)."""
     import yaml
 
-    from .scenario import load_yaml
+    from ..engine.scenario import load_yaml
 
     for name, data in log.attachments.items():
         if name.startswith("scenario/") and not name.endswith(".ssp"):  # a YAML scenario, not an SSP archive
@@ -295,8 +295,8 @@ def compare_plants(path: str | Path, plants: Sequence[str] = ("exudyn", "analyti
     Logs go to ``out_dir/<scenario>.<plant>.mcap``. ``on_run(plant, RunResult)`` is called
     after each run. Returns (comparison, [RunResult, RunResult]).
     """
-    from .run import run_scenario
-    from .scenario import load_scenario
+    from ..run import run_scenario
+    from ..engine.scenario import load_scenario
 
     if len(plants) != 2:
         raise CosimError(f"--plants needs exactly two plants, got {len(plants)}: {', '.join(plants)}")

@@ -2,8 +2,8 @@
 
 ``python -m cosim run SCENARIO --live [PORT]`` adds a :class:`LiveView` to the run. It starts a
 Foxglove WebSocket server (subprotocol ``foxglove.sdk.v1``) and attaches a sink to the run's
-:class:`cosim.publish.Publisher` that logs every channel into the server's ``foxglove.Context``
-(component samples encoded by :func:`cosim.log_writer.encode_messages` in the scenario's
+:class:`cosim.observers.publish.Publisher` that logs every channel into the server's ``foxglove.Context``
+(component samples encoded by :func:`cosim.observers.log_writer.encode_messages` in the scenario's
 ``logging.layout``, one message per sample by default, as for the log), so a viewer connected to
 ``ws://localhost:PORT`` (the Foxglove app: *Open connection*, *Foxglove WebSocket*) sees exactly
 the channels, schemas and 3D scene of the MCAP log, message for message, while the log is still
@@ -17,8 +17,8 @@ from __future__ import annotations
 import socket
 from collections.abc import Sequence
 
-from .algorithm import Runtime
-from .errors import CosimError
+from ..engine.algorithm import Runtime
+from ..errors import CosimError
 from .log_writer import FoxgloveChannels
 from .publish import Publisher
 
@@ -56,7 +56,7 @@ def _check_free(host: str, port: int) -> None:
 
 
 class _ContextSink(FoxgloveChannels):
-    """A publisher's sink logging into a ``foxglove.Context`` (see :class:`cosim.publish.Publisher`)."""
+    """A publisher's sink logging into a ``foxglove.Context`` (see :class:`cosim.observers.publish.Publisher`)."""
 
     def __init__(self, context) -> None:
         self._context = context

@@ -2,10 +2,10 @@
 
 A :class:`Publisher` is an observer that declares the run's channels and publishes every
 exchanged signal to its sinks. Every sink receives the same channels, schemas and messages:
-the MCAP file (:class:`cosim.mcap_log.McapRecorder`), the Foxglove WebSocket server
-(:class:`cosim.live.LiveView`), or both. One formula per message, in one place: a component's
+the MCAP file (:class:`cosim.observers.mcap_log.McapRecorder`), the Foxglove WebSocket server
+(:class:`cosim.observers.live.LiveView`), or both. One formula per message, in one place: a component's
 samples leave the master as blocks of rows of raw values (cheap for the master's loop), turned
-into JSON messages by :func:`cosim.log_writer.encode_messages` in the sink (in the log's writer
+into JSON messages by :func:`cosim.observers.log_writer.encode_messages` in the sink (in the log's writer
 process, or for the live view).
 
 Channels (JSON encoding, each with a titled JSON Schema):
@@ -23,7 +23,7 @@ Channels (JSON encoding, each with a titled JSON Schema):
     simulated time (sooner when a block is full) logged at its last sample's stamp; each property of the
     schema is an array of the sample's type. Cheaper to write; viewers see arrays.
 
-  :mod:`cosim.runlog` reads both alike;
+  :mod:`cosim.io.runlog` reads both alike;
 - ``/scene``: ``foxglove.SceneUpdate`` at ``scene_rate_hz``: the robot (rails or arms,
   rods, platform) and the platform's trail over the last ``trail_s`` seconds;
 - ``/scene/reference``: ``foxglove.SceneUpdate``, the reference path as a line: the whole
@@ -33,13 +33,13 @@ Channels (JSON encoding, each with a titled JSON Schema):
   ``base -> platform`` (the platform position);
 - ``/events``: events of model-exchange components (time, component, kind).
 
-Scene and transform messages use Foxglove's published schemas (:mod:`cosim.foxglove_schemas`).
+Scene and transform messages use Foxglove's published schemas (:mod:`cosim.observers.foxglove_schemas`).
 
 Time stamps: a message's log time is its simulation time plus :attr:`Publisher.offset_ns`:
 with ``stamps="wall"`` (default) the wall clock at the run's start minus the simulated start,
 so viewers show the real date; with ``stamps="simulation"`` zero. The ``"t"`` field of every
 message is the simulation time in s either way, and the log's ``time`` metadata record keeps
-the offset (:func:`cosim.runlog.time_offset_ns` reads it back; logs without it have offset 0).
+the offset (:func:`cosim.io.runlog.time_offset_ns` reads it back; logs without it have offset 0).
 
 Inputs are published with the value held over the step that ends at the stamp; outputs with
 their value at the stamp.
@@ -57,9 +57,9 @@ from typing import Any
 import numpy as np
 import orjson
 
-from .algorithm import Runtime
-from .errors import CosimError
-from .fmu import BINARY, BOOLEAN, INTEGER, REAL, STRING
+from ..engine.algorithm import Runtime
+from ..errors import CosimError
+from ..fmi.fmu import BINARY, BOOLEAN, INTEGER, REAL, STRING
 
 __all__ = [
     "EVENTS_SCHEMA",
@@ -172,7 +172,7 @@ class _Rows:
     __slots__ = ("cid", "cap", "capture", "stamps", "data", "raw", "sources")
 
     def __init__(self, cid: int, runs, readers, block_bytes: int):
-        from .algorithm import byte_view
+        from ..engine.algorithm import byte_view
 
         self.cid = cid
         self.stamps: list[int] = []
@@ -370,7 +370,7 @@ def reference_path(scenario) -> np.ndarray | None:
     spec = getattr(scenario, "trajectory", None)
     if spec is None:
         return None
-    from .preflight import make_trajectory, sampled_positions
+    from ..engine.preflight import make_trajectory, sampled_positions
 
     t0, t1 = scenario.time.start, scenario.time.stop
     n = int(min(_REFERENCE_POINTS, max(2, round((t1 - t0) / scenario.time.step) + 1)))
@@ -383,14 +383,14 @@ def reference_path(scenario) -> np.ndarray | None:
 class Publisher:
     """Observer publishing the run's channels to its sinks (see the module docstring).
 
-    A sink (the MCAP log's :class:`cosim.log_writer.LogSink` or writer process, the live view's
+    A sink (the MCAP log's :class:`cosim.observers.log_writer.LogSink` or writer process, the live view's
     Foxglove channels) is attached before :meth:`start` and receives, in the run's order:
 
     - ``channel(cid, topic, schema_name, schema_json, metadata, layout)``: a channel ``cid`` (0, 1, ...);
-      ``layout`` (:class:`cosim.log_writer.BlockLayout`) for a component channel, else None;
+      ``layout`` (:class:`cosim.observers.log_writer.BlockLayout`) for a component channel, else None;
     - ``blocks(offset_ns, blocks)``: samples of component channels, ``(cid, stamps, rows, skip)`` each
       (simulation ns; raw values, see :class:`_Rows` and :class:`_Joint`), made into the channel's
-      messages in its layout by :func:`cosim.log_writer.encode_messages` (log times: stamps +
+      messages in its layout by :func:`cosim.observers.log_writer.encode_messages` (log times: stamps +
       ``offset_ns``);
     - ``message(cid, log_time, data)``: any other message, JSON encoded.
 

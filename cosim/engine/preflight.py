@@ -15,7 +15,7 @@ from typing import Any
 
 import numpy as np
 
-from .errors import Issue, PreflightError, ScenarioError
+from ..errors import Issue, PreflightError, ScenarioError
 from .scenario import Scenario, TrajectorySpec, line_for
 
 __all__ = ["make_trajectory", "check_positions", "sampled_positions", "preflight", "initial_state_values", "trajectory_start_values"]

@@ -11,7 +11,7 @@ all step, then all outputs are read.
 
 Observers are called after each macro step with the components that stepped.
 A stop request (SIGINT, SIGTERM) is honoured between macro steps, never inside an FMU call;
-a component that never returns is the watchdog's (:mod:`cosim.watchdog`).
+a component that never returns is the watchdog's (:mod:`cosim.engine.watchdog`).
 """
 
 from __future__ import annotations
@@ -24,8 +24,8 @@ import time as _time
 from dataclasses import dataclass, field
 from typing import Any, Callable, Protocol, Sequence
 
-from .errors import STOP_SIGNALS
-from .fmu import Slave, Terminated
+from ..errors import STOP_SIGNALS
+from ..fmi.fmu import Slave, Terminated
 from .system import SystemPlan
 
 __all__ = ["Observer", "Runtime", "initialize", "simulate", "StopRequest"]
@@ -83,7 +83,7 @@ class Runtime:
         return [[c for c in self.plan.order if k % self.multiples[c] == 0] for k in range(period)]
 
     def where(self, port: Any) -> tuple[Any, int]:
-        """(values array, index) of a resolved :class:`~cosim.system.Port` (an array's first element)."""
+        """(values array, index) of a resolved :class:`~cosim.engine.system.Port` (an array's first element)."""
         arr, i = self.slaves[port.comp].locate(port.var, port.var.causality == "output")
         return arr, i + port.offset
 
@@ -175,7 +175,7 @@ class StopRequest:
         self.request(signum)
 
     def interrupted(self) -> BaseException:
-        from .errors import Interrupted
+        from ..errors import Interrupted
 
         return Interrupted(self.signum or signal.SIGINT)
 

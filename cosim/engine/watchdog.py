@@ -33,7 +33,7 @@ import threading
 import time
 from typing import Any, Callable
 
-from .errors import Interrupted, StallError, exit_now, exit_status, exit_text
+from ..errors import Interrupted, StallError, exit_now, exit_status, exit_text
 
 __all__ = ["Watchdog", "GRACE_S"]
 
@@ -49,7 +49,7 @@ class Watchdog:
     in the main thread around initialization and the run loop.
 
     ``budget``: wall-clock seconds a step may take (None: no stall check, signals only);
-    ``stop``: the run's :class:`~cosim.algorithm.StopRequest`; ``abort(error)``: the hard
+    ``stop``: the run's :class:`~cosim.engine.algorithm.StopRequest`; ``abort(error)``: the hard
     shutdown, called from the watchdog's thread when the main thread does not unwind.
     """
 
@@ -138,7 +138,7 @@ class Watchdog:
 
     def _where(self) -> tuple[str, float, str]:
         """(component, simulation time, where it runs) of the innermost slave call on the main thread's stack."""
-        from .fmu import _Base
+        from ..fmi.fmu import _Base
         from .offload import Proxy
 
         frame = sys._current_frames().get(self._main)

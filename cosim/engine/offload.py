@@ -36,10 +36,10 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from . import fmu as _fmu
+from ..fmi import fmu as _fmu
 from .algorithm import Runtime, byte_view, initialize, simulate
-from .errors import STOP_SIGNALS, CosimError
-from .fmu import PY_KINDS, Terminated, Variable, cleanup_extracted, load_fmu, make_slave
+from ..errors import STOP_SIGNALS, CosimError
+from ..fmi.fmu import PY_KINDS, Terminated, Variable, cleanup_extracted, load_fmu, make_slave
 from .system import Link, Port, SystemPlan
 
 __all__ = ["AUTO_MIN_STEPS", "RING", "feedforward", "choose", "Offload", "Proxy"]
@@ -83,7 +83,7 @@ def usable_cpus() -> int:
 def choose(plan: SystemPlan, mode: str, n_steps: int, writer_process: bool = False) -> tuple[list[int], str]:
     """Components to offload under ``mode`` (auto, on, off) and a note saying why or why not.
 
-    ``writer_process``: the run's log is written by a writer process (:class:`cosim.log_writer.WriterProcess`),
+    ``writer_process``: the run's log is written by a writer process (:class:`cosim.observers.log_writer.WriterProcess`),
     which takes the other CPU too. With fewer than three CPUs, ``auto`` then runs serially when the
     feed-forward group holds compiled FMUs only: each step of theirs costs the master about a microsecond,
     which a worker hardly saves, while its own steps take CPU time from the writer (helix_ctc_analytic, native

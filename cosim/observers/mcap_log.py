@@ -1,21 +1,21 @@
-"""MCAP recorder: an observer that writes the run's channels (:mod:`cosim.publish`) to an MCAP file.
+"""MCAP recorder: an observer that writes the run's channels (:mod:`cosim.observers.publish`) to an MCAP file.
 
-- the channels, schemas and messages are those of :class:`cosim.publish.Publisher` (one
+- the channels, schemas and messages are those of :class:`cosim.observers.publish.Publisher` (one
   ``/<component>`` JSON channel per component, the ``/scene``, ``/scene/reference`` and
-  ``/tf`` Foxglove channels, ``/events``), the same channels the live view (:mod:`cosim.live`)
-  serves, written by :mod:`cosim.log_writer` (foxglove-sdk's MCAP writer); component channels in
+  ``/tf`` Foxglove channels, ``/events``), the same channels the live view (:mod:`cosim.observers.live`)
+  serves, written by :mod:`cosim.observers.log_writer` (foxglove-sdk's MCAP writer); component channels in
   the scenario's ``logging.layout``: one message per sample (``samples``, the default) or per
   block of samples (``blocks``);
 - a run of :attr:`McapRecorder.PROCESS_MIN_STEPS` steps or more writes through a writer process
-  (:class:`cosim.log_writer.WriterProcess`, started when the recorder is made, so it is ready
+  (:class:`cosim.observers.log_writer.WriterProcess`, started when the recorder is made, so it is ready
   when the loop starts): the master only copies each step's values into blocks, and the child
   encodes the JSON messages (one per sample in the ``samples`` layout), compresses and writes on
   the other core. Shorter runs write in this process (a child would cost more to start than it
   saves);
-- metadata (scenario, versions, platform, time stamps: see :func:`cosim.publish.time_metadata`)
+- metadata (scenario, versions, platform, time stamps: see :func:`cosim.observers.publish.time_metadata`)
   and attachments (the scenario file and each FMU's modelDescription.xml);
 - zstd chunks flushed every ``flush_interval`` wall seconds, so a killed run
-  leaves every complete chunk readable (see :mod:`cosim.recover`);
+  leaves every complete chunk readable (see :mod:`cosim.io.recover`);
 - ``finish`` always writes the summary and index, on success, error or Ctrl-C, and the
   ``outcome`` metadata (completed, error, interrupted, stalled; the message);
 - a write that fails (disk full) stops the run at the next block of samples handed to the
@@ -25,7 +25,7 @@ Measured (``benchmarks/native.py``, line 5): foxglove-sdk's MCAP writer fed one 
 built from a dict in the master's loop cost helix_ctc_analytic about 50 us per 1 ms step (4.6
 times the unlogged run). Now the loop only copies each step's rows and hands blocks of them over,
 in either layout: the layouts differ in the writer process alone (one message per sample costs
-it more, see :class:`cosim.log_writer.LogSink`).
+it more, see :class:`cosim.observers.log_writer.LogSink`).
 """
 
 from __future__ import annotations
@@ -39,8 +39,8 @@ from typing import Sequence
 
 import orjson
 
-from .algorithm import Runtime
-from .errors import CosimError
+from ..engine.algorithm import Runtime
+from ..errors import CosimError
 from .log_writer import LogSink, WriterFailed, WriterProcess
 from .publish import Publisher, time_metadata
 

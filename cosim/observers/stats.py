@@ -1,6 +1,6 @@
 """One record for the difference of two signals: what a run's error observer accumulates
-(:class:`cosim.observers.ErrorObserver`), what a report computes from the log
-(:mod:`cosim.report`) and what ``compare`` finds between two logs (:mod:`cosim.compare`)."""
+(:class:`cosim.observers.recorders.ErrorObserver`), what a report computes from the log
+(:mod:`cosim.analysis.report`) and what ``compare`` finds between two logs (:mod:`cosim.analysis.compare`)."""
 
 from __future__ import annotations
 

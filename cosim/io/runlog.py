@@ -1,6 +1,6 @@
 """Read a run's MCAP log back into arrays, and write decimated baselines of it.
 
-A run log (see :mod:`cosim.mcap_log`) holds one JSON channel ``/<component>`` per
+A run log (see :mod:`cosim.observers.mcap_log`) holds one JSON channel ``/<component>`` per
 component. Its messages are one sample each, ``{"t": ..., "<variable>": value, ...}`` (the
 channel's metadata says ``layout: samples``, the default; logs written before layouts have no
 ``layout``), or blocks of samples, ``{"t": [...], "<variable>": [...], ...}`` (one array
@@ -10,7 +10,7 @@ stamps, values, unit and causality. The ``/scene`` channels (Foxglove drawing) a
 skipped.
 
 Time stamps are simulation time: a log whose ``time`` metadata gives an offset (log times
-from the run's wall-clock start, see :mod:`cosim.publish`) has it subtracted here, so old
+from the run's wall-clock start, see :mod:`cosim.observers.publish`) has it subtracted here, so old
 logs (pure simulation time) and new ones read alike.
 
 A *baseline* is the same format decimated in time (``write_baseline``): small enough
@@ -28,7 +28,7 @@ from typing import Iterable, Sequence
 import numpy as np
 import orjson
 
-from .errors import CosimError
+from ..errors import CosimError
 
 __all__ = ["Signal", "RunLog", "read_run", "write_baseline", "time_offset_ns", "samples", "AXES"]
 
@@ -38,7 +38,7 @@ _SKIP_TOPICS = {"/scene", "/scene/reference", "/tf", "/events"}
 
 def time_offset_ns(metadata: dict[str, dict[str, str]]) -> int:
     """Log time minus simulation time, ns, from a log's metadata records (see
-    :func:`cosim.publish.time_metadata`); 0 for logs without a ``time`` record (pure simulation time)."""
+    :func:`cosim.observers.publish.time_metadata`); 0 for logs without a ``time`` record (pure simulation time)."""
     try:
         return int(metadata.get("time", {}).get("offset_ns", 0))
     except ValueError:

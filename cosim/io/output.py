@@ -17,7 +17,7 @@ import sys
 import time
 from pathlib import Path
 
-from .errors import CosimError
+from ..errors import CosimError
 
 __all__ = ["OutputError", "OutputClaim", "check_output", "claim", "partial_path", "writable_parent"]
 

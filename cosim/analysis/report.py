@@ -1,6 +1,6 @@
 """Reports of a run log: figures and a markdown summary, and the controller table (thesis Table 5).
 
-``make_report(run)`` reads a run's MCAP log (:mod:`cosim.runlog`) and writes, into
+``make_report(run)`` reads a run's MCAP log (:mod:`cosim.io.runlog`) and writes, into
 ``<log stem>_report/`` next to the log unless told otherwise:
 
 - ``path_3d.png``: the platform path, desired vs actual, in 3D;
@@ -22,7 +22,7 @@ The signals compared are those of the ``compare`` section of the scenario attach
 the log (``plant.p`` vs ``traj.p_ref`` when there is none). Errors are ``actual -
 reference`` at the time stamps both signals carry: for a single-rate run that is the
 start sample and every step, the samples the run's own summary
-(:class:`cosim.observers.ErrorObserver`) used, so the RMSE here equals the summary's.
+(:class:`cosim.observers.recorders.ErrorObserver`) used, so the RMSE here equals the summary's.
 """
 
 from __future__ import annotations
@@ -37,9 +37,9 @@ from typing import Any, Sequence
 
 import numpy as np
 
-from .errors import CosimError
-from .runlog import AXES, RunLog, read_run
-from .stats import ErrorStats
+from ..errors import CosimError
+from ..io.runlog import AXES, RunLog, read_run
+from ..observers.stats import ErrorStats
 
 __all__ = ["ReportError", "Pair", "Tracking", "Report", "TableRow", "Table", "tracking", "make_report",
            "controller_table", "register"]
@@ -115,7 +115,7 @@ def _scenario_doc(run: RunLog) -> tuple[str | None, dict]:
     """The attached scenario file (name, parsed YAML mapping), or (None, {})."""
     import yaml
 
-    from .scenario import load_yaml
+    from ..engine.scenario import load_yaml
 
     for name, data in run.attachments.items():
         if name.startswith("scenario/"):
@@ -130,7 +130,7 @@ def _scenario_doc(run: RunLog) -> tuple[str | None, dict]:
 def _compare_spec(run: RunLog) -> tuple[list[str], list[str], str]:
     from pydantic import ValidationError
 
-    from .scenario import Compare, expand_signal
+    from ..engine.scenario import Compare, expand_signal
 
     att, doc = _scenario_doc(run)
     section = doc.get("compare")
@@ -553,7 +553,7 @@ def make_report(run: RunLog | str | Path, out_dir: str | Path | None = None) -> 
     Parameters
     ----------
     run
-        A run log path (MCAP written by :mod:`cosim.mcap_log`) or a :class:`RunLog`.
+        A run log path (MCAP written by :mod:`cosim.observers.mcap_log`) or a :class:`RunLog`.
     out_dir
         Where to write (created); default ``<log stem>_report/`` next to the log.
 

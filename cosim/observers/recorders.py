@@ -5,7 +5,7 @@ from __future__ import annotations
 import math
 from typing import Sequence
 
-from .algorithm import Runtime
+from ..engine.algorithm import Runtime
 from .stats import ErrorStats
 
 __all__ = ["ErrorObserver", "Probe"]
@@ -13,7 +13,7 @@ __all__ = ["ErrorObserver", "Probe"]
 
 class ErrorObserver:
     """Accumulates actual - reference at every macro step (after it) and at the start;
-    :meth:`result` gives one :class:`~cosim.stats.ErrorStats` per pair."""
+    :meth:`result` gives one :class:`~cosim.observers.stats.ErrorStats` per pair."""
 
     def __init__(self, actual: list[str], reference: list[str]):
         self.actual = actual

@@ -1,7 +1,7 @@
 """The run log's writer: component samples encoded as JSON messages and written to MCAP (by
 foxglove-sdk's MCAP writer), in this process or in a writer process on another core.
 
-:class:`cosim.publish.Publisher` hands its sinks each component channel's samples in blocks: the
+:class:`cosim.observers.publish.Publisher` hands its sinks each component channel's samples in blocks: the
 stamps and the *rows* (the bytes of the logged values as the FMU buffers hold them, one row per
 sample); every other message (scene, transforms, events) comes encoded. Here:
 
@@ -16,7 +16,7 @@ sample); every other message (scene, transforms, events) comes encoded. Here:
   foxglove-sdk's MCAP writer (zstd chunks, indexes, summary). A file never finished has every
   chunk flushed so far and no summary: ``cosim recover`` reads it;
 - :class:`WriterProcess`: the same calls sent through a pipe to a :class:`LogSink` in a child
-  process (``python -m cosim.log_writer``), so that encoding, compressing and writing take the
+  process (``python -m cosim.observers.log_writer``), so that encoding, compressing and writing take the
   other core, not the master's loop. The child ignores Ctrl-C (the master finishes the log); a
   master that dies closes the pipe, and the child then writes what it has and exits, leaving the
   file unfinished (recoverable), as a killed writer in the master would.
@@ -62,7 +62,7 @@ def row_format(ctype: Any, count: int) -> str:
 
 @dataclass(frozen=True)
 class BlockLayout:
-    """How a component channel's samples become its messages (see :mod:`cosim.publish`).
+    """How a component channel's samples become its messages (see :mod:`cosim.observers.publish`).
 
     ``keys``: the JSON keys of the logged variables (``"t"`` comes first, not listed).
     ``fmt``: the :mod:`struct` format (``=``, no padding) of one sample's raw values, the row; None
@@ -113,7 +113,7 @@ class BlockLayout:
         return found
 
     def c_joints(self) -> tuple[bytes, Any, bytes]:
-        """:meth:`joints` as ``cosim_samples`` takes them (see cosim/turn.c): back to back, the end of each
+        """:meth:`joints` as ``cosim_samples`` takes them (see cosim/fmi/turn.c): back to back, the end of each
         (a ``size_t`` array), and a byte per element of the row, 1 for an FMI 2 Boolean."""
         found = self._cache.get("c_joints")
         if found is None:
@@ -140,7 +140,7 @@ def encode_samples(layout: BlockLayout, stamps: list[int], data: bytes | list,
 
     ``data`` and ``skip`` as in :func:`encode_block`. With a row format, the numbers of the whole block
     are written by orjson, two calls (the times, the values), and joined with the keys
-    (:meth:`BlockLayout.joints`) between them: by ``cosim_samples`` (:func:`cosim.turn.samples_helper`), one
+    (:meth:`BlockLayout.joints`) between them: by ``cosim_samples`` (:func:`cosim.fmi.turn.samples_helper`), one
     pass in C over orjson's output, else cut at their commas (a number, ``true``, ``false`` or ``null``
     has none) and joined in Python. No dict and no Python loop per sample either way.
     """
@@ -168,7 +168,7 @@ _SAMPLES_HELPER: list = []  # [cosim_samples, or None without a C compiler], loo
 
 def _samples_helper():
     if not _SAMPLES_HELPER:
-        from .turn import samples_helper
+        from ..fmi.turn import samples_helper
 
         _SAMPLES_HELPER.append(samples_helper())
     return _SAMPLES_HELPER[0]
@@ -306,7 +306,7 @@ def _os_error(text: str) -> OSError:
 
 class FoxgloveChannels:
     """The publisher's channels (by its channel ids) on one foxglove-sdk context: what a log file (:class:`LogSink`)
-    and the live view (:mod:`cosim.live`) have in common. Users set ``_context``, ``_channels`` (list), ``_log``
+    and the live view (:mod:`cosim.observers.live`) have in common. Users set ``_context``, ``_channels`` (list), ``_log``
     and ``_layouts`` (dicts)."""
 
     _context: Any
@@ -327,7 +327,7 @@ class FoxgloveChannels:
 
 
 class LogSink(FoxgloveChannels):
-    """One MCAP log fed by :class:`cosim.publish.Publisher` (see the module docstring), written by
+    """One MCAP log fed by :class:`cosim.observers.publish.Publisher` (see the module docstring), written by
     foxglove-sdk's MCAP writer on a ``foxglove.Context`` of its own (zstd chunks of ``chunk_size``
     uncompressed bytes at ``zstd_level``, compressed in the calling thread). Raises OSError when the
     file cannot be written (at the call that finds out).
@@ -448,7 +448,7 @@ class WriterProcess:
         env = dict(os.environ)
         root = str(Path(__file__).resolve().parents[1])
         env["PYTHONPATH"] = root + (os.pathsep + env["PYTHONPATH"] if env.get("PYTHONPATH") else "")
-        self._proc = subprocess.Popen([sys.executable, "-m", "cosim.log_writer"], stdin=subprocess.PIPE,
+        self._proc = subprocess.Popen([sys.executable, "-m", "cosim.observers.log_writer"], stdin=subprocess.PIPE,
                                       stdout=subprocess.PIPE, stderr=subprocess.PIPE, bufsize=0,
                                       start_new_session=True, env=env)  # own session: Ctrl-C is the master's
         self._fd = self._proc.stdin.fileno()
@@ -595,7 +595,7 @@ def os_reason(exc: OSError) -> str:
 def main() -> int:
     import signal
 
-    from .errors import STOP_SIGNALS
+    from ..errors import STOP_SIGNALS
 
     for sig in STOP_SIGNALS:  # the master handles Ctrl-C and a closed terminal and finishes the log
         signal.signal(sig, signal.SIG_IGN)

@@ -21,8 +21,8 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from .algorithm import Runtime
-from .errors import CosimError
+from ..engine.algorithm import Runtime
+from ..errors import CosimError
 
 __all__ = ["RealTime", "parse_factor"]
 
