@@ -67,7 +67,7 @@ def helix_native(stop: float):
 
 def bare_calls(osc_path: Path, thru_path: Path, steps: int) -> float:
     """Seconds per step of the two FMUs' per-step FMI calls in a bare Python loop."""
-    from cosim.fmi.fmu import load_fmu, make_slave
+    from cosim.fmi import load_fmu, make_slave
 
     osc, thru = make_slave("osc", load_fmu(osc_path)), make_slave("thru", load_fmu(thru_path))
     for s in (osc, thru):
@@ -126,7 +126,7 @@ def main() -> None:
     for _ in range(args.rounds):
         bare = min(bare, bare_calls(osc, thru, args.steps))
         for mode, helper in modes.items():
-            turn.helper = helper  # what cosim.fmi.fmu's co-simulation wrappers get when they bind their turn
+            turn.helper = helper  # what cosim.fmi's co-simulation wrappers get when they bind their turn
             b = best[mode]
             res = helix_native(args.stop_time)
             for name, sec in res.component_time.items():

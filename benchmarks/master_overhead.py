@@ -40,7 +40,7 @@ logging: {{signals: all, flush_interval: 1.0}}
 def bare_fmi_cost(fmus: dict, steps: int) -> float:
     """Seconds per step for the FMI calls alone (same FMUs, same calls, no master): the connected
     outputs are read, as the master reads them without a log (plant.x only with one)."""
-    from cosim.fmi.fmu import load_fmu, make_slave
+    from cosim.fmi import load_fmu, make_slave
 
     specs = [("src", fmus["CosimTSource"], [], ["y"]), ("g1", fmus["CosimTGain"], ["u"], ["y"]),
              ("g2", fmus["CosimTGain"], ["u"], ["y"]), ("plant", fmus["CosimTIntegrator"], ["u"], [])]
@@ -56,7 +56,7 @@ def bare_fmi_cost(fmus: dict, steps: int) -> float:
         vin = (c_uint32 * len(ins))(*[info[n].vr for n in ins])
         vout = (c_uint32 * len(outs))(*[info[n].vr for n in outs])
         bin_, bout = (c_double * max(1, len(ins)))(), (c_double * max(1, len(outs)))()
-        dll = s.fmu.dll  # the C functions bound as the master binds them (cosim.fmi.fmu._Base)
+        dll = s.fmu.dll  # the C functions bound as the master binds them (cosim.fmi.slave.Base)
         setr = s._bound_call(dll, "fmi2SetReal", s._c, vin, len(ins), bin_) if ins else None
         getr = s._bound_call(dll, "fmi2GetReal", s._c, vout, len(outs), bout) if outs else None
         calls.append((s._c, setr, s._hot_function(dll, "fmi2DoStep"), getr))

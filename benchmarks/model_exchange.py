@@ -3,7 +3,7 @@
 Both scenarios run the same helix, IK and CTC FMUs against the same analytic plant: in
 ``helix_ctc_analytic`` the plant is an FMI 2.0 co-simulation FMU that integrates itself with
 fixed-step RK4 (``delta.dynamics.integrate``, 1 ms); in ``helix_ctc_me`` it is the FMI 3.0 model-exchange FMU of the
-same dynamics, integrated by the master (``cosim/fmi/fmu.py`` ``_MEMixin``, ``cosim/fmi/integrators.py``)
+same dynamics, integrated by the master (``cosim/fmi/model_exchange.py``, ``cosim/fmi/integrators.py``)
 with the solver named in the scenario. Each run is timed on its stepping loop (``RunResult.wall_time``;
 no FMU build, instantiation or worker start) with logging off; the scenarios run alternately
 ``--rounds`` times so drifts in machine load affect both alike, and the best of each is kept.

@@ -55,11 +55,11 @@ def run(name: str, stop: float, *, fmus: str, parallel: str | None = None, log: 
 
 
 def derivative_call_us(n: int = 20000) -> tuple[float, float]:
-    """Microseconds of one derivative evaluation of the native ME plant through cosim.fmi.fmu's ME wrapper: its
+    """Microseconds of one derivative evaluation of the native ME plant through cosim.fmi's ME wrapper: its
     ``rhs`` (what the integrators call), and set_time + set_x + get_dx."""
     import ctypes
 
-    from cosim.fmi.fmu import load_fmu, make_slave
+    from cosim.fmi import load_fmu, make_slave
     from fmus import registry
 
     slave = make_slave("plant", load_fmu(registry.build("linear_analytic_plant_me", native=True, fmi=2)), "me")
@@ -88,21 +88,21 @@ def derivative_call_us(n: int = 20000) -> tuple[float, float]:
 
 def count_derivative_calls(stop: float) -> int:
     """Derivative evaluations of helix_ctc_me on native FMUs (a separate, untimed run with a counter)."""
-    from cosim.fmi import fmu
+    from cosim.fmi import model_exchange as fmu
 
     calls = 0
-    original = fmu._MEMixin.rhs
+    original = fmu.ModelExchange.rhs
 
     def counted(self, t, x, dx):  # noqa: ANN001, ANN202
         nonlocal calls
         calls += 1
         return original(self, t, x, dx)
 
-    fmu._MEMixin.rhs = counted
+    fmu.ModelExchange.rhs = counted
     try:
         run("helix_ctc_me", stop, fmus="native", parallel="off")
     finally:
-        fmu._MEMixin.rhs = original
+        fmu.ModelExchange.rhs = original
     return calls
 
 

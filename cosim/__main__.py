@@ -21,7 +21,7 @@ control block), then ``_dl_fini`` runs the library's destructor function,
 
 (the instruction is ``lock xadd`` on that word: in a chunk of glibc's unsorted bin it is the bk
 pointer, which the next free walking the bin finds corrupt, e.g. in libGLX's or libgfortran's
-destructor when Exudyn is loaded). :mod:`cosim.fmi.fmu` now resets that state itself before the
+destructor when Exudyn is loaded). :mod:`cosim.fmi.pythonfmu` now resets that state itself before the
 library is unloaded or the process exits, which removes the write (valgrind: no invalid access
 left). This exit stays as a second guard for what third-party destructors may still do after
 the command's work is done: nothing is left to finalize, and the exit code and the output are

@@ -25,7 +25,7 @@ import numpy as np
 
 from .engine.algorithm import Runtime
 from .errors import ScenarioError, UnknownSignalError
-from .fmi.fmu import BOOLEAN, INTEGER, REAL
+from .fmi import BOOLEAN, INTEGER, REAL
 from .run import RunResult, run_scenario
 from .engine.scenario import Scenario, dotted_overrides, expand_signal, load_scenario
 

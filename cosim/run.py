@@ -9,7 +9,7 @@ from typing import Any, Mapping, Sequence
 
 from .engine.algorithm import Observer, Runtime, StopRequest, initialize, simulate
 from .errors import ComponentSourceError, CosimError, Issue
-from .fmi.fmu import Extractions, FMUInfo, cleanup_extracted, load_fmu, make_slave
+from .fmi import Extractions, FMUInfo, cleanup_extracted, load_fmu, make_slave
 from .observers.recorders import ErrorObserver
 from .engine.offload import Offload, choose
 from .engine.scenario import Scenario, line_for, expand_signal, load_scenario

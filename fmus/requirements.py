@@ -216,7 +216,7 @@ def _release_interpreter_state_at_exit(resources: str) -> None:
     interpreter state. When the library is still loaded at exit (the first PythonFMU library of a
     process always is), ``exit`` frees that pointer's control block in a static destructor, then the
     library's unload hook resets the pointer and writes into the freed block, and the next heap
-    operation aborts ("corrupted double-linked list"; found with valgrind, see ``cosim/fmi/fmu.py``). An
+    operation aborts ("corrupted double-linked list"; found with valgrind, see ``cosim/fmi/pythonfmu.py``). An
     ``atexit`` handler runs before those destructors: calling the library's own
     ``finalizePythonInterpreter`` there leaves both an empty pointer. This runs in any Python host
     (FMPy, libcosimpy, our master). It is skipped where PythonFMU started the interpreter itself (a
@@ -247,7 +247,7 @@ def release_pythonfmu_state(library: str) -> None:
     """Reset the global interpreter state of the PythonFMU library ``library`` if it is loaded (see
     above): found by the name it was loaded under and never loaded here (an unloaded library ran its
     hooks in order). Any other library, or one without the function: nothing. The master calls it
-    too, for every PythonFMU library it loads (``cosim.fmi.fmu``)."""
+    too, for every PythonFMU library it loads (``cosim.fmi.pythonfmu``)."""
     import ctypes
     import os
 

@@ -25,7 +25,7 @@ from dataclasses import dataclass, field
 from typing import Any, Callable, Protocol, Sequence
 
 from ..errors import STOP_SIGNALS
-from ..fmi.fmu import Slave, Terminated
+from ..fmi import Slave, Terminated
 from .system import SystemPlan
 
 __all__ = ["Observer", "Runtime", "initialize", "simulate", "StopRequest"]

@@ -36,10 +36,10 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from ..fmi import fmu as _fmu
+from ..fmi import extract as _extract
 from .algorithm import Runtime, byte_view, initialize, simulate
 from ..errors import STOP_SIGNALS, CosimError
-from ..fmi.fmu import PY_KINDS, Terminated, Variable, cleanup_extracted, load_fmu, make_slave
+from ..fmi import PY_KINDS, Terminated, Variable, cleanup_extracted, load_fmu, make_slave
 from .system import Link, Port, SystemPlan
 
 __all__ = ["AUTO_MIN_STEPS", "RING", "feedforward", "choose", "Offload", "Proxy"]
@@ -455,8 +455,8 @@ def _worker(spec: dict, raw: Any, filled: list, free: list, stop: Any, conn: Any
         # none is set when the worker forks today (the watchdog starts after it): a guard against that order
     except ValueError:
         pass
-    _fmu._EXTRACTED.update({(Path(p), tuple(stamp)): Path(d) for p, stamp, d in spec["extracted"]})
-    inherited = set(_fmu._EXTRACTED)  # the master's extractions (forked: all of them): the master removes them
+    _extract._EXTRACTED.update({(Path(p), tuple(stamp)): Path(d) for p, stamp, d in spec["extracted"]})
+    inherited = set(_extract._EXTRACTED)  # the master's extractions (forked: all of them): the master removes them
     slaves: list[Any] = []
     pubs: list[_Publisher] = []
     code = 1

@@ -1,6 +1,6 @@
 """System structure: names resolved once into typed ids, wiring checked, Gauss-Seidel order.
 
-Pure with respect to FMI calls: it reads model descriptions (:class:`cosim.fmi.fmu.FMUInfo`)
+Pure with respect to FMI calls: it reads model descriptions (:class:`cosim.fmi.FMUInfo`)
 and the scenario, and produces a :class:`SystemPlan` the algorithm executes.
 """
 
@@ -13,7 +13,7 @@ from dataclasses import dataclass, field
 from typing import Any, Mapping
 
 from ..errors import AlgebraicLoopError, Issue, UnknownSignalError, WiringError
-from ..fmi.fmu import FMUInfo, Variable
+from ..fmi import FMUInfo, Variable
 from .scenario import Scenario, line_for, expand_signal, issue_at
 
 __all__ = ["Port", "Link", "SystemPlan", "build_plan", "gauss_seidel_order", "find_variable_loop"]

@@ -138,14 +138,14 @@ class Watchdog:
 
     def _where(self) -> tuple[str, float, str]:
         """(component, simulation time, where it runs) of the innermost slave call on the main thread's stack."""
-        from ..fmi.fmu import _Base
+        from ..fmi.slave import Base
         from .offload import Proxy
 
         frame = sys._current_frames().get(self._main)
         t_loop = None
         while frame is not None:
             me = frame.f_locals.get("self") if frame.f_code.co_name != "<module>" else None
-            if isinstance(me, (_Base, Proxy)):
+            if isinstance(me, (Base, Proxy)):
                 return me.name, float(me.time), " (in the worker process)" if isinstance(me, Proxy) else ""
             if t_loop is None and frame.f_code.co_name == "simulate" and "t" in frame.f_locals:
                 t_loop = frame.f_locals["t"]

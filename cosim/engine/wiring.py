@@ -11,7 +11,7 @@ input of the same name of the second (at least one).
 
 from __future__ import annotations
 
-from ..fmi.fmu import FMUInfo
+from ..fmi import FMUInfo
 from .system import find_variable
 
 __all__ = ["expand_connection"]

@@ -1,6 +1,6 @@
 """ODE integrators for model-exchange FMUs: one continuous integration between events.
 
-The master integrates a model-exchange FMU itself. :class:`~cosim.fmi.fmu._MEMixin` owns the
+The master integrates a model-exchange FMU itself. :class:`~cosim.fmi.model_exchange.ModelExchange` owns the
 FMI protocol (event mode, event iteration, time events, step events, termination); an
 integrator here owns only the numerics: it advances the FMU's continuous states towards a
 stop time it must not pass, locates state events (a sign change of an event indicator) to

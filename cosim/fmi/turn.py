@@ -13,7 +13,7 @@ takes a component from 2.1-3.4 us to 0.9-1.6 us per step (``benchmarks/master_na
 A model-exchange FMU's right-hand side, which the master's integrator evaluates many times per step
 (fmiXSetTime, fmiXSetContinuousStates, fmiXGetDerivatives or fmi3GetContinuousStateDerivatives, then the
 derivatives checked for NaN), is one crossing the same way: ``cosim_rhs``, through :func:`make_rhs`
-(:meth:`cosim.fmi.fmu._MEMixin.rhs`).
+(:meth:`cosim.fmi.model_exchange.ModelExchange.rhs`).
 
 The same library holds ``cosim_samples`` for the log writer (:func:`samples_helper`,
 :func:`cosim.observers.log_writer.encode_samples`): a block's sample messages joined from the numbers orjson wrote,
@@ -23,8 +23,8 @@ The helper is compiled at first use with the system C compiler (``$CC``, else ``
 cache (``$XDG_CACHE_HOME/cosim``, default ``~/.cache/cosim``), once per version of its source; processes
 building it at the same time each rename a complete file into place. Without a compiler, or when the
 build fails, :func:`helper` and :func:`rhs_helper` return None, :func:`unavailable` says why, and the
-master makes the same calls from Python one by one (:meth:`cosim.fmi.fmu._CoSimulation.set_step_get`,
-:meth:`cosim.fmi.fmu._MEMixin.rhs`).
+master makes the same calls from Python one by one (:meth:`cosim.fmi.slave.CoSimulation.set_step_get`,
+:meth:`cosim.fmi.model_exchange.ModelExchange.rhs`).
 """
 
 from __future__ import annotations

@@ -58,7 +58,7 @@ from urllib.parse import unquote, urlparse
 from xml.etree import ElementTree as ET
 
 from ..errors import Issue, ScenarioError
-from ..fmi.fmu import MAX_FMU_BYTES, SSP_PREFIX, sweep_orphans
+from ..fmi.extract import MAX_FMU_BYTES, SSP_PREFIX, sweep_orphans
 
 if TYPE_CHECKING:  # the CLI imports this module to register its command: keep pydantic out of that
     from ..engine.scenario import Scenario

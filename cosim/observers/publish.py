@@ -59,7 +59,7 @@ import orjson
 
 from ..engine.algorithm import Runtime
 from ..errors import CosimError
-from ..fmi.fmu import BINARY, BOOLEAN, INTEGER, REAL, STRING
+from ..fmi import BINARY, BOOLEAN, INTEGER, REAL, STRING
 
 __all__ = [
     "EVENTS_SCHEMA",

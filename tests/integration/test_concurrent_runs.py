@@ -18,8 +18,8 @@ from pathlib import Path
 
 import pytest
 
-from cosim.fmi import fmu
-from cosim.fmi.fmu import Extractions, load_fmu
+from cosim.fmi import extract
+from cosim.fmi import Extractions, load_fmu
 from cosim.run import run_scenario
 from cosim.engine.scenario import load_scenario
 
@@ -111,7 +111,7 @@ def test_a_worker_forked_while_another_thread_holds_the_lock_runs(write_scenario
     grabbed, release = threading.Event(), threading.Event()
 
     def hold() -> None:
-        with fmu._LOCK:
+        with extract._LOCK:
             grabbed.set()
             release.wait(10)
 

@@ -281,7 +281,7 @@ def test_declared_dependencies_are_the_direct_feedthrough(name):
 
 def test_plants_and_trajectories_declare_no_direct_feedthrough():
     """What the master's Gauss-Seidel order relies on, now from the FMUs rather than scenarios."""
-    from cosim.fmi.fmu import load_fmu
+    from cosim.fmi import load_fmu
 
     for name in NAMES:
         if "plant" in name or registry.get(name).module == "trajectories":

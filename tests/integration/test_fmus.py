@@ -226,7 +226,7 @@ def test_model_exchange_plant_matches_cosimulation_plant_under_ctc(fmu_dir):
     # with each step's effort held (zero-order hold), the way a scenario runs it.
     # (fmpy.simulate_fmu with a stepwise input table applies the switches ~0.1 ms late,
     # which alone shifts the helix by ~3e-5 m.)
-    from cosim.fmi.fmu import load_fmu, make_slave
+    from cosim.fmi import load_fmu, make_slave
 
     info = load_fmu(_path(fmu_dir, "linear_analytic_plant_me"))
     me = make_slave("plant_me", info, "me", rtol=1e-10)
@@ -281,7 +281,7 @@ def test_bundled_code_does_not_shadow(fmu_dir):
 def test_ik_fmu_unreachable_reference_names_the_leg_and_holds(fmu_dir):
     """An unreachable p_ref: reachable drops, the joint references hold their last reachable
     values (no NaN reaches the controller) and the FMU's log says which leg failed."""
-    from cosim.fmi.fmu import load_fmu, make_slave
+    from cosim.fmi import load_fmu, make_slave
 
     info = load_fmu(_path(fmu_dir, "linear_ik"))
     slave = make_slave("ik", info)

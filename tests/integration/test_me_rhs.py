@@ -21,7 +21,8 @@ from cfmus import build
 
 from cosim.fmi import turn
 from cosim.errors import FMIError
-from cosim.fmi.fmu import _MEMixin, load_fmu, make_slave
+from cosim.fmi import load_fmu, make_slave
+from cosim.fmi.model_exchange import ModelExchange
 from cosim.observers.recorders import Probe
 from cosim.run import run_scenario
 from cosim.engine.scenario import load_scenario, parse_scenario
@@ -39,13 +40,13 @@ def _run(scenario, signals: list[str], *, python: bool, monkeypatch):
     with monkeypatch.context() as m:
         if python:
             m.setattr(turn, "rhs_helper", lambda: None)
-        bind = _MEMixin._bind_rhs
+        bind = ModelExchange._bind_rhs
 
         def spy(self):
             bind(self)
             made.append(self._c_rhs is not None)
 
-        m.setattr(_MEMixin, "_bind_rhs", spy)
+        m.setattr(ModelExchange, "_bind_rhs", spy)
         probe = Probe(signals)
         result = run_scenario(scenario, log=False, extra_observers=[probe], read_all=True)
     return probe, result, made

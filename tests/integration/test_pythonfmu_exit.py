@@ -1,4 +1,4 @@
-"""No write to freed memory when a process that ran a PythonFMU FMU exits (cosim.fmi.fmu).
+"""No write to freed memory when a process that ran a PythonFMU FMU exits (cosim.fmi.pythonfmu).
 
 PythonFMU's native wrapper keeps a global ``std::shared_ptr<PyState>`` (``(anonymous
 namespace)::pyState`` in PySlaveInstance.cpp). In a library still loaded at exit, ``exit``
@@ -44,10 +44,10 @@ CHILD = textwrap.dedent(r"""
         return [ctypes.c_void_p.from_address(base + at + 8 * i).value or 0 for i in range(2)]
 
     result = {}
-    # registered before cosim.fmi.fmu is imported, so it runs after cosim.fmi.fmu's exit handler
+    # registered before cosim.fmi is imported, so it runs after its exit handler
     atexit.register(lambda: print(json.dumps({**result, "at_exit": pystate(lib)}), flush=True))
 
-    from cosim.fmi.fmu import load_fmu, make_slave
+    from cosim.fmi import load_fmu, make_slave
 
     info = load_fmu(sys.argv[1])
 

@@ -123,7 +123,7 @@ def test_analytic_plant_bounds_a_stiff_step_instead_of_hanging(build):
 def test_me_derivative_failure_is_an_error_not_a_crash():
     """pythonfmu3 0.3.4 crashed the process (exit 139) when get_continuous_state_derivatives raised."""
     from fmus.registry import build
-    from cosim.fmi.fmu import load_fmu, make_slave
+    from cosim.fmi import load_fmu, make_slave
 
     slave = make_slave("plant", load_fmu(build("linear_analytic_plant_me")), "me")
     slave.instantiate()

@@ -427,7 +427,7 @@ def test_an_ssd_that_inflates_too_far_is_refused(ssp, tmp_path, capsys, monkeypa
 def test_an_archive_unpacked_by_a_killed_run_is_removed_by_the_next(ssp, private_tmp):
     """SIGKILL leaves an SSP run's unpacked archive behind (no handler runs); the next SSP run removes it
     (issue 25), and leaves those of live processes alone."""
-    from cosim.fmi.fmu import SSP_PREFIX
+    from cosim.fmi.extract import SSP_PREFIX
 
     dead = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"], capture_output=True, text=True)
     orphan = private_tmp / f"{SSP_PREFIX}{int(dead.stdout)}-helix-abc"
@@ -452,7 +452,8 @@ def test_an_fmu_member_that_unpacks_too_far_is_refused(ssp, tmp_path, capsys, pr
 
 def test_an_fmu_file_that_unpacks_too_far_is_refused(tmp_path, monkeypatch):
     """A zip bomb given as an FMU (a component's path, or extracted from an archive) is refused before it is read."""
-    import cosim.fmi.fmu as fmu_module
+    import cosim.fmi.extract as fmu_module
+    from cosim.fmi import load_fmu
     from cosim.errors import ComponentSourceError
 
     bomb = tmp_path / "bomb.fmu"
@@ -461,4 +462,4 @@ def test_an_fmu_file_that_unpacks_too_far_is_refused(tmp_path, monkeypatch):
         zf.writestr("resources/zeros.bin", b"\0" * 200_000)
     monkeypatch.setattr(fmu_module, "MAX_FMU_BYTES", 100_000)
     with pytest.raises(ComponentSourceError, match="unpacks to"):
-        fmu_module.load_fmu(bomb)
+        load_fmu(bomb)

@@ -16,7 +16,8 @@ from cfmus import build
 
 from cosim.fmi import turn
 from cosim.errors import FMIError
-from cosim.fmi.fmu import _CoSimulation, load_fmu, make_slave
+from cosim.fmi import load_fmu, make_slave
+from cosim.fmi.slave import CoSimulation
 from cosim.observers.recorders import Probe
 from cosim.run import run_scenario
 from cosim.engine.scenario import parse_scenario
@@ -38,13 +39,13 @@ def _run(scenario, signals: list[str], *, python: bool, monkeypatch, made: list 
         if python:
             m.setattr(turn, "helper", lambda: None)
         elif made is not None:
-            bind = _CoSimulation._bind_turn
+            bind = CoSimulation._bind_turn
 
             def spy(self):
                 bind(self)
                 made.append(self._c_turn is not None)
 
-            m.setattr(_CoSimulation, "_bind_turn", spy)
+            m.setattr(CoSimulation, "_bind_turn", spy)
         probe = Probe(signals)
         result = run_scenario(scenario, log=False, extra_observers=[probe])
     return probe, result

@@ -15,7 +15,7 @@ import pytest
 from mcap.reader import make_reader
 from mcap.stream_reader import StreamReader
 
-from cosim.fmi.fmu import BOOLEAN, REAL
+from cosim.fmi import BOOLEAN, REAL
 from cosim.observers.log_writer import (BlockLayout, LogSink, WriterFailed, WriterProcess, encode_block, encode_samples,
                               row_format)
 from cosim.observers.publish import block_layout

@@ -5,7 +5,7 @@ from __future__ import annotations
 import pytest
 
 from cosim.engine import offload
-from cosim.fmi.fmu import Variable
+from cosim.fmi import Variable
 from cosim.engine.offload import AUTO_MIN_STEPS, choose, feedforward
 from cosim.engine.system import Link, Port, SystemPlan
 

@@ -1,0 +1,187 @@
+"""What an FMU declares: its variables and interfaces, read from modelDescription.xml once per file."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, replace
+from functools import cached_property
+from pathlib import Path
+from typing import Any
+
+
+from ..errors import ComponentSourceError, Issue
+from .extract import extraction, forget_extractions, file_stamp, check_archive
+
+
+
+REAL, INTEGER, BOOLEAN, STRING, BINARY, CLOCK = "Real", "Integer", "Boolean", "String", "Binary", "Clock"
+# declared FMI 2.0 / 3.0 types mapped onto the kinds the master exchanges (connections need equal kinds)
+_KIND = {"Real": REAL, "Float64": REAL, "Float32": REAL,
+         "Integer": INTEGER, "Enumeration": INTEGER, "Int8": INTEGER, "Int16": INTEGER, "Int32": INTEGER,
+         "Int64": INTEGER, "UInt8": INTEGER, "UInt16": INTEGER, "UInt32": INTEGER, "UInt64": INTEGER,
+         "Boolean": BOOLEAN, "String": STRING, "Binary": BINARY, "Clock": CLOCK}
+# kinds whose values live in Python lists (copied through Python), not in ctypes arrays
+PY_KINDS = (STRING, BINARY)
+
+
+@dataclass(frozen=True)
+class Variable:
+    """A model variable as the master sees it."""
+
+    name: str
+    vr: int
+    kind: str  # REAL, INTEGER, BOOLEAN, STRING or BINARY
+    fmi_type: str  # the type as declared (Real, Float64, Int32, Enumeration, ...)
+    causality: str
+    variability: str
+    unit: str | None
+    description: str | None
+    start: Any
+    index: int  # 1-based position in ModelVariables (FMI 2.0 ModelStructure indices)
+    shape: tuple[int, ...] = ()  # FMI 3.0 array dimensions; () for a scalar
+    dims: tuple[tuple[int | None, int | None], ...] = ()  # per dimension: (fixed size, structural parameter vr)
+    initial: str | None = None
+    min: str | None = None
+    max: str | None = None
+
+    @property
+    def count(self) -> int:
+        """Number of elements (1 for a scalar)."""
+        return math.prod(self.shape) if self.shape else 1
+
+    @property
+    def is_array(self) -> bool:
+        return bool(self.dims)
+
+
+@dataclass
+class FMUInfo:
+    """A parsed FMU: model description, variables, interfaces, feedthrough.
+
+    The archive is extracted (into a temporary directory) only when an instance needs its
+    binaries (:attr:`unzipdir`), and removed at the end of the run (:class:`Extractions`).
+    """
+
+    path: Path
+    md: Any  # fmpy.model_description.ModelDescription
+    variables: dict[str, Variable]
+    stamp: tuple[int, ...] = ()  # the file as read (:func:`file_stamp`): a rebuilt file is another extraction
+
+    @property
+    def unzipdir(self) -> Path:
+        """The extracted archive (extracted at first use, shared by every copy of this info)."""
+        return extraction((self.path, self.stamp))
+
+    @property
+    def fmi_major(self) -> int:
+        return int(self.md.fmiVersion.split(".")[0])
+
+    @property
+    def interfaces(self) -> list[str]:
+        return [k for k, v in (("cs", self.md.coSimulation), ("me", self.md.modelExchange)) if v is not None]
+
+    @cached_property
+    def feedthrough(self) -> dict[str, list[str] | None]:
+        """Output name -> the inputs it depends on directly; None when the FMU does not declare it."""
+        inputs = {v.name for v in self.variables.values() if v.causality == "input"}
+        out: dict[str, list[str] | None] = {}
+        for u in self.md.outputs:
+            if u.dependencies is None:
+                out[u.variable.name] = None
+            else:
+                # every listed input counts, whatever its dependenciesKind (conservative)
+                out[u.variable.name] = [d.name for d in u.dependencies if d.name in inputs]
+        return out
+
+    def model_description_xml(self) -> bytes:
+        import zipfile
+
+        with zipfile.ZipFile(self.path) as z:
+            return z.read("modelDescription.xml")
+
+    def structural_parameters(self) -> dict[str, Variable]:
+        return {n: v for n, v in self.variables.items() if v.causality == "structuralParameter"}
+
+    def with_structure(self, values: dict[str, Any]) -> "FMUInfo":
+        """A copy whose array shapes follow the structural parameter values ``values`` (name -> value)."""
+        by_vr = {v.vr: int(values[n]) if n in values else _scalar_start(v)
+                 for n, v in self.structural_parameters().items()}
+        variables = {n: replace(v, shape=_shape(v.dims, by_vr, n)) if v.dims else v
+                     for n, v in self.variables.items()}
+        return FMUInfo(self.path, self.md, variables, self.stamp)
+
+
+def _scalar_start(v: Variable) -> int:
+    try:
+        return int(str(v.start).split()[0])
+    except (ValueError, IndexError):
+        raise ComponentSourceError(Issue("", f"structural parameter {v.name} has no usable start value "
+                                             f"({v.start!r})")) from None
+
+
+def _shape(dims, by_vr: dict[int, int], name: str) -> tuple[int, ...]:
+    shape = []
+    for size, vr in dims:
+        if size is None:
+            if vr not in by_vr:
+                raise ComponentSourceError(Issue("", f"{name}: dimension refers to value reference {vr}, "
+                                                     "which is not a structural parameter"))
+            size = by_vr[vr]
+        shape.append(int(size))
+    return tuple(shape)
+
+
+_CACHE: dict[Path, FMUInfo] = {}  # resolved path -> its description, read from the file of info.stamp
+
+
+def _unit(v: Any) -> str | None:
+    if getattr(v, "unit", None):
+        return v.unit
+    dt = getattr(v, "declaredType", None)
+    return getattr(dt, "unit", None) if dt is not None else None
+
+
+def _attr(v: Any, name: str) -> str | None:
+    value = getattr(v, name, None)
+    if value is None and getattr(v, "declaredType", None) is not None:
+        value = getattr(v.declaredType, name, None)
+    return None if value is None else str(value)
+
+
+def load_fmu(path: str | Path) -> FMUInfo:
+    """Read the model description (once per path and process); nothing is extracted yet."""
+    import fmpy
+
+    path = Path(path).resolve()
+    try:
+        st = path.stat()
+    except OSError:
+        raise ComponentSourceError(Issue("", f"FMU not found: {path}")) from None
+    stamp = file_stamp(st)
+    cached = _CACHE.get(path)
+    if cached is not None:
+        if cached.stamp == stamp:
+            return cached
+        forget_extractions(path)  # the file was rebuilt in place: its old extractions are stale
+    if path.is_file():
+        check_archive(path)
+    try:
+        md = fmpy.read_model_description(str(path), validate=False)
+    except Exception as exc:  # fmpy raises bare Exception for malformed files
+        raise ComponentSourceError(Issue("", f"{path}: cannot read modelDescription.xml: {exc}")) from None
+    clocks = [v for v in md.modelVariables if v.type == "Clock"]
+    if clocks:
+        names = ", ".join(f"{v.name} (vr {v.valueReference})" for v in clocks[:5])
+        raise ComponentSourceError(Issue("", f"{path.name} declares Clock variables ({names}): clocks (FMI 3.0 "
+                                             "scheduled execution and synchronous clocks) are not supported"))
+    variables = {}
+    for i, v in enumerate(md.modelVariables, start=1):
+        dims = tuple((int(d.start) if d.start is not None else None, d.valueReference) for d in v.dimensions)
+        variables[v.name] = Variable(
+            name=v.name, vr=v.valueReference, kind=_KIND.get(v.type, v.type), fmi_type=v.type,
+            causality=v.causality, variability=v.variability, unit=_unit(v), description=v.description,
+            start=v.start, index=i, shape=tuple(v.shape or ()) if dims else (), dims=dims, initial=v.initial,
+            min=_attr(v, "min"), max=_attr(v, "max"))
+    info = FMUInfo(path, md, variables, stamp)
+    _CACHE[path] = info
+    return info

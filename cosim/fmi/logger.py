@@ -1,0 +1,62 @@
+"""FMU log messages: the FMI 2 logger dispatch (one native proxy for every instance) and the text shown."""
+
+from __future__ import annotations
+
+import ast
+import itertools
+import re
+import weakref
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    from .slave import Base
+
+
+
+
+
+# FMI 2.0 loggers are variadic; fmpy formats the message in a native proxy that keeps *one* global
+# target (the logger of the instance created last), so every instance gets the same dispatcher and
+# is told apart by the componentEnvironment it was instantiated with.
+FMI2_LOG_TARGETS: weakref.WeakValueDictionary[int, "Base"] = weakref.WeakValueDictionary()
+FMI2_ENVIRONMENTS = itertools.count(1)
+_FMI2_LOGGER: Any = None
+
+
+def fmi2_logger() -> Any:
+    global _FMI2_LOGGER
+    if _FMI2_LOGGER is None:
+        from fmpy.fmi2 import fmi2CallbackLoggerTYPE
+
+        def dispatch(env, instance, status, category, message):  # noqa: ANN001, ANN202
+            slave = FMI2_LOG_TARGETS.get(env or 0)
+            if slave is not None:
+                slave._on_log(status, category, message)
+
+        _FMI2_LOGGER = fmi2CallbackLoggerTYPE(dispatch)
+    return _FMI2_LOGGER
+
+
+# pythonfmu / pythonfmu3 report a Python exception as this text and the exception's repr
+_PY_EXCEPTION = re.compile(r"Fatal py exception encountered: \[[^\]]*\][^\n]*\n(?P<repr>.*)", re.S)
+_REPR = re.compile(r"(?P<type>[A-Za-z_][\w.]*)\((?P<args>.*)\)", re.S)
+
+
+def log_text(message: str) -> str:
+    """An FMU's log message as shown to the user: a Python exception reported by pythonfmu as
+    ``Fatal py exception encountered: [where] ...\\nType('text')`` becomes ``Type: text``."""
+    m = _PY_EXCEPTION.match(message)
+    if m is None:
+        return message
+    rep = m["repr"].strip()
+    r = _REPR.fullmatch(rep)
+    if r is not None:
+        try:
+            args = ast.literal_eval(f"({r['args']},)") if r["args"].strip() else ()
+        except (ValueError, SyntaxError):
+            return rep
+        if len(args) == 1 and isinstance(args[0], str):
+            return f"{r['type']}: {args[0]}"
+        if not args:
+            return r["type"]
+    return rep
