@@ -14,8 +14,6 @@ names walk the scenario's sections (``time.stop``, ``time.step``, ``trajectory.p
 
 from __future__ import annotations
 
-import math
-import re
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -23,16 +21,19 @@ from typing import Any
 
 import numpy as np
 
+from .analysis.metrics import metric_names, metrics
 from .engine.algorithm import Runtime
+from .engine.scenario import Scenario, dotted_overrides, load_scenario
+from .engine.system import Port
+from .engine.wiring import index_text
 from .errors import ScenarioError, UnknownSignalError
 from .fmi import BOOLEAN, INTEGER, REAL
+from .observers.recorders import PeakEffort
 from .run import RunResult, run_scenario
-from .engine.scenario import Scenario, dotted_overrides, expand_signal, load_scenario
 
 __all__ = ["PeakEffort", "Result", "SignalRecorder", "load", "metric_names", "metrics", "run"]
 
 _NUMERIC = (REAL, INTEGER, BOOLEAN)
-_EFFORT = re.compile(r"^u(\[\d+\])?$")  # actuator effort u[i] (conventions), N or N*m
 
 
 def load(scenario: str | Path | Scenario, overrides: Mapping[str, Any] | None = None) -> Scenario:
@@ -53,66 +54,6 @@ def load(scenario: str | Path | Scenario, overrides: Mapping[str, Any] | None = 
     return load_scenario(scenario, dotted_overrides(dict(overrides or {})))
 
 
-def metric_names(scenario: Scenario) -> list[str]:
-    """Names of :func:`metrics`, in order: ``rmse_<axis>``..., ``max_error_<axis>``..., then the totals."""
-    axes = _axes(scenario)
-    return ([f"rmse_{a}" for a in axes] + [f"max_error_{a}" for a in axes]
-            + ["rmse", "max_error", "peak_effort", "sim_time_s", "steps", "wall_time_s"])
-
-
-def _axes(scenario: Scenario) -> list[str]:
-    if scenario.compare is None:
-        return []
-    actual = expand_signal(scenario.compare.actual)
-    short = [a.rsplit(".", 1)[-1] for a in actual]
-    return short if len(set(short)) == len(short) else actual
-
-
-def metrics(scenario: Scenario, result: RunResult, peak: float) -> dict[str, float]:
-    """Summary metrics of a run: per-axis RMSE and largest error of ``compare`` (signal units),
-    their largest over the axes, the peak |effort| (N or N*m), simulated and wall time (s), steps."""
-    out: dict[str, float] = {}
-    axes = _axes(scenario)
-    for a, e in zip(axes, result.errors):
-        out[f"rmse_{a}"] = e.rmse
-    for a, e in zip(axes, result.errors):
-        out[f"max_error_{a}"] = e.max_error
-    out["rmse"] = max((e.rmse for e in result.errors), default=math.nan)
-    out["max_error"] = max((e.max_error for e in result.errors), default=math.nan)
-    out["peak_effort"] = peak
-    out["sim_time_s"] = result.sim_time
-    out["steps"] = result.steps
-    out["wall_time_s"] = result.wall_time
-    return out
-
-
-class PeakEffort:
-    """Observer: the largest |u[i]| of every component output named ``u`` or ``u[i]``."""
-
-    def __init__(self) -> None:
-        self.peak = math.nan
-
-    def start(self, rt: Runtime) -> None:
-        from .engine.system import Port
-
-        self._src = []
-        for c, outs in enumerate(rt.plan.outputs):
-            for var in outs:
-                if _EFFORT.match(var.name) and var.kind == REAL:
-                    arr, i = rt.where(Port(c, var))
-                    self._src += [(arr, i + e) for e in range(var.count)]
-        self.peak = 0.0 if self._src else math.nan
-        self.stepped(-1, rt.start_ns, ())
-
-    def stepped(self, k: int, t_ns: int, active: Sequence[int]) -> None:
-        for arr, i in self._src:
-            v = abs(arr[i])
-            self.peak = max(self.peak, v)
-
-    def finish(self, rt: Runtime, error: BaseException | None) -> None:
-        return None
-
-
 class SignalRecorder:
     """Observer: every numeric input and output the master reads, at every macro step, by name."""
 
@@ -122,7 +63,6 @@ class SignalRecorder:
         self._rows: list[list[float]] = []
 
     def start(self, rt: Runtime) -> None:
-        from .engine.system import Port, index_text
 
         self._src = []
         for c, name in enumerate(rt.plan.names):

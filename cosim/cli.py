@@ -368,9 +368,8 @@ def _regression_parser(sub: argparse._SubParsersAction) -> None:
 
 
 def _cmd_validate_model(args: argparse.Namespace) -> int:
-    from multibody.validate import validate_model
-
     from delta.robots import PRESETS
+    from multibody.validate import validate_model
 
     if args.robot not in PRESETS:
         raise CosimError(f"--robot: unknown preset {args.robot!r}; valid: {', '.join(PRESETS)}")
@@ -502,8 +501,8 @@ def _stdout_kept_for_json(on: bool):
 
 
 def _cmd_run(args: argparse.Namespace) -> int:
-    from .run import run_scenario
     from .engine.scenario import apply_overrides
+    from .run import run_scenario
 
     overrides = apply_overrides(args.set, args.stop_time)
     if args.parallel:
@@ -532,7 +531,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
 
 def _cmd_check(args: argparse.Namespace) -> int:
     from .engine.offload import choose
-    from .run import prepare
+    from .engine.prepare import prepare
     from .engine.scenario import apply_overrides
 
     with _open_scenario(args, apply_overrides(args.set, args.stop_time)) as scenario:
@@ -588,8 +587,8 @@ def build_parser() -> argparse.ArgumentParser:
     from fmus.cli import register as _register_fmus
 
     from .analysis.report import register as _register_report
-    from .io.ssp import register as _register_ssp
     from .analysis.sweep import register as _register_sweep
+    from .io.ssp import register as _register_ssp
 
     _register_report(sub)
     _register_ssp(sub)

@@ -7,16 +7,24 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Mapping, Sequence
 
-from .engine.algorithm import Observer, Runtime, StopRequest, initialize, simulate
-from .errors import ComponentSourceError, CosimError, Issue
-from .fmi import Extractions, FMUInfo, cleanup_extracted, load_fmu, make_slave
-from .observers.recorders import ErrorObserver
-from .engine.offload import Offload, choose
-from .engine.scenario import Scenario, line_for, expand_signal, load_scenario
-from .observers.stats import ErrorStats
-from .engine.watchdog import Watchdog, hard_exit
+from delta.robots import get_preset
 
-__all__ = ["RunResult", "progress_bar", "locate_fmus", "prepare", "run_scenario", "check_scenario"]
+from .engine.algorithm import Observer, Runtime, StopRequest, initialize, simulate
+from .engine.offload import Offload, choose
+from .engine.prepare import input_files, prepare
+from .engine.scenario import Scenario, expand_signal, load_scenario
+from .engine.watchdog import Watchdog, hard_exit
+from .errors import CosimError
+from .fmi import Extractions, cleanup_extracted, make_slave
+from .io.output import OutputError, claim
+from .observers.live import LiveView
+from .observers.mcap_log import McapRecorder
+from .observers.publish import Publisher, reference_path
+from .observers.realtime import RealTime
+from .observers.recorders import ErrorObserver
+from .observers.stats import ErrorStats
+
+__all__ = ["RunResult", "progress_bar", "run_scenario"]
 
 
 @dataclass
@@ -68,133 +76,14 @@ def progress_bar():
                     TimeRemainingColumn(), transient=True)
 
 
-def locate_fmus(scenario: Scenario, fmu_files: Mapping[str, str | Path] | None = None) -> dict[str, FMUInfo]:
-    """Each component's FMU: ``path`` relative to the scenario file, or ``fmu`` built by fmus.registry.
-
-    ``fmu_files``: our FMUs already built, by :func:`build_key` (a sweep builds them once for every case);
-    the others are built here.
-    """
-    base = _scenario_dir(scenario)
-    lines = scenario._lines
-    infos: dict[str, FMUInfo] = {}
-    issues: list[Issue] = []
-    built = {k: Path(p) for k, p in (fmu_files or {}).items()}
-    for name, comp in scenario.components.items():
-        loc = ("components", name, "fmu" if comp.fmu else "path")
-        where = dict(file=scenario.source, line=line_for(loc, lines))
-        try:
-            if comp.path is not None:
-                path = Path(comp.path)
-                path = path if path.is_absolute() else base / path
-                if not path.exists():
-                    issues.append(Issue(f"components.{name}.path", f"FMU file not found: {path}", **where))
-                    continue
-            else:
-                key = build_key(scenario, comp.fmu)
-                if key not in built:
-                    built[key] = build_ours(*key)
-                path = built[key]
-            infos[name] = load_fmu(path)
-        except ComponentSourceError as exc:
-            issues += [Issue(f"components.{name}", i.message, **where) for i in exc.issues]
-    if issues:
-        raise ComponentSourceError(issues)
-    return infos
-
-
-def input_files(scenario: Scenario) -> tuple[Path, ...]:
-    """The files a run of ``scenario`` reads: its file (or archive) and the FMUs its components give by ``path``;
-    no output may be written over one of them."""
-    base = _scenario_dir(scenario)
-    paths = [Path(c.path) if Path(c.path).is_absolute() else base / c.path
-             for c in scenario.components.values() if c.path is not None]
-    return tuple(Path(p) for p in (scenario.source, *paths) if p is not None and p != "<string>")
-
-
-def _scenario_dir(scenario: Scenario) -> Path:
-    return Path(scenario.source).parent if scenario.source and scenario.source != "<string>" else Path.cwd()
-
-
-def build_key(scenario: Scenario, name: str) -> tuple[str, bool, int]:
-    """(FMU name, native, FMI version) of our FMU ``name`` in ``scenario``: the native build where the scenario asks
-    for it (``fmus: native``, or ``auto`` with a C compiler on this machine) and the FMU has one, else the python
-    build (FMI 2 co-simulation, or 3 for ``*_me``)."""
-    if scenario.fmus == "python":
-        return name, False, 2
-    from fmus import registry
-
-    if name not in registry.native_names():
-        return name, False, 2
-    if scenario.fmus == "auto":
-        from fmus.native.build import compiler
-        from fmus.native.errors import CompilerMissingError
-
-        try:
-            compiler()
-        except CompilerMissingError:
-            return name, False, 2
-    return name, True, scenario.native_fmi
-
-
-def build_ours(name: str, native: bool = False, fmi: int = 2) -> Path:
-    """Our FMU ``name``, built (or taken from the cache): the python build, or with ``native`` the C build for FMI
-    ``fmi``. A native build that cannot be made (no C compiler) is one line naming what is missing."""
-    try:
-        from fmus import registry
-    except ImportError:
-        raise ComponentSourceError(Issue("", f"fmu: {name}: our FMU registry (fmus.registry) is not available; "
-                                             "give 'path' to an .fmu instead")) from None
-    try:
-        return Path(registry.build(name, native=native, fmi=fmi))
-    except (KeyError, ValueError, LookupError) as exc:
-        known = getattr(registry, "names", None)
-        hint = f"; known: {', '.join(known())}" if callable(known) else ""
-        raise ComponentSourceError(Issue("", f"unknown FMU {name!r}: {exc}{hint}")) from None
-
-
-def prepare(scenario: Scenario, log_signals: str | None = None, *,
-            fmu_files: Mapping[str, str | Path] | None = None):
-    """Pre-flight and plan (no FMU instantiated): returns (plan, preflight report).
-
-    With a ``trajectory:`` section, our trajectory FMUs get their parameters from it.
-    ``log_signals`` overrides ``logging.signals`` (:func:`cosim.engine.system.build_plan`);
-    ``fmu_files``: our FMUs already built (:func:`locate_fmus`).
-    """
-    from .engine.preflight import initial_state_values, preflight, trajectory_start_values
-    from .engine.system import build_plan
-
-    trajectory_values = trajectory_start_values(scenario)  # our trajectory FMUs follow the scenario's section
-    report = preflight(scenario)
-    infos = locate_fmus(scenario, fmu_files)
-    plan = build_plan(scenario, infos, log_signals)
-    for name, values in trajectory_values.items():
-        c = plan.names.index(name)
-        plan.start_values[c] = {**values, **plan.start_values[c]}  # explicit ones are equal (checked)
-    init = initial_state_values(scenario)
-    if init:
-        c = plan.names.index(scenario.initial_state.component)
-        variables = plan.infos[c].variables
-        missing = [n for n in init if n not in variables]
-        if missing:
-            from .errors import ScenarioError
-
-            raise ScenarioError(Issue("initial_state", f"{scenario.initial_state.component} has no "
-                                      f"{', '.join(missing)} (set initial_state.position/velocity to its start "
-                                      f"parameters, or from_trajectory: false)", scenario.source))
-        plan.start_values[c] = {**init, **plan.start_values[c]}  # explicit parameters win
-    return plan, report
-
-
 def _publishing(scenario: Scenario, mcap_path: Path | None, live: tuple[str, int] | None,
                 stamps: str) -> tuple[list[Observer], Observer | None]:
     """The MCAP recorder and/or the live view on one publisher of the run's channels, in start order,
     and the recorder (None without a log)."""
-    from .observers.publish import Publisher, reference_path
 
     robot = None
     scene = scenario.logging.scene
     if scene is not None and scenario.robot:
-        from delta.robots import get_preset
 
         robot = get_preset(scenario.robot)
     publisher = Publisher(robot, expand_signal(scene.position) if scene else None, scene.rate_hz if scene else 30.0,
@@ -204,22 +93,13 @@ def _publishing(scenario: Scenario, mcap_path: Path | None, live: tuple[str, int
     sinks: list[Observer] = []
     recorder = None
     if live is not None:  # first: a port in use fails before the log file is opened
-        from .observers.live import LiveView
 
         sinks.append(LiveView(publisher, live[1], live[0]))
     if mcap_path is not None:
-        from .observers.mcap_log import McapRecorder
 
         recorder = McapRecorder(mcap_path, publisher, scenario, scenario.source, scenario.logging.flush_interval)
         sinks.append(recorder)
     return sinks + [publisher], recorder
-
-
-def check_scenario(path: str | Path, overrides: dict | None = None) -> tuple[Scenario, Any, str]:
-    """Validate the scenario, resolve its FMUs and wiring and run the pre-flight."""
-    scenario = load_scenario(path, overrides)
-    plan, report = prepare(scenario)
-    return scenario, plan, report
 
 
 def run_scenario(scenario: Scenario | str | Path, out: str | Path | None = None, overrides: dict | None = None,
@@ -241,7 +121,6 @@ def run_scenario(scenario: Scenario | str | Path, out: str | Path | None = None,
     The log's path is claimed (checked writable, locked, written as X.partial) before any FMU is
     loaded, and the finished log renamed into place at the end (see :mod:`cosim.io.output`).
     """
-    from .io.output import claim
 
     output = None
     with Extractions() as held:  # this run's FMU extractions (other runs of the process keep theirs)
@@ -325,7 +204,6 @@ def _settle(output, error: BaseException | None) -> None:
         output.discard()
     else:
         output.release()
-        from .io.output import OutputError
 
         raise OutputError(f"{state}; the log written so far is kept in {output.partial}: recover it with "
                           f"`python -m cosim recover {output.partial}`") from None
@@ -346,7 +224,6 @@ def _run_claimed(scenario: Scenario, output, held: Extractions, progress: bool, 
                  [scenario.components[n].step_multiple for n in plan.names], scenario.algorithm)
     writer_process = False  # the log written by a writer process (as McapRecorder decides): it takes a CPU
     if logging_on:
-        from .observers.mcap_log import McapRecorder
 
         writer_process = rt.n_steps >= McapRecorder.PROCESS_MIN_STEPS
     ahead, note = choose(plan, scenario.parallel, rt.n_steps, writer_process)
@@ -363,7 +240,6 @@ def _run_claimed(scenario: Scenario, output, held: Extractions, progress: bool, 
         observers += sinks
     pacing = None
     if realtime is not None:
-        from .observers.realtime import RealTime
 
         pacing = RealTime(realtime)
     observers += list(extra_observers)

@@ -25,9 +25,13 @@ from typing import Callable, Mapping, Sequence
 
 import numpy as np
 
+from fmus import registry
+
+from ..engine.scenario import load_scenario, load_yaml
 from ..errors import CosimError, Issue, ScenarioError
 from ..io.runlog import RunLog, Signal, read_run
 from ..observers.stats import ErrorStats
+from ..run import run_scenario
 
 __all__ = ["Comparison", "compare_logs", "compare_plants", "tolerance_for", "parse_tolerances",
            "logged_tolerances", "PLANTS"]
@@ -141,7 +145,6 @@ def logged_tolerances(log: RunLog) -> dict[str, float]:
     """``regression.tolerances`` of the scenario attached to ``log`` ({} when it has none)."""
     import yaml
 
-    from ..engine.scenario import load_yaml
 
     for name, data in log.attachments.items():
         if name.startswith("scenario/") and not name.endswith(".ssp"):  # a YAML scenario, not an SSP archive
@@ -269,7 +272,6 @@ def _plant_overrides(scenario, component: str, kind: str, plant: str) -> tuple[d
     """Loader overrides that put ``plant`` in ``component``, and the parameters it had to drop."""
     from fmpy import read_model_description
 
-    from fmus import registry
 
     template, extra = PLANTS[plant]
     fmu = template.format(kind=kind)
@@ -295,8 +297,6 @@ def compare_plants(path: str | Path, plants: Sequence[str] = ("exudyn", "analyti
     Logs go to ``out_dir/<scenario>.<plant>.mcap``. ``on_run(plant, RunResult)`` is called
     after each run. Returns (comparison, [RunResult, RunResult]).
     """
-    from ..run import run_scenario
-    from ..engine.scenario import load_scenario
 
     if len(plants) != 2:
         raise CosimError(f"--plants needs exactly two plants, got {len(plants)}: {', '.join(plants)}")

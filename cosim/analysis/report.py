@@ -37,6 +37,9 @@ from typing import Any, Sequence
 
 import numpy as np
 
+from delta.paper_data import THESIS_TABLE_5_M
+
+from ..engine.scenario import Compare, expand_signal, load_yaml
 from ..errors import CosimError
 from ..io.runlog import AXES, RunLog, read_run
 from ..observers.stats import ErrorStats
@@ -115,7 +118,6 @@ def _scenario_doc(run: RunLog) -> tuple[str | None, dict]:
     """The attached scenario file (name, parsed YAML mapping), or (None, {})."""
     import yaml
 
-    from ..engine.scenario import load_yaml
 
     for name, data in run.attachments.items():
         if name.startswith("scenario/"):
@@ -130,7 +132,6 @@ def _scenario_doc(run: RunLog) -> tuple[str | None, dict]:
 def _compare_spec(run: RunLog) -> tuple[list[str], list[str], str]:
     from pydantic import ValidationError
 
-    from ..engine.scenario import Compare, expand_signal
 
     att, doc = _scenario_doc(run)
     section = doc.get("compare")
@@ -684,7 +685,6 @@ def controller_table(paths: Sequence[str | Path | RunLog], thesis: bool | None =
         A log cannot be read or lacks its compared signals; ReportError when a run's compared
         signals are not a platform vector x, y, z.
     """
-    from delta.paper_data import THESIS_TABLE_5_M
 
     if not paths:
         raise ReportError("controller table: no run logs given")

@@ -18,7 +18,7 @@
 
 ``results.csv``: one row per case: ``case`` (a hash of its parameter values), ``status``
 (``ok``: the run completed; ``failed``: it raised, ``message`` says why), one column per swept
-name, then :func:`cosim.api.metric_names` (``rmse_x``... ``max_error_x``... in signal units,
+name, then :func:`cosim.analysis.metrics.metric_names` (``rmse_x``... ``max_error_x``... in signal units,
 ``rmse`` and ``max_error`` the largest over the axes, ``peak_effort`` N or N*m, ``sim_time_s``,
 ``steps``, ``wall_time_s`` of the case), ``checks`` (the scenario's acceptance checks:
 ``ok``/``FAILED``/empty), ``mcap`` (with ``--logs``) and ``message``. Floats are written with
@@ -39,7 +39,14 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from ..errors import CosimError
+from ..engine.prepare import build_key, build_ours, locate_fmus
+from ..engine.scenario import dotted_overrides, parse_set_value, read_scenario
+from ..engine.system import build_plan
+from ..errors import CosimError, exit_now
+from ..fmi import cleanup_extracted
+from ..observers.recorders import PeakEffort
+from ..run import run_scenario
+from .metrics import metric_names, metrics
 
 if TYPE_CHECKING:
     from ..engine.scenario import Scenario
@@ -78,7 +85,6 @@ class Case:
 
 
 def _value(text: str, where: str) -> Any:
-    from ..engine.scenario import parse_set_value
 
     return parse_set_value(text.strip(), where)
 
@@ -176,21 +182,19 @@ def run_loaded_case(scenario: Scenario, fmu_files: dict[tuple[str, bool, int], s
     """Run one case, a loaded :class:`~cosim.engine.scenario.Scenario` (in a Dask worker, or here); never
     raises for a failing case.
 
-    ``fmu_files``: our FMUs by :func:`cosim.run.build_key`, built beforehand. The run is serial in its process
+    ``fmu_files``: our FMUs by :func:`cosim.engine.prepare.build_key`, built beforehand. The run is serial in its process
     (``parallel: off``: the sweep already uses the cores). Returns the row of ``results.csv``
     without the parameter columns: status, message, metrics, checks, mcap.
     """
-    from .. import api
-    from ..run import run_scenario
 
     t0 = time.perf_counter()
     row: dict[str, Any] = {"status": "failed", "message": "", "checks": "", "mcap": ""}
     try:
         sc = scenario.model_copy(update={"parallel": "off"})  # a valid value: nothing to validate again
-        peak = api.PeakEffort()
+        peak = PeakEffort()
         res = run_scenario(sc, out=mcap, log=mcap is not None, progress=False, extra_observers=[peak],
                            fmu_files=fmu_files)
-        row.update(api.metrics(sc, res, peak.peak))
+        row.update(metrics(sc, res, peak.peak))
         row["status"] = "ok" if res.status == "completed" else res.status
         row["message"] = res.message
         if res.checks:
@@ -238,8 +242,7 @@ def read_results(out: str | Path) -> list[dict[str, str]]:
 
 
 def prebuild(scenarios: Iterable[Any]) -> dict[tuple[str, bool, int], str]:
-    """Build each of our FMUs the cases use, once; :func:`cosim.run.build_key` -> absolute path."""
-    from ..run import build_key, build_ours
+    """Build each of our FMUs the cases use, once; :func:`cosim.engine.prepare.build_key` -> absolute path."""
 
     keys = sorted({build_key(sc, c.fmu) for sc in scenarios for c in sc.components.values() if c.fmu is not None})
     return {k: str(Path(build_ours(*k)).resolve()) for k in keys}
@@ -248,8 +251,6 @@ def prebuild(scenarios: Iterable[Any]) -> dict[tuple[str, bool, int], str]:
 def _check_names(scenarios: list[Any], fmu_files: dict[tuple[str, bool, int], str]) -> None:
     """Resolve every case's parameter names and values against the FMUs (no instantiation), so a
     misspelt name stops the sweep before it starts (ScenarioError / WiringError, exit 2)."""
-    from ..run import locate_fmus
-    from ..engine.system import build_plan
 
     infos = None
     for sc in scenarios:
@@ -280,8 +281,6 @@ def run_sweep(scenario: str | Path, cases: list[Case], out: str | Path, *, worke
     ``on_progress(done, failed, total)`` after each case. Raises :class:`ScenarioError` for a bad
     override name or value (checked for every case before anything runs).
     """
-    from .. import api
-    from ..engine.scenario import dotted_overrides, read_scenario
 
     t_start = time.perf_counter()
     scenario = str(Path(scenario).resolve())
@@ -289,7 +288,7 @@ def run_sweep(scenario: str | Path, cases: list[Case], out: str | Path, *, worke
     source = read_scenario(scenario)  # read once: every case is derived from it
     loaded = [source.load(dotted_overrides(c.values, "sweep case")) for c in cases]
     params = list(dict.fromkeys(k for c in cases for k in c.values))
-    columns = _columns(params, api.metric_names(loaded[0]))
+    columns = _columns(params, metric_names(loaded[0]))
     out.mkdir(parents=True, exist_ok=True)
     table = out / RESULTS
     done_rows = read_results(out)
@@ -446,13 +445,11 @@ def dask_setup(worker) -> None:  # noqa: ARG001 - Dask's preload hook
     """Import what a case needs while the worker starts (not in its first case), and arrange a
     quick exit for a nanny's worker process once the worker has closed (:func:`_exit_now`)."""
     import atexit
-    import importlib
     import multiprocessing
 
     if multiprocessing.parent_process() is not None:
         atexit.register(_exit_now)
-    for module in ("api", "run"):
-        importlib.import_module(f"{__package__}.{module}")
+    # this module imports what a case needs (the run, the FMU access layer) when the worker loads it
 
 
 def dask_teardown(worker) -> None:  # noqa: ARG001 - Dask's preload hook
@@ -466,16 +463,12 @@ def _exit_now() -> None:
     interpreter's finalization and the shared libraries' destructors sometimes abort there
     ("free(): corrupted unsorted chunks") after every result was delivered."""
     import logging
-    import sys
 
-    from ..errors import exit_now
 
     if not _TORN_DOWN:
         return
     try:
-        fmu = sys.modules.get(f"{__package__}.fmu")
-        if fmu is not None:
-            fmu.cleanup_extracted()
+        cleanup_extracted()
         logging.shutdown()
     finally:
         exit_now(0)
@@ -605,7 +598,6 @@ def register(sub) -> None:
 
 
 def _cmd_sweep(args) -> int:
-    from ..engine.scenario import parse_set_value
 
     if args.n is not None and not 1 <= args.n <= MAX_CASES:
         raise SweepError(f"-n must be from 1 to {MAX_CASES}, got {args.n}")

@@ -24,7 +24,7 @@ import time as _time
 from dataclasses import dataclass, field
 from typing import Any, Callable, Protocol, Sequence
 
-from ..errors import STOP_SIGNALS
+from ..errors import STOP_SIGNALS, Interrupted
 from ..fmi import Slave, Terminated
 from .system import SystemPlan
 
@@ -175,7 +175,6 @@ class StopRequest:
         self.request(signum)
 
     def interrupted(self) -> BaseException:
-        from ..errors import Interrupted
 
         return Interrupted(self.signum or signal.SIGINT)
 

@@ -36,10 +36,10 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from ..fmi import extract as _extract
-from .algorithm import Runtime, byte_view, initialize, simulate
 from ..errors import STOP_SIGNALS, CosimError
 from ..fmi import PY_KINDS, Terminated, Variable, cleanup_extracted, load_fmu, make_slave
+from ..fmi import extract as _extract
+from .algorithm import Runtime, byte_view, initialize, simulate
 from .system import Link, Port, SystemPlan
 
 __all__ = ["AUTO_MIN_STEPS", "RING", "feedforward", "choose", "Offload", "Proxy"]

@@ -15,6 +15,11 @@ from typing import Any
 
 import numpy as np
 
+from delta.robots import get_preset
+from delta.trajectories import TYPES
+from delta.workspace import check_trajectory
+from fmus.adapters.trajectories import ADAPTERS
+
 from ..errors import Issue, PreflightError, ScenarioError
 from .scenario import Scenario, TrajectorySpec, line_for
 
@@ -22,10 +27,7 @@ __all__ = ["make_trajectory", "check_positions", "sampled_positions", "preflight
 
 def make_trajectory(spec: TrajectorySpec, source: str | None = None):
     """Instantiate the class of ``spec.type`` (:data:`delta.trajectories.TYPES`) with ``spec.params``."""
-    try:
-        from delta.trajectories import TYPES
-    except ImportError:
-        raise ScenarioError(Issue("trajectory", "delta.trajectories is not available", source)) from None
+
     cls = TYPES[spec.type]
     try:  # spec.params are typed by the scenario's model (TrajectorySpec._typed)
         return cls(**spec.params)
@@ -36,8 +38,6 @@ def make_trajectory(spec: TrajectorySpec, source: str | None = None):
 def check_positions(robot_name: str, times: np.ndarray, positions: np.ndarray,
                     singularity_margin: float | None) -> None:
     """Raise :class:`PreflightError` (the first offending sample and why) if any position is unreachable."""
-    from delta.robots import get_preset
-    from delta.workspace import check_trajectory
 
     res = check_trajectory(get_preset(robot_name), np.asarray(positions, dtype=float), np.asarray(times, dtype=float),
                            singularity_margin)
@@ -87,10 +87,7 @@ def _trajectory_adapters(scenario: Scenario) -> dict[str, type]:
     ours = {n: c.fmu for n, c in scenario.components.items() if c.fmu is not None}
     if not ours:
         return {}
-    try:
-        from fmus.adapters.trajectories import ADAPTERS
-    except ImportError:  # our FMUs cannot be built either; locate_fmus reports that
-        return {}
+
     by_fmu = {a.FMU: a for a in ADAPTERS.values()}
     return {name: by_fmu[fmu] for name, fmu in ours.items() if fmu in by_fmu}
 
@@ -132,7 +129,6 @@ def trajectory_start_values(scenario: Scenario) -> dict[str, dict[str, Any]]:
     for name, cls in adapters.items():
         comp = scenario.components[name]
         if cls.TYPE != spec.type:
-            from fmus.adapters.trajectories import ADAPTERS
 
             issue(("components", name, "fmu"),
                   f"{comp.fmu} generates a {cls.TYPE} trajectory but trajectory.type is {spec.type}; "

@@ -17,6 +17,8 @@ from typing import Any, Literal, Union
 import yaml
 from pydantic import BaseModel, ConfigDict, Field, PrivateAttr, ValidationError, field_validator, model_validator
 
+from delta.robots import PRESETS
+from delta.trajectories import TYPES
 from delta.trajectories import TYPES as TRAJECTORY_TYPES
 
 from ..errors import Issue, ScenarioError
@@ -464,7 +466,6 @@ def scenario_from_data(data: dict[str, Any], file: str = "<string>", overrides: 
     Raises :class:`ScenarioError` with every issue.
     """
     import copy
-
     import difflib
 
     lines = lines if lines is not None else {}
@@ -543,7 +544,6 @@ def _semantic_issues(s: Scenario) -> list[tuple[tuple, str]]:
     if s.trajectory is not None and s.robot is None:
         out.append((("trajectory",), "a trajectory needs 'robot' (the preset to check it against)"))
     if s.robot is not None:
-        from delta.robots import PRESETS
 
         if s.robot not in PRESETS:
             close = difflib.get_close_matches(s.robot, list(PRESETS), n=3) or list(PRESETS)
@@ -573,7 +573,6 @@ def trajectory_params_model(kind: str) -> type[BaseModel]:
     import dataclasses
     import typing
 
-    from delta.trajectories import TYPES
 
     if kind in _PARAM_MODELS:
         return _PARAM_MODELS[kind]
@@ -824,7 +823,6 @@ def apply_overrides(sets: list[str], stop_time: float | None = None) -> Override
 
 def scenario_json_schema() -> dict:
     """JSON Schema of the scenario format, for editors (yaml-language-server)."""
-    from delta.trajectories import TYPES
 
     schema = Scenario.model_json_schema(by_alias=True)
     schema.get("properties", {}).pop("source", None)

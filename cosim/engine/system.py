@@ -8,13 +8,13 @@ from __future__ import annotations
 
 import difflib
 import math
-import re
 from dataclasses import dataclass, field
 from typing import Any, Mapping
 
 from ..errors import AlgebraicLoopError, Issue, UnknownSignalError, WiringError
 from ..fmi import FMUInfo, Variable
-from .scenario import Scenario, line_for, expand_signal, issue_at
+from .scenario import Scenario, expand_signal, issue_at, line_for
+from .wiring import expand_connection, find_variable, index_text
 
 __all__ = ["Port", "Link", "SystemPlan", "build_plan", "gauss_seidel_order", "find_variable_loop"]
 
@@ -51,43 +51,6 @@ class Link:
     @property
     def count(self) -> int:
         return self.src.count
-
-
-_ELEMENT = re.compile(r"^(?P<base>.+)\[(?P<idx>\d+(?:\s*,\s*\d+)*)\]$")
-
-
-def index_text(var: Variable, element: int | None) -> str:
-    if element is None:
-        return ""
-    idx, rest = [], element
-    for n in reversed(var.shape):
-        idx.append(rest % n + 1)
-        rest //= n
-    return "[" + ",".join(str(i) for i in reversed(idx)) + "]"
-
-
-def find_variable(info: FMUInfo, name: str) -> tuple[Variable | None, int | None, str]:
-    """``name`` in ``info``: a variable, or one element ``base[i]`` / ``base[i,j]`` of an FMI 3.0 array.
-
-    Returns (variable, element or None, problem); the problem is empty when found.
-    """
-    var = info.variables.get(name)
-    if var is not None:
-        return var, None, ""
-    m = _ELEMENT.match(name)
-    if m is None:
-        return None, None, ""
-    base = info.variables.get(m.group("base"))
-    if base is None or not base.is_array:
-        return None, None, ""
-    idx = [int(i) for i in m.group("idx").split(",")]
-    if len(idx) != len(base.shape) or any(not 1 <= i <= n for i, n in zip(idx, base.shape)):
-        return None, None, f"{name}: index out of range ({base.name} has shape {'x'.join(map(str, base.shape))}, " \
-                           f"indices start at 1)"
-    flat = 0
-    for i, n in zip(idx, base.shape):
-        flat = flat * n + (i - 1)
-    return base, flat, ""
 
 
 # value ranges of FMI 3.0's fixed-width integers (FMI 2.0 Integer and Enumeration: 32 bits)
@@ -279,8 +242,6 @@ def build_plan(scenario: Scenario, infos: Mapping[str, FMUInfo], log_signals: st
                        f"{role}{_close(vname, candidates)}")
             return None
         return Port(idx[comp], var, element)
-
-    from .wiring import expand_connection
 
     driven: dict[str, int] = {}
     for i, c in enumerate(scenario.connections):

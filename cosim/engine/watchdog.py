@@ -34,6 +34,8 @@ import time
 from typing import Any, Callable
 
 from ..errors import Interrupted, StallError, exit_now, exit_status, exit_text
+from ..fmi.slave import Base
+from .offload import Proxy
 
 __all__ = ["Watchdog", "GRACE_S"]
 
@@ -138,8 +140,6 @@ class Watchdog:
 
     def _where(self) -> tuple[str, float, str]:
         """(component, simulation time, where it runs) of the innermost slave call on the main thread's stack."""
-        from ..fmi.slave import Base
-        from .offload import Proxy
 
         frame = sys._current_frames().get(self._main)
         t_loop = None

@@ -1,4 +1,5 @@
-"""Connections by prefix: ``{from: traj.p_ref, to: ik.p_ref}`` wires every element with a matching suffix.
+"""Variable names and connections: ``name`` or ``base[i,j]`` resolved to a variable (or one element of an FMI 3.0
+array), and connections by prefix: ``{from: traj.p_ref, to: ik.p_ref}`` wires every element with a matching suffix.
 
 A connection end that names a variable (a scalar, a whole FMI 3.0 array or one element of it)
 is used as is. Otherwise it is a prefix: the variables named ``prefix.SUFFIX`` or
@@ -11,10 +12,48 @@ input of the same name of the second (at least one).
 
 from __future__ import annotations
 
-from ..fmi import FMUInfo
-from .system import find_variable
+import re
 
-__all__ = ["expand_connection"]
+from ..fmi import FMUInfo, Variable
+
+__all__ = ["expand_connection", "find_variable", "index_text"]
+
+
+_ELEMENT = re.compile(r"^(?P<base>.+)\[(?P<idx>\d+(?:\s*,\s*\d+)*)\]$")
+
+
+def index_text(var: Variable, element: int | None) -> str:
+    if element is None:
+        return ""
+    idx, rest = [], element
+    for n in reversed(var.shape):
+        idx.append(rest % n + 1)
+        rest //= n
+    return "[" + ",".join(str(i) for i in reversed(idx)) + "]"
+
+
+def find_variable(info: FMUInfo, name: str) -> tuple[Variable | None, int | None, str]:
+    """``name`` in ``info``: a variable, or one element ``base[i]`` / ``base[i,j]`` of an FMI 3.0 array.
+
+    Returns (variable, element or None, problem); the problem is empty when found.
+    """
+    var = info.variables.get(name)
+    if var is not None:
+        return var, None, ""
+    m = _ELEMENT.match(name)
+    if m is None:
+        return None, None, ""
+    base = info.variables.get(m.group("base"))
+    if base is None or not base.is_array:
+        return None, None, ""
+    idx = [int(i) for i in m.group("idx").split(",")]
+    if len(idx) != len(base.shape) or any(not 1 <= i <= n for i, n in zip(idx, base.shape)):
+        return None, None, f"{name}: index out of range ({base.name} has shape {'x'.join(map(str, base.shape))}, " \
+                           f"indices start at 1)"
+    flat = 0
+    for i, n in zip(idx, base.shape):
+        flat = flat * n + (i - 1)
+    return base, flat, ""
 
 
 def _members(info: FMUInfo, prefix: str, causality: str) -> list[tuple[str, str]]:

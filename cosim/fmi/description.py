@@ -8,11 +8,8 @@ from functools import cached_property
 from pathlib import Path
 from typing import Any
 
-
 from ..errors import ComponentSourceError, Issue
-from .extract import extraction, forget_extractions, file_stamp, check_archive
-
-
+from .extract import check_archive, extraction, file_stamp, forget_extractions
 
 REAL, INTEGER, BOOLEAN, STRING, BINARY, CLOCK = "Real", "Integer", "Boolean", "String", "Binary", "Clock"
 # declared FMI 2.0 / 3.0 types mapped onto the kinds the master exchanges (connections need equal kinds)

@@ -12,10 +12,7 @@ from contextvars import ContextVar
 from pathlib import Path
 from typing import Any, Iterable
 
-
 from ..errors import ComponentSourceError, Issue
-
-
 
 Key = tuple  # (resolved FMU path, its stamp): one extraction per file as it was read
 

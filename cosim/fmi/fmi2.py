@@ -6,15 +6,12 @@ import ctypes
 from ctypes import byref, c_double, c_int32
 from typing import Any, Iterable
 
-
 from ..errors import FMIError
 from .description import BOOLEAN, INTEGER, REAL, STRING, Variable
 from .logger import FMI2_ENVIRONMENTS, FMI2_LOG_TARGETS, fmi2_logger
 from .model_exchange import ModelExchange
 from .pythonfmu import KEEP_ALIVE
-from .slave import Terminated, Base, Buffers, CoSimulation, as_number
-
-
+from .slave import Base, Buffers, CoSimulation, Terminated, as_number
 
 # --------------------------------------------------------------------------- FMI 2.0
 

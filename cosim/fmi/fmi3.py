@@ -6,14 +6,11 @@ import ctypes
 from ctypes import byref, c_double, c_int32, c_int64, c_size_t, c_uint32
 from typing import Any, Iterable
 
-
 from ..errors import FMIError, ScenarioError
 from .description import BINARY, STRING, Variable
 from .model_exchange import ModelExchange
 from .pythonfmu import KEEP_ALIVE
-from .slave import Terminated, Base, Buffers, CoSimulation, as_number
-
-
+from .slave import Base, Buffers, CoSimulation, Terminated, as_number
 
 # --------------------------------------------------------------------------- FMI 3.0
 

@@ -9,10 +9,10 @@ import math
 from ctypes import c_double
 from typing import Any, Callable
 
-
 from ..errors import FMIError
-from .turn import DERIVATIVES, STATES, TIME, make_rhs
+from .integrators import make_integrator
 from .slave import Terminated
+from .turn import DERIVATIVES, STATES, TIME, make_rhs
 
 isfinite = math.isfinite  # a module global: one lookup less per output buffer in the hot path
 
@@ -163,7 +163,6 @@ class ModelExchange:
         self.integrator.reset(self.time)
 
     def exit_initialization(self) -> None:
-        from .integrators import make_integrator
 
         self._exit_init()
         self.event_log = []

@@ -7,9 +7,6 @@ from typing import Any
 
 from fmus.requirements import release_pythonfmu_state
 
-
-
-
 # Callbacks and library handles handed to FMUs live as long as the process: an FMU may call its
 # logger while being freed, and pythonfmu libraries must not be unloaded (GC of their objects crashes).
 KEEP_ALIVE: list[Any] = []

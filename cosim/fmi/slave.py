@@ -15,11 +15,11 @@ from typing import Any, Callable, Protocol, Sequence
 from fmus.requirements import release_pythonfmu_state
 
 from ..errors import FMIError, printable
-from .turn import GET, SET, STEP, Exchange, Finite, make_turn
-from .description import BINARY, BOOLEAN, FMUInfo, REAL, Variable
 from . import extract
+from .description import BINARY, BOOLEAN, REAL, FMUInfo, Variable
 from .logger import log_text
 from .pythonfmu import PYTHONFMU_LIBRARIES
+from .turn import GET, SET, STEP, Exchange, Finite, make_turn
 
 isfinite = math.isfinite  # a module global: one lookup less per output buffer in the hot path
 

@@ -7,6 +7,7 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 
 from ..errors import CosimError
+from .output import check_output
 
 __all__ = ["recover", "RecoveryReport"]
 
@@ -30,7 +31,6 @@ def recover(path: str | Path, out: str | Path | None = None) -> RecoveryReport:
     The copy is written under a temporary name next to ``out`` and renamed when complete: a
     failure (disk full) leaves no output, not an empty or truncated one.
     """
-    from .output import check_output
 
     path = Path(path)
     out = Path(out) if out else _default_out(path)

@@ -11,7 +11,7 @@ scenario as an SSP archive that any SSP tool can run:
   libcosim reads (``osp:FixedStepAlgorithm baseStepSize``) and a component's step multiple as
   ``osp:StepSizeHint``;
 - ``resources/<name>.ssv``: per component, every start value our master sets (the plan of
-  :func:`cosim.run.prepare`: explicit parameters, our trajectory FMUs' parameters from the
+  :func:`cosim.engine.prepare.prepare`: explicit parameters, our trajectory FMUs' parameters from the
   ``trajectory:`` section and the plant's initial state), bound through ``ssd:ParameterBinding``;
 - ``resources/<name>.fmu``: the FMUs;
 - a root annotation of type ``org.delta-cosim.engine.scenario`` holding what SSP has no place for
@@ -57,8 +57,11 @@ from typing import TYPE_CHECKING, Any, Iterator
 from urllib.parse import unquote, urlparse
 from xml.etree import ElementTree as ET
 
+from ..engine.prepare import input_files, prepare
+from ..engine.scenario import Component, apply_overrides, load_scenario, scenario_from_data
 from ..errors import Issue, ScenarioError
 from ..fmi.extract import MAX_FMU_BYTES, SSP_PREFIX, sweep_orphans
+from .output import check_output
 
 if TYPE_CHECKING:  # the CLI imports this module to register its command: keep pydantic out of that
     from ..engine.scenario import Scenario
@@ -188,7 +191,6 @@ def _extras(scenario: Scenario) -> dict[str, Any]:
     data["logging"] = logging
     if data.get("initial_state"):
         data["initial_state"] = {**data["initial_state"], "from_trajectory": False}  # values are in the .ssv
-    from ..engine.scenario import Component
 
     defaults = {k: Component.model_fields[k].default for k in _COMPONENT_OPTIONS}
     options = {}
@@ -203,12 +205,10 @@ def _extras(scenario: Scenario) -> dict[str, Any]:
 def export_ssp(scenario: Scenario, out: str | Path) -> ExportReport:
     """Write ``scenario`` as an SSP 1.0 archive at ``out`` (see the module docstring).
 
-    Builds our FMUs if needed and runs the pre-flight (:func:`cosim.run.prepare`); raises
+    Builds our FMUs if needed and runs the pre-flight (:func:`cosim.engine.prepare.prepare`); raises
     :class:`cosim.errors.CosimError` subclasses for a bad scenario, :class:`SspError` for what SSP
     1.0 cannot express.
     """
-    from .output import check_output
-    from ..run import input_files, prepare
 
     out = Path(out)
     plan, _ = prepare(scenario)
@@ -635,7 +635,6 @@ def open_ssp(ssp: str | Path, overrides: dict[tuple, Any] | None = None) -> Iter
             what = " and ".join(f"the {'base step' if k == 'step' else 'stop time'}" for k, _ in missing)
             raise SspError(ssp, f"{what}: neither the SSD's default experiment nor the FMUs give it; "
                                 f"pass {' and '.join(f for _, f in missing)}")
-        from ..engine.scenario import scenario_from_data
 
         yield scenario_from_data(data, str(ssp), overrides)
     finally:
@@ -667,7 +666,6 @@ def register(sub) -> None:
 
 
 def _cmd_export(args) -> int:
-    from ..engine.scenario import apply_overrides, load_scenario
 
     rep = export_ssp(load_scenario(args.scenario, apply_overrides(args.set, args.stop_time)), args.out)
     if args.json:

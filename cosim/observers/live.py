@@ -19,7 +19,7 @@ from collections.abc import Sequence
 
 from ..engine.algorithm import Runtime
 from ..errors import CosimError
-from .log_writer import FoxgloveChannels
+from .log_writer import FoxgloveChannels, encode_messages
 from .publish import Publisher
 
 __all__ = ["DEFAULT_PORT", "LiveView", "parse_address"]
@@ -65,7 +65,6 @@ class _ContextSink(FoxgloveChannels):
         self._layouts: dict = {}
 
     def blocks(self, offset_ns: int, blocks) -> None:
-        from .log_writer import encode_messages
 
         for cid, stamps, data, skip in blocks:
             log = self._log[cid]

@@ -42,6 +42,9 @@ from typing import Any
 
 import orjson
 
+from ..errors import STOP_SIGNALS
+from ..fmi.turn import samples_helper
+
 __all__ = ["BlockLayout", "FoxgloveChannels", "encode_block", "encode_messages", "encode_samples", "row_format",
            "LogSink", "WriterProcess", "WriterFailed"]
 
@@ -168,7 +171,6 @@ _SAMPLES_HELPER: list = []  # [cosim_samples, or None without a C compiler], loo
 
 def _samples_helper():
     if not _SAMPLES_HELPER:
-        from ..fmi.turn import samples_helper
 
         _SAMPLES_HELPER.append(samples_helper())
     return _SAMPLES_HELPER[0]
@@ -595,7 +597,6 @@ def os_reason(exc: OSError) -> str:
 def main() -> int:
     import signal
 
-    from ..errors import STOP_SIGNALS
 
     for sig in STOP_SIGNALS:  # the master handles Ctrl-C and a closed terminal and finishes the log
         signal.signal(sig, signal.SIG_IGN)

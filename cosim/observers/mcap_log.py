@@ -41,7 +41,7 @@ import orjson
 
 from ..engine.algorithm import Runtime
 from ..errors import CosimError
-from .log_writer import LogSink, WriterFailed, WriterProcess
+from .log_writer import LogSink, WriterFailed, WriterProcess, os_reason
 from .publish import Publisher, time_metadata
 
 __all__ = ["McapRecorder"]
@@ -159,7 +159,6 @@ class McapRecorder:
 
     def _failure(self, exc: BaseException) -> CosimError:
         """A failed write as one line: the file and the OS's reason (e.g. no space left on device)."""
-        from .log_writer import os_reason
 
         reason = os_reason(exc) if isinstance(exc, OSError) else str(exc)
         if "space" not in reason:

@@ -50,16 +50,22 @@ from __future__ import annotations
 import ctypes
 import time
 from collections import deque
-from functools import lru_cache, partial
 from collections.abc import Sequence
+from functools import lru_cache, partial
 from typing import Any
 
 import numpy as np
 import orjson
 
-from ..engine.algorithm import Runtime
+from delta.kinematics import inverse_kinematics, leg_axes, platform_offsets
+from delta.model import build_model
+
+from ..engine.algorithm import Runtime, byte_view
+from ..engine.preflight import make_trajectory, sampled_positions
 from ..errors import CosimError
 from ..fmi import BINARY, BOOLEAN, INTEGER, REAL, STRING
+from .foxglove_schemas import FRAME_TRANSFORMS, SCENE_UPDATE
+from .log_writer import BlockLayout, row_format
 
 __all__ = [
     "EVENTS_SCHEMA",
@@ -144,7 +150,6 @@ def block_layout(keys: Sequence[str], readers, kinds: Sequence[str], per_sample:
     consecutive elements of one ctypes array, in row order; a row is their bytes one after the other)
     when every value lives in a ctypes array (numbers, Booleans), else None (values read one by one).
     ``keys``: one JSON key per reader; ``per_sample``: the channel's layout is ``samples``."""
-    from .log_writer import BlockLayout, row_format
 
     if any(kind not in (REAL, INTEGER, BOOLEAN) for kind in kinds) or any(
             not isinstance(getattr(arr, "_type_", None), type) or n == 0 for arr, _, n, _ in readers):
@@ -172,7 +177,6 @@ class _Rows:
     __slots__ = ("cid", "cap", "capture", "stamps", "data", "raw", "sources")
 
     def __init__(self, cid: int, runs, readers, block_bytes: int):
-        from ..engine.algorithm import byte_view
 
         self.cid = cid
         self.stamps: list[int] = []
@@ -295,8 +299,6 @@ class _Drawing:
     _RED = {"r": 0.9, "g": 0.1, "b": 0.1, "a": 1.0}
 
     def __init__(self, robot) -> None:
-        from delta.kinematics import leg_axes, platform_offsets
-        from delta.model import build_model
 
         self.robot = robot
         self.model = model = build_model(robot)
@@ -306,7 +308,6 @@ class _Drawing:
 
     def update(self, p, t_ns: int, trail: list | None = None) -> dict | None:
         """:func:`scene_update` with the trail's points in their JSON form (dicts or fragments)."""
-        from delta.kinematics import inverse_kinematics
 
         model, actuator = self.model, self.model.actuator
         x, y, z = (float(v) for v in p)
@@ -370,7 +371,6 @@ def reference_path(scenario) -> np.ndarray | None:
     spec = getattr(scenario, "trajectory", None)
     if spec is None:
         return None
-    from ..engine.preflight import make_trajectory, sampled_positions
 
     t0, t1 = scenario.time.start, scenario.time.stop
     n = int(min(_REFERENCE_POINTS, max(2, round((t1 - t0) / scenario.time.step) + 1)))
@@ -480,7 +480,6 @@ class Publisher:
 
     # -- observer protocol
     def start(self, rt: Runtime) -> None:
-        from .foxglove_schemas import FRAME_TRANSFORMS, SCENE_UPDATE
 
         plan = rt.plan
         self.origin(rt)

@@ -3,12 +3,15 @@
 from __future__ import annotations
 
 import math
+import re
 from typing import Sequence
 
 from ..engine.algorithm import Runtime
+from ..engine.system import Port
+from ..fmi import REAL
 from .stats import ErrorStats
 
-__all__ = ["ErrorObserver", "Probe"]
+__all__ = ["ErrorObserver", "PeakEffort", "Probe"]
 
 
 class ErrorObserver:
@@ -71,6 +74,34 @@ class Probe:
         self.t_ns.append(t_ns)
         for s, (arr, i) in zip(self.signals, self._src):
             self.values[s].append(arr[i])
+
+    def finish(self, rt: Runtime, error: BaseException | None) -> None:
+        return None
+
+
+_EFFORT = re.compile(r"^u(\[\d+\])?$")  # actuator effort u[i] (conventions), N or N*m
+
+
+class PeakEffort:
+    """Observer: the largest |u[i]| of every component output named ``u`` or ``u[i]``."""
+
+    def __init__(self) -> None:
+        self.peak = math.nan
+
+    def start(self, rt: Runtime) -> None:
+        self._src = []
+        for c, outs in enumerate(rt.plan.outputs):
+            for var in outs:
+                if _EFFORT.match(var.name) and var.kind == REAL:
+                    arr, i = rt.where(Port(c, var))
+                    self._src += [(arr, i + e) for e in range(var.count)]
+        self.peak = 0.0 if self._src else math.nan
+        self.stepped(-1, rt.start_ns, ())
+
+    def stepped(self, k: int, t_ns: int, active: Sequence[int]) -> None:
+        for arr, i in self._src:
+            v = abs(arr[i])
+            self.peak = max(self.peak, v)
 
     def finish(self, rt: Runtime, error: BaseException | None) -> None:
         return None

@@ -134,7 +134,7 @@ def test_exudyn_plant_amplifies_rounding():
 
 def test_native_run_is_native_where_it_can_be(tmp_path):
     """fmus: native builds the C FMUs; the Exudyn plant stays python (it has no native build)."""
-    from cosim.run import build_key
+    from cosim.engine.prepare import build_key
 
     scenario = api.load(ROOT / "scenarios" / "helix_ctc.yaml", {"fmus": "native"})
     keys = {n: build_key(scenario, c.fmu) for n, c in scenario.components.items()}

@@ -19,7 +19,8 @@ import pytest
 
 from cosim.cli import main
 from cosim.observers.recorders import Probe
-from cosim.run import prepare, run_scenario
+from cosim.engine.prepare import prepare
+from cosim.run import run_scenario
 from cosim.engine.scenario import load_scenario
 from cosim.io.ssp import NS, export_ssp, open_ssp
 

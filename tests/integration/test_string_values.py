@@ -15,7 +15,7 @@ import pytest
 from cfmus import build
 from cli_helpers import cosim
 
-from cosim.run import prepare
+from cosim.engine.prepare import prepare
 from cosim.io.runlog import read_run
 from cosim.engine.scenario import apply_overrides, dotted_overrides, load_scenario
 from cosim.analysis.sweep import Case, parse_grid

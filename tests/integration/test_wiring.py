@@ -6,7 +6,7 @@ from pathlib import Path
 import pytest
 
 from cosim.errors import CosimError
-from cosim.run import prepare
+from cosim.engine.prepare import prepare
 from cosim.engine.scenario import load_scenario
 
 pytestmark = pytest.mark.integration
