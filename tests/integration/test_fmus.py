@@ -298,7 +298,7 @@ def test_ik_fmu_unreachable_reference_names_the_leg_and_holds(fmu_dir):
         slave.get_outputs()
         q_ok = list(q_out.values)
         assert flag_out.values[0] == 1, "(0, 0, -0.6) m is reachable"
-        p_in.values[:] = [0.5, 0.0, -0.6]  # the README's example: out of reach of leg 1
+        p_in.values[:] = [0.5, 0.0, -0.6]  # the CLI example of docs/core.md: out of reach of leg 1
         slave.set_inputs()
         slave.step(0.0, 1e-3)
         slave.get_outputs()

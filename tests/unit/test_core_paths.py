@@ -119,7 +119,7 @@ def test_float_ik_reports_the_same_failing_leg_as_the_workspace(name):
 
 
 def test_unreachable_linear_point_names_the_leg():
-    """The README's CLI example: (0.5, 0, -0.6) m is out of reach of leg 1."""
+    """The CLI example of docs/core.md: (0.5, 0, -0.6) m is out of reach of leg 1."""
     assert solve_ik(build_model(linear_delta_thesis), (0.5, 0.0, -0.6)) == (None, 1)
 
 

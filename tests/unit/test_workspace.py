@@ -33,7 +33,7 @@ def test_seed_004_cylinder_bottom_ring_respects_upper_joint_limit():
 def test_seed_004_cylinder_top_ring_exceeds_lower_joint_limit():
     """Documented discrepancy: on the top ring (z2 = +150 mm, R = 250 mm) our IK needs
     -100.7 deg, beyond the paper's -85 deg; within -85 deg the top ring is limited to
-    about +132 mm. See README, 'Known discrepancies with the papers'."""
+    about +132 mm. See docs/figures.md, 'Known discrepancies with the papers'."""
     res = check_cylinder(rotary_delta_prototype, HOME, 0.200, 0.150, 0.250, surface_only=True, check_limits=True)
     assert res.failure is Failure.JOINT_LIMIT, res.reason
     z_above = largest_cylinder(rotary_delta_prototype, HOME, z_below=0.2, radius=0.25, surface_only=True)
