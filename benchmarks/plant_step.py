@@ -1,10 +1,10 @@
 """Microseconds per 1 ms step of each Exudyn plant and fidelity, this checkout against a baseline commit.
 
-Run: ``python benchmarks/plant_step.py [--steps N] [--rounds R] [--baseline COMMIT]``. The ``multibody/``
+Run: ``python benchmarks/plant_step.py [--steps N] [--rounds R] [--baseline COMMIT] [--reuse-jacobian]``. The ``multibody/``
 package of ``COMMIT`` (default 288e832, where issue 27's plant work started) is taken from git into a
 temporary directory and imported under another name, so both versions run in this one process on the same
 ``delta/``; rounds interleave every plant of both versions, so that load from other processes hits them
-alike. Printed per plant: the median and minimum over the rounds of both versions and the ratio of the
+alike (``--reuse-jacobian``: this checkout's plants with ``SolverSettings(reuse_jacobian=True)``). Printed per plant: the median and minimum over the rounds of both versions and the ratio of the
 medians (this / baseline), with issue 27's target for the full plants (at most 0.5). Efforts: analytic
 gravity compensation (constant), from the same pose each round.
 
@@ -79,6 +79,8 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--rounds", type=_positive, default=7, help="interleaved rounds; medians are printed (default 7)")
     ap.add_argument("--baseline", default=DEFAULT_BASELINE, metavar="COMMIT",
                     help=f"commit whose multibody/ is timed alongside this checkout's (default {DEFAULT_BASELINE})")
+    ap.add_argument("--reuse-jacobian", action="store_true",
+                    help="time this checkout's plants with SolverSettings(reuse_jacobian=True)")
     args = ap.parse_args(argv)
 
     import multibody
@@ -92,7 +94,8 @@ def main(argv: list[str] | None = None) -> None:
         plants = {}
         for name, robot, fidelity in CASES:
             for version, package in versions.items():
-                plant = package.make_plant(robot, fidelity=fidelity, p0=P0)
+                settings = multibody.SolverSettings(reuse_jacobian=True) if version == "this" and args.reuse_jacobian else None
+                plant = package.make_plant(robot, fidelity=fidelity, p0=P0, settings=settings)
                 u = analytic_model(robot, plant.masses).gravity_term(plant.output.q)
                 plants[name, version] = (plant, u)
         samples = {key: [] for key in plants}
@@ -105,7 +108,7 @@ def main(argv: list[str] | None = None) -> None:
                 samples[key].append((time.perf_counter() - t0) / args.steps * 1e6)
 
     print(f"us per 1 ms step: median (min) over {args.rounds} interleaved rounds of {args.steps} steps; "
-          f"baseline = multibody/ at {args.baseline}")
+          f"baseline = multibody/ at {args.baseline}{'; this: reuse_jacobian=True' if args.reuse_jacobian else ''}")
     print(f"{'plant':15s} {'baseline':>17s} {'this':>17s} {'ratio':>7s} {'target':>13s}")
     for name, _, _ in CASES:
         old, new = samples[name, "baseline"], samples[name, "this"]
