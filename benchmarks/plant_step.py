@@ -1,61 +1,125 @@
-"""Microseconds per 1 ms step of each Exudyn plant and fidelity, measured side by side.
+"""Microseconds per 1 ms step of each Exudyn plant and fidelity, this checkout against a baseline commit.
 
-Run: ``python benchmarks/plant_step.py [--steps N] [--rounds R]``. Rounds interleave the plants
-so that load from other processes hits all of them alike; the median per plant is printed with
-its ratio to the lumped linear plant and the issue's target. Efforts: analytic gravity
-compensation (constant).
+Run: ``python benchmarks/plant_step.py [--steps N] [--rounds R] [--baseline COMMIT] [--reuse-jacobian]``. The ``multibody/``
+package of ``COMMIT`` (default 288e832, where issue 27's plant work started) is taken from git into a
+temporary directory and imported under another name, so both versions run in this one process on the same
+``delta/``; rounds interleave every plant of both versions, so that load from other processes hits them
+alike (``--reuse-jacobian``: this checkout's plants with ``SolverSettings(reuse_jacobian=True)``). Printed per plant: the median and minimum over the rounds of both versions and the ratio of the
+medians (this / baseline), with issue 27's target for the full plants (at most 0.5). Efforts: analytic
+gravity compensation (constant), from the same pose each round.
 
-Where the time goes (``python -m cProfile``, Exudyn's ``solver.timer``): in the full models the
-per-step Jacobian factorisation dominates (sparse LU of 95 / 134 unknowns, linear / rotary);
-the lumped linear plant is ~10 us of solver and the rest Python (efforts in, outputs out).
+Where the time goes (``perf record``; Exudyn's ``solver.timer``), linear / rotary full at 288e832, about
+140 / 250 us per step on the 2-core machine: ``SolveSteps`` 115 / 180 us, of which Eigen's sparse LU of
+the Newton matrix (95 / 134 unknowns; refactorised on every ``SolveSteps`` entry) about half, the Newton
+Jacobian a fifth, two residuals (mass matrix, forces, constraint reactions) a quarter; the Python around
+it 20 us linear (efforts in 4 us, outputs 5 us, end-time settings 2 us), 45 us rotary (of which 19 us were
+six Exudyn output calls to read the arm angles, now read from the coordinates: 6 us).
+With ``reuse_jacobian`` (linear / rotary): factorisation 2 us, Jacobian < 1 us per step; Newton takes
+~2.9 iterations instead of ~1, so ~3.9 residual evaluations (56 / 85 us: constraint reactions, forces,
+constraints, mass matrix) and ~2.9 solves (12 / 15 us) are most of what is left, plus the Python above.
 """
 
 from __future__ import annotations
 
 import argparse
+import importlib.util
+import io
+import subprocess
+import sys
+import tarfile
+import tempfile
 import time
+from pathlib import Path
 
 import numpy as np
 
 from delta.dynamics import analytic_model
 from delta.robots import linear_delta_thesis, rotary_delta_prototype
-from multibody import make_plant
 
+ROOT = Path(__file__).resolve().parents[1]
+DEFAULT_BASELINE = "288e832"
+P0 = (0.03, -0.02, -0.45)
 CASES = [
-    ("linear full", linear_delta_thesis, "full", (0.03, -0.02, -0.45)),
-    ("linear lumped", linear_delta_thesis, "lumped", (0.03, -0.02, -0.45)),
-    ("rotary full", rotary_delta_prototype, "full", (0.03, -0.02, -0.45)),
-    ("rotary lumped", rotary_delta_prototype, "lumped", (0.03, -0.02, -0.45)),
+    ("linear full", linear_delta_thesis, "full"),
+    ("linear lumped", linear_delta_thesis, "lumped"),
+    ("rotary full", rotary_delta_prototype, "full"),
+    ("rotary lumped", rotary_delta_prototype, "lumped"),
 ]
-TARGET_US = {"linear full": 300.0, "linear lumped": 30.0, "rotary full": 600.0}
-"""Issue 4 targets, us per 1 ms step on the 2-core machine (none for the rotary lumped plant)."""
+TARGET_RATIO = {"linear full": 0.5, "rotary full": 0.5}
+"""Issue 27 item 3: per-step time of the full plants at most half the baseline's."""
 
 
-def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__)
-    ap.add_argument("--steps", type=int, default=300)
-    ap.add_argument("--rounds", type=int, default=5)
-    args = ap.parse_args()
-    plants = {}
-    for name, robot, fidelity, p0 in CASES:
-        plant = make_plant(robot, fidelity=fidelity, p0=p0)
-        u = analytic_model(robot, plant.masses).gravity_term(plant.output.q)
-        plants[name] = (plant, u)
-    samples = {name: [] for name in plants}
-    for _ in range(args.rounds):
-        for name, (plant, u) in plants.items():
-            plant.reset(plant.output.p if plant.time == 0.0 else CASES[[c[0] for c in CASES].index(name)][3])
-            t0 = time.perf_counter()
-            for _ in range(args.steps):
-                plant.step(plant.time, 1e-3, u)
-            samples[name].append((time.perf_counter() - t0) / args.steps * 1e6)
-    ref = float(np.median(samples["linear lumped"]))
-    print(f"{'plant':15s} {'us/step (median)':>17s} {'min':>8s} {'ratio to linear lumped':>24s} {'target':>8s}")
-    for name, vals in samples.items():
-        med = float(np.median(vals))
-        target = TARGET_US.get(name)
-        verdict = "-" if target is None else f"{target:.0f} {'met' if med <= target else 'MISSED'}"
-        print(f"{name:15s} {med:17.1f} {min(vals):8.1f} {med / ref:24.2f} {verdict:>8s}")
+def load_baseline(commit: str, into: Path):
+    """Import ``multibody/`` as it is in ``commit`` (from ``git archive``) as package ``multibody_baseline``."""
+    proc = subprocess.run(["git", "-C", str(ROOT), "archive", "--format=tar", commit, "multibody"],
+                          capture_output=True)
+    if proc.returncode != 0:
+        message = proc.stderr.decode(errors="replace").strip().splitlines()
+        raise ValueError(f"--baseline {commit!r}: no multibody/ at that commit in {ROOT} "
+                         f"({message[-1] if message else 'git archive failed'})")
+    with tarfile.open(fileobj=io.BytesIO(proc.stdout)) as tar:
+        tar.extractall(into, filter="data")
+    package = into / "multibody_baseline"
+    (into / "multibody").rename(package)
+    spec = importlib.util.spec_from_file_location("multibody_baseline", package / "__init__.py",
+                                                  submodule_search_locations=[str(package)])
+    module = importlib.util.module_from_spec(spec)
+    sys.modules["multibody_baseline"] = module  # its relative imports resolve inside it
+    spec.loader.exec_module(module)
+    return module
+
+
+def _positive(text: str) -> int:
+    value = int(text)
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"must be an integer >= 1, got {text}")
+    return value
+
+
+def main(argv: list[str] | None = None) -> None:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--steps", type=_positive, default=300, help="1 ms steps per plant and round (default 300)")
+    ap.add_argument("--rounds", type=_positive, default=7, help="interleaved rounds; medians are printed (default 7)")
+    ap.add_argument("--baseline", default=DEFAULT_BASELINE, metavar="COMMIT",
+                    help=f"commit whose multibody/ is timed alongside this checkout's (default {DEFAULT_BASELINE})")
+    ap.add_argument("--reuse-jacobian", action="store_true",
+                    help="time this checkout's plants with SolverSettings(reuse_jacobian=True)")
+    args = ap.parse_args(argv)
+
+    import multibody
+
+    with tempfile.TemporaryDirectory(prefix="plant_step_") as tmp:
+        try:
+            baseline = load_baseline(args.baseline, Path(tmp))
+        except ValueError as exc:
+            ap.error(str(exc))
+        versions = {"baseline": baseline, "this": multibody}
+        plants = {}
+        for name, robot, fidelity in CASES:
+            for version, package in versions.items():
+                settings = multibody.SolverSettings(reuse_jacobian=True) if version == "this" and args.reuse_jacobian else None
+                plant = package.make_plant(robot, fidelity=fidelity, p0=P0, settings=settings)
+                u = analytic_model(robot, plant.masses).gravity_term(plant.output.q)
+                plants[name, version] = (plant, u)
+        samples = {key: [] for key in plants}
+        for _ in range(args.rounds):
+            for key, (plant, u) in plants.items():
+                plant.reset(P0)
+                t0 = time.perf_counter()
+                for _ in range(args.steps):
+                    plant.step(plant.time, 1e-3, u)
+                samples[key].append((time.perf_counter() - t0) / args.steps * 1e6)
+
+    print(f"us per 1 ms step: median (min) over {args.rounds} interleaved rounds of {args.steps} steps; "
+          f"baseline = multibody/ at {args.baseline}{'; this: reuse_jacobian=True' if args.reuse_jacobian else ''}")
+    print(f"{'plant':15s} {'baseline':>17s} {'this':>17s} {'ratio':>7s} {'target':>13s}")
+    for name, _, _ in CASES:
+        old, new = samples[name, "baseline"], samples[name, "this"]
+        ratio = float(np.median(new) / np.median(old))
+        target = TARGET_RATIO.get(name)
+        verdict = "-" if target is None else f"{target:.2f} {'met' if ratio <= target else 'MISSED'}"
+        print(f"{name:15s} {np.median(old):8.1f} ({min(old):6.1f}) {np.median(new):8.1f} ({min(new):6.1f}) "
+              f"{ratio:7.2f} {verdict:>13s}")
 
 
 if __name__ == "__main__":

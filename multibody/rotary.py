@@ -21,6 +21,8 @@ Actuator effort ``u[i]``: motor torque about ``a_i`` (turning arm i down), N*m.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from delta.dynamics import RotaryDeltaMasses
@@ -90,7 +92,8 @@ class RotaryDeltaPlant(DeltaPlant):
 
         elbow_mass = m.elbow if full else m.elbow + 2.0 * (1.0 - w_i) * m.rod
         elbow_weight = m.elbow if full else m.elbow + 2.0 * (1.0 - w_g) * m.rod
-        self._arms, self._elbow_markers, self._drives = [], [], []
+        self._arms, self._drives = [], []
+        self._com_from_motor, self._elbow_local = np.zeros((3, 3)), np.zeros((3, 3))  # per arm, base axes, m
         self._effort_values = []  # symbolic vector variables returned by the motor loads
         self._e = e
         self._origins = robot.base_radius * e
@@ -105,10 +108,10 @@ class RotaryDeltaPlant(DeltaPlant):
             omega = qd0[i] * a
             arm = self._add_body(total, inertia, com, np.cross(omega, com - origin), omega)
             self._arms.append(arm)
+            self._com_from_motor[i], self._elbow_local[i] = com - origin, elbows[i] - com
             self._add_weight(arm, origin + 0.5 * la * d - com, m.arm)
             self._add_weight(arm, elbows[i] - com, elbow_weight)
             elbow_marker = mbs.AddMarker(MarkerBodyPosition(bodyNumber=arm, localPosition=list(elbows[i] - com)))
-            self._elbow_markers.append(elbow_marker)
             axes_frame = np.column_stack([e[i], -z, a])  # joint z = motor axis
             if self.prescribed is None:
                 joint = mbs.CreateGenericJoint(itemNumbers=[self._ground, arm], position=list(origin),
@@ -148,20 +151,35 @@ class RotaryDeltaPlant(DeltaPlant):
             value.SetVector([ui * a0, ui * a1, ui * a2])
 
     def _after_assemble(self) -> None:
-        import exudyn as exu
-
-        ovt = exu.OutputVariableType
-        self._position, self._angular_velocity = ovt.Position, ovt.AngularVelocity
+        system_data = self.mbs.systemData
+        first = [int(system_data.GetNodeLTGODE2(self.mbs.GetObject(arm)["nodeNumber"])[0]) for arm in self._arms]
+        self._arm_index = np.array(first)[:, None] + np.arange(7)  # (3, 7): each arm node's position, Euler parameters
         self._axes_list = self._axes.tolist()
+        self._arm_geometry = list(zip(self._com_from_motor.tolist(), self._elbow_local.tolist(), self._e.tolist(),
+                                      self._axes_list))
 
     def _read_joints(self, coords: np.ndarray, coords_t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        # arm angle from the elbow position in the plane of leg i, speed from the arm's angular velocity
-        marker_output, body_output = self.mbs.GetMarkerOutput, self.mbs.GetObjectOutputBody
-        elbows = np.array([marker_output(m, self._position) for m in self._elbow_markers]) - self._origins
-        omegas = np.array([body_output(a, self._angular_velocity, [0.0, 0.0, 0.0]) for a in self._arms])
-        q = np.arctan2(-elbows[:, 2], np.einsum("ij,ij->i", elbows, self._e))
-        qd = np.einsum("ij,ij->i", omegas, self._axes)
-        return q, qd
+        # From the arm nodes' coordinates (displacements from the reset pose, whose rotation is the identity), as
+        # Exudyn's own outputs compute them: the elbow at com + R r (R = I + 2 e0 [e]x + 2 [e]x^2 from the Euler
+        # parameters (e0, e)) gives the arm angle in the plane of leg i, and the angular velocity
+        # w = 2 (e0 de - de0 e + e x de) (base frame) the speed about a_i. Scalar arithmetic: numpy's overhead
+        # on 3-vectors (np.cross ~20 us a call) would cost more than Exudyn's six output calls it replaces.
+        q, qd = [], []
+        for x, x_t, ((cx, cy, cz), (rx, ry, rz), (ex, ey, ez), (ax, ay, az)) in zip(
+                coords[self._arm_index].tolist(), coords_t[self._arm_index].tolist(), self._arm_geometry):
+            dx, dy, dz, e0, e1, e2, e3 = x
+            e0 += 1.0  # reference Euler parameters (1, 0, 0, 0)
+            d0, d1, d2, d3 = x_t[3:]
+            sx, sy, sz = e2 * rz - e3 * ry, e3 * rx - e1 * rz, e1 * ry - e2 * rx  # e x r
+            px = cx + dx + rx + 2.0 * (e0 * sx + e2 * sz - e3 * sy)  # elbow - motor = com + R r - origin
+            py = cy + dy + ry + 2.0 * (e0 * sy + e3 * sx - e1 * sz)
+            pz = cz + dz + rz + 2.0 * (e0 * sz + e1 * sy - e2 * sx)
+            q.append(math.atan2(-pz, px * ex + py * ey + pz * ez))
+            wx = e0 * d1 - d0 * e1 + e2 * d3 - e3 * d2  # w / 2
+            wy = e0 * d2 - d0 * e2 + e3 * d1 - e1 * d3
+            wz = e0 * d3 - d0 * e3 + e1 * d2 - e2 * d1
+            qd.append(2.0 * (wx * ax + wy * ay + wz * az))
+        return np.array(q), np.array(qd)
 
     def _read_prescribed_reaction(self) -> np.ndarray:
         import exudyn as exu
