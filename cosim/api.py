@@ -22,7 +22,7 @@ from typing import Any
 import numpy as np
 
 from .analysis.metrics import metric_names, metrics
-from .engine.algorithm import Runtime
+from .engine.execution import Execution
 from .engine.scenario import Scenario, dotted_overrides, load_scenario
 from .engine.system import Port
 from .engine.wiring import index_text
@@ -62,7 +62,7 @@ class SignalRecorder:
         self.names: list[str] = []
         self._rows: list[list[float]] = []
 
-    def start(self, rt: Runtime) -> None:
+    def start(self, rt: Execution) -> None:
 
         self._src = []
         for c, name in enumerate(rt.plan.names):
@@ -82,7 +82,7 @@ class SignalRecorder:
         self.t_ns.append(t_ns)
         self._rows.append([arr[i] for arr, i in self._src])
 
-    def finish(self, rt: Runtime, error: BaseException | None) -> None:
+    def finish(self, rt: Execution, error: BaseException | None) -> None:
         return None
 
     def arrays(self) -> tuple[np.ndarray, dict[str, np.ndarray]]:
@@ -146,7 +146,7 @@ def run(scenario: str | Path | Scenario, overrides: Mapping[str, Any] | None = N
     if signals:
         recorder = SignalRecorder()
         observers.append(recorder)
-    res = run_scenario(sc, out=out, log=log, progress=progress, extra_observers=observers,
+    res = run_scenario(sc, out=out, log=log, progress=progress, observers=observers,
                        read_all=signals)  # every output read each step, also without a log
     t, values = recorder.arrays() if recorder is not None else (np.zeros(0), {})
     return Result(res, metrics(sc, res, peak.peak), t, values)

@@ -87,11 +87,11 @@ class PreflightError(CosimError, ValueError):
 class AlgebraicLoopError(ScenarioError):
     """Direct-feedthrough connections form a cycle; the message lists the variables in it."""
 
-    def __init__(self, loop: list[str]):
+    def __init__(self, loop: list[str], remedy: str = ""):
         self.loop = list(loop)
         super().__init__(
             [Issue("connections", "algebraic loop through direct feedthrough: " + " -> ".join(self.loop)
-                   + "; break it with a component that has no direct feedthrough or use algorithm: jacobi")]
+                   + "; break it with a component that has no direct feedthrough" + (f" or {remedy}" if remedy else ""))]
         )
 
 

@@ -3,13 +3,13 @@
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any, Mapping, Sequence
 
 from delta.robots import get_preset
 
-from .engine.algorithm import Observer, Runtime, StopRequest, initialize, simulate
+from .engine.execution import Execution, Observer, StopRequest
 from .engine.offload import Offload, choose
 from .engine.prepare import input_files, prepare
 from .engine.scenario import Scenario, expand_signal, load_scenario
@@ -24,7 +24,7 @@ from .observers.realtime import RealTime
 from .observers.recorders import ErrorObserver
 from .observers.stats import ErrorStats
 
-__all__ = ["RunResult", "progress_bar", "run_scenario"]
+__all__ = ["RunOptions", "RunResult", "progress_bar", "run_scenario"]
 
 
 @dataclass
@@ -39,7 +39,7 @@ class RunResult:
     errors: list[ErrorStats] = field(default_factory=list)
     checks: dict[str, dict[str, Any]] = field(default_factory=dict)
     mcap: str | None = None
-    status: str = "completed"  # completed | interrupted | error
+    status: str = "completed"  # completed (at the stop time) | terminated (an FMU ended it early); failures raise
     message: str = ""
     notes: list[str] = field(default_factory=list)  # e.g. which components ran ahead in a worker process
     worker_time: dict[str, float] = field(default_factory=dict)  # s per component, inside the worker process
@@ -68,6 +68,35 @@ class RunResult:
 _SUMMARY_KEYS = ("actual", "reference", "unit", "rmse", "max_error", "t_max", "samples")
 
 
+@dataclass(frozen=True)
+class RunOptions:
+    """How to run a scenario (everything but the scenario itself): one record from the CLI, the API, SSP runs
+    and sweeps to :func:`run_scenario`, so a new option is one field here, not a parameter threaded through
+    every layer.
+
+    ``out``: the log's path (default: the scenario's ``logging.out``, else ``runs/<name>.mcap``);
+    ``overrides``: applied when the scenario is given as a path; ``log``: log or not (None: the scenario's
+    ``logging.enabled``); ``progress``: a progress bar on long runs; ``observers``: more observers, after ours;
+    ``live``: (host, port) of a Foxglove WebSocket server showing the run (:mod:`cosim.observers.live`);
+    ``realtime``: pace the run at this many simulated seconds per wall second (:mod:`cosim.observers.realtime`);
+    ``stamps``: log times from the run's ``"wall"``-clock start or pure ``"simulation"`` time
+    (:mod:`cosim.observers.publish`); ``read_all``: read every output of every component at every step, also
+    without a log (for an observer of every signal, :class:`cosim.api.SignalRecorder`); ``fmu_files``: our
+    FMUs already built, by :func:`~cosim.engine.prepare.build_key` (a sweep builds them once).
+    """
+
+    out: str | Path | None = None
+    overrides: Mapping | None = None
+    log: bool | None = None
+    progress: bool = False
+    observers: Sequence[Observer] = ()
+    live: tuple[str, int] | None = None
+    realtime: float | None = None
+    stamps: str = "wall"
+    read_all: bool = False
+    fmu_files: Mapping[Any, str | Path] | None = None
+
+
 def progress_bar():
     """The progress bar of long commands (rich; transient, so the summary replaces it)."""
     from rich.progress import BarColumn, Progress, TextColumn, TimeRemainingColumn
@@ -76,61 +105,47 @@ def progress_bar():
                     TimeRemainingColumn(), transient=True)
 
 
-def _publishing(scenario: Scenario, mcap_path: Path | None, live: tuple[str, int] | None,
-                stamps: str) -> tuple[list[Observer], Observer | None]:
+def _publishing(scenario: Scenario, mcap_path: Path | None, options: RunOptions) -> tuple[list[Observer], Observer | None]:
     """The MCAP recorder and/or the live view on one publisher of the run's channels, in start order,
     and the recorder (None without a log)."""
-
     robot = None
     scene = scenario.logging.scene
     if scene is not None and scenario.robot:
-
         robot = get_preset(scenario.robot)
     publisher = Publisher(robot, expand_signal(scene.position) if scene else None, scene.rate_hz if scene else 30.0,
-                          stamps, reference_path(scenario) if robot is not None else None,
+                          options.stamps, reference_path(scenario) if robot is not None else None,
                           expand_signal(scenario.compare.reference) if scenario.compare is not None else None,
                           scenario.logging.layout)
     sinks: list[Observer] = []
     recorder = None
-    if live is not None:  # first: a port in use fails before the log file is opened
-
-        sinks.append(LiveView(publisher, live[1], live[0]))
+    if options.live is not None:  # first: a port in use fails before the log file is opened
+        host, port = options.live
+        sinks.append(LiveView(publisher, port, host))
     if mcap_path is not None:
-
         recorder = McapRecorder(mcap_path, publisher, scenario, scenario.source, scenario.logging.flush_interval)
         sinks.append(recorder)
     return sinks + [publisher], recorder
 
 
-def run_scenario(scenario: Scenario | str | Path, out: str | Path | None = None, overrides: dict | None = None,
-                 log: bool | None = None, progress: bool = False, extra_observers: Sequence[Observer] = (),
-                 live: tuple[str, int] | None = None, realtime: float | None = None, stamps: str = "wall", *,
-                 read_all: bool = False, fmu_files: Mapping[str, str | Path] | None = None) -> RunResult:
-    """Run a scenario end to end. Raises CosimError (bad input, FMU failure, a stalled component:
-    StallError) or Interrupted (a KeyboardInterrupt: SIGINT, SIGTERM).
+def run_scenario(scenario: Scenario | str | Path, options: RunOptions | None = None, /, **changes: Any) -> RunResult:
+    """Run a scenario end to end with ``options`` (a :class:`RunOptions`; keyword ``changes`` replace its
+    fields: ``run_scenario(sc, log=False)``). Raises CosimError (bad input, FMU failure, a stalled component:
+    StallError) or Interrupted (a KeyboardInterrupt: SIGINT, SIGTERM, SIGHUP).
 
     The MCAP file, when logging, is finished whatever happens, and the FMUs extracted for the
-    run are removed (success, error or Ctrl-C). ``live``: (host, port) of a Foxglove WebSocket
-    server showing the run (:mod:`cosim.observers.live`); ``realtime``: pace the run at this many simulated
-    seconds per wall second (:mod:`cosim.observers.realtime`); ``stamps``: log times from the run's
-    ``"wall"``-clock start or pure ``"simulation"`` time (:mod:`cosim.observers.publish`).
-    ``read_all``: read every output of every component at every step, also without a log (for
-    an observer of every signal, :class:`cosim.api.SignalRecorder`); ``fmu_files``: our FMUs
-    already built, by name (:func:`locate_fmus`).
-
-    The log's path is claimed (checked writable, locked, written as X.partial) before any FMU is
-    loaded, and the finished log renamed into place at the end (see :mod:`cosim.io.output`).
+    run are removed (success, error or Ctrl-C). The log's path is claimed (checked writable, locked,
+    written as X.partial) before any FMU is loaded, and the finished log renamed into place at the end
+    (see :mod:`cosim.io.output`).
     """
-
+    options = replace(options or RunOptions(), **changes)
     output = None
     with Extractions() as held:  # this run's FMU extractions (other runs of the process keep theirs)
         try:
             if not isinstance(scenario, Scenario):
-                scenario = load_scenario(scenario, overrides)
-            logging_on = scenario.logging.enabled if log is None else log
-            output = claim(_log_path(scenario, out), input_files(scenario)) if logging_on else None
-            result = _run_claimed(scenario, output, held, progress, extra_observers, live, realtime, stamps,
-                                  read_all, fmu_files)
+                scenario = load_scenario(scenario, dict(options.overrides) if options.overrides else None)
+            logging_on = scenario.logging.enabled if options.log is None else options.log
+            output = claim(_log_path(scenario, options.out), input_files(scenario)) if logging_on else None
+            result = _run_claimed(scenario, output, held, options)
         except BaseException as exc:
             _conclude(output, exc, held)
             raise
@@ -168,8 +183,8 @@ def _conclude(output, error: BaseException | None, held: Extractions, offload: O
         held.release()
 
 
-def _finish_observers(started: Sequence[Observer], rt: Runtime, error: BaseException | None, recorder,
-                      output, hard: bool = False) -> BaseException | None:
+def _finish_observers(ex: Execution, error: BaseException | None, recorder, output,
+                      hard: bool = False) -> BaseException | None:
     """Finish the started observers with the run's ``error``, in order; returns the error the run ends with.
 
     The recorder's outcome marks the log (``output.state``: ``"finished"``, or why it could not be
@@ -178,9 +193,9 @@ def _finish_observers(started: Sequence[Observer], rt: Runtime, error: BaseExcep
     the watchdog's hard shutdown (``hard``), where no failure may stop the exit.
     """
     catch = Exception if hard else CosimError
-    for o in started:
+    for o in ex.started:
         try:
-            o.finish(rt, error)
+            o.finish(ex, error)
             if o is recorder:
                 output.state = "finished"
         except catch as exc:
@@ -209,43 +224,37 @@ def _settle(output, error: BaseException | None) -> None:
                           f"`python -m cosim recover {output.partial}`") from None
 
 
-def _run_claimed(scenario: Scenario, output, held: Extractions, progress: bool, extra_observers: Sequence[Observer],
-                 live: tuple[str, int] | None, realtime: float | None, stamps: str, read_all: bool,
-                 fmu_files: Mapping[str, str | Path] | None) -> RunResult:
+def _run_claimed(scenario: Scenario, output, held: Extractions, options: RunOptions) -> RunResult:
     logging_on = output is not None
-    published = logging_on or live is not None  # the log's and the live view's signals: logging.signals
-    plan, _ = prepare(scenario, None if published else ("all" if read_all else "none"), fmu_files=fmu_files)
+    published = logging_on or options.live is not None  # the log's and the live view's signals: logging.signals
+    plan, _ = prepare(scenario, None if published else ("all" if options.read_all else "none"),
+                      fmu_files=options.fmu_files)
     comps = scenario.components
+    ex = Execution(plan, scenario.time.start_ns, scenario.time.stop_ns, scenario.time.step_ns,
+                   [comps[n].step_multiple for n in plan.names], scenario.algorithm)
     slaves = [make_slave(n, plan.infos[i], comps[n].interface, comps[n].rtol, comps[n].solver, comps[n].max_step)
               for i, n in enumerate(plan.names)]
-    for c, s in enumerate(slaves):
-        s.bind(plan.inputs[c], plan.outputs[c])
-    rt = Runtime(plan, slaves, scenario.time.start_ns, scenario.time.stop_ns, scenario.time.step_ns,
-                 [scenario.components[n].step_multiple for n in plan.names], scenario.algorithm)
-    writer_process = False  # the log written by a writer process (as McapRecorder decides): it takes a CPU
-    if logging_on:
-
-        writer_process = rt.n_steps >= McapRecorder.PROCESS_MIN_STEPS
-    ahead, note = choose(plan, scenario.parallel, rt.n_steps, writer_process)
+    for s in slaves:
+        ex.add_slave(s)
+    writer_process = logging_on and ex.n_steps >= McapRecorder.PROCESS_MIN_STEPS  # a writer process takes a CPU
+    ahead, note = choose(plan, scenario.parallel, ex.n_steps, writer_process)
     offload: Offload | None = None
-    observers: list[Observer] = []
     tracking = None
     if scenario.compare is not None:
         tracking = ErrorObserver(expand_signal(scenario.compare.actual), expand_signal(scenario.compare.reference))
-        observers.append(tracking)
+        ex.add_observer(tracking)
     mcap_path = output.target if output is not None else None
     recorder = None
     if published:  # the log and the live view: the same channels (cosim.observers.publish)
-        sinks, recorder = _publishing(scenario, output.partial if output is not None else None, live, stamps)
-        observers += sinks
+        sinks, recorder = _publishing(scenario, output.partial if output is not None else None, options)
+        for o in sinks:
+            ex.add_observer(o)
+    for o in options.observers:
+        ex.add_observer(o)
     pacing = None
-    if realtime is not None:
-
-        pacing = RealTime(realtime)
-    observers += list(extra_observers)
-    if pacing is not None:  # last: every other observer has seen the step before it waits
-        observers.append(pacing)
-    started: list[Observer] = []
+    if options.realtime is not None:  # last: every other observer has seen the step before it waits
+        pacing = RealTime(options.realtime)
+        ex.add_observer(pacing)
     error: BaseException | None = None
     t_wall = time.perf_counter()
     t_loop_end: float | None = None
@@ -256,7 +265,7 @@ def _run_claimed(scenario: Scenario, output, held: Extractions, progress: bool, 
         """The watchdog's hard shutdown, from its thread: the main thread is stuck inside a component's
         call and cannot unwind. The end of the run without it (the stuck component is never freed),
         then say why and leave the process."""
-        _finish_observers(started, rt, err, recorder, output, hard=True)
+        _finish_observers(ex, err, recorder, output, hard=True)
         lines = []
         try:
             _conclude(output, err, held, offload)
@@ -267,26 +276,22 @@ def _run_claimed(scenario: Scenario, output, held: Extractions, progress: bool, 
 
     try:
         if ahead:  # proxies take the feed-forward components' places, on the same buffers
-            offload = Offload(plan, ahead, [slaves[c] for c in ahead], rt.multiples, rt.start_ns, rt.stop_ns,
-                              rt.step_ns, rt.algorithm)
+            offload = Offload(ex, ahead, [slaves[c] for c in ahead])
             for c, proxy in zip(ahead, offload.proxies):
-                slaves[c] = proxy
-        watchdog = Watchdog(rt, scenario.watchdog_s, stop, abort)  # after the worker's fork: a thread of its own
+                ex.replace_slave(c, proxy)
+        watchdog = Watchdog(ex, scenario.watchdog_s, stop, abort)  # after the worker's fork: a thread of its own
         with stop, watchdog:
             try:
-                initialize(rt)
-                for o in observers:
-                    o.start(rt)
-                    started.append(o)
+                ex.initialize()
                 t_wall = time.perf_counter()
                 cb, every = None, 0
-                if progress and rt.n_steps >= 1000:
+                if options.progress and ex.n_steps >= 1000:
                     bar = progress_bar()
                     bar.start()
-                    task = bar.add_task(scenario.name, total=rt.n_steps)
-                    every = max(1, rt.n_steps // 200)
+                    task = bar.add_task(scenario.name, total=ex.n_steps)
+                    every = max(1, ex.n_steps // 200)
                     cb = lambda k: bar.update(task, completed=k)  # noqa: E731
-                simulate(rt, observers, stop, cb, every)
+                ex.simulate_until(None, stop, cb, every)
                 t_loop_end = time.perf_counter()  # the loop's wall time, without the shutdown below
             except BaseException as exc:
                 replaced = watchdog.translate(exc)  # the watchdog's error, when it stopped the run
@@ -300,7 +305,7 @@ def _run_claimed(scenario: Scenario, output, held: Extractions, progress: bool, 
         wall = (t_loop_end if t_loop_end is not None else time.perf_counter()) - t_wall
         if bar is not None:
             bar.stop()
-        for s in slaves:
+        for s in ex.slaves:
             try:
                 if error is None:
                     s.terminate()
@@ -308,20 +313,21 @@ def _run_claimed(scenario: Scenario, output, held: Extractions, progress: bool, 
                 error = error or exc
             finally:
                 s.free()
-        error = _finish_observers(started, rt, error, recorder, output)
+        error = _finish_observers(ex, error, recorder, output)
     if error is not None:  # a failure at the end (fmi2Terminate, the worker's report) fails the run too
         raise error
-    t_end_ns = rt.t_end_ns if rt.t_end_ns is not None else rt.t_ns(rt.k_done)
-    result = RunResult(scenario.name, rt.k_done, (t_end_ns - rt.start_ns) * 1e-9, wall,
-                       dict(zip(plan.names, rt.comp_time)), mcap=str(mcap_path) if mcap_path else None,
+    t_end_ns = ex.t_end_ns if ex.t_end_ns is not None else ex.t_ns(ex.k_done)
+    result = RunResult(scenario.name, ex.k_done, (t_end_ns - ex.start_ns) * 1e-9, wall,
+                       dict(zip(plan.names, ex.comp_time)), mcap=str(mcap_path) if mcap_path else None,
                        notes=[note] if note else [], worker_time=offload.worker_time if offload else {})
-    result.events = {n: s.events for n, s in zip(plan.names, slaves) if getattr(s, "model_exchange", False)}
-    result.notes += [o.summary() for o in observers if hasattr(o, "summary")]  # live view, real time
+    result.events = {n: s.events for n, s in zip(plan.names, ex.slaves) if s.model_exchange}
+    result.notes += [o.summary() for o in ex.observers if hasattr(o, "summary")]  # live view, real time
     if pacing is not None:
         result.realtime = pacing.figures()
-    if rt.terminated is not None:  # an FMU ended the simulation: a normal end, said in the summary
-        result.message = str(rt.terminated)
-        result.terminated_by = rt.terminated.component
+    if ex.terminated is not None:  # an FMU ended the simulation: a normal end, said in the summary
+        result.status = "terminated"
+        result.message = str(ex.terminated)
+        result.terminated_by = ex.terminated.component
     if tracking is not None:
         result.errors = tracking.result()
         if scenario.checks is not None:

@@ -3,8 +3,8 @@
 A component whose inputs all come from components that are themselves free of feedback
 (in helix_ctc the trajectory and the inverse kinematics: functions of time alone) never
 waits for the rest of the system. The master hands that *feed-forward group* to one worker
-process, which runs it with the same code as a serial run (the same FMUs, :func:`initialize`,
-:func:`simulate`, schedule and algorithm) on the machine's other core, and publishes the
+process, which runs it with the same code as a serial run (the same FMUs, :class:`~cosim.engine.execution.Execution`,
+schedule and algorithm) on the machine's other core, and publishes the
 values the master reads from each component, call after call, into a ring buffer in shared
 memory. In the master each of those components is replaced by a :class:`Proxy` bound to the
 same variables: its ``get_outputs`` copies the next published values byte for byte, so the
@@ -39,7 +39,7 @@ from typing import Any
 from ..errors import STOP_SIGNALS, CosimError
 from ..fmi import PY_KINDS, Terminated, Variable, cleanup_extracted, load_fmu, make_slave
 from ..fmi import extract as _extract
-from .algorithm import Runtime, byte_view, initialize, simulate
+from .execution import Execution, byte_view
 from .system import Link, Port, SystemPlan
 
 __all__ = ["AUTO_MIN_STEPS", "RING", "feedforward", "choose", "Offload", "Proxy"]
@@ -192,8 +192,8 @@ class _Ring:
 class Offload:
     """The worker process and the shared ring of a feed-forward group, seen from the master."""
 
-    def __init__(self, plan: SystemPlan, comps: list[int], templates: list[Any], multiples: list[int],
-                 start_ns: int, stop_ns: int, step_ns: int, algorithm: str):
+    def __init__(self, ex: Execution, comps: list[int], templates: list[Any]):
+        plan, multiples = ex.plan, ex.multiples
         self.names = [plan.names[c] for c in comps]
         self.worker_time: dict[str, float] = {}
         self._messages: list[tuple[str, Any]] = []
@@ -213,8 +213,8 @@ class Offload:
             links=[(index[lk.src.comp], lk.src.var.name, index[lk.dst.comp], lk.dst.var.name)
                    for lk in plan.links if lk.dst.comp in index],
             order=[index[c] for c in plan.order if c in index],
-            multiples=[multiples[c] for c in comps], algorithm=algorithm,
-            start_ns=start_ns, stop_ns=stop_ns, step_ns=step_ns, sizes=self.layout.sizes, parent=os.getpid())
+            multiples=[multiples[c] for c in comps], algorithm=ex.algorithm_name,
+            start_ns=ex.start_ns, stop_ns=ex.stop_ns, step_ns=ex.step_ns, sizes=self.layout.sizes, parent=os.getpid())
         ctx = mp.get_context(_START_METHOD)
         self.raw = ctx.RawArray(ctypes.c_char, self.layout.total)
         self.filled = [ctx.Semaphore(0) for _ in comps]
@@ -301,6 +301,8 @@ class Proxy:
         self.group, self.j = group, j
         self.name, self.info = template.name, template.info
         self.time = 0.0
+        self.model_exchange = False  # whatever it is, the worker runs it: integrated and counted there
+        self.events = 0
         self._template = template  # bound, never instantiated: it owns the buffers the worker's layout matches
         self._ring = group.ring(j, [b.values for b in template.out_bufs])
 
@@ -462,15 +464,15 @@ def _worker(spec: dict, raw: Any, filled: list, free: list, stop: Any, conn: Any
     code = 1
     try:
         try:
-            rt = _runtime(spec, raw, filled, free, stop, slaves, pubs)
-            initialize(rt)
-            simulate(rt)
-            if rt.terminated is not None:  # one of ours ended the simulation: the master ends there too
-                term = rt.terminated
+            ex = _execution(spec, raw, filled, free, stop, slaves, pubs)
+            ex.initialize()
+            ex.simulate_until()
+            if ex.terminated is not None:  # one of ours ended the simulation: the master ends there too
+                term = ex.terminated
                 conn.send(("terminated", (term.component, term.function, term.time)))
             for s in slaves:
                 s.terminate()
-            conn.send(("done", {n: t - p.napped for n, t, p in zip(spec["names"], rt.comp_time, pubs)}))
+            conn.send(("done", {n: t - p.napped for n, t, p in zip(spec["names"], ex.comp_time, pubs)}))
             code = 0
         except _Stopped:
             code = 0
@@ -500,13 +502,20 @@ def _worker(spec: dict, raw: Any, filled: list, free: list, stop: Any, conn: Any
         os._exit(code)
 
 
-def _runtime(spec: dict, raw: Any, filled: list, free: list, stop: Any, slaves: list, pubs: list) -> Runtime:
+def _execution(spec: dict, raw: Any, filled: list, free: list, stop: Any, slaves: list, pubs: list) -> Execution:
+    """The worker's execution of its group: the same plan, grid and algorithm as the master's, each component
+    wrapped in a :class:`_Publisher` that fills its ring."""
     infos = [load_fmu(p) for p in spec["paths"]]
+    variables = [info.variables for info in infos]
+    links = [Link(Port(a, variables[a][av]), Port(b, variables[b][bv])) for a, av, b, bv in spec["links"]]
+    plan = SystemPlan(spec["names"], infos, links, spec["order"], spec["start_values"],
+                      [[variables[j][v] for v in spec["inputs"][j]] for j in range(len(infos))],
+                      [[variables[j][v] for v in spec["outputs"][j]] for j in range(len(infos))])
+    ex = Execution(plan, spec["start_ns"], spec["stop_ns"], spec["step_ns"], spec["multiples"], spec["algorithm"])
     for j, name in enumerate(spec["names"]):
         interface, rtol, solver, max_step = spec["kinds"][j]
-        s = make_slave(name, infos[j], interface, rtol, solver, max_step)
-        s.bind([infos[j].variables[v] for v in spec["inputs"][j]], [infos[j].variables[v] for v in spec["outputs"][j]])
-        slaves.append(s)
+        slaves.append(make_slave(name, infos[j], interface, rtol, solver, max_step))
+        ex.add_slave(slaves[j])  # bound to the plan's variables: the buffers the ring's layout describes
     layout = _Layout(spec["sizes"])
     for j, s in enumerate(slaves):
         sizes = [ctypes.sizeof(b.values) for b in s.out_bufs]
@@ -515,13 +524,8 @@ def _runtime(spec: dict, raw: Any, filled: list, free: list, stop: Any, slaves: 
                              f"{layout.sizes[j]}")
         ring = _Ring(raw, layout, j, filled[j], free[j], [b.values for b in s.out_bufs], publish=True)
         pubs.append(_Publisher(s, ring, stop, spec["parent"]))
-    variables = [info.variables for info in infos]
-    links = [Link(Port(a, variables[a][av]), Port(b, variables[b][bv])) for a, av, b, bv in spec["links"]]
-    plan = SystemPlan(spec["names"], infos, links, spec["order"], spec["start_values"],
-                      [[variables[j][v] for v in spec["inputs"][j]] for j in range(len(infos))],
-                      [[variables[j][v] for v in spec["outputs"][j]] for j in range(len(infos))])
-    return Runtime(plan, pubs, spec["start_ns"], spec["stop_ns"], spec["step_ns"], spec["multiples"],
-                   spec["algorithm"])
+        ex.replace_slave(j, pubs[j])
+    return ex
 
 
 # --------------------------------------------------------------------------- errors across processes

@@ -22,6 +22,7 @@ from delta.trajectories import TYPES
 from delta.trajectories import TYPES as TRAJECTORY_TYPES
 
 from ..errors import Issue, ScenarioError
+from .algorithm import ALGORITHMS, DEFAULT
 
 __all__ = [
     "Scenario",
@@ -269,7 +270,8 @@ class Scenario(_Model):
     components: dict[str, Component]
     connections: list[Connection] = Field(default_factory=list)
     time: TimeGrid
-    algorithm: Literal["gauss_seidel", "jacobi"] = "gauss_seidel"
+    algorithm: Literal[tuple(ALGORITHMS)] = Field(  # type: ignore[valid-type]  # the registered algorithms
+        DEFAULT, description="master algorithm: " + ", ".join(ALGORITHMS) + " (cosim.engine.algorithm)")
     fmus: Literal["auto", "python", "native"] = Field(
         "auto", description="build of our FMUs (components given by 'fmu:'): 'native' (C generated from the same "
                             "formulas, no Python in the FMU; needs a C compiler; the Exudyn plants have no native "

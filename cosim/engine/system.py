@@ -13,6 +13,7 @@ from typing import Any, Mapping
 
 from ..errors import AlgebraicLoopError, Issue, UnknownSignalError, WiringError
 from ..fmi import FMUInfo, Variable
+from .algorithm import ALGORITHMS
 from .scenario import Scenario, expand_signal, issue_at, line_for
 from .wiring import expand_connection, find_variable, index_text
 
@@ -148,7 +149,6 @@ class SystemPlan:
     inputs: list[list[Variable]]  # connected inputs, per component
     outputs: list[list[Variable]]  # outputs read every step, per component
     logged: list[list[Variable]] = field(default_factory=list)  # inputs + outputs recorded, per component
-    notes: list[str] = field(default_factory=list)  # non-fatal findings (e.g. loops broken at undeclared deps)
 
     def port(self, ref: str) -> Port:
         comp, name = ref.split(".", 1)
@@ -310,17 +310,19 @@ def build_plan(scenario: Scenario, infos: Mapping[str, FMUInfo], log_signals: st
             logged[k] = (list(inputs[k]) if signals == "all" else []) + list(outputs[k])
 
     feedthrough = [_feedthrough(infos[n], scenario.components[n].feedthrough) for n in names]
-    notes: list[str] = []
-    if scenario.algorithm == "gauss_seidel":
+    ordered = ALGORITHMS[scenario.algorithm].reads_this_step  # reads outputs of the same macro step: an order needed
+    if ordered:
         loop = find_variable_loop(names, links, feedthrough)
         if loop is not None:
             labels, undeclared = loop
-            err = AlgebraicLoopError(labels)
+            free = [a.name for a in ALGORITHMS.values() if not a.reads_this_step]
+            remedy = "use " + " or ".join(f"algorithm: {a}" for a in free) if free else ""
+            err = AlgebraicLoopError(labels, remedy)
             if undeclared:
                 hint = (f"; {', '.join(sorted(undeclared))} do not declare output dependencies in ModelStructure "
                         f"(so every output is assumed to depend on every input): if they have no direct "
                         f"feedthrough, set components.<name>.feedthrough: none")
-                err = AlgebraicLoopError(labels)
+                err = AlgebraicLoopError(labels, remedy)
                 err.issues[0] = Issue(err.issues[0].path, err.issues[0].message + hint, scenario.source,
                                       line_for(("connections",), lines))
             else:
@@ -328,11 +330,11 @@ def build_plan(scenario: Scenario, infos: Mapping[str, FMUInfo], log_signals: st
                                       line_for(("connections",), lines))
             err.args = ("\n".join(str(i) for i in err.issues),)
             raise err
-    jacobi = scenario.algorithm == "jacobi"  # Jacobi reads the previous step only: the order is free
+    # an algorithm that reads the previous step only (Jacobi) can take any order
     order = gauss_seidel_order(len(names), [(lk.src.comp, lk.dst.comp,
-                                             not jacobi and lk.dst.var.name in feedthrough[lk.dst.comp])
+                                             ordered and lk.dst.var.name in feedthrough[lk.dst.comp])
                                             for lk in links])
-    return SystemPlan(names, [infos[n] for n in names], links, order, start_values, inputs, outputs, logged, notes)
+    return SystemPlan(names, [infos[n] for n in names], links, order, start_values, inputs, outputs, logged)
 
 
 def _feedthrough(info: FMUInfo, declared: str) -> dict[str, list[str] | None] | set[str]:

@@ -3,13 +3,13 @@
 The master calls components synchronously, so a component that never returns from a call
 (an ODE solver taking ever smaller steps, a C FMU in an endless loop) stops the run loop, and
 with it the between-steps check of SIGINT / SIGTERM. A daemon thread watches the run's progress
-(``rt.k_done``, one macro step) and the signals:
+(``ex.k_done``, one macro step) and the signals:
 
 - a step (or the initialization) that makes no progress for ``budget`` wall-clock seconds, or a
   stop signal that the run loop has not answered within ``grace`` seconds, is *fired*: the
-  thread names the component and the simulation time (from the main thread's stack: the
-  innermost slave method being called) and raises an exception in the main thread
-  (``PyThreadState_SetAsyncExc``). Python code, such as our pythonfmu FMUs and SciPy's
+  thread names the component and the simulation time (from the record the execution keeps of
+  the component with the turn, :attr:`~cosim.engine.execution.Execution.current`) and raises an
+  exception in the main thread (``PyThreadState_SetAsyncExc``). Python code, such as our pythonfmu FMUs and SciPy's
   integrators, unwinds from it at its next bytecode; the run then ends through its usual path
   (log finished and marked, worker stopped, FMUs freed), with the error replaced by the
   watchdog's (:class:`~cosim.errors.StallError`, or :class:`~cosim.errors.Interrupted`);
@@ -34,7 +34,7 @@ import time
 from typing import Any, Callable
 
 from ..errors import Interrupted, StallError, exit_now, exit_status, exit_text
-from ..fmi.slave import Base
+from .execution import MASTER, PHASES
 from .offload import Proxy
 
 __all__ = ["Watchdog", "GRACE_S"]
@@ -51,13 +51,13 @@ class Watchdog:
     in the main thread around initialization and the run loop.
 
     ``budget``: wall-clock seconds a step may take (None: no stall check, signals only);
-    ``stop``: the run's :class:`~cosim.engine.algorithm.StopRequest`; ``abort(error)``: the hard
+    ``stop``: the run's :class:`~cosim.engine.execution.StopRequest`; ``abort(error)``: the hard
     shutdown, called from the watchdog's thread when the main thread does not unwind.
     """
 
     def __init__(self, rt: Any, budget: float | None, stop: Any, abort: Callable[[BaseException], None],
                  grace: float = GRACE_S):
-        self.rt = rt
+        self.ex = rt
         self.budget = budget
         self.stop = stop
         self.abort = abort
@@ -109,7 +109,7 @@ class Watchdog:
     # -- watchdog thread
     def _watch(self) -> None:
         tick = 0.05 if self.budget is None else min(0.25, max(0.01, self.budget / 20))
-        last_k, since = self.rt.k_done, time.monotonic()
+        last_k, since = self.ex.k_done, time.monotonic()
         signum: int | None = None
         signalled_at = 0.0
         while not self._done.is_set():
@@ -125,7 +125,7 @@ class Watchdog:
                         signum, signalled_at = b, now
             if self._done.is_set():
                 return
-            k = self.rt.k_done
+            k = self.ex.k_done
             if k != last_k:
                 last_k, since = k, now
             if signum is not None and now - signalled_at > self.grace and now - since > self.grace:
@@ -139,19 +139,15 @@ class Watchdog:
                 return
 
     def _where(self) -> tuple[str, float, str]:
-        """(component, simulation time, where it runs) of the innermost slave call on the main thread's stack."""
-
-        frame = sys._current_frames().get(self._main)
-        t_loop = None
-        while frame is not None:
-            me = frame.f_locals.get("self") if frame.f_code.co_name != "<module>" else None
-            if isinstance(me, (Base, Proxy)):
-                return me.name, float(me.time), " (in the worker process)" if isinstance(me, Proxy) else ""
-            if t_loop is None and frame.f_code.co_name == "simulate" and "t" in frame.f_locals:
-                t_loop = frame.f_locals["t"]
-            frame = frame.f_back
-        start = self.rt.start_ns * 1e-9
-        return ("(initialization)" if self.rt.k_done == 0 and t_loop is None else "(master)"), (t_loop or start), ""
+        """(component, simulation time, where it runs) of the call the main thread is in, as the execution
+        records it (:attr:`~cosim.engine.execution.Execution.current`): the component with the turn and its
+        own time, or the master between turns (in the initialization, or at the macro step's time)."""
+        c, t, phase = self.ex.current.tolist()
+        c = int(c)
+        if c == MASTER:
+            return ("(initialization)" if PHASES[int(phase)] == "initialization" else "(master)"), t, ""
+        slave = self.ex.slaves[c]
+        return slave.name, float(slave.time), " (in the worker process)" if isinstance(slave, Proxy) else ""
 
     def _fire(self, error: BaseException) -> None:
         self.error = error

@@ -38,11 +38,16 @@ class Terminated(Exception):
 
 
 class Slave(Protocol):
-    """What the algorithm needs from a component, whatever its FMI version and kind."""
+    """What the execution and its algorithms need from a component, whatever its FMI version and kind (the four
+    wrappers here, and the offload's proxy of a component run by a worker process)."""
 
     name: str
     info: FMUInfo
-    time: float
+    time: float  # s: the time the component reached (the watchdog names it)
+    model_exchange: bool  # the master integrates it
+    events: int  # model exchange: events handled (the initial event iteration excluded); else 0
+
+    def locate(self, var: Variable, output: bool = True) -> tuple[Any, int]: ...  # (values array, index) of var
 
     def instantiate(self) -> None: ...
     def set_start(self, values: dict[str, Any]) -> None: ...
@@ -109,6 +114,7 @@ class Base:
 
     fmi: int = 2
     model_exchange = False
+    events = 0
 
     def __init__(self, name: str, info: FMUInfo):
         self.name = name

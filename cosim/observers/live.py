@@ -17,7 +17,7 @@ from __future__ import annotations
 import socket
 from collections.abc import Sequence
 
-from ..engine.algorithm import Runtime
+from ..engine.execution import Execution
 from ..errors import CosimError
 from .log_writer import FoxgloveChannels, encode_messages
 from .publish import Publisher
@@ -102,7 +102,7 @@ class LiveView:
     def url(self) -> str:
         return f"ws://{'localhost' if self.host in ('127.0.0.1', '0.0.0.0') else self.host}:{self.port}"
 
-    def start(self, rt: Runtime) -> None:
+    def start(self, rt: Execution) -> None:
         import foxglove
         from foxglove.websocket import Capability
 
@@ -124,7 +124,7 @@ class LiveView:
             self._next_time = t_ns + _TIME_PERIOD_NS
             self.server.broadcast_time(t_ns + self._offset)
 
-    def finish(self, rt: Runtime | None, error: BaseException | None) -> None:
+    def finish(self, rt: Execution | None, error: BaseException | None) -> None:
         if self._sink is not None:
             try:
                 self.publisher.flush()  # the last samples

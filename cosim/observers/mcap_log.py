@@ -39,7 +39,7 @@ from typing import Sequence
 
 import orjson
 
-from ..engine.algorithm import Runtime
+from ..engine.execution import Execution
 from ..errors import CosimError
 from .log_writer import LogSink, WriterFailed, WriterProcess, os_reason
 from .publish import Publisher, time_metadata
@@ -101,7 +101,7 @@ class McapRecorder:
         self._sink = None
 
     # -- observer protocol
-    def start(self, rt: Runtime) -> None:
+    def start(self, rt: Execution) -> None:
         self.path.parent.mkdir(parents=True, exist_ok=True)
         try:
             if self._process is not None:
@@ -118,7 +118,7 @@ class McapRecorder:
             raise self._failure(exc) from None
         self._last_flush = time.monotonic()
 
-    def _metadata(self, rt: Runtime) -> None:
+    def _metadata(self, rt: Execution) -> None:
         from importlib.metadata import PackageNotFoundError, version
 
         import fmpy
@@ -170,7 +170,7 @@ class McapRecorder:
                 pass
         return CosimError(f"{self.path}: cannot write the MCAP log: {reason}")
 
-    def finish(self, rt: Runtime | None, error: BaseException | None) -> None:
+    def finish(self, rt: Execution | None, error: BaseException | None) -> None:
         """Mark the outcome and close the file; raises CosimError when the file cannot be completed."""
         sink, self._sink = self._sink, None
         if sink is None:

@@ -60,7 +60,7 @@ import orjson
 from delta.kinematics import inverse_kinematics, leg_axes, platform_offsets
 from delta.model import build_model
 
-from ..engine.algorithm import Runtime, byte_view
+from ..engine.execution import Execution, byte_view
 from ..engine.preflight import make_trajectory, sampled_positions
 from ..errors import CosimError
 from ..fmi import BINARY, BOOLEAN, INTEGER, REAL, STRING
@@ -239,7 +239,7 @@ def block_schema(schema: dict) -> dict:
             "one array element per sample", "properties": props, "required": list(props)}
 
 
-def component_schema(rt: Runtime, c: int) -> tuple[dict, list]:
+def component_schema(rt: Execution, c: int) -> tuple[dict, list]:
     """(JSON Schema, readers) of component ``c``'s channel; readers as in :func:`_values_any`."""
     plan = rt.plan
     props = {"t": {"type": "number", "description": "simulation time", "unit": "s"}}
@@ -447,7 +447,7 @@ class Publisher:
         """Add a sink; it receives every channel and message from :meth:`start` on."""
         self._sinks.append(sink)
 
-    def origin(self, rt: Runtime) -> int:
+    def origin(self, rt: Execution) -> int:
         """Fix (once) and return the offset log time - simulation time, ns."""
         if self.offset_ns is None:
             self.offset_ns = time.time_ns() - rt.start_ns if self.stamps == "wall" else 0
@@ -479,7 +479,7 @@ class Publisher:
             sink.blocks(self.offset_ns, blocks)
 
     # -- observer protocol
-    def start(self, rt: Runtime) -> None:
+    def start(self, rt: Execution) -> None:
 
         plan = rt.plan
         self.origin(rt)
@@ -607,5 +607,5 @@ class Publisher:
         if t_ns >= self._next_tick:
             self._tick(t_ns)
 
-    def finish(self, rt: Runtime | None, error: BaseException | None) -> None:
+    def finish(self, rt: Execution | None, error: BaseException | None) -> None:
         self.flush()  # normally done: each sink flushes the publisher before it closes

@@ -21,7 +21,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from ..engine.algorithm import Runtime
+from ..engine.execution import Execution
 from ..errors import CosimError
 
 __all__ = ["RealTime", "parse_factor"]
@@ -49,7 +49,7 @@ class RealTime:
         self.achieved = math.nan
         self.wall_s = 0.0
 
-    def start(self, rt: Runtime) -> None:
+    def start(self, rt: Execution) -> None:
         # Everything alive now (FMUs, their modules, the plan) lives as long as the run: keep it out of
         # the garbage collector's full passes, which otherwise stall a step by 20-50 ms every few seconds
         gc.freeze()
@@ -70,7 +70,7 @@ class RealTime:
             self._n += 1
         self._t_last = t_ns
 
-    def finish(self, rt: Runtime | None, error: BaseException | None) -> None:
+    def finish(self, rt: Execution | None, error: BaseException | None) -> None:
         gc.unfreeze()
         self.wall_s = (time.perf_counter_ns() - self._w0) * 1e-9
         self.lags_s = self._lags[:self._n] * 1e-9

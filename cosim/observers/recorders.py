@@ -6,7 +6,7 @@ import math
 import re
 from typing import Sequence
 
-from ..engine.algorithm import Runtime
+from ..engine.execution import Execution
 from ..engine.system import Port
 from ..fmi import REAL
 from .stats import ErrorStats
@@ -22,7 +22,7 @@ class ErrorObserver:
         self.actual = actual
         self.reference = reference
 
-    def start(self, rt: Runtime) -> None:
+    def start(self, rt: Execution) -> None:
         self._pairs = []
         self.units = []
         for a, r in zip(self.actual, self.reference):
@@ -46,7 +46,7 @@ class ErrorObserver:
                 self.t_mx[j] = t_ns
         self.n += 1
 
-    def finish(self, rt: Runtime, error: BaseException | None) -> None:
+    def finish(self, rt: Execution, error: BaseException | None) -> None:
         return None
 
     def result(self) -> list[ErrorStats]:
@@ -64,7 +64,7 @@ class Probe:
         self.t_ns: list[int] = []
         self.values: dict[str, list[float]] = {s: [] for s in signals}
 
-    def start(self, rt: Runtime) -> None:
+    def start(self, rt: Execution) -> None:
         self._src = []
         for s in self.signals:
             self._src.append(rt.where(rt.plan.port(s)))
@@ -75,7 +75,7 @@ class Probe:
         for s, (arr, i) in zip(self.signals, self._src):
             self.values[s].append(arr[i])
 
-    def finish(self, rt: Runtime, error: BaseException | None) -> None:
+    def finish(self, rt: Execution, error: BaseException | None) -> None:
         return None
 
 
@@ -88,7 +88,7 @@ class PeakEffort:
     def __init__(self) -> None:
         self.peak = math.nan
 
-    def start(self, rt: Runtime) -> None:
+    def start(self, rt: Execution) -> None:
         self._src = []
         for c, outs in enumerate(rt.plan.outputs):
             for var in outs:
@@ -103,5 +103,5 @@ class PeakEffort:
             v = abs(arr[i])
             self.peak = max(self.peak, v)
 
-    def finish(self, rt: Runtime, error: BaseException | None) -> None:
+    def finish(self, rt: Execution, error: BaseException | None) -> None:
         return None

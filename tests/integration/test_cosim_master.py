@@ -64,7 +64,7 @@ def test_gauss_seidel_matches_recurrence_and_log(write_scenario, tmp_path):
     path = write_scenario(LOOP.format(m=1, stop=0.5, alg="gauss_seidel"))
     probe = Probe(["plant.x", "ctl.y"])
     out = tmp_path / "run.mcap"
-    res = run_scenario(load_scenario(path), out=out, extra_observers=[probe])
+    res = run_scenario(load_scenario(path), out=out, observers=[probe])
     # Gauss-Seidel, plant (no feedthrough) first: x_{n+1} = x_n + h u_n, then u_{n+1} = -5 x_{n+1}.
     # The test gain computes y only in do_step, so u_0 is its start value 0.
     x, u, h = 0.5, 0.0, 0.001
@@ -97,7 +97,7 @@ def test_gauss_seidel_matches_recurrence_and_log(write_scenario, tmp_path):
 def test_jacobi_matches_recurrence(write_scenario):
     path = write_scenario(LOOP.format(m=1, stop=0.2, alg="jacobi"))
     probe = Probe(["plant.x"])
-    run_scenario(load_scenario(path), log=False, extra_observers=[probe])
+    run_scenario(load_scenario(path), log=False, observers=[probe])
     # Jacobi: both read the previous macro step's outputs: x' = x + h y, y' = -5 x
     x, y, h = 0.5, 0.0, 0.001  # y_0 = 0: the test gain computes only in do_step
     for n, value in enumerate(probe.values["plant.x"]):

@@ -48,7 +48,7 @@ def _run(scenario, signals: list[str], *, python: bool, monkeypatch):
 
         m.setattr(ModelExchange, "_bind_rhs", spy)
         probe = Probe(signals)
-        result = run_scenario(scenario, log=False, extra_observers=[probe], read_all=True)
+        result = run_scenario(scenario, log=False, observers=[probe], read_all=True)
     return probe, result, made
 
 

@@ -62,19 +62,19 @@ def test_json_stays_the_only_thing_on_stdout_when_the_run_prints(capfd, monkeypa
 
 def test_a_relative_out_stays_where_the_run_started_when_the_working_directory_changes(tmp_path, monkeypatch):
     """An FMU that calls chdir during the run must not move a relative --out (issue 25)."""
-    import cosim.run as run_module
+    from cosim.engine.execution import Execution
 
     run_dir, elsewhere = tmp_path / "here", tmp_path / "elsewhere"
     run_dir.mkdir()
     elsewhere.mkdir()
     monkeypatch.chdir(run_dir)
-    real = run_module.initialize
+    real = Execution.initialize
 
-    def moving_initialize(rt):  # what such an FMU does while it is instantiated
+    def moving_initialize(ex, *args, **kwargs):  # what such an FMU does while it is instantiated
         os.chdir(elsewhere)
-        return real(rt)
+        return real(ex, *args, **kwargs)
 
-    monkeypatch.setattr(run_module, "initialize", moving_initialize)
+    monkeypatch.setattr(Execution, "initialize", moving_initialize)
     rc = main(["run", str(ROOT / "scenarios" / "helix_ctc_analytic.yaml"), "--stop-time", "0.01",
                "--out", "rel.mcap", "--quiet"])
     assert rc == 0

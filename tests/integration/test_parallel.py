@@ -147,7 +147,7 @@ def test_dead_worker_is_reported(write_scenario, tmp_path):
     path = write_scenario(MIXED.format(m=1, stop=5.0, alg="gauss_seidel", parallel='"on"'))
     killer = _KillWorker(at=100)
     with pytest.raises(CosimError) as exc:
-        run_scenario(load_scenario(path), log=False, extra_observers=[killer])
+        run_scenario(load_scenario(path), log=False, observers=[killer])
     text = str(exc.value)
     assert "the worker process running src, ref exited (code -9)" in text, text
 

@@ -50,9 +50,9 @@ def _ours(scenario_or_path, overrides=None) -> tuple[list[int], np.ndarray]:
     probe = Probe(P)
     if str(scenario_or_path).endswith(".ssp"):
         with open_ssp(scenario_or_path, overrides) as sc:
-            run_scenario(sc, log=False, extra_observers=[probe])
+            run_scenario(sc, log=False, observers=[probe])
     else:
-        run_scenario(load_scenario(scenario_or_path, overrides), log=False, extra_observers=[probe])
+        run_scenario(load_scenario(scenario_or_path, overrides), log=False, observers=[probe])
     return probe.t_ns, np.column_stack([probe.values[s] for s in P])
 
 
@@ -369,7 +369,7 @@ def test_another_tools_ssp_runs(tmp_path, test_fmus, capsys):
     with open_ssp(ssp, {("time", "step"): 0.1}) as sc:
         assert sc.components["gain"].interface == "cs"
         assert sc.components["src"].parameters == {"offset": 2.0} and sc.components["gain"].parameters == {"k": 3.0}
-        res = run_scenario(sc, out=tmp_path / "foreign.mcap", extra_observers=[probe])  # logged: gain.y is read
+        res = run_scenario(sc, out=tmp_path / "foreign.mcap", observers=[probe])  # logged: gain.y is read
     assert res.steps == 5, res.steps
     assert probe.values["src.y"][0] == 2.0, probe.values["src.y"]
     # after each step the gain holds k times the source's output of that macro step (Gauss-Seidel: the

@@ -38,7 +38,7 @@ def test_helix_fmu_follows_the_trajectory_section(tmp_path):
     path = tmp_path / "section.yaml"
     path.write_text(SCENARIO)
     probe = Probe(["traj.p_ref.x", "traj.p_ref.y", "traj.p_ref.z"])
-    run_scenario(load_scenario(path), out=tmp_path / "section.mcap", extra_observers=[probe])
+    run_scenario(load_scenario(path), out=tmp_path / "section.mcap", observers=[probe])
     t = np.asarray(probe.t_ns) * 1e-9
     expected = Helix(rx=0.05, ry=0.08, omega=2.0, z0=-0.5, vz=0.002, duration=1.0).sample(t)[0]
     got = np.column_stack([probe.values[f"traj.p_ref.{a}"] for a in "xyz"])
@@ -65,6 +65,6 @@ def test_a_yaml_1_1_exponent_in_the_parameters_is_a_number(tmp_path):
     text = text.replace("  type: helix                    #", "  params: {rx: 5e-2, ry: 5e-2}\n  type: helix  #")
     (tmp_path / "s.yaml").write_text(text.replace("../runs/", str(tmp_path) + "/"))
     probe = Probe(["traj.p_ref.x"])
-    res = run_scenario(load_scenario(tmp_path / "s.yaml", {("time", "stop"): 0.01}), log=False, extra_observers=[probe])
+    res = run_scenario(load_scenario(tmp_path / "s.yaml", {("time", "stop"): 0.01}), log=False, observers=[probe])
     assert res.status == "completed", res.message
     assert probe.values["traj.p_ref.x"][0] == pytest.approx(0.05, abs=1e-15)

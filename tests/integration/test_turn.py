@@ -47,7 +47,7 @@ def _run(scenario, signals: list[str], *, python: bool, monkeypatch, made: list 
 
             m.setattr(CoSimulation, "_bind_turn", spy)
         probe = Probe(signals)
-        result = run_scenario(scenario, log=False, extra_observers=[probe])
+        result = run_scenario(scenario, log=False, observers=[probe])
     return probe, result
 
 

@@ -1,5 +1,5 @@
 """The per-step fast paths: compiled value writers (fmus._names.writer) and the master's
-block moves for wired vector signals (cosim.engine.algorithm._runs)."""
+block moves for wired vector signals (cosim.engine.execution._runs)."""
 
 from __future__ import annotations
 
@@ -7,7 +7,7 @@ import ctypes
 
 import pytest
 
-from cosim.engine.algorithm import _runs
+from cosim.engine.execution import _runs
 from fmus._names import writer
 
 

@@ -1,0 +1,323 @@
+"""The execution: a system's components on one integer time grid, stepped by an algorithm, watched by observers.
+
+In the spirit of libcosim's ``execution``: make one on a :class:`~cosim.engine.system.SystemPlan`, add the
+components (:meth:`Execution.add_slave`, in the plan's order) and the observers, then :meth:`~Execution.initialize`,
+and :meth:`~Execution.step` or :meth:`~Execution.simulate_until`. The CLI, the API, SSP runs, sweeps and the
+offload worker all run through it (:func:`cosim.run.run_scenario` composes one from a scenario).
+
+Time is an integer count of nanoseconds: ``t_ns = start_ns + k * step_ns``, never a float accumulated step after
+step. The algorithm (:mod:`cosim.engine.algorithm`) runs one macro step; the execution handles the schedule
+(multi-rate), observers (called after each macro step with the components that stepped), progress, stop
+requests (SIGINT, SIGTERM, SIGHUP: honoured between macro steps, never inside an FMU call) and an FMU that
+ends the simulation. A component that never returns is the watchdog's (:mod:`cosim.engine.watchdog`): it reads
+:attr:`Execution.current`, which the execution and the algorithm keep up to date, in shared memory so that a
+process watching this one can read it too.
+"""
+
+from __future__ import annotations
+
+import ctypes
+import math
+import mmap
+import signal
+import threading
+import time as _time
+from typing import Any, Callable, Protocol, Sequence
+
+from ..errors import STOP_SIGNALS, Interrupted
+from ..fmi import Slave, Terminated
+from .algorithm import ALGORITHMS, DEFAULT, Algorithm
+from .system import SystemPlan
+
+__all__ = ["Observer", "Execution", "StopRequest", "byte_view", "MASTER", "PHASES"]
+
+MASTER = -1
+"""``current[0]`` when no component has the turn (the master between turns, its observers)."""
+PHASES = ("initialization", "step", "termination")
+"""``current[2]``: the phase of the run, by index."""
+
+
+class Observer(Protocol):
+    """Watches a run; never changes inputs. Methods are called in this order."""
+
+    def start(self, ex: "Execution") -> None: ...
+    def stepped(self, k: int, t_ns: int, active: Sequence[int]) -> None: ...
+    def finish(self, ex: "Execution", error: BaseException | None) -> None: ...
+
+
+class Execution:
+    """A plan's components on the integer time grid ``start_ns + k * step_ns`` up to ``stop_ns``, run by an
+    algorithm (:data:`~cosim.engine.algorithm.ALGORITHMS`, by name), watched by observers.
+
+    ``multiples``: each component's step multiple (multi-rate); ``algorithm``: a registered name.
+    After :meth:`initialize`: ``k_done`` (macro steps completed), ``comp_time`` (wall seconds per component),
+    ``terminated`` / ``t_end_ns`` (an FMU ended the simulation early, and when).
+    """
+
+    def __init__(self, plan: SystemPlan, start_ns: int, stop_ns: int, step_ns: int, multiples: Sequence[int],
+                 algorithm: str = DEFAULT):
+        self.plan = plan
+        self.start_ns, self.stop_ns, self.step_ns = start_ns, stop_ns, step_ns
+        self.multiples = list(multiples)
+        self.algorithm_name = algorithm
+        self.algorithm: Algorithm = ALGORITHMS[algorithm]()
+        self.slaves: list[Slave] = []
+        self.observers: list[Observer] = []
+        self.started: list[Observer] = []  # observers started, in order: those to finish
+        self.comp_time: list[float] = []
+        self.k_done = 0
+        self.copies: list[list[tuple[Any, int, Any, int]]] = []  # element copies per destination component
+        self.moves: list[list[tuple[memoryview, memoryview]]] = []  # (dst bytes, src bytes) per component
+        self.terminated: Terminated | None = None
+        self.t_end_ns: int | None = None
+        # component with the turn (MASTER: none), simulation time (s) of the macro step, phase (PHASES index):
+        # doubles in a shared anonymous mapping, written by the main thread, read by the watchdog's thread
+        self._record = mmap.mmap(-1, 3 * 8)
+        self.current = memoryview(self._record).cast("d")
+        self.current[0], self.current[1], self.current[2] = MASTER, start_ns * 1e-9, 0
+
+    # -- building
+    def add_slave(self, slave: Slave) -> int:
+        """Add the next component (the plan's order of names), bound to the plan's inputs and outputs."""
+        c = len(self.slaves)
+        slave.bind(self.plan.inputs[c], self.plan.outputs[c])
+        self.slaves.append(slave)
+        return c
+
+    def replace_slave(self, c: int, slave: Slave) -> None:
+        """Put ``slave`` in component ``c``'s place, on the same buffers (a worker process's proxy)."""
+        self.slaves[c] = slave
+
+    def add_observer(self, observer: Observer) -> None:
+        self.observers.append(observer)
+
+    # -- the grid
+    @property
+    def n_steps(self) -> int:
+        return (self.stop_ns - self.start_ns) // self.step_ns
+
+    def t_ns(self, k: int) -> int:
+        return self.start_ns + k * self.step_ns
+
+    def schedule(self) -> list[list[int]]:
+        """Active components (in order) for each base step of one hyper-period."""
+        period = math.lcm(*self.multiples) if self.multiples else 1
+        return [[c for c in self.plan.order if k % self.multiples[c] == 0] for k in range(period)]
+
+    def turns(self) -> list[list[tuple[int, list, list, Slave, float]]]:
+        """Per base step of the hyper-period, its active components in order, each with what its turn needs:
+        the links copied into it (:meth:`pull`), the component, its step size (s)."""
+        h = [m * self.step_ns * 1e-9 for m in self.multiples]
+        return [[(c, self.moves[c], self.copies[c], self.slaves[c], h[c]) for c in active]
+                for active in self.schedule()]
+
+    # -- links
+    def _link(self) -> None:
+        self.comp_time = [0.0] * len(self.slaves)
+        links: list[list[tuple[Any, int, Any, int]]] = [[] for _ in self.slaves]
+        for lk in self.plan.links:
+            dv, di = self.slaves[lk.dst.comp].locate(lk.dst.var, output=False)
+            sv, si = self.slaves[lk.src.comp].locate(lk.src.var, output=True)
+            di += lk.dst.offset
+            si += lk.src.offset
+            links[lk.dst.comp] += [(dv, di + e, sv, si + e) for e in range(lk.count)]
+        split = [_runs(ls) for ls in links]
+        self.moves = [m for m, _ in split]
+        self.copies = [c for _, c in split]
+
+    def where(self, port: Any) -> tuple[Any, int]:
+        """(values array, index) of a resolved :class:`~cosim.engine.system.Port` (an array's first element)."""
+        arr, i = self.slaves[port.comp].locate(port.var, port.var.causality == "output")
+        return arr, i + port.offset
+
+    def pull(self, c: int) -> None:
+        """Copy connected outputs into component ``c``'s input buffers."""
+        for d, src in self.moves[c]:
+            d[:] = src
+        for dv, di, sv, si in self.copies[c]:
+            dv[di] = sv[si]
+
+    # -- running
+    def initialize(self, start_observers: bool = True) -> None:
+        """Instantiate, set start values, initialization mode, propagate outputs in order, exit; then start the
+        observers (``start_observers``), each in turn (:attr:`started`)."""
+        if len(self.slaves) != len(self.plan.names):
+            raise ValueError(f"{len(self.slaves)} components added, the plan has {len(self.plan.names)}")
+        self._link()
+        cur = self.current
+        start, stop = self.start_ns * 1e-9, self.stop_ns * 1e-9
+        for c, s in enumerate(self.slaves):
+            cur[0] = c
+            s.instantiate()
+            s.set_start(self.plan.start_values[c])
+            s.enter_initialization(start, stop)
+        for c in self.plan.order:
+            cur[0] = c
+            s = self.slaves[c]
+            self.pull(c)
+            s.set_inputs()
+            s.get_outputs()
+        for c in self.plan.order:  # second pass: inputs of components whose sources come later in the order
+            cur[0] = c
+            self.pull(c)
+            self.slaves[c].set_inputs()
+        try:
+            for c, s in enumerate(self.slaves):
+                cur[0] = c
+                s.exit_initialization()
+        except Terminated as term:  # an FMU ended the simulation in its initial event iteration
+            self.terminated, self.t_end_ns = term, self.start_ns
+        for c in self.plan.order:  # outputs as initialized (a model-exchange FMU's initial event may change them)
+            cur[0] = c
+            self.slaves[c].get_outputs()
+        cur[0], cur[2] = MASTER, PHASES.index("step")
+        if start_observers:
+            for o in self.observers:
+                o.start(self)
+                self.started.append(o)
+
+    def step(self, stop: "StopRequest | None" = None) -> None:
+        """One macro step."""
+        self.simulate_until(self.t_ns(self.k_done + 1), stop)
+
+    def simulate_until(self, t_ns: int | None = None, stop: "StopRequest | None" = None,
+                       progress: Callable[[int], None] | None = None, progress_every: int = 0) -> None:
+        """Run the macro steps from ``k_done`` up to time ``t_ns`` (the stop time when None). Raises Interrupted
+        (a KeyboardInterrupt) on a stop request.
+
+        ``comp_time`` gets each component's wall time: the clock is read once before a step's first component
+        and once after each component, and the time between two readings is the component's (its links copied
+        in, its FMI calls and checks); the observers run outside the readings.
+        """
+        if self.terminated is not None:  # ended before (at initialization, or an earlier call)
+            return
+        k_end = self.n_steps if t_ns is None else min(self.n_steps, (t_ns - self.start_ns) // self.step_ns)
+        schedule = self.schedule()
+        period = len(schedule)
+        macro_step = self.algorithm.macro_step(self)
+        cur = self.current
+        stepped = [o.stepped for o in self.observers]
+        report = progress if progress is not None and progress_every else None
+        start_ns, step_ns = self.start_ns, self.step_ns
+        k = self.k_done
+        try:
+            for k in range(self.k_done, k_end):
+                t = (start_ns + k * step_ns) * 1e-9
+                cur[1] = t
+                macro_step(k, t)
+                cur[0] = MASTER
+                self.k_done = k + 1
+                if stepped:
+                    t_end = start_ns + (k + 1) * step_ns
+                    active = schedule[k % period]
+                    for f in stepped:
+                        f(k, t_end, active)
+                if report is not None and (k + 1) % progress_every == 0:
+                    report(k + 1)
+                if stop is not None and stop.requested:
+                    raise stop.interrupted()
+        except Terminated as term:
+            self._end_at(term, k, schedule[k % period], stepped)
+
+    def _end_at(self, term: Terminated, k: int, active: Sequence[int], stepped: Sequence[Callable]) -> None:
+        """An FMU ended the simulation inside macro step ``k``: finish that step as far as it went (the components
+        the algorithm says are read, :meth:`~cosim.engine.algorithm.Algorithm.read_after_termination`). The
+        observers see the step with those components, stamped no later than the termination time."""
+        c_term = self.plan.names.index(term.component)
+        done = self.algorithm.read_after_termination(active, c_term)
+        for c in done:
+            self.slaves[c].get_outputs()
+        self.current[0] = MASTER
+        self.k_done = k + 1
+        self.terminated = term
+        self.t_end_ns = min(self.t_ns(k + 1), max(self.t_ns(k), round(term.time * 1e9)))
+        for f in stepped:
+            f(k, self.t_end_ns, done)
+
+
+def byte_view(array: Any, start: int = 0, count: int | None = None) -> memoryview:
+    """Bytes of elements ``start .. start + count`` of a ctypes array, as a writable memoryview.
+
+    ``dst[:] = src`` between two such views copies the bytes in C without a foreign-function
+    call (about 0.15 us against 0.65 us for ``memmove`` through ctypes, measured here).
+    """
+    size = ctypes.sizeof(array._type_)
+    n = len(array) - start if count is None else count
+    return memoryview(array).cast("B")[start * size:(start + n) * size]
+
+
+_MOVABLE = (ctypes.c_double, ctypes.c_float, ctypes.c_int8, ctypes.c_int16, ctypes.c_int32, ctypes.c_int64,
+            ctypes.c_uint8, ctypes.c_uint16, ctypes.c_uint32, ctypes.c_uint64, ctypes.c_bool)
+
+
+def _runs(links: list[tuple[Any, int, Any, int]]) -> tuple[list[tuple[memoryview, memoryview]],
+                                                           list[tuple[Any, int, Any, int]]]:
+    """Split element links ``(dst array, i, src array, j)`` into block moves and element copies.
+
+    Consecutive links between the same two numeric arrays with consecutive indices on both
+    sides (the usual case: a vector output wired to a vector input) become one move of the
+    same bytes between two :func:`byte_view` s; anything else (strings, single values, mixed
+    element types) stays an element copy, which converts through Python like before.
+    """
+    moves: list[tuple[memoryview, memoryview]] = []
+    copies: list[tuple[Any, int, Any, int]] = []
+    run: list[tuple[Any, int, Any, int]] = []
+
+    def close() -> None:
+        if len(run) > 1:
+            dv, di, sv, si = run[0]
+            moves.append((byte_view(dv, di, len(run)), byte_view(sv, si, len(run))))
+        else:
+            copies.extend(run)
+        run.clear()
+
+    for link in links:
+        dv, di, sv, si = link
+        if run:
+            pdv, pdi, psv, psi = run[-1]
+            if not (dv is pdv and sv is psv and di == pdi + 1 and si == psi + 1):
+                close()
+        if getattr(dv, "_type_", None) is getattr(sv, "_type_", 0) and dv._type_ in _MOVABLE:
+            run.append(link)
+        else:
+            close()
+            copies.append(link)
+    close()
+    return moves, copies
+
+
+class StopRequest:
+    """Turns SIGINT, SIGTERM and SIGHUP (the terminal closed) into a flag checked between macro steps (an FMU is
+    never interrupted mid-call); the step boundary then raises :class:`~cosim.errors.Interrupted`.
+    A second signal raises at once. ``signum`` and ``when`` (monotonic s) say which and when."""
+
+    SIGNALS = STOP_SIGNALS
+
+    def __init__(self) -> None:
+        self.requested = False
+        self.signum: int | None = None
+        self.when: float | None = None
+        self._previous: dict[int, Any] = {}
+
+    def __enter__(self) -> "StopRequest":
+        if threading.current_thread() is threading.main_thread():
+            for s in self.SIGNALS:
+                self._previous[s] = signal.signal(s, self._handle)
+        return self
+
+    def request(self, signum: int) -> None:
+        if not self.requested:
+            self.requested, self.signum, self.when = True, signum, _time.monotonic()
+
+    def _handle(self, signum, frame) -> None:
+        if self.requested:  # second signal: give up waiting for the step to end
+            raise self.interrupted()
+        self.request(signum)
+
+    def interrupted(self) -> BaseException:
+        return Interrupted(self.signum or signal.SIGINT)
+
+    def __exit__(self, *exc) -> None:
+        for s, previous in self._previous.items():
+            signal.signal(s, previous)
+        self._previous.clear()
