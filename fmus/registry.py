@@ -16,7 +16,7 @@ from pathlib import Path
 
 from delta.errors import CosimError
 
-__all__ = ["FmuEntry", "AdapterError", "REGISTRY", "names", "get", "adapter", "build", "available", "native_names"]
+__all__ = ["FmuEntry", "AdapterError", "REGISTRY", "ROLES", "names", "get", "find", "adapter", "build", "available", "native_names"]
 
 
 class AdapterError(CosimError, ImportError):
@@ -33,6 +33,10 @@ class FmuEntry:
     name) with it; ``fmi`` is 2 (co-simulation, pythonfmu) or 3 (model exchange, pythonfmu3);
     ``requires`` are further modules that must be importable for the adapter to run (those its
     module imports lazily, such as ``multibody.plant``).
+
+    What the FMU is, for the tools that look at scenarios and logs (compare, report, table) instead of
+    matching names: ``role`` (one of :data:`ROLES`), ``variant`` within the role (the control law, the
+    plant's model, the trajectory type) and ``label`` (how a table prints it: ``PD+``, ``CTC``).
     """
 
     name: str
@@ -43,24 +47,38 @@ class FmuEntry:
     fmi: int = 2
     requires: tuple[str, ...] = ()
     summary: str = ""
+    role: str = ""
+    variant: str = ""
+    label: str = ""
 
 
-_CONTROLLERS = {"pd": "PDController", "pid": "PIDController", "pdplus": "PDPlusController", "ctc": "CTCController"}
+ROLES = ("trajectory", "inverse_kinematics", "forward_kinematics", "controller", "plant")
+
+
+# control law -> (adapter class, label in tables)
+_CONTROLLERS = {"pd": ("PDController", "PD"), "pid": ("PIDController", "PID"), "pdplus": ("PDPlusController", "PD+"),
+                "ctc": ("CTCController", "CTC")}
 
 
 def _robot_entries(kind: str) -> list[FmuEntry]:
-    """The FMUs of one robot kind: the declaration of which adapter class serves which FMU."""
+    """The FMUs of one robot kind: the declaration of which adapter class serves which FMU, and what it is."""
     return [
-        FmuEntry(f"{kind}_ik", "kinematics", "InverseKinematics", kind, summary=f"inverse kinematics, {kind} delta"),
-        FmuEntry(f"{kind}_fk", "kinematics", "ForwardKinematics", kind, summary=f"forward kinematics, {kind} delta"),
-        *(FmuEntry(f"{kind}_{ctrl}", "controllers", cls, kind, summary=f"{ctrl.upper()} joint controller, {kind} delta")
-          for ctrl, cls in _CONTROLLERS.items()),
+        FmuEntry(f"{kind}_ik", "kinematics", "InverseKinematics", kind, summary=f"inverse kinematics, {kind} delta",
+                 role="inverse_kinematics", label="IK"),
+        FmuEntry(f"{kind}_fk", "kinematics", "ForwardKinematics", kind, summary=f"forward kinematics, {kind} delta",
+                 role="forward_kinematics", label="FK"),
+        *(FmuEntry(f"{kind}_{ctrl}", "controllers", cls, kind, summary=f"{label} joint controller, {kind} delta",
+                   role="controller", variant=ctrl, label=label)
+          for ctrl, (cls, label) in _CONTROLLERS.items()),
         FmuEntry(f"{kind}_analytic_plant", "plants", "AnalyticPlant", kind,
-                 summary=f"analytic dynamics plant (co-simulation), {kind} delta"),
+                 summary=f"analytic dynamics plant (co-simulation), {kind} delta",
+                 role="plant", variant="analytic", label="analytic model"),
         FmuEntry(f"{kind}_analytic_plant_me", "plant_me", "AnalyticPlantME", kind, fmi=3,
-                 summary=f"analytic dynamics plant (FMI 3.0 model exchange), {kind} delta"),
+                 summary=f"analytic dynamics plant (FMI 3.0 model exchange), {kind} delta",
+                 role="plant", variant="analytic_me", label="analytic model (model exchange)"),
         FmuEntry(f"{kind}_exudyn_plant", "plants", "ExudynPlant", kind, packages=("delta", "multibody"),
-                 requires=("multibody.plant",), summary=f"Exudyn multibody plant (full or lumped), {kind} delta"),
+                 requires=("multibody.plant",), summary=f"Exudyn multibody plant (full or lumped), {kind} delta",
+                 role="plant", variant="exudyn", label="Exudyn multibody"),
     ]
 
 
@@ -70,7 +88,8 @@ def _trajectory_entries() -> list[FmuEntry]:
     from .adapters.trajectories import ADAPTERS
 
     return [FmuEntry(a.FMU, "trajectories", a.__name__, None,
-                     summary=f"{a.TYPE.replace('_', ' ')} trajectory generator") for a in ADAPTERS.values()]
+                     summary=f"{a.TYPE.replace('_', ' ')} trajectory generator", role="trajectory", variant=a.TYPE,
+                     label=a.TYPE.replace("_", " ")) for a in ADAPTERS.values()]
 
 
 def _entries() -> list[FmuEntry]:
@@ -84,6 +103,14 @@ REGISTRY: dict[str, FmuEntry] = {e.name: e for e in _entries()}
 
 def names() -> list[str]:
     return list(REGISTRY)
+
+
+def find(role: str, kind: str | None = None, variant: str | None = None) -> list[FmuEntry]:
+    """Our FMUs of ``role`` (:data:`ROLES`), for robot ``kind`` and of ``variant`` where given."""
+    if role not in ROLES:
+        raise ValueError(f"unknown role {role!r}; roles: {', '.join(ROLES)}")
+    return [e for e in REGISTRY.values()
+            if e.role == role and (kind is None or e.kind == kind) and (variant is None or e.variant == variant)]
 
 
 def get(name: str) -> FmuEntry:

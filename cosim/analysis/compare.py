@@ -237,35 +237,33 @@ def compare_logs(a: RunLog | str | Path, b: RunLog | str | Path, tolerances: Map
 
 # --------------------------------------------------------------------------- plants
 
-# plant name -> (FMU name template, extra component settings)
+# plant name -> (the plant FMU's variant in the registry, extra component settings)
 PLANTS: dict[str, tuple[str, dict]] = {
-    "exudyn": ("{kind}_exudyn_plant", {"parameters": {"model.fidelity": "full"}}),
-    "exudyn_lumped": ("{kind}_exudyn_plant", {"parameters": {"model.fidelity": "lumped"}}),
-    "analytic": ("{kind}_analytic_plant", {}),
-    "analytic_me": ("{kind}_analytic_plant_me", {"interface": "me"}),
+    "exudyn": ("exudyn", {"parameters": {"model.fidelity": "full"}}),
+    "exudyn_lumped": ("exudyn", {"parameters": {"model.fidelity": "lumped"}}),
+    "analytic": ("analytic", {}),
+    "analytic_me": ("analytic_me", {"interface": "me"}),
 }
-_PLANT_FMU = re.compile(r"^(linear|rotary)_(exudyn_plant|analytic_plant|analytic_plant_me)$")
 
 
 def _plant_component(scenario, component: str | None) -> tuple[str, str]:
-    """(component name, robot kind) of the scenario's plant."""
-    found = {n: _PLANT_FMU.match(c.fmu or "") for n, c in scenario.components.items()}
-    found = {n: m for n, m in found.items() if m}
+    """(component name, robot kind) of the scenario's plant: the component that is one of our plant FMUs."""
+    plants = {e.name: e for e in registry.find("plant")}
+    found = {n: plants[c.fmu] for n, c in scenario.components.items() if c.fmu in plants}
     if component is not None:
         if component not in scenario.components:
             raise ScenarioError(Issue("--component", f"unknown component {component!r}; components: "
                                       f"{', '.join(scenario.components)}", scenario.source))
         if component not in found:
             raise ScenarioError(Issue(f"components.{component}", "is not one of our plant FMUs "
-                                      "(<linear|rotary>_<exudyn|analytic>_plant[_me]); its plant cannot be swapped",
-                                      scenario.source))
-        return component, found[component].group(1)
+                                      f"({', '.join(plants)}); its plant cannot be swapped", scenario.source))
+        return component, found[component].kind
     if len(found) != 1:
         raise ScenarioError(Issue("components", f"{'no' if not found else 'more than one'} plant component "
                                   f"({', '.join(found) or 'none of our plant FMUs'}); name it with --component",
                                   scenario.source))
-    name, m = next(iter(found.items()))
-    return name, m.group(1)
+    name, entry = next(iter(found.items()))
+    return name, entry.kind
 
 
 def _plant_overrides(scenario, component: str, kind: str, plant: str) -> tuple[dict, list[str]]:
@@ -273,8 +271,8 @@ def _plant_overrides(scenario, component: str, kind: str, plant: str) -> tuple[d
     from fmpy import read_model_description
 
 
-    template, extra = PLANTS[plant]
-    fmu = template.format(kind=kind)
+    variant, extra = PLANTS[plant]
+    fmu = registry.find("plant", kind, variant)[0].name
     md = read_model_description(str(registry.build(fmu)))
     variables = {v.name for v in md.modelVariables}
     base = dict(scenario.components[component].parameters)

@@ -30,7 +30,6 @@ from __future__ import annotations
 import argparse
 import json
 import math
-import re
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Sequence
@@ -38,6 +37,7 @@ from typing import Any, Sequence
 import numpy as np
 
 from delta.paper_data import THESIS_TABLE_5_M
+from fmus import registry
 
 from ..engine.scenario import Compare, expand_signal, load_yaml
 from ..errors import CosimError
@@ -50,8 +50,6 @@ __all__ = ["ReportError", "Pair", "Tracking", "Report", "TableRow", "Table", "tr
 _DEFAULT_ACTUAL, _DEFAULT_REFERENCE = "plant.p", "traj.p_ref"
 _JOINTS = ["q[1]", "q[2]", "q[3]"]
 _DPI = 120
-_CONTROLLERS = {"pd": "PD", "pid": "PID", "pdplus": "PD+", "ctc": "CTC"}
-_CONTROLLER_FMU = re.compile(r"^(?:linear|rotary)_(pd|pid|pdplus|ctc)$")
 _THESIS_ROBOT = "linear_delta_thesis"
 _THESIS_SOURCE = "thesis Table 5 (MATLAB controller, ADAMS prototype)"
 
@@ -656,9 +654,9 @@ def _describe(run: RunLog, actual_component: str) -> tuple[str, str, bool]:
         if not isinstance(c, dict):
             continue
         fmu = str(c.get("fmu") or c.get("path") or "")
-        m = _CONTROLLER_FMU.match(fmu)
-        if m:
-            controller = _CONTROLLERS[m.group(1)]
+        entry = registry.REGISTRY.get(fmu)
+        if entry is not None and entry.role == "controller":
+            controller = entry.label
         if name == actual_component and fmu:
             fidelity = (c.get("parameters") or {}).get("model.fidelity")
             plant = fmu + (f" ({fidelity})" if fidelity else "")
@@ -704,9 +702,10 @@ def controller_table(paths: Sequence[str | Path | RunLog], thesis: bool | None =
     if thesis is None:
         thesis = bool(helix_controllers)
     if thesis:
-        wanted = [k for k, v in _CONTROLLERS.items() if v in helix_controllers and k in THESIS_TABLE_5_M]
-        for key in wanted or [k for k in _CONTROLLERS if k in THESIS_TABLE_5_M]:
-            rows.append(TableRow(f"thesis Table 5, {_CONTROLLERS[key]}", _CONTROLLERS[key], "ADAMS prototype",
+        labels = {e.variant: e.label for e in registry.find("controller") if e.variant in THESIS_TABLE_5_M}
+        wanted = [k for k, label in labels.items() if label in helix_controllers]
+        for key in wanted or list(labels):
+            rows.append(TableRow(f"thesis Table 5, {labels[key]}", labels[key], "ADAMS prototype",
                                  tuple(THESIS_TABLE_5_M[key]), _THESIS_SOURCE))
     return Table(rows)
 
