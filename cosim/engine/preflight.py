@@ -16,24 +16,13 @@ from typing import Any
 import numpy as np
 
 from delta.robots import get_preset
-from delta.trajectories import TYPES
 from delta.workspace import check_trajectory
 from fmus.adapters.trajectories import ADAPTERS
 
 from ..errors import Issue, PreflightError, ScenarioError
-from .scenario import Scenario, TrajectorySpec, line_for
+from .scenario import Scenario
 
-__all__ = ["make_trajectory", "check_positions", "sampled_positions", "preflight", "initial_state_values", "trajectory_start_values"]
-
-def make_trajectory(spec: TrajectorySpec, source: str | None = None):
-    """Instantiate the class of ``spec.type`` (:data:`delta.trajectories.TYPES`) with ``spec.params``."""
-
-    cls = TYPES[spec.type]
-    try:  # spec.params are typed by the scenario's model (TrajectorySpec._typed)
-        return cls(**spec.params)
-    except (TypeError, ValueError) as exc:  # pydantic's ValidationError is a ValueError
-        raise ScenarioError(Issue("trajectory.params", f"{cls.__name__}: {exc}", source)) from None
-
+__all__ = ["check_positions", "sampled_positions", "preflight", "initial_state_values", "trajectory_start_values"]
 
 def check_positions(robot_name: str, times: np.ndarray, positions: np.ndarray,
                     singularity_margin: float | None) -> None:
@@ -59,7 +48,7 @@ def preflight(scenario: Scenario) -> str:
     spec = scenario.trajectory
     if spec is None or scenario.robot is None:
         return "no trajectory to check"
-    traj = make_trajectory(spec, scenario.source)
+    traj = scenario.trajectory_object()
     t0, t1 = scenario.time.start, scenario.time.stop
     n = max(2, int(np.ceil((t1 - t0) / spec.check_step)) + 1)
     times = np.linspace(t0, t1, n)
@@ -72,7 +61,7 @@ def initial_state_values(scenario: Scenario) -> dict[str, float]:
     init = scenario.initial_state
     if scenario.trajectory is None or not init.from_trajectory:
         return {}
-    traj = make_trajectory(scenario.trajectory, scenario.source)
+    traj = scenario.trajectory_object()
     state = traj.evaluate(scenario.time.start)
     p = np.asarray(getattr(state, "p", state[0] if isinstance(state, tuple) else state), dtype=float).reshape(3)
     v = getattr(state, "v", state[1] if isinstance(state, tuple) and len(state) > 1 else None)
@@ -117,13 +106,11 @@ def trajectory_start_values(scenario: Scenario) -> dict[str, dict[str, Any]]:
     adapters = _trajectory_adapters(scenario) if spec is not None else {}
     if not adapters:
         return {}
-    traj = make_trajectory(spec, scenario.source)
-    lines = scenario._lines
+    traj = scenario.trajectory_object()
     issues: list[Issue] = []
 
     def issue(loc: tuple, message: str) -> None:
-        path = ".".join(str(p) for p in loc)
-        issues.append(Issue(path, message, scenario.source, line_for(loc, lines)))
+        issues.append(scenario.sources.issue(loc, message))
 
     out: dict[str, dict[str, Any]] = {}
     for name, cls in adapters.items():

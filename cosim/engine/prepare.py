@@ -14,7 +14,7 @@ from fmus.native.errors import CompilerMissingError
 from ..errors import ComponentSourceError, Issue, ScenarioError
 from ..fmi import FMUInfo, load_fmu
 from .preflight import initial_state_values, preflight, trajectory_start_values
-from .scenario import Scenario, line_for
+from .scenario import Scenario
 from .system import build_plan
 
 __all__ = ["locate_fmus", "input_files", "build_key", "build_ours", "prepare"]
@@ -27,13 +27,12 @@ def locate_fmus(scenario: Scenario, fmu_files: Mapping[str, str | Path] | None =
     the others are built here.
     """
     base = _scenario_dir(scenario)
-    lines = scenario._lines
     infos: dict[str, FMUInfo] = {}
     issues: list[Issue] = []
     built = {k: Path(p) for k, p in (fmu_files or {}).items()}
     for name, comp in scenario.components.items():
         loc = ("components", name, "fmu" if comp.fmu else "path")
-        where = dict(file=scenario.source, line=line_for(loc, lines))
+        where = dict(file=scenario.source, line=scenario.sources.line(loc))
         try:
             if comp.path is not None:
                 path = Path(comp.path)

@@ -10,7 +10,7 @@ Unknown keys are rejected. Every problem is reported at once as
 from __future__ import annotations
 
 import re
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Literal, Union
 
@@ -19,7 +19,6 @@ from pydantic import BaseModel, ConfigDict, Field, PrivateAttr, ValidationError,
 
 from delta.robots import PRESETS
 from delta.trajectories import TYPES
-from delta.trajectories import TYPES as TRAJECTORY_TYPES
 
 from ..errors import Issue, ScenarioError
 from .algorithm import ALGORITHMS, DEFAULT
@@ -156,7 +155,7 @@ class TrajectorySpec(_Model):
     (:func:`trajectory_params_model`).
     """
 
-    type: Literal[tuple(TRAJECTORY_TYPES)] = Field(description="trajectory type (delta.trajectories.TYPES)")
+    type: Literal[tuple(TYPES)] = Field(description="trajectory type (delta.trajectories.TYPES)")
     params: dict[str, Any] = Field(default_factory=dict)
     check_step: float = Field(0.01, gt=0, description="pre-flight sampling step, s")
     singularity_margin: float | None = Field(
@@ -296,13 +295,31 @@ class Scenario(_Model):
     regression: Regression = Field(default_factory=Regression)
     # set by the loader, not part of the file format
     source: str | None = Field(None, exclude=True, json_schema_extra={"readOnly": True})
-    # where the values came from, for the messages (issue_at): the line of every key path in the
-    # file, and the command-line option of every overridden value
-    _lines: dict[tuple, int] = PrivateAttr(default_factory=dict)
-    _origins: dict[tuple, str] = PrivateAttr(default_factory=dict)
-    # overridden component parameters as written, where they hold a WrittenNumber (its text): the
-    # values the FMU variables type (cosim.engine.system.build_plan)
-    _written: dict[tuple, Any] = PrivateAttr(default_factory=dict)
+    # where the values came from (set by the loader): :attr:`sources`
+    _sources: "SourceMap | None" = PrivateAttr(default=None)
+    _trajectory: Any = PrivateAttr(default=None)  # built once: :meth:`trajectory_object`
+
+    def trajectory_object(self) -> Any:
+        """The trajectory of the ``trajectory:`` section (an instance of its :data:`delta.trajectories.TYPES`
+        class; None without the section), built once per scenario: the pre-flight, the start values of our
+        trajectory FMUs, the initial state and the log's reference path all use this one."""
+        spec = self.trajectory
+        if spec is None:
+            return None
+        if self._trajectory is None:
+            cls = TYPES[spec.type]
+            try:  # spec.params are typed by the scenario's model (TrajectorySpec._typed)
+                self._trajectory = cls(**spec.params)
+            except (TypeError, ValueError) as exc:  # pydantic's ValidationError is a ValueError
+                raise ScenarioError(Issue("trajectory.params", f"{cls.__name__}: {exc}", self.source)) from None
+        return self._trajectory
+
+    @property
+    def sources(self) -> "SourceMap":
+        """Where each value came from (file and line, or the command-line option): the one way issues are placed."""
+        if self._sources is None:
+            self._sources = SourceMap(self.source)
+        return self._sources
 
     @field_validator("parallel", mode="after")
     @classmethod
@@ -325,6 +342,30 @@ def expand_signal(spec: str | list[str]) -> list[str]:
 
 
 # --------------------------------------------------------------------------- YAML with lines
+
+
+@dataclass
+class SourceMap:
+    """Where a scenario's values came from, by key path (``("components", "ctl", "parameters", "gain.kp")``).
+
+    ``file``: the scenario file (or archive); ``lines``: the 1-based line of every key and item in it;
+    ``origins``: the command-line option (``--set ctl.gain.kp[1]=2e4``) of every overridden value;
+    ``written``: overridden component parameters as written where the text matters (a number given as text,
+    ``--set s=1e3``, typed by the FMU variable it sets: :func:`cosim.engine.system.build_plan`).
+    """
+
+    file: str | None
+    lines: dict[tuple, int] = field(default_factory=dict)
+    origins: dict[tuple, str] = field(default_factory=dict)
+    written: dict[tuple, Any] = field(default_factory=dict)
+
+    def line(self, loc: tuple) -> int | None:
+        """The line of ``loc`` in the file, or of its nearest enclosing key."""
+        return line_for(loc, self.lines)
+
+    def issue(self, loc: tuple, message: str) -> Issue:
+        """An issue placed where the value at ``loc`` came from (:func:`issue_at`)."""
+        return issue_at(loc, message, self.file, self.lines, self.origins)
 
 
 def _collect_lines(node: yaml.Node, path: tuple, lines: dict[tuple, int]) -> None:
@@ -513,9 +554,7 @@ def scenario_from_data(data: dict[str, Any], file: str = "<string>", overrides: 
     issues = [issue_at(loc, msg, file, lines, origins) for loc, msg in _semantic_issues(scenario)]
     if issues:
         raise ScenarioError(issues)
-    scenario._lines = lines
-    scenario._origins = origins
-    scenario._written = written
+    scenario._sources = SourceMap(file, lines, origins, written)
     return scenario
 
 

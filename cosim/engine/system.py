@@ -14,7 +14,7 @@ from typing import Any, Mapping
 from ..errors import AlgebraicLoopError, Issue, UnknownSignalError, WiringError
 from ..fmi import FMUInfo, Variable
 from .algorithm import ALGORITHMS
-from .scenario import Scenario, expand_signal, issue_at, line_for
+from .scenario import Scenario, expand_signal
 from .wiring import expand_connection, find_variable, index_text
 
 __all__ = ["Port", "Link", "SystemPlan", "build_plan", "gauss_seidel_order", "find_variable_loop"]
@@ -176,13 +176,12 @@ def build_plan(scenario: Scenario, infos: Mapping[str, FMUInfo], log_signals: st
     """Resolve every name in ``scenario`` against the FMUs; raise one error listing every problem."""
     names = list(scenario.components)
     idx = {n: i for i, n in enumerate(names)}
-    lines = scenario._lines
-    origins = scenario._origins
-    written = scenario._written
+    sources = scenario.sources
+    written = sources.written
     issues: list[Issue] = []
 
     def issue(loc: tuple, msg: str) -> None:
-        issues.append(issue_at(loc, msg, scenario.source, lines, origins))
+        issues.append(sources.issue(loc, msg))
 
     start_values: list[dict[str, Any]] = [dict() for _ in names]
     infos = dict(infos)
@@ -323,11 +322,9 @@ def build_plan(scenario: Scenario, infos: Mapping[str, FMUInfo], log_signals: st
                         f"(so every output is assumed to depend on every input): if they have no direct "
                         f"feedthrough, set components.<name>.feedthrough: none")
                 err = AlgebraicLoopError(labels, remedy)
-                err.issues[0] = Issue(err.issues[0].path, err.issues[0].message + hint, scenario.source,
-                                      line_for(("connections",), lines))
+                err.issues[0] = sources.issue(("connections",), err.issues[0].message + hint)
             else:
-                err.issues[0] = Issue(err.issues[0].path, err.issues[0].message, scenario.source,
-                                      line_for(("connections",), lines))
+                err.issues[0] = sources.issue(("connections",), err.issues[0].message)
             err.args = ("\n".join(str(i) for i in err.issues),)
             raise err
     # an algorithm that reads the previous step only (Jacobi) can take any order

@@ -61,7 +61,7 @@ from delta.kinematics import inverse_kinematics, leg_axes, platform_offsets
 from delta.model import build_model
 
 from ..engine.execution import Execution, byte_view
-from ..engine.preflight import make_trajectory, sampled_positions
+from ..engine.preflight import sampled_positions
 from ..errors import CosimError
 from ..fmi import BINARY, BOOLEAN, INTEGER, REAL, STRING
 from .foxglove_schemas import FRAME_TRANSFORMS, SCENE_UPDATE
@@ -374,7 +374,7 @@ def reference_path(scenario) -> np.ndarray | None:
 
     t0, t1 = scenario.time.start, scenario.time.stop
     n = int(min(_REFERENCE_POINTS, max(2, round((t1 - t0) / scenario.time.step) + 1)))
-    return sampled_positions(make_trajectory(spec, scenario.source), np.linspace(t0, t1, n))
+    return sampled_positions(scenario.trajectory_object(), np.linspace(t0, t1, n))
 
 
 # --------------------------------------------------------------------------- publisher

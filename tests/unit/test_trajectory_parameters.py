@@ -122,7 +122,8 @@ def test_disagreeing_default_and_set_override_are_reported_together():
     assert lines == [
         "x.yaml:9: components.traj.parameters.helix.omega: 2.0 disagrees with trajectory (the Helix default) "
         f"omega = {math.pi}; set it in one place (trajectory.params)",
-        "x.yaml:9: components.traj.parameters.helix.vz: 0.0 disagrees with trajectory (the Helix default) "
+        # the value came from the command line: the issue names the option, as every override's issue does
+        "--set traj.helix.vz=0.0: 0.0 disagrees with trajectory (the Helix default) "
         "vz = -0.01; set it in one place (trajectory.params)",
     ], "\n".join(lines)
 
