@@ -71,7 +71,6 @@ __all__ = [
     "joint_acceleration",
     "platform_acceleration",
     "joint_state_from_platform",
-    "platform_state_from_joints",
 ]
 
 
@@ -546,7 +545,3 @@ def joint_state_from_platform(
     return q, qd, qdd
 
 
-def platform_state_from_joints(robot: Robot | Model, q: np.ndarray, qd: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Platform position and velocity for a joint state; raises if FK has no solution."""
-    p = fk(robot, q).require()
-    return p, platform_velocity(robot, q, p, qd)

@@ -185,13 +185,3 @@ def build_entry(entry: FmuEntry, out_dir: str | Path | None = None, *, force: bo
     return target
 
 
-def clear_stale(out_dir: str | Path | None = None) -> None:
-    """Remove partial builds left by an interrupted run."""
-    for p in _cache_dir(out_dir).glob(".*.partial.fmu"):
-        p.unlink()
-
-
-def copy_to(path: Path, dest: Path) -> Path:
-    dest.parent.mkdir(parents=True, exist_ok=True)
-    shutil.copy2(path, dest)
-    return dest

@@ -65,7 +65,6 @@ __all__ = [
     "ValidationReport",
     "run_prescribed",
     "force_errors",
-    "force_error_vs_w",
     "validation_trajectory",
     "validate_model",
 ]
@@ -162,28 +161,6 @@ def force_errors(run: PrescribedRun, robot, masses) -> tuple[float, float]:
     rms = float(np.sqrt(np.mean(err**2)) / np.sqrt(np.mean(run.f_plant**2)))
     peak = float(np.max(np.abs(err)) / np.max(np.abs(run.f_plant)))
     return rms, peak
-
-
-def force_error_vs_w(robot, trajectory, w_values, masses=None, h: float = 2e-4, duration: float | None = None,
-                     fidelity: str = "full") -> list[tuple[float, float, float]]:
-    """Analytic-vs-plant effort error as a function of the lumping factor ``w``.
-
-    The plant is run once (its rods are rigid bodies, independent of ``w``); the analytic
-    model uses ``w_inertia = w_gravity = w``.
-
-    Returns
-    -------
-    list of (w, rms_rel_error, peak_rel_error)
-        ``rms_rel_error = rms(f_model - f_plant) / rms(f_plant)`` over all joints and samples,
-        ``peak_rel_error = max|f_model - f_plant| / max|f_plant|``.
-    """
-    masses = masses or _default_masses(robot)
-    run = run_prescribed(robot, trajectory, masses, h=h, duration=duration, fidelity=fidelity)
-    out = []
-    for w in w_values:
-        rms, peak = force_errors(run, robot, masses.with_(w_inertia=float(w), w_gravity=float(w)))
-        out.append((float(w), rms, peak))
-    return out
 
 
 # -- validate_model ---------------------------------------------------------------------------
