@@ -9,7 +9,7 @@ from __future__ import annotations
 import difflib
 import math
 from dataclasses import dataclass, field
-from typing import Any, Mapping
+from typing import Any, Callable, Mapping
 
 from ..errors import AlgebraicLoopError, Issue, UnknownSignalError, WiringError
 from ..fmi import FMUInfo, Variable
@@ -173,16 +173,38 @@ def _describe(ref: str, v: Variable) -> str:
 
 
 def build_plan(scenario: Scenario, infos: Mapping[str, FMUInfo], log_signals: str | None = None) -> SystemPlan:
-    """Resolve every name in ``scenario`` against the FMUs; raise one error listing every problem."""
+    """Resolve every name in ``scenario`` against the FMUs; raise one error listing every problem.
+
+    In turn: the parameters typed as start values (:func:`_start_values`), the connections resolved into
+    links (:func:`_links`), the signals the run reads besides (:func:`_reads`), what each component exchanges
+    and logs (:func:`_exchanged`), and the order the algorithm needs (:func:`_order`).
+    """
     names = list(scenario.components)
     idx = {n: i for i, n in enumerate(names)}
-    sources = scenario.sources
-    written = sources.written
     issues: list[Issue] = []
 
     def issue(loc: tuple, msg: str) -> None:
-        issues.append(sources.issue(loc, msg))
+        issues.append(scenario.sources.issue(loc, msg))
 
+    infos, start_values = _start_values(scenario, dict(infos), idx, issue)
+    links = _links(scenario, infos, idx, issue)
+    reads = _reads(scenario, infos, idx, issue)
+    if issues:
+        raise WiringError(issues)
+    inputs, outputs, logged = _exchanged(scenario, infos, names, links, reads, log_signals)
+    order = _order(scenario, infos, names, links)
+    return SystemPlan(names, [infos[n] for n in names], links, order, start_values, inputs, outputs, logged)
+
+
+Report = Callable[[tuple, str], None]
+
+
+def _start_values(scenario: Scenario, infos: dict[str, FMUInfo], idx: dict[str, int],
+                  issue: Report) -> tuple[dict[str, FMUInfo], list[dict[str, Any]]]:
+    """Each component's parameters typed by the FMU variables they set (arrays sized by the structural
+    parameters first); returns the infos with their structure and the start values per component."""
+    names = list(idx)
+    written = scenario.sources.written
     start_values: list[dict[str, Any]] = [dict() for _ in names]
     infos = dict(infos)
     for n, comp in scenario.components.items():
@@ -223,6 +245,11 @@ def build_plan(scenario: Scenario, infos: Mapping[str, FMUInfo], log_signals: st
                     else:
                         start_values[idx[n]][vname] = typed
 
+    return infos, start_values
+
+
+def _links(scenario: Scenario, infos: dict[str, FMUInfo], idx: dict[str, int], issue: Report) -> list[Link]:
+    """The connections as links between resolved ports, each checked (causality, kind, size, unit, one driver)."""
     links: list[Link] = []
 
     def resolve(ref: str, loc: tuple, role: str) -> Port | None:
@@ -268,6 +295,11 @@ def build_plan(scenario: Scenario, infos: Mapping[str, FMUInfo], log_signals: st
             driven.setdefault(c_dst, i)
             links.append(Link(src, dst))
 
+    return links
+
+
+def _reads(scenario: Scenario, infos: dict[str, FMUInfo], idx: dict[str, int], issue: Report) -> list[Port]:
+    """The signals the run reads besides the connections: the compared pair, the scene's position."""
     extra_reads: list[str] = []
     if scenario.compare is not None:
         extra_reads += expand_signal(scenario.compare.actual) + expand_signal(scenario.compare.reference)
@@ -284,9 +316,12 @@ def build_plan(scenario: Scenario, infos: Mapping[str, FMUInfo], log_signals: st
                       f"{ref}: no such output{_close(vname, outs)}")
             else:
                 reads.append(Port(idx[comp], var, element))
-    if issues:
-        raise WiringError(issues)
+    return reads
 
+
+def _exchanged(scenario: Scenario, infos: dict[str, FMUInfo], names: list[str], links: list[Link],
+               reads: list[Port], log_signals: str | None) -> tuple[list, list, list]:
+    """Per component: the inputs set, the outputs read each step and the variables logged."""
     inputs = [[] for _ in names]
     outputs = [[] for _ in names]
     for link in links:
@@ -308,6 +343,13 @@ def build_plan(scenario: Scenario, infos: Mapping[str, FMUInfo], log_signals: st
                     outputs[k].append(v)
             logged[k] = (list(inputs[k]) if signals == "all" else []) + list(outputs[k])
 
+    return inputs, outputs, logged
+
+
+def _order(scenario: Scenario, infos: dict[str, FMUInfo], names: list[str], links: list[Link]) -> list[int]:
+    """The components' order: by direct feedthrough when the algorithm reads outputs of the same step (an
+    algebraic loop refused, naming the variables in it), any order otherwise."""
+    sources = scenario.sources
     feedthrough = [_feedthrough(infos[n], scenario.components[n].feedthrough) for n in names]
     ordered = ALGORITHMS[scenario.algorithm].reads_this_step  # reads outputs of the same macro step: an order needed
     if ordered:
@@ -328,10 +370,9 @@ def build_plan(scenario: Scenario, infos: Mapping[str, FMUInfo], log_signals: st
             err.args = ("\n".join(str(i) for i in err.issues),)
             raise err
     # an algorithm that reads the previous step only (Jacobi) can take any order
-    order = gauss_seidel_order(len(names), [(lk.src.comp, lk.dst.comp,
-                                             ordered and lk.dst.var.name in feedthrough[lk.dst.comp])
-                                            for lk in links])
-    return SystemPlan(names, [infos[n] for n in names], links, order, start_values, inputs, outputs, logged)
+    return gauss_seidel_order(len(names), [(lk.src.comp, lk.dst.comp,
+                                            ordered and lk.dst.var.name in feedthrough[lk.dst.comp])
+                                           for lk in links])
 
 
 def _feedthrough(info: FMUInfo, declared: str) -> dict[str, list[str] | None] | set[str]:
