@@ -19,7 +19,7 @@ Adding an algorithm: a class with the three members of :class:`Algorithm`, regis
 from __future__ import annotations
 
 import time as _time
-from typing import TYPE_CHECKING, Callable, ClassVar, Protocol, Sequence
+from typing import TYPE_CHECKING, Any, Callable, ClassVar, Protocol, Sequence
 
 if TYPE_CHECKING:
     from .execution import Execution
@@ -51,6 +51,13 @@ class Algorithm(Protocol):
         ...
 
 
+def _loop_state(ex: "Execution") -> tuple[list, int, list[float], Any, Callable[[], float]]:
+    """What a macro step's loop reads, as locals: the turns of the hyper-period (:meth:`Execution.turns`), its
+    length, the per-component wall times, the record of the component with the turn, the clock."""
+    turns = ex.turns()
+    return turns, len(turns), ex.comp_time, ex.current, _time.perf_counter
+
+
 class GaussSeidel:
     """Sequential: set inputs, step, get outputs, component after component, in the plan's order."""
 
@@ -58,11 +65,7 @@ class GaussSeidel:
     reads_this_step: ClassVar[bool] = True
 
     def macro_step(self, ex: "Execution") -> MacroStep:
-        turns = ex.turns()
-        period = len(turns)
-        ctime = ex.comp_time
-        current = ex.current
-        clock = _time.perf_counter
+        turns, period, ctime, current, clock = _loop_state(ex)
 
         def step(k: int, t: float) -> None:
             t_prev = clock()
@@ -91,11 +94,7 @@ class Jacobi:
     reads_this_step: ClassVar[bool] = False
 
     def macro_step(self, ex: "Execution") -> MacroStep:
-        turns = ex.turns()
-        period = len(turns)
-        ctime = ex.comp_time
-        current = ex.current
-        clock = _time.perf_counter
+        turns, period, ctime, current, clock = _loop_state(ex)
 
         def step(k: int, t: float) -> None:
             turn = turns[k % period]
