@@ -31,6 +31,7 @@ always the command's.
 import sys
 
 from .cli import main
+from .engine import supervision
 from .errors import exit_now
 
 
@@ -51,10 +52,12 @@ def _exit(code: object) -> None:
             threading._shutdown()  # as at a normal exit: non-daemon threads end first
         atexit._run_exitfuncs()  # e.g. removal of extracted FMUs
     finally:
+        supervision.finished()  # a supervised run's child ends through here: not a crash
         exit_now(status)
 
 
 if __name__ == "__main__":  # also imported by multiprocessing's spawned workers
+    supervision.ENABLED = True  # `run` forks its supervisor here, never in a library user's process
     try:
         result = main()
     except SystemExit as stop:

@@ -20,7 +20,7 @@ from typing import Callable, Sequence
 
 from delta.errors import CosimError, UnreachableError
 
-from .errors import STOP_SIGNALS, exit_status, exit_text
+from .errors import EXIT_BAD_INPUT, STOP_SIGNALS, exit_status, exit_text
 
 EXIT_OK = 0
 EXIT_CHECK_FAILED = 1
@@ -501,6 +501,11 @@ def _stdout_kept_for_json(on: bool):
 
 
 def _cmd_run(args: argparse.Namespace) -> int:
+    from .engine import supervision
+
+    code = supervision.supervise(lambda record, reason: _crashed(args, record, reason))
+    if code is not None:  # the supervisor: the run went on in its child process
+        return code
     from .engine.scenario import apply_overrides
     from .run import run_scenario
 
@@ -527,6 +532,32 @@ def _cmd_run(args: argparse.Namespace) -> int:
     elif not args.quiet:
         print(_summary_text(res))
     return EXIT_OK if res.passed else EXIT_CHECK_FAILED
+
+
+def _crashed(args: argparse.Namespace, record, reason: str) -> int:
+    """The supervisor's report of a run whose process died inside a component (cosim.engine.supervision): one
+    line naming the component, the phase, the time and how it died, then where the log written so far is."""
+    from pathlib import Path
+
+    from .fmi.extract import sweep_orphans
+    from .io.recover import recover
+
+    sweep_orphans()  # the FMUs the dead child extracted
+    message = f"{record.where()} {reason}"
+    lines = [exit_text(message, "crash")]
+    info = record.info()
+    partial, target = info.get("partial"), info.get("target")
+    if partial and Path(partial).exists():
+        try:
+            report = recover(partial, target)
+            Path(partial).unlink(missing_ok=True)
+            lines.append(f"the log up to the crash ({report.messages} messages) is in {report.out}")
+        except CosimError as exc:
+            lines.append(f"the log written so far stays in {partial} ({exc}): `python -m cosim recover {partial}`")
+        Path(target + ".lock").unlink(missing_ok=True)
+    _error_json(args, message, "crash")
+    print("\n".join(lines), file=sys.stderr)
+    return EXIT_BAD_INPUT  # an error (2): the run failed
 
 
 def _cmd_check(args: argparse.Namespace) -> int:

@@ -9,6 +9,7 @@ from typing import Any, Mapping, Sequence
 
 from delta.robots import get_preset
 
+from .engine import supervision
 from .engine.execution import Execution, Observer, StopRequest
 from .engine.offload import Offload, choose
 from .engine.prepare import input_files, prepare
@@ -230,8 +231,13 @@ def _run_claimed(scenario: Scenario, output, held: Extractions, options: RunOpti
     plan, _ = prepare(scenario, None if published else ("all" if options.read_all else "none"),
                       fmu_files=options.fmu_files)
     comps = scenario.components
+    supervised = supervision.record()  # python -m cosim run: the record its supervisor process reads
     ex = Execution(plan, scenario.time.start_ns, scenario.time.stop_ns, scenario.time.step_ns,
-                   [comps[n].step_multiple for n in plan.names], scenario.algorithm)
+                   [comps[n].step_multiple for n in plan.names], scenario.algorithm, supervised)
+    if supervised is not None:
+        supervised.describe(names=plan.names, watchdog_s=scenario.watchdog_s,
+                            partial=str(output.partial) if output is not None else None,
+                            target=str(output.target) if output is not None else None)
     slaves = [make_slave(n, plan.infos[i], comps[n].interface, comps[n].rtol, comps[n].solver, comps[n].max_step)
               for i, n in enumerate(plan.names)]
     for s in slaves:
@@ -283,6 +289,8 @@ def _run_claimed(scenario: Scenario, output, held: Extractions, options: RunOpti
         with stop, watchdog:
             try:
                 ex.initialize()
+                if supervised is not None and recorder is not None:
+                    supervised.describe(writer_pid=recorder.writer_pid)
                 t_wall = time.perf_counter()
                 cb, every = None, 0
                 if options.progress and ex.n_steps >= 1000:

@@ -21,6 +21,7 @@ DEPENDENCIES = {
     "CosimTRaiser": {"y": ["u"]},
     "CosimTSlow": {"y": []},
     "CosimTSum": {"y": ["a", "b"], "n": []},
+    "CosimTCrash": {"y": []},
 }
 SCRIPTS = {
     "CosimTSource": "cosim_t_source.py",
@@ -29,6 +30,7 @@ SCRIPTS = {
     "CosimTRaiser": "cosim_t_raiser.py",
     "CosimTSlow": "cosim_t_slow.py",
     "CosimTSum": "cosim_t_sum.py",
+    "CosimTCrash": "cosim_t_crash.py",
 }
 
 

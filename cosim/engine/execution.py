@@ -18,7 +18,6 @@ from __future__ import annotations
 
 import ctypes
 import math
-import mmap
 import signal
 import threading
 import time as _time
@@ -27,15 +26,10 @@ from typing import Any, Callable, Protocol, Sequence
 from ..errors import STOP_SIGNALS, Interrupted
 from ..fmi import Slave, Terminated
 from .algorithm import ALGORITHMS, DEFAULT, Algorithm
+from .supervision import MASTER, PHASES, Record
 from .system import SystemPlan
 
-__all__ = ["Observer", "Execution", "StopRequest", "byte_view", "MASTER", "PHASES"]
-
-MASTER = -1
-"""``current[0]`` when no component has the turn (the master between turns, its observers)."""
-PHASES = ("initialization", "step", "termination")
-"""``current[2]``: the phase of the run, by index."""
-
+__all__ = ["Observer", "Execution", "StopRequest", "byte_view"]
 
 class Observer(Protocol):
     """Watches a run; never changes inputs. Methods are called in this order."""
@@ -55,7 +49,7 @@ class Execution:
     """
 
     def __init__(self, plan: SystemPlan, start_ns: int, stop_ns: int, step_ns: int, multiples: Sequence[int],
-                 algorithm: str = DEFAULT):
+                 algorithm: str = DEFAULT, record: Record | None = None):
         self.plan = plan
         self.start_ns, self.stop_ns, self.step_ns = start_ns, stop_ns, step_ns
         self.multiples = list(multiples)
@@ -70,11 +64,12 @@ class Execution:
         self.moves: list[list[tuple[memoryview, memoryview]]] = []  # (dst bytes, src bytes) per component
         self.terminated: Terminated | None = None
         self.t_end_ns: int | None = None
-        # component with the turn (MASTER: none), simulation time (s) of the macro step, phase (PHASES index):
-        # doubles in a shared anonymous mapping, written by the main thread, read by the watchdog's thread
-        self._record = mmap.mmap(-1, 3 * 8)
-        self.current = memoryview(self._record).cast("d")
-        self.current[0], self.current[1], self.current[2] = MASTER, start_ns * 1e-9, 0
+        # component with the turn (MASTER: none), simulation time (s) of the macro step, phase (PHASES index), steps
+        # done: written by the main thread, read by the watchdog's thread and by a supervisor process (``record``:
+        # the one it reads, cosim.engine.supervision)
+        self.record = record if record is not None else Record()
+        self.current = self.record.current
+        self.current[0], self.current[1], self.current[2], self.current[3] = MASTER, start_ns * 1e-9, 0, 0
 
     # -- building
     def add_slave(self, slave: Slave) -> int:
@@ -206,7 +201,7 @@ class Execution:
                 cur[1] = t
                 macro_step(k, t)
                 cur[0] = MASTER
-                self.k_done = k + 1
+                cur[3] = self.k_done = k + 1
                 if stepped:
                     t_end = start_ns + (k + 1) * step_ns
                     active = schedule[k % period]
@@ -228,7 +223,7 @@ class Execution:
         for c in done:
             self.slaves[c].get_outputs()
         self.current[0] = MASTER
-        self.k_done = k + 1
+        self.current[3] = self.k_done = k + 1
         self.terminated = term
         self.t_end_ns = min(self.t_ns(k + 1), max(self.t_ns(k), round(term.time * 1e9)))
         for f in stepped:

@@ -34,8 +34,8 @@ import time
 from typing import Any, Callable
 
 from ..errors import Interrupted, StallError, exit_now, exit_status, exit_text
-from .execution import MASTER, PHASES
 from .offload import Proxy
+from .supervision import MASTER, PHASES
 
 __all__ = ["Watchdog", "GRACE_S"]
 
@@ -142,7 +142,7 @@ class Watchdog:
         """(component, simulation time, where it runs) of the call the main thread is in, as the execution
         records it (:attr:`~cosim.engine.execution.Execution.current`): the component with the turn and its
         own time, or the master between turns (in the initialization, or at the macro step's time)."""
-        c, t, phase = self.ex.current.tolist()
+        c, t, phase = self.ex.current.tolist()[:3]
         c = int(c)
         if c == MASTER:
             return ("(initialization)" if PHASES[int(phase)] == "initialization" else "(master)"), t, ""

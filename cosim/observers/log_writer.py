@@ -448,7 +448,7 @@ class WriterProcess:
 
     def __init__(self) -> None:
         env = dict(os.environ)
-        root = str(Path(__file__).resolve().parents[1])
+        root = str(Path(__file__).resolve().parents[2])  # the folder holding the cosim package
         env["PYTHONPATH"] = root + (os.pathsep + env["PYTHONPATH"] if env.get("PYTHONPATH") else "")
         self._proc = subprocess.Popen([sys.executable, "-m", "cosim.observers.log_writer"], stdin=subprocess.PIPE,
                                       stdout=subprocess.PIPE, stderr=subprocess.PIPE, bufsize=0,
@@ -461,6 +461,7 @@ class WriterProcess:
         except (ImportError, AttributeError, OSError):  # not Linux, or above this user's limit: the default works
             pass
         self.failure: str | None = None
+        self.pid = self._proc.pid
         self._queue: list[bytes] = []
         self._queued = 0
 

@@ -100,6 +100,11 @@ class McapRecorder:
         self._process = WriterProcess() if process else None  # now: it starts while the FMUs load
         self._sink = None
 
+    @property
+    def writer_pid(self) -> int | None:
+        """The writer process's pid (None when the log is written in this process)."""
+        return self._process.pid if self._process is not None else None
+
     # -- observer protocol
     def start(self, rt: Execution) -> None:
         self.path.parent.mkdir(parents=True, exist_ok=True)

@@ -5,13 +5,14 @@ from __future__ import annotations
 import signal
 
 import pytest
+from fake_components import FakeSlave, plan
 
 from cosim.engine.algorithm import ALGORITHMS, GaussSeidel, Jacobi
-from cosim.engine.execution import MASTER, Execution, StopRequest
+from cosim.engine.execution import Execution, StopRequest
 from cosim.engine.scenario import Scenario
+from cosim.engine.supervision import MASTER
 from cosim.engine.watchdog import Watchdog
 from cosim.errors import Interrupted
-from fake_components import FakeSlave, plan
 
 STEP_NS = 1_000_000  # 1 ms
 

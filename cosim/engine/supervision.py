@@ -1,0 +1,197 @@
+"""A run's supervisor: the command line's run goes on in a child process, and its parent names a crash.
+
+An FMU is foreign code inside our process: a segfault, an ``abort()`` or an ``exit()`` in ``doStep`` ends
+the process with no Python frame left to say which component, and a PythonFMU FMU called with the Python
+lock held can keep the watchdog's thread from ever running. So ``python -m cosim run`` forks once before
+anything is loaded (:func:`supervise`): the child runs as it always did; the parent only waits, and reads
+what the child's :class:`~cosim.engine.execution.Execution` keeps in a shared record (:class:`Record`: the
+component with the turn, the macro step's time, the phase, the steps done; the component names and the
+log's paths once the run starts). It costs the hot loop nothing but those stores.
+
+When the child dies without finishing (a signal, or an exit that is not ours), the parent says which
+component, in which phase, at which simulation time; recovers the log written so far into its target
+(:func:`cosim.io.recover.recover`: every complete record up to the crash; a log written by a writer process
+has every step sent before the crash) and removes the partial file and the claim's lock. It is also the
+backstop of the watchdog and of the stop signals: the signals are forwarded once (the child runs in its
+own process group, so a terminal's Ctrl-C reaches it through its parent only once), and a child that does
+not end within its grace after a stop signal, or makes no progress for its watchdog budget plus the grace
+while its own watchdog could not act, is killed and named the same way.
+"""
+
+from __future__ import annotations
+
+import ctypes
+import json
+import mmap
+import os
+import signal
+import time
+from typing import Any, Callable
+
+from ..errors import STOP_SIGNALS, printable
+
+__all__ = ["Record", "supervise", "record", "finished", "ENABLED", "MASTER", "PHASES"]
+
+MASTER = -1
+"""``current[0]`` when no component has the turn (the master between turns, its observers)."""
+PHASES = ("initialization", "step", "termination")
+"""``current[2]``: the phase of the run, by index."""
+
+ENABLED = False
+"""Set by ``python -m cosim`` (never by a library user's process, which must not be forked)."""
+
+_FIELDS = 5  # component, time (s), phase, steps done, finished (1.0 once the child ends through our exit)
+_INFO = 32 * 1024  # JSON of the run's description after the fields (names, log paths, watchdog budget)
+_POLL_S = 0.05
+_GRACE_S = 2.0  # the engine watchdog's grace (cosim.engine.watchdog.GRACE_S) is 2 s: ours comes after it
+_STOP_WAIT_S = 3 * _GRACE_S + 1.0  # after a forwarded stop signal: the child's own grace, its hard abort, a margin
+_WRITER_WAIT_S = 10.0  # a log writer process finishing what it received before its master died
+
+
+class Record:
+    """A small shared-memory record: ``current`` (doubles: component, time, phase, steps, finished) and the run's
+    description (JSON). Anonymous and shared: written by one process, readable by the processes forked after
+    it was made (the supervisor's child writes, the supervisor reads)."""
+
+    def __init__(self) -> None:
+        self._mm = mmap.mmap(-1, _FIELDS * 8 + _INFO)
+        self.current = memoryview(self._mm)[: _FIELDS * 8].cast("d")
+        self.current[0], self.current[2] = MASTER, 0
+
+    def describe(self, **info: Any) -> None:
+        """Store the run's description (merged with what is there): names, log paths, watchdog budget."""
+        data = json.dumps({**self.info(), **info}).encode()[: _INFO - 4]
+        self._mm[_FIELDS * 8: _FIELDS * 8 + 4] = len(data).to_bytes(4, "little")
+        self._mm[_FIELDS * 8 + 4: _FIELDS * 8 + 4 + len(data)] = data
+
+    def info(self) -> dict:
+        n = int.from_bytes(self._mm[_FIELDS * 8: _FIELDS * 8 + 4], "little")
+        if not n:
+            return {}
+        try:
+            return json.loads(self._mm[_FIELDS * 8 + 4: _FIELDS * 8 + 4 + n])
+        except ValueError:
+            return {}
+
+    def where(self) -> str:
+        """``component 'ctl' in its step at t = 1.234 s`` (or the master's part), from the record."""
+        c, t, phase = int(self.current[0]), self.current[1], PHASES[int(self.current[2]) % len(PHASES)]
+        names = self.info().get("names") or []
+        if c == MASTER or not 0 <= c < len(names):
+            return f"the master ({phase}, t = {t:.6g} s)"
+        what = "its step" if phase == "step" else f"its {phase}"
+        return f"component {printable(names[c])!r} in {what} at t = {t:.6g} s"
+
+
+_RECORD: Record | None = None
+
+
+def record() -> Record | None:
+    """The record this process writes for its supervisor (None when it is not a supervised run)."""
+    return _RECORD
+
+
+def finished() -> None:
+    """The supervised child ends through our own exit: whatever its exit code, it is not a crash."""
+    if _RECORD is not None:
+        _RECORD.current[4] = 1.0
+
+
+def supervise(on_crash: Callable[[Record, str], int]) -> int | None:
+    """Fork (when :data:`ENABLED`): returns None in the child, which goes on with the run; in the parent,
+    waits for the child and returns its exit code, or ``on_crash(record, reason)``'s when it died without
+    finishing (``reason``: ``crashed (SIGSEGV)``, ``exited with status 3``, ``was killed: no progress ...``).
+    Without fork or when not enabled, returns None at once (the run goes on in this process, unsupervised)."""
+    global _RECORD
+    if not ENABLED or not hasattr(os, "fork") or os.environ.get("COSIM_SUPERVISE", "1") == "0":
+        return None
+    rec = Record()
+    pid = os.fork()
+    if pid == 0:
+        _RECORD = rec
+        try:
+            os.setpgid(0, 0)  # terminal signals reach the parent only, which forwards each once
+        except OSError:
+            pass
+        _die_with_parent()
+        return None
+    return _wait(pid, rec, on_crash)
+
+
+def _die_with_parent() -> None:
+    try:
+        libc = ctypes.CDLL(None, use_errno=True)
+        libc.prctl(1, signal.SIGKILL, 0, 0, 0)  # PR_SET_PDEATHSIG: a supervisor killed with SIGKILL takes us along
+    except (OSError, AttributeError):
+        pass
+
+
+def _wait(pid: int, rec: Record, on_crash: Callable[[Record, str], int]) -> int:
+    stopped_at: list[float] = []
+
+    def forward(signum: int, frame: Any) -> None:
+        if not stopped_at:
+            stopped_at.append(time.monotonic())
+        try:
+            os.kill(pid, signum)
+        except ProcessLookupError:
+            pass
+
+    previous = {s: signal.signal(s, forward) for s in STOP_SIGNALS}
+    try:
+        seen, since = tuple(rec.current[:4]), time.monotonic()
+        while True:
+            try:
+                done, status = os.waitpid(pid, os.WNOHANG)
+            except ChildProcessError:
+                return 2
+            if done:
+                break
+            now = time.monotonic()
+            state = tuple(rec.current[:4])  # component, time, phase, steps: any change is progress
+            if state != seen:
+                seen, since = state, now
+            budget = rec.info().get("watchdog_s")
+            reason = None
+            if stopped_at and now - stopped_at[0] > _STOP_WAIT_S:
+                reason = f"did not stop within {_STOP_WAIT_S:g} s of the stop signal: killed"
+            elif budget and now - since > budget + 2 * _GRACE_S:
+                reason = f"made no progress for {now - since:.3g} s (watchdog {budget:g} s) and could not be " \
+                         f"stopped from inside: killed"
+            if reason is not None:
+                os.killpg(pid, signal.SIGKILL)
+                os.waitpid(pid, 0)
+                _wait_for_writer(rec)
+                return on_crash(rec, reason)
+            time.sleep(_POLL_S)
+    finally:
+        for s, h in previous.items():
+            signal.signal(s, h)
+    if rec.current[4] == 1.0:  # ended through our exit: its code is the command's
+        return os.waitstatus_to_exitcode(status)
+    if os.WIFSIGNALED(status):
+        reason = f"crashed ({signal.Signals(os.WTERMSIG(status)).name})"
+    else:
+        reason = f"exited with status {os.WEXITSTATUS(status)} (an exit() inside a component)"
+    try:  # what is left of its process group (the offload worker dies with it by itself)
+        os.killpg(pid, signal.SIGKILL)
+    except ProcessLookupError:
+        pass
+    _wait_for_writer(rec)
+    return on_crash(rec, reason)
+
+
+def _wait_for_writer(rec: Record) -> None:
+    """Wait (bounded) for the log writer process, which writes what it received and ends by itself once its
+    master's pipe is closed; killed after :data:`_WRITER_WAIT_S`."""
+    pid = rec.info().get("writer_pid")
+    deadline = time.monotonic() + _WRITER_WAIT_S
+    while pid:
+        try:
+            os.kill(pid, 0)
+        except ProcessLookupError:
+            return
+        if time.monotonic() > deadline:
+            os.kill(pid, signal.SIGKILL)
+            return
+        time.sleep(_POLL_S)

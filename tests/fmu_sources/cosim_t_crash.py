@@ -1,0 +1,41 @@
+"""Test FMU: a source that misbehaves in the step that reaches ``at`` s, as foreign code can in our process.
+
+``mode``: 0 behaves; 1 segfaults (reads address 0); 2 aborts; 3 calls the C library's ``exit(3)``; 4 blocks the
+stop signals in its thread and sleeps in C for ``hold`` s with the Python lock held (a call through
+``ctypes.PyDLL``): no other thread of the process can run Python, so neither the watchdog nor a signal handler
+can act."""
+import signal
+import ctypes
+import os
+
+from pythonfmu import Fmi2Causality, Fmi2Slave, Fmi2Variability, Integer, Real
+
+
+class CosimTCrash(Fmi2Slave):
+    author = "cosim tests"
+    description = "a source that crashes on purpose"
+
+    def __init__(self, **kwargs):
+        super().__init__(**kwargs)
+        self.mode = 0
+        self.at = 0.0
+        self.hold = 60.0
+        self.y = 0.0
+        self.register_variable(Integer("mode", causality=Fmi2Causality.parameter, variability=Fmi2Variability.tunable))
+        self.register_variable(Real("at", causality=Fmi2Causality.parameter, variability=Fmi2Variability.tunable))
+        self.register_variable(Real("hold", causality=Fmi2Causality.parameter, variability=Fmi2Variability.tunable))
+        self.register_variable(Real("y", causality=Fmi2Causality.output, initial="exact"))
+
+    def do_step(self, current_time, step_size):
+        if current_time + step_size >= self.at - 1e-12:
+            if self.mode == 1:
+                ctypes.string_at(0)
+            elif self.mode == 2:
+                os.abort()
+            elif self.mode == 3:
+                ctypes.CDLL(None).exit(3)
+            elif self.mode == 4:
+                signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT, signal.SIGTERM, signal.SIGHUP})
+                ctypes.PyDLL(None).sleep(int(self.hold))
+        self.y = current_time + step_size
+        return True

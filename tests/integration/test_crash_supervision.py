@@ -1,0 +1,100 @@
+"""A component that crashes or will not stop, under `python -m cosim run`'s supervisor (cosim.engine.supervision).
+
+Each case: exit code 2, one line naming the component, the phase, the simulation time and how the process
+died, no traceback, the log recovered up to the crash (readable, its samples ending there), no partial file,
+lock or extracted FMU left behind.
+"""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import pytest
+
+from cosim.io.runlog import read_run
+
+pytestmark = pytest.mark.integration
+
+ROOT = Path(__file__).resolve().parents[2]
+SCENARIO = """
+name: crash
+components:
+  src: {{path: "{{CosimTCrash}}", parameters: {{mode: {mode}, at: {at}, hold: 60}}}}
+  g: {{path: "{{CosimTGain}}"}}
+connections:
+  - {{from: src.y, to: g.u}}
+time: {{stop: {stop}, step: 0.001}}
+parallel: off
+{extra}
+"""
+
+
+def _start(path: Path, out: Path, tmp: Path) -> subprocess.Popen:
+    out.parent.mkdir(exist_ok=True)
+    env = {**os.environ, "TMPDIR": str(tmp), "PYTHONPATH": str(ROOT)}
+    return subprocess.Popen([sys.executable, "-m", "cosim", "run", str(path), "--out", str(out), "--quiet"],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env, cwd=ROOT)
+
+
+def _check_after(proc: subprocess.Popen, out: Path, tmp: Path, line: str, t_end: float) -> None:
+    stdout, stderr = proc.communicate(timeout=60)
+    assert proc.returncode == 2, (proc.returncode, stderr)
+    assert "Traceback" not in stderr, stderr
+    lines = stderr.strip().splitlines()
+    assert lines[0].startswith("error: ") and line in lines[0], stderr
+    assert len(lines) == 2 and str(out) in lines[1], stderr
+    run = read_run(out)  # a complete, indexed log
+    t = run.signal("g.y").t
+    assert len(t) > 0 and t[-1] <= t_end + 1e-9, (t[-1] if len(t) else None, t_end)
+    left = sorted(p.name for p in out.parent.iterdir() if p.name != out.name)
+    assert left == [], left  # no .partial, no .lock
+    assert not list(tmp.glob("cosim-*")), list(tmp.glob("cosim-*"))  # extracted FMUs removed
+
+
+@pytest.mark.parametrize("mode, how", [(1, "crashed (SIGSEGV)"), (2, "crashed (SIGABRT)"),
+                                       (3, "exited with status 3")])
+def test_a_crash_inside_a_component_is_named_and_its_log_recovered(mode, how, write_scenario, tmp_path):
+    tmp = Path(tempfile.mkdtemp(dir=tmp_path))
+    path = write_scenario(SCENARIO.format(mode=mode, at=2.5, stop=3.0, extra=""))  # 3000 steps: a writer process
+    out = tmp_path / "logs" / "crash.mcap"
+    proc = _start(path, out, tmp)
+    _check_after(proc, out, tmp, f"component 'src' in its step at t = 2.499 s {how}", 2.5)
+
+
+def test_a_component_holding_the_python_lock_is_killed_after_a_stop_signal(write_scenario, tmp_path):
+    """The FMU blocks in C with the Python lock held: neither the child's signal handler nor its watchdog thread
+    can run. The supervisor forwards SIGTERM, waits the child's grace, then kills it and names the component."""
+    tmp = Path(tempfile.mkdtemp(dir=tmp_path))
+    path = write_scenario(SCENARIO.format(mode=4, at=0.5, stop=3.0, extra=""))
+    out = tmp_path / "logs" / "held.mcap"
+    proc = _start(path, out, tmp)
+    time.sleep(3.0)  # well inside the held call (starts at t = 0.5 s of simulated time, a fraction of a second in)
+    t0 = time.monotonic()
+    proc.send_signal(signal.SIGTERM)
+    _check_after(proc, out, tmp, "component 'src' in its step at t = 0.499 s did not stop within", 0.5)
+    assert time.monotonic() - t0 < 20
+
+
+def test_a_component_holding_the_python_lock_past_the_watchdog_is_killed(write_scenario, tmp_path):
+    tmp = Path(tempfile.mkdtemp(dir=tmp_path))
+    path = write_scenario(SCENARIO.format(mode=4, at=0.5, stop=3.0, extra="watchdog_s: 1.0"))
+    out = tmp_path / "logs" / "stalled.mcap"
+    t0 = time.monotonic()
+    proc = _start(path, out, tmp)
+    _check_after(proc, out, tmp, "component 'src' in its step at t = 0.499 s made no progress", 0.5)
+    assert time.monotonic() - t0 < 30
+
+
+def test_a_run_that_ends_well_is_not_a_crash_and_keeps_its_exit_code(write_scenario, tmp_path):
+    path = write_scenario(SCENARIO.format(mode=0, at=0.5, stop=0.2, extra=""))
+    out = tmp_path / "logs" / "fine.mcap"
+    proc = _start(path, out, tmp_path)
+    stdout, stderr = proc.communicate(timeout=60)
+    assert proc.returncode == 0 and stderr == "", stderr
+    assert read_run(out).signal("g.y").t[-1] == pytest.approx(0.2)
