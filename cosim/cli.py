@@ -689,8 +689,13 @@ def main(argv: Sequence[str] | None = None) -> int:
     import signal
 
     argv = list(sys.argv[1:] if argv is None else argv)
-    parser = build_parser()
-    args, extra = parser.parse_known_args(argv)
+    try:
+        parser = build_parser()
+        args, extra = parser.parse_known_args(argv)
+    except KeyboardInterrupt as exc:  # Ctrl-C while starting (imports): interrupted, no traceback
+        message, kind, code = exit_status(exc)
+        print(exit_text(message, kind), file=sys.stderr)
+        return code
     if extra:
         _unknown(parser, argv, extra)
     handler: Handler = args.handler

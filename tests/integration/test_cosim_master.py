@@ -11,6 +11,7 @@ from pathlib import Path
 
 import orjson
 import pytest
+from cli_helpers import wait_for
 from fmu_helpers import SLOW_SCENARIO
 
 from cosim.errors import AlgebraicLoopError, FMIError, WiringError
@@ -185,12 +186,19 @@ def _slow_scenario(write_scenario) -> Path:
     return write_scenario(SLOW_SCENARIO)
 
 
+def _wait_for_steps(out: Path) -> None:
+    """Until the run has written part of its log (a loaded machine starts it slower than a quiet one)."""
+    partial = out.with_name(out.name + ".partial")
+    wait_for(lambda: partial.exists() and partial.stat().st_size > 20_000, 60, f"{partial} to grow")
+    time.sleep(0.3)
+
+
 def test_sigint_finishes_the_log(write_scenario, tmp_path):
     path = _slow_scenario(write_scenario)
     out = tmp_path / "int.mcap"
     proc = subprocess.Popen([sys.executable, "-m", "cosim", "run", str(path), "--out", str(out), "--quiet"],
                             cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
-    time.sleep(2.5)  # imports, build-free start and some hundred steps
+    _wait_for_steps(out)  # started, and some steps logged
     proc.send_signal(signal.SIGINT)
     _, err = proc.communicate(timeout=30)
     assert proc.returncode == 130, f"exit code {proc.returncode} vs 130; stderr: {err.decode()}"
@@ -209,7 +217,7 @@ def test_killed_writer_is_recovered(write_scenario, tmp_path):
     out = tmp_path / "killed.mcap"
     proc = subprocess.Popen([sys.executable, "-m", "cosim", "run", str(path), "--out", str(out), "--quiet"],
                             cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
-    time.sleep(2.5)
+    _wait_for_steps(out)
     os.kill(proc.pid, signal.SIGKILL)
     proc.wait(timeout=10)
     partial = out.with_name(out.name + ".partial")  # written under this name, renamed only when finished
