@@ -30,7 +30,7 @@ from typing import Any, Callable
 
 from ..errors import STOP_SIGNALS, printable
 
-__all__ = ["Record", "supervise", "record", "finished", "ENABLED", "MASTER", "PHASES"]
+__all__ = ["Record", "supervise", "record", "finished", "command_pid", "ENABLED", "MASTER", "PHASES"]
 
 MASTER = -1
 """``current[0]`` when no component has the turn (the master between turns, its observers)."""
@@ -84,6 +84,13 @@ class Record:
 
 
 _RECORD: Record | None = None
+_SUPERVISOR: int | None = None  # the supervisor's pid, in its child
+
+
+def command_pid() -> int:
+    """The pid of the command the user started: the supervisor's in a supervised run (signals sent to it reach
+    the run), else this process's."""
+    return _SUPERVISOR if _SUPERVISOR is not None else os.getpid()
 
 
 def record() -> Record | None:
@@ -102,13 +109,14 @@ def supervise(on_crash: Callable[[Record, str], int]) -> int | None:
     waits for the child and returns its exit code, or ``on_crash(record, reason)``'s when it died without
     finishing (``reason``: ``crashed (SIGSEGV)``, ``exited with status 3``, ``was killed: no progress ...``).
     Without fork or when not enabled, returns None at once (the run goes on in this process, unsupervised)."""
-    global _RECORD
+    global _RECORD, _SUPERVISOR
     if not ENABLED or not hasattr(os, "fork") or os.environ.get("COSIM_SUPERVISE", "1") == "0":
         return None
     rec = Record()
+    parent = os.getpid()
     pid = os.fork()
     if pid == 0:
-        _RECORD = rec
+        _RECORD, _SUPERVISOR = rec, parent
         try:
             os.setpgid(0, 0)  # terminal signals reach the parent only, which forwards each once
         except OSError:

@@ -35,6 +35,7 @@ from typing import Any, Callable
 
 from ..errors import Interrupted, StallError, exit_now, exit_status, exit_text
 from .offload import Proxy
+from . import supervision
 from .supervision import MASTER, PHASES
 
 __all__ = ["Watchdog", "GRACE_S"]
@@ -165,4 +166,5 @@ def hard_exit(error: BaseException, lines: list[str]) -> None:
     message, kind, code = exit_status(error)
     for line in [exit_text(message, kind), *lines]:
         print(line, file=sys.stderr)
+    supervision.finished()  # our own exit, said: the supervisor passes its code on
     exit_now(code)

@@ -17,6 +17,7 @@ import sys
 import time
 from pathlib import Path
 
+from ..engine import supervision
 from ..errors import CosimError
 
 __all__ = ["OutputError", "OutputClaim", "check_output", "claim", "partial_path", "writable_parent"]
@@ -157,7 +158,7 @@ def claim(target: str | Path, inputs: tuple[str | Path | None, ...] = ()) -> Out
     try:
         os.ftruncate(fd, 0)
         argv = ["python -m cosim" if sys.argv[0].endswith("__main__.py") else sys.argv[0], *sys.argv[1:]]
-        os.write(fd, f"pid={os.getpid()}\nstarted={time.time():.3f}\ncommand={' '.join(argv)}\n".encode())
+        os.write(fd, f"pid={supervision.command_pid()}\nstarted={time.time():.3f}\ncommand={' '.join(argv)}\n".encode())
         os.close(os.open(partial, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o644))
     except OSError as exc:
         out.release()

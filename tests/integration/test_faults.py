@@ -429,7 +429,9 @@ def test_out_in_a_read_only_directory(scen, read_only_dir):
 
 def test_two_runs_on_one_path(scen, tmp_path):
     out = tmp_path / "c.mcap"
-    first = start_cosim("run", scen(SLOW.replace("stop: 20.0", "stop: 3.0")), "--out", out, "--quiet")
+    # 300 steps of 10 ms wall each: long enough for the second command to start on a loaded machine
+    first = start_cosim("run", scen(SLOW.replace("stop: 20.0", "stop: 3.0").replace("delay: 0.002", "delay: 0.01")),
+                        "--out", out, "--quiet")
     _started(first, out.with_name("c.mcap.partial"))
     second = cosim("run", scen(SMALL, name="other.yaml"), "--out", out)
     fails(second, 2, f"another run \\(pid {first.pid}, started", "is writing it")
