@@ -371,6 +371,9 @@ class SweepCluster:
     ``with`` waits for it and yields ``(client, label)``; :meth:`close` if ``with`` is never entered.
     """
 
+    CONNECT_TIMEOUT = 10.0
+    """s, for an existing scheduler to accept a connection, answer Dask's handshake and say it is a scheduler."""
+
     def __init__(self, workers: int | None, scheduler: str | None):
         self.workers, self.scheduler = workers, scheduler
         self.cluster = self.client = self._thread = None
@@ -384,7 +387,48 @@ class SweepCluster:
         if self.scheduler is None:
             self._thread = threading.Thread(target=self._start_local, name="sweep-cluster-start", daemon=True)
             self._thread.start()
+        else:
+            self._probe()
         return self
+
+    def _probe(self) -> None:
+        """Check that ``scheduler`` is a Dask scheduler, within :attr:`CONNECT_TIMEOUT`, before anything is built:
+        Dask's client waits for ever on a silent listener, and reads an HTTP answer as a frame of 3 EiB."""
+        import asyncio
+
+        from distributed.comm import connect
+
+        address, timeout = self.scheduler, self.CONNECT_TIMEOUT
+
+        async def identity() -> dict:
+            comm = await connect(address, timeout=timeout)
+            try:
+                await comm.write({"op": "identity", "reply": True})
+                return await comm.read()
+            finally:
+                comm.abort()
+
+        try:  # connect() retries a refused connection for ``timeout``, then its handshake waits for ever: bounded
+            answer = asyncio.run(asyncio.wait_for(identity(), timeout + 1.0))
+        except (asyncio.TimeoutError, TimeoutError):
+            raise SweepError(f"--scheduler {address}: no answer from {address} within {timeout:g} s (it accepted "
+                             f"the connection: is it a Dask scheduler?)") from None
+        except ValueError as exc:  # parse_address: not an address of a comm Dask knows
+            raise SweepError(f"--scheduler {address}: not a scheduler address ({exc}); expected tcp://HOST:PORT") \
+                from None
+        except OSError as exc:  # distributed's CommClosedError too: refused, or closed during the handshake
+            if str(exc).startswith("Timed out trying to connect"):
+                raise SweepError(f"--scheduler {address}: cannot connect to {address} within {timeout:g} s "
+                                 f"({_comm_reason(exc.__cause__ or exc)})") from None
+            raise SweepError(f"--scheduler {address}: {address} is not a Dask scheduler (it closed the connection "
+                             f"in Dask's handshake: {_comm_reason(exc)})") from None
+        except Exception:  # an answer in another protocol: a length of 3 EiB, undecodable frames, ...
+            raise SweepError(f"--scheduler {address}: {address} is not a Dask scheduler (its answer is not "
+                             f"Dask's protocol)") from None
+        if not isinstance(answer, dict) or answer.get("type") != "Scheduler":
+            kind = answer.get("type") if isinstance(answer, dict) else None
+            raise SweepError(f"--scheduler {address}: {address} is not a Dask scheduler"
+                             + (f" (a Dask {kind})" if kind else ""))
 
     def _start_local(self) -> None:
         try:
@@ -436,6 +480,11 @@ class SweepCluster:
             self.client.close()
         if self.cluster is not None:
             self.cluster.close()
+
+
+def _comm_reason(exc: BaseException) -> str:
+    """distributed's comm error without its ``in <TCP ...>:`` prefix (``ConnectionRefusedError: [Errno 111] ...``)."""
+    return re.sub(r"^in <[^>]*>: ", "", str(exc))
 
 
 # Worker preload (``LocalCluster(preload=["cosim.sweep"])``, or ``dask worker --preload cosim.sweep``).

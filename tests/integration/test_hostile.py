@@ -130,3 +130,81 @@ def test_a_chunk_cut_short_is_damage_not_a_record(tmp_path, run):
     log = tmp_path / "short.mcap"
     forged_log(log, 8192, 4096)
     fails(run("compare", log, log), 2, "short.mcap: cannot read the MCAP log", "4,096 of the 8,192 bytes")
+
+
+# --------------------------------------------------------------------------- --scheduler that is not Dask
+
+SWEEP_SCENARIO = Path(__file__).resolve().parents[2] / "scenarios" / "helix_ctc_analytic.yaml"
+
+
+class _Server:
+    """A TCP server on 127.0.0.1 in a thread: ``http`` answers whatever it is sent with an HTTP 400 page, ``silent``
+    accepts and never says a word."""
+
+    def __init__(self, kind: str):
+        import socketserver
+        import threading
+
+        class Handler(socketserver.BaseRequestHandler):
+            def handle(self) -> None:
+                if kind == "http":
+                    self.request.recv(65536)
+                    self.request.sendall(b"HTTP/1.1 400 Bad Request\r\nContent-Type: text/html\r\n"
+                                         b"Content-Length: 24\r\nConnection: close\r\n\r\n<html>bad request</html>")
+                else:
+                    stop.wait(60)
+
+        stop = threading.Event()
+        self.stop = stop
+        self.server = socketserver.ThreadingTCPServer(("127.0.0.1", 0), Handler)
+        self.server.daemon_threads = True
+        self.address = f"tcp://127.0.0.1:{self.server.server_address[1]}"
+        threading.Thread(target=self.server.serve_forever, daemon=True).start()
+
+    def close(self) -> None:
+        self.stop.set()
+        self.server.shutdown()
+        self.server.server_close()
+
+
+@pytest.fixture
+def server(request):
+    s = _Server(request.param)
+    yield s
+    s.close()
+
+
+def _sweep(run, tmp_path, scheduler: str):
+    import time
+
+    t0 = time.monotonic()
+    r = run("sweep", SWEEP_SCENARIO, "--grid", "ctl.gain.kp[1]=1e4,2e4", "--stop-time", "0.05", "--scheduler",
+            scheduler, "--out", tmp_path / "sweep", "--quiet", limit_memory=True, timeout=60)
+    return r, time.monotonic() - t0
+
+
+@pytest.mark.parametrize("server", ["http"], indirect=True)
+def test_a_scheduler_that_answers_http_is_not_dask(server, run, tmp_path):
+    r, _ = _sweep(run, tmp_path, server.address)
+    fails(r, 2, f"--scheduler {server.address}: {server.address} is not a Dask scheduler")
+    assert not (tmp_path / "sweep" / "results.csv").exists(), "a case was run"
+
+
+@pytest.mark.parametrize("server", ["silent"], indirect=True)
+def test_a_silent_scheduler_is_given_up_after_the_timeout(server, run, tmp_path):
+    from cosim.sweep import SweepCluster
+
+    r, wall = _sweep(run, tmp_path, server.address)
+    fails(r, 2, f"--scheduler {server.address}: no answer from {server.address} within "
+                f"{SweepCluster.CONNECT_TIMEOUT:g} s")
+    assert wall < SweepCluster.CONNECT_TIMEOUT + 30, f"{wall:.1f} s to give up"  # bounded, not for ever
+
+
+def test_a_scheduler_address_that_refuses_or_is_not_an_address(run, tmp_path):
+    from cli_helpers import free_port
+
+    address = f"tcp://127.0.0.1:{free_port()}"
+    fails(_sweep(run, tmp_path, address)[0], 2, f"--scheduler {address}: cannot connect to {address} within",
+          "Connection refused")
+    fails(_sweep(run, tmp_path, "notaurl")[0], 2, "--scheduler notaurl: not a scheduler address",
+          "expected tcp://HOST:PORT")
