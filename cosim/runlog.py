@@ -151,6 +151,8 @@ class _Clamped:
 def _inflate(chunk, path: Path, offset: int) -> bytes:
     """The uncompressed records of an MCAP ``chunk`` (at byte ``offset`` of ``path``), never more than it declares
     nor than :data:`MAX_CHUNK_BYTES`: CosimError otherwise, naming the file, the offset and the limit."""
+    import lz4.frame
+    import zstandard
     from mcap.exceptions import McapError, UnsupportedCompressionError
 
     declared = chunk.uncompressed_size
@@ -160,22 +162,14 @@ def _inflate(chunk, path: Path, offset: int) -> bytes:
                          f"(cosim.runlog.MAX_CHUNK_BYTES; the logs written here have chunks of 1 MiB): refused")
     try:
         if chunk.compression == "zstd":
-            import zstandard
-
             data = zstandard.ZstdDecompressor().stream_reader(chunk.data, read_across_frames=True).read(declared + 1)
         elif chunk.compression == "lz4":
-            import lz4.frame
-
             data = lz4.frame.LZ4FrameDecompressor().decompress(chunk.data, max_length=declared + 1)
         elif chunk.compression == "":
             data = chunk.data
         else:
             raise UnsupportedCompressionError(chunk.compression)
-    except (RuntimeError, ValueError, EOFError) as exc:  # lz4's errors, and zstandard.ZstdError below
-        raise McapError(f"chunk at byte {offset}: {exc}") from None
-    except Exception as exc:
-        if type(exc).__name__ != "ZstdError":
-            raise
+    except (zstandard.ZstdError, RuntimeError, ValueError, EOFError) as exc:  # RuntimeError: lz4's
         raise McapError(f"chunk at byte {offset}: {exc}") from None
     if len(data) > declared:
         raise CosimError(f"{where} inflates past the {declared:,} bytes it declares: refused (a damaged or forged "
