@@ -17,8 +17,9 @@
   the same command again skips the cases already there (``ok`` or ``failed``).
 
 ``results.csv``: one row per case: ``case`` (a hash of its parameter values), ``status``
-(``ok``: the run completed; ``failed``: it raised, ``message`` says why), one column per swept
-name, then :func:`cosim.api.metric_names` (``rmse_x``... ``max_error_x``... in signal units,
+(``ok``: the run completed and passed its acceptance checks; ``failed``: it raised or missed a
+check, ``message`` says why), one column per swept name, then :func:`cosim.api.metric_names`
+(``rmse_x``... ``max_error_x``... in signal units,
 ``rmse`` and ``max_error`` the largest over the axes, ``peak_effort`` N or N*m, ``sim_time_s``,
 ``steps``, ``wall_time_s`` of the case), ``checks`` (the scenario's acceptance checks:
 ``ok``/``FAILED``/empty), ``mcap`` (with ``--logs``) and ``message``. Floats are written with
@@ -195,6 +196,10 @@ def run_loaded_case(scenario: Scenario, fmu_files: dict[tuple[str, bool, int], s
         row["message"] = res.message
         if res.checks:
             row["checks"] = "ok" if res.passed else "FAILED"
+        if res.checks and not res.passed and row["status"] == "ok":  # ran to the end but missed its acceptance
+            row["status"] = "failed"
+            row["message"] = "acceptance check failed: " + ", ".join(
+                f"{name} {c['value']:.4g} > {c['limit']:g}" for name, c in res.checks.items() if not c["ok"])
         row["mcap"] = res.mcap or ""
     except Exception as exc:  # a failing case is a result, never the end of the sweep
         row.update(_failed(exc, t0))
@@ -296,8 +301,8 @@ def run_sweep(scenario: str | Path, cases: list[Case], out: str | Path, *, worke
     if done_rows and list(done_rows[0]) != columns:
         raise SweepError(f"{table} holds another sweep (columns {', '.join(done_rows[0])}); use another --out")
     finished = {r["case"]: r for r in done_rows if r["status"] in ("ok", "failed")}
-    failed = {f"{cid} ({', '.join(f'{k}={r[k]}' for k in params)})": r["message"]
-              for cid, r in finished.items() if r["status"] == "failed"}
+    failed = {f"{cid} ({', '.join(f'{k}={r[k]}' for k in params)})": r["message"] or "acceptance check failed"
+              for cid, r in finished.items() if r["status"] == "failed" or r["checks"] == "FAILED"}
     todo = [(c, sc) for c, sc in zip(cases, loaded) if c.id not in finished]
     (out / "sweep.json").write_text(json.dumps({"scenario": scenario, "parameters": params,
                                                 "cases": len(cases)}, indent=2))
@@ -378,6 +383,7 @@ class SweepCluster:
         self.workers, self.scheduler = workers, scheduler
         self.cluster = self.client = self._thread = None
         self._error: BaseException | None = None
+        self._scratch: str | None = None  # the embedded workers' folder, removed with the cluster
 
     def start(self) -> "SweepCluster":
         import logging
@@ -410,7 +416,7 @@ class SweepCluster:
 
         try:  # connect() retries a refused connection for ``timeout``, then its handshake waits for ever: bounded
             answer = asyncio.run(asyncio.wait_for(identity(), timeout + 1.0))
-        except (asyncio.TimeoutError, TimeoutError):
+        except TimeoutError:
             raise SweepError(f"--scheduler {address}: no answer from {address} within {timeout:g} s (it accepted "
                              f"the connection: is it a Dask scheduler?)") from None
         except ValueError as exc:  # parse_address: not an address of a comm Dask knows
@@ -422,7 +428,7 @@ class SweepCluster:
                                  f"({_comm_reason(exc.__cause__ or exc)})") from None
             raise SweepError(f"--scheduler {address}: {address} is not a Dask scheduler (it closed the connection "
                              f"in Dask's handshake: {_comm_reason(exc)})") from None
-        except Exception:  # an answer in another protocol: a length of 3 EiB, undecodable frames, ...
+        except Exception:  # noqa: BLE001 - an answer in another protocol: a frame of 3 EiB, undecodable, ...
             raise SweepError(f"--scheduler {address}: {address} is not a Dask scheduler (its answer is not "
                              f"Dask's protocol)") from None
         if not isinstance(answer, dict) or answer.get("type") != "Scheduler":
@@ -434,12 +440,15 @@ class SweepCluster:
         try:
             import logging
             import os
+            import tempfile
 
             import dask
             from distributed import LocalCluster
 
             n = self.workers or os.cpu_count() or 1
-            with dask.config.set(WORKER_CONFIG):  # the nannies hand this configuration to their workers
+            self._scratch = tempfile.mkdtemp(prefix="cosim-sweep-")  # not dask-scratch-space, left in the temp folder
+            config = {**WORKER_CONFIG, "temporary-directory": self._scratch}  # the scheduler's and workers' folders
+            with dask.config.set(config):  # the nannies hand this configuration to their workers
                 self.cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
                                             dashboard_address=None, silence_logs=logging.ERROR,
                                             preload=[__name__],  # dask_setup below
@@ -480,6 +489,10 @@ class SweepCluster:
             self.client.close()
         if self.cluster is not None:
             self.cluster.close()
+        if self._scratch is not None:
+            import shutil
+
+            shutil.rmtree(self._scratch, ignore_errors=True)
 
 
 def _comm_reason(exc: BaseException) -> str:

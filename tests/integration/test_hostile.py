@@ -208,3 +208,32 @@ def test_a_scheduler_address_that_refuses_or_is_not_an_address(run, tmp_path):
           "Connection refused")
     fails(_sweep(run, tmp_path, "notaurl")[0], 2, "--scheduler notaurl: not a scheduler address",
           "expected tcp://HOST:PORT")
+
+
+# --------------------------------------------------------------------------- results mean what they say
+
+def test_a_sweep_case_that_misses_its_acceptance_check_is_failed(run, tmp_path):
+    """The same run twice, once under a limit it cannot meet: that case is failed (status, summary, exit 1), with
+    its metrics and the check that failed; the sweep run again still counts it failed."""
+    import csv
+    import json
+
+    out = tmp_path / "sweep"
+    args = ("sweep", SWEEP_SCENARIO, "--grid", "checks.max_rmse=1,1e-15", "--stop-time", "0.1", "--workers", "1",
+            "--out", out)
+    r = run(*args, "--quiet", timeout=240)
+    assert r.returncode == 1, r.stdout + r.stderr
+    assert "Traceback" not in r.stderr, r.stderr
+    with (out / "results.csv").open(newline="") as f:
+        rows = {row["checks.max_rmse"]: row for row in csv.DictReader(f)}
+    strict, loose = rows["1e-15"], rows["1"]
+    assert (strict["status"], strict["checks"]) == ("failed", "FAILED"), strict
+    assert strict["message"].startswith("acceptance check failed: max_rmse ") and "> 1e-15" in strict["message"], \
+        strict["message"]
+    assert float(strict["rmse"]) > 1e-15 and strict["rmse"] == loose["rmse"], (strict["rmse"], loose["rmse"])
+    assert (loose["status"], loose["checks"], loose["message"]) == ("ok", "ok", ""), loose
+    assert "2 cases, 1 ok, 1 failed" in r.stdout and f"FAILED {strict['case']} " in r.stdout, r.stdout
+    again = run(*args, "--json", timeout=240)
+    summary = json.loads(again.stdout)
+    assert again.returncode == 1 and (summary["ran"], summary["skipped"]) == (0, 2), (again.returncode, summary)
+    assert not summary["ok"] and len(summary["failed"]) == 1, summary
