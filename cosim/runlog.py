@@ -179,8 +179,9 @@ def _inflate(chunk, path: Path, offset: int) -> bytes:
     return data
 
 
-def log_records(f, path: str | Path) -> Iterator:
-    """Every record of the MCAP file ``f`` (binary, at its start) in file order, the records of a chunk in its place.
+def log_records(f, path: str | Path, chunks: bool = True) -> Iterator:
+    """Every record of the MCAP file ``f`` (binary, at its start) in file order, the records of a chunk in its place
+    (``chunks=False``: chunks skipped, not inflated; the records outside them only: attachments, metadata, summary).
 
     Bounded whatever the file says: a chunk is inflated to no more than it declares and :data:`MAX_CHUNK_BYTES`
     (CosimError naming ``path``, the chunk's byte offset and the limit), no record is longer than the file and no
@@ -195,7 +196,8 @@ def log_records(f, path: str | Path) -> Iterator:
     start = 8  # the first record follows the magic
     for rec in StreamReader(src, emit_chunks=True, record_size_limit=src.size).records:
         if isinstance(rec, Chunk):
-            yield from breakup_chunk(replace(rec, compression="", data=_inflate(rec, Path(path), start)))
+            if chunks:
+                yield from breakup_chunk(replace(rec, compression="", data=_inflate(rec, Path(path), start)))
         else:
             yield rec
         start = f.tell()

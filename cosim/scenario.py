@@ -36,6 +36,9 @@ __all__ = [
     "ScenarioFile",
     "parse_scenario",
     "scenario_from_data",
+    "scenario_from_log",
+    "effective_scenario",
+    "EFFECTIVE_ATTACHMENT",
     "scenario_json_schema",
     "apply_overrides",
     "dotted_overrides",
@@ -639,6 +642,70 @@ def read_scenario(path: str | Path) -> ScenarioFile:
         raise ScenarioError(Issue("", f"not UTF-8 text (byte 0x{raw[exc.start]:02x} at offset {exc.start}); "
                                       f"save the scenario as UTF-8", str(path), line)) from None
     return _parse_yaml(text, str(path))
+
+
+EFFECTIVE_ATTACHMENT = "effective/scenario.json"
+"""The log's attachment of the scenario as run (:func:`effective_scenario`), which ``run --from-log`` runs again."""
+
+
+def effective_scenario(scenario: Scenario, log: str | Path | None = None) -> dict[str, Any]:
+    """``scenario`` as it runs, every override applied, as a scenario mapping (JSON, valid YAML): every key with its
+    value, defaults included; the paths of FMU files absolute, ``logging.out`` the run's ``log`` (absolute) when
+    given; a component parameter overridden by a number written as text (``1e3``) as that text, as a file gives it."""
+    import os
+
+    data = Scenario.model_dump(scenario, mode="json", by_alias=True)
+    base = Path(scenario.source).parent if scenario.source and scenario.source != "<string>" else Path.cwd()
+    for comp in data["components"].values():
+        if comp.get("path") is not None:
+            comp["path"] = os.path.normpath((base / comp["path"]).absolute())
+    if log is not None:
+        data["logging"]["out"] = os.path.normpath(Path(log).absolute())
+    for path, text in scenario._written.items():  # ("components", name, "parameters", variable)
+        data["components"][path[1]]["parameters"][path[3]] = text
+    return data
+
+
+def scenario_from_log(path: str | Path, overrides: dict[tuple, Any] | None = None) -> Scenario:
+    """The scenario a run log records (:data:`EFFECTIVE_ATTACHMENT`), with ``overrides`` on top, to run it again.
+
+    Its log goes where ``--out`` says or to ``runs/<name>.mcap``, never to the recorded ``logging.out`` (the first
+    run's log). Raises :class:`ScenarioError` naming ``path`` when it is missing, not an MCAP log or records no
+    scenario; a recorded FMU file that is gone is reported when the FMUs are located, as for a scenario file.
+    """
+    import json
+
+    from mcap.exceptions import McapError
+    from mcap.records import Attachment
+
+    from .runlog import log_records
+
+    path = Path(path)
+    if not path.is_file():
+        raise ScenarioError(Issue("", "no such log file", str(path)))
+    found = None
+    try:
+        with open(path, "rb") as f:
+            for rec in log_records(f, path, chunks=False):
+                if isinstance(rec, Attachment) and rec.name == EFFECTIVE_ATTACHMENT:
+                    found = bytes(rec.data)
+                    break
+    except (McapError, OSError, ValueError) as exc:  # before the attachment: read up to it otherwise
+        raise ScenarioError(Issue("", f"not a readable MCAP log ({type(exc).__name__}: {exc}); give a run's log",
+                                  str(path))) from None
+    if found is None:
+        raise ScenarioError(Issue("", f"the log records no scenario as run ({EFFECTIVE_ATTACHMENT}): written by an "
+                                      "older version or not by `python -m cosim run`; run its scenario file instead",
+                                  str(path)))
+    try:
+        data = json.loads(found)
+    except ValueError as exc:
+        raise ScenarioError(Issue("", f"{EFFECTIVE_ATTACHMENT} is not JSON ({exc})", str(path))) from None
+    if not isinstance(data, dict):
+        raise ScenarioError(Issue("", f"{EFFECTIVE_ATTACHMENT} is not a scenario mapping", str(path)))
+    if isinstance(data.get("logging"), dict):
+        data["logging"]["out"] = None
+    return scenario_from_data(data, str(path), overrides)
 
 
 class Overrides(dict):

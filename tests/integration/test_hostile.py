@@ -8,6 +8,7 @@ empty afterwards, and writes nowhere but ``tmp_path``.
 from __future__ import annotations
 
 import os
+import re
 import resource
 from pathlib import Path
 
@@ -237,3 +238,87 @@ def test_a_sweep_case_that_misses_its_acceptance_check_is_failed(run, tmp_path):
     summary = json.loads(again.stdout)
     assert again.returncode == 1 and (summary["ran"], summary["skipped"]) == (0, 2), (again.returncode, summary)
     assert not summary["ok"] and len(summary["failed"]) == 1, summary
+
+
+def _same_signals(a: Path, b: Path) -> int:
+    """Assert two logs hold the same signals, stamp for stamp and bit for bit; returns how many."""
+    import numpy as np
+
+    from cosim.runlog import read_run
+
+    la, lb = read_run(a), read_run(b)
+    assert la.signals.keys() == lb.signals.keys(), sorted(set(la.signals) ^ set(lb.signals))
+    for name, sa in la.signals.items():
+        sb = lb.signals[name]
+        assert np.array_equal(sa.t_ns, sb.t_ns), (name, sa.t_ns[:5], sb.t_ns[:5])
+        assert np.array_equal(sa.y, sb.y, equal_nan=True), (name, sa.y[:5], sb.y[:5])
+    return len(la.signals)
+
+
+def test_a_run_is_repeated_from_its_log_alone(run, tmp_path):
+    """The log records the command line and the scenario as run (after --set and --stop-time): run again from it,
+    from another folder, it gives the same signals bit for bit; without the override the signals differ (it was
+    applied)."""
+    import json
+
+    from cosim.runlog import read_run
+    from cosim.scenario import EFFECTIVE_ATTACHMENT
+
+    first, again, plain = tmp_path / "first.mcap", tmp_path / "again.mcap", tmp_path / "plain.mcap"
+    r = run("run", SWEEP_SCENARIO, "--set", "ctl.gain.kp[1]=2e4", "--stop-time", "0.1", "--out", first, "--quiet")
+    assert r.returncode == 0, r.stderr
+    elsewhere = tmp_path / "elsewhere"
+    elsewhere.mkdir()
+    r = run("run", "--from-log", first, "--out", again, "--quiet", cwd=elsewhere)
+    assert r.returncode == 0, r.stderr
+    assert _same_signals(first, again) > 20
+    log = read_run(first)
+    argv = json.loads(log.metadata["command"]["argv"])
+    assert argv[argv.index("--set") + 1] == "ctl.gain.kp[1]=2e4" and "--stop-time" in argv, argv
+    recorded = json.loads(log.attachments[EFFECTIVE_ATTACHMENT])
+    assert recorded["components"]["ctl"]["parameters"] == {"gain.kp[1]": "2e4"}, recorded["components"]["ctl"]
+    assert recorded["time"]["stop"] == 0.1, recorded["time"]
+    assert recorded["logging"]["out"] == str(first), recorded["logging"]  # the log it ran to, not the file's
+    rerun = json.loads(read_run(again).attachments[EFFECTIVE_ATTACHMENT])
+    assert rerun == {**recorded, "logging": {**recorded["logging"], "out": str(again)}}, (rerun, recorded)
+    assert run("run", SWEEP_SCENARIO, "--stop-time", "0.1", "--out", plain, "--quiet").returncode == 0
+    with pytest.raises(AssertionError):
+        _same_signals(first, plain)
+
+
+def test_run_from_a_log_that_cannot_say_how_it_was_made(run, tmp_path, write_scenario):
+    """A log that is missing, not an MCAP file, records no scenario (an older log), or whose FMU files are gone:
+    one line naming the log and the cause, exit 2, no log written."""
+    import shutil
+
+    golden = Path(__file__).resolve().parents[1] / "golden" / "helix_ctc.mcap"
+    fails(run("run", "--from-log", tmp_path / "none.mcap"), 2, "none.mcap: no such log file")
+    fails(run("run", "--from-log", SWEEP_SCENARIO), 2, "helix_ctc_analytic.yaml: not a readable MCAP log")
+    fails(run("run", "--from-log", golden, "--out", tmp_path / "g.mcap"), 2,
+          "helix_ctc.mcap: the log records no scenario as run")
+    fails(run("run", SWEEP_SCENARIO, "--from-log", golden), 2, "a scenario file or --from-log LOG, not both")
+    fails(run("run"), 2, "run needs a scenario file \\(or --from-log LOG")
+    fmus = tmp_path / "fmus"
+    fmus.mkdir()
+    text = """
+name: small
+components:
+  src: {path: "{CosimTSource}"}
+  g: {path: "{CosimTGain}", parameters: {k: 2.0}}
+connections:
+  - {from: src.y, to: g.u}
+time: {stop: 0.05, step: 0.01}
+"""
+    scenario = write_scenario(text)
+    source = scenario.read_text()
+    for original in set(re.findall(r'path: "([^"]+)"', source)):  # copies the log refers to, removed below
+        copy = fmus / Path(original).name
+        shutil.copy(original, copy)
+        source = source.replace(original, str(copy))
+    scenario.write_text(source)
+    small = tmp_path / "small.mcap"
+    assert run("run", scenario, "--out", small, "--quiet").returncode == 0
+    (fmus / "CosimTGain.fmu").unlink()
+    fails(run("run", "--from-log", small, "--out", tmp_path / "again.mcap"), 2,
+          "small.mcap: components.g.path: FMU file not found: ", re.escape(str(fmus / "CosimTGain.fmu")))
+    assert not (tmp_path / "again.mcap").exists() and not (tmp_path / "g.mcap").exists()
