@@ -322,3 +322,18 @@ time: {stop: 0.05, step: 0.01}
     fails(run("run", "--from-log", small, "--out", tmp_path / "again.mcap"), 2,
           "small.mcap: components.g.path: FMU file not found: ", re.escape(str(fmus / "CosimTGain.fmu")))
     assert not (tmp_path / "again.mcap").exists() and not (tmp_path / "g.mcap").exists()
+
+
+@pytest.mark.parametrize("build", ["python", "native"])
+def test_the_analytic_plant_stops_at_the_end_stop_as_the_exudyn_plant(run, build):
+    """A diverging controller drives carriage 3 past its stroke (q_max = 580 mm) at t = 0.138 s: both builds of the
+    analytic plant stop there, as the Exudyn plant does, naming the joint and the limit (they ran on to 'the platform
+    left the workspace', or to 'completed' with a carriage 1.1 m past its stroke)."""
+    from delta.kinematics import END_STOP
+
+    r = run("run", SWEEP_SCENARIO, "--stop-time", "1", "--set", "ctl.gain.kp[1]=1e12", "--set", f"fmus={build}",
+            "--no-log")
+    message = fails(r, 2, "component 'plant': fmi2DoStep returned discard at t = 0.138 s", re.escape(END_STOP),
+                    "leg 3 (joint limit: q = 0.58\\d+ m > q_max = 0.5800 m|is beyond its joint limits)")
+    assert "left the workspace" not in message and "completed" not in r.stdout, (message, r.stdout)
+
