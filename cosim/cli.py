@@ -542,11 +542,11 @@ def _cmd_run(args: argparse.Namespace) -> int:
 
 def _cmd_check(args: argparse.Namespace) -> int:
     from .offload import choose
-    from .run import prepare
+    from .run import check_initialization
     from .scenario import apply_overrides
 
     with _open_scenario(args, apply_overrides(args.set, args.stop_time)) as scenario:
-        plan, report = prepare(scenario)
+        plan, report = check_initialization(scenario)  # the checks a run makes before t = 0, FMUs' own included
     order = " -> ".join(plan.names[c] for c in plan.order)
     from .mcap_log import McapRecorder
 

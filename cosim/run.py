@@ -222,6 +222,31 @@ def check_scenario(path: str | Path, overrides: dict | None = None) -> tuple[Sce
     return scenario, plan, report
 
 
+def check_initialization(scenario: Scenario) -> tuple[Any, str]:
+    """What ``check`` does: :func:`prepare`, then every component instantiated and initialized as a run does before
+    t = 0 (the FMUs' own parameter checks: a gain, a mass, a geometry, a trajectory they refuse), then freed, no
+    step taken. Returns (plan, pre-flight report); raises the run's own error for what it refuses at t = 0."""
+    with Extractions() as held:
+        slaves = []
+        try:
+            plan, report = prepare(scenario)
+            comps = scenario.components
+            for i, n in enumerate(plan.names):
+                slaves.append(make_slave(n, plan.infos[i], comps[n].interface, comps[n].rtol, comps[n].solver,
+                                         comps[n].max_step))
+                slaves[-1].bind(plan.inputs[i], plan.outputs[i])
+            rt = Runtime(plan, slaves, scenario.time.start_ns, scenario.time.stop_ns, scenario.time.step_ns,
+                         [comps[n].step_multiple for n in plan.names], scenario.algorithm)
+            initialize(rt)
+            for s in slaves:
+                s.terminate()
+        finally:
+            for s in slaves:
+                s.free()
+            held.release()
+    return plan, report
+
+
 def run_scenario(scenario: Scenario | str | Path, out: str | Path | None = None, overrides: dict | None = None,
                  log: bool | None = None, progress: bool = False, extra_observers: Sequence[Observer] = (),
                  live: tuple[str, int] | None = None, realtime: float | None = None, stamps: str = "wall", *,

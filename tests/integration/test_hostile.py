@@ -337,3 +337,16 @@ def test_the_analytic_plant_stops_at_the_end_stop_as_the_exudyn_plant(run, build
                     "leg 3 (joint limit: q = 0.58\\d+ m > q_max = 0.5800 m|is beyond its joint limits)")
     assert "left the workspace" not in message and "completed" not in r.stdout, (message, r.stdout)
 
+
+@pytest.mark.parametrize("item, cause", [
+    ("ctl.gain.kp[1]=-1", "component 'ctl': .*CTC.kp must be > 0 per joint \\(joint 1\\)"),
+    ("plant.mass.platform=-1", "component 'plant': .*masses.platform must be >= 0"),
+    ("plant.solver.max_step=0", "component 'plant': .*solver.max_step must be a time > 0 s"),
+])
+def test_check_refuses_what_run_refuses_at_t0_with_the_same_message(run, tmp_path, item, cause):
+    """Parameter values the FMUs refuse when they are initialized: check said ok, run failed at t = 0."""
+    ran = fails(run("run", SWEEP_SCENARIO, "--set", item, "--stop-time", "0.01", "--out", tmp_path / "x.mcap"), 2,
+                cause)
+    checked = fails(run("check", SWEEP_SCENARIO, "--set", item), 2, cause)
+    assert checked == ran, (checked, ran)
+    assert run("check", SWEEP_SCENARIO).returncode == 0
