@@ -324,6 +324,7 @@ def _finish_observers(started: Sequence[Observer], rt: Runtime, error: BaseExcep
     the watchdog's hard shutdown (``hard``), where no failure may stop the exit.
     """
     catch = Exception if hard else CosimError
+    late: BaseException | None = None  # a signal while another observer finished (the live view's wait)
     for o in started:
         try:
             o.finish(rt, error)
@@ -335,6 +336,12 @@ def _finish_observers(started: Sequence[Observer], rt: Runtime, error: BaseExcep
                 error = error or exc
             elif not hard:
                 raise
+        except BaseException as exc:  # noqa: BLE001 - KeyboardInterrupt, Interrupted: raised once the log is done
+            if o is recorder:
+                raise
+            late = late or exc
+    if late is not None:
+        raise late
     return error
 
 

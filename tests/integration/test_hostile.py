@@ -350,3 +350,150 @@ def test_check_refuses_what_run_refuses_at_t0_with_the_same_message(run, tmp_pat
     checked = fails(run("check", SWEEP_SCENARIO, "--set", item), 2, cause)
     assert checked == ran, (checked, ran)
     assert run("check", SWEEP_SCENARIO).returncode == 0
+
+
+# --------------------------------------------------------------------------- a viewer that stops reading
+
+class _StalledViewer:
+    """A WebSocket client (websockets' sans-I/O protocol on a plain socket with a small receive buffer) that speaks
+    the Foxglove protocol to ``--live``'s server, subscribes to every channel it advertises, then never reads."""
+
+    def __init__(self, port: int):
+        import threading
+
+        self.port = port
+        self.subscribed = threading.Event()
+        self.sock = None
+        threading.Thread(target=self._run, daemon=True).start()
+
+    def _run(self) -> None:
+        import json
+        import socket
+        import time
+
+        from websockets.client import ClientProtocol
+        from websockets.frames import Frame, Opcode
+        from websockets.typing import Subprotocol
+        from websockets.uri import parse_uri
+
+        deadline = time.monotonic() + 60
+        while True:
+            try:
+                self.sock = socket.create_connection(("127.0.0.1", self.port), timeout=1)
+                break
+            except OSError:
+                if time.monotonic() > deadline:
+                    return
+                time.sleep(0.05)
+        self.sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4096)
+        proto = ClientProtocol(parse_uri(f"ws://127.0.0.1:{self.port}"),
+                               subprotocols=[Subprotocol("foxglove.sdk.v1")], max_size=None)
+        proto.send_request(proto.connect())
+        self.sock.sendall(b"".join(proto.data_to_send()))
+        self.sock.settimeout(10)
+        subscriptions = 0
+        while subscriptions < 5:  # the plant's and the scene's channels, at least
+            proto.receive_data(self.sock.recv(65536))
+            for event in proto.events_received():
+                if isinstance(event, Frame) and event.opcode == Opcode.TEXT:
+                    msg = json.loads(event.data)
+                    if msg.get("op") == "advertise":
+                        new = [{"id": subscriptions + i + 1, "channelId": ch["id"]}
+                               for i, ch in enumerate(msg["channels"])]
+                        subscriptions += len(new)
+                        proto.send_text(json.dumps({"op": "subscribe", "subscriptions": new}).encode())
+                        self.sock.sendall(b"".join(proto.data_to_send()))
+        self.subscribed.set()  # and from here on, never a read
+
+    def close(self) -> None:
+        if self.sock is not None:
+            self.sock.close()
+
+
+LIVE_STOP = 3.0  # s simulated, at wall-clock pace
+
+
+def test_a_viewer_that_stops_reading_does_not_hold_the_run(tmp_path):
+    """The run ends on time, exit 0, its log finished; the viewer is dropped with one warning line (it held a 10 s
+    run 51 s, until the viewer disconnected)."""
+    import time
+
+    from cli_helpers import free_port
+
+    from cosim.live import STOP_TIMEOUT
+    from cosim.runlog import read_run
+
+    port, out = free_port(), tmp_path / "live.mcap"
+    viewer = _StalledViewer(port)
+    t0 = time.monotonic()
+    try:
+        r = cosim("run", SWEEP_SCENARIO, "--stop-time", LIVE_STOP, "--live", port, "--realtime", "--out", out,
+                  "--quiet", timeout=60)
+        wall = time.monotonic() - t0
+    finally:
+        viewer.close()
+    assert viewer.subscribed.is_set(), "the viewer never subscribed"
+    assert r.returncode == 0 and "Traceback" not in r.stderr, r.stderr
+    lines = r.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith(f"warning: live view on ws://localhost:{port}: a viewer did not "
+                                                   f"take the end of the run within {STOP_TIMEOUT:g} s"), r.stderr
+    assert wall < LIVE_STOP + STOP_TIMEOUT + 30, f"{wall:.1f} s for a {LIVE_STOP} s run"  # start-up included
+    assert read_run(out).status == "completed"
+
+
+@pytest.mark.parametrize("sig, code", [("SIGTERM", 143), ("SIGINT", 130)])
+def test_a_signal_at_the_end_with_a_stalled_viewer_stops_it_and_keeps_the_log(tmp_path, sig, code):
+    """A signal about 1 s after a 3 s run at wall-clock pace ends, while the server waits for the stalled viewer (or,
+    on a slow machine, just before the run ends): the process stops with the signal's exit code and keeps its
+    finished log (the wait ignored SIGINT, and after SIGTERM the finished log was deleted)."""
+    import signal
+    import time
+
+    from cli_helpers import free_port, start_cosim
+
+    from cosim.runlog import read_run
+
+    port, out = free_port(), tmp_path / "live.mcap"
+    viewer = _StalledViewer(port)
+    proc = start_cosim("run", SWEEP_SCENARIO, "--stop-time", LIVE_STOP, "--live", port, "--realtime", "--out", out,
+                       "--quiet")
+    try:
+        assert viewer.subscribed.wait(60), "the viewer never subscribed"  # when the run's loop starts
+        time.sleep(LIVE_STOP + 1.0)  # inside the end's wait for the viewer (2 s), never after the process
+        proc.send_signal(getattr(signal, sig))
+        _, err = proc.communicate(timeout=30)
+    finally:
+        proc.kill()
+        viewer.close()
+    assert proc.returncode == code and "Traceback" not in err, (proc.returncode, err)
+    assert f"interrupted ({sig})" in err.strip().splitlines()[-1], err
+    assert out.exists() and not out.with_name(out.name + ".partial").exists(), sorted(os.listdir(tmp_path))
+    assert read_run(out).status in ("completed", "interrupted"), read_run(out).status
+
+
+def test_sigterm_with_a_stalled_viewer_keeps_the_log(tmp_path):
+    """SIGTERM while a viewer has stopped reading: the run stops, says so, finishes and keeps its log (the finished
+    log was deleted)."""
+    import signal
+    import time
+
+    from cli_helpers import free_port, start_cosim
+
+    from cosim.runlog import read_run
+
+    port, out = free_port(), tmp_path / "live.mcap"
+    viewer = _StalledViewer(port)
+    proc = start_cosim("run", SWEEP_SCENARIO, "--stop-time", "30", "--live", port, "--realtime", "--out", out,
+                       "--quiet")
+    try:
+        assert viewer.subscribed.wait(60), "the viewer never subscribed"
+        time.sleep(0.5)
+        proc.send_signal(signal.SIGTERM)
+        _, err = proc.communicate(timeout=30)
+    finally:
+        proc.kill()
+        viewer.close()
+    assert proc.returncode == 143 and "Traceback" not in err, err
+    assert "interrupted (SIGTERM)" in err.strip().splitlines()[-1], err
+    assert out.exists() and not out.with_name(out.name + ".partial").exists(), sorted(os.listdir(tmp_path))
+    assert read_run(out).status == "interrupted"
