@@ -268,7 +268,9 @@ def _cmd_singularity(args: argparse.Namespace) -> int:
 
 def _cosim_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("run", help="run a co-simulation scenario (YAML or SSP archive) and log it to MCAP")
-    p.add_argument("scenario", help="scenario file (.yaml) or SSP 1.0 archive (.ssp)")
+    p.add_argument("scenario", nargs="?", help="scenario file (.yaml) or SSP 1.0 archive (.ssp)")
+    p.add_argument("--from-log", metavar="LOG", help="instead of a scenario file: run again the scenario a run's "
+                                                     ".mcap log records, as it ran (every override applied)")
     p.add_argument("--out", help="MCAP output path (default: the scenario's logging.out or runs/<name>.mcap)")
     p.add_argument("--stop-time", type=float, help="override time.stop, s")
     p.add_argument("--step", type=float, help="override time.step (the base communication step), s")
@@ -476,6 +478,14 @@ def _open_scenario(args: argparse.Namespace, overrides: dict):
 
     if args.step is not None:
         overrides.put(("time", "step"), args.step, f"--step {args.step:g}")
+    from_log = getattr(args, "from_log", None)
+    if (from_log is None) == (args.scenario is None):
+        raise CosimError("run takes a scenario file or --from-log LOG, not both" if from_log else
+                         "run needs a scenario file (or --from-log LOG: a run's log)")
+    if from_log is not None:
+        from .io.runlog import scenario_from_log
+
+        return nullcontext(scenario_from_log(from_log, overrides))
     if is_ssp(args.scenario):
         return open_ssp(args.scenario, overrides)
     return nullcontext(load_scenario(args.scenario, overrides))
@@ -562,11 +572,11 @@ def _crashed(args: argparse.Namespace, record, reason: str) -> int:
 
 def _cmd_check(args: argparse.Namespace) -> int:
     from .engine.offload import choose
-    from .engine.prepare import prepare
     from .engine.scenario import apply_overrides
+    from .run import check_initialization
 
     with _open_scenario(args, apply_overrides(args.set, args.stop_time)) as scenario:
-        plan, report = prepare(scenario)
+        plan, report = check_initialization(scenario)  # the checks a run makes before t = 0, FMUs' own included
     order = " -> ".join(plan.names[c] for c in plan.order)
     from .observers.mcap_log import McapRecorder
 

@@ -128,6 +128,31 @@ def _publishing(scenario: Scenario, mcap_path: Path | None, options: RunOptions)
     return sinks + [publisher], recorder
 
 
+def check_initialization(scenario: Scenario) -> tuple[Any, str]:
+    """What ``check`` does: :func:`~cosim.engine.prepare.prepare`, then every component instantiated and initialized
+    as a run does before t = 0 (the FMUs' own parameter checks: a gain, a mass, a geometry, a trajectory they
+    refuse), then freed, no step taken. Returns (plan, pre-flight report); raises the run's own error for what it
+    refuses at t = 0."""
+    with Extractions() as held:
+        ex = None
+        try:
+            plan, report = prepare(scenario)
+            comps = scenario.components
+            ex = Execution(plan, scenario.time.start_ns, scenario.time.stop_ns, scenario.time.step_ns,
+                           [comps[n].step_multiple for n in plan.names], scenario.algorithm)
+            for i, n in enumerate(plan.names):
+                ex.add_slave(make_slave(n, plan.infos[i], comps[n].interface, comps[n].rtol, comps[n].solver,
+                                        comps[n].max_step))
+            ex.initialize(start_observers=False)
+            for s in ex.slaves:
+                s.terminate()
+        finally:
+            for s in ex.slaves if ex is not None else ():
+                s.free()
+            held.release()
+    return plan, report
+
+
 def run_scenario(scenario: Scenario | str | Path, options: RunOptions | None = None, /, **changes: Any) -> RunResult:
     """Run a scenario end to end with ``options`` (a :class:`RunOptions`; keyword ``changes`` replace its
     fields: ``run_scenario(sc, log=False)``). Raises CosimError (bad input, FMU failure, a stalled component:
@@ -194,6 +219,7 @@ def _finish_observers(ex: Execution, error: BaseException | None, recorder, outp
     the watchdog's hard shutdown (``hard``), where no failure may stop the exit.
     """
     catch = Exception if hard else CosimError
+    late: BaseException | None = None  # a signal while another observer finished (the live view's wait)
     for o in ex.started:
         try:
             o.finish(ex, error)
@@ -205,6 +231,12 @@ def _finish_observers(ex: Execution, error: BaseException | None, recorder, outp
                 error = error or exc
             elif not hard:
                 raise
+        except BaseException as exc:  # noqa: BLE001 - KeyboardInterrupt, Interrupted: raised once the log is done
+            if o is recorder:
+                raise
+            late = late or exc
+    if late is not None:
+        raise late
     return error
 
 

@@ -196,6 +196,9 @@ _ZERO = (0.0, 0.0, 0.0)
 NO_SOLUTION = tuple(f"leg {i} has no solution" for i in (1, 2, 3))
 """Reasons of the per-leg checks, as generated code reports them (``fmus.native``)."""
 BEYOND_LIMITS = tuple(f"leg {i} is beyond its joint limits" for i in (1, 2, 3))
+END_STOP = "the actuator was driven into its end stop (the plant stops here rather than pass through it)"
+"""Why a plant stops when a step ends with a joint beyond its limits (:func:`inverse_kinematics` with ``limits``):
+every plant, the Exudyn one (:mod:`multibody`), the analytic one and its native build, stops so."""
 SERIAL = tuple(f"type 1 (serial) singularity: leg {i} rod is orthogonal to its actuator motion" for i in (1, 2, 3))
 PARALLEL = "type 2 (parallel) singularity: J is singular"
 WRONG_MODE = "the joints would be assembled outside the working mode"

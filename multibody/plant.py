@@ -301,6 +301,7 @@ class DeltaPlant:
     def _out_of_range(self, t: float, q: list[float]) -> None:
         """Raise the error of a joint driven past its range (the robot's end stops)."""
         from delta.actuators import kind_of
+        from delta.kinematics import END_STOP
 
         actuator = kind_of(self.robot.kind)
         for i, qi in enumerate(q):
@@ -308,8 +309,7 @@ class DeltaPlant:
                 (value, lo, hi), unit = actuator.shown([qi, self._q_lo, self._q_hi])
                 raise PlantError(
                     f"{type(self).__name__}: joint {i + 1} at q = {value:.6g} {unit} left its {actuator.joint_range} "
-                    f"[{lo:.6g}, {hi:.6g}] {unit} at t = {t:.6f} s: the "
-                    "actuator was driven into its end stop (the plant stops here rather than pass through it)")
+                    f"[{lo:.6g}, {hi:.6g}] {unit} at t = {t:.6f} s: {END_STOP}")
 
     def energy(self) -> tuple[float, float]:
         """Kinetic and gravitational potential energy of the model, J (potential zero at z = 0)."""

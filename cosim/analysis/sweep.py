@@ -17,8 +17,9 @@
   the same command again skips the cases already there (``ok`` or ``failed``).
 
 ``results.csv``: one row per case: ``case`` (a hash of its parameter values), ``status``
-(``ok``: the run completed; ``failed``: it raised, ``message`` says why), one column per swept
-name, then :func:`cosim.analysis.metrics.metric_names` (``rmse_x``... ``max_error_x``... in signal units,
+(``ok``: the run completed and passed its acceptance checks; ``failed``: it raised or missed a
+check, ``message`` says why), one column per swept name, then :func:`cosim.analysis.metrics.metric_names`
+(``rmse_x``... ``max_error_x``... in signal units,
 ``rmse`` and ``max_error`` the largest over the axes, ``peak_effort`` N or N*m, ``sim_time_s``,
 ``steps``, ``wall_time_s`` of the case), ``checks`` (the scenario's acceptance checks:
 ``ok``/``FAILED``/empty), ``mcap`` (with ``--logs``) and ``message``. Floats are written with
@@ -199,6 +200,10 @@ def run_loaded_case(scenario: Scenario, fmu_files: dict[tuple[str, bool, int], s
         row["message"] = res.message
         if res.checks:
             row["checks"] = "ok" if res.passed else "FAILED"
+        if res.checks and not res.passed and row["status"] == "ok":  # ran to the end but missed its acceptance
+            row["status"] = "failed"
+            row["message"] = "acceptance check failed: " + ", ".join(
+                f"{name} {c['value']:.4g} > {c['limit']:g}" for name, c in res.checks.items() if not c["ok"])
         row["mcap"] = res.mcap or ""
     except Exception as exc:  # a failing case is a result, never the end of the sweep
         row.update(_failed(exc, t0))
@@ -295,8 +300,8 @@ def run_sweep(scenario: str | Path, cases: list[Case], out: str | Path, *, worke
     if done_rows and list(done_rows[0]) != columns:
         raise SweepError(f"{table} holds another sweep (columns {', '.join(done_rows[0])}); use another --out")
     finished = {r["case"]: r for r in done_rows if r["status"] in ("ok", "failed")}
-    failed = {f"{cid} ({', '.join(f'{k}={r[k]}' for k in params)})": r["message"]
-              for cid, r in finished.items() if r["status"] == "failed"}
+    failed = {f"{cid} ({', '.join(f'{k}={r[k]}' for k in params)})": r["message"] or "acceptance check failed"
+              for cid, r in finished.items() if r["status"] == "failed" or r["checks"] == "FAILED"}
     todo = [(c, sc) for c, sc in zip(cases, loaded) if c.id not in finished]
     (out / "sweep.json").write_text(json.dumps({"scenario": scenario, "parameters": params,
                                                 "cases": len(cases)}, indent=2))
@@ -370,10 +375,14 @@ class SweepCluster:
     ``with`` waits for it and yields ``(client, label)``; :meth:`close` if ``with`` is never entered.
     """
 
+    CONNECT_TIMEOUT = 10.0
+    """s, for an existing scheduler to accept a connection, answer Dask's handshake and say it is a scheduler."""
+
     def __init__(self, workers: int | None, scheduler: str | None):
         self.workers, self.scheduler = workers, scheduler
         self.cluster = self.client = self._thread = None
         self._error: BaseException | None = None
+        self._scratch: str | None = None  # the embedded workers' folder, removed with the cluster
 
     def start(self) -> "SweepCluster":
         import logging
@@ -383,18 +392,62 @@ class SweepCluster:
         if self.scheduler is None:
             self._thread = threading.Thread(target=self._start_local, name="sweep-cluster-start", daemon=True)
             self._thread.start()
+        else:
+            self._probe()
         return self
+
+    def _probe(self) -> None:
+        """Check that ``scheduler`` is a Dask scheduler, within :attr:`CONNECT_TIMEOUT`, before anything is built:
+        Dask's client waits for ever on a silent listener, and reads an HTTP answer as a frame of 3 EiB."""
+        import asyncio
+
+        from distributed.comm import connect
+
+        address, timeout = self.scheduler, self.CONNECT_TIMEOUT
+
+        async def identity() -> dict:
+            comm = await connect(address, timeout=timeout)
+            try:
+                await comm.write({"op": "identity", "reply": True})
+                return await comm.read()
+            finally:
+                comm.abort()
+
+        try:  # connect() retries a refused connection for ``timeout``, then its handshake waits for ever: bounded
+            answer = asyncio.run(asyncio.wait_for(identity(), timeout + 1.0))
+        except TimeoutError:
+            raise SweepError(f"--scheduler {address}: no answer from {address} within {timeout:g} s (it accepted "
+                             f"the connection: is it a Dask scheduler?)") from None
+        except ValueError as exc:  # parse_address: not an address of a comm Dask knows
+            raise SweepError(f"--scheduler {address}: not a scheduler address ({exc}); expected tcp://HOST:PORT") \
+                from None
+        except OSError as exc:  # distributed's CommClosedError too: refused, or closed during the handshake
+            if str(exc).startswith("Timed out trying to connect"):
+                raise SweepError(f"--scheduler {address}: cannot connect to {address} within {timeout:g} s "
+                                 f"({_comm_reason(exc.__cause__ or exc)})") from None
+            raise SweepError(f"--scheduler {address}: {address} is not a Dask scheduler (it closed the connection "
+                             f"in Dask's handshake: {_comm_reason(exc)})") from None
+        except Exception:  # noqa: BLE001 - an answer in another protocol: a frame of 3 EiB, undecodable, ...
+            raise SweepError(f"--scheduler {address}: {address} is not a Dask scheduler (its answer is not "
+                             f"Dask's protocol)") from None
+        if not isinstance(answer, dict) or answer.get("type") != "Scheduler":
+            kind = answer.get("type") if isinstance(answer, dict) else None
+            raise SweepError(f"--scheduler {address}: {address} is not a Dask scheduler"
+                             + (f" (a Dask {kind})" if kind else ""))
 
     def _start_local(self) -> None:
         try:
             import logging
             import os
+            import tempfile
 
             import dask
             from distributed import LocalCluster
 
             n = self.workers or os.cpu_count() or 1
-            with dask.config.set(WORKER_CONFIG):  # the nannies hand this configuration to their workers
+            self._scratch = tempfile.mkdtemp(prefix="cosim-sweep-")  # not dask-scratch-space, left in the temp folder
+            config = {**WORKER_CONFIG, "temporary-directory": self._scratch}  # the scheduler's and workers' folders
+            with dask.config.set(config):  # the nannies hand this configuration to their workers
                 self.cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
                                             dashboard_address=None, silence_logs=logging.ERROR,
                                             preload=[__name__],  # dask_setup below
@@ -435,6 +488,15 @@ class SweepCluster:
             self.client.close()
         if self.cluster is not None:
             self.cluster.close()
+        if self._scratch is not None:
+            import shutil
+
+            shutil.rmtree(self._scratch, ignore_errors=True)
+
+
+def _comm_reason(exc: BaseException) -> str:
+    """distributed's comm error without its ``in <TCP ...>:`` prefix (``ConnectionRefusedError: [Errno 111] ...``)."""
+    return re.sub(r"^in <[^>]*>: ", "", str(exc))
 
 
 # Worker preload (``LocalCluster(preload=["cosim.analysis.sweep"])``, or ``dask worker --preload cosim.analysis.sweep``).

@@ -38,6 +38,8 @@ __all__ = [
     "ScenarioFile",
     "parse_scenario",
     "scenario_from_data",
+    "effective_scenario",
+    "EFFECTIVE_ATTACHMENT",
     "scenario_json_schema",
     "apply_overrides",
     "dotted_overrides",
@@ -679,6 +681,28 @@ def read_scenario(path: str | Path) -> ScenarioFile:
         raise ScenarioError(Issue("", f"not UTF-8 text (byte 0x{raw[exc.start]:02x} at offset {exc.start}); "
                                       f"save the scenario as UTF-8", str(path), line)) from None
     return _parse_yaml(text, str(path))
+
+
+EFFECTIVE_ATTACHMENT = "effective/scenario.json"
+"""The log's attachment of the scenario as run (:func:`effective_scenario`), which ``run --from-log`` runs again."""
+
+
+def effective_scenario(scenario: Scenario, log: str | Path | None = None) -> dict[str, Any]:
+    """``scenario`` as it runs, every override applied, as a scenario mapping (JSON, valid YAML): every key with its
+    value, defaults included; the paths of FMU files absolute, ``logging.out`` the run's ``log`` (absolute) when
+    given; a component parameter overridden by a number written as text (``1e3``) as that text, as a file gives it."""
+    import os
+
+    data = Scenario.model_dump(scenario, mode="json", by_alias=True)
+    base = Path(scenario.source).parent if scenario.source and scenario.source != "<string>" else Path.cwd()
+    for comp in data["components"].values():
+        if comp.get("path") is not None:
+            comp["path"] = os.path.normpath((base / comp["path"]).absolute())
+    if log is not None:
+        data["logging"]["out"] = os.path.normpath(Path(log).absolute())
+    for path, text in scenario.sources.written.items():  # ("components", name, "parameters", variable)
+        data["components"][path[1]]["parameters"][path[3]] = text
+    return data
 
 
 class Overrides(dict):

@@ -34,8 +34,8 @@ import time
 from typing import Any, Callable
 
 from ..errors import Interrupted, StallError, exit_now, exit_status, exit_text
-from .offload import Proxy
 from . import supervision
+from .offload import Proxy
 from .supervision import MASTER, PHASES
 
 __all__ = ["Watchdog", "GRACE_S"]

@@ -8,6 +8,7 @@ from pathlib import Path
 
 from ..errors import CosimError
 from .output import check_output
+from .runlog import log_records
 
 __all__ = ["recover", "RecoveryReport"]
 
@@ -59,9 +60,9 @@ def _default_out(path: Path) -> Path:
 
 def _copy(path: Path, tmp: Path, out: Path) -> RecoveryReport:
     from mcap.exceptions import McapError
-    from mcap.records import Attachment, Channel, Chunk, Message, Metadata, Schema
-    from mcap.stream_reader import StreamReader, breakup_chunk
+    from mcap.records import Attachment, Channel, Message, Metadata, Schema
     from mcap.writer import CompressionType, Writer
+
 
     schemas: dict[int, int] = {}
     channels: dict[int, int] = {}
@@ -88,12 +89,10 @@ def _copy(path: Path, tmp: Path, out: Path) -> RecoveryReport:
                 counts["metadata"] += 1
 
         try:
-            for rec in StreamReader(src, skip_magic=False).records:
-                if isinstance(rec, Chunk):
-                    for inner in breakup_chunk(rec):
-                        handle(inner)
-                else:
-                    handle(rec)
+            for rec in log_records(src, path):  # a chunk past runlog.MAX_CHUNK_BYTES: CosimError, nothing written
+                handle(rec)
+        except CosimError:
+            raise
         except OSError as exc:
             if exc.errno is not None:  # a real I/O failure (reading, or writing: disk full), not a short input
                 raise

@@ -21,16 +21,22 @@ baseline is comparing two logs.
 from __future__ import annotations
 
 import difflib
+import json
+import os
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Iterable, Sequence
+from typing import Any, Iterable, Iterator, Sequence
 
 import numpy as np
 import orjson
+from mcap.exceptions import McapError
+from mcap.records import Attachment
 
-from ..errors import CosimError
+from ..engine.scenario import EFFECTIVE_ATTACHMENT, Scenario, scenario_from_data
+from ..errors import CosimError, Issue, ScenarioError
 
-__all__ = ["Signal", "RunLog", "read_run", "write_baseline", "time_offset_ns", "samples", "AXES"]
+__all__ = ["Signal", "RunLog", "read_run", "write_baseline", "log_records", "scenario_from_log", "time_offset_ns", "samples", "AXES",
+           "MAX_CHUNK_BYTES"]
 
 AXES = ("x", "y", "z")
 _SKIP_TOPICS = {"/scene", "/scene/reference", "/tf", "/events"}
@@ -126,6 +132,81 @@ class RunLog:
         return [n for n in self.signals if n.split(".", 1)[1] == variable]
 
 
+MAX_CHUNK_BYTES = 256 * 1024 ** 2
+"""Largest MCAP chunk read, uncompressed: a chunk that declares more is refused before it is inflated, one that
+inflates past what it declares is refused at that point. The logs written here have chunks of 1 MiB
+(:attr:`cosim.observers.mcap_log.McapRecorder.CHUNK_SIZE`); an 82 KB file whose one zstd chunk inflated to 2.5 GiB exhausted
+the memory of ``recover`` (issue 25)."""
+
+
+class _Clamped:
+    """A binary file as the mcap package reads it, no read longer than what is left of the file: a damaged length
+    field (up to 2**64) reads what there is, instead of allocating what it says first."""
+
+    def __init__(self, f) -> None:
+        self._f = f
+        self.size = os.fstat(f.fileno()).st_size
+
+    def read(self, n: int = -1) -> bytes:
+        left = max(0, self.size - self._f.tell())
+        return self._f.read(left if n is None or n < 0 else min(n, left))
+
+
+def _inflate(chunk, path: Path, offset: int) -> bytes:
+    """The uncompressed records of an MCAP ``chunk`` (at byte ``offset`` of ``path``), never more than it declares
+    nor than :data:`MAX_CHUNK_BYTES`: CosimError otherwise, naming the file, the offset and the limit."""
+    import lz4.frame
+    import zstandard
+    from mcap.exceptions import McapError, UnsupportedCompressionError
+
+    declared = chunk.uncompressed_size
+    where = f"{path}: the MCAP chunk at byte {offset}"
+    if declared > MAX_CHUNK_BYTES:
+        raise CosimError(f"{where} declares {declared:,} bytes uncompressed, more than the {MAX_CHUNK_BYTES:,} read "
+                         f"(cosim.io.runlog.MAX_CHUNK_BYTES; the logs written here have chunks of 1 MiB): refused")
+    try:
+        if chunk.compression == "zstd":
+            data = zstandard.ZstdDecompressor().stream_reader(chunk.data, read_across_frames=True).read(declared + 1)
+        elif chunk.compression == "lz4":
+            data = lz4.frame.LZ4FrameDecompressor().decompress(chunk.data, max_length=declared + 1)
+        elif chunk.compression == "":
+            data = chunk.data
+        else:
+            raise UnsupportedCompressionError(chunk.compression)
+    except (zstandard.ZstdError, RuntimeError, ValueError, EOFError) as exc:  # RuntimeError: lz4's
+        raise McapError(f"chunk at byte {offset}: {exc}") from None
+    if len(data) > declared:
+        raise CosimError(f"{where} inflates past the {declared:,} bytes it declares: refused (a damaged or forged "
+                         f"log)")
+    if len(data) < declared:  # cut short (a killed writer) or damaged: no partial record is parsed
+        raise McapError(f"chunk at byte {offset} inflates to {len(data):,} of the {declared:,} bytes it declares")
+    return data
+
+
+def log_records(f, path: str | Path, chunks: bool = True) -> Iterator:
+    """Every record of the MCAP file ``f`` (binary, at its start) in file order, the records of a chunk in its place
+    (``chunks=False``: chunks skipped, not inflated; the records outside them only: attachments, metadata, summary).
+
+    Bounded whatever the file says: a chunk is inflated to no more than it declares and :data:`MAX_CHUNK_BYTES`
+    (CosimError naming ``path``, the chunk's byte offset and the limit), no record is longer than the file and no
+    read goes past its end. A damaged or cut file raises the mcap package's errors (``McapError``).
+    """
+    from dataclasses import replace
+
+    from mcap.records import Chunk
+    from mcap.stream_reader import StreamReader, breakup_chunk
+
+    src = _Clamped(f)
+    start = 8  # the first record follows the magic
+    for rec in StreamReader(src, emit_chunks=True, record_size_limit=src.size).records:
+        if isinstance(rec, Chunk):
+            if chunks:
+                yield from breakup_chunk(replace(rec, compression="", data=_inflate(rec, Path(path), start)))
+        else:
+            yield rec
+        start = f.tell()
+
+
 def _open_error(path: Path, exc: Exception) -> CosimError:
     return CosimError(f"{path}: cannot read the MCAP log ({type(exc).__name__}: {exc}); if the run was killed, "
                       f"rewrite it first with `python -m cosim recover {path}`")
@@ -134,58 +215,72 @@ def _open_error(path: Path, exc: Exception) -> CosimError:
 def read_run(path: str | Path, components: Iterable[str] | None = None) -> RunLog:
     """Read a run log. ``components`` limits the channels read (default: all but ``/scene``).
 
-    Raises CosimError naming the file when it is missing, not an MCAP file, or unfinished.
+    Raises CosimError naming the file when it is missing, not an MCAP file, unfinished, or holds a chunk past
+    :data:`MAX_CHUNK_BYTES`.
     """
     from mcap.exceptions import McapError
-    from mcap.reader import make_reader
+    from mcap.records import Attachment, Channel, Footer, Message, Metadata, Schema
 
     path = Path(path)
     if not path.is_file():
         raise CosimError(f"{path}: no such file")
     wanted = None if components is None else {f"/{c}" for c in components}
     columns: dict[str, dict[str, list]] = {}  # per component, per key (t included): the values in file order
-    stamps: dict[str, list[int]] = {}
+    stamps: dict[str, list[int]] = {}  # simulation time (blocks) or log time (one sample a message), ns
+    logged: dict[str, list[bool]] = {}  # per stamp: a log time (the time offset is subtracted once it is known)
     props: dict[str, dict] = {}
     metadata: dict[str, dict[str, str]] = {}
     attachments: dict[str, bytes] = {}
     channel_md: dict[str, dict[str, str]] = {}
-    events: list[dict] = []
+    events: list[tuple[int, dict]] = []
+    schemas: dict[int, Schema] = {}
+    read: dict[int, str] = {}  # channel id -> component, for the channels read
+    seen: set[int] = set()
+    footer = False
     try:
         with open(path, "rb") as f:
-            reader = make_reader(f)
-            summary = reader.get_summary()
-            if summary is None:
-                raise McapError("no summary section (unfinished log)")
-            topics = []
-            for ch in summary.channels.values():
-                if ch.topic in _SKIP_TOPICS or (wanted is not None and ch.topic not in wanted):
-                    continue
-                comp = ch.topic.lstrip("/")
-                topics.append(ch.topic)
-                channel_md[comp] = dict(ch.metadata)
-                schema = summary.schemas.get(ch.schema_id)
-                props[comp] = orjson.loads(schema.data).get("properties", {}) if schema is not None else {}
-                columns[comp], stamps[comp] = {}, []
-            for rec in reader.iter_metadata():
-                metadata[rec.name] = dict(rec.metadata)
-            offset = time_offset_ns(metadata)
-            has_events = any(ch.topic == "/events" for ch in summary.channels.values())
-            for _, ch, msg in reader.iter_messages(topics=["/events"] if has_events else [], log_time_order=True):
-                events.append(orjson.loads(msg.data))
-            for _, ch, msg in reader.iter_messages(topics=topics, log_time_order=False):
-                comp = ch.topic[1:]
-                d = orjson.loads(msg.data)
-                cols = columns[comp]
-                if isinstance(d.get("t"), list):  # a block of samples: the stamps from its times
-                    stamps[comp] += [round(t * 1e9) for t in d["t"]]
-                    for key, values in d.items():
-                        cols.setdefault(key, []).extend(values)
-                else:  # one sample
-                    stamps[comp].append(msg.log_time - offset)
-                    for key, value in d.items():
-                        cols.setdefault(key, []).append(value)
-            for att in reader.iter_attachments():
-                attachments[att.name] = bytes(att.data)
+            for rec in log_records(f, path):
+                if isinstance(rec, Message):
+                    comp = read.get(rec.channel_id)
+                    if comp is None:
+                        continue
+                    d = orjson.loads(rec.data)
+                    if comp == "/events":
+                        events.append((rec.log_time, d))
+                        continue
+                    cols = columns[comp]
+                    if isinstance(d.get("t"), list):  # a block of samples: the stamps from its times
+                        stamps[comp] += [round(t * 1e9) for t in d["t"]]
+                        logged[comp] += [False] * len(d["t"])
+                        for key, values in d.items():
+                            cols.setdefault(key, []).extend(values)
+                    else:  # one sample
+                        stamps[comp].append(rec.log_time)
+                        logged[comp].append(True)
+                        for key, value in d.items():
+                            cols.setdefault(key, []).append(value)
+                elif isinstance(rec, Schema):
+                    schemas.setdefault(rec.id, rec)
+                elif isinstance(rec, Channel) and rec.id not in seen:  # the summary repeats them
+                    seen.add(rec.id)
+                    if rec.topic == "/events":
+                        read[rec.id] = "/events"
+                    if rec.topic in _SKIP_TOPICS or (wanted is not None and rec.topic not in wanted):
+                        continue
+                    comp = rec.topic.lstrip("/")
+                    read[rec.id] = comp
+                    channel_md[comp] = dict(rec.metadata)
+                    schema = schemas.get(rec.schema_id)
+                    props[comp] = orjson.loads(schema.data).get("properties", {}) if schema is not None else {}
+                    columns[comp], stamps[comp], logged[comp] = {}, [], []
+                elif isinstance(rec, Metadata):
+                    metadata[rec.name] = dict(rec.metadata)
+                elif isinstance(rec, Attachment):
+                    attachments[rec.name] = bytes(rec.data)
+                elif isinstance(rec, Footer):
+                    footer = True
+        if not footer:
+            raise McapError("no footer (unfinished log)")
     except (McapError, OSError, ValueError, orjson.JSONDecodeError) as exc:
         raise _open_error(path, exc) from None
     if wanted is not None:
@@ -193,12 +288,14 @@ def read_run(path: str | Path, components: Iterable[str] | None = None) -> RunLo
         if missing:
             raise CosimError(f"{path}: no channel for component(s) {', '.join(missing)}; "
                              f"it has {', '.join(sorted(channel_md)) or 'none'}")
+    offset = time_offset_ns(metadata)
     signals: dict[str, Signal] = {}
     for comp, cols in columns.items():
         if not stamps[comp]:
             continue
-        order = np.argsort(np.asarray(stamps[comp], dtype=np.int64), kind="stable")
-        t_ns = np.asarray(stamps[comp], dtype=np.int64)[order]
+        t_ns = np.asarray(stamps[comp], dtype=np.int64) - offset * np.asarray(logged[comp], dtype=np.int64)
+        order = np.argsort(t_ns, kind="stable")
+        t_ns = t_ns[order]
         for key, values in cols.items():
             if key == "t":
                 continue
@@ -210,7 +307,8 @@ def read_run(path: str | Path, components: Iterable[str] | None = None) -> RunLo
             signals[f"{comp}.{key}"] = Signal(f"{comp}.{key}", t_ns, _column(values, item)[order],
                                               meta.get("unit", ""), meta.get("description", ""),
                                               meta.get("causality", ""))
-    return RunLog(path, signals, metadata, attachments, channel_md, events)
+    ordered = sorted(range(len(events)), key=lambda i: events[i][0])  # log time order, file order among equals
+    return RunLog(path, signals, metadata, attachments, channel_md, [events[i][1] for i in ordered])
 
 
 def _column(values: list, meta: dict) -> np.ndarray:
@@ -239,7 +337,8 @@ def write_baseline(source: str | Path, out: str | Path, period: float = 0.01,
     the pick is exact): whole messages of a log with one sample a message, the samples on the
     period of each block otherwise. Returns (path, samples kept).
     """
-    from mcap.reader import make_reader
+    from mcap.exceptions import McapError
+    from mcap.records import Attachment, Channel, Footer, Message, Metadata, Schema
     from mcap.writer import CompressionType, Writer
 
     source, out = Path(source), Path(out)
@@ -254,28 +353,46 @@ def write_baseline(source: str | Path, out: str | Path, period: float = 0.01,
     written = 0
     try:
         with open(source, "rb") as f, open(tmp, "wb") as dst:
-            reader = make_reader(f)
-            summary = reader.get_summary()
-            if summary is None:
-                raise _open_error(source, ValueError("no summary section (unfinished log)"))
+            schemas: dict[int, Schema] = {}  # first pass: what comes before or after the messages
+            channels: dict[int, Channel] = {}
+            metadata: list[Metadata] = []
+            attachments: list[Attachment] = []
+            footer = False
+            for rec in log_records(f, source):
+                if isinstance(rec, Schema):
+                    schemas.setdefault(rec.id, rec)
+                elif isinstance(rec, Channel):
+                    channels.setdefault(rec.id, rec)
+                elif isinstance(rec, Metadata):
+                    metadata.append(rec)
+                elif isinstance(rec, Attachment):
+                    attachments.append(rec)
+                elif isinstance(rec, Footer):
+                    footer = True
+            if not footer:
+                raise McapError("no footer (unfinished log)")
             w = Writer(dst, compression=CompressionType.ZSTD)
             w.start(profile="", library="cosim-baseline")
             schema_ids, channel_ids = {}, {}
-            for ch in summary.channels.values():
+            for ch in channels.values():
                 if ch.topic in _SKIP_TOPICS or (wanted is not None and ch.topic not in wanted):
                     continue
-                sch = summary.schemas[ch.schema_id]
+                sch = schemas[ch.schema_id]
                 if sch.id not in schema_ids:
                     schema_ids[sch.id] = w.register_schema(sch.name, sch.encoding, sch.data)
                 channel_ids[ch.id] = w.register_channel(ch.topic, ch.message_encoding, schema_ids[sch.id],
                                                         dict(ch.metadata))
             if wanted is not None:
-                found = {ch.topic for ch in summary.channels.values()}
+                found = {ch.topic for ch in channels.values()}
                 missing = sorted(c[1:] for c in wanted - found)
                 if missing:
                     raise CosimError(f"{source}: no channel for component(s) {', '.join(missing)}")
-            offset = time_offset_ns({rec.name: dict(rec.metadata) for rec in reader.iter_metadata()})
-            for _, ch, msg in reader.iter_messages(topics=[summary.channels[i].topic for i in channel_ids]):
+            offset = time_offset_ns({rec.name: dict(rec.metadata) for rec in metadata})
+            f.seek(0)
+            for msg in log_records(f, source):  # second pass: the messages kept
+                if not isinstance(msg, Message) or msg.channel_id not in channel_ids:
+                    continue
+                ch = channels[msg.channel_id]
                 if ch.metadata.get("layout") != "blocks":  # one sample a message
                     if (msg.log_time - offset) % period_ns == 0:
                         w.add_message(channel_ids[ch.id], msg.log_time, msg.data, msg.publish_time)
@@ -288,10 +405,10 @@ def write_baseline(source: str | Path, out: str | Path, period: float = 0.01,
                     w.add_message(channel_ids[ch.id], stamp,
                                   orjson.dumps({k: [v[i] for i in keep] for k, v in block.items()}), stamp)
                     written += len(keep)
-            for rec in reader.iter_metadata():
+            for rec in metadata:
                 w.add_metadata(rec.name, dict(rec.metadata))
             w.add_metadata("baseline", {"source": str(source), "period_s": repr(period)})
-            for att in reader.iter_attachments():
+            for att in attachments:
                 w.add_attachment(att.create_time, att.log_time, att.name, att.media_type, att.data)
             w.finish()
         tmp.replace(out)
@@ -302,3 +419,38 @@ def write_baseline(source: str | Path, out: str | Path, period: float = 0.01,
         tmp.unlink(missing_ok=True)
         raise _open_error(source, exc) from None
     return out, written
+
+
+def scenario_from_log(path: str | Path, overrides: dict[tuple, Any] | None = None) -> Scenario:
+    """The scenario a run log records (:data:`EFFECTIVE_ATTACHMENT`), with ``overrides`` on top, to run it again.
+
+    Its log goes where ``--out`` says or to ``runs/<name>.mcap``, never to the recorded ``logging.out`` (the first
+    run's log). Raises :class:`ScenarioError` naming ``path`` when it is missing, not an MCAP log or records no
+    scenario; a recorded FMU file that is gone is reported when the FMUs are located, as for a scenario file.
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise ScenarioError(Issue("", "no such log file", str(path)))
+    found = None
+    try:
+        with open(path, "rb") as f:
+            for rec in log_records(f, path, chunks=False):
+                if isinstance(rec, Attachment) and rec.name == EFFECTIVE_ATTACHMENT:
+                    found = bytes(rec.data)
+                    break
+    except (McapError, OSError, ValueError) as exc:  # before the attachment: read up to it otherwise
+        raise ScenarioError(Issue("", f"not a readable MCAP log ({type(exc).__name__}: {exc}); give a run's log",
+                                  str(path))) from None
+    if found is None:
+        raise ScenarioError(Issue("", f"the log records no scenario as run ({EFFECTIVE_ATTACHMENT}): written by an "
+                                      "older version or not by `python -m cosim run`; run its scenario file instead",
+                                  str(path)))
+    try:
+        data = json.loads(found)
+    except ValueError as exc:
+        raise ScenarioError(Issue("", f"{EFFECTIVE_ATTACHMENT} is not JSON ({exc})", str(path))) from None
+    if not isinstance(data, dict):
+        raise ScenarioError(Issue("", f"{EFFECTIVE_ATTACHMENT} is not a scenario mapping", str(path)))
+    if isinstance(data.get("logging"), dict):
+        data["logging"]["out"] = None
+    return scenario_from_data(data, str(path), overrides)

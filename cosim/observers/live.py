@@ -26,6 +26,13 @@ __all__ = ["DEFAULT_PORT", "LiveView", "parse_address"]
 
 DEFAULT_PORT = 8765
 _TIME_PERIOD_NS = 33_000_000  # viewer clock updates per simulated second: about 30
+BACKLOG_MESSAGES = 1024
+"""Messages queued per viewer (foxglove-sdk's ``message_backlog_size``): a viewer that reads slower than the run
+loses its oldest messages, one that stops reading costs the run nothing."""
+STOP_TIMEOUT = 2.0
+"""s the server may take to close its connections at the end of the run; a viewer that does not take its close by
+then (it stopped reading) is dropped with one warning line, and the run ends (issue 25: a stalled viewer held a
+10 s run 51 s, through SIGINT, and SIGTERM then lost the finished log)."""
 
 
 def parse_address(text: str | int | None) -> tuple[str, int]:
@@ -109,7 +116,8 @@ class LiveView:
         context = foxglove.Context()
         try:
             self.server = foxglove.start_server(name=self.name, host=self.host, port=self.port,
-                                                capabilities=[Capability.Time], context=context)
+                                                capabilities=[Capability.Time], context=context,
+                                                message_backlog_size=BACKLOG_MESSAGES)
         except RuntimeError as exc:
             raise CosimError(f"--live: cannot serve on {self.host}:{self.port}: {exc}") from None
         self.port = self.server.port
@@ -133,8 +141,21 @@ class LiveView:
             self._sink.close()
             self._sink = None
         if self.server is not None:
-            self.server.stop()
-            self.server = None
+            server, self.server = self.server, None
+            self._stop(server)
+
+    def _stop(self, server) -> None:
+        """``server.stop()``, which waits for every viewer to take its close, waited for :data:`STOP_TIMEOUT` at most
+        (in a thread of its own, left behind when a viewer never reads again: the process still ends)."""
+        import sys
+        import threading
+
+        stopper = threading.Thread(target=server.stop, name="live-view-stop", daemon=True)
+        stopper.start()
+        stopper.join(STOP_TIMEOUT)
+        if stopper.is_alive():
+            print(f"warning: live view on {self.url}: a viewer did not take the end of the run within "
+                  f"{STOP_TIMEOUT:g} s (it stopped reading): dropped", file=sys.stderr, flush=True)
 
     def summary(self) -> str:
         return f"live view served on {self.url} (Foxglove WebSocket, subprotocol foxglove.sdk.v1)"

@@ -12,8 +12,9 @@
   encodes the JSON messages (one per sample in the ``samples`` layout), compresses and writes on
   the other core. Shorter runs write in this process (a child would cost more to start than it
   saves);
-- metadata (scenario, versions, platform, time stamps: see :func:`cosim.observers.publish.time_metadata`)
-  and attachments (the scenario file and each FMU's modelDescription.xml);
+- metadata (scenario, versions, platform, the command line and its folder, time stamps: see
+  :func:`cosim.observers.publish.time_metadata`) and attachments (the scenario file, the scenario as run with every
+  override applied, :func:`cosim.engine.scenario.effective_scenario`, and each FMU's modelDescription.xml);
 - zstd chunks flushed every ``flush_interval`` wall seconds, so a killed run
   leaves every complete chunk readable (see :mod:`cosim.io.recover`);
 - ``finish`` always writes the summary and index, on success, error or Ctrl-C, and the
@@ -40,6 +41,7 @@ from typing import Sequence
 import orjson
 
 from ..engine.execution import Execution
+from ..engine.scenario import EFFECTIVE_ATTACHMENT, effective_scenario
 from ..errors import CosimError
 from .log_writer import LogSink, WriterFailed, WriterProcess, os_reason
 from .publish import Publisher, time_metadata
@@ -144,10 +146,15 @@ class McapRecorder:
                 "name": s.name, "algorithm": s.algorithm, "step_s": repr(s.time.step), "stop_s": repr(s.time.stop),
                 "start_s": repr(s.time.start), "robot": str(s.robot), "components": ",".join(s.components),
                 "file": str(self.scenario_file or s.source or "")})
+        w.metadata("command", {"argv": orjson.dumps(getattr(sys, "orig_argv", sys.argv)).decode(), "cwd": os.getcwd()})
         pub = self.publisher
         w.metadata("time", time_metadata(pub.stamps, pub.origin(rt), rt.start_ns))
         now = time.time_ns()
-        if self.scenario_file is not None and self.scenario_file.exists():
+        if self.scenario is not None:  # the scenario as run, every override applied: `run --from-log` runs it again
+            log = self.path.with_name(self.path.name.removesuffix(".partial"))  # renamed so once finished
+            w.attachment(EFFECTIVE_ATTACHMENT, "application/json",
+                         orjson.dumps(effective_scenario(self.scenario, log), option=orjson.OPT_INDENT_2), now, now)
+        if self.scenario_file is not None and self.scenario_file.exists() and not _is_log(self.scenario_file):
             ssp = self.scenario_file.suffix.lower() == ".ssp"  # an SSP archive (SSP 1.0 names its MIME type)
             w.attachment(f"scenario/{self.scenario_file.name}", "application/x-ssp-package" if ssp else "application/yaml",
                          self.scenario_file.read_bytes(), now, now)
@@ -203,6 +210,12 @@ class McapRecorder:
                 except OSError:
                     pass
             raise exc if isinstance(exc, CosimError) else self._failure(exc) from None
+
+
+def _is_log(path: Path) -> bool:
+    """Whether ``path`` is an MCAP file: the log a ``run --from-log`` read its scenario from, not attached again."""
+    with open(path, "rb") as f:
+        return f.read(5) == b"\x89MCAP"
 
 
 def _steps(scenario) -> int:

@@ -6,7 +6,7 @@ from math import isfinite
 
 from delta.dynamics import integrate
 from delta.errors import CosimError, ParameterError, UnreachableError
-from delta.kinematics import inverse_kinematics
+from delta.kinematics import END_STOP, inverse_kinematics, joint_limit_reason
 from delta.model import build_model
 
 from .._fmi import Adapter, axis_names, joint_names, writer
@@ -53,8 +53,9 @@ class AnalyticPlant(Adapter):
     ``h > 0`` is accepted. Within a step the effort is constant and the robot's own motion is slow
     (the helix turns at 0.5 Hz): on 10 s of the helix under CTC, 1 ms steps stay within 2e-14 m of a
     16-substep reference (RK3: 1.1e-11 m, the midpoint rule: 1.7e-8 m, which already changes the
-    tracking RMSE by 16 %). A state that leaves the workspace, meets a singularity or stops being finite
-    (an absurd effort) fails the step (fmi2Discard) with the reason logged.
+    tracking RMSE by 16 %). A state that leaves the workspace or the joint range (the end stops, as the Exudyn
+    plant), meets a singularity or stops being finite (an absurd effort) fails the step (fmi2Discard) with the
+    reason logged.
     """
 
     EXPERIMENT = (0.0, 1.0, 1e-3)
@@ -77,10 +78,12 @@ class AnalyticPlant(Adapter):
     def advance(self, t: float, h: float) -> None:
         try:
             p, v = integrate(self.model, self.p, self.v, self.vec3(U), h, self.values["solver.max_step"])
-            q, qd, _, fault = inverse_kinematics(self.model, p, v, limits=False)  # the step's end is no RK stage
-            if fault:
+            q, qd, _, fault = inverse_kinematics(self.model, p, v)  # at the step's end (no RK stage): the limits too
+            if fault > 0:
                 raise UnreachableError(f"the platform left the workspace at p = ({p[0]:.6g}, {p[1]:.6g}, "
                                        f"{p[2]:.6g}) m: leg {fault} has no solution")
+            if fault < 0:  # as the Exudyn plant (multibody.DeltaPlant.step): a joint past its range stops the plant
+                raise UnreachableError(f"{END_STOP}: {joint_limit_reason(self.model, -fault, q[-fault - 1])}")
         except CosimError as exc:
             raise type(exc)(f"{self.modelName} at t = {t:.6f} s: {exc}") from None
         self.p, self.v, self.q, self.qd = p, v, q, qd

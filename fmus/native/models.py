@@ -25,7 +25,8 @@ import casadi as ca
 
 from delta.control import CTC, PD, PID, PDPlus
 from delta.dynamics import forward_dynamics, platform_state, platform_step
-from delta.kinematics import inverse_kinematics, proximity, set_pose, working_mode_fault
+from delta.kinematics import (BEYOND_LIMITS, END_STOP, inverse_kinematics, proximity, set_pose,
+                              working_mode_fault)
 from delta.model import Data
 from delta.trajectories import PROFILES, TYPES
 
@@ -286,6 +287,9 @@ class PIDController(Controller):
 
 # ----------------------------------------------------------------------------- analytic plant
 
+WORKSPACE = "the platform left the workspace: "
+
+
 class AnalyticPlant(NativeModel):
     """As :class:`fmus.adapters.plants.AnalyticPlant` (co-simulation: RK4 in platform coordinates, the state
     ``p, v``, substeps of at most ``solver.max_step``) and :class:`fmus.adapters.plant_me.AnalyticPlantME`
@@ -309,8 +313,9 @@ class AnalyticPlant(NativeModel):
         model = self.model(sym, trace)
         p, v = sym.s[:3], sym.s[3:]
         checks = [Check(_all(SYMBOLIC.isfinite(x) for x in sym.s), "the state diverged (not finite)")]
-        q, qd, _, _ = inverse_kinematics(model, p, v, limits=False)  # the step's end is no RK stage
-        checks += _errors(trace, "the platform left the workspace: ")
+        q, qd, _, _ = inverse_kinematics(model, p, v)  # at the step's end (no RK stage): the joint limits too
+        checks += [Check(c.ok, f"{END_STOP}: {c.reason.removeprefix(WORKSPACE)}")  # as the python build
+                   if c.reason.removeprefix(WORKSPACE) in BEYOND_LIMITS else c for c in _errors(trace, WORKSPACE)]
         return Result(dict(zip(Q + QD + P + V, (*q, *qd, *p, *v))), checks=checks)
 
     def advance(self, sym: Symbols, trace: Trace) -> Result:

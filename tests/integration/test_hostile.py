@@ -1,0 +1,499 @@
+"""Hostile inputs, round 2 (issue 25): forged logs, a scheduler that is not Dask, results that must mean what they say.
+
+In the style of ``test_faults.py``: every case runs ``python -m cosim`` in a subprocess and asserts its exit code,
+one message line naming the cause, no traceback; each runs with its own temporary folder (``TMPDIR``), which must be
+empty afterwards, and writes nowhere but ``tmp_path``.
+"""
+
+from __future__ import annotations
+
+import os
+import re
+import resource
+from pathlib import Path
+
+import pytest
+from cli_helpers import cosim
+from test_faults import fails
+
+from cosim.io.runlog import MAX_CHUNK_BYTES
+
+pytestmark = pytest.mark.integration
+
+MEMORY_LIMIT = 1024 ** 3
+"""Address space of a command reading a forged log, bytes: well above what reading a small log takes, well under the
+2.5 GiB a bomb inflates to, so a regression fails on the spot instead of exhausting the machine."""
+
+
+@pytest.fixture
+def run(tmp_path):
+    """``cosim`` with a temporary folder of its own, which must be left empty."""
+    tmp = tmp_path / "tmp"
+    tmp.mkdir()
+
+    def call(*args, limit_memory: bool = False, **kw):
+        def limit() -> None:
+            resource.setrlimit(resource.RLIMIT_AS, (MEMORY_LIMIT, MEMORY_LIMIT))
+
+        env = {**os.environ, "TMPDIR": str(tmp), **kw.pop("env", {})}
+        return cosim(*args, env=env, preexec_fn=limit if limit_memory else None, **kw)
+
+    yield call
+    assert not any(tmp.iterdir()), f"left in the temporary folder: {sorted(p.name for p in tmp.iterdir())}"
+
+
+# --------------------------------------------------------------------------- MCAP decompression bombs
+
+BOMB_BYTES = 5 * 2 ** 29  # 2.5 GiB of zeros: about 80 kB of zstd
+
+
+def _zeros(compression: str, n: int) -> bytes:
+    """``n`` zero bytes compressed as an MCAP chunk is (one zstd or lz4 frame), never held uncompressed."""
+    block = bytes(2 ** 22)
+    if compression == "zstd":
+        import zstandard
+
+        c = zstandard.ZstdCompressor(level=1).compressobj(size=n)
+    else:
+        import lz4.frame
+
+        c = lz4.frame.LZ4FrameCompressor()
+        head = c.begin(source_size=n)
+    parts = [] if compression == "zstd" else [head]
+    for start in range(0, n, len(block)):
+        parts.append(c.compress(block[:n - start]))
+    parts.append(c.flush())
+    return b"".join(parts)
+
+
+def forged_log(path: Path, declared: int, inflated: int, compression: str = "zstd") -> int:
+    """Write a finished, indexed MCAP log (header, a channel, one chunk, summary with its chunk index, footer)
+    whose chunk declares ``declared`` uncompressed bytes and inflates to ``inflated``: a lie when they differ, an
+    honest bomb when both are huge. Returns the chunk's byte offset."""
+    from mcap.data_stream import RecordBuilder
+    from mcap.records import Channel, Chunk, ChunkIndex, DataEnd, Footer, Header, Schema
+    from mcap.writer import MCAP0_MAGIC
+
+    schema = Schema(id=1, name="s", encoding="jsonschema", data=b"{}")
+    channel = Channel(id=1, topic="/plant", message_encoding="json", schema_id=1, metadata={})
+    data = _zeros(compression, inflated)
+    b = RecordBuilder()
+    Header(profile="", library="forged").write(b)
+    schema.write(b)
+    channel.write(b)
+    offset = len(MCAP0_MAGIC) + b.count
+    Chunk(compression=compression, data=data, message_start_time=0, message_end_time=0, uncompressed_crc=0,
+          uncompressed_size=declared).write(b)
+    length = len(MCAP0_MAGIC) + b.count - offset
+    DataEnd(data_section_crc=0).write(b)
+    summary = len(MCAP0_MAGIC) + b.count
+    schema.write(b)
+    channel.write(b)
+    ChunkIndex(message_start_time=0, message_end_time=0, chunk_start_offset=offset, chunk_length=length,
+               message_index_offsets={1: offset + length}, message_index_length=0, compression=compression,
+               compressed_size=len(data), uncompressed_size=declared).write(b)
+    Footer(summary_start=summary, summary_offset_start=0, summary_crc=0).write(b)
+    path.write_bytes(MCAP0_MAGIC + b.end() + MCAP0_MAGIC)
+    return offset
+
+
+def _commands(log: Path, tmp_path: Path) -> list[tuple]:
+    """Every command that reads a log."""
+    return [("recover", log, "--out", tmp_path / "r.mcap"), ("compare", log, log),
+            ("report", log, "--out", tmp_path / "report"), ("table", log),
+            ("baseline", log, "--out", tmp_path / "b.mcap")]
+
+
+@pytest.mark.parametrize("compression", ["zstd", "lz4"])
+def test_a_chunk_lying_about_its_size_is_refused_by_every_reader(tmp_path, run, compression):
+    log = tmp_path / "lie.mcap"
+    at = forged_log(log, 4096, BOMB_BYTES, compression)
+    assert log.stat().st_size < 12 * 2 ** 20, log.stat().st_size  # a small file (lz4 compresses zeros less)
+    for args in _commands(log, tmp_path):
+        fails(run(*args, limit_memory=True), 2, f"lie.mcap: the MCAP chunk at byte {at} ",
+              "inflates past the 4,096 bytes it declares")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["lie.mcap", "tmp"], "an output was written"
+
+
+def test_an_honest_chunk_over_the_limit_is_refused_before_it_is_inflated(tmp_path, run):
+    log = tmp_path / "bomb.mcap"
+    at = forged_log(log, BOMB_BYTES, BOMB_BYTES)
+    assert log.stat().st_size < 200_000, log.stat().st_size  # the 82 KB of issue 25
+    for args in _commands(log, tmp_path):
+        message = fails(run(*args, limit_memory=True), 2, f"bomb.mcap: the MCAP chunk at byte {at} ",
+                        f"declares {BOMB_BYTES:,} bytes", f"{MAX_CHUNK_BYTES:,}", "cosim.io.runlog.MAX_CHUNK_BYTES")
+        assert "refused" in message, message
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["bomb.mcap", "tmp"], "an output was written"
+
+
+def test_a_chunk_cut_short_is_damage_not_a_record(tmp_path, run):
+    """A chunk that inflates to fewer bytes than it declares (a cut frame) is a damaged log, never parsed in part."""
+    log = tmp_path / "short.mcap"
+    forged_log(log, 8192, 4096)
+    fails(run("compare", log, log), 2, "short.mcap: cannot read the MCAP log", "4,096 of the 8,192 bytes")
+
+
+# --------------------------------------------------------------------------- --scheduler that is not Dask
+
+SWEEP_SCENARIO = Path(__file__).resolve().parents[2] / "scenarios" / "helix_ctc_analytic.yaml"
+
+
+class _Server:
+    """A TCP server on 127.0.0.1 in a thread: ``http`` answers whatever it is sent with an HTTP 400 page, ``silent``
+    accepts and never says a word."""
+
+    def __init__(self, kind: str):
+        import socketserver
+        import threading
+
+        class Handler(socketserver.BaseRequestHandler):
+            def handle(self) -> None:
+                if kind == "http":
+                    self.request.recv(65536)
+                    self.request.sendall(b"HTTP/1.1 400 Bad Request\r\nContent-Type: text/html\r\n"
+                                         b"Content-Length: 24\r\nConnection: close\r\n\r\n<html>bad request</html>")
+                else:
+                    stop.wait(60)
+
+        stop = threading.Event()
+        self.stop = stop
+        self.server = socketserver.ThreadingTCPServer(("127.0.0.1", 0), Handler)
+        self.server.daemon_threads = True
+        self.address = f"tcp://127.0.0.1:{self.server.server_address[1]}"
+        threading.Thread(target=self.server.serve_forever, daemon=True).start()
+
+    def close(self) -> None:
+        self.stop.set()
+        self.server.shutdown()
+        self.server.server_close()
+
+
+@pytest.fixture
+def server(request):
+    s = _Server(request.param)
+    yield s
+    s.close()
+
+
+def _sweep(run, tmp_path, scheduler: str):
+    import time
+
+    t0 = time.monotonic()
+    r = run("sweep", SWEEP_SCENARIO, "--grid", "ctl.gain.kp[1]=1e4,2e4", "--stop-time", "0.05", "--scheduler",
+            scheduler, "--out", tmp_path / "sweep", "--quiet", limit_memory=True, timeout=60)
+    return r, time.monotonic() - t0
+
+
+@pytest.mark.parametrize("server", ["http"], indirect=True)
+def test_a_scheduler_that_answers_http_is_not_dask(server, run, tmp_path):
+    r, _ = _sweep(run, tmp_path, server.address)
+    fails(r, 2, f"--scheduler {server.address}: {server.address} is not a Dask scheduler")
+    assert not (tmp_path / "sweep" / "results.csv").exists(), "a case was run"
+
+
+@pytest.mark.parametrize("server", ["silent"], indirect=True)
+def test_a_silent_scheduler_is_given_up_after_the_timeout(server, run, tmp_path):
+    from cosim.analysis.sweep import SweepCluster
+
+    r, wall = _sweep(run, tmp_path, server.address)
+    fails(r, 2, f"--scheduler {server.address}: no answer from {server.address} within "
+                f"{SweepCluster.CONNECT_TIMEOUT:g} s")
+    assert wall < SweepCluster.CONNECT_TIMEOUT + 30, f"{wall:.1f} s to give up"  # bounded, not for ever
+
+
+def test_a_scheduler_address_that_refuses_or_is_not_an_address(run, tmp_path):
+    from cli_helpers import free_port
+
+    address = f"tcp://127.0.0.1:{free_port()}"
+    fails(_sweep(run, tmp_path, address)[0], 2, f"--scheduler {address}: cannot connect to {address} within",
+          "Connection refused")
+    fails(_sweep(run, tmp_path, "notaurl")[0], 2, "--scheduler notaurl: not a scheduler address",
+          "expected tcp://HOST:PORT")
+
+
+# --------------------------------------------------------------------------- results mean what they say
+
+def test_a_sweep_case_that_misses_its_acceptance_check_is_failed(run, tmp_path):
+    """The same run twice, once under a limit it cannot meet: that case is failed (status, summary, exit 1), with
+    its metrics and the check that failed; the sweep run again still counts it failed."""
+    import csv
+    import json
+
+    out = tmp_path / "sweep"
+    args = ("sweep", SWEEP_SCENARIO, "--grid", "checks.max_rmse=1,1e-15", "--stop-time", "0.1", "--workers", "1",
+            "--out", out)
+    r = run(*args, "--quiet", timeout=240)
+    assert r.returncode == 1, r.stdout + r.stderr
+    assert "Traceback" not in r.stderr, r.stderr
+    with (out / "results.csv").open(newline="") as f:
+        rows = {row["checks.max_rmse"]: row for row in csv.DictReader(f)}
+    strict, loose = rows["1e-15"], rows["1"]
+    assert (strict["status"], strict["checks"]) == ("failed", "FAILED"), strict
+    assert strict["message"].startswith("acceptance check failed: max_rmse ") and "> 1e-15" in strict["message"], \
+        strict["message"]
+    assert float(strict["rmse"]) > 1e-15 and strict["rmse"] == loose["rmse"], (strict["rmse"], loose["rmse"])
+    assert (loose["status"], loose["checks"], loose["message"]) == ("ok", "ok", ""), loose
+    assert "2 cases, 1 ok, 1 failed" in r.stdout and f"FAILED {strict['case']} " in r.stdout, r.stdout
+    again = run(*args, "--json", timeout=240)
+    summary = json.loads(again.stdout)
+    assert again.returncode == 1 and (summary["ran"], summary["skipped"]) == (0, 2), (again.returncode, summary)
+    assert not summary["ok"] and len(summary["failed"]) == 1, summary
+
+
+def _same_signals(a: Path, b: Path) -> int:
+    """Assert two logs hold the same signals, stamp for stamp and bit for bit; returns how many."""
+    import numpy as np
+
+    from cosim.io.runlog import read_run
+
+    la, lb = read_run(a), read_run(b)
+    assert la.signals.keys() == lb.signals.keys(), sorted(set(la.signals) ^ set(lb.signals))
+    for name, sa in la.signals.items():
+        sb = lb.signals[name]
+        assert np.array_equal(sa.t_ns, sb.t_ns), (name, sa.t_ns[:5], sb.t_ns[:5])
+        assert np.array_equal(sa.y, sb.y, equal_nan=True), (name, sa.y[:5], sb.y[:5])
+    return len(la.signals)
+
+
+def test_a_run_is_repeated_from_its_log_alone(run, tmp_path):
+    """The log records the command line and the scenario as run (after --set and --stop-time): run again from it,
+    from another folder, it gives the same signals bit for bit; without the override the signals differ (it was
+    applied)."""
+    import json
+
+    from cosim.io.runlog import read_run
+    from cosim.engine.scenario import EFFECTIVE_ATTACHMENT
+
+    first, again, plain = tmp_path / "first.mcap", tmp_path / "again.mcap", tmp_path / "plain.mcap"
+    r = run("run", SWEEP_SCENARIO, "--set", "ctl.gain.kp[1]=2e4", "--stop-time", "0.1", "--out", first, "--quiet")
+    assert r.returncode == 0, r.stderr
+    elsewhere = tmp_path / "elsewhere"
+    elsewhere.mkdir()
+    r = run("run", "--from-log", first, "--out", again, "--quiet", cwd=elsewhere)
+    assert r.returncode == 0, r.stderr
+    assert _same_signals(first, again) > 20
+    log = read_run(first)
+    argv = json.loads(log.metadata["command"]["argv"])
+    assert argv[argv.index("--set") + 1] == "ctl.gain.kp[1]=2e4" and "--stop-time" in argv, argv
+    recorded = json.loads(log.attachments[EFFECTIVE_ATTACHMENT])
+    assert recorded["components"]["ctl"]["parameters"] == {"gain.kp[1]": "2e4"}, recorded["components"]["ctl"]
+    assert recorded["time"]["stop"] == 0.1, recorded["time"]
+    assert recorded["logging"]["out"] == str(first), recorded["logging"]  # the log it ran to, not the file's
+    rerun = json.loads(read_run(again).attachments[EFFECTIVE_ATTACHMENT])
+    assert rerun == {**recorded, "logging": {**recorded["logging"], "out": str(again)}}, (rerun, recorded)
+    assert run("run", SWEEP_SCENARIO, "--stop-time", "0.1", "--out", plain, "--quiet").returncode == 0
+    with pytest.raises(AssertionError):
+        _same_signals(first, plain)
+
+
+def test_run_from_a_log_that_cannot_say_how_it_was_made(run, tmp_path, write_scenario):
+    """A log that is missing, not an MCAP file, records no scenario (an older log), or whose FMU files are gone:
+    one line naming the log and the cause, exit 2, no log written."""
+    import shutil
+
+    golden = Path(__file__).resolve().parents[1] / "golden" / "helix_ctc.mcap"
+    fails(run("run", "--from-log", tmp_path / "none.mcap"), 2, "none.mcap: no such log file")
+    fails(run("run", "--from-log", SWEEP_SCENARIO), 2, "helix_ctc_analytic.yaml: not a readable MCAP log")
+    fails(run("run", "--from-log", golden, "--out", tmp_path / "g.mcap"), 2,
+          "helix_ctc.mcap: the log records no scenario as run")
+    fails(run("run", SWEEP_SCENARIO, "--from-log", golden), 2, "a scenario file or --from-log LOG, not both")
+    fails(run("run"), 2, "run needs a scenario file \\(or --from-log LOG")
+    fmus = tmp_path / "fmus"
+    fmus.mkdir()
+    text = """
+name: small
+components:
+  src: {path: "{CosimTSource}"}
+  g: {path: "{CosimTGain}", parameters: {k: 2.0}}
+connections:
+  - {from: src.y, to: g.u}
+time: {stop: 0.05, step: 0.01}
+"""
+    scenario = write_scenario(text)
+    source = scenario.read_text()
+    for original in set(re.findall(r'path: "([^"]+)"', source)):  # copies the log refers to, removed below
+        copy = fmus / Path(original).name
+        shutil.copy(original, copy)
+        source = source.replace(original, str(copy))
+    scenario.write_text(source)
+    small = tmp_path / "small.mcap"
+    assert run("run", scenario, "--out", small, "--quiet").returncode == 0
+    (fmus / "CosimTGain.fmu").unlink()
+    fails(run("run", "--from-log", small, "--out", tmp_path / "again.mcap"), 2,
+          "small.mcap: components.g.path: FMU file not found: ", re.escape(str(fmus / "CosimTGain.fmu")))
+    assert not (tmp_path / "again.mcap").exists() and not (tmp_path / "g.mcap").exists()
+
+
+@pytest.mark.parametrize("build", ["python", "native"])
+def test_the_analytic_plant_stops_at_the_end_stop_as_the_exudyn_plant(run, build):
+    """A diverging controller drives carriage 3 past its stroke (q_max = 580 mm) at t = 0.138 s: both builds of the
+    analytic plant stop there, as the Exudyn plant does, naming the joint and the limit (they ran on to 'the platform
+    left the workspace', or to 'completed' with a carriage 1.1 m past its stroke)."""
+    from delta.kinematics import END_STOP
+
+    r = run("run", SWEEP_SCENARIO, "--stop-time", "1", "--set", "ctl.gain.kp[1]=1e12", "--set", f"fmus={build}",
+            "--no-log")
+    message = fails(r, 2, "component 'plant': fmi2DoStep returned discard at t = 0.138 s", re.escape(END_STOP),
+                    "leg 3 (joint limit: q = 0.58\\d+ m > q_max = 0.5800 m|is beyond its joint limits)")
+    assert "left the workspace" not in message and "completed" not in r.stdout, (message, r.stdout)
+
+
+@pytest.mark.parametrize("item, cause", [
+    ("ctl.gain.kp[1]=-1", "component 'ctl': .*CTC.kp must be > 0 per joint \\(joint 1\\)"),
+    ("plant.mass.platform=-1", "component 'plant': .*masses.platform must be >= 0"),
+    ("plant.solver.max_step=0", "component 'plant': .*solver.max_step must be a time > 0 s"),
+])
+def test_check_refuses_what_run_refuses_at_t0_with_the_same_message(run, tmp_path, item, cause):
+    """Parameter values the FMUs refuse when they are initialized: check said ok, run failed at t = 0."""
+    ran = fails(run("run", SWEEP_SCENARIO, "--set", item, "--stop-time", "0.01", "--out", tmp_path / "x.mcap"), 2,
+                cause)
+    checked = fails(run("check", SWEEP_SCENARIO, "--set", item), 2, cause)
+    assert checked == ran, (checked, ran)
+    assert run("check", SWEEP_SCENARIO).returncode == 0
+
+
+# --------------------------------------------------------------------------- a viewer that stops reading
+
+class _StalledViewer:
+    """A WebSocket client (websockets' sans-I/O protocol on a plain socket with a small receive buffer) that speaks
+    the Foxglove protocol to ``--live``'s server, subscribes to every channel it advertises, then never reads."""
+
+    def __init__(self, port: int):
+        import threading
+
+        self.port = port
+        self.subscribed = threading.Event()
+        self.sock = None
+        threading.Thread(target=self._run, daemon=True).start()
+
+    def _run(self) -> None:
+        import json
+        import socket
+        import time
+
+        from websockets.client import ClientProtocol
+        from websockets.frames import Frame, Opcode
+        from websockets.typing import Subprotocol
+        from websockets.uri import parse_uri
+
+        deadline = time.monotonic() + 60
+        while True:
+            try:
+                self.sock = socket.create_connection(("127.0.0.1", self.port), timeout=1)
+                break
+            except OSError:
+                if time.monotonic() > deadline:
+                    return
+                time.sleep(0.05)
+        self.sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4096)
+        proto = ClientProtocol(parse_uri(f"ws://127.0.0.1:{self.port}"),
+                               subprotocols=[Subprotocol("foxglove.sdk.v1")], max_size=None)
+        proto.send_request(proto.connect())
+        self.sock.sendall(b"".join(proto.data_to_send()))
+        self.sock.settimeout(10)
+        subscriptions = 0
+        while subscriptions < 5:  # the plant's and the scene's channels, at least
+            proto.receive_data(self.sock.recv(65536))
+            for event in proto.events_received():
+                if isinstance(event, Frame) and event.opcode == Opcode.TEXT:
+                    msg = json.loads(event.data)
+                    if msg.get("op") == "advertise":
+                        new = [{"id": subscriptions + i + 1, "channelId": ch["id"]}
+                               for i, ch in enumerate(msg["channels"])]
+                        subscriptions += len(new)
+                        proto.send_text(json.dumps({"op": "subscribe", "subscriptions": new}).encode())
+                        self.sock.sendall(b"".join(proto.data_to_send()))
+        self.subscribed.set()  # and from here on, never a read
+
+    def close(self) -> None:
+        if self.sock is not None:
+            self.sock.close()
+
+
+LIVE_STOP = 3.0  # s simulated, at wall-clock pace
+
+
+def test_a_viewer_that_stops_reading_does_not_hold_the_run(tmp_path):
+    """The run ends on time, exit 0, its log finished; the viewer is dropped with one warning line (it held a 10 s
+    run 51 s, until the viewer disconnected)."""
+    import time
+
+    from cli_helpers import free_port
+
+    from cosim.observers.live import STOP_TIMEOUT
+    from cosim.io.runlog import read_run
+
+    port, out = free_port(), tmp_path / "live.mcap"
+    viewer = _StalledViewer(port)
+    t0 = time.monotonic()
+    try:
+        r = cosim("run", SWEEP_SCENARIO, "--stop-time", LIVE_STOP, "--live", port, "--realtime", "--out", out,
+                  "--quiet", timeout=60)
+        wall = time.monotonic() - t0
+    finally:
+        viewer.close()
+    assert viewer.subscribed.is_set(), "the viewer never subscribed"
+    assert r.returncode == 0 and "Traceback" not in r.stderr, r.stderr
+    lines = r.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith(f"warning: live view on ws://localhost:{port}: a viewer did not "
+                                                   f"take the end of the run within {STOP_TIMEOUT:g} s"), r.stderr
+    assert wall < LIVE_STOP + STOP_TIMEOUT + 30, f"{wall:.1f} s for a {LIVE_STOP} s run"  # start-up included
+    assert read_run(out).status == "completed"
+
+
+@pytest.mark.parametrize("sig, code", [("SIGTERM", 143), ("SIGINT", 130)])
+def test_a_signal_at_the_end_with_a_stalled_viewer_stops_it_and_keeps_the_log(tmp_path, sig, code):
+    """A signal about 1 s after a 3 s run at wall-clock pace ends, while the server waits for the stalled viewer (or,
+    on a slow machine, just before the run ends): the process stops with the signal's exit code and keeps its
+    finished log (the wait ignored SIGINT, and after SIGTERM the finished log was deleted)."""
+    import signal
+    import time
+
+    from cli_helpers import free_port, start_cosim
+
+    from cosim.io.runlog import read_run
+
+    port, out = free_port(), tmp_path / "live.mcap"
+    viewer = _StalledViewer(port)
+    proc = start_cosim("run", SWEEP_SCENARIO, "--stop-time", LIVE_STOP, "--live", port, "--realtime", "--out", out,
+                       "--quiet")
+    try:
+        assert viewer.subscribed.wait(60), "the viewer never subscribed"  # when the run's loop starts
+        time.sleep(LIVE_STOP + 1.0)  # inside the end's wait for the viewer (2 s), never after the process
+        proc.send_signal(getattr(signal, sig))
+        _, err = proc.communicate(timeout=30)
+    finally:
+        proc.kill()
+        viewer.close()
+    assert proc.returncode == code and "Traceback" not in err, (proc.returncode, err)
+    assert f"interrupted ({sig})" in err.strip().splitlines()[-1], err
+    assert out.exists() and not out.with_name(out.name + ".partial").exists(), sorted(os.listdir(tmp_path))
+    assert read_run(out).status in ("completed", "interrupted"), read_run(out).status
+
+
+def test_sigterm_with_a_stalled_viewer_keeps_the_log(tmp_path):
+    """SIGTERM while a viewer has stopped reading: the run stops, says so, finishes and keeps its log (the finished
+    log was deleted)."""
+    import signal
+    import time
+
+    from cli_helpers import free_port, start_cosim
+
+    from cosim.io.runlog import read_run
+
+    port, out = free_port(), tmp_path / "live.mcap"
+    viewer = _StalledViewer(port)
+    proc = start_cosim("run", SWEEP_SCENARIO, "--stop-time", "30", "--live", port, "--realtime", "--out", out,
+                       "--quiet")
+    try:
+        assert viewer.subscribed.wait(60), "the viewer never subscribed"
+        time.sleep(0.5)
+        proc.send_signal(signal.SIGTERM)
+        _, err = proc.communicate(timeout=30)
+    finally:
+        proc.kill()
+        viewer.close()
+    assert proc.returncode == 143 and "Traceback" not in err, err
+    assert "interrupted (SIGTERM)" in err.strip().splitlines()[-1], err
+    assert out.exists() and not out.with_name(out.name + ".partial").exists(), sorted(os.listdir(tmp_path))
+    assert read_run(out).status == "interrupted"
