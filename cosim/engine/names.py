@@ -12,7 +12,7 @@ the component is never parsed here: FMI variable names keep their own dots and q
 
 from __future__ import annotations
 
-__all__ = ["split_ref", "quote", "ref", "name_problem", "safe_stem"]
+__all__ = ["name_problem", "quote", "ref", "safe_stem", "split_ref"]
 
 _QUOTE = "'"
 

@@ -59,8 +59,8 @@ from xml.etree import ElementTree as ET
 
 from ..engine.names import ref, safe_stem
 from ..engine.prepare import input_files, prepare
-from ..engine.wiring import index_text
 from ..engine.scenario import Component, apply_overrides, load_scenario, scenario_from_data
+from ..engine.wiring import index_text
 from ..errors import Issue, ScenarioError
 from ..fmi.extract import MAX_FMU_BYTES, SSP_PREFIX, sweep_orphans
 from .output import check_output
