@@ -23,13 +23,21 @@ Import (:func:`open_ssp`, ``python -m cosim run|check SYSTEM.ssp``) reads any SS
 FMU components (ours or another tool's): the .ssd, its parameter bindings (.ssv files or inline
 parameter sets), the FMUs from the archive, and builds the same :class:`cosim.engine.scenario.Scenario`
 the YAML loader builds, run by the normal :func:`cosim.run.run_scenario`. The base step comes from
-the OSP annotation, else from the FMUs' default experiments (the smallest), else ``--step``; the
-stop time from the default experiment, else the FMUs', else ``--stop-time``. The archive is
+the OSP annotation (``osp:FixedStepAlgorithm baseStepSize``, which also makes the algorithm Jacobi:
+libcosim's fixed_step_algorithm steps every FMU from the previous step's values) or OMSimulator's
+(``oms:FixedStepMaster stepSize`` on the system; two annotations that disagree are an error), else
+from the FMUs' default experiments (the smallest), else ``--step``; the stop time from the default
+experiment, else the FMUs', else ``--stop-time``. Our own annotation, when present, sets the algorithm.
+Parameter bindings of a component and of the system (``Component.parameter`` names, the longest
+component name that fits) are applied, each through its ``.ssm`` parameter mapping (SSP 1.0: a mapped
+name goes to the entry's targets through its linear, boolean, integer or enumeration transformation;
+an unmapped name stays as it is); the system's come last and win. Component names are SSP's: any text
+(``DP Controller``); in dotted names a name with a dot is quoted (:mod:`cosim.engine.names`), and a file
+made from a name is made safe first. The archive is
 unpacked into a temporary directory that :func:`open_ssp` removes when its block ends (also on
 error and Ctrl-C). Bad input raises :class:`SspError`: one line naming the file and the problem.
-Not supported (a clear error, never a silent change): nested systems, signal dictionaries,
-system-level connectors, parameter mappings (.ssm), connection transformations, components that
-are not FMUs, FMI 3 arrays.
+Not supported (a clear error, never a silent change): SSP 2.0, nested systems, signal dictionaries,
+system-level connectors, connection transformations, components that are not FMUs, FMI 3 arrays.
 
 Library choice: the standard library's ``xml.etree.ElementTree``, written against the SSP 1.0 XSDs
 (those shipped with fmpy in ``fmpy/ssp/schema``; the tests validate every exported file against
