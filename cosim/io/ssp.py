@@ -86,9 +86,11 @@ NS = {
     "ssb": "http://ssp-standard.org/SSP1/SystemStructureSignalDictionary",
     "osp": "http://opensimulationplatform.com/SSP/OSPAnnotations",
     "dcs": "https://github.com/delta-cosim/ssp",
+    "oms": "https://raw.githubusercontent.com/OpenModelica/OMSimulator/master/schema/oms.xsd",
 }
 SSD_NAME = "SystemStructure.ssd"
 OSP_ANNOTATION = "com.opensimulationplatform"
+OMS_ANNOTATION = "org.openmodelica"
 OUR_ANNOTATION = "org.delta-cosim.engine.scenario"
 FMU_TYPE = "application/x-fmu-sharedlibrary"
 PARAMETER_SET_TYPE = "application/x-ssp-parameter-set"
@@ -244,10 +246,17 @@ def export_ssp(scenario: Scenario, out: str | Path) -> ExportReport:
     t = scenario.time
     root = _el(None, "ssd:SystemStructureDescription", {
         "xmlns:ssd": NS["ssd"], "xmlns:ssc": NS["ssc"], "xmlns:ssv": NS["ssv"], "xmlns:osp": NS["osp"],
-        "xmlns:dcs": NS["dcs"], "name": scenario.name, "version": "1.0",
+        "xmlns:dcs": NS["dcs"], "xmlns:oms": NS["oms"], "name": scenario.name, "version": "1.0",
         "description": scenario.description or None, "generationTool": "delta-cosim"})
     system = _el(root, "ssd:System", {"name": scenario.name})
     elements = _el(system, "ssd:Elements")
+    # OMSimulator 3.0 types a system by its own annotation (SystemWC, its fixed-step master): without
+    # it the import fails ("[NewSystem] internal error"). It reads only the first ssc:Annotation here.
+    # (appended after the connections: the SSD's order)
+    system_annotations = _el(None, "ssd:Annotations")
+    oms = _el(_el(_el(system_annotations, "ssc:Annotation", {"type": OMS_ANNOTATION}), "oms:Annotations"),
+              "oms:SimulationInformation")
+    _el(oms, "oms:FixedStepMaster", {"description": "oms-ma", "stepSize": _num(t.step)})
     connected = {}  # (component, variable name) that a connection uses (prefixes expanded: plan.links)
     for link in plan.links:
         for port in (link.src, link.dst):
@@ -304,6 +313,7 @@ def export_ssp(scenario: Scenario, out: str | Path) -> ExportReport:
         for link in plan.links:
             _el(conns, "ssd:Connection", {"startElement": names[link.src.comp], "startConnector": _connector(link.src),
                                           "endElement": names[link.dst.comp], "endConnector": _connector(link.dst)})
+    system.append(system_annotations)
     units = _unit_definitions(infos)
     used = {v.unit for info in infos for v in info.variables.values() if v.unit}
     if used & set(units):
@@ -313,7 +323,9 @@ def export_ssp(scenario: Scenario, out: str | Path) -> ExportReport:
     exp = _el(root, "ssd:DefaultExperiment", {"startTime": _num(t.start), "stopTime": _num(t.stop)})
     ann = _el(_el(exp, "ssd:Annotations"), "ssc:Annotation", {"type": OSP_ANNOTATION})
     _el(_el(ann, "osp:Algorithm"), "osp:FixedStepAlgorithm", {"baseStepSize": _num(t.step)})
-    ours = _el(_el(root, "ssd:Annotations"), "ssc:Annotation", {"type": OUR_ANNOTATION})
+    # ours on the system, after OMSimulator's: OMSimulator 3.0 refuses any ssd:Annotations at the top
+    # ("wrong xml schema detected"), though SSP 1.0 allows them there
+    ours = _el(system_annotations, "ssc:Annotation", {"type": OUR_ANNOTATION})
     _el(ours, "dcs:Scenario").text = json.dumps(_extras(scenario), indent=1)
     check_output(out, (*input_files(scenario), *(info.path for info in infos)))
     partial = out.with_name(f".{out.name}.partial")
@@ -571,9 +583,6 @@ def _osp_step(node: ET.Element | None, ssp: Path) -> float | None:
     return None
 
 
-OMS_ANNOTATION = "org.openmodelica"
-
-
 def _local(el: ET.Element) -> str:
     return el.tag.rsplit("}", 1)[-1]
 
@@ -657,7 +666,8 @@ def read_ssp(ssp: str | Path, workdir: str | Path) -> dict[str, Any]:
         if system.find("ssd:SignalDictionaries", NS) is not None:
             raise SspError(ssp, f"{SSD_NAME}: signal dictionaries are not supported")
         extras: dict[str, Any] = {}
-        for ann in root.iterfind("ssd:Annotations/ssc:Annotation", NS):
+        for ann in [*system.iterfind("ssd:Annotations/ssc:Annotation", NS),  # ours, since OMSimulator's check
+                    *root.iterfind("ssd:Annotations/ssc:Annotation", NS)]:  # archives written before
             if ann.get("type") == OUR_ANNOTATION:
                 node = ann.find("dcs:Scenario", NS)
                 try:
