@@ -12,6 +12,7 @@ from delta.robots import get_preset
 from .engine import supervision
 from .engine.execution import Execution, Observer, StopRequest
 from .engine.offload import Offload, choose
+from .engine.names import safe_stem
 from .engine.prepare import input_files, prepare
 from .engine.scenario import Scenario, expand_signal, load_scenario
 from .engine.watchdog import Watchdog, hard_exit
@@ -187,13 +188,6 @@ def _log_path(scenario: Scenario, out: str | Path | None) -> Path:
         base = Path(scenario.source).parent if scenario.source and scenario.source != "<string>" else Path(".")
         return base / scenario.logging.out
     return Path("runs") / f"{safe_stem(scenario.name)}.mcap"
-
-
-def safe_stem(name: str) -> str:
-    """``name`` as a file name in a folder of ours: letters, digits, ``.``, ``_`` and ``-`` kept, any other character
-    ``_``, no leading dot (an SSP's system named ``../../x`` must not put its log outside ``runs/``)."""
-    stem = "".join(c if c.isalnum() or c in "._-" else "_" for c in name).lstrip(".")
-    return stem or "run"
 
 
 def _conclude(output, error: BaseException | None, held: Extractions, offload: Offload | None = None) -> None:

@@ -22,6 +22,7 @@ from delta.trajectories import TYPES
 
 from ..errors import Issue, ScenarioError
 from .algorithm import ALGORITHMS, DEFAULT
+from .names import name_problem, quote, split_ref
 
 __all__ = [
     "Scenario",
@@ -104,8 +105,13 @@ class Connection(_Model):
     @field_validator("src", "dst")
     @classmethod
     def _dotted(cls, v: str) -> str:
-        if v.startswith(".") or v.endswith(".") or ("." not in v and not v.isidentifier()):
-            raise ValueError(f"expected 'component.variable', a prefix 'component.p_ref' or a component, got {v!r}")
+        try:
+            comp, rest, _ = split_ref(v)
+        except ValueError as exc:
+            raise ValueError(str(exc)) from None
+        if not comp or rest == "" or v.endswith("."):
+            raise ValueError(f"expected 'component.variable', a prefix 'component.p_ref' or a component, got {v!r} "
+                             "(a component name with a dot is quoted: 'a.b'.x)")
         return v
 
 
@@ -331,8 +337,9 @@ class Scenario(_Model):
     @model_validator(mode="after")
     def _names(self) -> "Scenario":
         for name in self.components:
-            if not name.isidentifier():
-                raise ValueError(f"component name {name!r} must be an identifier (letters, digits, _)")
+            problem = name_problem(name)
+            if problem:
+                raise ValueError(problem)
         return self
 
 
@@ -568,7 +575,11 @@ def _semantic_issues(s: Scenario) -> list[tuple[tuple, str]]:
     names = list(s.components)
 
     def comp_of(ref: str, loc: tuple) -> None:
-        comp = ref.split(".", 1)[0]
+        try:
+            comp = split_ref(ref)[0]
+        except ValueError as exc:
+            out.append((loc, str(exc)))
+            return
         if comp not in s.components:
             close = difflib.get_close_matches(comp, names, n=3)
             hint = f"; did you mean {', '.join(close)}?" if close else f"; components: {', '.join(names)}"
@@ -804,14 +815,21 @@ def _is_mapping(annotation: Any) -> tuple[bool, Any]:
     return False, None
 
 
-def _unknown_name(name: str, prefix: str, candidates: list[str], origin: str) -> ScenarioError:
+def _unknown_name(name: str, prefix: str, wrong: str, candidates: list[str], origin: str) -> ScenarioError:
     import difflib
 
-    wrong = name[len(prefix):].split(".", 1)[0] if prefix else name.split(".", 1)[0]
     close = difflib.get_close_matches(wrong, candidates, n=3, cutoff=0.5)
-    hint = f"did you mean {', '.join(prefix + c for c in close)}? " if close else ""
-    return ScenarioError(Issue("", f"unknown name {prefix + wrong!r}; {hint}valid here: "
-                                   f"{', '.join(prefix + c for c in candidates)}", origin))
+    hint = f"did you mean {', '.join(prefix + quote(c) for c in close)}? " if close else ""
+    return ScenarioError(Issue("", f"unknown name {prefix + quote(wrong)!r}; {hint}valid here: "
+                                   f"{', '.join(prefix + quote(c) for c in candidates)}", origin))
+
+
+def _split(text: str, origin: str) -> tuple[str, str | None]:
+    try:
+        head, rest, _ = split_ref(text)
+    except ValueError as exc:
+        raise ScenarioError(Issue("", str(exc), origin)) from None
+    return head, rest
 
 
 def resolve_name(name: str, data: dict[str, Any], origin: str = "--set") -> tuple:
@@ -820,42 +838,45 @@ def resolve_name(name: str, data: dict[str, Any], origin: str = "--set") -> tupl
     ``COMP.PARAM`` (``ctl.gain.kp[1]``, ``plant.mass.payload``) is a component parameter;
     otherwise the name walks the scenario's sections: ``time.stop``, ``trajectory.params.rx``,
     ``algorithm``, ``logging.enabled``, ``components.ctl.parameters.gain.kp[1]``. A mapping
-    (parameters, ``trajectory.params``) takes the rest of the name as one key. An unknown
-    name raises :class:`ScenarioError`, one line citing ``origin``, with the close matches.
+    (parameters, ``trajectory.params``) takes the rest of the name as one key. A component name
+    with a dot is quoted (``'Ship.Engine'.rpm``, ``components.'Ship.Engine'.step_multiple``;
+    :mod:`cosim.engine.names`). An unknown name raises :class:`ScenarioError`, one line citing
+    ``origin``, with the close matches.
     """
     components = data.get("components") or {}
-    head, _, rest = name.partition(".")
+    head, rest = _split(name, origin)
     if head in components:
         if not rest:
             raise ScenarioError(Issue("", f"{name!r} is a component: name one of its parameters, "
-                                          f"{name}.PARAM", origin))
+                                          f"{quote(head)}.PARAM", origin))
         return ("components", head, "parameters", rest)
     model: type[BaseModel] = Scenario
-    parts = name.split(".")
+    remaining: str | None = name
     path: tuple = ()
-    while parts:
+    while remaining is not None:
         fields = {(f.alias or n): f for n, f in model.model_fields.items() if n != "source"}
-        prefix = ".".join(map(str, path)) + "." if path else ""
-        key = parts.pop(0)
+        prefix = ".".join(quote(str(p)) for p in path) + "." if path else ""
+        key, remaining = _split(remaining, origin)
         if key not in fields:
             top = list(components) + list(fields) if not path else list(fields)
-            raise _unknown_name(name, prefix, top, origin)
+            raise _unknown_name(name, prefix, key, top, origin)
         path += (key,)
         ann = fields[key].annotation
         is_map, value_ann = _is_mapping(ann)
         sub = _model_of(value_ann) if is_map else _model_of(ann)
         if is_map and sub is not None:  # components: one key, then its model
-            if not parts:
+            if remaining is None:
                 return path
-            path += (parts.pop(0),)
+            key, remaining = _split(remaining, origin)
+            path += (key,)
             model = sub
         elif is_map:  # parameters, trajectory.params, tolerances: the rest is one key
-            return path + (".".join(parts),) if parts else path
+            return path + (remaining,) if remaining is not None else path
         elif sub is not None:
             model = sub
-        elif parts:
+        elif remaining is not None:
             raise ScenarioError(Issue("", f"{'.'.join(map(str, path))} is a value, it has no "
-                                          f"{'.'.join(parts)!r}", origin))
+                                          f"{remaining!r}", origin))
     return path
 
 
@@ -875,11 +896,16 @@ def apply_overrides(sets: list[str], stop_time: float | None = None) -> Override
     """Turn ``--set NAME=value`` (dotted names, :func:`resolve_name`) and ``--stop-time`` into loader overrides."""
     out = Overrides()
     for item in sets:
-        key = item.split("=", 1)[0]
-        if "=" not in item or not key or key.startswith(".") or key.endswith("."):
+        try:  # a quoted component name may hold '=': the key ends at the first '=' after it
+            end = split_ref(item)[2] if item.startswith("'") else 0
+        except ValueError as exc:
+            raise ScenarioError(Issue("", str(exc), f"--set {item}")) from None
+        at = item.find("=", end)
+        key = item[:at] if at >= 0 else item
+        if at < 0 or not key or key.startswith(".") or key.endswith("."):
             raise ScenarioError(Issue("", f"expected NAME=value (component.parameter, time.stop, "
                                           f"trajectory.params.NAME, ...), got {item!r}", "--set"))
-        value = parse_set_value(item.split("=", 1)[1], f"--set {item}")
+        value = parse_set_value(item[at + 1:], f"--set {item}")
         out.put((DOTTED, key), value, f"--set {item}")
     if stop_time is not None:
         out.put(("time", "stop"), stop_time, f"--stop-time {stop_time:g}")

@@ -14,6 +14,7 @@ from typing import Any, Callable, Mapping
 from ..errors import AlgebraicLoopError, Issue, UnknownSignalError, WiringError
 from ..fmi import FMUInfo, Variable
 from .algorithm import ALGORITHMS
+from .names import quote, split_ref
 from .scenario import Scenario, expand_signal
 from .wiring import expand_connection, find_variable, index_text
 
@@ -41,7 +42,7 @@ class Port:
         return self.var.count if self.element is None else 1
 
     def label(self, names: list[str]) -> str:
-        return f"{names[self.comp]}.{self.var.name}{index_text(self.var, self.element)}"
+        return f"{quote(names[self.comp])}.{self.var.name}{index_text(self.var, self.element)}"
 
 
 @dataclass(frozen=True)
@@ -151,7 +152,10 @@ class SystemPlan:
     logged: list[list[Variable]] = field(default_factory=list)  # inputs + outputs recorded, per component
 
     def port(self, ref: str) -> Port:
-        comp, name = ref.split(".", 1)
+        comp, name, _ = split_ref(ref)
+        if comp not in self.names or name is None:
+            raise UnknownSignalError(f"{ref}: no such component.variable (components: "
+                                     f"{', '.join(map(quote, self.names))})")
         i = self.names.index(comp)
         var, element, problem = find_variable(self.infos[i], name)
         if var is None:
@@ -253,8 +257,8 @@ def _links(scenario: Scenario, infos: dict[str, FMUInfo], idx: dict[str, int], i
     links: list[Link] = []
 
     def resolve(ref: str, loc: tuple, role: str) -> Port | None:
-        comp, vname = ref.split(".", 1)
-        if comp not in idx:
+        comp, vname, _ = split_ref(ref)
+        if comp not in idx or vname is None:
             return None  # already reported by the scenario validation
         info = infos[comp]
         want = ("output",) if role == "output" else ("input",)
@@ -307,8 +311,8 @@ def _reads(scenario: Scenario, infos: dict[str, FMUInfo], idx: dict[str, int], i
         extra_reads += expand_signal(scenario.logging.scene.position)
     reads: list[Port] = []
     for ref in extra_reads:
-        comp, vname = ref.split(".", 1)
-        if comp in idx:
+        comp, vname, _ = split_ref(ref)
+        if comp in idx and vname is not None:
             var, element, _ = find_variable(infos[comp], vname)
             if var is None or var.causality not in ("output", "input"):
                 outs = [v.name for v in infos[comp].variables.values() if v.causality == "output"]
@@ -357,12 +361,15 @@ def _order(scenario: Scenario, infos: dict[str, FMUInfo], names: list[str], link
         if loop is not None:
             labels, undeclared = loop
             free = [a.name for a in ALGORITHMS.values() if not a.reads_this_step]
-            remedy = "use " + " or ".join(f"algorithm: {a}" for a in free) if free else ""
+            # an SSP archive has no YAML to edit: the advice is the command-line option that does the same
+            ssp = (scenario.source or "").lower().endswith(".ssp")
+            setting = "--set {}={}" if ssp else "{}: {}"
+            remedy = "use " + " or ".join(setting.format("algorithm", a) for a in free) if free else ""
             err = AlgebraicLoopError(labels, remedy)
             if undeclared:
-                hint = (f"; {', '.join(sorted(undeclared))} do not declare output dependencies in ModelStructure "
-                        f"(so every output is assumed to depend on every input): if they have no direct "
-                        f"feedthrough, set components.<name>.feedthrough: none")
+                hint = (f"; {', '.join(sorted(map(quote, undeclared)))} do not declare output dependencies in "
+                        f"ModelStructure (so every output is assumed to depend on every input): if they have no "
+                        f"direct feedthrough, set {setting.format('components.<name>.feedthrough', 'none')}")
                 err = AlgebraicLoopError(labels, remedy)
                 err.issues[0] = sources.issue(("connections",), err.issues[0].message + hint)
             else:

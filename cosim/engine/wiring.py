@@ -15,6 +15,7 @@ from __future__ import annotations
 import re
 
 from ..fmi import FMUInfo, Variable
+from .names import ref, split_ref
 
 __all__ = ["expand_connection", "find_variable", "index_text"]
 
@@ -72,17 +73,17 @@ def expand_connection(src: str, dst: str, infos: dict[str, FMUInfo]) -> tuple[li
 
     Ends that resolve to variables give ``[(src, dst)]`` unchanged (the caller checks them).
     """
-    if "." not in src and "." not in dst:  # component to component: every output with a same-named input
-        if src not in infos or dst not in infos:
+    (sc, sname, _), (dc, dname, _) = split_ref(src), split_ref(dst)  # the scenario checked the quoting
+    if sname is None and dname is None:  # component to component: every output with a same-named input
+        if sc not in infos or dc not in infos:
             return [], ""  # an unknown component: reported by the scenario validation
-        inputs = {v.name for v in infos[dst].variables.values() if v.causality == "input"}
-        names = [v.name for v in infos[src].variables.values() if v.causality == "output" and v.name in inputs]
+        inputs = {v.name for v in infos[dc].variables.values() if v.causality == "input"}
+        names = [v.name for v in infos[sc].variables.values() if v.causality == "output" and v.name in inputs]
         if not names:
             return [], f"{src} has no output named like an input of {dst}"
-        return [(f"{src}.{n}", f"{dst}.{n}") for n in names], ""
-    if "." not in src or "." not in dst:
-        return [], f"give both ends as components ({src.split('.')[0]} -> {dst.split('.')[0]}) or both as variables"
-    (sc, sname), (dc, dname) = src.split(".", 1), dst.split(".", 1)
+        return [(ref(sc, n), ref(dc, n)) for n in names], ""
+    if sname is None or dname is None:
+        return [], f"give both ends as components ({ref(sc, '')} -> {ref(dc, '')}) or both as variables"
     if sc not in infos or dc not in infos:
         return [(src, dst)], ""
     s_var = find_variable(infos[sc], sname)[0]
@@ -97,4 +98,4 @@ def expand_connection(src: str, dst: str, infos: dict[str, FMUInfo]) -> tuple[li
         return [], (f"prefix connection: {src} has {len(s_suf)} output(s) ({' '.join(s_suf)}), {dst} has "
                     f"{len(d_suf)} input(s) ({' '.join(d_suf)}); they must match suffix by suffix")
     d_by = dict(d_mem)
-    return [(f"{sc}.{name}", f"{dc}.{d_by[suf]}") for suf, name in s_mem], ""
+    return [(ref(sc, name), ref(dc, d_by[suf])) for suf, name in s_mem], ""

@@ -23,13 +23,21 @@ Import (:func:`open_ssp`, ``python -m cosim run|check SYSTEM.ssp``) reads any SS
 FMU components (ours or another tool's): the .ssd, its parameter bindings (.ssv files or inline
 parameter sets), the FMUs from the archive, and builds the same :class:`cosim.engine.scenario.Scenario`
 the YAML loader builds, run by the normal :func:`cosim.run.run_scenario`. The base step comes from
-the OSP annotation, else from the FMUs' default experiments (the smallest), else ``--step``; the
-stop time from the default experiment, else the FMUs', else ``--stop-time``. The archive is
+the OSP annotation (``osp:FixedStepAlgorithm baseStepSize``, which also makes the algorithm Jacobi:
+libcosim's fixed_step_algorithm steps every FMU from the previous step's values) or OMSimulator's
+(``oms:FixedStepMaster stepSize`` on the system; two annotations that disagree are an error), else
+from the FMUs' default experiments (the smallest), else ``--step``; the stop time from the default
+experiment, else the FMUs', else ``--stop-time``. Our own annotation, when present, sets the algorithm.
+Parameter bindings of a component and of the system (``Component.parameter`` names, the longest
+component name that fits) are applied, each through its ``.ssm`` parameter mapping (SSP 1.0: a mapped
+name goes to the entry's targets through its linear, boolean, integer or enumeration transformation;
+an unmapped name stays as it is); the system's come last and win. Component names are SSP's: any text
+(``DP Controller``); in dotted names a name with a dot is quoted (:mod:`cosim.engine.names`), and a file
+made from a name is made safe first. The archive is
 unpacked into a temporary directory that :func:`open_ssp` removes when its block ends (also on
 error and Ctrl-C). Bad input raises :class:`SspError`: one line naming the file and the problem.
-Not supported (a clear error, never a silent change): nested systems, signal dictionaries,
-system-level connectors, parameter mappings (.ssm), connection transformations, components that
-are not FMUs, FMI 3 arrays.
+Not supported (a clear error, never a silent change): SSP 2.0, nested systems, signal dictionaries,
+system-level connectors, connection transformations, components that are not FMUs, FMI 3 arrays.
 
 Library choice: the standard library's ``xml.etree.ElementTree``, written against the SSP 1.0 XSDs
 (those shipped with fmpy in ``fmpy/ssp/schema``; the tests validate every exported file against
@@ -57,8 +65,10 @@ from typing import TYPE_CHECKING, Any, Iterator
 from urllib.parse import unquote, urlparse
 from xml.etree import ElementTree as ET
 
+from ..engine.names import ref, safe_stem
 from ..engine.prepare import input_files, prepare
 from ..engine.scenario import Component, apply_overrides, load_scenario, scenario_from_data
+from ..engine.wiring import index_text
 from ..errors import Issue, ScenarioError
 from ..fmi.extract import MAX_FMU_BYTES, SSP_PREFIX, sweep_orphans
 from .output import check_output
@@ -76,9 +86,11 @@ NS = {
     "ssb": "http://ssp-standard.org/SSP1/SystemStructureSignalDictionary",
     "osp": "http://opensimulationplatform.com/SSP/OSPAnnotations",
     "dcs": "https://github.com/delta-cosim/ssp",
+    "oms": "https://raw.githubusercontent.com/OpenModelica/OMSimulator/master/schema/oms.xsd",
 }
 SSD_NAME = "SystemStructure.ssd"
 OSP_ANNOTATION = "com.opensimulationplatform"
+OMS_ANNOTATION = "org.openmodelica"
 OUR_ANNOTATION = "org.delta-cosim.engine.scenario"
 FMU_TYPE = "application/x-fmu-sharedlibrary"
 PARAMETER_SET_TYPE = "application/x-ssp-parameter-set"
@@ -202,6 +214,24 @@ def _extras(scenario: Scenario) -> dict[str, Any]:
     return data
 
 
+def _member_stems(names: list[str]) -> list[str]:
+    """File names in ``resources/`` for the components: the name made safe (:func:`cosim.engine.names.safe_stem`;
+    ``DP Controller`` -> ``DP_Controller``), numbered when two would clash."""
+    out: list[str] = []
+    for name in names:
+        stem, n = safe_stem(name, "component"), 2
+        while stem.lower() in {o.lower() for o in out}:
+            stem = f"{safe_stem(name, 'component')}_{n}"
+            n += 1
+        out.append(stem)
+    return out
+
+
+def _connector(port) -> str:
+    """A port's connector name (the variable, with its FMI 3 element index)."""
+    return f"{port.var.name}{index_text(port.var, port.element)}"
+
+
 def export_ssp(scenario: Scenario, out: str | Path) -> ExportReport:
     """Write ``scenario`` as an SSP 1.0 archive at ``out`` (see the module docstring).
 
@@ -216,10 +246,17 @@ def export_ssp(scenario: Scenario, out: str | Path) -> ExportReport:
     t = scenario.time
     root = _el(None, "ssd:SystemStructureDescription", {
         "xmlns:ssd": NS["ssd"], "xmlns:ssc": NS["ssc"], "xmlns:ssv": NS["ssv"], "xmlns:osp": NS["osp"],
-        "xmlns:dcs": NS["dcs"], "name": scenario.name, "version": "1.0",
+        "xmlns:dcs": NS["dcs"], "xmlns:oms": NS["oms"], "name": scenario.name, "version": "1.0",
         "description": scenario.description or None, "generationTool": "delta-cosim"})
     system = _el(root, "ssd:System", {"name": scenario.name})
     elements = _el(system, "ssd:Elements")
+    # OMSimulator 3.0 types a system by its own annotation (SystemWC, its fixed-step master): without
+    # it the import fails ("[NewSystem] internal error"). It reads only the first ssc:Annotation here.
+    # (appended after the connections: the SSD's order)
+    system_annotations = _el(None, "ssd:Annotations")
+    oms = _el(_el(_el(system_annotations, "ssc:Annotation", {"type": OMS_ANNOTATION}), "oms:Annotations"),
+              "oms:SimulationInformation")
+    _el(oms, "oms:FixedStepMaster", {"description": "oms-ma", "stepSize": _num(t.step)})
     connected = {}  # (component, variable name) that a connection uses (prefixes expanded: plan.links)
     for link in plan.links:
         for port in (link.src, link.dst):
@@ -230,9 +267,10 @@ def export_ssp(scenario: Scenario, out: str | Path) -> ExportReport:
                 raise SspError(out, f"connection of {port.label(names)}: FMI 3 arrays have no SSP 1.0 connector")
     ssv_files: dict[str, bytes] = {}
     n_params: dict[str, int] = {}
+    stems = _member_stems(names)
     for c, name in enumerate(names):
         comp, info = scenario.components[name], infos[c]
-        el = _el(elements, "ssd:Component", {"name": name, "type": FMU_TYPE, "source": f"resources/{name}.fmu",
+        el = _el(elements, "ssd:Component", {"name": name, "type": FMU_TYPE, "source": f"resources/{stems[c]}.fmu",
                                              "implementation": _IMPLEMENTATION.get(comp.interface)})
         connectors = _el(el, "ssd:Connectors")
         for var in info.variables.values():
@@ -261,10 +299,10 @@ def export_ssp(scenario: Scenario, out: str | Path) -> ExportReport:
                     _typed(_el(params, "ssv:Parameter", {"name": vname}), "ssv", var, value, f"{name}.")
                 except ValueError as exc:
                     raise SspError(out, str(exc)) from None
-            ssv_files[f"resources/{name}.ssv"] = _xml(pset)
+            ssv_files[f"resources/{stems[c]}.ssv"] = _xml(pset)
             n_params[name] = len(values)
             bindings = _el(el, "ssd:ParameterBindings")
-            _el(bindings, "ssd:ParameterBinding", {"type": PARAMETER_SET_TYPE, "source": f"resources/{name}.ssv"})
+            _el(bindings, "ssd:ParameterBinding", {"type": PARAMETER_SET_TYPE, "source": f"resources/{stems[c]}.ssv"})
         else:
             n_params[name] = 0
         if comp.step_multiple != 1:
@@ -273,9 +311,9 @@ def export_ssp(scenario: Scenario, out: str | Path) -> ExportReport:
     if plan.links:
         conns = _el(system, "ssd:Connections")
         for link in plan.links:
-            (se, sc), (ee, ec) = link.src.label(names).split(".", 1), link.dst.label(names).split(".", 1)
-            _el(conns, "ssd:Connection", {"startElement": se, "startConnector": sc, "endElement": ee,
-                                          "endConnector": ec})
+            _el(conns, "ssd:Connection", {"startElement": names[link.src.comp], "startConnector": _connector(link.src),
+                                          "endElement": names[link.dst.comp], "endConnector": _connector(link.dst)})
+    system.append(system_annotations)
     units = _unit_definitions(infos)
     used = {v.unit for info in infos for v in info.variables.values() if v.unit}
     if used & set(units):
@@ -285,7 +323,9 @@ def export_ssp(scenario: Scenario, out: str | Path) -> ExportReport:
     exp = _el(root, "ssd:DefaultExperiment", {"startTime": _num(t.start), "stopTime": _num(t.stop)})
     ann = _el(_el(exp, "ssd:Annotations"), "ssc:Annotation", {"type": OSP_ANNOTATION})
     _el(_el(ann, "osp:Algorithm"), "osp:FixedStepAlgorithm", {"baseStepSize": _num(t.step)})
-    ours = _el(_el(root, "ssd:Annotations"), "ssc:Annotation", {"type": OUR_ANNOTATION})
+    # ours on the system, after OMSimulator's: OMSimulator 3.0 refuses any ssd:Annotations at the top
+    # ("wrong xml schema detected"), though SSP 1.0 allows them there
+    ours = _el(system_annotations, "ssc:Annotation", {"type": OUR_ANNOTATION})
     _el(ours, "dcs:Scenario").text = json.dumps(_extras(scenario), indent=1)
     check_output(out, (*input_files(scenario), *(info.path for info in infos)))
     partial = out.with_name(f".{out.name}.partial")
@@ -294,8 +334,8 @@ def export_ssp(scenario: Scenario, out: str | Path) -> ExportReport:
             z.writestr(SSD_NAME, _xml(root))
             for arc, data in ssv_files.items():
                 z.writestr(arc, data)
-            for name, info in zip(names, infos):
-                z.write(info.path, f"resources/{name}.fmu", compress_type=zipfile.ZIP_STORED)  # already deflated
+            for stem, info in zip(stems, infos):
+                z.write(info.path, f"resources/{stem}.fmu", compress_type=zipfile.ZIP_STORED)  # already deflated
         partial.replace(out)
     finally:
         partial.unlink(missing_ok=True)
@@ -327,11 +367,6 @@ def _read_member(zf: zipfile.ZipFile, member: str, ssp: Path) -> bytes:
     if len(data) > MAX_XML_BYTES:
         raise SspError(ssp, f"{member} unpacks to more than {MAX_XML_BYTES:,} bytes: refused")
     return data
-
-
-def _plain_file(name: str) -> bool:
-    """A file name without separators or dots alone (safe to join to a folder of ours)."""
-    return name not in ("", ".", "..") and "/" not in name and "\\" not in name and "\0" not in name
 
 
 def _member(base: str, uri: str, ssp: Path, what: str) -> str:
@@ -385,28 +420,147 @@ def _parameter_set(pset: ET.Element, ssp: Path, where: str, prefix: str) -> dict
     return values
 
 
-def _bindings(el: ET.Element, zf: zipfile.ZipFile, ssp: Path, comp: str) -> dict[str, Any]:
-    values: dict[str, Any] = {}
+PARAMETER_MAPPING_TYPE = "application/x-ssp-parameter-mapping"
+
+
+def _mapping(b: ET.Element, zf: zipfile.ZipFile, ssp: Path, where: str) -> tuple[str, dict[str, list]]:
+    """The ``ssd:ParameterMapping`` of binding ``b``: (its file or "inline", parameter name -> [(target,
+    transformation element or None)]); no mapping: ("", {})."""
+    pm = b.find("ssd:ParameterMapping", NS)
+    if pm is None:
+        return "", {}
+    mtype = pm.get("type", PARAMETER_MAPPING_TYPE)
+    if mtype != PARAMETER_MAPPING_TYPE:
+        raise SspError(ssp, f"{where}: parameter mapping of type {mtype!r} is not supported (only "
+                            f"{PARAMETER_MAPPING_TYPE})")
+    if pm.get("source") is not None:
+        what = _member("", pm.get("source"), ssp, f"{where}: parameter mapping")
+        try:
+            root = _parse_xml(_read_member(zf, what, ssp), ssp, what)
+        except KeyError:
+            raise SspError(ssp, f"{where}: parameter mapping source {what} is not in the archive") from None
+    else:
+        what, root = "inline parameter mapping", pm.find("ssm:ParameterMapping", NS)
+        if root is None:
+            raise SspError(ssp, f"{where}: ssd:ParameterMapping has neither a source nor an ssm:ParameterMapping")
+    if root.tag != _q("ssm", "ParameterMapping"):
+        raise SspError(ssp, f"{what}: expected an ssm:ParameterMapping, found {root.tag}")
+    entries: dict[str, list] = {}
+    for e in root.iterfind("ssm:MappingEntry", NS):
+        src, dst = e.get("source"), e.get("target")
+        if not src or not dst:
+            raise SspError(ssp, f"{what}: a MappingEntry without source or target")
+        transforms = [c for c in e if c.tag.startswith(f"{{{NS['ssc']}}}")]
+        known = [c for c in transforms if c.tag.rsplit("}", 1)[1] in _TRANSFORMATIONS]
+        if len(known) != len(transforms) or len(known) > 1:
+            found = ", ".join(c.tag.rsplit("}", 1)[1] for c in transforms)
+            raise SspError(ssp, f"{what}: mapping {src} -> {dst}: transformation {found} is not supported (one of "
+                                f"{', '.join(_TRANSFORMATIONS)})")
+        entries.setdefault(src, []).append((dst, known[0] if known else None))
+    return what, entries
+
+
+_TRANSFORMATIONS = ("LinearTransformation", "BooleanMappingTransformation", "IntegerMappingTransformation",
+                    "EnumerationMappingTransformation")
+
+
+def _transform(value: Any, tr: ET.Element | None, ssp: Path, where: str) -> Any:
+    """``value`` through an SSP 1.0 transformation (ssc:LinearTransformation: factor * value + offset; the
+    mapping transformations: the ssc:MapEntry whose source is the value)."""
+    if tr is None:
+        return value
+    kind = tr.tag.rsplit("}", 1)[1]
+    if kind == "LinearTransformation":
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            raise SspError(ssp, f"{where}: a LinearTransformation needs a Real or Integer value, got {value!r}")
+        try:
+            factor, offset = float(tr.get("factor", "1")), float(tr.get("offset", "0"))
+        except ValueError:
+            raise SspError(ssp, f"{where}: LinearTransformation factor/offset are not numbers") from None
+        out = factor * value + offset
+        return out if isinstance(value, float) or out != int(out) else int(out)
+    text = ("true" if value else "false") if isinstance(value, bool) else str(value)
+    for m in tr.iterfind("ssc:MapEntry", NS):
+        source = m.get("source", "")
+        if source == text or (kind == "BooleanMappingTransformation" and _bool_text(source) == value):
+            target = m.get("target", "")
+            return _bool_text(target) if kind == "BooleanMappingTransformation" else _int_text(target, ssp, where)
+    raise SspError(ssp, f"{where}: {kind} has no MapEntry for the value {text!r}")
+
+
+def _bool_text(text: str) -> bool | None:
+    return {"true": True, "1": True, "false": False, "0": False}.get(text.strip())
+
+
+def _int_text(text: str, ssp: Path, where: str) -> int:
+    try:
+        return int(text)
+    except ValueError:
+        raise SspError(ssp, f"{where}: MapEntry target {text!r} is not an integer") from None
+
+
+def _binding_values(el: ET.Element, zf: zipfile.ZipFile, ssp: Path, where: str) -> list[tuple[str, Any, str]]:
+    """(name, value, file) of every parameter the ``ssd:ParameterBindings`` under ``el`` give, in order, each
+    through its binding's parameter mapping (a mapped name takes the mapping's targets; an unmapped name stays)
+    and prefix."""
+    out: list[tuple[str, Any, str]] = []
     for b in el.iterfind("ssd:ParameterBindings/ssd:ParameterBinding", NS):
         btype = b.get("type", PARAMETER_SET_TYPE)
         if btype != PARAMETER_SET_TYPE:
-            raise SspError(ssp, f"component {comp!r}: parameter binding of type {btype!r} is not supported "
+            raise SspError(ssp, f"{where}: parameter binding of type {btype!r} is not supported "
                                 f"(only {PARAMETER_SET_TYPE})")
-        if b.find("ssd:ParameterMapping", NS) is not None:
-            raise SspError(ssp, f"component {comp!r}: parameter mappings (.ssm) are not supported")
+        mapping_file, mapping = _mapping(b, zf, ssp, where)
         prefix = b.get("prefix", "")
         source = b.get("source")
+        sets: list[tuple[str, dict[str, Any]]] = []
         if source is not None:
-            member = _member("", source, ssp, f"component {comp!r}: parameter binding")
+            member = _member("", source, ssp, f"{where}: parameter binding")
             try:
                 data = _read_member(zf, member, ssp)
             except KeyError:
-                raise SspError(ssp, f"component {comp!r}: parameter binding source {member} is not in the "
-                                    "archive") from None
-            values.update(_parameter_set(_parse_xml(data, ssp, member), ssp, member, prefix))
+                raise SspError(ssp, f"{where}: parameter binding source {member} is not in the archive") from None
+            sets.append((member, _parameter_set(_parse_xml(data, ssp, member), ssp, member, "")))
         for pset in b.iterfind("ssd:ParameterValues/ssv:ParameterSet", NS):
-            values.update(_parameter_set(pset, ssp, f"component {comp!r}: inline parameter values", prefix))
-    return values
+            label = f"{where}: inline parameter values"
+            sets.append((label, _parameter_set(pset, ssp, label, "")))
+        for file, values in sets:
+            for name, value in values.items():
+                for target, tr in mapping.get(name, [(name, None)]):
+                    value_out = _transform(value, tr, ssp, f"{mapping_file}: parameter {name} of {file}")
+                    out.append((prefix + target, value_out, file))
+    return out
+
+
+def _bindings(el: ET.Element, zf: zipfile.ZipFile, ssp: Path, comp: str) -> dict[str, Any]:
+    return {name: value for name, value, _ in _binding_values(el, zf, ssp, f"component {comp!r}")}
+
+
+def _system_bindings(system: ET.Element, zf: zipfile.ZipFile, ssp: Path, components: dict[str, dict[str, Any]]) \
+        -> None:
+    """Apply the system's own parameter bindings to the components they name (SSP 1.0: a parameter of a
+    system-level set is named ``Component.parameter``; the longest component name that fits is taken, so
+    names with dots need no quoting here). They come after the components' own bindings and win over them.
+    A parameter that names no component, or no variable of it, is one error naming the file and the parameter."""
+    import fmpy
+
+    names = sorted(components, key=len, reverse=True)
+    variables: dict[str, set[str]] = {}
+    for name, value, file in _binding_values(system, zf, ssp, "the system"):
+        comp = next((c for c in names if name.startswith(c + ".")), None)
+        if comp is None:
+            raise SspError(ssp, f"{file}: parameter {name!r} of a system-level binding names no component "
+                                f"(expected Component.parameter; components: {', '.join(components)})")
+        var = name[len(comp) + 1:]
+        if comp not in variables:
+            path = components[comp]["path"]
+            try:
+                md = fmpy.read_model_description(path, validate=False)
+            except Exception as exc:  # noqa: BLE001 - a broken FMU, named
+                raise SspError(ssp, f"component {comp!r}: cannot read the FMU's modelDescription.xml ({exc})") from None
+            variables[comp] = {v.name for v in md.modelVariables}
+        if var not in variables[comp]:
+            raise SspError(ssp, f"{file}: parameter {name!r}: component {comp!r} has no variable {var!r}")
+        components[comp].setdefault("parameters", {})[var] = value
 
 
 def _osp_step(node: ET.Element | None, ssp: Path) -> float | None:
@@ -426,6 +580,36 @@ def _osp_step(node: ET.Element | None, ssp: Path) -> float | None:
             if not step > 0 or not math.isfinite(step):
                 raise SspError(ssp, f"osp:FixedStepAlgorithm baseStepSize must be > 0, got {step}")
             return step
+    return None
+
+
+def _local(el: ET.Element) -> str:
+    return el.tag.rsplit("}", 1)[-1]
+
+
+def _oms_step(system: ET.Element, ssp: Path) -> float | None:
+    """The base step of OMSimulator's annotation on the system (its ``SystemWC``: ``<ssc:Annotation
+    type="org.openmodelica"><oms:Annotations><oms:SimulationInformation><oms:FixedStepMaster
+    stepSize=.../>``; ``oms:VariableStepMaster``: its ``maximumStepSize``), if any. Tags are matched by
+    local name, as OMSimulator matches them by its own prefix without resolving namespaces."""
+    for ann in system.iterfind("ssd:Annotations/ssc:Annotation", NS):
+        if ann.get("type") != OMS_ANNOTATION:
+            continue
+        for info in ann.iter():
+            if _local(info) != "SimulationInformation":
+                continue
+            for master in info:
+                attr = {"FixedStepMaster": "stepSize", "VariableStepMaster": "maximumStepSize"}.get(_local(master))
+                if attr is None:
+                    continue
+                try:
+                    step = float(master.get(attr, ""))
+                except ValueError:
+                    raise SspError(ssp, f"{SSD_NAME}: OMSimulator's {_local(master)} {attr} {master.get(attr)!r} "
+                                        "is not a number") from None
+                if not step > 0 or not math.isfinite(step):
+                    raise SspError(ssp, f"{SSD_NAME}: OMSimulator's {_local(master)} {attr} must be > 0, got {step}")
+                return step
     return None
 
 
@@ -467,6 +651,8 @@ def read_ssp(ssp: str | Path, workdir: str | Path) -> dict[str, Any]:
             found = ", ".join(sorted(m for m in members if m.endswith(".ssd"))) or "none"
             raise SspError(ssp, f"no {SSD_NAME} at the top of the archive (.ssd files found: {found})")
         root = _parse_xml(_read_member(zf, SSD_NAME, ssp), ssp, SSD_NAME)
+        if root.tag.startswith("{http://ssp-standard.org/SSP2/"):
+            raise SspError(ssp, f"{SSD_NAME}: SSP 2.0 is not supported (SSP 1.0 only)")
         if root.tag != _q("ssd", "SystemStructureDescription"):
             raise SspError(ssp, f"{SSD_NAME}: the root element is {root.tag}, expected ssd:SystemStructureDescription "
                                 f"in namespace {NS['ssd']}")
@@ -477,8 +663,11 @@ def read_ssp(ssp: str | Path, workdir: str | Path) -> dict[str, Any]:
             raise SspError(ssp, f"{SSD_NAME}: no ssd:System element")
         if system.find("ssd:Connectors", NS) is not None:
             raise SspError(ssp, f"{SSD_NAME}: connectors of the system itself are not supported (only components')")
+        if system.find("ssd:SignalDictionaries", NS) is not None:
+            raise SspError(ssp, f"{SSD_NAME}: signal dictionaries are not supported")
         extras: dict[str, Any] = {}
-        for ann in root.iterfind("ssd:Annotations/ssc:Annotation", NS):
+        for ann in [*system.iterfind("ssd:Annotations/ssc:Annotation", NS),  # ours, since OMSimulator's check
+                    *root.iterfind("ssd:Annotations/ssc:Annotation", NS)]:  # archives written before
             if ann.get("type") == OUR_ANNOTATION:
                 node = ann.find("dcs:Scenario", NS)
                 try:
@@ -520,8 +709,8 @@ def read_ssp(ssp: str | Path, workdir: str | Path) -> dict[str, Any]:
                                     f"({', '.join(_INTERFACE)})")
             # the component's name is the SSD's to choose and never a path here: each FMU goes to a folder
             # numbered by its place in the system (a name such as "../../x" wrote outside the work folder)
-            base = posixpath.basename(member)
-            target = workdir / "fmus" / f"{len(components):04d}" / (base if _plain_file(base) else "component.fmu")
+            stem = posixpath.splitext(posixpath.basename(member))[0]
+            target = workdir / "fmus" / f"{len(components):04d}" / f"{safe_stem(stem, 'component')}.fmu"
             if zf.getinfo(member).file_size > MAX_FMU_BYTES:  # read no further than declared: this bounds it
                 raise SspError(ssp, f"component {name!r}: its FMU {member} unpacks to more than "
                                     f"{MAX_FMU_BYTES:,} bytes: refused")
@@ -543,6 +732,7 @@ def read_ssp(ssp: str | Path, workdir: str | Path) -> dict[str, Any]:
             components[name] = comp
         if not components:
             raise SspError(ssp, f"{SSD_NAME}: the system has no components")
+        _system_bindings(system, zf, ssp, components)
 
         connections = []
         for cn in system.iterfind("ssd:Connections/ssd:Connection", NS):
@@ -559,7 +749,7 @@ def read_ssp(ssp: str | Path, workdir: str | Path) -> dict[str, Any]:
                 if conn not in connectors[elem]:
                     known = ", ".join(sorted(connectors[elem])[:12]) or "none"
                     raise SspError(ssp, f"{label}: component {elem!r} has no connector {conn!r} (connectors: {known})")
-                ends.append(f"{elem}.{conn}")
+                ends.append(ref(elem, conn))
             if cn.find("ssc:LinearTransformation", NS) is not None or any(
                     child.tag.endswith("MappingTransformation") for child in cn):
                 raise SspError(ssp, f"connection {ends[0]} -> {ends[1]}: transformations are not supported")
@@ -574,6 +764,11 @@ def read_ssp(ssp: str | Path, workdir: str | Path) -> dict[str, Any]:
                 except ValueError:
                     raise SspError(ssp, f"ssd:DefaultExperiment {attr} {exp.get(attr)!r} is not a number") from None
         step = _osp_step(exp, ssp)
+        oms_step = _oms_step(system, ssp)
+        if step is not None and oms_step is not None and step != oms_step:
+            raise SspError(ssp, f"{SSD_NAME}: the OSP annotation gives the base step {step:g} s, OMSimulator's "
+                                f"{oms_step:g} s: give one (or --step)")
+        step = step if step is not None else oms_step
         if step is None or "stop" not in time:
             fmu_step, fmu_stop = _fmu_defaults(ssp, [Path(c["path"]) for c in components.values()])
             step = step if step is not None else fmu_step
@@ -590,6 +785,8 @@ def read_ssp(ssp: str | Path, workdir: str | Path) -> dict[str, Any]:
                     components[name]["step_multiple"] = round(m)
     data: dict[str, Any] = {"name": extras.pop("name", None) or root.get("name") or ssp.stem,
                             "components": components, "connections": connections, "time": time}
+    if _osp_step(exp, ssp) is not None:  # libcosim's fixed_step_algorithm: every FMU from the last step's values
+        data["algorithm"] = "jacobi"
     if root.get("description") and "description" not in extras:
         data["description"] = root.get("description")
     data.update({k: v for k, v in extras.items() if k in _EXTRAS})

@@ -13,6 +13,7 @@ import sys
 import tempfile
 import zipfile
 from pathlib import Path
+from xml.etree import ElementTree as ET
 
 import numpy as np
 import pytest
@@ -464,3 +465,18 @@ def test_an_fmu_file_that_unpacks_too_far_is_refused(tmp_path, monkeypatch):
     monkeypatch.setattr(fmu_module, "MAX_FMU_BYTES", 100_000)
     with pytest.raises(ComponentSourceError, match="unpacks to"):
         load_fmu(bomb)
+
+
+def test_export_is_typed_for_omsimulator(ssp):
+    """OMSimulator 3.0 (built from source, v3.0.0-158) imports a system only with its own annotation
+    (oms:FixedStepMaster: else "[NewSystem] internal error") and refuses ssd:Annotations at the top
+    ("wrong xml schema detected"): ours go on the system, OMSimulator's first (it reads only the first)."""
+    with zipfile.ZipFile(ssp) as z:
+        root = ET.fromstring(z.read("SystemStructure.ssd"))
+    assert root.find("ssd:Annotations", NS) is None, "top-level annotations break OMSimulator's import"
+    anns = root.findall("ssd:System/ssd:Annotations/ssc:Annotation", NS)
+    assert [a.get("type") for a in anns] == ["org.openmodelica", "org.delta-cosim.engine.scenario"], anns
+    master = anns[0].find("oms:Annotations/oms:SimulationInformation/oms:FixedStepMaster", NS)
+    assert master is not None and float(master.get("stepSize")) == 0.001, ET.tostring(anns[0])
+    with open_ssp(ssp) as sc:  # the OSP and OMSimulator steps agree; our annotation keeps the algorithm
+        assert sc.time.step == 0.001 and sc.algorithm == "gauss_seidel", (sc.time, sc.algorithm)

@@ -80,3 +80,52 @@ def test_schema_types_trajectory_parameters_per_type():
     branches = schema["$defs"]["TrajectorySpec"]["allOf"]
     kinds = [b["if"]["properties"]["type"]["const"] for b in branches]
     assert kinds == ["helix", "pick_and_place", "point_to_point", "waypoints"], kinds
+
+
+# --------------------------------------------------------------------------- names as SSP allows them
+
+QUOTED = {"components": {"DP Controller": {}, "Ship.Engine": {}, "a=b": {}, "ctl": {}}}
+
+
+@pytest.mark.parametrize("name, path", [
+    ("DP Controller.gain.kp", ("components", "DP Controller", "parameters", "gain.kp")),
+    ("'DP Controller'.gain.kp", ("components", "DP Controller", "parameters", "gain.kp")),
+    ("'Ship.Engine'.rpm", ("components", "Ship.Engine", "parameters", "rpm")),
+    ("components.'Ship.Engine'.step_multiple", ("components", "Ship.Engine", "step_multiple")),
+    ("'it\\'s'.x", None),
+])
+def test_quoted_component_names_resolve(name, path):
+    data = {"components": {**QUOTED["components"], "it's": {}}}
+    want = path or ("components", "it's", "parameters", "x")
+    assert resolve_name(name, data) == want, (name, resolve_name(name, data), want)
+
+
+def test_unquoted_dotted_component_name_is_refused_with_the_quoted_spelling():
+    with pytest.raises(ScenarioError) as exc:
+        resolve_name("Ship.Engine.rpm", QUOTED, "--set Ship.Engine.rpm=1")
+    assert "\n" not in str(exc.value) and "'Ship.Engine'" in str(exc.value), str(exc.value)
+
+
+def test_set_splits_after_a_quoted_name_and_refuses_an_open_quote():
+    ov = apply_overrides(["'a=b'.k=3", "DP Controller.gain.kp=2"])
+    assert ov == {("<dotted name>", "'a=b'.k"): 3, ("<dotted name>", "DP Controller.gain.kp"): 2}, ov
+    with pytest.raises(ScenarioError) as exc:
+        apply_overrides(["'Ship.Engine.rpm=1"])
+    assert "no closing quote" in str(exc.value), str(exc.value)
+
+
+def test_names_round_trip_through_quote_and_split():
+    from cosim.engine.names import quote, ref, split_ref
+
+    for name in ["ctl", "DP Controller", "Ship.Engine", "it's", "a\\b", "'q'", "x=y"]:
+        assert split_ref(ref(name, "p.x[1]"))[:2] == (name, "p.x[1]"), (name, ref(name, "p.x[1]"))
+    assert quote("DP Controller") == "DP Controller" and quote("Ship.Engine") == "'Ship.Engine'"
+
+
+def test_component_names_with_spaces_load_and_control_characters_do_not():
+    text = TEXT.replace("ctl:", "DP Controller:").replace("to: ctl.u", "to: DP Controller.u")
+    s = parse_scenario(text, "x.yaml", apply_overrides(["'DP Controller'.gain.kp[1]=4"]))
+    assert s.components["DP Controller"].parameters["gain.kp[1]"] == 4, s.components["DP Controller"]
+    with pytest.raises(ScenarioError) as exc:
+        parse_scenario(TEXT.replace("ctl:", '"c\\tl":'), "x.yaml")
+    assert "control character" in str(exc.value), str(exc.value)

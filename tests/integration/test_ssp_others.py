@@ -1,0 +1,204 @@
+"""SSP files as other tools write them (issue 26, item 2), built here with zipfile and the pythonfmu test FMUs:
+names with spaces and dots, system-level parameter bindings with .ssm mappings, OSP's and OMSimulator's
+algorithm and step annotations, and one line for each SSP feature the master does not support."""
+
+from __future__ import annotations
+
+import zipfile
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from cosim.cli import main
+from cosim.engine.scenario import apply_overrides
+from cosim.io.ssp import SspError, open_ssp
+from cosim.observers.recorders import Probe
+from cosim.run import run_scenario
+
+pytestmark = pytest.mark.integration
+
+HEAD = """<?xml version="1.0" encoding="UTF-8"?>
+<ssd:SystemStructureDescription xmlns:ssd="http://ssp-standard.org/SSP1/SystemStructureDescription"
+    xmlns:ssc="http://ssp-standard.org/SSP1/SystemStructureCommon"
+    xmlns:ssv="http://ssp-standard.org/SSP1/SystemStructureParameterValues"
+    xmlns:ssm="http://ssp-standard.org/SSP1/SystemStructureParameterMapping"
+    xmlns:osp="http://opensimulationplatform.com/SSP/OSPAnnotations"
+    xmlns:oms="https://raw.githubusercontent.com/OpenModelica/OMSimulator/master/schema/oms.xsd"
+    name="others" version="{version}">
+  <ssd:System name="root">
+    {system_extra}
+    <ssd:Elements>
+      <ssd:Component name="Ship.Engine" source="resources/source.fmu">
+        <ssd:Connectors><ssd:Connector name="y" kind="output"><ssc:Real/></ssd:Connector></ssd:Connectors>
+      </ssd:Component>
+      <ssd:Component name="DP Controller" source="resources/gain.fmu">
+        <ssd:Connectors>
+          <ssd:Connector name="u" kind="input"><ssc:Real/></ssd:Connector>
+          <ssd:Connector name="y" kind="output"><ssc:Real/></ssd:Connector>
+        </ssd:Connectors>
+      </ssd:Component>
+      {elements_extra}
+    </ssd:Elements>
+    <ssd:Connections>
+      <ssd:Connection startElement="Ship.Engine" startConnector="y" endElement="DP Controller" endConnector="u"/>
+      {connections_extra}
+    </ssd:Connections>
+  </ssd:System>
+  <ssd:DefaultExperiment startTime="0" stopTime="0.5">{experiment}</ssd:DefaultExperiment>
+</ssd:SystemStructureDescription>
+"""
+OSP_STEP = ('<ssd:Annotations><ssc:Annotation type="com.opensimulationplatform"><osp:Algorithm>'
+            '<osp:FixedStepAlgorithm baseStepSize="0.1"/></osp:Algorithm></ssc:Annotation></ssd:Annotations>')
+OMS_STEP = ('<ssd:Annotations><ssc:Annotation type="org.openmodelica"><oms:Annotations><oms:SimulationInformation>'
+            '<oms:FixedStepMaster description="oms-ma" stepSize="0.05" relativeTolerance="1e-4"/>'
+            '</oms:SimulationInformation></oms:Annotations></ssc:Annotation></ssd:Annotations>')
+SYSTEM_BINDING = ('<ssd:ParameterBindings><ssd:ParameterBinding source="resources/system.ssv">'
+                  '<ssd:ParameterMapping source="resources/system.ssm"/></ssd:ParameterBinding></ssd:ParameterBindings>')
+
+
+def _ssv(params: dict[str, float]) -> str:
+    rows = "".join(f'<ssv:Parameter name="{n}"><ssv:Real value="{v!r}"/></ssv:Parameter>' for n, v in params.items())
+    return ('<?xml version="1.0"?><ssv:ParameterSet xmlns:ssv="http://ssp-standard.org/SSP1/'
+            f'SystemStructureParameterValues" version="1.0" name="system"><ssv:Parameters>{rows}</ssv:Parameters>'
+            '</ssv:ParameterSet>')
+
+
+def _ssm(entries: str) -> str:
+    return ('<?xml version="1.0"?><ssm:ParameterMapping xmlns:ssm="http://ssp-standard.org/SSP1/'
+            'SystemStructureParameterMapping" xmlns:ssc="http://ssp-standard.org/SSP1/SystemStructureCommon" '
+            f'version="1.0">{entries}</ssm:ParameterMapping>')
+
+
+# the system's set: "gain_value" mapped (x 1.5) onto the controller's k, "Ship.Engine.offset" applied by its name
+SSV = _ssv({"gain_value": 2.0, "Ship.Engine.offset": 0.25})
+SSM = _ssm('<ssm:MappingEntry source="gain_value" target="DP Controller.k">'
+           '<ssc:LinearTransformation factor="1.5" offset="0"/></ssm:MappingEntry>')
+
+
+def _archive(tmp_path: Path, test_fmus, name: str = "others.ssp", *, version: str = "1.0", system_extra: str = "",
+             elements_extra: str = "", connections_extra: str = "", experiment: str = OSP_STEP,
+             files: dict[str, str] | None = None, gain: str = "CosimTGain") -> Path:
+    ssd = HEAD.format(version=version, system_extra=system_extra, elements_extra=elements_extra,
+                      connections_extra=connections_extra, experiment=experiment)
+    path = tmp_path / name
+    with zipfile.ZipFile(path, "w") as z:
+        z.writestr("SystemStructure.ssd", ssd)
+        for member, text in (files or {}).items():
+            z.writestr(member, text)
+        z.write(test_fmus["CosimTSource"], "resources/source.fmu")
+        z.write(test_fmus[gain], "resources/gain.fmu")
+    return path
+
+
+def _cli(capsys, *argv) -> tuple[int, str, str]:
+    rc = main([str(a) for a in argv])
+    out = capsys.readouterr()
+    return rc, out.out, out.err
+
+
+def test_names_with_spaces_and_dots_and_a_system_binding_with_a_mapping(tmp_path, test_fmus):
+    """`DP Controller` and `Ship.Engine` connect, take the system-level set through its .ssm (k = 1.5 * 2),
+    and are addressed by --set (`'Ship.Engine'.amplitude`, quoted for its dot) and by probes."""
+    ssp = _archive(tmp_path, test_fmus, system_extra=SYSTEM_BINDING,
+                   files={"resources/system.ssv": SSV, "resources/system.ssm": SSM})
+    probe = Probe(["'Ship.Engine'.y", "DP Controller.y"])
+    overrides = apply_overrides(["'Ship.Engine'.amplitude=0.5", "DP Controller.u=0"])
+    with open_ssp(ssp, overrides) as sc:
+        assert sc.components["DP Controller"].parameters == {"k": 3.0, "u": 0}, sc.components["DP Controller"]
+        assert sc.components["Ship.Engine"].parameters == {"offset": 0.25, "amplitude": 0.5}, \
+            sc.components["Ship.Engine"].parameters
+        assert sc.algorithm == "jacobi", sc.algorithm
+        res = run_scenario(sc, out=tmp_path / "others.mcap", observers=[probe])
+    assert res.steps == 5, res.steps
+    src, gain = np.array(probe.values["'Ship.Engine'.y"]), np.array(probe.values["DP Controller.y"])
+    assert src[0] == 0.25, src  # the system-level offset reached the source
+    # Jacobi (OSP's algorithm): the gain's step k reads the source's output of step k - 1
+    np.testing.assert_allclose(gain[1:], 3.0 * src[:-1], rtol=0, atol=1e-15, err_msg="gain.y != k * src.y(t - h)")
+
+
+def test_the_algebraic_loop_of_an_ssp_is_refused_with_set_advice(tmp_path, test_fmus, capsys):
+    """Two gains in a feedthrough loop: OSP's annotation (Jacobi) runs them; without it (Gauss-Seidel)
+    the loop is refused and the advice is a --set option, not YAML."""
+    loop = ('<ssd:Component name="echo" source="resources/gain.fmu"><ssd:Connectors>'
+            '<ssd:Connector name="u" kind="input"><ssc:Real/></ssd:Connector>'
+            '<ssd:Connector name="y" kind="output"><ssc:Real/></ssd:Connector></ssd:Connectors></ssd:Component>')
+    conns = '<ssd:Connection startElement="DP Controller" startConnector="y" endElement="echo" endConnector="u"/>'
+    ssp = _archive(tmp_path, test_fmus, elements_extra=loop, connections_extra=conns)
+    path = tmp_path / "loop.ssp"  # echo drives the controller: DP Controller.y -> echo.u -> echo.y -> DP Controller.u
+    with zipfile.ZipFile(ssp) as zin, zipfile.ZipFile(path, "w") as zout:
+        for item in zin.namelist():
+            data = zin.read(item)
+            if item == "SystemStructure.ssd":
+                data = data.replace(b'startElement="Ship.Engine" startConnector="y" endElement="DP Controller"',
+                                    b'startElement="echo" startConnector="y" endElement="DP Controller"')
+            zout.writestr(item, data)
+    with open_ssp(path) as sc:
+        assert sc.algorithm == "jacobi", sc.algorithm
+    rc, _, err = _cli(capsys, "run", path, "--no-log", "--quiet")
+    assert rc == 0, err
+    rc, _, err = _cli(capsys, "run", path, "--no-log", "--quiet", "--set", "algorithm=gauss_seidel")
+    assert rc == 2 and len(err.strip().splitlines()) == 1, err
+    assert "algebraic loop" in err and "--set algorithm=jacobi" in err and "algorithm: jacobi" not in err, err
+
+
+def test_omsimulator_step_annotation_sets_the_base_step(tmp_path, test_fmus):
+    """OMSimulator writes its step on the system (oms:FixedStepMaster stepSize); the algorithm stays ours."""
+    ssp = _archive(tmp_path, test_fmus, system_extra=OMS_STEP, experiment="")
+    with open_ssp(ssp) as sc:
+        assert sc.time.step == 0.05 and sc.time.n_steps == 10, sc.time
+        assert sc.algorithm == "gauss_seidel", sc.algorithm
+    both = _archive(tmp_path, test_fmus, "both.ssp", system_extra=OMS_STEP)  # OSP's 0.1 s against OMS's 0.05 s
+    with pytest.raises(SspError) as exc:
+        with open_ssp(both):
+            pass
+    assert "OSP annotation gives the base step 0.1 s, OMSimulator's 0.05 s" in str(exc.value), str(exc.value)
+
+
+NESTED = '<ssd:System name="inner"><ssd:Elements/></ssd:System>'
+BINDING_ERRORS = {
+    "no_component": (_ssv({"Rudder.k": 1.0}), _ssm(""),
+                     "resources/system.ssv: parameter 'Rudder.k' of a system-level binding names no component"),
+    "no_variable": (_ssv({"DP Controller.kp": 1.0}), _ssm(""),
+                    "resources/system.ssv: parameter 'DP Controller.kp': component 'DP Controller' has no "
+                    "variable 'kp'"),
+    "mapped_to_nothing": (_ssv({"g": 1.0}), _ssm('<ssm:MappingEntry source="g" target="Rudder.k"/>'),
+                          "parameter 'Rudder.k' of a system-level binding names no component"),
+    "unknown_map_value": (_ssv({"g": 1.0}), _ssm(
+        '<ssm:MappingEntry source="g" target="DP Controller.k"><ssc:IntegerMappingTransformation>'
+        '<ssc:MapEntry source="2" target="3"/></ssc:IntegerMappingTransformation></ssm:MappingEntry>'),
+        "resources/system.ssm: parameter g of resources/system.ssv: IntegerMappingTransformation has no MapEntry"),
+}
+UNSUPPORTED = {
+    "nested_system": (dict(elements_extra=NESTED), "nested systems"),
+    "system_connectors": (dict(system_extra='<ssd:Connectors><ssd:Connector name="x" kind="input"/></ssd:Connectors>'),
+                          "connectors of the system itself are not supported"),
+    "ssp_2": (dict(version="2.0"), "SSP version '2.0' is not supported"),
+    "signal_dictionary": (dict(system_extra='<ssd:SignalDictionaries/>'), "signal dictionaries are not supported"),
+}
+
+
+@pytest.mark.parametrize("case", list(BINDING_ERRORS))
+def test_a_system_binding_that_cannot_be_applied_is_one_line(tmp_path, test_fmus, capsys, case):
+    ssv, ssm, expected = BINDING_ERRORS[case]
+    ssp = _archive(tmp_path, test_fmus, system_extra=SYSTEM_BINDING,
+                   files={"resources/system.ssv": ssv, "resources/system.ssm": ssm})
+    rc, _, err = _cli(capsys, "run", ssp, "--no-log", "--quiet")
+    assert rc == 2 and len(err.strip().splitlines()) == 1 and expected in err, err
+
+
+@pytest.mark.parametrize("case", list(UNSUPPORTED))
+def test_each_unsupported_ssp_feature_is_one_line_naming_it(tmp_path, test_fmus, capsys, case):
+    kwargs, expected = UNSUPPORTED[case]
+    ssp = _archive(tmp_path, test_fmus, **kwargs)
+    rc, _, err = _cli(capsys, "run", ssp, "--no-log", "--quiet")
+    assert rc == 2 and len(err.strip().splitlines()) == 1 and expected in err and str(ssp) in err, err
+
+
+def test_ssp_2_namespace_is_named(tmp_path, test_fmus, capsys):
+    ssp = tmp_path / "ssp2.ssp"
+    with zipfile.ZipFile(ssp, "w") as z:
+        z.writestr("SystemStructure.ssd", '<ssd:SystemStructureDescription xmlns:ssd="http://ssp-standard.org/SSP2/'
+                                          'SystemStructureDescription" version="2.0" name="x"/>')
+    rc, _, err = _cli(capsys, "run", ssp, "--no-log", "--quiet")
+    assert rc == 2 and "SSP 2.0 is not supported" in err and len(err.strip().splitlines()) == 1, err
