@@ -261,3 +261,70 @@ def test_port_probes_and_bad_handshakes_do_not_end_the_run(tmp_path):
         proc.kill()
     assert proc.returncode == 0, f"exit {proc.returncode}: {err.decode()}"
     assert out.exists() and not out.with_name(out.name + ".partial").exists()
+
+
+def test_a_hundred_viewers_do_not_change_the_run(tmp_path):
+    """100 viewers at once: a third subscribe to every channel and read, a third connect and leave, a third send
+    garbage. The run ends on time with exit 0 and its log holds every sample a run without viewers logs
+    (issue 25: no client behaviour changes the run's result)."""
+    import threading
+
+    from websockets.sync.client import connect
+
+    from cosim.io.runlog import read_run
+
+    served: list[int] = []  # viewers that received a message after subscribing
+
+    def viewer(i: int, port: int, stop: threading.Event) -> None:
+        deadline = time.monotonic() + 60
+        while not stop.is_set() and time.monotonic() < deadline:
+            try:
+                if i % 3 == 2:
+                    with socket.create_connection(("127.0.0.1", port), timeout=2) as s:
+                        s.sendall(b"\x00garbage\xff" * 20)
+                    return
+                with connect(f"ws://127.0.0.1:{port}", subprotocols=["foxglove.sdk.v1"], open_timeout=10) as ws:
+                    if i % 3 == 1:
+                        return  # connect and leave
+                    subscribed = False
+                    while not stop.is_set():
+                        msg = ws.recv(timeout=5)
+                        if subscribed and isinstance(msg, bytes) and i not in served:
+                            served.append(i)
+                        if isinstance(msg, str) and not subscribed and json.loads(msg).get("op") == "advertise":
+                            channels = json.loads(msg)["channels"]
+                            ws.send(json.dumps({"op": "subscribe", "subscriptions": [
+                                {"id": k + 1 + 1000 * i, "channelId": ch["id"]} for k, ch in enumerate(channels)]}))
+                            subscribed = True
+                return
+            except (OSError, TimeoutError, Exception):  # noqa: BLE001 - not up yet, or the run ended: try again / done
+                time.sleep(0.1)
+
+    stop_s = 2.0
+    quiet = tmp_path / "quiet.mcap"
+    r = subprocess.run([sys.executable, "-m", "cosim", "run", str(SCENARIO), "--stop-time", str(stop_s),
+                        "--out", str(quiet), "--quiet"], cwd=ROOT, capture_output=True, text=True, timeout=120)
+    assert r.returncode == 0, r.stderr
+    port, out = free_port(), tmp_path / "crowd.mcap"
+    stop = threading.Event()
+    threads = [threading.Thread(target=viewer, args=(i, port, stop), daemon=True) for i in range(100)]
+    t0 = time.monotonic()
+    proc = subprocess.Popen([sys.executable, "-m", "cosim", "run", str(SCENARIO), "--stop-time", str(stop_s),
+                             "--live", str(port), "--realtime", "--out", str(out), "--quiet"],
+                            cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    for t in threads:
+        t.start()
+    try:
+        _, err = proc.communicate(timeout=120)
+    finally:
+        stop.set()
+        proc.kill()
+    wall = time.monotonic() - t0
+    assert proc.returncode == 0 and "Traceback" not in err, err
+    assert wall < stop_s + 40, f"{wall:.1f} s for a {stop_s} s run at wall-clock pace"
+    crowd, alone = read_run(out), read_run(quiet)
+    assert crowd.status == "completed"
+    assert len(served) >= 10, f"only {len(served)} of 33 reading viewers were served: the crowd did not gather"
+    for name in ("plant.p.x", "ctl.u[1]", "traj.p_ref.z"):
+        a, b = crowd.signal(name), alone.signal(name)
+        assert len(a.t) == len(b.t) == round(stop_s / 1e-3) + 1 and (a.y == b.y).all(), name
