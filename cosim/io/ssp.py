@@ -572,15 +572,19 @@ def _osp_step(node: ET.Element | None, ssp: Path) -> float | None:
             continue
         algo = ann.find("osp:Algorithm/osp:FixedStepAlgorithm", NS)
         if algo is not None:
-            try:
-                step = float(algo.get("baseStepSize", ""))
-            except ValueError:
-                raise SspError(ssp, f"osp:FixedStepAlgorithm baseStepSize {algo.get('baseStepSize')!r} is not a "
-                                    "number") from None
-            if not step > 0 or not math.isfinite(step):
-                raise SspError(ssp, f"osp:FixedStepAlgorithm baseStepSize must be > 0, got {step}")
-            return step
+            return _positive_step(algo.get("baseStepSize"), "osp:FixedStepAlgorithm baseStepSize", ssp)
     return None
+
+
+def _positive_step(text: str | None, what: str, ssp: Path) -> float:
+    """A step size given by an annotation: a number > 0 s, else one error naming ``what``."""
+    try:
+        step = float(text or "")
+    except ValueError:
+        raise SspError(ssp, f"{what} {text!r} is not a number") from None
+    if not step > 0 or not math.isfinite(step):
+        raise SspError(ssp, f"{what} must be > 0, got {step}")
+    return step
 
 
 def _local(el: ET.Element) -> str:
@@ -602,14 +606,7 @@ def _oms_step(system: ET.Element, ssp: Path) -> float | None:
                 attr = {"FixedStepMaster": "stepSize", "VariableStepMaster": "maximumStepSize"}.get(_local(master))
                 if attr is None:
                     continue
-                try:
-                    step = float(master.get(attr, ""))
-                except ValueError:
-                    raise SspError(ssp, f"{SSD_NAME}: OMSimulator's {_local(master)} {attr} {master.get(attr)!r} "
-                                        "is not a number") from None
-                if not step > 0 or not math.isfinite(step):
-                    raise SspError(ssp, f"{SSD_NAME}: OMSimulator's {_local(master)} {attr} must be > 0, got {step}")
-                return step
+                return _positive_step(master.get(attr), f"{SSD_NAME}: OMSimulator's {_local(master)} {attr}", ssp)
     return None
 
 

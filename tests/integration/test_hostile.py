@@ -14,7 +14,7 @@ from pathlib import Path
 
 import pytest
 from cli_helpers import cosim
-from test_faults import fails
+from test_faults import SMALL, fails
 
 from cosim.io.runlog import MAX_CHUNK_BYTES
 
@@ -300,15 +300,7 @@ def test_run_from_a_log_that_cannot_say_how_it_was_made(run, tmp_path, write_sce
     fails(run("run"), 2, "run needs a scenario file \\(or --from-log LOG")
     fmus = tmp_path / "fmus"
     fmus.mkdir()
-    text = """
-name: small
-components:
-  src: {path: "{CosimTSource}"}
-  g: {path: "{CosimTGain}", parameters: {k: 2.0}}
-connections:
-  - {from: src.y, to: g.u}
-time: {stop: 0.05, step: 0.01}
-"""
+    text = SMALL.replace("stop: 0.2", "stop: 0.05")
     scenario = write_scenario(text)
     source = scenario.read_text()
     for original in set(re.findall(r'path: "([^"]+)"', source)):  # copies the log refers to, removed below
