@@ -413,7 +413,7 @@ EXPORT fmi1Status FMI1(DoStep)(fmi1Component c, fmi1Real currentCommunicationPoi
     case STEP_TERMINATED:
         /* FMI 1.0 cannot say "terminated": a partial step, fmiLastSuccessfulTime = t_end */
         core_log(in, ST_DISCARD, "logStatusDiscard",
-                 "the model terminates the simulation at t = %.17g (FMI 1.0: the step ends early)", t_end);
+                 "the model terminates the simulation at t = %.17g", t_end);
         in->mode = M_STEP_FAILED;
         return fmi1Discard;
     case STEP_REJECTED:
