@@ -14,7 +14,7 @@ failed step, as FMPy and libcosim take it, and only a model-exchange FMU can end
 from __future__ import annotations
 
 import ctypes
-from ctypes import byref, c_double, c_int8, c_int32
+from ctypes import byref, c_double, c_int, c_int8, c_int32
 from typing import Any
 
 from ..errors import FMIError
@@ -24,6 +24,10 @@ from .logger import FMI1_INSTANTIATING, FMI2_LOG_TARGETS, fmi2_logger
 from .model_exchange import ModelExchange
 from .pythonfmu import KEEP_ALIVE
 from .slave import Base, Buffers, CoSimulation, as_number
+
+
+_CS_STATUS_FUNCTIONS = ("InitializeSlave", "DoStep", "CancelStep", "GetStatus", "GetRealStatus", "GetIntegerStatus",
+                        "GetBooleanStatus", "GetStringStatus", "SetRealInputDerivatives", "GetRealOutputDerivatives")
 
 
 class FMI1(Base):
@@ -48,8 +52,14 @@ class FMI1(Base):
         from fmpy.fmi1 import FMU1Model, FMU1Slave
 
         cls = FMU1Model if self.model_exchange else FMU1Slave
-        return cls(guid=self.info.md.guid, unzipDirectory=str(self.info.unzipdir), modelIdentifier=self._identifier,
-                   instanceName=self.name)
+        fmu = cls(guid=self.info.md.guid, unzipDirectory=str(self.info.unzipdir), modelIdentifier=self._identifier,
+                  instanceName=self.name)
+        if not self.model_exchange:
+            # fmpy 0.3 declares these co-simulation functions as returning a string, not an fmiStatus: a status
+            # other than fmiOK would be read as a pointer (a crash); declared here as the standard has them
+            for name in _CS_STATUS_FUNCTIONS:
+                getattr(fmu.dll, self._symbol(name)).restype = c_int
+        return fmu
 
     def instantiate(self) -> None:
         from fmpy import calloc, free
@@ -158,7 +168,7 @@ class FMI1CoSimulation(CoSimulation, FMI1):
                 t_last = float(self.fmu.getRealStatus(fmi1LastSuccessfulTime).value)
             except Exception:  # noqa: BLE001 - optional: then only the step's start is known to be done
                 t_last = t
-            if t < t_last < t + h:
+            if t < t_last < t + h and f"{t_last:.9g}" != f"{t:.9g}":  # beyond the step's start as shown
                 detail += f" after reaching t = {t_last:.9g} s"
             if self._last_log():
                 detail += f" ({self._last_log()})"
