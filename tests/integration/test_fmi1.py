@@ -16,6 +16,7 @@ its tolerances (``CS_RTOL``, ``ME_RTOL``, ``EVENT_ATOL``, justified there). What
 from __future__ import annotations
 
 import copy
+import json
 
 import numpy as np
 import pytest
@@ -220,3 +221,36 @@ def test_fmi1_in_the_parallel_worker_as_in_a_serial_run(tmp_path):
         other = logs["on"].signal(name)
         assert np.array_equal(sig.t_ns, other.t_ns), f"{name}: stamps differ with the worker"
         assert np.array_equal(sig.y, other.y), f"{name}: values differ with the worker"
+
+
+def test_fmi1_live_view_serves_the_component_channel(tmp_path):
+    """The live view works on the Slave protocol: an FMI 1.0 model-exchange component's channel is served
+    with the schema it is logged with, and its messages validate."""
+    import asyncio
+    import subprocess
+    import sys
+    import time
+
+    import jsonschema
+    import yaml
+    from cli_helpers import free_port
+    from test_live import ROOT, _watch
+
+    scenario = tmp_path / "vdp.yaml"
+    scenario.write_text(yaml.safe_dump({"name": "vdp1", "components": {"m": one(build("VanDerPol", 1, "me"), "me")},
+                                        "time": {"stop": 3.0, "step": 0.01}}))
+    port = free_port()
+    proc = subprocess.Popen([sys.executable, "-m", "cosim", "run", str(scenario), "--live", str(port), "--realtime",
+                             "--no-log", "--quiet"], cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    try:
+        channels, got, _ = asyncio.run(_watch(port, {"/m"}, want=5, deadline=time.monotonic() + 90))
+        _, err = proc.communicate(timeout=120)
+    finally:
+        proc.kill()
+    assert proc.returncode == 0, f"exit {proc.returncode}: {err.decode()}"
+    assert len(got["/m"]) >= 5, f"{len(got['/m'])} messages on /m, channels {sorted(channels)}"
+    validator = jsonschema.Draft202012Validator(json.loads(channels["/m"]["schema"]))
+    for log_time, msg in got["/m"]:
+        errors = list(validator.iter_errors(msg))
+        assert not errors, f"/m at {log_time} ns: {errors[0].message}"
+        assert {"x0", "x1"} <= set(msg), f"/m message without the outputs: {msg}"
