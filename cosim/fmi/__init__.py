@@ -1,7 +1,7 @@
 """FMU access layer: the only package that calls fmpy.
 
-One protocol, :class:`~cosim.fmi.slave.Slave`, over four wrappers: FMI 2.0 and 3.0 (:mod:`.fmi2`, :mod:`.fmi3`),
-co-simulation (:mod:`.slave`) and model exchange (:mod:`.model_exchange`, numerics in :mod:`.integrators`).
+One protocol, :class:`~cosim.fmi.slave.Slave`, over six wrappers: FMI 1.0, 2.0 and 3.0 (:mod:`.fmi1`,
+:mod:`.fmi2`, :mod:`.fmi3`), co-simulation (:mod:`.slave`) and model exchange (:mod:`.model_exchange`, numerics in :mod:`.integrators`).
 What an FMU declares is read once per file (:mod:`.description`); archives are checked and extracted once
 per file and process (:mod:`.extract`); FMU log messages reach the user through :mod:`.logger`; PythonFMU's
 libraries get the care of :mod:`.pythonfmu`. The hot path calls the C functions directly with pre-built
@@ -22,6 +22,7 @@ import math
 from ..errors import ComponentSourceError, Issue
 from .description import BINARY, BOOLEAN, INTEGER, PY_KINDS, REAL, STRING, FMUInfo, Variable, load_fmu
 from .extract import Extractions, cleanup_extracted
+from .fmi1 import FMI1CoSimulation, FMI1ModelExchange
 from .fmi2 import FMI2CoSimulation, FMI2ModelExchange
 from .fmi3 import FMI3CoSimulation, FMI3ModelExchange
 from .slave import Slave, Terminated
@@ -44,11 +45,12 @@ def make_slave(name: str, info: FMUInfo, interface: str = "auto", rtol: float = 
         raise ComponentSourceError(Issue(f"components.{name}.interface",
                                          f"{info.path.name} has no {interface} interface (it has: "
                                          f"{', '.join(available) or 'none'})"))
-    cls = {(2, "cs"): FMI2CoSimulation, (2, "me"): FMI2ModelExchange,
+    cls = {(1, "cs"): FMI1CoSimulation, (1, "me"): FMI1ModelExchange,
+           (2, "cs"): FMI2CoSimulation, (2, "me"): FMI2ModelExchange,
            (3, "cs"): FMI3CoSimulation, (3, "me"): FMI3ModelExchange}.get((info.fmi_major, interface))
     if cls is None:
         raise ComponentSourceError(Issue(f"components.{name}", f"FMI {info.md.fmiVersion} is not supported "
-                                                               "(FMI 2.0 and 3.0 are)"))
+                                                               "(FMI 1.0, 2.0 and 3.0 are)"))
     slave = cls(name, info)
     if slave.model_exchange:
         slave.rtol = rtol

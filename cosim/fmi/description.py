@@ -79,7 +79,10 @@ class FMUInfo:
 
     @cached_property
     def feedthrough(self) -> dict[str, list[str] | None]:
-        """Output name -> the inputs it depends on directly; None when the FMU does not declare it."""
+        """Output name -> the inputs it depends on directly; None when the FMU does not declare it (FMI 1.0,
+        which has no ModelStructure: every output)."""
+        if self.fmi_major == 1:
+            return {v.name: None for v in self.variables.values() if v.causality == "output"}
         inputs = {v.name for v in self.variables.values() if v.causality == "input"}
         out: dict[str, list[str] | None] = {}
         for u in self.md.outputs:

@@ -1,4 +1,4 @@
-"""FMU log messages: the FMI 2 logger dispatch (one native proxy for every instance) and the text shown."""
+"""FMU log messages: the FMI 1 / FMI 2 logger dispatch (one native proxy for every instance) and the text shown."""
 
 from __future__ import annotations
 
@@ -15,21 +15,29 @@ if TYPE_CHECKING:
 
 
 
-# FMI 2.0 loggers are variadic; fmpy formats the message in a native proxy that keeps *one* global
-# target (the logger of the instance created last), so every instance gets the same dispatcher and
-# is told apart by the componentEnvironment it was instantiated with.
+# FMI 1.0 and 2.0 loggers are variadic; fmpy formats the message in a native proxy that keeps *one*
+# global target for both versions (the logger of the instance created last), so every instance gets
+# the same dispatcher and is told apart by its first argument: the componentEnvironment it was
+# instantiated with (FMI 2, small integers) or, in FMI 1.0, which has none, the component itself (an
+# address). An FMI 1.0 component is known only once fmiInstantiate returned; what it logs before
+# (a GUID mismatch) names it by instance name (FMI1_INSTANTIATING, only while instantiating).
 FMI2_LOG_TARGETS: weakref.WeakValueDictionary[int, "Base"] = weakref.WeakValueDictionary()
+FMI1_INSTANTIATING: weakref.WeakValueDictionary[bytes, "Base"] = weakref.WeakValueDictionary()
 FMI2_ENVIRONMENTS = itertools.count(1)
 _FMI2_LOGGER: Any = None
 
 
 def fmi2_logger() -> Any:
+    """The one logger callback of FMI 1.0 and 2.0 instances (an ``fmi2CallbackLoggerTYPE``; FMI 1.0's type
+    has the same signature)."""
     global _FMI2_LOGGER
     if _FMI2_LOGGER is None:
         from fmpy.fmi2 import fmi2CallbackLoggerTYPE
 
         def dispatch(env, instance, status, category, message):  # noqa: ANN001, ANN202
             slave = FMI2_LOG_TARGETS.get(env or 0)
+            if slave is None and instance is not None:
+                slave = FMI1_INSTANTIATING.get(instance)
             if slave is not None:
                 slave._on_log(status, category, message)
 

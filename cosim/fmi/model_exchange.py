@@ -131,12 +131,12 @@ class ModelExchange:
         if status > 1:
             self._check(status, self._name_get_nom)
 
-    def _bind_me(self, prefix: str, derivatives: str) -> None:
+    def _bind_me(self, prefix: str, derivatives: str, nominals: str = "GetNominalsOfContinuousStates") -> None:
         dll = self.fmu.dll
         fn = self._hot_function
         self._name_get_x, self._name_set_x = f"{prefix}GetContinuousStates", f"{prefix}SetContinuousStates"
         self._name_get_dx, self._name_get_z = f"{prefix}{derivatives}", f"{prefix}GetEventIndicators"
-        self._name_get_nom, self._name_set_time = f"{prefix}GetNominalsOfContinuousStates", f"{prefix}SetTime"
+        self._name_get_nom, self._name_set_time = f"{prefix}{nominals}", f"{prefix}SetTime"
         self._fn_get_x, self._fn_set_x = fn(dll, self._name_get_x), fn(dll, self._name_set_x)
         self._fn_get_dx, self._fn_get_z = fn(dll, self._name_get_dx), fn(dll, self._name_get_z)
         self._fn_get_nom, self._fn_set_time = fn(dll, self._name_get_nom), fn(dll, self._name_set_time)

@@ -142,6 +142,11 @@ class Base:
     def _last_log(self) -> str:
         return self.log[-1] if self.log else ""
 
+    def _symbol(self, function: str) -> str:
+        """The C name of FMI function ``function`` (``DoStep``: ``fmi2DoStep``; FMI 1.0 prefixes the model
+        identifier)."""
+        return f"fmi{self.fmi}{function}"
+
     def _guard(self, function: str, call, *args):
         """Lifecycle calls through fmpy (which raises on a failing status): translate to FMIError."""
         from fmpy.fmi1 import FMICallException
@@ -408,7 +413,7 @@ class CoSimulation:
                 return [Exchange(ctypes.cast(getattr(dll, b.function), ctypes.c_void_p).value,
                                  ctypes.addressof(b.vrs), b.n, ctypes.addressof(b.values), b.size) for b in bufs]
 
-            do_step = ctypes.cast(getattr(dll, f"fmi{self.fmi}DoStep"), ctypes.c_void_p).value
+            do_step = ctypes.cast(getattr(dll, self._symbol("DoStep")), ctypes.c_void_p).value
             finite = [Finite(ctypes.addressof(b.values), b.size, b.fmi_type == "Float32")
                       for b in self._finite_bufs]
             made = make_turn(self.fmi, self._c, do_step, self._t, self._h, exchanges(self.in_bufs),

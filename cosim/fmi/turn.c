@@ -18,6 +18,7 @@
 
 typedef int (*Exchange2)(void *, const unsigned int *, size_t, void *);
 typedef int (*Exchange3)(void *, const unsigned int *, size_t, void *, size_t);
+typedef int (*DoStep1)(void *, double, double, char);  /* FMI 1: fmiBoolean newStep is a char */
 typedef int (*DoStep2)(void *, double, double, int);
 typedef int (*DoStep3)(void *, double, double, bool, bool *, bool *, bool *, double *);
 
@@ -38,7 +39,7 @@ typedef struct {
 } Finite;
 
 typedef struct {
-    int fmi;             /* 2 or 3 */
+    int fmi;             /* 1, 2 or 3 */
     void *instance;
     void *do_step;
     const double *t;     /* communication point and step size, written by the caller before each turn */
@@ -59,7 +60,7 @@ enum { TURN_OK = 0, TURN_SET = 1, TURN_STEP = 2, TURN_GET = 3, TURN_NONFINITE = 
 
 static int exchange(const Turn *u, const Exchange *e)
 {
-    if (u->fmi == 2)
+    if (u->fmi < 3)  /* FMI 1 and 2: the same signature */
         return ((Exchange2)e->function)(u->instance, e->vrs, e->n, e->values);
     return ((Exchange3)e->function)(u->instance, e->vrs, e->n, e->values, e->size);
 }
@@ -87,8 +88,11 @@ int cosim_turn(Turn *u)
         s = exchange(u, &u->sets[i]);
         if (s > 1) { u->status = s; u->index = i; return TURN_SET; }
     }
-    if (u->fmi == 2) {
-        s = ((DoStep2)u->do_step)(u->instance, *u->t, *u->h, 1);  /* noSetFMUStatePriorToCurrentPoint */
+    if (u->fmi < 3) {
+        if (u->fmi == 1)
+            s = ((DoStep1)u->do_step)(u->instance, *u->t, *u->h, 1);  /* newStep */
+        else
+            s = ((DoStep2)u->do_step)(u->instance, *u->t, *u->h, 1);  /* noSetFMUStatePriorToCurrentPoint */
         if (s > 1) { u->status = s; u->index = 0; return TURN_STEP; }
     } else {
         s = ((DoStep3)u->do_step)(u->instance, *u->t, *u->h, true, u->event, u->terminate, u->early, u->last);
@@ -103,8 +107,9 @@ int cosim_turn(Turn *u)
     return TURN_OK;
 }
 
-/* fmi2SetTime / fmi3SetTime; fmi2SetContinuousStates / fmi3SetContinuousStates; fmi2GetDerivatives /
- * fmi3GetContinuousStateDerivatives: the same C signatures in both versions */
+/* fmiSetTime / fmi2SetTime / fmi3SetTime; fmiSetContinuousStates / fmi2SetContinuousStates /
+ * fmi3SetContinuousStates; fmiGetDerivatives / fmi2GetDerivatives / fmi3GetContinuousStateDerivatives: the
+ * same C signatures in all three versions */
 typedef int (*SetTime)(void *, double);
 typedef int (*SetStates)(void *, const double *, size_t);
 typedef int (*GetDerivatives)(void *, double *, size_t);

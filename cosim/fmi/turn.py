@@ -180,7 +180,8 @@ def make_turn(fmi: int, instance: int, do_step: int, t: c_double, h: c_double, s
     ``instance`` and ``do_step`` are addresses; ``t`` and ``h`` the ``c_double`` s the caller writes the
     communication point and step size into before each call; ``flags`` FMI 3 doStep's outputs
     (eventHandlingNeeded, terminateSimulation, earlyReturn as ``c_bool``, lastSuccessfulTime as
-    ``c_double``), None for FMI 2; ``prototype(f)`` the ctypes prototype ``f`` is called through (the GIL
+    ``c_double``), None for FMI 1 and 2; ``fmi`` 1, 2 or 3 (FMI 1 and 2 share the exchange signature,
+    their doStep's last argument is a ``char`` and an ``int``); ``prototype(f)`` the ctypes prototype ``f`` is called through (the GIL
     handling of the FMU's other calls). The Turn keeps the arrays and values it points to alive (ctypes
     holds them in its ``_objects``), but not the buffers the exchanges name by address: their owner must
     outlive the call.

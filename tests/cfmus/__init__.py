@@ -1,8 +1,10 @@
-"""Small FMI 2 / FMI 3 test FMUs of our own, written in C and built on demand.
+"""Small FMI 1 / FMI 2 / FMI 3 test FMUs of our own, written in C and built on demand.
 
 ``build(model, fmi)`` compiles ``c/models/<model file>`` with the FMI wrapper
 of that version and zips it with its generated modelDescription.xml into
-``<repo>/.fmu_cache/cfmus/<model>-fmi<fmi>-<key>.fmu``; ``key`` hashes every
+``<repo>/.fmu_cache/cfmus/<model>-fmi<fmi>-<key>.fmu``. An FMI 1.0 FMU has one
+interface, so FMI 1 takes it too: ``build(model, 1, "cs")`` or ``"me"`` (file
+``<model>-fmi1-<interface>-<key>.fmu``). ``key`` hashes every
 C source and header, the Python that generates the description, the FMI
 headers and ``gcc --version``, so an edit to any of them rebuilds and an
 unchanged FMU is reused. Files are written under a temporary name in the
@@ -11,6 +13,7 @@ see half an FMU, and nothing is left in /tmp.
 
     >>> from cfmus import build, MODELS          # tests/ on sys.path
     >>> fmu = build("BouncingBall", 3)           # pathlib.Path to the .fmu
+    >>> fmu1 = build("Stair", 1, "cs")           # FMI 1.0 co-simulation
 """
 
 from __future__ import annotations
@@ -28,12 +31,13 @@ from pathlib import Path
 from .generate import model_description, variables_header
 from .models import MODEL_SPECS, state_space_defaults
 
-__all__ = ["build", "MODELS", "BuildError", "CACHE_DIR", "state_space_defaults"]
+__all__ = ["build", "MODELS", "MODELS_FMI1", "BuildError", "CACHE_DIR", "state_space_defaults"]
 
 HERE = Path(__file__).resolve().parent
 C_DIR = HERE / "c"
 CACHE_DIR = HERE.parents[1] / ".fmu_cache" / "cfmus"
-MODELS: list[tuple[str, int]] = sorted(MODEL_SPECS)
+MODELS: list[tuple[str, int]] = sorted(k for k in MODEL_SPECS if k[1] > 1)  # FMUs with both interfaces
+MODELS_FMI1: list[str] = sorted(m for m, fmi in MODEL_SPECS if fmi == 1)  # built per interface
 CFLAGS = ("-std=c11", "-O1", "-fPIC", "-shared", "-fvisibility=hidden", "-Wall", "-Wextra", "-Werror")
 
 
@@ -60,7 +64,7 @@ def _source_key() -> str:
     """Hash of everything an FMU is built from (except the model choice)."""
     h = hashlib.sha256(_compiler_version())
     files = sorted(C_DIR.rglob("*.[ch]")) + sorted(HERE.glob("*.py"))
-    files += sorted(_fmi_headers().glob("fmi[23]*.h"))
+    files += sorted(_fmi_headers().glob("fmi[123]*.h"))
     for f in files:
         h.update(f.name.encode() + b"\0" + f.read_bytes() + b"\0")
     h.update(" ".join(CFLAGS).encode())
@@ -74,7 +78,7 @@ def _compile(model: str, fmi: int, token: str, workdir: Path) -> Path:
     cmd = [
         "gcc", *CFLAGS,
         f"-I{C_DIR}", f"-I{_fmi_headers()}", f"-I{workdir}",
-        f"-DINSTANTIATION_TOKEN=\"{token}\"",
+        f"-DINSTANTIATION_TOKEN=\"{token}\"", f"-DMODEL_IDENTIFIER={model}",
         str(C_DIR / "core.c"), str(C_DIR / f"fmi{fmi}_wrapper.c"), str(C_DIR / "models" / spec.source),
         "-o", str(library), "-lm",
     ]
@@ -85,24 +89,28 @@ def _compile(model: str, fmi: int, token: str, workdir: Path) -> Path:
     return library
 
 
-def build(model: str, fmi: int) -> Path:
-    """Path of the FMU ``model`` for FMI version ``fmi`` (2 or 3), built if needed.
+def build(model: str, fmi: int, interface: str | None = None) -> Path:
+    """Path of the FMU ``model`` for FMI version ``fmi`` (1, 2 or 3), built if needed; ``interface``
+    ("cs" or "me") is the one interface of an FMI 1.0 FMU (FMI 2 and 3 files carry both).
 
-    Raises ``KeyError`` for an unknown pair (see ``MODELS``) and ``BuildError``
-    with gcc's stderr when the compilation fails.
+    Raises ``KeyError`` for an unknown pair (see ``MODELS``, ``MODELS_FMI1``), ``ValueError`` for a
+    missing or needless ``interface`` and ``BuildError`` with gcc's stderr when the compilation fails.
     """
     if (model, fmi) not in MODEL_SPECS:
-        raise KeyError(f"no test FMU {model!r} for FMI {fmi}; available: {MODELS}")
+        raise KeyError(f"no test FMU {model!r} for FMI {fmi}; available: {MODELS}, FMI 1: {MODELS_FMI1}")
+    if (fmi == 1) != (interface in ("cs", "me")) or (fmi > 1 and interface is not None):
+        raise ValueError(f"FMI {fmi}: interface {interface!r}, expected 'cs' or 'me' for FMI 1 and none otherwise")
+    kind = f"fmi{fmi}" if fmi > 1 else f"fmi1-{interface}"
     key = _source_key()
-    target = CACHE_DIR / f"{model}-fmi{fmi}-{key[:16]}.fmu"
+    target = CACHE_DIR / f"{model}-{kind}-{key[:16]}.fmu"
     if target.exists():
         return target
     CACHE_DIR.mkdir(parents=True, exist_ok=True)
-    token = "{" + str(uuid.uuid5(uuid.NAMESPACE_URL, f"cfmus/{model}/{fmi}/{key}")) + "}"
+    token = "{" + str(uuid.uuid5(uuid.NAMESPACE_URL, f"cfmus/{model}/{kind}/{key}")) + "}"
     workdir = Path(tempfile.mkdtemp(prefix=f".build-{model}-{fmi}-", dir=CACHE_DIR))
     try:
         library = _compile(model, fmi, token, workdir)
-        xml = model_description(MODEL_SPECS[(model, fmi)], token)
+        xml = model_description(MODEL_SPECS[(model, fmi)], token, interface)
         partial = workdir / "fmu.zip"
         with zipfile.ZipFile(partial, "w", zipfile.ZIP_DEFLATED) as z:
             z.writestr("modelDescription.xml", xml)
@@ -112,12 +120,12 @@ def build(model: str, fmi: int) -> Path:
         os.replace(partial, target)  # atomic: readers see no FMU or a whole one
     finally:
         shutil.rmtree(workdir, ignore_errors=True)
-    _remove_stale(model, fmi, keep=target)
+    _remove_stale(model, kind, keep=target)
     return target
 
 
-def _remove_stale(model: str, fmi: int, keep: Path) -> None:
+def _remove_stale(model: str, kind: str, keep: Path) -> None:
     """Drop builds of the same FMU from older sources (best effort)."""
-    for old in CACHE_DIR.glob(f"{model}-fmi{fmi}-*.fmu"):
+    for old in CACHE_DIR.glob(f"{model}-{kind}-????????????????.fmu"):
         if old != keep:
             old.unlink(missing_ok=True)

@@ -211,8 +211,65 @@ def _structure(root: ET.Element, model: Model, ref: dict[str, int]) -> None:
             unknown(ms, "EventIndicator", name, deps)
 
 
-def model_description(model: Model, token: str) -> bytes:
-    """modelDescription.xml of ``model`` with the GUID / instantiationToken ``token``."""
+_FMI1_VARIABILITY = {"fixed": "parameter", "tunable": "parameter"}  # FMI 1.0 has no tunable parameters
+_FMI1_CAUSALITY = {"parameter": "internal", "local": "internal", "calculatedParameter": "internal"}
+
+
+def _model_description_fmi1(model: Model, token: str, interface: str) -> ET.Element:
+    """FMI 1.0: one interface per file (co-simulation announced by ``<Implementation>``), function names
+    prefixed with the model identifier, no ModelStructure (outputs depend on every input), the states
+    counted on the root element, no independent variable."""
+    root = ET.Element("fmiModelDescription", {
+        "fmiVersion": "1.0", "modelName": model.name, "modelIdentifier": model.name, "guid": token,
+        "description": model.description, "generationTool": GENERATOR, "variableNamingConvention": "structured",
+        "numberOfContinuousStates": str(len(model.derivatives)),
+        "numberOfEventIndicators": str(len(model.event_indicators))})
+    if model.units:
+        units = ET.SubElement(root, "UnitDefinitions")
+        for name in model.units:
+            ET.SubElement(units, "BaseUnit", unit=name)
+    if model.enumerations:
+        types = ET.SubElement(root, "TypeDefinitions")
+        for name, items in model.enumerations.items():
+            enum = ET.SubElement(ET.SubElement(types, "Type", name=name), "EnumerationType")
+            for item, value in items:  # FMI 1.0 numbers the items 1, 2, ... in order
+                assert value == len(enum) + 1, f"{name}.{item}: FMI 1.0 enumeration values are 1, 2, ..."
+                ET.SubElement(enum, "Item", name=item, description=item)
+    ET.SubElement(root, "DefaultExperiment", {k: repr(float(model.experiment[k])) for k in ("startTime", "stopTime")})
+    mv = ET.SubElement(root, "ModelVariables")
+    for v in model.variables:
+        if v.causality == "independent":
+            continue
+        sv = ET.SubElement(mv, "ScalarVariable", {
+            "name": v.name, "valueReference": str(v.vr), "description": v.description,
+            "variability": _FMI1_VARIABILITY.get(v.variability, v.variability),
+            "causality": _FMI1_CAUSALITY.get(v.causality, v.causality)})
+        a = {}
+        if v.declared_type:
+            a["declaredType"] = v.declared_type
+        if v.unit:
+            a["unit"] = v.unit
+        if v.nominal is not None:
+            a["nominal"] = repr(float(v.nominal))
+        if v.start is not None and _effective_initial(v) != "calculated":
+            a["start"] = _fmt(v.start)
+        ET.SubElement(sv, _FMI2_TYPES[v.type], a)
+    if interface == "cs":
+        cs = ET.SubElement(ET.SubElement(root, "Implementation"), "CoSimulation_StandAlone")
+        ET.SubElement(cs, "Capabilities", canHandleVariableCommunicationStepSize="true", canHandleEvents="true",
+                      canRejectSteps="false", canInterpolateInputs="false", maxOutputDerivativeOrder="0",
+                      canRunAsynchronuously="false", canSignalEvents="false",
+                      canBeInstantiatedOnlyOncePerProcess="false", canNotUseMemoryManagementFunctions="true")
+    return root
+
+
+def model_description(model: Model, token: str, interface: str | None = None) -> bytes:
+    """modelDescription.xml of ``model`` with the GUID / instantiationToken ``token``; FMI 1.0 needs the
+    ``interface`` ("cs" or "me") of the file."""
+    if model.fmi == 1:
+        root = _model_description_fmi1(model, token, interface)
+        ET.indent(root)
+        return b'<?xml version="1.0" encoding="UTF-8"?>\n' + ET.tostring(root, encoding="utf-8") + b"\n"
     root = _common_root(model, token)
     _interfaces(root, model)
     _definitions(root, model)

@@ -263,7 +263,7 @@ _FMI2_NAMES = {"Float64": "Real", "Int32": "Integer", "Boolean": "Boolean", "Str
 
 
 def _feedthrough(fmi: int) -> Model:
-    types = list(_FEEDTHROUGH_STARTS) if fmi == 3 else list(_FMI2_NAMES)
+    types = list(_FEEDTHROUGH_STARTS) if fmi == 3 else list(_FMI2_NAMES)  # FMI 1.0: the FMI 2.0 types
     variables = [_time()]
     outputs = {}
     for k, t in enumerate(types, start=1):
@@ -322,6 +322,11 @@ def _clocked() -> Model:
 
 
 MODEL_SPECS: dict[tuple[str, int], Model] = {
+    ("BouncingBall", 1): _bouncing_ball(1),
+    ("Stair", 1): _stair(1),
+    ("VanDerPol", 1): _van_der_pol(1),
+    ("Feedthrough", 1): _feedthrough(1),
+    ("Halving", 1): _halving(1),
     ("BouncingBall", 2): _bouncing_ball(2),
     ("BouncingBall", 3): _bouncing_ball(3),
     ("Stair", 2): _stair(2),

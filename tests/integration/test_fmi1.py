@@ -1,0 +1,256 @@
+"""FMI 1.0 through the master against FMPy on the same files (issue 26, item 3).
+
+The FMUs are the C models of ``tests/cfmus`` built for FMI 1.0, one file per interface (FMI 1.0 has
+no file with both). The test matrix is test_third_party's for FMI 2 and 3, where the feature exists
+in FMI 1.0, with its referee (``fmpy.simulate_fmu`` on the same file, interface and output grid) and
+its tolerances (``CS_RTOL``, ``ME_RTOL``, ``EVENT_ATOL``, justified there). What FMI 1.0 lacks:
+
+- a co-simulation slave cannot ask to end the simulation (no ``fmiTerminated``): its ``fmiDiscard``
+  is a failed step for the master, as for FMPy and libcosim; model exchange ends it through the
+  event update's ``terminateSimulation``;
+- FMPy 0.3 never calls ``fmiCompletedIntegratorStep`` of an FMI 1.0 FMU (it reads a flag that
+  FMI 1.0 does not have), so it sees no step event: the master's step events of ``Halving`` are
+  checked against FMPy on the FMI 2.0 build of the same model core.
+"""
+
+from __future__ import annotations
+
+import copy
+import json
+
+import numpy as np
+import pytest
+from cfmus import MODELS_FMI1, build
+from cli_helpers import cosim
+from fmpy.validation import validate_fmu
+from test_third_party import (
+    CS_RTOL,
+    EVENT_ATOL,
+    ME_RTOL,
+    _validate_messages,
+    _yaml,
+    assert_same,
+    fmpy_event_times,
+    fmpy_run,
+    one,
+    run_master,
+)
+
+from cosim.engine.scenario import parse_scenario
+from cosim.errors import ComponentSourceError, FMIError
+from cosim.fmi import FMUInfo, load_fmu, make_slave
+from cosim.io.runlog import read_run
+from cosim.run import run_scenario
+
+pytestmark = pytest.mark.integration
+
+CASES = [  # model, stop, step, outputs, exactly compared outputs (test_third_party.CASES without FMI 3's)
+    ("VanDerPol", 20.0, 0.01, ["x0", "x1"], ()),
+    ("BouncingBall", 3.0, 0.01, ["h", "v", "bounces"], ("bounces",)),
+    ("Stair", 8.0, 0.1, ["counter", "ramp"], ("counter", "ramp")),
+    ("Halving", 5.0, 0.01, ["x", "count"], ("count",)),
+]
+IDS = [c[0] for c in CASES]
+
+
+@pytest.mark.parametrize("interface", ["cs", "me"])
+@pytest.mark.parametrize("model", MODELS_FMI1)
+def test_fmi1_fmus_pass_fmpy_validation(model, interface):
+    problems = validate_fmu(str(build(model, 1, interface)))
+    assert problems == [], f"{model} FMI 1 {interface}: validate_fmu found {problems}, expected none"
+
+
+def test_fmi1_description_one_interface_and_unknown_feedthrough():
+    """FMI 1.0 has no ModelStructure: every output may depend on every input (None, as an FMI 2 output
+    without dependencies), which orders components conservatively; causality and variability are read in
+    FMI 2 terms (internal -> local, variability parameter -> causality parameter)."""
+    cs, me = load_fmu(build("Feedthrough", 1, "cs")), load_fmu(build("Feedthrough", 1, "me"))
+    assert (cs.interfaces, me.interfaces) == (["cs"], ["me"]), (cs.interfaces, me.interfaces)
+    outputs = sorted(v.name for v in cs.variables.values() if v.causality == "output")
+    assert outputs and cs.feedthrough == {name: None for name in outputs}, cs.feedthrough
+    p = cs.variables["Real_parameter"]
+    assert (p.causality, p.variability) == ("parameter", "fixed"), (p.causality, p.variability)
+    with pytest.raises(ComponentSourceError, match="has no me interface"):
+        make_slave("m", cs, "me")
+
+
+@pytest.mark.parametrize("model,stop,step,names,exact", CASES, ids=IDS)
+def test_fmi1_cosimulation_matches_fmpy(tmp_path, model, stop, step, names, exact):
+    fmu = build(model, 1, "cs")
+    res, log = run_master(tmp_path, {"m": one(fmu, "cs")}, stop, step)
+    assert res.status == "completed", res.message
+    assert_same(log, fmpy_run(fmu, "cs", stop, step, names), names, CS_RTOL, exact)
+
+
+@pytest.mark.parametrize("solver", ["cvode", "dop853"])
+@pytest.mark.parametrize("model,stop,step,names,exact", CASES, ids=IDS)
+def test_fmi1_model_exchange_matches_fmpy(tmp_path, model, stop, step, names, exact, solver):
+    fmu = build(model, 1, "me")
+    res, log = run_master(tmp_path, {"m": one(fmu, "me", solver=solver)}, stop, step)
+    assert res.status == "completed", res.message
+    # FMPy sees no FMI 1.0 step event (module docstring): its Halving reference is the FMI 2.0 build
+    referee = build(model, 2) if model == "Halving" else fmu
+    assert_same(log, fmpy_run(referee, "me", stop, step, names), names, ME_RTOL, exact)
+    ours = [e["t"] for e in log.events]
+    theirs = fmpy_event_times(referee, stop, step, names)
+    assert len(ours) == len(theirs) == res.events["m"], \
+        f"event count: ours {len(ours)} (summary {res.events['m']}) vs FMPy {len(theirs)}"
+    if model == "Halving":
+        assert {e["kind"] for e in log.events} == {"step"}, f"event kinds {log.events}, expected step events"
+    if model == "BouncingBall" and solver == "dop853":  # as in test_third_party: the closed form is the referee
+        from test_third_party import bounce_times
+
+        theirs = bounce_times(len(ours))
+    worst = max((abs(a - b) for a, b in zip(ours, theirs)), default=0.0)
+    assert worst <= EVENT_ATOL, f"event times differ by up to {worst:.3g} s: ours {ours} vs {theirs}"
+
+
+def test_fmi1_model_exchange_ending_the_simulation_ends_the_run_normally(tmp_path):
+    fmu = build("Stair", 1, "me")
+    path = tmp_path / "stair.yaml"
+    path.write_text(_yaml({"stair": one(fmu, "me")}, 15.0, 0.1))
+    out = tmp_path / "stair.mcap"
+    proc = cosim("run", str(path), "--out", str(out))
+    assert proc.returncode == 0, f"exit {proc.returncode}: {proc.stderr}"
+    assert "'stair' ended the simulation at t = 10.5 s" in proc.stdout, proc.stdout
+    log = read_run(out)
+    counter = log.signal("stair.counter")
+    assert abs(counter.t[-1] - 10.5) < 1e-9, f"last sample at {counter.t[-1]} s, expected the termination at 10.5 s"
+    assert counter.y[-1] == 11, f"counter at the end {counter.y[-1]}, expected 11 (incremented at t = 1..10)"
+    assert log.metadata["outcome"]["terminated_by"] == "stair", log.metadata["outcome"]
+    ref = fmpy_run(fmu, "me", 15.0, 0.1, ["counter"])
+    assert ref["time"][-1] <= 10.5 + 1e-9 and ref["counter"][-1] == 11, (ref["time"][-1], ref["counter"][-1])
+    assert_same(log, ref, ["counter"], 0, ("counter",), component="stair")
+
+
+def test_fmi1_termination_in_the_initial_event_update_ends_the_run_at_the_start(tmp_path):
+    res, log = run_master(tmp_path, {"m": one(build("Stair", 1, "me"), "me", {"t_terminate": 0.0})}, 5.0, 0.1)
+    assert res.terminated_by == "m" and res.steps == 0 and res.sim_time == 0.0, (res.message, res.steps)
+    assert list(log.signal("m.counter").t) == [0.0], "one sample, at the start"
+
+
+def test_fmi1_rejected_step_is_an_error_with_the_message_the_component_logged(tmp_path):
+    """Two instances of one FMU: the error names the one whose step was rejected, the FMI function, the
+    time, and the message that instance logged (through the FMI 1.0 logger: no componentEnvironment)."""
+    fmu = build("Stair", 1, "cs")
+    path = tmp_path / "reject.yaml"
+    path.write_text(_yaml({"early": one(fmu, "cs", {"t_reject": 4.05}), "late": one(fmu, "cs", {"t_reject": 3.05})},
+                          5.0, 0.1))
+    proc = cosim("run", str(path), "--no-log")
+    assert proc.returncode == 2, f"exit {proc.returncode}: {proc.stdout} {proc.stderr}"
+    lines = proc.stderr.strip().splitlines()
+    assert len(lines) == 1 and "Traceback" not in proc.stderr, proc.stderr
+    assert "component 'late': Stair_fmiDoStep returned discard at t = 3 s" in lines[0], lines[0]
+    assert "(step rejected at t = 3.04999" in lines[0] and "crosses t_reject" in lines[0], \
+        f"the FMU's log message is missing: {lines[0]}"
+    assert "reaching" not in lines[0], f"a rejected step reached nothing beyond its start: {lines[0]}"
+
+
+@pytest.mark.parametrize("turn", ["C", "Python"])
+def test_fmi1_cosimulation_cannot_end_the_simulation(tmp_path, monkeypatch, turn):
+    """FMI 1.0 co-simulation has no fmiTerminated: the Stair's partial step at t_terminate is a failed step
+    (libcosim's reading too), reported with the time the slave reached and its message, whether the C turn
+    or Python makes the calls. (FMPy 0.3.32 declares fmiDoStep as returning a string and crashes on any
+    status but fmiOK, so it cannot be the referee here; the master declares the status.)"""
+    if turn == "Python":
+        monkeypatch.setattr("cosim.fmi.slave.make_turn", lambda *args: None)
+    fmu = build("Stair", 1, "cs")
+    with pytest.raises(FMIError) as info:
+        run_master(tmp_path, {"m": one(fmu, "cs")}, 12.0, 0.1)
+    text = str(info.value)
+    assert "Stair_fmiDoStep returned discard at t = 10.4 s" in text and "reaching t = 10.5 s" in text, text
+    assert "(the model terminates the simulation at t = 10.4999" in text, f"the FMU's log message is missing: {text}"
+
+
+def test_fmi1_log_message_at_instantiation_reaches_the_error():
+    """A message logged before the FMU has a component (here: a GUID mismatch, with a NULL component) is
+    dispatched by instance name to the component being instantiated."""
+    info = load_fmu(build("VanDerPol", 1, "cs"))
+    md = copy.copy(info.md)
+    md.guid = "{00000000-0000-0000-0000-000000000000}"
+    slave = make_slave("vdp", FMUInfo(info.path, md, info.variables, info.stamp), "cs")
+    try:
+        with pytest.raises(FMIError) as err:
+            slave.instantiate()
+    finally:
+        slave.free()
+    assert "component 'vdp'" in str(err.value) and "the GUID does not match this binary" in str(err.value), \
+        str(err.value)
+
+
+FT_INPUTS = {"Real_input": -1.125, "Integer_input": -(2 ** 31), "Boolean_input": True, "String_input": "héllo",
+             "Enumeration_input": 3}
+
+
+@pytest.mark.parametrize("interface", ["cs", "me"])
+def test_fmi1_types_travel_and_are_logged_as_their_schema_says(tmp_path, interface):
+    """Every FMI 1.0 type from one component to the next and into the log (fmiBoolean is a char: logged as a
+    JSON boolean); the receiver in model exchange takes discrete inputs at an event update."""
+    a, b = build("Feedthrough", 1, "cs"), build("Feedthrough", 1, interface)
+    types = [n.removesuffix("_input") for n in FT_INPUTS]
+    res, log = run_master(tmp_path, {"a": one(a, "cs", FT_INPUTS), "b": one(b, interface)}, 0.05, 0.01,
+                          connections=[(f"a.{t}_output", f"b.{t}_input") for t in types])
+    assert res.status == "completed", res.message
+    for name, value in FT_INPUTS.items():
+        got = log.signal("b." + name.replace("_input", "_output")).y[-1]
+        assert got == value, f"{name}: b logged {got!r}, a was given {value!r}"
+    assert _validate_messages(tmp_path / "run.mcap") > 0
+
+
+def test_fmi1_in_the_parallel_worker_as_in_a_serial_run(tmp_path):
+    """The FMI 1.0 model-exchange stair (no inputs) runs ahead in the worker process, re-created there by
+    make_slave from its path and interface; a loop of two FMI 1.0 feedthroughs (CS and ME) stays in the
+    master. With and without the worker: the same logged values, the same end of the simulation."""
+    import yaml
+
+    comps = {"stair": one(build("Stair", 1, "me"), "me"), "a": one(build("Feedthrough", 1, "cs"), "cs"),
+             "b": one(build("Feedthrough", 1, "me"), "me")}
+    conns = [{"from": "stair.ramp", "to": "a.Real_input"}, {"from": "a.Real_output", "to": "b.Real_input"},
+             {"from": "b.Integer_output", "to": "a.Integer_input"}, {"from": "stair.counter", "to": "b.Integer_input"}]
+    logs = {}
+    for mode in ("off", "on"):
+        text = yaml.safe_dump({"name": "fmi1_worker", "components": comps, "connections": conns,
+                               "time": {"stop": 12.0, "step": 0.01}, "algorithm": "jacobi", "parallel": mode,
+                               "logging": {"signals": "all"}})
+        res = run_scenario(parse_scenario(text, str(tmp_path / f"{mode}.yaml")), out=tmp_path / f"{mode}.mcap")
+        assert res.terminated_by == "stair" and abs(res.sim_time - 10.5) < 1e-9, (mode, res.message, res.sim_time)
+        assert (mode == "on") == any("worker" in n for n in res.notes), (mode, res.notes)
+        logs[mode] = read_run(tmp_path / f"{mode}.mcap")
+    assert logs["off"].signal("a.Real_output").y[-1] == 5.5, "the stair's ramp (0.5 * 11) reached a"
+    for name, sig in logs["off"].signals.items():
+        other = logs["on"].signal(name)
+        assert np.array_equal(sig.t_ns, other.t_ns), f"{name}: stamps differ with the worker"
+        assert np.array_equal(sig.y, other.y), f"{name}: values differ with the worker"
+
+
+def test_fmi1_live_view_serves_the_component_channel(tmp_path):
+    """The live view works on the Slave protocol: an FMI 1.0 model-exchange component's channel is served
+    with the schema it is logged with, and its messages validate."""
+    import asyncio
+    import subprocess
+    import sys
+    import time
+
+    import jsonschema
+    import yaml
+    from cli_helpers import free_port
+    from test_live import ROOT, _watch
+
+    scenario = tmp_path / "vdp.yaml"
+    scenario.write_text(yaml.safe_dump({"name": "vdp1", "components": {"m": one(build("VanDerPol", 1, "me"), "me")},
+                                        "time": {"stop": 3.0, "step": 0.01}}))
+    port = free_port()
+    proc = subprocess.Popen([sys.executable, "-m", "cosim", "run", str(scenario), "--live", str(port), "--realtime",
+                             "--no-log", "--quiet"], cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    try:
+        channels, got, _ = asyncio.run(_watch(port, {"/m"}, want=5, deadline=time.monotonic() + 90))
+        _, err = proc.communicate(timeout=120)
+    finally:
+        proc.kill()
+    assert proc.returncode == 0, f"exit {proc.returncode}: {err.decode()}"
+    assert len(got["/m"]) >= 5, f"{len(got['/m'])} messages on /m, channels {sorted(channels)}"
+    validator = jsonschema.Draft202012Validator(json.loads(channels["/m"]["schema"]))
+    for log_time, msg in got["/m"]:
+        errors = list(validator.iter_errors(msg))
+        assert not errors, f"/m at {log_time} ns: {errors[0].message}"
+        assert {"x0", "x1"} <= set(msg), f"/m message without the outputs: {msg}"
