@@ -356,8 +356,11 @@ def _regression_parser(sub: argparse._SubParsersAction) -> None:
                                    "efforts with the analytic model's inverse dynamics for a range of w and "
                                    "identifies the best w (and the best separate inertia / gravity splits).")
     p.add_argument("--robot", required=True, help="preset name (see `python -m cosim robot presets`)")
-    p.add_argument("--trajectory", choices=("helix", "pick_place"), default="pick_place",
-                   help="validation motion (default pick_place: 25/305/25 mm, 0.5 s, about 7 g)")
+    p.add_argument("--trajectory", choices=("helix", "pick_place"), nargs="+", default=["pick_place"],
+                   help="validation motion(s) (default pick_place: 25/305/25 mm, 0.5 s, about 7 g); with several, "
+                        "the split is identified jointly over them")
+    p.add_argument("--out", help="write the identified model (robot, motions, fitted parameters, fit figures) "
+                                 "to this YAML file, for a scenario's `model:` key")
     p.add_argument("--w", type=float, nargs="+", metavar="W",
                    help="w values to sweep (default 0, 0.1, ..., 1)")
     p.add_argument("--no-separate", action="store_true", help="skip the separate inertia / gravity fit")
@@ -371,7 +374,11 @@ def _regression_parser(sub: argparse._SubParsersAction) -> None:
 
 def _cmd_validate_model(args: argparse.Namespace) -> int:
     from delta.robots import PRESETS
-    from multibody.validate import validate_model
+    import shlex
+    from dataclasses import asdict
+    from pathlib import Path
+
+    from multibody.validate import identify_model, validate_model
 
     if args.robot not in PRESETS:
         raise CosimError(f"--robot: unknown preset {args.robot!r}; valid: {', '.join(PRESETS)}")
@@ -380,24 +387,64 @@ def _cmd_validate_model(args: argparse.Namespace) -> int:
             raise CosimError(f"{name} must be > 0 s, got {value}")
     if args.w is not None and any(not 0.0 <= w <= 1.0 for w in args.w):
         raise CosimError(f"--w: every w must lie in [0, 1], got {args.w}")
+    several = len(args.trajectory) > 1 or args.out is not None
+    if several and (args.duration is not None or args.no_separate):
+        raise CosimError("validate-model: --duration and --no-separate apply to one motion without --out")
+    if args.out is not None and not Path(args.out).parent.resolve().is_dir():
+        raise CosimError(f"--out: no folder {Path(args.out).parent} to write {Path(args.out).name} into")
     bar = None
     progress = None
     if not (args.quiet or args.json):
         from .run import progress_bar
 
         bar = progress_bar()
-        task = bar.add_task(f"{args.robot} {args.trajectory}", total=None)
+        task = bar.add_task(f"{args.robot} {' + '.join(args.trajectory)}", total=None)
         bar.start()
         progress = lambda done, total: bar.update(task, completed=done, total=total)  # noqa: E731
     try:
-        rep = validate_model(args.robot, args.trajectory, args.w, not args.no_separate, h=args.step,
-                             duration=args.duration, fidelity=args.fidelity, progress=progress)
+        if several:
+            ident = identify_model(args.robot, args.trajectory, h=args.step, fidelity=args.fidelity, ws=args.w,
+                                   progress=progress)
+        else:
+            rep = validate_model(args.robot, args.trajectory[0], args.w, not args.no_separate, h=args.step,
+                                 duration=args.duration, fidelity=args.fidelity, progress=progress)
     except ValueError as exc:
         raise CosimError(f"validate-model: {exc}") from None
     finally:
         if bar is not None:
             bar.stop()
-    _emit(args, rep.as_dict(), rep.text())
+    if not several:
+        _emit(args, rep.as_dict(), rep.text())
+        return EXIT_OK
+    text = "\n\n".join([*(r.text() for r in ident.reports), ident.text()])
+    payload = {"identified": {"w_inertia": ident.w_inertia, "w_gravity": ident.w_gravity},
+               "fits": [asdict(f) for f in ident.fits], "reports": [r.as_dict() for r in ident.reports]}
+    if args.out is not None:
+        from .engine.model_file import write_model_file
+
+        command = (f"python -m cosim validate-model --robot {args.robot} --trajectory {' '.join(args.trajectory)}"
+                   + (f" --step {args.step:g}" if args.step != 2e-4 else "")
+                   + (f" --fidelity {args.fidelity}" if args.fidelity != "full" else "")
+                   + (" --w " + " ".join(f"{w:g}" for w in args.w) if args.w else "")
+                   + f" --out {shlex.quote(args.out)}")
+        fit = {f.trajectory: {"samples": f.samples, "duration_s": f.duration, "plant_rms": f.plant_rms,
+                              "plant_peak": f.plant_peak, "rms_rel": f.identified.rms_rel,
+                              "peak_rel": f.identified.peak_rel, "rms_abs": f.identified.rms_abs,
+                              "peak_abs": f.identified.peak_abs,
+                              "default_split": [f.default.w_inertia, f.default.w_gravity],
+                              "rms_rel_at_default": f.default.rms_rel, "peak_rel_at_default": f.default.peak_rel}
+               for f in ident.fits}
+        fitted_on = {"trajectories": [f.trajectory for f in ident.fits],
+                     "plant": f"{ident.fidelity} Exudyn plant, joints prescribed", "step_s": ident.h,
+                     "effort_unit": ident.effort_unit, "weighting": "each motion's errors over its plant RMS"}
+        try:
+            write_model_file(args.out, ident.robot, {"model.w_inertia": ident.w_inertia,
+                                                     "model.w_gravity": ident.w_gravity}, fitted_on, fit, command)
+        except OSError as exc:
+            raise CosimError(f"--out: cannot write {args.out}: {exc.strerror or exc}") from None
+        text += f"\nwrote {args.out}"
+        payload["out"] = args.out
+    _emit(args, payload, text)
     return EXIT_OK
 
 

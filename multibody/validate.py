@@ -67,6 +67,9 @@ __all__ = [
     "force_errors",
     "validation_trajectory",
     "validate_model",
+    "TrajectoryFit",
+    "Identification",
+    "identify_model",
 ]
 
 FORCE_COMPARISON_SETTINGS = SolverSettings(spectral_radius=0.5, newton_rel_tol=1e-8)
@@ -361,14 +364,19 @@ def validate_model(robot_preset: str, trajectory: str = "pick_place", ws=None, s
     n_evals = 3 + len(ws) + 1 + (1 if separate else 0)
     total = n_steps + n_evals
     done = [n_steps]
+    run = run_prescribed(robot, motion, masses, h=h, duration=end, fidelity=fidelity,
+                         progress=None if progress is None else (lambda k, n: progress(k, total)))
+    return _analyse(run, robot, trajectory, masses, ws, separate, h, end, fidelity, done, total, progress)
+
+
+def _analyse(run: PrescribedRun, robot, trajectory: str, masses, ws, separate: bool, h: float, end: float,
+             fidelity: str, done: list, total: int, progress: Progress | None) -> ValidationReport:
+    """The sweep and the best splits of :func:`validate_model` on a recorded run."""
 
     def tick() -> None:
         done[0] += 1
         if progress is not None:
             progress(done[0], total)
-
-    run = run_prescribed(robot, motion, masses, h=h, duration=end, fidelity=fidelity,
-                         progress=None if progress is None else (lambda k, n: progress(k, total)))
 
     def efforts(w_inertia: float, w_gravity: float) -> np.ndarray:
         f = _model_efforts(run, robot, masses.with_(w_inertia=float(w_inertia), w_gravity=float(w_gravity)))
@@ -397,3 +405,108 @@ def validate_model(robot_preset: str, trajectory: str = "pick_place", ws=None, s
         samples=len(run.t), plant_rms=float(np.sqrt(np.mean(f_plant**2))), plant_peak=float(np.max(np.abs(f_plant))),
         sweep=sweep, best=best, best_w_continuous=w_single, separate=split,
     )
+
+
+# -- identify_model ---------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class TrajectoryFit:
+    """How the identified split fits one validation motion: ``identified`` at the fitted split, ``default``
+    at the mass dataclass's default (the thesis's ``w = 2/3``), both over the plant's ``samples`` efforts."""
+
+    trajectory: str
+    duration: float
+    samples: int
+    plant_rms: float
+    plant_peak: float
+    identified: WError
+    default: WError
+
+
+@dataclass(frozen=True)
+class Identification:
+    """The leg mass split that best fits the plant over one or more validation motions (:func:`identify_model`).
+
+    ``w_inertia``, ``w_gravity`` minimise the sum over the motions of the squared effort errors, each motion's
+    divided by its plant RMS (so that the fast cycle's large efforts do not drown the helix's); ``fits`` the
+    errors per motion; ``reports`` each motion's own sweep (:func:`validate_model`).
+    """
+
+    robot: str
+    fidelity: str
+    effort_unit: str
+    h: float
+    w_inertia: float
+    w_gravity: float
+    fits: tuple[TrajectoryFit, ...]
+    reports: tuple[ValidationReport, ...]
+
+    def text(self) -> str:
+        u = self.effort_unit
+        names = " + ".join(f.trajectory for f in self.fits)
+        lines = [f"identified on {names}: w_inertia = {self.w_inertia:.4f}, w_gravity = {self.w_gravity:.4f}"]
+        for f in self.fits:
+            i, d = f.identified, f.default
+            lines.append(f"  {f.trajectory}: RMS {100 * i.rms_rel:.3f} % ({i.rms_abs:.4g} {u}), peak "
+                         f"{100 * i.peak_rel:.3f} %; at the default split ({d.w_inertia:.4g}, {d.w_gravity:.4g}): "
+                         f"RMS {100 * d.rms_rel:.3f} %, peak {100 * d.peak_rel:.3f} %")
+        return "\n".join(lines)
+
+
+def identify_model(robot_preset: str, trajectories=("pick_place", "helix"), masses=None, h: float = 2e-4,
+                   fidelity: str = "full", ws=None, progress: Progress | None = None) -> Identification:
+    """Identify ``(w_inertia, w_gravity)`` of the analytic model against the Exudyn plant over several motions.
+
+    Each motion of :data:`VALIDATION_TRAJECTORIES` is run once on the plant (prescribed joints, as in
+    :func:`validate_model`). The analytic efforts are affine in both splits, so the joint fit is a linear
+    least-squares problem over ``[0, 1]^2``: the rows of each motion are divided by its plant RMS (a relative
+    fit, every motion weighted alike). The fast pick cycle determines the inertial split, the slow helix the
+    gravity split (on the pick cycle alone the weight barely varies and ``w_gravity`` drifts to a bound).
+
+    Returns
+    -------
+    Identification
+    """
+    robot = get_preset(robot_preset)
+    masses = masses or _default_masses(robot)
+    ws = np.linspace(0.0, 1.0, 11) if ws is None else np.asarray(ws, dtype=float).reshape(-1)
+    motions = [(name, validation_trajectory(robot, name)) for name in dict.fromkeys(trajectories)]
+    if not motions:
+        raise ParameterError("identify_model needs at least one validation trajectory")
+    steps = [int(round(float(m.duration) / h)) for _, m in motions]
+    total = sum(steps) + len(motions) * (5 + len(ws)) + 2 * len(motions)
+    done = [0]
+
+    def advance(k: int, _n: int, before: int) -> None:
+        if progress is not None:
+            progress(before + k, total)
+
+    runs, reports, rows, rhs = [], [], [], []
+    for (name, motion), n in zip(motions, steps):
+        before = done[0]
+        run = run_prescribed(robot, motion, masses, h=h, fidelity=fidelity,
+                             progress=lambda k, m, b=before: advance(k, m, b))
+        done[0] = before + n
+        end = float(motion.duration)
+        reports.append(_analyse(run, robot, name, masses, ws, True, h, end, fidelity, done, total, progress))
+        f00 = _model_efforts(run, robot, masses.with_(w_inertia=0.0, w_gravity=0.0))
+        f10 = _model_efforts(run, robot, masses.with_(w_inertia=1.0, w_gravity=0.0))
+        f01 = _model_efforts(run, robot, masses.with_(w_inertia=0.0, w_gravity=1.0))
+        scale = float(np.sqrt(np.mean(run.f_plant**2)))
+        rows.append(np.column_stack([(f10 - f00).ravel(), (f01 - f00).ravel()]) / scale)
+        rhs.append((run.f_plant - f00).ravel() / scale)
+        runs.append((name, end, run))
+    w_i, w_g = _unit_box_least_squares(np.vstack(rows), np.concatenate(rhs))
+    fits = []
+    for name, end, run in runs:
+        f_plant = run.f_plant
+        fitted = _error(_model_efforts(run, robot, masses.with_(w_inertia=w_i, w_gravity=w_g)), f_plant, w_i, w_g)
+        default = _error(_model_efforts(run, robot, masses), f_plant, masses.w_inertia, masses.w_gravity)
+        done[0] += 2
+        if progress is not None:
+            progress(done[0], total)
+        fits.append(TrajectoryFit(name, end, len(run.t), float(np.sqrt(np.mean(f_plant**2))),
+                                  float(np.max(np.abs(f_plant))), fitted, default))
+    unit = kind_of(robot.kind).units[3].replace(".", "*")
+    return Identification(robot.name, fidelity, unit, float(h), w_i, w_g, tuple(fits), tuple(reports))

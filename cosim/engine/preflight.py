@@ -44,16 +44,38 @@ def sampled_positions(traj, times: np.ndarray) -> np.ndarray:
 
 
 def preflight(scenario: Scenario) -> str:
-    """Check the scenario's trajectory; returns a one-line report, raises PreflightError."""
+    """Check the scenario's trajectory (and the identified model's parameters against the robot's masses);
+    returns a one-line report, raises PreflightError."""
     spec = scenario.trajectory
+    model = _model_report(scenario)
     if spec is None or scenario.robot is None:
-        return "no trajectory to check"
+        return "no trajectory to check" + model
     traj = scenario.trajectory_object()
     t0, t1 = scenario.time.start, scenario.time.stop
     n = max(2, int(np.ceil((t1 - t0) / spec.check_step)) + 1)
     times = np.linspace(t0, t1, n)
     check_positions(scenario.robot, times, sampled_positions(traj, times), spec.singularity_margin)
-    return f"trajectory reachable ({n} samples, margin {spec.singularity_margin})"
+    return f"trajectory reachable ({n} samples, margin {spec.singularity_margin})" + model
+
+
+def _model_report(scenario: Scenario) -> str:
+    """``; model FILE (w_inertia = ..)`` for a scenario with an identified model, after building the robot's
+    analytic model with its parameters (the mass validation of :mod:`delta.masses`)."""
+    model = scenario.model_file()
+    if model is None:
+        return ""
+    from delta.actuators import kind_of
+    from delta.errors import ParameterError
+    from delta.model import build_model
+
+    robot = get_preset(scenario.robot)
+    fields = {name.removeprefix("model."): value for name, value in model.parameters.items()}
+    try:
+        build_model(robot, kind_of(robot.kind).masses_type().with_(**fields))
+    except (ParameterError, TypeError) as exc:
+        raise PreflightError(f"identified model {model.path}: {exc}") from None
+    shown = ", ".join(f"{k} = {v:.4g}" for k, v in fields.items())
+    return f"; identified model {scenario.model} ({shown})"
 
 
 def initial_state_values(scenario: Scenario) -> dict[str, float]:

@@ -13,6 +13,7 @@ from fmus.native.errors import CompilerMissingError
 
 from ..errors import ComponentSourceError, Issue, ScenarioError
 from ..fmi import FMUInfo, load_fmu
+from .model_file import model_based, model_start_values
 from .preflight import initial_state_values, preflight, trajectory_start_values
 from .scenario import Scenario
 from .system import build_plan
@@ -112,6 +113,13 @@ def prepare(scenario: Scenario, log_signals: str | None = None, *,
     for name, values in trajectory_values.items():
         c = plan.names.index(name)
         plan.start_values[c] = {**values, **plan.start_values[c]}  # explicit ones are equal (checked)
+    model = scenario.model_file()
+    if model is not None:  # the identified model: start values of our model-based components, explicit ones win
+        for c, name in enumerate(plan.names):
+            comp = scenario.components[name]
+            if comp.fmu is not None and model_based(registry.get(comp.fmu)):
+                values = model_start_values(model, plan.infos[c].variables)
+                plan.start_values[c] = {**values, **plan.start_values[c]}
     init = initial_state_values(scenario)
     if init:
         c = plan.names.index(scenario.initial_state.component)

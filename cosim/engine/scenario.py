@@ -22,6 +22,7 @@ from delta.trajectories import TYPES
 
 from ..errors import Issue, ScenarioError
 from .algorithm import ALGORITHMS, DEFAULT
+from .model_file import read_model_file
 from .names import name_problem, quote, split_ref
 
 __all__ = [
@@ -296,6 +297,11 @@ class Scenario(_Model):
                                 "stops naming the stalled component and time; null: no limit (Ctrl-C and SIGTERM "
                                 "still end a stalled run, after 2 s)")
     trajectory: TrajectorySpec | None = None
+    model: str | None = Field(
+        None, description="identified model file (YAML, written by `python -m cosim validate-model --out`), "
+                          "relative to the scenario file: its parameters (model.w_inertia, model.w_gravity) are "
+                          "the start values of every model-based component of ours (controllers, analytic "
+                          "plants); a component's own parameters win")
     initial_state: InitialState = Field(default_factory=InitialState)
     logging: Logging = Field(default_factory=Logging)
     compare: Compare | None = None
@@ -306,6 +312,19 @@ class Scenario(_Model):
     # where the values came from (set by the loader): :attr:`sources`
     _sources: "SourceMap | None" = PrivateAttr(default=None)
     _trajectory: Any = PrivateAttr(default=None)  # built once: :meth:`trajectory_object`
+    _model_file: Any = PrivateAttr(default=None)  # read once: :meth:`model_file`
+
+    def model_file(self) -> Any:
+        """The identified model the ``model:`` key names (:class:`cosim.engine.model_file.ModelFile`), read
+        once, its path relative to the scenario file; None without the key. Raises :class:`ScenarioError`."""
+        if self.model is None:
+            return None
+        if self._model_file is None:
+            path = Path(self.model)
+            if not path.is_absolute() and self.source and self.source != "<string>":
+                path = Path(self.source).parent / path
+            self._model_file = read_model_file(path)
+        return self._model_file
 
     def trajectory_object(self) -> Any:
         """The trajectory of the ``trajectory:`` section (an instance of its :data:`delta.trajectories.TYPES`
@@ -602,6 +621,17 @@ def _semantic_issues(s: Scenario) -> list[tuple[tuple, str]]:
         if s.robot not in PRESETS:
             close = difflib.get_close_matches(s.robot, list(PRESETS), n=3) or list(PRESETS)
             out.append((("robot",), f"unknown robot preset {s.robot!r}; valid: {', '.join(close)}"))
+    if s.model is not None and s.robot is None:
+        out.append((("model",), "an identified model needs 'robot' (the preset it was identified for)"))
+    elif s.model is not None:
+        try:
+            model = s.model_file()
+        except ScenarioError as exc:
+            out += [(("model",), i.message) for i in exc.issues]
+        else:
+            if model.robot != s.robot:
+                out.append((("model",), f"{s.model} was identified for {model.robot}, the scenario's robot is "
+                                        f"{s.robot}"))
     if s.trajectory is not None and s.initial_state.from_trajectory and s.initial_state.position:
         if s.initial_state.component not in s.components:
             out.append((("initial_state", "component"), f"unknown component {s.initial_state.component!r}"))

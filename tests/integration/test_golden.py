@@ -1,4 +1,4 @@
-"""Golden baselines: helix_ctc and pick_place_ctc, run in full, against decimated reference logs.
+"""Golden baselines: helix_ctc, helix_ctc_thesis and pick_place_ctc, run in full, against decimated reference logs.
 
 A change in plant, controllers, FMUs or master shows up here as a failing comparison
 that names the signal, the size of the difference and when it happened. The
@@ -31,7 +31,7 @@ def _run(name: str, out: Path, overrides: dict | None = None):
 
 
 @pytest.mark.parametrize("build", ["python", "native"])
-@pytest.mark.parametrize("name", ["helix_ctc", "pick_place_ctc"])
+@pytest.mark.parametrize("name", ["helix_ctc", "helix_ctc_thesis", "pick_place_ctc"])
 def test_run_matches_its_golden_baseline(name, build, tmp_path):
     """Both builds of our FMUs (issue 23) pass the same baseline with the same tolerances."""
     out = tmp_path / f"{name}.mcap"

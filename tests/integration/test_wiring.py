@@ -46,11 +46,13 @@ def test_prefixes_wire_what_element_lines_wired(tmp_path):
     ("{from: traj, to: ctl.qd}", "connections[3]: give both ends as components"),
 ])
 def test_mismatches_are_file_line_errors(tmp_path, line, expected):
-    text = (ROOT / "scenarios" / "helix_ctc.yaml").read_text().replace("{from: plant.qd, to: ctl.qd}", line)
-    (tmp_path / "s.yaml").write_text(text)
+    # helix_ctc_thesis: helix_ctc's wiring without its identified model file (not copied to tmp_path)
+    original = (ROOT / "scenarios" / "helix_ctc_thesis.yaml").read_text()
+    at = 1 + [n for n, text in enumerate(original.splitlines()) if "{from: plant.qd, to: ctl.qd}" in text][0]
+    (tmp_path / "s.yaml").write_text(original.replace("{from: plant.qd, to: ctl.qd}", line))
     with pytest.raises(CosimError) as exc:
         prepare(load_scenario(tmp_path / "s.yaml"))
-    assert f"s.yaml:20: {expected}" in str(exc.value), str(exc.value)
+    assert at == 23 and f"s.yaml:{at}: {expected}" in str(exc.value), (at, str(exc.value))
 
 
 @pytest.mark.parametrize("first, second", [

@@ -1,0 +1,104 @@
+"""Identified model files: the analytic model's parameters that ``python -m cosim validate-model --out`` fitted.
+
+A YAML file with the robot preset, the motions the parameters were fitted on, the parameters by FMU name
+(``model.w_inertia``, ``model.w_gravity``) and their fit figures (relative RMS and peak effort error per
+motion, at the fitted split and at the default one). A scenario names it with ``model:`` and every
+model-based component of ours (controllers that declare the parameters, the analytic plants) takes its
+start values from it (:func:`model_start_values`, applied by :func:`cosim.engine.prepare.prepare`).
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import tempfile
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+from ..errors import Issue, ScenarioError
+
+__all__ = ["FORMAT", "PARAMETERS", "ModelFile", "read_model_file", "write_model_file", "model_start_values"]
+
+FORMAT = "cosim-identified-model/1"
+PARAMETERS = ("model.w_inertia", "model.w_gravity")
+"""The FMU parameters an identified model may set: the leg mass split of the analytic model (shares in [0, 1])."""
+
+# what the model is used by: our FMUs of these (role, variant); the Exudyn plant is the machine it was fitted to
+_MODEL_BASED = (("controller", None), ("plant", "analytic"), ("plant", "analytic_me"))
+
+
+@dataclass(frozen=True)
+class ModelFile:
+    """An identified model read from ``path``: ``robot`` preset, ``parameters`` by FMU name, the rest as written."""
+
+    path: str
+    robot: str
+    parameters: dict[str, float]
+    fitted_on: dict[str, Any]
+    fit: dict[str, Any]
+
+
+def _fail(path: str, message: str) -> ScenarioError:
+    return ScenarioError(Issue("model", f"identified model {path}: {message} (write one with "
+                                        f"`python -m cosim validate-model --robot PRESET --out FILE`)"))
+
+
+def read_model_file(path: str | Path) -> ModelFile:
+    """Read and check an identified model file; :class:`ScenarioError` naming the file and what is wrong."""
+    path = str(path)
+    try:
+        data = yaml.safe_load(Path(path).read_text(encoding="utf-8"))
+    except OSError as exc:
+        raise _fail(path, f"cannot read: {exc.strerror}") from None
+    except (UnicodeDecodeError, yaml.YAMLError) as exc:
+        raise _fail(path, f"not a YAML file: {str(exc).splitlines()[0]}") from None
+    if not isinstance(data, dict) or data.get("format") != FORMAT:
+        raise _fail(path, f"format must be {FORMAT!r}")
+    robot, params = data.get("robot"), data.get("parameters")
+    if not isinstance(robot, str):
+        raise _fail(path, "robot must be a preset name")
+    if not isinstance(params, dict) or not params:
+        raise _fail(path, f"parameters must map some of {', '.join(PARAMETERS)} to values")
+    for name, value in params.items():
+        if name not in PARAMETERS:
+            raise _fail(path, f"unknown parameter {name!r}; valid: {', '.join(PARAMETERS)}")
+        if isinstance(value, bool) or not isinstance(value, (int, float)) or not 0.0 <= value <= 1.0:
+            raise _fail(path, f"{name} must be a number in [0, 1], got {value!r}")
+    return ModelFile(path, robot, {k: float(v) for k, v in params.items()}, dict(data.get("fitted_on") or {}),
+                     dict(data.get("fit") or {}))
+
+
+def write_model_file(path: str | Path, robot: str, parameters: dict[str, float], fitted_on: dict[str, Any],
+                     fit: dict[str, Any], command: str) -> None:
+    """Write an identified model atomically (a temporary file in the same folder, then renamed over ``path``),
+    ``command`` in its header comment. Raises ``OSError`` when the folder cannot be written."""
+    path = Path(path)
+    body = {"format": FORMAT, "robot": robot, "fitted_on": fitted_on,
+            "parameters": {k: float(v) for k, v in parameters.items()}, "fit": fit}
+    for name, value in body["parameters"].items():
+        if name not in PARAMETERS or not math.isfinite(value):
+            raise ValueError(f"cannot write {name} = {value}")
+    text = (f"# Identified model of {robot}: the analytic model's leg mass split fitted to the Exudyn plant.\n"
+            f"# Written by: {command}\n# Scenarios use it with the top-level key  model: <path to this file>\n"
+            + yaml.safe_dump(body, sort_keys=False, default_flow_style=False))
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    try:
+        with os.fdopen(fd, "w", encoding="utf-8") as fh:
+            fh.write(text)
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+
+
+def model_based(entry: Any) -> bool:
+    """Whether our FMU ``entry`` (:class:`fmus.registry.FmuEntry`) computes with the analytic model."""
+    return any(entry.role == role and (variant is None or entry.variant == variant) for role, variant in _MODEL_BASED)
+
+
+def model_start_values(model: ModelFile, variables: Any) -> dict[str, float]:
+    """The identified parameters that an FMU with ``variables`` (names) declares."""
+    return {name: value for name, value in model.parameters.items() if name in variables}

@@ -1,0 +1,42 @@
+"""A scenario's identified model reaches every model-based component of ours, and only those (issue 27)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from cosim.engine.prepare import prepare
+from cosim.engine.scenario import load_scenario
+
+ROOT = Path(__file__).resolve().parents[2]
+pytestmark = pytest.mark.integration
+
+
+def _start(scenario, name):
+    plan, report = prepare(scenario)
+    return plan.start_values[plan.names.index(name)], report
+
+
+def test_the_controller_takes_the_identified_split_and_the_exudyn_plant_does_not():
+    scenario = load_scenario(ROOT / "scenarios" / "helix_ctc.yaml", {("fmus",): "python"})
+    model = scenario.model_file().parameters
+    ctl, report = _start(scenario, "ctl")
+    for name, value in model.items():
+        assert ctl.get(name) == value, (name, ctl.get(name), value)
+    plant, _ = _start(scenario, "plant")
+    assert not set(model) & set(plant), f"the Exudyn plant took {set(model) & set(plant)}"
+    assert "identified model models/linear_delta_thesis.yaml (w_inertia = " in report, report
+
+
+def test_the_analytic_plant_takes_it_and_an_explicit_parameter_wins():
+    scenario = load_scenario(ROOT / "scenarios" / "helix_ctc.yaml",
+                             {("fmus",): "python", ("components", "plant", "fmu"): "linear_analytic_plant",
+                              ("components", "plant", "parameters"): {},
+                              ("components", "ctl", "parameters", "model.w_inertia"): 0.25})
+    model = scenario.model_file().parameters
+    plant, _ = _start(scenario, "plant")
+    assert {k: plant.get(k) for k in model} == model, (plant, model)
+    ctl, _ = _start(scenario, "ctl")
+    assert ctl["model.w_inertia"] == 0.25, ctl
+    assert ctl["model.w_gravity"] == model["model.w_gravity"], (ctl, model)
