@@ -495,8 +495,10 @@ class SweepCluster:
 
 
 def _comm_reason(exc: BaseException) -> str:
-    """distributed's comm error without its ``in <TCP ...>:`` prefix (``ConnectionRefusedError: [Errno 111] ...``)."""
-    return re.sub(r"^in <[^>]*>: ", "", str(exc))
+    """distributed's comm error without its ``in <TCP ...>:`` prefix (``ConnectionRefusedError: [Errno 111] ...``);
+    an error without text (a connect attempt that timed out on a loaded machine) by its kind."""
+    text = re.sub(r"^in <[^>]*>: ", "", str(exc)).strip()
+    return text or f"{type(exc).__name__}: the last attempt gave no reason"
 
 
 # Worker preload (``LocalCluster(preload=["cosim.analysis.sweep"])``, or ``dask worker --preload cosim.analysis.sweep``).
