@@ -4,7 +4,7 @@
    1 ms: each component's ``component_time_s`` / steps (target <= 2 us per FMU per step). A
    component's time is what the master spends on it in a step: its links copied in, its inputs set,
    its doStep, its outputs read and checked for NaN; the master reads its clock once before a step's
-   first component and once after each component (cosim.engine.algorithm: each algorithm.s macro step). The master's own share
+   first component and once after each component (cosim.engine.algorithm: each algorithm's macro step). The master's own share
    of that run (loop wall time minus the components: step loop, observers) is printed too.
 2. The master's own cost on two C FMUs (``tests/cfmus``: FMI 2 VanDerPol, its ``x0`` wired to
    Feedthrough's ``Real_input``; serial, no log, ``--steps`` steps of 1 ms; target <= 2 us per step):
