@@ -172,6 +172,28 @@ def _van_der_pol(fmi: int) -> Model:
     )
 
 
+def _horizon(fmi: int) -> Model:
+    return Model(
+        "Horizon",
+        fmi,
+        "horizon.c",
+        "der(x) = 1; fails any step ending past its stopTime (Error), t_reached = the time reached",
+        (
+            _time(),
+            Var("x", 1, "Float64", "output", "continuous", "exact", 0.0, "Integrated time since the start",
+                unit="s", nominal=1.0),
+            Var("der(x)", 2, "Float64", "local", "continuous", "calculated", field="der_x",
+                description="Derivative of x", derivative="x"),
+            Var("t_reached", 3, "Float64", "output", "continuous", "calculated",
+                description="The time the FMU is at (its own t + h after a step)", unit="s"),
+        ),
+        outputs={"x": ["x"], "t_reached": []},
+        derivatives={"der(x)": []},
+        experiment={"startTime": 0.0, "stopTime": 2.0, "stepSize": 1e-4},
+        units=("s",),
+    )
+
+
 def state_space_defaults(m: int = 3, n: int = 3, r: int = 3) -> dict[str, list[list[float]] | list[float]]:
     """The StateSpace defaults for given sizes, as in c/models/state_space.c."""
     A = [[0.0] * n for _ in range(n)]
@@ -334,4 +356,6 @@ MODEL_SPECS: dict[tuple[str, int], Model] = {
     ("Clocked", 3): _clocked(),
     ("Halving", 2): _halving(2),
     ("Halving", 3): _halving(3),
+    ("Horizon", 2): _horizon(2),
+    ("Horizon", 3): _horizon(3),
 }

@@ -125,6 +125,9 @@ typedef struct {
     /* Co-simulation only: true (and *t_reject) if a step from t0 to t1 must be
        rejected (NULL: every step is accepted). */
     bool (*rejects_step)(const void *d, double t0, double t1, double *t_reject);
+    /* True: like some exporters' FMUs (20-sim: "Exceeded model finish time"), the model fails (Error)
+       a co-simulation step ending past the stopTime it was given, and a model exchange SetTime past it. */
+    bool strict_stop_time;
 } ModelClass;
 
 extern const ModelClass MODEL;
