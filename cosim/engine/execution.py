@@ -143,8 +143,8 @@ class Execution:
 
     # -- running
     def initialize(self, start_observers: bool = True) -> None:
-        """Instantiate, set start values, initialization mode, propagate outputs in order, exit; then start the
-        observers (``start_observers``), each in turn (:attr:`started`)."""
+        """Instantiate, set up the experiment, set start values, initialization mode, propagate outputs in order,
+        exit; then start the observers (``start_observers``), each in turn (:attr:`started`)."""
         if len(self.slaves) != len(self.plan.names):
             raise ValueError(f"{len(self.slaves)} components added, the plan has {len(self.plan.names)}")
         self._link()
@@ -153,6 +153,7 @@ class Execution:
         for c, s in enumerate(self.slaves):
             cur[0] = c
             s.instantiate()
+            s.setup_experiment(start, stop)  # the order of FMPy and libcosim: start values after the setup
             s.set_start(self.plan.start_values[c])
             s.enter_initialization(start, stop)
         for c in self.plan.order:

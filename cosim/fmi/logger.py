@@ -5,6 +5,7 @@ from __future__ import annotations
 import ast
 import itertools
 import re
+import threading
 import weakref
 from typing import TYPE_CHECKING, Any
 
@@ -21,6 +22,19 @@ if TYPE_CHECKING:
 FMI2_LOG_TARGETS: weakref.WeakValueDictionary[int, "Base"] = weakref.WeakValueDictionary()
 FMI2_ENVIRONMENTS = itertools.count(1)
 _FMI2_LOGGER: Any = None
+CALLING = threading.local()
+"""``CALLING.slave``: the instance whose lifecycle call (``Base._guard``) this thread is making, if any."""
+
+
+def _without_environment(instance: bytes | None) -> "Base | None":
+    """The instance a message with a NULL componentEnvironment (some exporters' FMUs send one) is about: the one
+    whose call this thread is making, else the only live FMI 2 instance of that instance name."""
+    caller = getattr(CALLING, "slave", None)
+    if caller is not None:
+        return caller
+    name = (instance or b"").decode("utf-8", "replace")
+    named = [s for s in list(FMI2_LOG_TARGETS.values()) if s.name == name]
+    return named[0] if len(named) == 1 else None
 
 
 def fmi2_logger() -> Any:
@@ -29,7 +43,7 @@ def fmi2_logger() -> Any:
         from fmpy.fmi2 import fmi2CallbackLoggerTYPE
 
         def dispatch(env, instance, status, category, message):  # noqa: ANN001, ANN202
-            slave = FMI2_LOG_TARGETS.get(env or 0)
+            slave = FMI2_LOG_TARGETS.get(env) if env else _without_environment(instance)
             if slave is not None:
                 slave._on_log(status, category, message)
 

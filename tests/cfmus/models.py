@@ -194,6 +194,26 @@ def _horizon(fmi: int) -> Model:
     )
 
 
+def _forgetful(fmi: int) -> Model:
+    return Model(
+        "Forgetful",
+        fmi,
+        "forgetful.c",
+        "y = p, z an output with initial exact; FMI 2: setupExperiment forgets values set before it, log "
+        "messages carry no componentEnvironment",
+        (
+            _time(),
+            Var("p", 1, "Float64", "parameter", "fixed", "exact", 1.0, "A parameter (must be >= 0)"),
+            Var("y", 2, "Float64", "output", "continuous", "calculated", description="y = p"),
+            Var("z", 3, "Float64", "output", "discrete", "exact", 0.0,
+                "An output whose start value an importer may set (initial exact)"),
+        ),
+        outputs={"y": [], "z": []},
+        experiment={"startTime": 0.0, "stopTime": 1.0, "stepSize": 0.1},
+        units=("s",),
+    )
+
+
 def state_space_defaults(m: int = 3, n: int = 3, r: int = 3) -> dict[str, list[list[float]] | list[float]]:
     """The StateSpace defaults for given sizes, as in c/models/state_space.c."""
     A = [[0.0] * n for _ in range(n)]
@@ -358,4 +378,6 @@ MODEL_SPECS: dict[tuple[str, int], Model] = {
     ("Halving", 3): _halving(3),
     ("Horizon", 2): _horizon(2),
     ("Horizon", 3): _horizon(3),
+    ("Forgetful", 2): _forgetful(2),
+    ("Forgetful", 3): _forgetful(3),
 }

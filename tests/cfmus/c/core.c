@@ -200,6 +200,8 @@ Status core_enter_initialization(Instance *in, double start_time, bool stop_defi
 Status core_exit_initialization(Instance *in)
 {
     const char *fn = "ExitInitializationMode";
+    const char *why = MODEL.invalid ? MODEL.invalid(in->data) : NULL;
+    if (why) return core_fail(in, fn, "%s", why);
     MODEL.initialize(in->data, in->time);
     in->dirty = true;
     if (!alloc_scratch(in)) return core_fail(in, fn, "out of memory");
