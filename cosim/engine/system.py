@@ -232,9 +232,7 @@ def _start_values(scenario: Scenario, infos: dict[str, FMUInfo], idx: dict[str, 
             for vname, val in targets:
                 var = info.variables.get(vname)
                 if var is None:
-                    settable = [v.name for v in info.variables.values()
-                                if v.causality in ("parameter", "input", "structuralParameter")
-                                or v.variability == "tunable"]
+                    settable = [v.name for v in info.variables.values() if settable_at_start(v)]
                     issue(loc, f"{info.path.name} has no variable {vname!r}{_close(vname, settable)}")
                 elif not settable_at_start(var):
                     issue(loc, f"{vname} is {var.causality}/{var.variability} (initial {initial_of(var)}): its value "
