@@ -9,8 +9,8 @@ An FMU gets the double nearest ``t_k`` (:meth:`Grid.time`) and a step size ``h``
 so that the FMU's own ``t + h``, added in double arithmetic, is the double nearest ``t_{k+m}``: the step after
 lands on the next point exactly, and the last one on the stop time given to the FMU, never past it (where no
 double ``h`` does that, in a step from a point below half the next, ``t + h`` is the double just below:
-:func:`step_between`). Computing
-``h = m step_ns * 1e-9`` instead misses by an ulp: ``1.9999000000000002 + 1e-4 > 2.0``.
+:func:`step_between`). Computing ``h = m step_ns * 1e-9`` instead misses by an ulp: ``1.9999000000000002 + 1e-4
+> 2.0``.
 
 This module is the one place where nanoseconds become the doubles an FMU sees; every algorithm, the model
 exchange integration and the offload worker take their times from it.
