@@ -75,6 +75,9 @@ class FakeSlave:
     def instantiate(self) -> None:
         self.calls.append(("instantiate",))
 
+    def setup_experiment(self, start: float, stop: float) -> None:
+        self.calls.append(("setup_experiment", start, stop))
+
     def set_start(self, values: dict[str, Any]) -> None:
         self.calls.append(("set_start", dict(values)))
         self.state.update(values)

@@ -26,8 +26,10 @@ if TYPE_CHECKING:
 
 __all__ = ["Algorithm", "GaussSeidel", "Jacobi", "ALGORITHMS", "DEFAULT"]
 
-MacroStep = Callable[[int, float], None]
-"""Runs base step ``k`` (at time ``t`` s) of the execution: the turns of its active components."""
+MacroStep = Callable[[int, float, float], None]
+"""Runs base step ``k`` (at time ``t`` s, the grid's double; ``h`` the grid's base step size from it) of the
+execution: the turns of its active components, a multi-rate one's step size from the grid
+(:meth:`~cosim.engine.grid.Grid.step_size`)."""
 
 
 class Algorithm(Protocol):
@@ -51,11 +53,13 @@ class Algorithm(Protocol):
         ...
 
 
-def _loop_state(ex: "Execution") -> tuple[list, int, list[float], Any, Callable[[], float]]:
+def _loop_state(ex: "Execution") -> tuple[list, int, list[float], Any, Callable[[], float],
+                                          Callable[[int, int, float], float]]:
     """What a macro step's loop reads, as locals: the turns of the hyper-period (:meth:`Execution.turns`), its
-    length, the per-component wall times, the record of the component with the turn, the clock."""
+    length, the per-component wall times, the record of the component with the turn, the clock, the step size
+    of a component from base step ``k`` at ``t`` over its multiple (:meth:`~cosim.engine.grid.Grid.step_size`)."""
     turns = ex.turns()
-    return turns, len(turns), ex.comp_time, ex.current, _time.perf_counter
+    return turns, len(turns), ex.comp_time, ex.current, _time.perf_counter, ex.grid.step_size
 
 
 class GaussSeidel:
@@ -65,17 +69,17 @@ class GaussSeidel:
     reads_this_step: ClassVar[bool] = True
 
     def macro_step(self, ex: "Execution") -> MacroStep:
-        turns, period, ctime, current, clock = _loop_state(ex)
+        turns, period, ctime, current, clock, step_size = _loop_state(ex)
 
-        def step(k: int, t: float) -> None:
+        def step(k: int, t: float, h: float) -> None:
             t_prev = clock()
-            for c, moves, copies, s, hc in turns[k % period]:
+            for c, moves, copies, s, m in turns[k % period]:
                 current[0] = c
                 for d, src in moves:
                     d[:] = src
                 for dv, di, sv, si in copies:
                     dv[di] = sv[si]
-                s.set_step_get(t, hc)
+                s.set_step_get(t, h if m == 1 else step_size(k, m, t))
                 now = clock()
                 ctime[c] += now - t_prev
                 t_prev = now
@@ -94,9 +98,9 @@ class Jacobi:
     reads_this_step: ClassVar[bool] = False
 
     def macro_step(self, ex: "Execution") -> MacroStep:
-        turns, period, ctime, current, clock = _loop_state(ex)
+        turns, period, ctime, current, clock, step_size = _loop_state(ex)
 
-        def step(k: int, t: float) -> None:
+        def step(k: int, t: float, h: float) -> None:
             turn = turns[k % period]
             t_prev = clock()
             for c, moves, copies, s, _ in turn:
@@ -109,9 +113,9 @@ class Jacobi:
                 now = clock()
                 ctime[c] += now - t_prev
                 t_prev = now
-            for c, _, _, s, hc in turn:
+            for c, _, _, s, m in turn:
                 current[0] = c
-                s.step(t, hc)
+                s.step(t, h if m == 1 else step_size(k, m, t))
                 now = clock()
                 ctime[c] += now - t_prev
                 t_prev = now

@@ -5,8 +5,9 @@ components (:meth:`Execution.add_slave`, in the plan's order) and the observers,
 and :meth:`~Execution.step` or :meth:`~Execution.simulate_until`. The CLI, the API, SSP runs, sweeps and the
 offload worker all run through it (:func:`cosim.run.run_scenario` composes one from a scenario).
 
-Time is an integer count of nanoseconds: ``t_ns = start_ns + k * step_ns``, never a float accumulated step after
-step. The algorithm (:mod:`cosim.engine.algorithm`) runs one macro step; the execution handles the schedule
+Time is an integer count of nanoseconds on a :class:`~cosim.engine.grid.Grid` (``t_ns = start_ns + k * step_ns``),
+never a float accumulated step after step; the grid gives the doubles the components are called with, each step
+landing exactly on the next point and the last on the stop time. The algorithm (:mod:`cosim.engine.algorithm`) runs one macro step; the execution handles the schedule
 (multi-rate), observers (called after each macro step with the components that stepped), progress, stop
 requests (SIGINT, SIGTERM, SIGHUP: honoured between macro steps, never inside an FMU call) and an FMU that
 ends the simulation. A component that never returns is the watchdog's (:mod:`cosim.engine.watchdog`): it reads
@@ -26,10 +27,14 @@ from typing import Any, Callable, Protocol, Sequence
 from ..errors import STOP_SIGNALS, Interrupted
 from ..fmi import Slave, Terminated
 from .algorithm import ALGORITHMS, DEFAULT, Algorithm
+from .grid import Grid
 from .supervision import MASTER, PHASES, Record
 from .system import SystemPlan
 
 __all__ = ["Observer", "Execution", "StopRequest", "byte_view"]
+
+_CHUNK = 4096  # base steps whose times and step sizes the grid computes at once
+
 
 class Observer(Protocol):
     """Watches a run; never changes inputs. Methods are called in this order."""
@@ -40,8 +45,8 @@ class Observer(Protocol):
 
 
 class Execution:
-    """A plan's components on the integer time grid ``start_ns + k * step_ns`` up to ``stop_ns``, run by an
-    algorithm (:data:`~cosim.engine.algorithm.ALGORITHMS`, by name), watched by observers.
+    """A plan's components on the integer time grid ``start_ns + k * step_ns`` up to ``stop_ns`` (:attr:`grid`), run
+    by an algorithm (:data:`~cosim.engine.algorithm.ALGORITHMS`, by name), watched by observers.
 
     ``multiples``: each component's step multiple (multi-rate); ``algorithm``: a registered name.
     After :meth:`initialize`: ``k_done`` (macro steps completed), ``comp_time`` (wall seconds per component),
@@ -51,6 +56,7 @@ class Execution:
     def __init__(self, plan: SystemPlan, start_ns: int, stop_ns: int, step_ns: int, multiples: Sequence[int],
                  algorithm: str = DEFAULT, record: Record | None = None):
         self.plan = plan
+        self.grid = Grid(start_ns, stop_ns, step_ns)
         self.start_ns, self.stop_ns, self.step_ns = start_ns, stop_ns, step_ns
         self.multiples = list(multiples)
         self.algorithm_name = algorithm
@@ -69,7 +75,7 @@ class Execution:
         # the one it reads, cosim.engine.supervision)
         self.record = record if record is not None else Record()
         self.current = self.record.current
-        self.current[0], self.current[1], self.current[2], self.current[3] = MASTER, start_ns * 1e-9, 0, 0
+        self.current[0], self.current[1], self.current[2], self.current[3] = MASTER, self.grid.time(0), 0, 0
 
     # -- building
     def add_slave(self, slave: Slave) -> int:
@@ -89,21 +95,21 @@ class Execution:
     # -- the grid
     @property
     def n_steps(self) -> int:
-        return (self.stop_ns - self.start_ns) // self.step_ns
+        return self.grid.n_steps
 
     def t_ns(self, k: int) -> int:
-        return self.start_ns + k * self.step_ns
+        return self.grid.t_ns(k)
 
     def schedule(self) -> list[list[int]]:
         """Active components (in order) for each base step of one hyper-period."""
         period = math.lcm(*self.multiples) if self.multiples else 1
         return [[c for c in self.plan.order if k % self.multiples[c] == 0] for k in range(period)]
 
-    def turns(self) -> list[list[tuple[int, list, list, Slave, float]]]:
+    def turns(self) -> list[list[tuple[int, list, list, Slave, int]]]:
         """Per base step of the hyper-period, its active components in order, each with what its turn needs:
-        the links copied into it (:meth:`pull`), the component, its step size (s)."""
-        h = [m * self.step_ns * 1e-9 for m in self.multiples]
-        return [[(c, self.moves[c], self.copies[c], self.slaves[c], h[c]) for c in active]
+        the links copied into it (:meth:`pull`), the component, its step multiple (the grid's
+        :meth:`~cosim.engine.grid.Grid.step_size` gives the step size of a base step)."""
+        return [[(c, self.moves[c], self.copies[c], self.slaves[c], self.multiples[c]) for c in active]
                 for active in self.schedule()]
 
     # -- links
@@ -134,16 +140,17 @@ class Execution:
 
     # -- running
     def initialize(self, start_observers: bool = True) -> None:
-        """Instantiate, set start values, initialization mode, propagate outputs in order, exit; then start the
-        observers (``start_observers``), each in turn (:attr:`started`)."""
+        """Instantiate, set up the experiment, set start values, initialization mode, propagate outputs in order,
+        exit; then start the observers (``start_observers``), each in turn (:attr:`started`)."""
         if len(self.slaves) != len(self.plan.names):
             raise ValueError(f"{len(self.slaves)} components added, the plan has {len(self.plan.names)}")
         self._link()
         cur = self.current
-        start, stop = self.start_ns * 1e-9, self.stop_ns * 1e-9
+        start, stop = self.grid.time(0), self.grid.time(self.n_steps)
         for c, s in enumerate(self.slaves):
             cur[0] = c
             s.instantiate()
+            s.setup_experiment(start, stop)  # the order of FMPy and libcosim: start values after the setup
             s.set_start(self.plan.start_values[c])
             s.enter_initialization(start, stop)
         for c in self.plan.order:
@@ -186,24 +193,30 @@ class Execution:
         """
         if self.terminated is not None:  # ended before (at initialization, or an earlier call)
             return
-        k_end = self.n_steps if t_ns is None else min(self.n_steps, (t_ns - self.start_ns) // self.step_ns)
+        k_end = self.n_steps if t_ns is None else self.grid.index(t_ns)
         schedule = self.schedule()
         period = len(schedule)
         macro_step = self.algorithm.macro_step(self)
         cur = self.current
         stepped = [o.stepped for o in self.observers]
         report = progress if progress is not None and progress_every else None
-        start_ns, step_ns = self.start_ns, self.step_ns
-        k = self.k_done
+        chunk, t_ns = self.grid.chunk, self.grid.t_ns
+        times: list[float] = []
+        steps: list[float] = []
+        k0 = k = self.k_done
         try:
             for k in range(self.k_done, k_end):
-                t = (start_ns + k * step_ns) * 1e-9
+                i = k - k0
+                if i >= len(times):  # the grid's doubles, a chunk at a time
+                    k0, i = k, 0
+                    times, steps = chunk(k, min(k_end, k + _CHUNK))
+                t = times[i]
                 cur[1] = t
-                macro_step(k, t)
+                macro_step(k, t, steps[i])
                 cur[0] = MASTER
                 cur[3] = self.k_done = k + 1
                 if stepped:
-                    t_end = start_ns + (k + 1) * step_ns
+                    t_end = t_ns(k + 1)
                     active = schedule[k % period]
                     for f in stepped:
                         f(k, t_end, active)

@@ -22,6 +22,7 @@ from delta.trajectories import TYPES
 
 from ..errors import Issue, ScenarioError
 from .algorithm import ALGORITHMS, DEFAULT
+from .grid import NS_PER_S, Grid, grid_error
 from .model_file import read_model_file
 from .names import name_problem, quote, split_ref
 
@@ -53,7 +54,6 @@ __all__ = [
     "NS_PER_S",
 ]
 
-NS_PER_S = 1_000_000_000
 # a list sets name[1], name[2], ... (FMI 2 structured names) or a whole FMI 3 array; nested lists
 # give a matrix row by row
 ParamValue = Union[bool, int, float, str, list[Union[bool, int, float, str]], list[list[Union[bool, int, float]]]]
@@ -117,7 +117,8 @@ class Connection(_Model):
 
 
 class TimeGrid(_Model):
-    """Stop time and base communication step, s. Converted once to integer nanoseconds."""
+    """Stop time and base communication step, s. Converted once to integer nanoseconds (the step rounded to the
+    nanosecond when it is no whole number of them: :mod:`cosim.engine.grid`)."""
 
     stop: float = Field(gt=0, description="stop time, s")
     step: float = Field(gt=0, description="base communication step, s")
@@ -125,14 +126,17 @@ class TimeGrid(_Model):
 
     @model_validator(mode="after")
     def _grid(self) -> "TimeGrid":
-        for name in ("stop", "step", "start"):
+        for name in ("stop", "start"):
             v = getattr(self, name)
             # a float read from YAML is within 1e-3 ns of its intended whole-nanosecond value
             if abs(v * NS_PER_S - round(v * NS_PER_S)) > 1e-3:
                 raise ValueError(f"{name} = {v} s is not a whole number of nanoseconds")
+        if self.step_ns < 1:
+            raise ValueError(f"step = {self.step} s is shorter than the grid's resolution, 1 ns")
         if self.stop_ns <= self.start_ns:
             raise ValueError(f"stop ({self.stop} s) must be after start ({self.start} s)")
-        if (self.stop_ns - self.start_ns) % self.step_ns:
+        # a step that is no whole number of ns (1/30 s) is rounded to the ns, the last point still the stop time
+        if grid_error(self.start_ns, self.stop_ns, self.step_ns) is not None:
             n = (self.stop_ns - self.start_ns) // self.step_ns
             raise ValueError(
                 f"stop - start = {self.stop - self.start} s is not a whole number of steps of {self.step} s; "
@@ -153,7 +157,7 @@ class TimeGrid(_Model):
 
     @property
     def n_steps(self) -> int:
-        return (self.stop_ns - self.start_ns) // self.step_ns
+        return Grid(self.start_ns, self.stop_ns, self.step_ns).n_steps
 
 
 class TrajectorySpec(_Model):

@@ -13,6 +13,7 @@ from typing import Any, Callable, Mapping
 
 from ..errors import AlgebraicLoopError, Issue, UnknownSignalError, WiringError
 from ..fmi import FMUInfo, Variable
+from ..fmi.description import initial_of, settable_at_start
 from .algorithm import ALGORITHMS
 from .names import quote, split_ref
 from .scenario import Scenario, expand_signal
@@ -235,13 +236,12 @@ def _start_values(scenario: Scenario, infos: dict[str, FMUInfo], idx: dict[str, 
             for vname, val in targets:
                 var = info.variables.get(vname)
                 if var is None:
-                    settable = [v.name for v in info.variables.values()
-                                if v.causality in ("parameter", "input", "structuralParameter")
-                                or v.variability == "tunable"]
+                    settable = [v.name for v in info.variables.values() if settable_at_start(v)]
                     issue(loc, f"{info.path.name} has no variable {vname!r}{_close(vname, settable)}")
-                elif var.variability == "constant" or var.causality in ("output", "calculatedParameter",
-                                                                         "independent"):
-                    issue(loc, f"{vname} is {var.causality}/{var.variability}: its value cannot be set")
+                elif not settable_at_start(var):
+                    issue(loc, f"{vname} is {var.causality}/{var.variability} (initial {initial_of(var)}): its value "
+                               "cannot be set before initialization (FMI: inputs and non-constant variables with "
+                               "initial exact or approx)")
                 else:
                     typed, problem = typed_value(var, val)
                     if problem:

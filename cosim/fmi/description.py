@@ -51,6 +51,27 @@ class Variable:
         return bool(self.dims)
 
 
+def initial_of(var: Variable) -> str | None:
+    """``var``'s ``initial``, or where the description leaves it out the default the standard gives for its
+    causality and variability (FMI 2.0 table of section 2.2.7, FMI 3.0 section 2.4.7.5: the same defaults)."""
+    if var.initial:
+        return var.initial
+    if var.causality in ("parameter", "structuralParameter") or var.variability == "constant":
+        return "exact"
+    if var.causality in ("calculatedParameter", "output", "local"):
+        return "calculated"
+    return None  # input, independent: no initial
+
+
+def settable_at_start(var: Variable) -> bool:
+    """Whether an importer may set ``var`` before initialization (FMI 2.0 section 4.2.4 / 3.2.3 and FMI 3.0
+    section 2.3: in the instantiated state, any non-constant variable with initial ``exact`` or ``approx``, and
+    an input): parameters, inputs, and outputs or locals declared ``initial="exact"`` or ``"approx"``."""
+    if var.variability == "constant" or var.causality == "independent":
+        return False
+    return var.causality == "input" or initial_of(var) in ("exact", "approx")
+
+
 @dataclass
 class FMUInfo:
     """A parsed FMU: model description, variables, interfaces, feedthrough.

@@ -69,9 +69,14 @@ class FMI2(Base):
         values = [str(v) for v in values] if kind == STRING else [as_number(kind, v) for v in values]
         self._guard(f"fmi2Set{kind} ({what})", fn, [var.vr], values)
 
-    def enter_initialization(self, start: float, stop: float) -> None:
+    def setup_experiment(self, start: float, stop: float) -> None:
+        """fmi2SetupExperiment before the start values: some exporters' FMUs reset their variables in it, and
+        FMPy and libcosim set start values after it."""
         self.time = start
         self._guard("fmi2SetupExperiment", self.fmu.setupExperiment, None, start, stop)
+
+    def enter_initialization(self, start: float, stop: float) -> None:
+        self.time = start
         self._guard("fmi2EnterInitializationMode", self.fmu.enterInitializationMode)
 
     def _exchange_name(self, direction: str, b: Buffers) -> str:

@@ -5,6 +5,7 @@ from __future__ import annotations
 import ast
 import itertools
 import re
+import threading
 import weakref
 from typing import TYPE_CHECKING, Any
 
@@ -25,6 +26,19 @@ FMI2_LOG_TARGETS: weakref.WeakValueDictionary[int, "Base"] = weakref.WeakValueDi
 FMI1_INSTANTIATING: weakref.WeakValueDictionary[bytes, "Base"] = weakref.WeakValueDictionary()
 FMI2_ENVIRONMENTS = itertools.count(1)
 _FMI2_LOGGER: Any = None
+CALLING = threading.local()
+"""``CALLING.slave``: the instance whose lifecycle call (``Base._guard``) this thread is making, if any."""
+
+
+def _without_environment(instance: bytes | None) -> "Base | None":
+    """The instance a message with a NULL componentEnvironment (some exporters' FMUs send one) is about: the one
+    whose call this thread is making, else the only live FMI 2 instance of that instance name."""
+    caller = getattr(CALLING, "slave", None)
+    if caller is not None:
+        return caller
+    name = (instance or b"").decode("utf-8", "replace")
+    named = [s for s in list(FMI2_LOG_TARGETS.values()) if s.name == name]
+    return named[0] if len(named) == 1 else None
 
 
 def fmi2_logger() -> Any:
@@ -35,8 +49,8 @@ def fmi2_logger() -> Any:
         from fmpy.fmi2 import fmi2CallbackLoggerTYPE
 
         def dispatch(env, instance, status, category, message):  # noqa: ANN001, ANN202
-            slave = FMI2_LOG_TARGETS.get(env or 0)
-            if slave is None and instance is not None:
+            slave = FMI2_LOG_TARGETS.get(env) if env else _without_environment(instance)
+            if slave is None and instance is not None:  # FMI 1.0 while instantiating: by instance name
                 slave = FMI1_INSTANTIATING.get(instance)
             if slave is not None:
                 slave._on_log(status, category, message)

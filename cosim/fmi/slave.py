@@ -17,7 +17,7 @@ from fmus.requirements import release_pythonfmu_state
 from ..errors import FMIError, printable
 from . import extract
 from .description import BINARY, BOOLEAN, REAL, FMUInfo, Variable
-from .logger import log_text
+from .logger import CALLING, log_text
 from .pythonfmu import PYTHONFMU_LIBRARIES
 from .turn import GET, SET, STEP, Exchange, Finite, make_turn
 
@@ -49,7 +49,11 @@ class Slave(Protocol):
 
     def locate(self, var: Variable, output: bool = True) -> tuple[Any, int]: ...  # (values array, index) of var
 
+    # initialization, in this order (FMPy's and libcosim's): instantiate, setup_experiment (FMI 2's
+    # fmi2SetupExperiment; nothing for the FMI versions that take the times at initialization), set_start,
+    # enter_initialization (which gets the times again), exit_initialization
     def instantiate(self) -> None: ...
+    def setup_experiment(self, start: float, stop: float) -> None: ...
     def set_start(self, values: dict[str, Any]) -> None: ...
     def enter_initialization(self, start: float, stop: float) -> None: ...
     def exit_initialization(self) -> None: ...
@@ -151,6 +155,7 @@ class Base:
         """Lifecycle calls through fmpy (which raises on a failing status): translate to FMIError."""
         from fmpy.fmi1 import FMICallException
 
+        before, CALLING.slave = getattr(CALLING, "slave", None), self  # a log without environment is this call's
         try:
             return call(*args)
         except FMICallException as exc:
@@ -161,6 +166,8 @@ class Base:
             raise
         except Exception as exc:  # fmpy uses bare Exception for failed instantiation
             raise FMIError(self.name, function, self.time, None, self._last_log() or str(exc)) from None
+        finally:
+            CALLING.slave = before
 
     def _on_log(self, status: int, category: bytes | None, message: bytes | None) -> None:
         text = printable(log_text((message or b"").decode("utf-8", "replace").strip()))
@@ -173,7 +180,12 @@ class Base:
         """Whether the FMU logged an error-status message while at time ``t`` (e.g. during a step from t)."""
         return self._error_log is not None and self._error_log[0] == t
 
-    # -- start values (parameters), before initialization
+    def setup_experiment(self, start: float, stop: float) -> None:
+        """Before the start values: FMI 2 sets up the experiment here (fmi2SetupExperiment); FMI 1.0 and 3.0
+        take start and stop time when initialization begins (:meth:`enter_initialization`), so nothing here."""
+        self.time = start
+
+    # -- start values, after setup_experiment and before enter_initialization (as FMPy and libcosim set them)
     def set_start(self, values: dict[str, Any]) -> None:
         for name, value in values.items():
             var = self.info.variables[name]

@@ -503,9 +503,8 @@ class Publisher:
             rows = _Rows(cid, runs, readers, self.BLOCK_BYTES)
             self._pending.append(rows)
             self._rows_of[c] = rows
-            self._by_comp.append((rows.data.append, rows.capture, rows.stamps.append, rt.multiples[c] * rt.step_ns))
-        self._step_ns = rt.step_ns
-        self._t0 = rt.start_ns
+            self._by_comp.append((rows.data.append, rows.capture, rows.stamps.append, rt.multiples[c]))
+        self._grid = rt.grid
         self._rt = rt
         self._scene = None
         if self.scene_robot is not None and self.scene_position:
@@ -589,16 +588,17 @@ class Publisher:
         else:
             if joint is not None:  # the last step of a run an FMU ended: some components only
                 self.flush()
-            t_start = self._t0 + k * self._step_ns
+            grid = self._grid
             by_comp = self._by_comp
             ended = self._rt.t_end_ns is not None  # an FMU ended the run: no stamp past the time reached
             for c in active:
                 entry = by_comp[c]
                 if entry is not None:
-                    add, read, stamp, h = entry
+                    add, read, stamp, m = entry
                     add(read())
                     # the end of this component's own (possibly multi-rate) step
-                    stamp(min(t_start + h, t_ns) if ended else t_start + h)
+                    t_end = grid.t_ns(grid.end(k, m))
+                    stamp(min(t_end, t_ns) if ended else t_end)
         self._n += 1
         if self._n >= self._cap:
             self.flush()

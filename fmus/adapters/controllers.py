@@ -80,9 +80,14 @@ class _Controller(Adapter):
 
     def advance(self, t: float, h: float) -> None:
         """One control period ends: commit the law's state (the PID integral) for the inputs
-        that held during the step; the effort applied over the step was already output."""
-        if self.law is None or self.law.h != h:
+        that held during the step; the effort applied over the step was already output.
+
+        The law's period follows the step size, its state is kept: the PID integral is a sum of ``e h``, so a
+        step of another length adds ``e h`` of that length to it. (A master's step sizes differ by an ulp from
+        step to step when each lands exactly on its communication point.)"""
+        if self.law is None or not h > 0.0:  # a period <= 0 is refused as the law's parameter
             self.law = self.make_law(h)
+        self.law.h = h
         if self.law.stateful:  # stateless laws: the effort output before the step is all there is
             self.law.step(*self._inputs())
 

@@ -257,8 +257,9 @@ class CTCController(Controller):
 
 
 class PIDController(Controller):
-    """PID: the state is the integral and the period of the last step (the python build makes a new law,
-    with a zero integral, when the step size changes; before the first step it assumes the default step)."""
+    """PID: the state is the integral and the period of the last step (the output's integral update uses it;
+    before the first step the default step). As in the python build, the integral is kept when the step size
+    changes: it is a sum of ``e h`` whatever each ``h``."""
 
     LAW, GAINS = PID, ("kp", "ki", "kd")
     n_state = 4  # integral[3], h of the last step
@@ -279,9 +280,7 @@ class PIDController(Controller):
         return Result(dict(zip(U, u)), checks=_errors(trace))
 
     def advance(self, sym: Symbols, trace: Trace) -> Result:
-        same = sym.h == sym.s[3]
-        integral = [ca.if_else(same, x, 0.0) for x in sym.s[:3]]
-        _, integral = self.law(sym, trace, sym.h, integral=integral)._evaluate(*self.inputs(sym))
+        _, integral = self.law(sym, trace, sym.h, integral=list(sym.s[:3]))._evaluate(*self.inputs(sym))
         return Result(state=[*integral, sym.h], checks=_errors(trace))
 
 

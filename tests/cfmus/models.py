@@ -172,6 +172,48 @@ def _van_der_pol(fmi: int) -> Model:
     )
 
 
+def _horizon(fmi: int) -> Model:
+    return Model(
+        "Horizon",
+        fmi,
+        "horizon.c",
+        "der(x) = 1; fails any step ending past its stopTime (Error), t_reached = the time reached",
+        (
+            _time(),
+            Var("x", 1, "Float64", "output", "continuous", "exact", 0.0, "Integrated time since the start",
+                unit="s", nominal=1.0),
+            Var("der(x)", 2, "Float64", "local", "continuous", "calculated", field="der_x",
+                description="Derivative of x", derivative="x"),
+            Var("t_reached", 3, "Float64", "output", "continuous", "calculated",
+                description="The time the FMU is at (its own t + h after a step)", unit="s"),
+        ),
+        outputs={"x": ["x"], "t_reached": []},
+        derivatives={"der(x)": []},
+        experiment={"startTime": 0.0, "stopTime": 2.0, "stepSize": 1e-4},
+        units=("s",),
+    )
+
+
+def _forgetful(fmi: int) -> Model:
+    return Model(
+        "Forgetful",
+        fmi,
+        "forgetful.c",
+        "y = p, z an output with initial exact; FMI 2: setupExperiment forgets values set before it, log "
+        "messages carry no componentEnvironment",
+        (
+            _time(),
+            Var("p", 1, "Float64", "parameter", "fixed", "exact", 1.0, "A parameter (must be >= 0)"),
+            Var("y", 2, "Float64", "output", "continuous", "calculated", description="y = p"),
+            Var("z", 3, "Float64", "output", "discrete", "exact", 0.0,
+                "An output whose start value an importer may set (initial exact)"),
+        ),
+        outputs={"y": [], "z": []},
+        experiment={"startTime": 0.0, "stopTime": 1.0, "stepSize": 0.1},
+        units=("s",),
+    )
+
+
 def state_space_defaults(m: int = 3, n: int = 3, r: int = 3) -> dict[str, list[list[float]] | list[float]]:
     """The StateSpace defaults for given sizes, as in c/models/state_space.c."""
     A = [[0.0] * n for _ in range(n)]
@@ -339,4 +381,8 @@ MODEL_SPECS: dict[tuple[str, int], Model] = {
     ("Clocked", 3): _clocked(),
     ("Halving", 2): _halving(2),
     ("Halving", 3): _halving(3),
+    ("Horizon", 2): _horizon(2),
+    ("Horizon", 3): _horizon(3),
+    ("Forgetful", 2): _forgetful(2),
+    ("Forgetful", 3): _forgetful(3),
 }

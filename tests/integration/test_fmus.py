@@ -232,6 +232,7 @@ def test_model_exchange_plant_matches_cosimulation_plant_under_ctc(fmu_dir):
     me = make_slave("plant_me", info, "me", rtol=1e-10)
     me.bind([info.variables[name] for name in U], [info.variables[name] for name in P])  # as the master does
     me.instantiate()
+    me.setup_experiment(0.0, n * h)
     me.set_start(start)
     me.enter_initialization(0.0, n * h)
     me.exit_initialization()

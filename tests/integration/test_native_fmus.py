@@ -17,6 +17,7 @@ RTOL_EXUDYN = 1e-8 relative; positions still to 1e-12 m.
 
 from __future__ import annotations
 
+import math
 import re
 from pathlib import Path
 
@@ -213,3 +214,46 @@ def test_string_parameter_takes_its_declared_values(fmi, cache):
         simulate_fmu(path, stop_time=1.0, start_values={"move.profile": "linear"},
                      logger=lambda *args: messages.append(args[-1].decode()), debug_logging=True)
     assert any('"linear"' in m and '"cubic"' in m and '"quintic"' in m for m in messages), messages
+
+
+def test_pid_keeps_its_integral_when_the_step_size_changes_by_an_ulp(cache):
+    """A master on an exact time grid gives step sizes that differ by an ulp from step to step
+    (cosim.engine.grid): the PID integral is kept through them, in the python and the native build alike.
+
+    linear_pid is stepped through FMPy with a constant error e on leg 1 and steps alternating h and the
+    next double above it; after each step u[1] must be kp e + ki (e sum(h) + e h_last) (the output adds the
+    coming step's e h with the last step's size), to RTOL, and the two builds must agree to RTOL."""
+    from fmpy import extract, read_model_description
+    from fmpy.fmi2 import FMU2Slave
+
+    e, h, n = 1e-4, 1e-3, 50  # 5e-6 m s of integral: far from the anti-windup bound and the effort limit
+    outputs = {}
+    for native in (False, True):
+        path = registry.build("linear_pid", cache, native=native, fmi=2)
+        md = read_model_description(str(path))
+        vrs = {v.name: v.valueReference for v in md.modelVariables}
+        start = {v.name: float(v.start) for v in md.modelVariables if v.start is not None and v.type == "Real"}
+        kp, ki = start["gain.kp[1]"], start["gain.ki[1]"]
+        fmu = FMU2Slave(guid=md.guid, unzipDirectory=extract(str(path)),
+                        modelIdentifier=md.coSimulation.modelIdentifier, instanceName=f"pid_{native}")
+        fmu.instantiate()
+        fmu.setupExperiment(startTime=0.0)
+        fmu.enterInitializationMode()
+        fmu.setReal([vrs["q[1]"], vrs["qd[1]"], vrs["q_ref[1]"], vrs["qd_ref[1]"]], [0.0, 0.0, e, 0.0])
+        fmu.exitInitializationMode()
+        t, total, got, want = 0.0, 0.0, [], []
+        for k in range(n):
+            hk = h if k % 2 == 0 else math.nextafter(h, 1.0)
+            fmu.doStep(t, hk)
+            t, total = t + hk, total + hk
+            got.append(fmu.getReal([vrs["u[1]"]])[0])
+            want.append(kp * e + ki * (e * total + e * hk))
+        fmu.terminate()
+        fmu.freeInstance()
+        got, want = np.array(got), np.array(want)
+        assert np.allclose(got, want, rtol=RTOL, atol=0.0), \
+            f"native={native}: u[1] {got[:4]} ... expected {want[:4]} ... (worst {np.max(np.abs(got - want))})"
+        assert got[-1] - got[0] > 0.5 * ki * e * (n - 1) * h, f"native={native}: the integral did not grow: {got}"
+        outputs[native] = got
+    worst = np.max(np.abs(outputs[True] - outputs[False]))
+    assert worst <= RTOL * np.max(np.abs(outputs[False])), f"python and native differ by {worst}"

@@ -55,6 +55,7 @@ CHILD = textwrap.dedent(r"""
         s = make_slave(name, info)
         s.bind([info.variables["u"]], [info.variables["y"]])
         s.instantiate()
+        s.setup_experiment(0.0, 1.0)
         s.set_start({})
         s.enter_initialization(0.0, 1.0)
         s.exit_initialization()

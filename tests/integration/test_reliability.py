@@ -127,6 +127,7 @@ def test_me_derivative_failure_is_an_error_not_a_crash():
 
     slave = make_slave("plant", load_fmu(build("linear_analytic_plant_me")), "me")
     slave.instantiate()
+    slave.setup_experiment(0.0, 1.0)
     slave.set_start({})
     slave.enter_initialization(0.0, 1.0)
     slave.bind([], [])

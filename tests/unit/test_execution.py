@@ -172,7 +172,9 @@ def test_initialization_sets_start_values_and_propagates_outputs_in_order():
     assert ("set_start", {"k": 2.0}) in src.calls
     ex.simulate_until()
     assert sink.inputs_seen == [[0.0]]  # Gauss-Seidel: src stepped first (outputs 0.0), sink read it
-    assert src.calls[:3] == [("instantiate",), ("set_start", {"k": 2.0}), ("enter_initialization", 0.0, 1e-3)]
+    # the order of FMPy and libcosim: start values after the experiment's setup, before initialization mode
+    assert src.calls[:4] == [("instantiate",), ("setup_experiment", 0.0, 1e-3), ("set_start", {"k": 2.0}),
+                             ("enter_initialization", 0.0, 1e-3)], src.calls[:4]
 
 
 def test_initialize_refuses_a_plan_with_components_missing():

@@ -200,6 +200,8 @@ Status core_enter_initialization(Instance *in, double start_time, bool stop_defi
 Status core_exit_initialization(Instance *in)
 {
     const char *fn = "ExitInitializationMode";
+    const char *why = MODEL.invalid ? MODEL.invalid(in->data) : NULL;
+    if (why) return core_fail(in, fn, "%s", why);
     MODEL.initialize(in->data, in->time);
     in->dirty = true;
     if (!alloc_scratch(in)) return core_fail(in, fn, "out of memory");
@@ -355,6 +357,9 @@ size_t core_n_indicators(const Instance *in)
 
 Status core_set_time(Instance *in, double t)
 {
+    if (MODEL.strict_stop_time && in->stop_defined && t > in->stop_time)
+        return core_fail(in, "SetTime", "Exceeded model finish time: time = %.17g > stopTime = %.17g", t,
+                         in->stop_time);
     in->time = t;
     in->dirty = true;
     return ST_OK;
@@ -498,6 +503,11 @@ StepOutcome core_do_step(Instance *in, double t, double h, double *t_end, bool *
     }
     if (h < 0.0) {
         core_fail(in, fn, "communicationStepSize = %.17g < 0", h);
+        return STEP_FAILED;
+    }
+    if (MODEL.strict_stop_time && in->stop_defined && target > in->stop_time) {
+        core_fail(in, fn, "Exceeded model finish time: the step from t = %.17g by h = %.17g ends at %.17g > "
+                  "stopTime = %.17g", t, h, target, in->stop_time);
         return STEP_FAILED;
     }
     if (MODEL.rejects_step && MODEL.rejects_step(in->data, t, target, &t_reject)) {

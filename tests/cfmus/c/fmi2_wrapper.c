@@ -42,7 +42,8 @@ static void sink(void *env, const char *name, Status status, const char *categor
         escaped[j++] = message[i];
     }
     escaped[j] = '\0';
-    cb->logger(cb->componentEnvironment, name, (fmi2Status)status, category, escaped);
+    cb->logger(MODEL.fmi2_null_log_environment ? NULL : cb->componentEnvironment, name, (fmi2Status)status,
+               category, escaped);
 }
 
 /* ---------------------------------------------------------------- common */
@@ -100,6 +101,7 @@ fmi2Status fmi2SetupExperiment(fmi2Component c, fmi2Boolean toleranceDefined, fm
     BEGIN(c, M_INSTANTIATED);
     (void)toleranceDefined;
     (void)tolerance;
+    if (MODEL.fmi2_setup_resets) core_reset(in);
     in->time = startTime;
     in->stop_defined = stopTimeDefined != fmi2False;
     in->stop_time = stopTime;

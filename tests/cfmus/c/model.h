@@ -125,6 +125,15 @@ typedef struct {
     /* Co-simulation only: true (and *t_reject) if a step from t0 to t1 must be
        rejected (NULL: every step is accepted). */
     bool (*rejects_step)(const void *d, double t0, double t1, double *t_reject);
+    /* True: like some exporters' FMUs (20-sim: "Exceeded model finish time"), the model fails (Error)
+       a co-simulation step ending past the stopTime it was given, and a model exchange SetTime past it. */
+    bool strict_stop_time;
+    /* NULL, or why the parameters are invalid (NULL: they are valid); ExitInitializationMode fails with it. */
+    const char *(*invalid)(const void *d);
+    /* FMI 2 only, as some exporters' FMUs do: fmi2SetupExperiment resets every variable to its default
+       (forgetting values set before it), and log messages carry a NULL componentEnvironment. */
+    bool fmi2_setup_resets;
+    bool fmi2_null_log_environment;
 } ModelClass;
 
 extern const ModelClass MODEL;

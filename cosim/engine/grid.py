@@ -1,0 +1,131 @@
+"""The time grid: communication points in integer nanoseconds, and the doubles an FMU is given for them.
+
+Communication point ``k`` of ``n`` is ``t_k = start + k (stop - start) / n`` rounded to the nanosecond (``n`` the
+number of base steps): the base step ``step_ns`` is ``(stop - start) / n`` rounded to the nanosecond, so a step
+that is a whole number of nanoseconds gives ``t_k = start + k step_ns`` exactly, and one that is not (1/30 s)
+gives points at most half a nanosecond from ``k`` exact steps, the last one on the stop time.
+
+An FMU gets the double nearest ``t_k`` (:meth:`Grid.time`) and a step size ``h`` (:meth:`Grid.step_size`) chosen
+so that the FMU's own ``t + h``, added in double arithmetic, is the double nearest ``t_{k+m}``: the step after
+lands on the next point exactly, and the last one on the stop time given to the FMU, never past it (where no
+double ``h`` does that, in a step from a point below half the next, ``t + h`` is the double just below:
+:func:`step_between`). Computing ``h = m step_ns * 1e-9`` instead misses by an ulp: ``1.9999000000000002 + 1e-4
+> 2.0``.
+
+This module is the one place where nanoseconds become the doubles an FMU sees; every algorithm, the model
+exchange integration and the offload worker take their times from it.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+__all__ = ["Grid", "NS_PER_S", "grid_error", "step_between"]
+
+NS_PER_S = 1_000_000_000
+
+
+def grid_error(start_ns: int, stop_ns: int, step_ns: int) -> str | None:
+    """Why ``start_ns .. stop_ns`` cannot be divided into steps of ``step_ns`` (None: it can).
+
+    It can when ``step_ns`` is ``(stop - start) / n`` rounded to the nanosecond for the nearest whole ``n``:
+    ``|stop - start - n step_ns| <= n / 2``."""
+    if step_ns <= 0:
+        return f"the step must be at least 1 ns, got {step_ns} ns"
+    span = stop_ns - start_ns
+    if span <= 0:
+        return f"the stop time ({stop_ns} ns) must be after the start time ({start_ns} ns)"
+    n = max(1, round(span / step_ns))
+    if 2 * abs(span - n * step_ns) > n:
+        return (f"stop - start = {span} ns is not a whole number of steps of {step_ns} ns "
+                f"(nor {n} steps of a step rounded to the nanosecond)")
+    return None
+
+
+def step_between(t: float, t_next: float) -> float:
+    """The double ``h`` with ``t + h == t_next`` in double arithmetic (``t < t_next``), or, where no double does
+    that, the one whose ``t + h`` is the double just below ``t_next`` (never past it).
+
+    ``t_next - t`` is exact when ``t >= t_next / 2`` (Sterbenz's lemma): every step of a grid after its first
+    point, whatever its length. Below that the rounded difference may miss by an ulp, and a neighbour of it hits;
+    or no double hits, when ``t`` has a bit below the ulp of ``t_next`` and the sum rounds ties to even away from
+    ``t_next`` (``0.007955549943174644 + h`` is never ``0.02486664982952393``). That happens only in a step from a
+    point below half the next: from a start time that is not zero, or a multi-rate step from the first points."""
+    h = t_next - t
+    below = None
+    for _ in range(4):
+        s = t + h
+        if s == t_next:
+            return h
+        if s < t_next:
+            below = h if below is None or h > below else below
+        h = math.nextafter(h, math.inf if s < t_next else -math.inf)
+    if below is None:  # every candidate went past: step down until below
+        below = h
+        while t + below >= t_next:
+            below = math.nextafter(below, 0.0)
+    return below
+
+
+class Grid:
+    """``n_steps`` base steps from ``start_ns`` to ``stop_ns`` (integer nanoseconds) of ``step_ns`` each (the exact
+    step rounded to the nanosecond: see :func:`grid_error`); raises ValueError for a span that is no whole number
+    of steps."""
+
+    __slots__ = ("start_ns", "stop_ns", "step_ns", "n_steps", "_uniform")
+
+    def __init__(self, start_ns: int, stop_ns: int, step_ns: int):
+        why = grid_error(start_ns, stop_ns, step_ns)
+        if why is not None:
+            raise ValueError(why)
+        self.start_ns, self.stop_ns, self.step_ns = start_ns, stop_ns, step_ns
+        self.n_steps = max(1, round((stop_ns - start_ns) / step_ns))
+        self._uniform = stop_ns - start_ns == self.n_steps * step_ns
+
+    def t_ns(self, k: int) -> int:
+        """Communication point ``k`` (0 .. n_steps), ns."""
+        if self._uniform:
+            return self.start_ns + k * self.step_ns
+        span, n = self.stop_ns - self.start_ns, self.n_steps
+        return self.start_ns + (2 * k * span + n) // (2 * n)  # k span / n, rounded (halves up)
+
+    def index(self, t_ns: int) -> int:
+        """The last communication point at or before ``t_ns`` (0 .. n_steps)."""
+        k = min(self.n_steps, max(0, (t_ns - self.start_ns) // self.step_ns))
+        while k < self.n_steps and self.t_ns(k + 1) <= t_ns:
+            k += 1
+        while k > 0 and self.t_ns(k) > t_ns:
+            k -= 1
+        return k
+
+    def time(self, k: int) -> float:
+        """The double nearest communication point ``k``, s (an integer true division rounds correctly)."""
+        return self.t_ns(k) / NS_PER_S
+
+    def end(self, k: int, m: int = 1) -> int:
+        """The point a component with step multiple ``m`` active at base step ``k`` steps to: ``k + m``, or the
+        last point when fewer than ``m`` base steps remain."""
+        return min(k + m, self.n_steps)
+
+    def chunk(self, k0: int, k1: int) -> tuple[list[float], list[float]]:
+        """The doubles of points ``k0 .. k1 - 1`` and the base step size from each (``m = 1``), computed together
+        for a run's hot loop: as :meth:`time` and :meth:`step_size` give them, at a few ns a point."""
+        ks = range(k0, k1 + 1)
+        if self.stop_ns < 2**53:  # the ns are exact doubles: the float64 division rounds correctly, as int / int
+            ns = (self.start_ns + self.step_ns * np.arange(k0, k1 + 1, dtype=np.int64) if self._uniform
+                  else np.array([self.t_ns(k) for k in ks], dtype=np.int64))
+            t = ns / float(NS_PER_S)
+        else:
+            t = np.array([self.time(k) for k in ks])
+        h = np.diff(t)
+        times, steps = t.tolist(), h.tolist()
+        for i in np.flatnonzero(t[:-1] + h != t[1:]).tolist():
+            steps[i] = step_between(times[i], times[i + 1])
+        return times[:-1], steps
+
+    def step_size(self, k: int, m: int = 1, t: float | None = None) -> float:
+        """The step size from point ``k`` (its double ``t``, when known) over ``m`` base steps: lands exactly on the
+        double of point :meth:`end`."""
+        return step_between(self.time(k) if t is None else t, self.time(self.end(k, m)))
