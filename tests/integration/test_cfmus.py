@@ -78,10 +78,15 @@ def test_fmu_runs_its_default_experiment(model, fmi, interface):
         # as FMI 2.0 section 2.1.6 asks ("if the environment tries to compute past stopTime the FMU has to
         # return fmi2Error"); the master's CVode never does (CVodeSetStopTime: tests/integration/test_time_grid.py);
         # measured: SetTime(2.0080567693289813) from t = 1.968, stopTime 2
-        with pytest.raises(RuntimeError, match="right-hand side routine failed"):
-            fmpy.simulate_fmu(str(path), fmi_type=interface)
-        return
-    result = fmpy.simulate_fmu(str(path), fmi_type=interface)
+        # (whether its integrator steps past depends on its step sizes: the FMI 2 build did once, not always):
+        # either it refuses that evaluation, or the run reaches stopTime like any other
+        try:
+            result = fmpy.simulate_fmu(str(path), fmi_type=interface)
+        except RuntimeError as exc:
+            assert "right-hand side routine failed" in str(exc), exc
+            return
+    else:
+        result = fmpy.simulate_fmu(str(path), fmi_type=interface)
     assert math.isclose(result["time"][-1], float(stop)), (
         f"{model} FMI {fmi} {interface}: run ended at t = {result['time'][-1]}, expected stopTime = {stop}"
     )
