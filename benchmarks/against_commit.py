@@ -2,8 +2,8 @@
 
     python benchmarks/against_commit.py --baseline 288e832 scenarios/helix_ctc.yaml --rounds 5
 
-The baseline commit is checked out into a temporary git worktree; both run ``python -m cosim run SCENARIO
---no-log --json`` in their own interpreter (the baseline with its own folder first on PYTHONPATH), alternately,
+The baseline commit is checked out into a temporary git worktree; each runs its own copy of ``SCENARIO`` (the file
+as that commit has it) with ``python -m cosim run SCENARIO --no-log --json`` in its own interpreter (the baseline with its own folder first on PYTHONPATH), alternately,
 ``--rounds`` times, and the stepping loop's wall time (``wall_time_s`` of the run summary) is compared: best and
 median per side, and their ratio (this checkout / baseline; below 1 is faster). The whole command's wall time
 (start-up, FMU build from the cache, extraction) is printed too. Both sides build their FMUs into their own
@@ -28,7 +28,7 @@ ROOT = Path(__file__).resolve().parents[1]
 def _run(tree: Path, scenario: str, extra: list[str]) -> tuple[float, float]:
     env = {**os.environ, "PYTHONPATH": str(tree)}
     t0 = time.perf_counter()
-    proc = subprocess.run([sys.executable, "-m", "cosim", "run", str(ROOT / scenario), "--no-log", "--json", *extra],
+    proc = subprocess.run([sys.executable, "-m", "cosim", "run", str(tree / scenario), "--no-log", "--json", *extra],
                           cwd=tree, env=env, capture_output=True, text=True)
     whole = time.perf_counter() - t0
     if proc.returncode not in (0, 1):

@@ -261,7 +261,8 @@ def _run_claimed(scenario: Scenario, output, held: Extractions, options: RunOpti
     ex = Execution(plan, scenario.time.start_ns, scenario.time.stop_ns, scenario.time.step_ns,
                    [comps[n].step_multiple for n in plan.names], scenario.algorithm, supervised)
     if supervised is not None:
-        supervised.describe(names=plan.names, watchdog_s=scenario.watchdog_s,
+        supervised.describe(names=plan.names, watchdog_s=scenario.watchdog_s, start_s=ex.grid.time(0),
+                            step_s=(ex.grid.time(ex.n_steps) - ex.grid.time(0)) / max(1, ex.n_steps),
                             partial=str(output.partial) if output is not None else None,
                             target=str(output.target) if output is not None else None)
     slaves = [make_slave(n, plan.infos[i], comps[n].interface, comps[n].rtol, comps[n].solver, comps[n].max_step)

@@ -70,16 +70,17 @@ class GaussSeidel:
 
     def macro_step(self, ex: "Execution") -> MacroStep:
         turns, period, ctime, current, clock, step_size = _loop_state(ex)
+        turns = [[(c, moves, copies, s.set_step_get, m) for c, moves, copies, s, m in turn] for turn in turns]
 
         def step(k: int, t: float, h: float) -> None:
             t_prev = clock()
-            for c, moves, copies, s, m in turns[k % period]:
+            for c, moves, copies, set_step_get, m in turns[k % period]:
                 current[0] = c
                 for d, src in moves:
                     d[:] = src
                 for dv, di, sv, si in copies:
                     dv[di] = sv[si]
-                s.set_step_get(t, h if m == 1 else step_size(k, m, t))
+                set_step_get(t, h if m == 1 else step_size(k, m, t))
                 now = clock()
                 ctime[c] += now - t_prev
                 t_prev = now

@@ -201,29 +201,25 @@ class Execution:
         stepped = [o.stepped for o in self.observers]
         report = progress if progress is not None and progress_every else None
         chunk, t_ns = self.grid.chunk, self.grid.t_ns
-        times: list[float] = []
-        steps: list[float] = []
-        k0 = k = self.k_done
+        k = self.k_done
         try:
-            for k in range(self.k_done, k_end):
-                i = k - k0
-                if i >= len(times):  # the grid's doubles, a chunk at a time
-                    k0, i = k, 0
-                    times, steps = chunk(k, min(k_end, k + _CHUNK))
-                t = times[i]
-                cur[1] = t
-                macro_step(k, t, steps[i])
-                cur[0] = MASTER
-                cur[3] = self.k_done = k + 1
-                if stepped:
-                    t_end = t_ns(k + 1)
-                    active = schedule[k % period]
-                    for f in stepped:
-                        f(k, t_end, active)
-                if report is not None and (k + 1) % progress_every == 0:
-                    report(k + 1)
-                if stop is not None and stop.requested:
-                    raise stop.interrupted()
+            while k < k_end:
+                k_next = min(k_end, k + _CHUNK)
+                times, steps = chunk(k, k_next)  # the grid's doubles, a chunk at a time
+                for k, t, h in zip(range(k, k_next), times, steps):
+                    macro_step(k, t, h)
+                    cur[0] = MASTER
+                    cur[3] = self.k_done = k + 1
+                    if stepped:
+                        t_end = t_ns(k + 1)
+                        active = schedule[k % period]
+                        for f in stepped:
+                            f(k, t_end, active)
+                    if report is not None and (k + 1) % progress_every == 0:
+                        report(k + 1)
+                    if stop is not None and stop.requested:
+                        raise stop.interrupted()
+                k = k_next
         except Terminated as term:
             self._end_at(term, k, schedule[k % period], stepped)
 

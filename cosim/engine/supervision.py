@@ -49,7 +49,7 @@ _WRITER_WAIT_S = 10.0  # a log writer process finishing what it received before 
 
 
 class Record:
-    """A small shared-memory record: ``current`` (doubles: component, time, phase, steps, finished) and the run's
+    """A small shared-memory record: ``current`` (doubles: component, start time, phase, steps done, finished) and the run's
     description (JSON). Anonymous and shared: written by one process, readable by the processes forked after
     it was made (the supervisor's child writes, the supervisor reads)."""
 
@@ -75,8 +75,11 @@ class Record:
 
     def where(self) -> str:
         """``component 'ctl' in its step at t = 1.234 s`` (or the master's part), from the record."""
-        c, t, phase = int(self.current[0]), self.current[1], PHASES[int(self.current[2]) % len(PHASES)]
-        names = self.info().get("names") or []
+        c, phase, steps = int(self.current[0]), PHASES[int(self.current[2]) % len(PHASES)], self.current[3]
+        info = self.info()
+        names = info.get("names") or []
+        # the macro step's start: the grid's point of the steps done (described at the start of the run)
+        t = info["start_s"] + steps * info["step_s"] if "step_s" in info else self.current[1]
         if c == MASTER or not 0 <= c < len(names):
             return f"the master ({phase}, t = {t:.6g} s)"
         what = "its step" if phase == "step" else f"its {phase}"

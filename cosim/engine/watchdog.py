@@ -143,10 +143,11 @@ class Watchdog:
         """(component, simulation time, where it runs) of the call the main thread is in, as the execution
         records it (:attr:`~cosim.engine.execution.Execution.current`): the component with the turn and its
         own time, or the master between turns (in the initialization, or at the macro step's time)."""
-        c, t, phase = self.ex.current.tolist()[:3]
+        c, _, phase, steps = self.ex.current.tolist()[:4]
         c = int(c)
-        if c == MASTER:
-            return ("(initialization)" if PHASES[int(phase)] == "initialization" else "(master)"), t, ""
+        if c == MASTER:  # the macro step's time: the grid's point of the steps done
+            return ("(initialization)" if PHASES[int(phase)] == "initialization" else "(master)"), \
+                self.ex.grid.time(min(int(steps), self.ex.n_steps)), ""
         slave = self.ex.slaves[c]
         return slave.name, float(slave.time), " (in the worker process)" if isinstance(slave, Proxy) else ""
 

@@ -136,7 +136,7 @@ def test_the_execution_records_which_component_has_the_turn():
     seen = []
 
     def step(t, h, u, state):
-        seen.append((int(ex.current[0]), ex.current[1], watchdog._where()))
+        seen.append((int(ex.current[0]), int(ex.current[3]), watchdog._where()))
         return [0.0]
 
     a, b = counter("a"), FakeSlave("b", [], ["y"], step)
@@ -145,7 +145,7 @@ def test_the_execution_records_which_component_has_the_turn():
     ex.initialize()
     assert watchdog._where() == ("(master)", 0.0, "")
     ex.simulate_until()
-    assert [s[:2] for s in seen] == [(1, 0.0), (1, 1e-3)]
+    assert [s[:2] for s in seen] == [(1, 0), (1, 1)]  # b has the turn; steps done before it
     assert seen[1][2] == ("b", 1e-3, "")  # b's own time when the step was called
     assert int(ex.current[0]) == MASTER
 
