@@ -28,6 +28,7 @@ the command's work is done: nothing is left to finalize, and the exit code and t
 always the command's.
 """
 
+import atexit
 import sys
 
 from .cli import main
@@ -37,8 +38,6 @@ from .errors import exit_now
 
 def _exit(code: object) -> None:
     """Leave with ``code`` as ``sys.exit`` would, without the interpreter's finalization."""
-    import atexit
-
     if code is None:
         status = 0
     elif isinstance(code, int):

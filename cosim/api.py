@@ -14,6 +14,7 @@ names walk the scenario's sections (``time.stop``, ``time.step``, ``trajectory.p
 
 from __future__ import annotations
 
+import difflib
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -112,7 +113,6 @@ class Result:
         try:
             return self.signals[name]
         except KeyError:
-            import difflib
 
             close = difflib.get_close_matches(name, list(self.signals), n=3)
             hint = f"; did you mean {', '.join(close)}?" if close else ""
@@ -121,7 +121,7 @@ class Result:
     def to_pandas(self):
         """The signals as a pandas DataFrame indexed by time in s (needs pandas, not a dependency)."""
         try:
-            import pandas as pd
+            import pandas as pd  # optional: pandas is not a dependency
         except ImportError:
             raise ImportError("Result.to_pandas needs pandas: pip install pandas") from None
         return pd.DataFrame(self.signals, index=pd.Index(self.time, name="t"))

@@ -6,6 +6,7 @@ and from the builtin that matches its meaning, so callers can catch either.
 
 from __future__ import annotations
 
+import os
 import signal
 import sys
 from dataclasses import dataclass
@@ -120,8 +121,6 @@ class Interrupted(KeyboardInterrupt):
     """The run was stopped by a signal (SIGINT, SIGTERM, SIGHUP); the exit code is 128 + ``signum``."""
 
     def __init__(self, signum: int, detail: str = ""):
-        import signal
-
         self.signum = signum
         self.detail = detail
         name = signal.Signals(signum).name
@@ -152,8 +151,6 @@ def exit_status(exc: BaseException) -> tuple[str, str, int]:
     which names its signal and what it stopped). The message is the ``error`` of ``--json``;
     :func:`exit_text` is its line(s) on stderr.
     """
-    import signal
-
     if isinstance(exc, UnreachableError):
         return str(exc), "unreachable", EXIT_BAD_INPUT
     if isinstance(exc, KeyboardInterrupt):
@@ -179,7 +176,6 @@ def exit_text(message: str, kind: str) -> str:
 def exit_now(code: int) -> None:
     """Flush stdout and stderr (a closed stream or a broken pipe is passed over) and end the process
     with ``code`` at once: ``os._exit``, no interpreter finalization."""
-    import os
 
     for stream in (sys.stdout, sys.stderr):
         try:

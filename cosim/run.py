@@ -11,8 +11,8 @@ from delta.robots import get_preset
 
 from .engine import supervision
 from .engine.execution import Execution, Observer, StopRequest
-from .engine.offload import Offload, choose
 from .engine.names import safe_stem
+from .engine.offload import Offload, choose
 from .engine.prepare import input_files, prepare
 from .engine.scenario import Scenario, expand_signal, load_scenario
 from .engine.watchdog import Watchdog, hard_exit
@@ -101,7 +101,12 @@ class RunOptions:
 
 def progress_bar():
     """The progress bar of long commands (rich; transient, so the summary replaces it)."""
-    from rich.progress import BarColumn, Progress, TextColumn, TimeRemainingColumn
+    from rich.progress import (  # lazy: --help loads this module without it
+        BarColumn,
+        Progress,
+        TextColumn,
+        TimeRemainingColumn,
+    )
 
     return Progress(TextColumn("[bold]{task.description}"), BarColumn(), TextColumn("{task.percentage:>3.0f}%"),
                     TimeRemainingColumn(), transient=True)

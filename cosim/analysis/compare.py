@@ -143,7 +143,7 @@ def parse_tolerances(items: Sequence[str]) -> dict[str, float]:
 
 def logged_tolerances(log: RunLog) -> dict[str, float]:
     """``regression.tolerances`` of the scenario attached to ``log`` ({} when it has none)."""
-    import yaml
+    import yaml  # lazy: --help loads this module without it
 
 
     for name, data in log.attachments.items():
@@ -268,7 +268,7 @@ def _plant_component(scenario, component: str | None) -> tuple[str, str]:
 
 def _plant_overrides(scenario, component: str, kind: str, plant: str) -> tuple[dict, list[str]]:
     """Loader overrides that put ``plant`` in ``component``, and the parameters it had to drop."""
-    from fmpy import read_model_description
+    from fmpy import read_model_description  # lazy: --help loads this module without it
 
 
     variant, extra = PLANTS[plant]

@@ -114,7 +114,7 @@ class Tracking:
 
 def _scenario_doc(run: RunLog) -> tuple[str | None, dict]:
     """The attached scenario file (name, parsed YAML mapping), or (None, {})."""
-    import yaml
+    import yaml  # lazy: --help loads this module without it
 
 
     for name, data in run.attachments.items():
@@ -128,7 +128,7 @@ def _scenario_doc(run: RunLog) -> tuple[str | None, dict]:
 
 
 def _compare_spec(run: RunLog) -> tuple[list[str], list[str], str]:
-    from pydantic import ValidationError
+    from pydantic import ValidationError  # lazy: --help loads this module without it
 
 
     att, doc = _scenario_doc(run)
@@ -267,7 +267,7 @@ def _pretty_unit(unit: str) -> str:
 
 
 def _fig(width: float, height: float, layout: str | None = "constrained"):
-    from matplotlib.figure import Figure
+    from matplotlib.figure import Figure  # lazy: --help loads this module without it
 
     return Figure(figsize=(width, height), dpi=_DPI, layout=layout)
 
@@ -279,7 +279,10 @@ def _auto(value: float, unit: str) -> str:
 
 
 def _plot_path(tr: Tracking, title: str, out: Path) -> Path:
-    from matplotlib.ticker import MaxNLocator, ScalarFormatter
+    from matplotlib.ticker import (  # lazy: --help loads this module without it
+        MaxNLocator,
+        ScalarFormatter,
+    )
 
     p = tr.position
     fig = _fig(7.5, 6.0, layout=None)  # constrained layout clips 3D axis labels

@@ -28,17 +28,27 @@ check, ``message`` says why), one column per swept name, then :func:`cosim.analy
 
 from __future__ import annotations
 
+import asyncio
+import atexit
 import csv
 import hashlib
 import itertools
 import json
+import logging
 import math
+import multiprocessing
+import os
 import re
+import shutil
+import tempfile
+import threading
 import time
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
+
+import numpy as np
 
 from ..engine.prepare import build_key, build_ours, locate_fmus
 from ..engine.scenario import dotted_overrides, parse_set_value, read_scenario
@@ -144,7 +154,6 @@ MAX_CASES = 1_000_000
 def make_cases(grid: dict[str, list[Any]], random: dict[str, tuple[str, float, float]], n: int | None,
                seed: int | None) -> list[Case]:
     """Cartesian product of ``grid``, each combined with ``n`` draws of ``random`` (numpy, ``seed``)."""
-    import numpy as np
 
     if random and not n:
         raise SweepError("--random needs -n N (the number of draws)")
@@ -183,8 +192,8 @@ def run_loaded_case(scenario: Scenario, fmu_files: dict[tuple[str, bool, int], s
     """Run one case, a loaded :class:`~cosim.engine.scenario.Scenario` (in a Dask worker, or here); never
     raises for a failing case.
 
-    ``fmu_files``: our FMUs by :func:`cosim.engine.prepare.build_key`, built beforehand. The run is serial in its process
-    (``parallel: off``: the sweep already uses the cores). Returns the row of ``results.csv``
+    ``fmu_files``: our FMUs by :func:`cosim.engine.prepare.build_key`, built beforehand. The run is serial in its
+    process (``parallel: off``: the sweep already uses the cores). Returns the row of ``results.csv``
     without the parameter columns: status, message, metrics, checks, mcap.
     """
 
@@ -323,7 +332,7 @@ def run_sweep(scenario: str | Path, cases: list[Case], out: str | Path, *, worke
         (out / "logs").mkdir(exist_ok=True)
     new = not table.exists() or table.stat().st_size == 0
     with cluster as (client, label), table.open("a", newline="") as f:
-        from distributed import as_completed
+        from distributed import as_completed  # lazy: --help loads this module without it
 
         writer = csv.writer(f)
         if new:
@@ -385,8 +394,6 @@ class SweepCluster:
         self._scratch: str | None = None  # the embedded workers' folder, removed with the cluster
 
     def start(self) -> "SweepCluster":
-        import logging
-        import threading
 
         logging.getLogger("distributed").setLevel(logging.ERROR)  # the process's: the cluster's and the client's
         if self.scheduler is None:
@@ -399,9 +406,8 @@ class SweepCluster:
     def _probe(self) -> None:
         """Check that ``scheduler`` is a Dask scheduler, within :attr:`CONNECT_TIMEOUT`, before anything is built:
         Dask's client waits for ever on a silent listener, and reads an HTTP answer as a frame of 3 EiB."""
-        import asyncio
 
-        from distributed.comm import connect
+        from distributed.comm import connect  # lazy: --help loads this module without it
 
         address, timeout = self.scheduler, self.CONNECT_TIMEOUT
 
@@ -437,12 +443,9 @@ class SweepCluster:
 
     def _start_local(self) -> None:
         try:
-            import logging
-            import os
-            import tempfile
 
-            import dask
-            from distributed import LocalCluster
+            import dask  # lazy: --help loads this module without it
+            from distributed import LocalCluster  # lazy: --help loads this module without it
 
             n = self.workers or os.cpu_count() or 1
             self._scratch = tempfile.mkdtemp(prefix="cosim-sweep-")  # not dask-scratch-space, left in the temp folder
@@ -456,7 +459,7 @@ class SweepCluster:
             self._error = exc
 
     def __enter__(self):
-        from distributed import Client
+        from distributed import Client  # lazy: --help loads this module without it
 
         if self._thread is None:  # not started yet (an embedded cluster starts here; an existing one needs nothing)
             self.start()
@@ -489,7 +492,6 @@ class SweepCluster:
         if self.cluster is not None:
             self.cluster.close()
         if self._scratch is not None:
-            import shutil
 
             shutil.rmtree(self._scratch, ignore_errors=True)
 
@@ -501,15 +503,14 @@ def _comm_reason(exc: BaseException) -> str:
     return text or f"{type(exc).__name__}: the last attempt gave no reason"
 
 
-# Worker preload (``LocalCluster(preload=["cosim.analysis.sweep"])``, or ``dask worker --preload cosim.analysis.sweep``).
+# Worker preload (``LocalCluster(preload=["cosim.analysis.sweep"])``, or
+# ``dask worker --preload cosim.analysis.sweep``).
 _TORN_DOWN = False
 
 
 def dask_setup(worker) -> None:  # noqa: ARG001 - Dask's preload hook
     """Import what a case needs while the worker starts (not in its first case), and arrange a
     quick exit for a nanny's worker process once the worker has closed (:func:`_exit_now`)."""
-    import atexit
-    import multiprocessing
 
     if multiprocessing.parent_process() is not None:
         atexit.register(_exit_now)
@@ -526,7 +527,6 @@ def _exit_now() -> None:
     flush, and leave with ``os._exit(0)`` (as ``python -m cosim`` does, :mod:`cosim.__main__`): the
     interpreter's finalization and the shared libraries' destructors sometimes abort there
     ("free(): corrupted unsorted chunks") after every result was delivered."""
-    import logging
 
 
     if not _TORN_DOWN:
@@ -542,11 +542,10 @@ def report(out: str | Path, metric: str = "rmse", fig: str | Path | None = None)
     """A figure of ``metric`` over the swept parameters of ``out/results.csv``: a line against one
     parameter (several lines when a second one has few values), a heatmap against two (a scatter
     for random draws). Failed cases are left out (and counted in the title). Returns the PNG path."""
-    import matplotlib
+    import matplotlib  # lazy: --help loads this module without it
 
     matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-    import numpy as np
+    import matplotlib.pyplot as plt  # lazy: --help loads this module without it
 
     rows = read_results(out)
     if not rows:
@@ -593,7 +592,7 @@ def report(out: str | Path, metric: str = "rmse", fig: str | Path | None = None)
                 grid[np.searchsorted(ub, vb), np.searchsorted(ua, va)] = v
             finite = grid[np.isfinite(grid)]
             log = finite.size and finite.min() > 0 and finite.max() > 100 * finite.min()
-            from matplotlib.colors import LogNorm
+            from matplotlib.colors import LogNorm  # lazy: --help loads this module without it
 
             im = ax.imshow(grid, origin="lower", aspect="auto", cmap="viridis", norm=LogNorm() if log else None)
             ax.set_xticks(range(len(ua)), la or [f"{v:g}" for v in ua])
@@ -682,7 +681,13 @@ def _cmd_sweep(args) -> int:
     bar = task = None
     progress: Callable[[int, int, int], None] | None = None
     if not (args.quiet or args.json):
-        from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+        from rich.progress import (  # lazy: --help loads this module without it
+            BarColumn,
+            MofNCompleteColumn,
+            Progress,
+            TextColumn,
+            TimeElapsedColumn,
+        )
 
         bar = Progress(TextColumn("[bold]sweep"), BarColumn(), MofNCompleteColumn(),
                        TextColumn("[green]{task.fields[ok]} ok[/] [red]{task.fields[failed]} failed[/] "

@@ -15,6 +15,9 @@ from typing import Any
 
 import numpy as np
 
+from delta.actuators import kind_of
+from delta.errors import ParameterError
+from delta.model import build_model
 from delta.robots import get_preset
 from delta.workspace import check_trajectory
 from fmus.adapters.trajectories import ADAPTERS
@@ -64,9 +67,6 @@ def _model_report(scenario: Scenario) -> str:
     model = scenario.model_file()
     if model is None:
         return ""
-    from delta.actuators import kind_of
-    from delta.errors import ParameterError
-    from delta.model import build_model
 
     robot = get_preset(scenario.robot)
     fields = {name.removeprefix("model."): value for name, value in model.parameters.items()}

@@ -9,7 +9,12 @@ Unknown keys are rejected. Every problem is reported at once as
 
 from __future__ import annotations
 
+import copy
+import dataclasses
+import difflib
+import os
 import re
+import typing
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Literal, Union
@@ -540,8 +545,6 @@ def scenario_from_data(data: dict[str, Any], file: str = "<string>", overrides: 
     ``overrides`` are applied first; ``lines`` (key path -> line) place the issues in ``file``.
     Raises :class:`ScenarioError` with every issue.
     """
-    import copy
-    import difflib
 
     lines = lines if lines is not None else {}
     origins = dict(getattr(overrides, "origins", {}))
@@ -592,7 +595,6 @@ def scenario_from_data(data: dict[str, Any], file: str = "<string>", overrides: 
 
 def _semantic_issues(s: Scenario) -> list[tuple[tuple, str]]:
     """Cross-field checks pydantic cannot see: names that must exist, sections that need a robot."""
-    import difflib
 
     out: list[tuple[tuple, str]] = []
     names = list(s.components)
@@ -658,13 +660,11 @@ def _semantic_issues(s: Scenario) -> list[tuple[tuple, str]]:
 def trajectory_params_model(kind: str) -> type[BaseModel]:
     """The typed parameters of trajectory type ``kind``: the constructor arguments of its
     :data:`delta.trajectories.TYPES` class, with their types and defaults (unknown keys refused)."""
-    import dataclasses
-    import typing
 
 
     if kind in _PARAM_MODELS:
         return _PARAM_MODELS[kind]
-    from pydantic import create_model
+    from pydantic import create_model  # lazy: --help loads this module without it
 
     cls = TYPES[kind]
     hints = typing.get_type_hints(cls)
@@ -686,7 +686,6 @@ _PARAM_MODELS: dict[str, type[BaseModel]] = {}
 
 def trajectory_params_issues(spec: TrajectorySpec) -> list[tuple[tuple, str]]:
     """``trajectory.params`` checked against the type's parameters: (location under params, message)."""
-    import difflib
 
     model = trajectory_params_model(spec.type)
     valid = list(model.model_fields)
@@ -736,7 +735,6 @@ def effective_scenario(scenario: Scenario, log: str | Path | None = None) -> dic
     """``scenario`` as it runs, every override applied, as a scenario mapping (JSON, valid YAML): every key with its
     value, defaults included; the paths of FMU files absolute, ``logging.out`` the run's ``log`` (absolute) when
     given; a component parameter overridden by a number written as text (``1e3``) as that text, as a file gives it."""
-    import os
 
     data = Scenario.model_dump(scenario, mode="json", by_alias=True)
     base = Path(scenario.source).parent if scenario.source and scenario.source != "<string>" else Path.cwd()
@@ -826,7 +824,6 @@ DOTTED = "<dotted name>"
 
 def _model_of(annotation: Any) -> type[BaseModel] | None:
     """The pydantic model inside an annotation (``X``, ``X | None``), if any."""
-    import typing
 
     if isinstance(annotation, type) and issubclass(annotation, BaseModel):
         return annotation
@@ -839,7 +836,6 @@ def _model_of(annotation: Any) -> type[BaseModel] | None:
 
 def _is_mapping(annotation: Any) -> tuple[bool, Any]:
     """(is a dict, its value annotation)."""
-    import typing
 
     if typing.get_origin(annotation) is dict:
         return True, typing.get_args(annotation)[1]
@@ -850,7 +846,6 @@ def _is_mapping(annotation: Any) -> tuple[bool, Any]:
 
 
 def _unknown_name(name: str, prefix: str, wrong: str, candidates: list[str], origin: str) -> ScenarioError:
-    import difflib
 
     close = difflib.get_close_matches(wrong, candidates, n=3, cutoff=0.5)
     hint = f"did you mean {', '.join(prefix + quote(c) for c in close)}? " if close else ""

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import zipfile
 from dataclasses import dataclass, replace
 from functools import cached_property
 from pathlib import Path
@@ -115,7 +116,6 @@ class FMUInfo:
         return out
 
     def model_description_xml(self) -> bytes:
-        import zipfile
 
         with zipfile.ZipFile(self.path) as z:
             return z.read("modelDescription.xml")
@@ -171,7 +171,7 @@ def _attr(v: Any, name: str) -> str | None:
 
 def load_fmu(path: str | Path) -> FMUInfo:
     """Read the model description (once per path and process); nothing is extracted yet."""
-    import fmpy
+    import fmpy  # lazy: --help loads this module without it
 
     path = Path(path).resolve()
     try:

@@ -8,6 +8,7 @@ import os
 import shutil
 import tempfile
 import threading
+import zipfile
 from contextvars import ContextVar
 from pathlib import Path
 from typing import Any, Iterable
@@ -49,7 +50,6 @@ def check_archive(path: Path) -> None:
     """Refuse an FMU archive whose members unpack past :data:`MAX_FMU_BYTES` (or whose modelDescription.xml
     does past :data:`MAX_DESCRIPTION_BYTES`) before anything is read or extracted: a zip bomb. Python's zip
     reader reads no member past its declared size, so the declared sizes bound what is written."""
-    import zipfile
 
     try:
         with zipfile.ZipFile(path) as zf:
@@ -124,7 +124,7 @@ _RUN: ContextVar[Extractions | None] = ContextVar("cosim_run_extractions", defau
 
 def extraction(key: Key) -> Path:
     """The extraction directory of the FMU file ``key`` = (path, stamp), held by the current run."""
-    import fmpy
+    import fmpy  # lazy: --help loads this module without it
 
     path = key[0]
     with _LOCK:

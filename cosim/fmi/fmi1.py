@@ -25,7 +25,6 @@ from .model_exchange import ModelExchange
 from .pythonfmu import KEEP_ALIVE
 from .slave import Base, Buffers, CoSimulation, as_number
 
-
 _CS_STATUS_FUNCTIONS = ("InitializeSlave", "DoStep", "CancelStep", "GetStatus", "GetRealStatus", "GetIntegerStatus",
                         "GetBooleanStatus", "GetStringStatus", "SetRealInputDerivatives", "GetRealOutputDerivatives")
 
@@ -49,7 +48,10 @@ class FMI1(Base):
         return f"{self._identifier}_fmi{function}"
 
     def _make(self) -> Any:
-        from fmpy.fmi1 import FMU1Model, FMU1Slave
+        from fmpy.fmi1 import (  # lazy: --help loads this module without it
+            FMU1Model,
+            FMU1Slave,
+        )
 
         cls = FMU1Model if self.model_exchange else FMU1Slave
         fmu = cls(guid=self.info.md.guid, unzipDirectory=str(self.info.unzipdir), modelIdentifier=self._identifier,
@@ -62,14 +64,17 @@ class FMI1(Base):
         return fmu
 
     def instantiate(self) -> None:
-        from fmpy import calloc, free
-        from fmpy.fmi1 import (
+        from fmpy import (  # lazy: --help loads this module without it
+            calloc,
+            free,
+        )
+        from fmpy.fmi1 import (  # lazy: --help loads this module without it
             fmi1CallbackAllocateMemoryTYPE,
             fmi1CallbackFreeMemoryTYPE,
             fmi1CallbackFunctions,
             fmi1CallbackLoggerTYPE,
         )
-        from fmpy.logging import addLoggerProxy
+        from fmpy.logging import addLoggerProxy  # lazy: --help loads this module without it
 
         self.fmu = self._load_library()
         self._note_library()
@@ -161,7 +166,7 @@ class FMI1CoSimulation(CoSimulation, FMI1):
         simulation); the time it reached is said when it tells it."""
         function = self._symbol("DoStep")
         if status == 2:
-            from fmpy.fmi1 import fmi1LastSuccessfulTime
+            from fmpy.fmi1 import fmi1LastSuccessfulTime  # lazy: --help loads this module without it
 
             detail = "the FMU rejected the step"
             try:

@@ -29,7 +29,10 @@ class FMI2(Base):
         return [Buffers(k, vs[0].fmi_type, vs, self._ctype(k, vs[0].fmi_type)) for k, vs in by_kind.items()]
 
     def _make(self) -> Any:
-        from fmpy.fmi2 import FMU2Model, FMU2Slave
+        from fmpy.fmi2 import (  # lazy: --help loads this module without it
+            FMU2Model,
+            FMU2Slave,
+        )
 
         md = self.info.md
         cls, ident = (FMU2Model, md.modelExchange.modelIdentifier) if self.model_exchange else \
@@ -38,13 +41,16 @@ class FMI2(Base):
                    instanceName=self.name)
 
     def instantiate(self) -> None:
-        from fmpy import calloc, free
-        from fmpy.fmi2 import (
+        from fmpy import (  # lazy: --help loads this module without it
+            calloc,
+            free,
+        )
+        from fmpy.fmi2 import (  # lazy: --help loads this module without it
             fmi2CallbackAllocateMemoryTYPE,
             fmi2CallbackFreeMemoryTYPE,
             fmi2CallbackFunctions,
         )
-        from fmpy.logging import addLoggerProxy
+        from fmpy.logging import addLoggerProxy  # lazy: --help loads this module without it
 
         self.fmu = self._load_library()
         self._note_library()
@@ -113,7 +119,10 @@ class FMI2CoSimulation(CoSimulation, FMI2):
 
     def _step_failed(self, status: int, t: float, h: float) -> None:
         """fmi2Discard with fmi2Terminated is the FMU ending the simulation; anything else fails."""
-        from fmpy.fmi2 import fmi2LastSuccessfulTime, fmi2Terminated
+        from fmpy.fmi2 import (  # lazy: --help loads this module without it
+            fmi2LastSuccessfulTime,
+            fmi2Terminated,
+        )
 
         if status == 2:  # fmi2Discard
             try:

@@ -32,7 +32,10 @@ class FMI3(Base):
         return [Buffers(vs[0].kind, t, vs, _CTYPE3.get(t)) for t, vs in by_type.items()]
 
     def _make(self) -> Any:
-        from fmpy.fmi3 import FMU3Model, FMU3Slave
+        from fmpy.fmi3 import (  # lazy: --help loads this module without it
+            FMU3Model,
+            FMU3Slave,
+        )
 
         md = self.info.md
         cls, ident = (FMU3Model, md.modelExchange.modelIdentifier) if self.model_exchange else \
@@ -87,7 +90,7 @@ class FMI3(Base):
             self._check(self.fmu.dll.fmi3GetString(c, b.vrs, b.n, raw, b.size), "fmi3GetString")
             b.values[:] = [(s or b"").decode("utf-8", "replace") for s in raw]
         else:
-            from fmpy.fmi3 import fmi3Binary
+            from fmpy.fmi3 import fmi3Binary  # lazy: --help loads this module without it
 
             sizes = (c_size_t * b.size)()
             ptrs = (fmi3Binary * b.size)()

@@ -96,7 +96,7 @@ class CVodeIntegrator:
     MAX_NUM_STEPS = 100_000  # internal steps allowed per call (one call never passes a communication point)
 
     def __init__(self, model: OdeModel, t0: float, rtol: float, max_step: float) -> None:
-        from fmpy.sundials import (
+        from fmpy.sundials import (  # lazy: --help loads this module without it
             CV_BDF,
             NV_DATA_S,
             SUN_COMM_NULL,
@@ -108,7 +108,7 @@ class CVodeIntegrator:
             SUNErrHandlerFn,
             SUNLinSol_Dense,
         )
-        from fmpy.sundials.cvode import (
+        from fmpy.sundials.cvode import (  # lazy: --help loads this module without it
             CV_NORMAL,
             CVode,
             CVodeCreate,
@@ -122,8 +122,8 @@ class CVodeIntegrator:
             CVRhsFn,
             CVRootFn,
         )
-        from fmpy.sundials.cvode_ls import CVodeSetLinearSolver
-        from fmpy.sundials.libraries import sundials_cvode
+        from fmpy.sundials.cvode_ls import CVodeSetLinearSolver  # lazy: --help loads this module without it
+        from fmpy.sundials.libraries import sundials_cvode  # lazy: --help loads this module without it
 
         self.model = model
         self.rtol = rtol
@@ -272,7 +272,7 @@ class DOP853Integrator:
         self._z_prev = self._indicators(t, self._x) if self.model.nz else None
 
     def _start(self, t_stop: float) -> None:
-        from scipy.integrate import DOP853
+        from scipy.integrate import DOP853  # lazy: --help loads this module without it
 
         first = None if self._h_last is None else min(self._h_last, t_stop - self.t)
         self._solver = DOP853(self._fun, self.t, self._x, t_stop, rtol=self.rtol, atol=self._atol,

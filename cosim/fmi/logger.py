@@ -46,7 +46,7 @@ def fmi2_logger() -> Any:
     has the same signature)."""
     global _FMI2_LOGGER
     if _FMI2_LOGGER is None:
-        from fmpy.fmi2 import fmi2CallbackLoggerTYPE
+        from fmpy.fmi2 import fmi2CallbackLoggerTYPE  # lazy: --help loads this module without it
 
         def dispatch(env, instance, status, category, message):  # noqa: ANN001, ANN202
             slave = FMI2_LOG_TARGETS.get(env) if env else _without_environment(instance)

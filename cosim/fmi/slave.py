@@ -153,7 +153,7 @@ class Base:
 
     def _guard(self, function: str, call, *args):
         """Lifecycle calls through fmpy (which raises on a failing status): translate to FMIError."""
-        from fmpy.fmi1 import FMICallException
+        from fmpy.fmi1 import FMICallException  # lazy: --help loads this module without it
 
         before, CALLING.slave = getattr(CALLING, "slave", None), self  # a log without environment is this call's
         try:

@@ -12,6 +12,7 @@ a single FMU.
 
 from __future__ import annotations
 
+import fcntl
 import os
 import sys
 import time
@@ -124,7 +125,6 @@ def claim(target: str | Path, inputs: tuple[str | Path | None, ...] = ()) -> Out
     run already writing ``target``, a partial file left by a run that did not finish, or ``target``
     being one of the run's ``inputs`` (its scenario or archive, which the log would replace).
     """
-    import fcntl
 
     # absolute from here on: an FMU that changes the working directory (chdir) must not move the log, its
     # partial file or its lock (issue 25)

@@ -59,9 +59,18 @@ def _default_out(path: Path) -> Path:
 
 
 def _copy(path: Path, tmp: Path, out: Path) -> RecoveryReport:
-    from mcap.exceptions import McapError
-    from mcap.records import Attachment, Channel, Message, Metadata, Schema
-    from mcap.writer import CompressionType, Writer
+    from mcap.exceptions import McapError  # lazy: --help loads this module without it
+    from mcap.records import (  # lazy: --help loads this module without it
+        Attachment,
+        Channel,
+        Message,
+        Metadata,
+        Schema,
+    )
+    from mcap.writer import (  # lazy: --help loads this module without it
+        CompressionType,
+        Writer,
+    )
 
 
     schemas: dict[int, int] = {}

@@ -541,7 +541,7 @@ def _system_bindings(system: ET.Element, zf: zipfile.ZipFile, ssp: Path, compone
     system-level set is named ``Component.parameter``; the longest component name that fits is taken, so
     names with dots need no quoting here). They come after the components' own bindings and win over them.
     A parameter that names no component, or no variable of it, is one error naming the file and the parameter."""
-    import fmpy
+    import fmpy  # lazy: --help loads this module without it
 
     names = sorted(components, key=len, reverse=True)
     variables: dict[str, set[str]] = {}
@@ -792,7 +792,7 @@ def read_ssp(ssp: str | Path, workdir: str | Path) -> dict[str, Any]:
 
 def _fmu_defaults(ssp: Path, paths: list[Path]) -> tuple[float | None, float | None]:
     """(smallest default step, largest default stop time) over the FMUs' DefaultExperiment."""
-    import fmpy
+    import fmpy  # lazy: --help loads this module without it
 
     steps, stops = [], []
     for path in paths:

@@ -15,6 +15,8 @@ without it the run goes as fast as it can and the viewer sees it fast-forwarded.
 from __future__ import annotations
 
 import socket
+import sys
+import threading
 from collections.abc import Sequence
 
 from ..engine.execution import Execution
@@ -110,8 +112,8 @@ class LiveView:
         return f"ws://{'localhost' if self.host in ('127.0.0.1', '0.0.0.0') else self.host}:{self.port}"
 
     def start(self, rt: Execution) -> None:
-        import foxglove
-        from foxglove.websocket import Capability
+        import foxglove  # lazy: --help loads this module without it
+        from foxglove.websocket import Capability  # lazy: --help loads this module without it
 
         context = foxglove.Context()
         try:
@@ -147,8 +149,6 @@ class LiveView:
     def _stop(self, server) -> None:
         """``server.stop()``, which waits for every viewer to take its close, waited for :data:`STOP_TIMEOUT` at most
         (in a thread of its own, left behind when a viewer never reads again: the process still ends)."""
-        import sys
-        import threading
 
         stopper = threading.Thread(target=server.stop, name="live-view-stop", daemon=True)
         stopper.start()

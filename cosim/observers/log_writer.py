@@ -27,11 +27,15 @@ The child imports no numpy (it starts in about 0.1 s): rows are read with :mod:`
 from __future__ import annotations
 
 import ctypes
+import errno
+import fcntl
 import logging
 import os
 import pickle
+import re
 import struct
 import subprocess
+import signal
 import sys
 import threading
 from dataclasses import dataclass, field
@@ -297,7 +301,6 @@ class _WriteFailures(logging.Handler):
 def _os_error(text: str) -> OSError:
     """The OSError a foxglove-sdk failure text names (``Os { code: 28, ... message: "No space left on
     device" }``), else one carrying the text."""
-    import re
 
     m = re.search(r"code: (\d+)", text)
     if m:
@@ -318,7 +321,7 @@ class FoxgloveChannels:
 
     def channel(self, cid: int, topic: str, schema_name: str, schema: bytes, metadata: dict[str, str],
                 layout: BlockLayout | None) -> None:
-        import foxglove
+        import foxglove  # lazy: --help loads this module without it
 
         ch = foxglove.Channel(topic, schema=foxglove.Schema(name=schema_name, encoding="jsonschema", data=schema),
                               message_encoding="json", context=self._context, metadata=metadata)
@@ -342,8 +345,11 @@ class LogSink(FoxgloveChannels):
     """
 
     def __init__(self, path: str | Path, chunk_size: int = 256 * 1024, zstd_level: int = 1):
-        import foxglove
-        from foxglove.mcap import MCAPCompression, MCAPWriteOptions
+        import foxglove  # lazy: --help loads this module without it
+        from foxglove.mcap import (  # lazy: --help loads this module without it
+            MCAPCompression,
+            MCAPWriteOptions,
+        )
 
         self._failures = _WriteFailures.attach()  # before opening: the writer reports failures through logging
         self._seen = self._failures.count
@@ -455,7 +461,6 @@ class WriterProcess:
                                       start_new_session=True, env=env)  # own session: Ctrl-C is the master's
         self._fd = self._proc.stdin.fileno()
         try:
-            import fcntl
 
             fcntl.fcntl(self._fd, fcntl.F_SETPIPE_SZ, _PIPE_BYTES)
         except (ImportError, AttributeError, OSError):  # not Linux, or above this user's limit: the default works
@@ -588,7 +593,6 @@ def _serve(inp, out) -> int:
 
 def os_reason(exc: OSError) -> str:
     """The OS's reason for a failed write, in a message's words."""
-    import errno
 
     if exc.errno == errno.ENOSPC:
         return "no space left on device"
@@ -596,8 +600,6 @@ def os_reason(exc: OSError) -> str:
 
 
 def main() -> int:
-    import signal
-
 
     for sig in STOP_SIGNALS:  # the master handles Ctrl-C and a closed terminal and finishes the log
         signal.signal(sig, signal.SIG_IGN)

@@ -35,6 +35,7 @@ import os
 import platform
 import sys
 import time
+from importlib.metadata import PackageNotFoundError, version
 from pathlib import Path
 from typing import Sequence
 
@@ -126,9 +127,8 @@ class McapRecorder:
         self._last_flush = time.monotonic()
 
     def _metadata(self, rt: Execution) -> None:
-        from importlib.metadata import PackageNotFoundError, version
 
-        import fmpy
+        import fmpy  # lazy: --help loads this module without it
 
         w = self._sink
         versions = {"python": sys.version.split()[0], "fmpy": fmpy.__version__, "orjson": orjson.__version__}

@@ -47,6 +47,7 @@ their value at the stamp.
 
 from __future__ import annotations
 
+import base64
 import ctypes
 import time
 from collections import deque
@@ -127,7 +128,6 @@ def _json_type(v) -> dict:
 def _converter(v):
     """None when the buffer's value is already the JSON value (floats, ints, C bools), else a function."""
     if v.kind == BINARY:
-        import base64
 
         return lambda b: base64.b64encode(b).decode("ascii")
     return bool if v.kind == BOOLEAN else None  # FMI 2.0 Booleans are C ints

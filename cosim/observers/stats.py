@@ -8,6 +8,8 @@ import math
 from dataclasses import dataclass, fields
 from typing import Any
 
+import numpy as np
+
 __all__ = ["ErrorStats"]
 
 
@@ -36,7 +38,6 @@ class ErrorStats:
     def of(cls, e: Any, t: Any, **fields: Any) -> "ErrorStats":
         """The statistics of the differences ``e`` (n,) at times ``t`` (n,), s; ``fields`` name the rest.
         No sample: NaN statistics."""
-        import numpy as np
 
         e = np.asarray(e, dtype=float)
         if not len(e):

@@ -10,6 +10,7 @@ command, so that ``--help`` starts in a fraction of a second; its docstring says
 from __future__ import annotations
 
 import ast
+import re
 from pathlib import Path
 
 import pytest
@@ -116,3 +117,20 @@ def test_no_import_cycle():
         if m not in state:
             walk(m, [m])
     assert not cycles, "\n".join(cycles)
+
+
+@pytest.mark.parametrize("module", sorted(set(MODULES) - LAZY_OK))
+def test_an_import_inside_a_function_says_why(module):
+    """Third-party packages some commands never need (fmpy, matplotlib, Dask, mcap, foxglove, an optional pandas)
+    may be imported where they are used, so that `python -m cosim --help`, which loads most modules to build its
+    parser, starts without them; the line says so (``# lazy: ...`` or ``# optional: ...``)."""
+    path = MODULES[module]
+    lines = path.read_text().splitlines()
+    silent = []
+    for node in ast.walk(ast.parse(path.read_text())):
+        if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)):
+            for sub in ast.walk(node):
+                if isinstance(sub, (ast.Import, ast.ImportFrom)) and not re.search(
+                        r"#\s*(lazy|optional)\b", lines[sub.lineno - 1]):
+                    silent.append(f"{module}:{sub.lineno}: {lines[sub.lineno - 1].strip()}")
+    assert not silent, "\n".join(silent)
