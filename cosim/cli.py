@@ -592,7 +592,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
 
 
 def _crashed(args: argparse.Namespace, record, reason: str) -> int:
-    """The supervisor's report of a run whose process died inside a component (cosim.engine.supervision): one
+    """The supervisor's report of a run (or a check) whose process died inside a component (cosim.engine.supervision): one
     line naming the component, the phase, the time and how it died, then where the log written so far is."""
     from pathlib import Path
 
@@ -618,6 +618,11 @@ def _crashed(args: argparse.Namespace, record, reason: str) -> int:
 
 
 def _cmd_check(args: argparse.Namespace) -> int:
+    from .engine import supervision
+
+    code = supervision.supervise(lambda record, reason: _crashed(args, record, reason))
+    if code is not None:  # the supervisor: the check went on in its child process (it instantiates every FMU)
+        return code
     from .engine.offload import choose
     from .engine.scenario import apply_overrides
     from .run import check_initialization

@@ -144,12 +144,30 @@ def check_initialization(scenario: Scenario) -> tuple[Any, str]:
         try:
             plan, report = prepare(scenario)
             comps = scenario.components
+            supervised = supervision.record()  # python -m cosim check: its supervisor names a crash
             ex = Execution(plan, scenario.time.start_ns, scenario.time.stop_ns, scenario.time.step_ns,
-                           [comps[n].step_multiple for n in plan.names], scenario.algorithm)
+                           [comps[n].step_multiple for n in plan.names], scenario.algorithm, supervised)
+            if supervised is not None:
+                supervised.describe(names=plan.names, watchdog_s=scenario.watchdog_s)
             for i, n in enumerate(plan.names):
                 ex.add_slave(make_slave(n, plan.infos[i], comps[n].interface, comps[n].rtol, comps[n].solver,
                                         comps[n].max_step))
-            ex.initialize(start_observers=False)
+
+            def abort(err: BaseException) -> None:  # a component that never returns from its initialization
+                held.release()
+                cleanup_extracted()
+                hard_exit(err, [])
+
+            stop = StopRequest()
+            watchdog = Watchdog(ex, scenario.watchdog_s, stop, abort)  # as a run's initialization is watched
+            with stop, watchdog:
+                try:
+                    ex.initialize(start_observers=False)
+                except BaseException as exc:
+                    replaced = watchdog.translate(exc)
+                    if replaced is not exc:
+                        raise replaced from None
+                    raise
             for s in ex.slaves:
                 s.terminate()
         finally:

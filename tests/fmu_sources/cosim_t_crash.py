@@ -3,7 +3,7 @@
 ``mode``: 0 behaves; 1 segfaults (reads address 0); 2 aborts; 3 calls the C library's ``exit(3)``; 4 blocks the
 stop signals in its thread and sleeps in C for ``hold`` s with the Python lock held (a call through
 ``ctypes.PyDLL``): no other thread of the process can run Python, so neither the watchdog nor a signal handler
-can act."""
+can act. ``mode`` 5 and 6 do what 1 and 4 do, in ``exitInitializationMode`` instead of a step."""
 import signal
 import ctypes
 import os
@@ -25,6 +25,13 @@ class CosimTCrash(Fmi2Slave):
         self.register_variable(Real("at", causality=Fmi2Causality.parameter, variability=Fmi2Variability.tunable))
         self.register_variable(Real("hold", causality=Fmi2Causality.parameter, variability=Fmi2Variability.tunable))
         self.register_variable(Real("y", causality=Fmi2Causality.output, initial="exact"))
+
+    def exit_initialization_mode(self):
+        if self.mode == 5:
+            ctypes.string_at(0)
+        elif self.mode == 6:
+            signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT, signal.SIGTERM, signal.SIGHUP})
+            ctypes.PyDLL(None).sleep(int(self.hold))
 
     def do_step(self, current_time, step_size):
         if current_time + step_size >= self.at - 1e-12:

@@ -98,3 +98,29 @@ def test_a_run_that_ends_well_is_not_a_crash_and_keeps_its_exit_code(write_scena
     stdout, stderr = proc.communicate(timeout=60)
     assert proc.returncode == 0 and stderr == "", stderr
     assert read_run(out).signal("g.y").t[-1] == pytest.approx(0.2)
+
+
+def test_check_names_a_component_that_crashes_in_its_initialization(write_scenario, tmp_path):
+    """`check` instantiates and initializes every component: it is supervised as a run is."""
+    tmp = Path(tempfile.mkdtemp(dir=tmp_path))
+    path = write_scenario(SCENARIO.format(mode=5, at=0.5, stop=1.0, extra=""))
+    env = {**os.environ, "TMPDIR": str(tmp), "PYTHONPATH": str(ROOT)}
+    r = subprocess.run([sys.executable, "-m", "cosim", "check", str(path)], capture_output=True, text=True, env=env,
+                       cwd=ROOT, timeout=120)
+    assert r.returncode == 2 and "Traceback" not in r.stderr, r.stderr
+    lines = r.stderr.strip().splitlines()
+    assert lines == ["error: component 'src' in its initialization at t = 0 s crashed (SIGSEGV)"], r.stderr
+    assert not list(tmp.glob("cosim-*")), list(tmp.glob("cosim-*"))
+
+
+def test_check_kills_a_component_that_holds_the_python_lock_in_its_initialization(write_scenario, tmp_path):
+    tmp = Path(tempfile.mkdtemp(dir=tmp_path))
+    path = write_scenario(SCENARIO.format(mode=6, at=0.5, stop=1.0, extra="watchdog_s: 1.0"))
+    env = {**os.environ, "TMPDIR": str(tmp), "PYTHONPATH": str(ROOT)}
+    t0 = time.monotonic()
+    r = subprocess.run([sys.executable, "-m", "cosim", "check", str(path)], capture_output=True, text=True, env=env,
+                       cwd=ROOT, timeout=120)
+    assert r.returncode == 2 and "Traceback" not in r.stderr, r.stderr
+    assert r.stderr.startswith("error: component 'src' in its initialization at t = 0 s made no progress"), r.stderr
+    assert time.monotonic() - t0 < 30
+    assert not list(tmp.glob("cosim-*")), list(tmp.glob("cosim-*"))
