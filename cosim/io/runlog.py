@@ -27,10 +27,14 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any, Iterable, Iterator, Sequence
 
+import lz4.frame
 import numpy as np
 import orjson
-from mcap.exceptions import McapError
-from mcap.records import Attachment
+import zstandard
+from mcap.exceptions import McapError, UnsupportedCompressionError
+from mcap.records import Attachment, Channel, Chunk, Footer, Message, Metadata, Schema
+from mcap.stream_reader import StreamReader, breakup_chunk
+from mcap.writer import CompressionType, Writer
 
 from ..engine.scenario import EFFECTIVE_ATTACHMENT, Scenario, scenario_from_data
 from ..errors import CosimError, Issue, ScenarioError
@@ -155,13 +159,6 @@ class _Clamped:
 def _inflate(chunk, path: Path, offset: int) -> bytes:
     """The uncompressed records of an MCAP ``chunk`` (at byte ``offset`` of ``path``), never more than it declares
     nor than :data:`MAX_CHUNK_BYTES`: CosimError otherwise, naming the file, the offset and the limit."""
-    import lz4.frame  # lazy: --help loads this module without it
-    import zstandard  # lazy: --help loads this module without it
-    from mcap.exceptions import (  # lazy: --help loads this module without it
-        McapError,
-        UnsupportedCompressionError,
-    )
-
     declared = chunk.uncompressed_size
     where = f"{path}: the MCAP chunk at byte {offset}"
     if declared > MAX_CHUNK_BYTES:
@@ -195,12 +192,6 @@ def log_records(f, path: str | Path, chunks: bool = True) -> Iterator:
     read goes past its end. A damaged or cut file raises the mcap package's errors (``McapError``).
     """
 
-    from mcap.records import Chunk  # lazy: --help loads this module without it
-    from mcap.stream_reader import (  # lazy: --help loads this module without it
-        StreamReader,
-        breakup_chunk,
-    )
-
     src = _Clamped(f)
     start = 8  # the first record follows the magic
     for rec in StreamReader(src, emit_chunks=True, record_size_limit=src.size).records:
@@ -223,16 +214,6 @@ def read_run(path: str | Path, components: Iterable[str] | None = None) -> RunLo
     Raises CosimError naming the file when it is missing, not an MCAP file, unfinished, or holds a chunk past
     :data:`MAX_CHUNK_BYTES`.
     """
-    from mcap.exceptions import McapError  # lazy: --help loads this module without it
-    from mcap.records import (  # lazy: --help loads this module without it
-        Attachment,
-        Channel,
-        Footer,
-        Message,
-        Metadata,
-        Schema,
-    )
-
     path = Path(path)
     if not path.is_file():
         raise CosimError(f"{path}: no such file")
@@ -349,20 +330,6 @@ def write_baseline(source: str | Path, out: str | Path, period: float = 0.01,
     the pick is exact): whole messages of a log with one sample a message, the samples on the
     period of each block otherwise. Returns (path, samples kept).
     """
-    from mcap.exceptions import McapError  # lazy: --help loads this module without it
-    from mcap.records import (  # lazy: --help loads this module without it
-        Attachment,
-        Channel,
-        Footer,
-        Message,
-        Metadata,
-        Schema,
-    )
-    from mcap.writer import (  # lazy: --help loads this module without it
-        CompressionType,
-        Writer,
-    )
-
     source, out = Path(source), Path(out)
     if period <= 0:
         raise CosimError(f"baseline period must be > 0 s, got {period}")
