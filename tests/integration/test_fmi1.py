@@ -105,24 +105,6 @@ def test_fmi1_model_exchange_matches_fmpy(tmp_path, model, stop, step, names, ex
     assert worst <= EVENT_ATOL, f"event times differ by up to {worst:.3g} s: ours {ours} vs {theirs}"
 
 
-def test_fmi1_model_exchange_ending_the_simulation_ends_the_run_normally(tmp_path):
-    fmu = build("Stair", 1, "me")
-    path = tmp_path / "stair.yaml"
-    path.write_text(_yaml({"stair": one(fmu, "me")}, 15.0, 0.1))
-    out = tmp_path / "stair.mcap"
-    proc = cosim("run", str(path), "--out", str(out))
-    assert proc.returncode == 0, f"exit {proc.returncode}: {proc.stderr}"
-    assert "'stair' ended the simulation at t = 10.5 s" in proc.stdout, proc.stdout
-    log = read_run(out)
-    counter = log.signal("stair.counter")
-    assert abs(counter.t[-1] - 10.5) < 1e-9, f"last sample at {counter.t[-1]} s, expected the termination at 10.5 s"
-    assert counter.y[-1] == 11, f"counter at the end {counter.y[-1]}, expected 11 (incremented at t = 1..10)"
-    assert log.metadata["outcome"]["terminated_by"] == "stair", log.metadata["outcome"]
-    ref = fmpy_run(fmu, "me", 15.0, 0.1, ["counter"])
-    assert ref["time"][-1] <= 10.5 + 1e-9 and ref["counter"][-1] == 11, (ref["time"][-1], ref["counter"][-1])
-    assert_same(log, ref, ["counter"], 0, ("counter",), component="stair")
-
-
 def test_fmi1_termination_in_the_initial_event_update_ends_the_run_at_the_start(tmp_path):
     res, log = run_master(tmp_path, {"m": one(build("Stair", 1, "me"), "me", {"t_terminate": 0.0})}, 5.0, 0.1)
     assert res.terminated_by == "m" and res.steps == 0 and res.sim_time == 0.0, (res.message, res.steps)
