@@ -23,11 +23,14 @@ import shutil
 import sys
 import tempfile
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from delta.errors import CosimError
 
 from . import requirements
-from .registry import FmuEntry
+
+if TYPE_CHECKING:  # the registry calls the builder: its entries' type only, no import cycle
+    from .registry import FmuEntry
 
 __all__ = ["DEFAULT_CACHE", "source_files", "fingerprint", "bundle_name", "is_current", "build_entry", "BuildError"]
 
