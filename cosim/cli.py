@@ -558,11 +558,6 @@ def _stdout_kept_for_json(on: bool):
 
 
 def _cmd_run(args: argparse.Namespace) -> int:
-    from .engine import supervision
-
-    code = supervision.supervise(lambda record, reason: _crashed(args, record, reason))
-    if code is not None:  # the supervisor: the run went on in its child process
-        return code
     from .engine.scenario import apply_overrides
     from .run import run_scenario
 
@@ -618,11 +613,6 @@ def _crashed(args: argparse.Namespace, record, reason: str) -> int:
 
 
 def _cmd_check(args: argparse.Namespace) -> int:
-    from .engine import supervision
-
-    code = supervision.supervise(lambda record, reason: _crashed(args, record, reason))
-    if code is not None:  # the supervisor: the check went on in its child process (it instantiates every FMU)
-        return code
     from .engine.offload import choose
     from .engine.scenario import apply_overrides
     from .run import check_initialization
@@ -766,6 +756,12 @@ def main(argv: Sequence[str] | None = None) -> int:
             if sig != signal.SIGINT:  # Ctrl-C raises KeyboardInterrupt by itself
                 signal.signal(sig, _terminate_as_interrupt)
     try:
+        if handler in _SUPERVISED:  # commands that load and call FMUs: a supervisor names a crash inside one
+            from .engine import supervision
+
+            code = supervision.supervise(lambda record, reason: _crashed(args, record, reason))
+            if code is not None:  # the supervisor: the command went on in its child process
+                return code
         return handler(args)
     except (CosimError, KeyboardInterrupt) as exc:
         message, kind, code = exit_status(exc)
@@ -777,6 +773,11 @@ def main(argv: Sequence[str] | None = None) -> int:
 
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
         return EXIT_OK
+
+
+_SUPERVISED = (_cmd_run, _cmd_check, _cmd_compare)
+"""Handlers that instantiate FMUs in this process (run, check, compare --plants): run under the supervisor
+(cosim.engine.supervision) when started as ``python -m cosim``."""
 
 
 def threading_main() -> bool:
