@@ -18,7 +18,6 @@ from __future__ import annotations
 import copy
 import json
 
-import numpy as np
 import pytest
 from cfmus import MODELS_FMI1, build
 from cli_helpers import cosim
@@ -34,13 +33,11 @@ from test_third_party import (
     fmpy_run,
     one,
     run_master,
+    same_with_and_without_the_worker,
 )
 
-from cosim.engine.scenario import parse_scenario
 from cosim.errors import ComponentSourceError, FMIError
 from cosim.fmi import FMUInfo, load_fmu, make_slave
-from cosim.io.runlog import read_run
-from cosim.run import run_scenario
 
 pytestmark = pytest.mark.integration
 
@@ -183,26 +180,13 @@ def test_fmi1_in_the_parallel_worker_as_in_a_serial_run(tmp_path):
     """The FMI 1.0 model-exchange stair (no inputs) runs ahead in the worker process, re-created there by
     make_slave from its path and interface; a loop of two FMI 1.0 feedthroughs (CS and ME) stays in the
     master. With and without the worker: the same logged values, the same end of the simulation."""
-    import yaml
 
     comps = {"stair": one(build("Stair", 1, "me"), "me"), "a": one(build("Feedthrough", 1, "cs"), "cs"),
              "b": one(build("Feedthrough", 1, "me"), "me")}
     conns = [{"from": "stair.ramp", "to": "a.Real_input"}, {"from": "a.Real_output", "to": "b.Real_input"},
              {"from": "b.Integer_output", "to": "a.Integer_input"}, {"from": "stair.counter", "to": "b.Integer_input"}]
-    logs = {}
-    for mode in ("off", "on"):
-        text = yaml.safe_dump({"name": "fmi1_worker", "components": comps, "connections": conns,
-                               "time": {"stop": 12.0, "step": 0.01}, "algorithm": "jacobi", "parallel": mode,
-                               "logging": {"signals": "all"}})
-        res = run_scenario(parse_scenario(text, str(tmp_path / f"{mode}.yaml")), out=tmp_path / f"{mode}.mcap")
-        assert res.terminated_by == "stair" and abs(res.sim_time - 10.5) < 1e-9, (mode, res.message, res.sim_time)
-        assert (mode == "on") == any("worker" in n for n in res.notes), (mode, res.notes)
-        logs[mode] = read_run(tmp_path / f"{mode}.mcap")
+    logs = same_with_and_without_the_worker(tmp_path, "fmi1_worker", comps, conns)
     assert logs["off"].signal("a.Real_output").y[-1] == 5.5, "the stair's ramp (0.5 * 11) reached a"
-    for name, sig in logs["off"].signals.items():
-        other = logs["on"].signal(name)
-        assert np.array_equal(sig.t_ns, other.t_ns), f"{name}: stamps differ with the worker"
-        assert np.array_equal(sig.y, other.y), f"{name}: values differ with the worker"
 
 
 def test_fmi1_live_view_serves_the_component_channel(tmp_path):

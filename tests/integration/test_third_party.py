@@ -31,9 +31,9 @@ import pytest
 from cfmus import build
 from cli_helpers import cosim, start_cosim, wait_for
 
-from cosim.run import run_scenario
-from cosim.io.runlog import read_run
 from cosim.engine.scenario import parse_scenario
+from cosim.io.runlog import read_run
+from cosim.run import run_scenario
 
 pytestmark = pytest.mark.integration
 
@@ -352,25 +352,34 @@ def test_no_extracted_fmu_outlives_a_run_an_error_or_an_interrupt(tmp_path):
 def test_termination_inside_the_parallel_worker_ends_the_run_as_a_serial_run_does(tmp_path):
     """The stair (feed-forward) runs ahead in the worker process; its end of the simulation must reach
     the master at the same step, with the same logged values, as without the worker."""
-    import yaml
 
     comps = {"stair": one(build("Stair", 3), "cs"), "ft": one(build("Feedthrough", 3), "cs"),
              "ss": one(build("StateSpace", 3), "cs")}
     conns = [{"from": "stair.counter", "to": "ft.Int32_input"}, {"from": "ss.y", "to": "ft.Float64_array_input"},
              {"from": "ft.Float64_array_output", "to": "ss.u"}]
+    same_with_and_without_the_worker(tmp_path, "worker_end", comps, conns)
+
+
+def same_with_and_without_the_worker(tmp_path, name: str, comps: dict, conns: list) -> dict:
+    """Run ``comps`` wired by ``conns`` (Jacobi, to 12 s, every signal logged) serial and with the worker: the
+    stair ends both at 10.5 s, the worker ran only in the second, every logged signal is the same in both.
+    Returns the two logs by ``parallel`` mode."""
+    import yaml
+
     logs = {}
     for mode in ("off", "on"):
-        text = yaml.safe_dump({"name": "worker_end", "components": comps, "connections": conns,
+        text = yaml.safe_dump({"name": name, "components": comps, "connections": conns,
                                "time": {"stop": 12.0, "step": 0.01}, "algorithm": "jacobi", "parallel": mode,
                                "logging": {"signals": "all"}})
         res = run_scenario(parse_scenario(text, str(tmp_path / f"{mode}.yaml")), out=tmp_path / f"{mode}.mcap")
         assert res.terminated_by == "stair" and abs(res.sim_time - 10.5) < 1e-9, (mode, res.message, res.sim_time)
         assert (mode == "on") == any("worker" in n for n in res.notes), (mode, res.notes)
         logs[mode] = read_run(tmp_path / f"{mode}.mcap")
-    for name, sig in logs["off"].signals.items():
-        other = logs["on"].signal(name)
-        assert np.array_equal(sig.t_ns, other.t_ns), f"{name}: stamps differ with the worker"
-        assert np.array_equal(sig.y, other.y), f"{name}: values differ with the worker"
+    for sig_name, sig in logs["off"].signals.items():
+        other = logs["on"].signal(sig_name)
+        assert np.array_equal(sig.t_ns, other.t_ns), f"{sig_name}: stamps differ with the worker"
+        assert np.array_equal(sig.y, other.y), f"{sig_name}: values differ with the worker"
+    return logs
 
 
 @pytest.mark.parametrize("fmi", [2, 3])
