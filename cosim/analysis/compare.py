@@ -27,7 +27,8 @@ import numpy as np
 
 from fmus import registry
 
-from ..engine.scenario import load_scenario, load_yaml
+from ..engine.bounded_yaml import load_yaml
+from ..engine.scenario import load_scenario
 from ..errors import CosimError, Issue, ScenarioError
 from ..io.runlog import RunLog, Signal, read_run
 from ..observers.stats import ErrorStats

@@ -39,7 +39,8 @@ import numpy as np
 from delta.paper_data import THESIS_TABLE_5_M
 from fmus import registry
 
-from ..engine.scenario import Compare, expand_signal, load_yaml
+from ..engine.bounded_yaml import load_yaml
+from ..engine.scenario import Compare, expand_signal
 from ..errors import CosimError
 from ..io.runlog import AXES, RunLog, read_run
 from ..observers.stats import ErrorStats

@@ -19,6 +19,7 @@ from typing import Any
 import yaml
 
 from ..errors import Issue, ScenarioError
+from .bounded_yaml import load_yaml
 
 __all__ = ["FORMAT", "PARAMETERS", "ModelFile", "read_model_file", "write_model_file", "model_start_values"]
 
@@ -50,7 +51,7 @@ def read_model_file(path: str | Path) -> ModelFile:
     """Read and check an identified model file; :class:`ScenarioError` naming the file and what is wrong."""
     path = str(path)
     try:
-        data = yaml.safe_load(Path(path).read_text(encoding="utf-8"))
+        data = load_yaml(Path(path).read_text(encoding="utf-8"))[0]  # bounded: a model file is outside input
     except OSError as exc:
         raise _fail(path, f"cannot read: {exc.strerror}") from None
     except (UnicodeDecodeError, yaml.YAMLError) as exc:

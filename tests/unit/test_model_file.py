@@ -94,3 +94,14 @@ def test_shipped_ctc_scenarios_use_their_committed_identified_model(name):
 def test_thesis_scenario_keeps_the_thesis_split():
     scenario = load_scenario(ROOT / "scenarios" / "helix_ctc_thesis.yaml")
     assert scenario.model is None and "model.w_inertia" not in scenario.components["ctl"].parameters, scenario
+
+
+def test_a_model_file_whose_aliases_expand_past_the_limit_is_refused_before_it_expands(tmp_path):
+    """A model file is outside input like a scenario: the same bounded reader (nine levels of nine aliases are 387
+    million values)."""
+    lines = ["a0: &a0 [1, 1, 1, 1, 1, 1, 1, 1, 1]"]
+    lines += [f"a{i}: &a{i} [" + ", ".join([f"*a{i - 1}"] * 9) + "]" for i in range(1, 10)]
+    bomb = tmp_path / "bomb.yaml"
+    bomb.write_text("\n".join(lines) + "\n")
+    with pytest.raises(ScenarioError, match=r"bomb.yaml.*expands to more than 200000 values"):
+        read_model_file(bomb)
