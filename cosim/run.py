@@ -140,7 +140,7 @@ def check_initialization(scenario: Scenario) -> tuple[Any, str]:
     refuse), then freed, no step taken. Returns (plan, pre-flight report); raises the run's own error for what it
     refuses at t = 0."""
     with Extractions() as held:
-        ex = None
+        ex, ended = None, False
         try:
             plan, report = prepare(scenario)
             comps = scenario.components
@@ -168,11 +168,12 @@ def check_initialization(scenario: Scenario) -> tuple[Any, str]:
                     if replaced is not exc:
                         raise replaced from None
                     raise
-            for s in ex.slaves:
-                s.terminate()
+            ended, failure = True, ex.end()
+            if failure is not None:
+                raise failure
         finally:
-            for s in ex.slaves if ex is not None else ():
-                s.free()
+            if ex is not None and not ended:
+                ex.end(terminate=False)
             held.release()
     return plan, report
 
@@ -363,14 +364,8 @@ def _run_claimed(scenario: Scenario, output, held: Extractions, options: RunOpti
         wall = (t_loop_end if t_loop_end is not None else time.perf_counter()) - t_wall
         if bar is not None:
             bar.stop()
-        for s in ex.slaves:
-            try:
-                if error is None:
-                    s.terminate()
-            except CosimError as exc:
-                error = error or exc
-            finally:
-                s.free()
+        ended = ex.end(terminate=error is None)  # every component freed, whatever happened
+        error = error or ended
         error = _finish_observers(ex, error, recorder, output)
     if error is not None:  # a failure at the end (fmi2Terminate, the worker's report) fails the run too
         raise error

@@ -24,7 +24,7 @@ import threading
 import time as _time
 from typing import Any, Callable, Protocol, Sequence
 
-from ..errors import STOP_SIGNALS, Interrupted
+from ..errors import STOP_SIGNALS, CosimError, Interrupted
 from ..fmi import Slave, Terminated
 from .algorithm import ALGORITHMS, DEFAULT, Algorithm
 from .grid import Grid
@@ -222,6 +222,25 @@ class Execution:
                 k = k_next
         except Terminated as term:
             self._end_at(term, k, schedule[k % period], stepped)
+
+    def end(self, terminate: bool = True) -> BaseException | None:
+        """Terminate (when ``terminate``) and free every component, each recorded as having the turn in the
+        termination phase (a crash or a hang there is named like one in a step). After a component's terminate
+        fails the others are freed without one. Returns that failure (a CosimError), or None."""
+        cur = self.current
+        cur[2] = PHASES.index("termination")
+        error: BaseException | None = None
+        for c, s in enumerate(self.slaves):
+            cur[0] = c
+            try:
+                if terminate and error is None:
+                    s.terminate()
+            except CosimError as exc:
+                error = exc
+            finally:
+                s.free()
+        cur[0] = MASTER
+        return error
 
     def _end_at(self, term: Terminated, k: int, active: Sequence[int], stepped: Sequence[Callable]) -> None:
         """An FMU ended the simulation inside macro step ``k``: finish that step as far as it went (the components
