@@ -9,8 +9,11 @@ I/O, no FMI, no Exudyn. Importing the package itself loads no numpy (the CLI's e
 :mod:`delta.errors`).
 """
 
+from importlib import import_module
+
 from .errors import CosimError, ParameterError, RobotError, UnreachableError
-from .robots import PRESETS, LinearDelta, Robot, RotaryDelta, get_preset
+
+_ROBOTS = ("PRESETS", "LinearDelta", "Robot", "RotaryDelta", "get_preset")
 
 __all__ = [
     "CosimError",
@@ -23,3 +26,11 @@ __all__ = [
     "RotaryDelta",
     "get_preset",
 ]
+
+
+def __getattr__(name: str):
+    """The robot names from :mod:`delta.robots`, imported on first use (it loads numpy; this package must not:
+    the log's writer process and ``--help`` import :mod:`delta.errors` through it)."""
+    if name in _ROBOTS:
+        return getattr(import_module(".robots", __name__), name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

@@ -15,13 +15,8 @@ A model-exchange FMU's right-hand side, which the master's integrator evaluates 
 derivatives checked for NaN), is one crossing the same way: ``cosim_rhs``, through :func:`make_rhs`
 (:meth:`cosim.fmi.model_exchange.ModelExchange.rhs`).
 
-The same library holds ``cosim_samples`` for the log writer (:func:`samples_helper`,
-:func:`cosim.observers.log_writer.encode_samples`): a block's sample messages joined from the numbers orjson wrote,
-one pass over them instead of a Python object per number.
-
-The helper is compiled at first use with the system C compiler (``$CC``, else ``cc``) into the user's
-cache (``$XDG_CACHE_HOME/cosim``, default ``~/.cache/cosim``), once per version of its source; processes
-building it at the same time each rename a complete file into place. Without a compiler, or when the
+The helper is compiled at first use (:mod:`cosim.cbuild`: the system C compiler, the user's cache, once
+per version of its source). Without a compiler, or when the
 build fails, :func:`helper` and :func:`rhs_helper` return None, :func:`unavailable` says why, and the
 master makes the same calls from Python one by one (:meth:`cosim.fmi.slave.CoSimulation.set_step_get`,
 :meth:`cosim.fmi.model_exchange.ModelExchange.rhs`).
@@ -30,23 +25,16 @@ master makes the same calls from Python one by one (:meth:`cosim.fmi.slave.CoSim
 from __future__ import annotations
 
 import ctypes
-import hashlib
-import os
-import platform
-import shutil
-import subprocess
-import tempfile
-import threading
 from ctypes import POINTER, c_bool, c_double, c_int, c_size_t, c_void_p
 from functools import partial
 from pathlib import Path
 from typing import Any, Callable, Sequence
 
-__all__ = ["Exchange", "Finite", "Turn", "Rhs", "helper", "rhs_helper", "samples_helper", "unavailable", "make_turn",
+from ..cbuild import Library
+
+__all__ = ["Exchange", "Finite", "Turn", "Rhs", "helper", "rhs_helper", "unavailable", "make_turn",
            "make_rhs", "SET", "STEP", "GET", "NONFINITE", "TIME", "STATES", "DERIVATIVES"]
 
-SOURCE = Path(__file__).with_name("turn.c")
-CFLAGS = ("-std=c99", "-O2", "-fPIC", "-shared")
 SET, STEP, GET, NONFINITE = 1, 2, 3, 4  # what ended a turn (cosim_turn's return value; 0: completed)
 TIME, STATES, DERIVATIVES = 1, 2, 3  # what ended a right-hand side (cosim_rhs's return value, or NONFINITE; 0: done)
 
@@ -83,59 +71,17 @@ class Rhs(ctypes.Structure):
                 ("get_derivatives", c_void_p), ("nx", c_size_t), ("t", POINTER(c_double)), ("status", c_int)]
 
 
-_LOCK = threading.Lock()
-_LIBRARY: list[Any] = []  # [the loaded library, or None] once looked for (one look per process)
-_REASON: list[str] = []  # why the helper is unavailable
-
-
-def _fresh_lock() -> None:
-    """In a forked child: a new lock (another thread of the parent may have held it at the fork)."""
-    global _LOCK
-    _LOCK = threading.Lock()
-
-
-if hasattr(os, "register_at_fork"):  # POSIX
-    os.register_at_fork(after_in_child=_fresh_lock)
-
-
-def _cache_dir() -> Path:
-    return Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache") / "cosim"
+_LIBRARY = Library(Path(__file__).with_name("turn.c"))
 
 
 def _build() -> Any:
     """The helper's library: from the cache, else compiled into it. Raises OSError or RuntimeError."""
-    source = SOURCE.read_bytes()
-    key = hashlib.sha256(source + "\0".join((*CFLAGS, platform.machine())).encode()).hexdigest()[:16]
-    cache = _cache_dir()
-    path = cache / f"turn-{key}.so"
-    if not path.exists():
-        cc = os.environ.get("CC", "cc")
-        if shutil.which(cc) is None:
-            raise RuntimeError(f"no C compiler ({cc!r} is not on PATH; set CC or install gcc)")
-        cache.mkdir(parents=True, exist_ok=True)
-        fd, tmp = tempfile.mkstemp(prefix=".turn-", suffix=".so", dir=cache)
-        os.close(fd)
-        try:
-            out = subprocess.run([cc, *CFLAGS, "-o", tmp, str(SOURCE), "-lm"], capture_output=True, text=True)
-            if out.returncode != 0:
-                raise RuntimeError(f"{cc} failed on {SOURCE}: {out.stderr.strip()[-2000:]}")
-            os.replace(tmp, path)
-        finally:
-            if os.path.exists(tmp):
-                os.unlink(tmp)
-    return ctypes.CDLL(str(path))
+    return _LIBRARY.build()
 
 
 def _library() -> Any:
     """The helper's loaded library, or None when it cannot be built here."""
-    with _LOCK:
-        if not _LIBRARY:
-            try:
-                _LIBRARY.append(_build())
-            except (OSError, RuntimeError) as exc:
-                _LIBRARY.append(None)
-                _REASON.append(str(exc))
-        return _LIBRARY[0]
+    return _LIBRARY.get()
 
 
 def helper() -> Any:
@@ -150,24 +96,9 @@ def rhs_helper() -> Any:
     return None if lib is None else lib.cosim_rhs
 
 
-def samples_helper() -> Any:
-    """The compiled ``cosim_samples`` with its argument and result types (see turn.c), or None when it cannot be
-    built here."""
-    lib = _library()
-    if lib is None:
-        return None
-    f = lib.cosim_samples
-    if f.restype is not ctypes.c_ssize_t:
-        f.restype = ctypes.c_ssize_t
-        f.argtypes = [ctypes.c_char_p, c_size_t, ctypes.c_char_p, c_size_t, c_size_t, c_size_t, ctypes.c_char_p,
-                      c_void_p, ctypes.c_char_p, c_void_p]
-    return f
-
-
 def unavailable() -> str | None:
-    """Why :func:`helper`, :func:`rhs_helper` and :func:`samples_helper` returned None (None: they did not, or
-    were not asked yet)."""
-    return _REASON[0] if _REASON else None
+    """Why :func:`helper` and :func:`rhs_helper` returned None (None: they did not, or were not asked yet)."""
+    return _LIBRARY.reason
 
 
 def make_turn(fmi: int, instance: int, do_step: int, t: c_double, h: c_double, sets: Sequence[Exchange],

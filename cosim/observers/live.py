@@ -21,7 +21,7 @@ from collections.abc import Sequence
 
 from ..engine.execution import Execution
 from ..errors import CosimError
-from .log_writer import FoxgloveChannels, encode_messages
+from .log_writer import FoxgloveChannels, encode_messages, live_view_serving
 from .publish import Publisher
 
 __all__ = ["DEFAULT_PORT", "LiveView", "parse_address"]
@@ -116,11 +116,13 @@ class LiveView:
         from foxglove.websocket import Capability  # lazy: --help loads this module without it
 
         context = foxglove.Context()
+        live_view_serving(True)  # no log writer is forked from this process while its threads run
         try:
             self.server = foxglove.start_server(name=self.name, host=self.host, port=self.port,
                                                 capabilities=[Capability.Time], context=context,
                                                 message_backlog_size=BACKLOG_MESSAGES)
         except RuntimeError as exc:
+            live_view_serving(False)
             raise CosimError(f"--live: cannot serve on {self.host}:{self.port}: {exc}") from None
         self.port = self.server.port
         self._sink = _ContextSink(context)
@@ -153,6 +155,7 @@ class LiveView:
         stopper = threading.Thread(target=server.stop, name="live-view-stop", daemon=True)
         stopper.start()
         stopper.join(STOP_TIMEOUT)
+        live_view_serving(False)  # its threads idle from now on (a stopper left behind is a thread: no fork either)
         if stopper.is_alive():
             print(f"warning: live view on {self.url}: a viewer did not take the end of the run within "
                   f"{STOP_TIMEOUT:g} s (it stopped reading): dropped", file=sys.stderr, flush=True)

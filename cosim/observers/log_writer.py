@@ -33,11 +33,13 @@ import logging
 import os
 import pickle
 import re
+import signal
 import struct
 import subprocess
-import signal
 import sys
 import threading
+import time
+import traceback
 from dataclasses import dataclass, field
 from functools import partial
 from itertools import accumulate, repeat
@@ -46,11 +48,12 @@ from typing import Any
 
 import orjson
 
+from ..cbuild import Library
 from ..errors import STOP_SIGNALS
-from ..fmi.turn import samples_helper
 
 __all__ = ["BlockLayout", "FoxgloveChannels", "encode_block", "encode_messages", "encode_samples", "row_format",
-           "LogSink", "WriterProcess", "WriterFailed"]
+           "samples_helper",
+           "LogSink", "WriterProcess", "WriterFailed", "live_view_serving"]
 
 
 # --------------------------------------------------------------------------- block messages
@@ -120,7 +123,7 @@ class BlockLayout:
         return found
 
     def c_joints(self) -> tuple[bytes, Any, bytes]:
-        """:meth:`joints` as ``cosim_samples`` takes them (see cosim/fmi/turn.c): back to back, the end of each
+        """:meth:`joints` as ``cosim_samples`` takes them (see samples.c): back to back, the end of each
         (a ``size_t`` array), and a byte per element of the row, 1 for an FMI 2 Boolean."""
         found = self._cache.get("c_joints")
         if found is None:
@@ -147,7 +150,7 @@ def encode_samples(layout: BlockLayout, stamps: list[int], data: bytes | list,
 
     ``data`` and ``skip`` as in :func:`encode_block`. With a row format, the numbers of the whole block
     are written by orjson, two calls (the times, the values), and joined with the keys
-    (:meth:`BlockLayout.joints`) between them: by ``cosim_samples`` (:func:`cosim.fmi.turn.samples_helper`), one
+    (:meth:`BlockLayout.joints`) between them: by ``cosim_samples`` (``samples.c``, :func:`samples_helper`), one
     pass in C over orjson's output, else cut at their commas (a number, ``true``, ``false`` or ``null``
     has none) and joined in Python. No dict and no Python loop per sample either way.
     """
@@ -163,19 +166,44 @@ def encode_samples(layout: BlockLayout, stamps: list[int], data: bytes | list,
     t_json, v_json = orjson.dumps(times), orjson.dumps(flat)
     joints, ends, fmi2 = layout.c_joints()
     width = len(flat) // n
-    out = ctypes.create_string_buffer(len(t_json) + len(v_json) + n * (ends[-1] + 1 + 4 * width))
-    size = join(t_json, len(t_json), v_json, len(v_json), n, width, joints, ends, fmi2, out)
-    if size < 0:
-        raise ValueError(f"cosim_samples: {n} samples of {width} values do not match orjson's output")
-    return ctypes.string_at(out, size).split(b"\n")
+    with _OUT_LOCK:  # the live view's thread and an in-process log share the buffer
+        out = _out_buffer(len(t_json) + len(v_json) + n * (ends[-1] + 1 + 4 * width))
+        size = join(t_json, len(t_json), v_json, len(v_json), n, width, joints, ends, fmi2, out)
+        if size < 0:
+            raise ValueError(f"cosim_samples: {n} samples of {width} values do not match orjson's output")
+        return ctypes.string_at(out, size).split(b"\n")
 
 
+_SAMPLES = Library(Path(__file__).with_name("samples.c"))
 _SAMPLES_HELPER: list = []  # [cosim_samples, or None without a C compiler], looked for once per process
+_OUT: list = [ctypes.create_string_buffer(1 << 16)]  # the join's output, grown as needed, reused
+_OUT_LOCK = threading.Lock()
+
+
+def _out_buffer(size: int):
+    """A buffer of at least ``size`` bytes for ``cosim_samples``, reused from call to call (making one costs
+    more than the join itself)."""
+    if len(_OUT[0]) < size:
+        _OUT[0] = ctypes.create_string_buffer(max(size, 2 * len(_OUT[0])))
+    return _OUT[0]
+
+
+def samples_helper():
+    """The compiled ``cosim_samples`` (``samples.c``) with its argument and result types, or None when it cannot
+    be built here (``_SAMPLES.reason`` says why)."""
+    lib = _SAMPLES.get()
+    if lib is None:
+        return None
+    f = lib.cosim_samples
+    if f.restype is not ctypes.c_ssize_t:
+        f.restype = ctypes.c_ssize_t
+        f.argtypes = [ctypes.c_char_p, ctypes.c_size_t, ctypes.c_char_p, ctypes.c_size_t, ctypes.c_size_t,
+                      ctypes.c_size_t, ctypes.c_char_p, ctypes.c_void_p, ctypes.c_char_p, ctypes.c_void_p]
+    return f
 
 
 def _samples_helper():
     if not _SAMPLES_HELPER:
-
         _SAMPLES_HELPER.append(samples_helper())
     return _SAMPLES_HELPER[0]
 
@@ -445,20 +473,120 @@ class WriterFailed(Exception):
     """The writer process reported a failure (its reason) or ended without one."""
 
 
+def _exec_writer() -> subprocess.Popen:
+    """The writer as a new interpreter (``python -m cosim.observers.log_writer``) in a session of its own (Ctrl-C
+    is the master's)."""
+    env = dict(os.environ)
+    root = str(Path(__file__).resolve().parents[2])  # the folder holding the cosim package
+    env["PYTHONPATH"] = root + (os.pathsep + env["PYTHONPATH"] if env.get("PYTHONPATH") else "")
+    return subprocess.Popen([sys.executable, "-m", "cosim.observers.log_writer"], stdin=subprocess.PIPE,
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, bufsize=0, start_new_session=True, env=env)
+
+
+class _ForkedWriter:
+    """The writer as a fork of the master, with what :class:`WriterProcess` uses of a ``subprocess.Popen``
+    (``pid``, ``stdin``, ``stdout``, ``stderr``, ``wait``, ``kill``, ``returncode``).
+
+    The child makes a session of its own (Ctrl-C and the supervisor's kill of the run's process group are
+    the master's), keeps its three pipes and closes every other descriptor it inherited (a live view's port,
+    the log's claim, FMU files), ignores the stop signals, imports foxglove, runs :func:`_serve` and leaves
+    with ``os._exit`` (none of the master's exit handlers, temp folders or buffered files are touched). It
+    is made only when no other Python thread runs and no live view serves in this process (their threads
+    would be missing in the child with whatever they held; the live view's recorder forks before the
+    server starts); a thread of a native library (OpenBLAS' idle pool) is left behind harmlessly, as the
+    child calls none of them.
+    """
+
+    serving = 0
+    """Live views serving in this process (:class:`cosim.observers.live.LiveView` counts itself in and out)."""
+
+    @classmethod
+    def possible(cls) -> bool:
+        return (hasattr(os, "fork") and sys.platform != "darwin" and threading.active_count() == 1
+                and cls.serving == 0)
+
+    @classmethod
+    def start(cls) -> "_ForkedWriter":
+        pipes = [os.pipe() for _ in range(3)]  # (read, write) of the child's stdin, stdout, stderr
+        keep = (pipes[0][0], pipes[1][1], pipes[2][1])
+        pid = os.fork()
+        if pid == 0:  # the child: never returns
+            code = 1
+            try:
+                os.setsid()
+                for sig in STOP_SIGNALS:
+                    signal.signal(sig, signal.SIG_IGN)
+                for target, fd in enumerate(keep):
+                    os.dup2(fd, target)
+                os.closerange(3, _max_fd())
+                import foxglove  # noqa: F401  # lazy: the master's --help loads this module without it
+
+                code = _serve(os.fdopen(0, "rb"), os.fdopen(1, "wb", buffering=0))
+            except BaseException:  # noqa: BLE001 - said on the stderr pipe, read by WriterProcess._reason
+                try:
+                    os.write(2, traceback.format_exc().encode(errors="replace"))
+                except OSError:
+                    pass
+            finally:
+                os._exit(code)
+        for fd in keep:
+            os.close(fd)
+        return cls(pid, pipes[0][1], pipes[1][0], pipes[2][0])
+
+    def __init__(self, pid: int, stdin: int, stdout: int, stderr: int) -> None:
+        self.pid = pid
+        self.stdin = os.fdopen(stdin, "wb", buffering=0)
+        self.stdout = os.fdopen(stdout, "rb")
+        self.stderr = os.fdopen(stderr, "rb")
+        self.returncode: int | None = None
+
+    def wait(self, timeout: float | None = None) -> int:
+        deadline = None if timeout is None else time.monotonic() + timeout
+        while self.returncode is None:
+            pid, status = os.waitpid(self.pid, 0 if deadline is None else os.WNOHANG)
+            if pid:
+                self.returncode = os.waitstatus_to_exitcode(status)
+            elif time.monotonic() > deadline:
+                raise subprocess.TimeoutExpired(f"log writer {self.pid}", timeout)
+            else:
+                time.sleep(0.005)
+        return self.returncode
+
+    def kill(self) -> None:
+        if self.returncode is None:
+            try:
+                os.kill(self.pid, signal.SIGKILL)
+            except ProcessLookupError:
+                pass
+
+
+def live_view_serving(serving: bool) -> None:
+    """A live view's server starts (True) or has stopped (False) in this process: no writer is forked meanwhile."""
+    _ForkedWriter.serving += 1 if serving else -1
+
+
+def _max_fd() -> int:
+    try:
+        return min(os.sysconf("SC_OPEN_MAX"), 1 << 16)
+    except (ValueError, OSError):
+        return 4096
+
+
 class WriterProcess:
     """A :class:`LogSink` in a child process: the same methods, sent through a pipe (see the module docstring).
 
-    Start it early (the interpreter takes about 0.1 s to start), then :meth:`open` the file. Every
-    call raises :class:`WriterFailed` with the child's reason once the child has failed.
+    Start it early, then :meth:`open` the file. Every call raises :class:`WriterFailed` with the child's
+    reason once the child has failed.
+
+    The child is a fork of this process where that is safe (:class:`_ForkedWriter`: POSIX but macOS, no other
+    Python thread, no live view serving): it has every module it needs but foxglove, which it imports while
+    the master loads its FMUs, and is ready in about 0.04 s. Elsewhere it is a new interpreter
+    (``python -m cosim.observers.log_writer``), which takes about 0.1 s of a core to start: on a 10 s
+    helix_ctc_analytic run of native FMUs (0.08 s unlogged) that start alone made the logged loop 1.3x longer.
     """
 
     def __init__(self) -> None:
-        env = dict(os.environ)
-        root = str(Path(__file__).resolve().parents[2])  # the folder holding the cosim package
-        env["PYTHONPATH"] = root + (os.pathsep + env["PYTHONPATH"] if env.get("PYTHONPATH") else "")
-        self._proc = subprocess.Popen([sys.executable, "-m", "cosim.observers.log_writer"], stdin=subprocess.PIPE,
-                                      stdout=subprocess.PIPE, stderr=subprocess.PIPE, bufsize=0,
-                                      start_new_session=True, env=env)  # own session: Ctrl-C is the master's
+        self._proc = _ForkedWriter.start() if _ForkedWriter.possible() else _exec_writer()
         self._fd = self._proc.stdin.fileno()
         try:
 

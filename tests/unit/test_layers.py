@@ -1,6 +1,6 @@
 """The master's rooms: imports point one way, with no cycle and no hidden import.
 
-Layers, lowest first: ``errors``, ``fmi`` (FMU access), ``engine`` (scenario, plan, algorithms, execution),
+Layers, lowest first: ``errors``, ``cbuild`` (the C helpers' compiler), ``fmi`` (FMU access), ``engine`` (scenario, plan, algorithms, execution),
 ``observers``, ``io``, ``run`` (a scenario's run, composed), ``analysis``, ``api``, the CLI. A module imports
 only from its own layer or below. Inside a layer, module-level imports form no cycle. Our own modules are
 imported at module level, except in the CLI (``cosim/cli.py`` imports each command's modules inside the
@@ -17,7 +17,7 @@ import pytest
 
 ROOT = Path(__file__).resolve().parents[2]
 PACKAGE = ROOT / "cosim"
-LAYERS = ["errors", "fmi", "engine", "observers", "io", "run", "analysis", "api", "cli", "__main__"]
+LAYERS = ["errors", "cbuild", "fmi", "engine", "observers", "io", "run", "analysis", "api", "cli", "__main__"]
 LAZY_OK = {"cosim.cli"}  # imports inside functions, for start-up time (see its docstring)
 
 

@@ -7,7 +7,9 @@ from __future__ import annotations
 
 import ctypes
 import dataclasses
+import os
 import struct
+import sys
 import time
 
 import orjson
@@ -16,6 +18,7 @@ from mcap.reader import make_reader
 from mcap.stream_reader import StreamReader
 
 from cosim.fmi import BOOLEAN, REAL
+from cosim.observers import log_writer
 from cosim.observers.log_writer import (BlockLayout, LogSink, WriterFailed, WriterProcess, encode_block, encode_samples,
                               row_format)
 from cosim.observers.publish import block_layout
@@ -76,7 +79,7 @@ def test_sample_messages_joined_in_c_and_in_python_are_the_same_bytes(monkeypatc
     import random
 
     from cosim.observers import log_writer
-    from cosim.fmi.turn import samples_helper
+    from cosim.observers.log_writer import samples_helper
 
     rnd = random.Random(23)
     specials = [0.0, -0.0, 5e-324, 1e300, -1.5e-7, 1e16, 123456789.0, float("nan"), float("inf"), -float("inf")]
@@ -161,7 +164,17 @@ def test_file_reads_back_with_its_summary_indexes_and_statistics(tmp_path, per_s
         assert late == [t for _, t, _ in got if t >= 120] and len(late) == (14 if per_sample else 8), late
 
 
-def test_writer_process_writes_the_file_and_reports_a_failure(tmp_path):
+@pytest.fixture(params=["fork", "exec"])
+def start(request, monkeypatch):
+    """Both ways the writer process starts: a fork of this process (where possible) and a new interpreter."""
+    if request.param == "fork" and not log_writer._ForkedWriter.possible():
+        pytest.skip("a forked writer is not possible here (not POSIX, macOS, or threads running)")
+    if request.param == "exec":
+        monkeypatch.setattr(log_writer._ForkedWriter, "possible", staticmethod(lambda: False))
+    return request.param
+
+
+def test_writer_process_writes_the_file_and_reports_a_failure(tmp_path, start):
     path = tmp_path / "p.mcap"
     w = WriterProcess()
     w.open(path, 1024, 1)
@@ -223,7 +236,7 @@ def _recovered(path, tmp_path, messages: int) -> dict:
 
 
 @pytest.mark.parametrize("layout", ["samples", "blocks"])
-def test_log_of_a_killed_writer_process_is_recoverable(tmp_path, layout):
+def test_log_of_a_killed_writer_process_is_recoverable(tmp_path, layout, start):
     """SIGKILL on the child after a flush: every flushed sample comes back, in either layout."""
     path = tmp_path / f"{layout}.mcap"
     w = _started_writer(path, layout == "samples")
@@ -238,7 +251,7 @@ def test_log_of_a_killed_writer_process_is_recoverable(tmp_path, layout):
 
 
 @pytest.mark.parametrize("layout", ["samples", "blocks"])
-def test_writer_process_left_by_its_master_leaves_an_unfinished_recoverable_log(tmp_path, layout):
+def test_writer_process_left_by_its_master_leaves_an_unfinished_recoverable_log(tmp_path, layout, start):
     """The pipe closes without ``finish`` (the master died): the child writes what it has and exits
     without a summary, as a killed writer would; nothing it was sent is lost."""
     path = tmp_path / f"{layout}.mcap"
@@ -248,3 +261,36 @@ def test_writer_process_left_by_its_master_leaves_an_unfinished_recoverable_log(
     assert w._proc.returncode == 0, w._proc.stderr.read()
     signals = _recovered(path, tmp_path, 7 if layout == "samples" else 3)
     assert signals["a.p.y"].t_ns.tolist() == [0, 1, 2, 3, 4, 5], signals["a.p.y"].t_ns
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="reads /proc")
+def test_forked_writer_keeps_none_of_the_masters_files(tmp_path):
+    """A forked writer closes what it inherited (here a listening socket, as a live view's port, and an open
+    file, as the log's claim): only its pipes, its log and what foxglove opens remain, and it is in a session
+    of its own (the stop signals and the supervisor's kill of the run's group are the master's)."""
+    import socket
+
+    if not log_writer._ForkedWriter.possible():
+        pytest.skip("a forked writer is not possible here")
+    held = open(tmp_path / "claim.lock", "w")
+    server = socket.socket()
+    server.bind(("127.0.0.1", 0))
+    server.listen()
+    try:
+        w = WriterProcess()
+        assert isinstance(w._proc, log_writer._ForkedWriter)
+        w.open(tmp_path / "f.mcap", 1024, 1)
+        w.flush()
+        deadline = time.monotonic() + 30
+        while not (tmp_path / "f.mcap").exists() and time.monotonic() < deadline:
+            time.sleep(0.02)
+        fds = os.listdir(f"/proc/{w.pid}/fd")
+        targets = {os.readlink(f"/proc/{w.pid}/fd/{fd}") for fd in fds if os.path.exists(f"/proc/{w.pid}/fd/{fd}")}
+        inode = os.fstat(server.fileno()).st_ino
+        assert str(tmp_path / "claim.lock") not in targets and f"socket:[{inode}]" not in targets, targets
+        assert os.getsid(w.pid) == w.pid != os.getsid(0)
+        w.finish()
+        assert w._proc.returncode == 0
+    finally:
+        server.close()
+        held.close()
