@@ -38,7 +38,8 @@ from pythonfmu.enums import Fmi2Status
 from pythonfmu.default_experiment import DefaultExperiment
 from pythonfmu.variables import Boolean, Integer, Real, String
 
-from ._names import UNITS, XYZ, ValueAccess, axis_names, compensate_exporter_refcount, joint_names, writer
+from ._names import (UNITS, XYZ, ValueAccess, axis_names, compensate_exporter_refcount, initial_knowns, joint_names,
+                     writer)
 
 __all__ = ["Adapter", "Depends", "UNITS", "XYZ", "joint_names", "axis_names", "DefaultExperiment", "writer"]
 
@@ -324,7 +325,7 @@ class Adapter(ValueAccess, Fmi2Slave):
         """
         index = {v.name: i + 1 for i, v in enumerate(self.vars.values())}
         inputs = {s.name for s in self.specs if s.causality == "input"}
-        parameters = [index[s.name] for s in self.specs if s.causality == "parameter"]
+        parameters = [s.name for s in self.specs if s.causality == "parameter"]
         outputs = sorted((s for s in self.specs if s.causality == "output"), key=lambda s: index[s.name])
         for spec in outputs:
             unknown = set(spec.depends) - inputs
@@ -343,11 +344,9 @@ class Adapter(ValueAccess, Fmi2Slave):
         node = SubElement(structure, "Outputs")
         for spec in outputs:
             unknown(node, spec, (index[n] for n in spec.depends))
-        # In initialization mode the knowns are the inputs and every variable with initial="exact"
-        # (here the parameters); the inputs an output depends on are the same as in a step.
         node = SubElement(structure, "InitialUnknowns")
         for spec in outputs:
-            unknown(node, spec, [*(index[n] for n in spec.depends), *parameters])
+            unknown(node, spec, (index[n] for n in initial_knowns(spec.depends, inputs, parameters)))
 
 
 def _component(name: str, index: int) -> str:

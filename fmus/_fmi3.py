@@ -29,7 +29,7 @@ from pythonfmu3 import (
 
 from delta.errors import ParameterError
 
-from ._names import UNITS, ValueAccess, compensate_exporter_refcount
+from ._names import UNITS, ValueAccess, compensate_exporter_refcount, initial_knowns
 
 __all__ = ["AdapterME"]
 
@@ -212,14 +212,13 @@ class AdapterME(ValueAccess, Fmi3SlaveBase, ModelExchange):
         if unknown:
             raise ValueError(f"{type(self).__name__}: dependencies on {sorted(unknown)}, which are neither inputs "
                              "nor states")
-        parameters = [vr[n] for n, k in self._kinds.items() if k == "parameter"]
+        inputs = {n for n, k in self._kinds.items() if k == "input"}
+        parameters = [n for n, k in self._kinds.items() if k == "parameter"]
         for element in root.find("ModelStructure"):
             ref = int(element.get("valueReference"))
             deps = self._depends.get(name[ref], ())
             if element.tag == "InitialUnknown":
-                # knowns in initialization mode: inputs and variables with initial="exact" (the
-                # parameters, which also fix the initial states)
-                known = sorted({vr[n] for n in deps if self._kinds[n] == "input"} | set(parameters))
+                known = sorted(vr[n] for n in initial_knowns(deps, inputs, parameters))
             elif element.tag in ("Output", "ContinuousStateDerivative"):
                 known = sorted(vr[n] for n in deps)
             else:

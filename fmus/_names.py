@@ -5,7 +5,8 @@ from __future__ import annotations
 import ctypes
 import sys
 
-__all__ = ["XYZ", "UNITS", "joint_names", "axis_names", "compensate_exporter_refcount", "ValueAccess", "writer"]
+__all__ = ["XYZ", "UNITS", "joint_names", "axis_names", "compensate_exporter_refcount", "ValueAccess", "writer",
+           "initial_knowns"]
 
 XYZ = ("x", "y", "z")
 
@@ -33,6 +34,18 @@ UNITS: dict[str, dict[str, int]] = {
     "1/s2": {"s": -2},
     "1/s3": {"s": -3},
 }
+
+
+def initial_knowns(depends, inputs, parameters) -> set:
+    """What an InitialUnknown depends on (FMI 2.0 2.2.8, FMI 3.0 2.4.8), from the knowns ``depends`` it
+    depends on in a step (inputs, and states for model exchange): in initialization mode the knowns are
+    the inputs and the variables with initial="exact", here the ``parameters``, which also fix the
+    initial states. So: the inputs among ``depends`` plus every parameter (parameters are not tracked
+    per unknown, an over-approximation the standard allows). The one rule of every build (python FMI 2
+    and 3, native): an InitialUnknown written without ``dependencies`` depends on every known, every
+    input included, and an importer that sorts initialization by these (OMSimulator) then sees an
+    algebraic loop through each feedback connection (plant q -> controller u -> plant u)."""
+    return {d for d in depends if d in inputs} | set(parameters)
 
 
 def joint_names(prefix: str) -> list[str]:

@@ -13,7 +13,7 @@ import importlib
 from dataclasses import dataclass
 from xml.etree.ElementTree import Element, SubElement, indent, tostring
 
-from .._names import UNITS
+from .._names import UNITS, initial_knowns
 from .errors import NativeError
 from .models import NativeModel
 
@@ -148,6 +148,12 @@ def _attributes(v: Variable) -> dict[str, str]:
     return attrs
 
 
+def _initial_knowns(itf: Interface, v: Variable) -> set[str]:
+    """The knowns InitialUnknown ``v`` depends on: the rule of the python builds (:func:`fmus._names.initial_knowns`)."""
+    return initial_knowns(v.depends or (), {u.name for u in itf.variables if u.causality == "input"},
+                          [p.name for p in itf.variables if p.causality == "parameter"])
+
+
 def model_description(itf: Interface, fmi: int, token: str, sources: list[str]) -> bytes:
     """modelDescription.xml of the native FMU for FMI ``fmi`` (2 or 3): co-simulation and model exchange."""
     if fmi == 2:
@@ -204,8 +210,11 @@ def _fmi2(itf: Interface, token: str, sources: list[str]) -> bytes:
                       | {index[s] for s, _ in itf.states})
     if unknowns:
         node = SubElement(structure, "InitialUnknowns")
+        by_index = {index[v.name]: v for v in variables}
         for i in unknowns:
-            SubElement(node, "Unknown", index=str(i))
+            known = _initial_knowns(itf, by_index[i])
+            SubElement(node, "Unknown", index=str(i),
+                       dependencies=" ".join(str(index[d]) for d in sorted(known, key=index.get)))
     indent(root)
     return b'<?xml version="1.0" encoding="UTF-8"?>\n' + tostring(root, encoding="utf-8") + b"\n"
 
@@ -243,7 +252,10 @@ def _fmi3(itf: Interface, token: str) -> bytes:
     for v in derivatives:
         SubElement(structure, "ContinuousStateDerivative", valueReference=str(v.vr),
                    dependencies=" ".join(str(vr[d]) for d in sorted(v.depends or (), key=vr.get)))
+    by_vr = {v.vr: v for v in itf.variables}
     for i in sorted({v.vr for v in outputs + derivatives} | {vr[s] for s, _ in itf.states}):
-        SubElement(structure, "InitialUnknown", valueReference=str(i))
+        known = _initial_knowns(itf, by_vr[i])
+        SubElement(structure, "InitialUnknown", valueReference=str(i),
+                   dependencies=" ".join(str(vr[d]) for d in sorted(known, key=vr.get)))
     indent(root)
     return b'<?xml version="1.0" encoding="UTF-8"?>\n' + tostring(root, encoding="utf-8") + b"\n"

@@ -82,6 +82,43 @@ def test_native_fmu_carries_its_sources_and_compiles_from_them(cache, tmp_path):
         assert np.isfinite(result["u[1]"][-1])
 
 
+def _initial_dependencies(md, fmi: int) -> dict[str, set[str]]:
+    """InitialUnknown name -> the names its ``dependencies`` list (None: the attribute is missing)."""
+    if fmi == 2:
+        names = [v.get("name") for v in md.iter("ScalarVariable")]
+        return {names[int(u.get("index")) - 1]: None if u.get("dependencies") is None
+                else {names[int(i) - 1] for i in u.get("dependencies").split()}
+                for u in md.iterfind("ModelStructure/InitialUnknowns/Unknown")}
+    names = {v.get("valueReference"): v.get("name") for v in md.find("ModelVariables")}
+    return {names[u.get("valueReference")]: None if u.get("dependencies") is None
+            else {names[i] for i in u.get("dependencies").split()}
+            for u in md.iterfind("ModelStructure/InitialUnknown")}
+
+
+def test_initial_unknowns_declare_their_dependencies_as_in_the_python_build(cache):
+    """One declaration (the adapter's ``depends``) and one rule (:func:`fmus._names.initial_knowns`) for
+    both builds: every InitialUnknown of a native FMU (FMI 2 and 3) lists its dependencies, and each
+    output's list names the same variables as in the python build. An InitialUnknown without the list
+    depends on every input: an importer then sees a loop at initialization through every feedback
+    connection (OMSimulator 3.0 did on helix_ctc_analytic: plant.q -> ctl.u -> plant.u)."""
+    import zipfile
+    from xml.etree import ElementTree as ET
+
+    from fmus.native.interface import interface, model_description
+    from fmus.native.models import native_model
+
+    for name in NATIVE:
+        with zipfile.ZipFile(registry.build(name, cache)) as zf:
+            python = _initial_dependencies(ET.fromstring(zf.read("modelDescription.xml")), 2)
+        itf = interface(name, native_model(name))
+        for fmi in (2, 3):
+            native = _initial_dependencies(ET.fromstring(model_description(itf, fmi, "token", [])), fmi)
+            bare = sorted(n for n, deps in native.items() if deps is None)
+            assert not bare, f"{name} FMI {fmi}: InitialUnknowns without dependencies: {bare}"
+            for output, deps in python.items():
+                assert native[output] == deps, f"{name} FMI {fmi} {output}: native {native[output]} vs python {deps}"
+
+
 def _signals(name: str, build: str, stop: float | None):
     overrides = {"fmus": build, "parallel": "off"}
     if stop is not None:

@@ -469,10 +469,98 @@ def test_an_fmu_file_that_unpacks_too_far_is_refused(tmp_path, monkeypatch):
         load_fmu(bomb)
 
 
+def _initialization_loop(ssp: Path) -> list[str]:
+    """A cycle (node names) in the archive's initialization graph, or [] when there is none: what
+    OMSimulator builds before it initializes (``ComponentFMUCS::initializeDependencyGraph_initialUnknowns``,
+    FMI 2.0 section 2.2.8): each InitialUnknown depends on the inputs its ``dependencies`` list, on every
+    input of its FMU when it has no ``dependencies`` attribute; each connection links an output to an input."""
+    import io
+
+    edges: dict[str, set[str]] = {}
+    with zipfile.ZipFile(ssp) as z:
+        root = ET.fromstring(z.read("SystemStructure.ssd"))
+        for comp in root.iterfind("ssd:System/ssd:Elements/ssd:Component", NS):
+            with zipfile.ZipFile(io.BytesIO(z.read(comp.get("source")))) as fmu:
+                md = ET.fromstring(fmu.read("modelDescription.xml"))
+            names = [v.get("name") for v in md.iter("ScalarVariable")]
+            inputs = {n for n, v in zip(names, md.iter("ScalarVariable")) if v.get("causality") == "input"}
+            for u in md.iterfind("ModelStructure/InitialUnknowns/Unknown"):
+                deps = u.get("dependencies")
+                known = inputs if deps is None else {names[int(i) - 1] for i in deps.split()} & inputs
+                for d in known:
+                    edges.setdefault(f"{comp.get('name')}.{d}", set()).add(f"{comp.get('name')}.{names[int(u.get('index')) - 1]}")
+        for c in root.iterfind("ssd:System/ssd:Connections/ssd:Connection", NS):
+            edges.setdefault(f"{c.get('startElement')}.{c.get('startConnector')}", set()).add(
+                f"{c.get('endElement')}.{c.get('endConnector')}")
+    state: dict[str, int] = {}  # 1 on the path, 2 done
+
+    def visit(node: str, path: list[str]) -> list[str]:
+        state[node], path = 1, [*path, node]
+        for nxt in sorted(edges.get(node, ())):
+            if state.get(nxt) == 1:
+                return [*path[path.index(nxt):], nxt]
+            if nxt not in state and (cycle := visit(nxt, path)):
+                return cycle
+        state[node] = 2
+        return []
+
+    for start in sorted(edges):
+        if start not in state and (cycle := visit(start, [])):
+            return cycle
+    return []
+
+
+@pytest.mark.parametrize("fmus", ["native", "python"])
+def test_export_has_no_algebraic_loop_at_initialization(tmp_path, fmus):
+    """Every InitialUnknown of our FMUs lists its dependencies (the inputs it depends on in a step, plus the
+    parameters), so the plant's q, computed from its parameters at initialization, does not depend on its
+    input u: without them (the native build before) an importer must assume every initial unknown depends
+    on every input, and OMSimulator 3.0 stopped on the loop plant.q -> ctl.u -> plant.u -> plant.q
+    ("Solution of algebraic loop 0 not within precision")."""
+    out = tmp_path / f"helix_ctc_analytic_{fmus}.ssp"
+    export_ssp(load_scenario(SCENARIO, {**OVERRIDES, ("fmus",): fmus}), out)
+    with zipfile.ZipFile(out) as z:
+        for member in z.namelist():
+            if member.endswith(".fmu"):
+                md = ET.fromstring(_description(z.read(member)))
+                bare = [u.get("index") for u in md.iterfind("ModelStructure/InitialUnknowns/Unknown")
+                        if u.get("dependencies") is None]
+                assert not bare, f"{member} ({fmus}): InitialUnknowns {bare} without dependencies"
+    assert _initialization_loop(out) == []
+    # the check itself: the same archive with the dependencies dropped has the loop through the plant
+    loop = _initialization_loop(_rewrite_fmu(out, tmp_path / "bare.ssp", "resources/plant.fmu",
+                                             lambda tail: re.sub(r' dependencies(Kind)?="[^"]*"', "", tail)))
+    assert loop and any(n.startswith("plant.u") for n in loop) and any(n.startswith("ctl.u") for n in loop), loop
+
+
+def _rewrite_fmu(src: Path, dst: Path, member: str, edit) -> Path:
+    """Copy an archive, editing one FMU's modelDescription.xml from ``<InitialUnknowns>`` on (text -> text)."""
+    import io
+
+    with zipfile.ZipFile(src) as zin, zipfile.ZipFile(dst, "w") as zout:
+        for item in zin.infolist():
+            data = zin.read(item.filename)
+            if item.filename == member:
+                buf = io.BytesIO()
+                with zipfile.ZipFile(io.BytesIO(data)) as fin, zipfile.ZipFile(buf, "w") as fout:
+                    for f in fin.infolist():
+                        body = fin.read(f.filename)
+                        if f.filename == "modelDescription.xml":
+                            text = body.decode()
+                            head, sep, tail = text.partition("<InitialUnknowns>")
+                            body = (head + sep + edit(tail)).encode()
+                        fout.writestr(f, body)
+                data = buf.getvalue()
+            zout.writestr(item, data)
+    return dst
+
+
 def test_export_is_typed_for_omsimulator(ssp):
     """OMSimulator 3.0 (built from source, v3.0.0-158) imports a system only with its own annotation
     (oms:FixedStepMaster: else "[NewSystem] internal error") and refuses ssd:Annotations at the top
-    ("wrong xml schema detected"): ours go on the system, OMSimulator's first (it reads only the first)."""
+    ("wrong xml schema detected"): ours go on the system, OMSimulator's first (it reads only the first).
+    Its initialization sorts the FMUs by their InitialUnknowns' dependencies: the archive has no loop there.
+    The run itself: tests/integration/test_ssp_omsimulator.py (where OMSIMULATOR_LIB is set)."""
     with zipfile.ZipFile(ssp) as z:
         root = ET.fromstring(z.read("SystemStructure.ssd"))
     assert root.find("ssd:Annotations", NS) is None, "top-level annotations break OMSimulator's import"
@@ -482,3 +570,4 @@ def test_export_is_typed_for_omsimulator(ssp):
     assert master is not None and float(master.get("stepSize")) == 0.001, ET.tostring(anns[0])
     with open_ssp(ssp) as sc:  # the OSP and OMSimulator steps agree; our annotation keeps the algorithm
         assert sc.time.step == 0.001 and sc.algorithm == "gauss_seidel", (sc.time, sc.algorithm)
+    assert _initialization_loop(ssp) == []
