@@ -12,7 +12,8 @@ scenario as an SSP archive that any SSP tool can run:
   ``osp:StepSizeHint``;
 - ``resources/<name>.ssv``: per component, every start value our master sets (the plan of
   :func:`cosim.engine.prepare.prepare`: explicit parameters, our trajectory FMUs' parameters from the
-  ``trajectory:`` section and the plant's initial state), bound through ``ssd:ParameterBinding``;
+  ``trajectory:`` section and the plant's initial state), bound through ``ssd:ParameterBinding``,
+  except a String equal to the FMU's own start value (OMSimulator 3.0 reads no ``ssv:String``);
 - ``resources/<name>.fmu``: the FMUs;
 - a root annotation of type ``org.delta-cosim.engine.scenario`` holding what SSP has no place for
   (algorithm, robot, trajectory for the pre-flight, comparison, checks, logging, per-component
@@ -175,6 +176,15 @@ def _typed(parent: ET.Element, prefix: str, var, value: Any = None, where: str =
     _el(parent, f"{prefix}:{kind}", attrib)
 
 
+def _string_at_start(var, value: Any) -> bool:
+    """Whether ``value`` is a String variable's own start value, which the export leaves out of the
+    .ssv: the FMU starts from it anyway (SSP 1.0 binds what it changes; an unbound parameter keeps its
+    start), and OMSimulator 3.0 refuses every ``ssv:String`` ("Unknown ParameterBinding-type"), so a
+    scenario that writes a String parameter at its default (``model.fidelity: full``) still runs
+    there. A String that differs from the start is written as ``ssv:String``, as the standard says."""
+    return _SSP_TYPE.get(var.fmi_type) == "String" and isinstance(value, str) and value == var.start
+
+
 def _unit_definitions(infos) -> dict[str, dict[str, str]]:
     """Unit name -> BaseUnit attributes (non-default exponents, factor, offset), from the FMUs."""
     out: dict[str, dict[str, str]] = {}
@@ -286,7 +296,7 @@ def export_ssp(scenario: Scenario, out: str | Path) -> ExportReport:
             _typed(conn, "ssc", var)
         if not len(connectors):
             el.remove(connectors)
-        values = plan.start_values[c]
+        values = {k: v for k, v in plan.start_values[c].items() if not _string_at_start(info.variables[k], v)}
         if values:
             pset = _el(None, "ssv:ParameterSet", {"xmlns:ssv": NS["ssv"], "version": "1.0",
                                                   "name": f"{name}_start_values"})

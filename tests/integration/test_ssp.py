@@ -22,7 +22,7 @@ from cosim.cli import main
 from cosim.observers.recorders import Probe
 from cosim.engine.prepare import prepare
 from cosim.run import run_scenario
-from cosim.engine.scenario import load_scenario
+from cosim.engine.scenario import apply_overrides, load_scenario
 from cosim.io.ssp import NS, export_ssp, open_ssp
 
 pytestmark = pytest.mark.integration
@@ -553,6 +553,24 @@ def _rewrite_fmu(src: Path, dst: Path, member: str, edit) -> Path:
                 data = buf.getvalue()
             zout.writestr(item, data)
     return dst
+
+
+@pytest.mark.parametrize("fidelity", [None, "full", "lumped"])
+def test_a_string_parameter_at_its_start_value_stays_out_of_the_ssv(tmp_path, fidelity):
+    """helix_ctc sets the Exudyn plant's ``model.fidelity`` to "full", the FMU's own start value: the export
+    leaves it out of the .ssv (OMSimulator 3.0 reads no ssv:String and logs an error for one); a value that
+    differs ("lumped") is written as ssv:String, and our master reads it back."""
+    sets = [] if fidelity is None else [f"plant.model.fidelity={fidelity}"]
+    out = tmp_path / "helix_ctc.ssp"
+    export_ssp(load_scenario(ROOT / "scenarios" / "helix_ctc.yaml", apply_overrides(sets, stop_time=0.01)), out)
+    with zipfile.ZipFile(out) as z:
+        ssv = ET.fromstring(z.read("resources/plant.ssv"))
+    strings = {p.get("name"): p.find("ssv:String", NS).get("value")
+               for p in ssv.iterfind("ssv:Parameters/ssv:Parameter", NS) if p.find("ssv:String", NS) is not None}
+    assert strings == ({"model.fidelity": "lumped"} if fidelity == "lumped" else {}), strings
+    assert ssv.find("ssv:Parameters/ssv:Parameter[@name='initial.v.y']", NS) is not None  # the rest is there
+    with open_ssp(out) as sc:
+        assert sc.components["plant"].parameters.get("model.fidelity") == strings.get("model.fidelity")
 
 
 def test_export_is_typed_for_omsimulator(ssp):
