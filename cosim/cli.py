@@ -364,6 +364,10 @@ def _regression_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--w", type=float, nargs="+", metavar="W",
                    help="w values to sweep (default 0, 0.1, ..., 1)")
     p.add_argument("--no-separate", action="store_true", help="skip the separate inertia / gravity fit")
+    p.add_argument("--w-rotation", type=float, default=None, metavar="W",
+                   help="share of the rods' rotational inertia in the model, held during the fit (0: the thesis's "
+                        "two point masses per rod; 1: uniform rods). Default: 1 when identifying (several "
+                        "motions or --out), 0 for one motion's sweep")
     p.add_argument("--fidelity", choices=("full", "lumped"), default="full", help="Exudyn plant (default full)")
     p.add_argument("--step", type=float, default=2e-4, help="plant step, s (default 2e-4)")
     p.add_argument("--duration", type=float, help="simulated time, s (default: the whole motion)")
@@ -387,6 +391,8 @@ def _cmd_validate_model(args: argparse.Namespace) -> int:
             raise CosimError(f"{name} must be > 0 s, got {value}")
     if args.w is not None and any(not 0.0 <= w <= 1.0 for w in args.w):
         raise CosimError(f"--w: every w must lie in [0, 1], got {args.w}")
+    if args.w_rotation is not None and not 0.0 <= args.w_rotation <= 1.0:
+        raise CosimError(f"--w-rotation must lie in [0, 1], got {args.w_rotation}")
     several = len(args.trajectory) > 1 or args.out is not None
     if several and (args.duration is not None or args.no_separate):
         raise CosimError("validate-model: --duration and --no-separate apply to one motion without --out")
@@ -404,10 +410,11 @@ def _cmd_validate_model(args: argparse.Namespace) -> int:
     try:
         if several:
             ident = identify_model(args.robot, args.trajectory, h=args.step, fidelity=args.fidelity, ws=args.w,
-                                   progress=progress)
+                                   progress=progress, w_rotation=1.0 if args.w_rotation is None else args.w_rotation)
         else:
             rep = validate_model(args.robot, args.trajectory[0], args.w, not args.no_separate, h=args.step,
-                                 duration=args.duration, fidelity=args.fidelity, progress=progress)
+                                 duration=args.duration, fidelity=args.fidelity, progress=progress,
+                                 w_rotation=args.w_rotation)
     except ValueError as exc:
         raise CosimError(f"validate-model: {exc}") from None
     finally:
@@ -417,7 +424,8 @@ def _cmd_validate_model(args: argparse.Namespace) -> int:
         _emit(args, rep.as_dict(), rep.text())
         return EXIT_OK
     text = "\n\n".join([*(r.text() for r in ident.reports), ident.text()])
-    payload = {"identified": {"w_inertia": ident.w_inertia, "w_gravity": ident.w_gravity},
+    payload = {"identified": {"w_inertia": ident.w_inertia, "w_gravity": ident.w_gravity,
+                              "w_rotation": ident.w_rotation},
                "fits": [asdict(f) for f in ident.fits], "reports": [r.as_dict() for r in ident.reports]}
     if args.out is not None:
         from .engine.model_file import write_model_file
@@ -426,6 +434,7 @@ def _cmd_validate_model(args: argparse.Namespace) -> int:
                    + (f" --step {args.step:g}" if args.step != 2e-4 else "")
                    + (f" --fidelity {args.fidelity}" if args.fidelity != "full" else "")
                    + (" --w " + " ".join(f"{w:g}" for w in args.w) if args.w else "")
+                   + (f" --w-rotation {args.w_rotation:g}" if args.w_rotation is not None else "")
                    + f" --out {shlex.quote(args.out)}")
         fit = {f.trajectory: {"samples": f.samples, "duration_s": f.duration, "plant_rms": f.plant_rms,
                               "plant_peak": f.plant_peak, "rms_rel": f.identified.rms_rel,
@@ -439,7 +448,8 @@ def _cmd_validate_model(args: argparse.Namespace) -> int:
                      "effort_unit": ident.effort_unit, "weighting": "each motion's errors over its plant RMS"}
         try:
             write_model_file(args.out, ident.robot, {"model.w_inertia": ident.w_inertia,
-                                                     "model.w_gravity": ident.w_gravity}, fitted_on, fit, command)
+                                                     "model.w_gravity": ident.w_gravity,
+                                                     "model.w_rotation": ident.w_rotation}, fitted_on, fit, command)
         except OSError as exc:
             raise CosimError(f"--out: cannot write {args.out}: {exc.strerror or exc}") from None
         text += f"\nwrote {args.out}"

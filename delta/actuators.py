@@ -7,7 +7,7 @@ singularities, workspace) is written once in :mod:`delta.model`, :mod:`delta.kin
 and :mod:`delta.dynamics` in terms of what an actuator class gives:
 
 * the path ``B_i(q)`` and its derivatives ``B_i'``, ``B_i''``, folded with the rod to the platform
-  (:meth:`Rail.leg`),
+  (:meth:`Rail.leg`), and ``B_i''`` itself (:meth:`Rail.curve`, for the rods' rotational inertia),
 * the closed-form leg inverse kinematics in the leg's plane (:meth:`Rail.solve`),
 * the actuator-side mass lumps and their weight (:meth:`Rail.inertia`, :meth:`Rail.weight`),
 * units, names and the default preset of its robot kind.
@@ -72,6 +72,10 @@ class Rail:
         ``B_i'' = 0``."""
         lz = z + q
         return x + ox, y + oy, lz, 0.0, 0.0, -1.0, 0.0, -lz
+
+    def curve(self, q, c, s, xp):  # noqa: ANN001, ANN201
+        """``B_i''``: a rail is straight."""
+        return 0.0, 0.0, 0.0
 
     def solve(self, x, y, z, c, s, ox, oy, xp):  # noqa: ANN001, ANN201
         """Leg IK for the platform position ``(x, y, z)``, leg direction ``e_i = (c, s)``: thesis eq. (9),
@@ -166,6 +170,11 @@ class Arm:
         lx, ly, lz = x + ox - lc * c, y + oy - lc * s, z + ls
         radial = lx * c + ly * s
         return lx, ly, lz, -ls * c, -ls * s, -lc, ls * lz - lc * radial, -ls * radial - lc * lz
+
+    def curve(self, q, c, s, xp):  # noqa: ANN001, ANN201
+        """``B_i'' = -La (cos q_i e_i - sin q_i z)``: the elbow's centripetal direction."""
+        lc = self.arm * xp.cos(q)
+        return -lc * c, -lc * s, self.arm * xp.sin(q)
 
     def solve(self, x, y, z, c, s, ox, oy, xp):  # noqa: ANN001, ANN201
         """Leg IK in the leg plane, with ``dx``, ``dy`` the radial and tangential parts of

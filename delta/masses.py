@@ -50,6 +50,11 @@ class _Masses:
         Leg mass distribution factor ``w`` (share of each rod lumped at the platform, the rest at the
         carriage or elbow) used for the inertial and the gravity terms; the thesis uses one ``w`` for
         both (default 2/3). ``w_gravity = 1/2`` is exact for the weight of uniform rods.
+    w_rotation : float
+        Share of the rods' own rotational inertia in the analytic model (:mod:`delta.dynamics`): 0 (the
+        default) lumps the rods as two point masses each, as the thesis does; 1 adds the kinetic energy a
+        uniform rod has beyond its two end halves, ``-m_l/12 |v_A - v_B|^2`` per rod, so that with
+        ``w_inertia = 1/2`` a uniform rod's kinetic energy is exact.
     gravity : float
         Gravitational acceleration along -z, m/s^2.
     """
@@ -61,6 +66,7 @@ class _Masses:
     payload: float = 0.0
     w_inertia: float = 2.0 / 3.0
     w_gravity: float = 2.0 / 3.0
+    w_rotation: float = 0.0
     gravity: float = GRAVITY
 
     def __post_init__(self) -> None:

@@ -49,6 +49,8 @@ class Model:
     rod : rod length ``L``, m.  q_min, q_max : joint limits (m or rad).
     inertia : actuator lump ``D`` (kg or kg m^2).  platform_mass : ``m_p`` of the inertial terms, kg.
     platform_weight : ``m_p g`` of the gravity terms, N.  actuator_weight : see the actuator's ``weight``.
+    rod_inertia : ``mu = -w_rotation m_l / 3``, kg: each leg's two rods' rotational inertia as a (negative)
+        point mass moving with the rod vector ``l_i`` (see :mod:`delta.dynamics`); 0 in the thesis's lumping.
     """
 
     robot: Robot
@@ -67,6 +69,7 @@ class Model:
     platform_mass: float
     platform_weight: float
     actuator_weight: float
+    rod_inertia: float
     xp: Any = SCALAR
     """The number namespace of the per-pose algorithms (:data:`delta.actuators.SCALAR`; symbols when
     ``fmus.native`` traces the formulas to C)."""
@@ -120,7 +123,7 @@ def compile_model(robot: Any, masses: Any, actuator: Actuator, xp: Any = SCALAR)
         inertia=actuator.inertia(masses),
         platform_mass=platform_lump + 6.0 * masses.w_inertia * masses.rod,
         platform_weight=(platform_lump + 6.0 * masses.w_gravity * masses.rod) * masses.gravity,
-        actuator_weight=actuator.weight(masses), xp=xp,
+        actuator_weight=actuator.weight(masses), rod_inertia=-masses.w_rotation * masses.rod / 3.0, xp=xp,
     )
 
 

@@ -1,7 +1,7 @@
 """Identified model files: the analytic model's parameters that ``python -m cosim validate-model --out`` fitted.
 
 A YAML file with the robot preset, the motions the parameters were fitted on, the parameters by FMU name
-(``model.w_inertia``, ``model.w_gravity``) and their fit figures (relative RMS and peak effort error per
+(``model.w_inertia``, ``model.w_gravity``, ``model.w_rotation``) and their fit figures (relative RMS and peak effort error per
 motion, at the fitted split and at the default one). A scenario names it with ``model:`` and every
 model-based component of ours (controllers that declare the parameters, the analytic plants) takes its
 start values from it (:func:`model_start_values`, applied by :func:`cosim.engine.prepare.prepare`).
@@ -24,8 +24,9 @@ from .bounded_yaml import load_yaml
 __all__ = ["FORMAT", "PARAMETERS", "ModelFile", "read_model_file", "write_model_file", "model_start_values"]
 
 FORMAT = "cosim-identified-model/1"
-PARAMETERS = ("model.w_inertia", "model.w_gravity")
-"""The FMU parameters an identified model may set: the leg mass split of the analytic model (shares in [0, 1])."""
+PARAMETERS = ("model.w_inertia", "model.w_gravity", "model.w_rotation")
+"""The FMU parameters an identified model may set: the leg mass split of the analytic model and the share of the
+rods' rotational inertia (shares in [0, 1], see :mod:`delta.dynamics`)."""
 
 # what the model is used by: our FMUs of these (role, variant); the Exudyn plant is the machine it was fitted to
 _MODEL_BASED = (("controller", None), ("plant", "analytic"), ("plant", "analytic_me"))

@@ -309,7 +309,7 @@ class Scenario(_Model):
     trajectory: TrajectorySpec | None = None
     model: str | None = Field(
         None, description="identified model file (YAML, written by `python -m cosim validate-model --out`), "
-                          "relative to the scenario file: its parameters (model.w_inertia, model.w_gravity) are "
+                          "relative to the scenario file: its parameters (model.w_inertia, model.w_gravity, model.w_rotation) are "
                           "the start values of every model-based component of ours (controllers, analytic "
                           "plants); a component's own parameters win")
     initial_state: InitialState = Field(default_factory=InitialState)

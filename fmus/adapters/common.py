@@ -35,6 +35,7 @@ _MASSES = {
     "payload": ("mass.payload", "kg", "payload carried by the platform"),
     "w_inertia": ("model.w_inertia", "1", "share of each rod lumped at the platform, inertia terms (thesis w)"),
     "w_gravity": ("model.w_gravity", "1", "share of each rod lumped at the platform, gravity terms (thesis w)"),
+    "w_rotation": ("model.w_rotation", "1", "share of the rods' rotational inertia about their centres (uniform rods: 1)"),
     "gravity": ("model.gravity", "m/s2", "gravitational acceleration along -z"),
 }
 

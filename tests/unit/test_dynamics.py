@@ -30,8 +30,11 @@ CASES = [
     (linear_delta_thesis, LinearDeltaMasses(w_inertia=2 / 3, w_gravity=0.5, payload=0.2), np.array([0.03, -0.02, -0.50])),
     (rotary_delta_prototype, RotaryDeltaMasses(), np.array([0.0, 0.0, -0.50])),
     (rotary_delta_prototype, RotaryDeltaMasses(w_inertia=0.6, w_gravity=0.5, payload=0.3), np.array([0.05, 0.02, -0.55])),
+    (linear_delta_thesis, LinearDeltaMasses(w_inertia=0.5, w_gravity=0.5, w_rotation=1.0), np.array([0.03, -0.02, -0.50])),
+    (rotary_delta_prototype, RotaryDeltaMasses(w_inertia=0.45, w_gravity=0.5, w_rotation=0.8, payload=0.1),
+     np.array([0.05, 0.02, -0.55])),
 ]
-IDS = ["linear", "linear-split-w", "rotary", "rotary-split-w"]
+IDS = ["linear", "linear-split-w", "rotary", "rotary-split-w", "linear-rod-rotation", "rotary-rod-rotation"]
 
 
 def _motion(p0, t, amp=0.04):
@@ -80,9 +83,13 @@ def test_power_balance(robot, masses, p0):
         assert abs(de_dt - power) < POWER_RTOL * scale, f"t={t}: dE/dt={de_dt!r}, f.qd={power!r}"
 
 
-@pytest.mark.parametrize("robot,masses,p0", CASES, ids=IDS)
+THESIS = [(c, i) for c, i in zip(CASES, IDS) if c[1].w_rotation == 0.0]
+
+
+@pytest.mark.parametrize("robot,masses,p0", [c for c, _ in THESIS], ids=[i for _, i in THESIS])
 def test_matches_thesis_eq35_with_reference_kinematics(robot, masses, p0):
-    """f = D qdd + J^-T m_p a + G_s + J^-T G_p (thesis eq. (35)) built from delta.kinematics."""
+    """f = D qdd + J^-T m_p a + G_s + J^-T G_p (thesis eq. (35)) built from delta.kinematics (the thesis's
+    lumping: the rods' rotation is checked by the power balance against the exact kinetic energy below)."""
     model = analytic_model(robot, masses)
     p, v, a = _motion(p0, 0.37)
     q = ik(robot, p).require()
@@ -123,6 +130,26 @@ def test_mass_matrix_symmetric_positive_and_terms_split(robot, masses, p0):
     assert np.allclose(model.velocity_term(q, np.zeros(3)), 0.0), "C qd must vanish at rest"
 
 
+@pytest.mark.parametrize("robot,masses,p0", [c for c in CASES if c[1].w_rotation == 0.0][:1] + [CASES[4]], ids=["thesis", "rods"])
+def test_kinetic_energy_of_uniform_rods_is_exact(robot, masses, p0):
+    """With ``w_inertia = 1/2`` and ``w_rotation = 1`` the model's kinetic energy is that of the machine with
+    uniform rods, computed here from the rods' end velocities (``m/6 (|v_A|^2 + v_A . v_B + |v_B|^2)`` per rod:
+    the integral of ``1/2 |v(s)|^2 dm`` along the rod), the carriages and the platform; the thesis's lumping
+    (``w_rotation = 0``) is not (it counts each rod as two point masses)."""
+    exact_masses = masses.with_(w_inertia=0.5, w_rotation=1.0)
+    model = analytic_model(robot, exact_masses)
+    q, qd, _ = _joint_state(model, *_motion(p0, 0.7, amp=0.05))
+    _, v = model.platform_state(q, qd)
+    m = exact_masses
+    expected = 0.5 * (m.platform + m.payload) * v @ v + 0.5 * m.carriage * qd @ qd
+    for qdi in qd:  # carriage i moves at -qd_i along z (B_i' = (0, 0, -1)); platform joint at v
+        va = np.array([0.0, 0.0, -qdi])
+        expected += 2 * m.rod / 6 * (va @ va + va @ v + v @ v)
+    assert abs(model.energy(q, qd)[0] - expected) < 1e-12 * expected, (model.energy(q, qd)[0], expected)
+    lumped = analytic_model(robot, masses.with_(w_inertia=0.5, w_rotation=0.0)).energy(q, qd)[0]
+    assert abs(lumped - expected) > 1e-4 * expected, "two point masses per rod are not a uniform rod"
+
+
 def test_gravity_signs_and_static_weight():
     """At rest, the vertical efforts carry the total weight (linear: sum f = -total m g)."""
     masses = LinearDeltaMasses(payload=0.5, w_gravity=0.5)
@@ -145,9 +172,12 @@ def test_factory_and_errors():
         LinearDeltaMasses(w_inertia=1.5)
 
 
-@pytest.mark.parametrize("robot,helix", [(linear_delta_thesis, {}), (rotary_delta_prototype, {"z0": -0.45, "rx": 0.05, "ry": 0.05})],
-                         ids=["linear", "rotary"])
-def test_plant_stepper_in_platform_coordinates_matches_joint_coordinates(robot, helix):
+@pytest.mark.parametrize("robot,helix,rotation", [(linear_delta_thesis, {}, 0.0),
+                                                  (rotary_delta_prototype, {"z0": -0.45, "rx": 0.05, "ry": 0.05}, 0.0),
+                                                  (linear_delta_thesis, {}, 1.0),
+                                                  (rotary_delta_prototype, {"z0": -0.45, "rx": 0.05, "ry": 0.05}, 1.0)],
+                         ids=["linear", "rotary", "linear-rod-rotation", "rotary-rod-rotation"])
+def test_plant_stepper_in_platform_coordinates_matches_joint_coordinates(robot, helix, rotation):
     """The analytic plant's stepper (RK4 on the platform state, one 1 ms step) against RK4 on the joint
     state with 16 substeps, both under the same CTC efforts on 2 s of the helix: two routes through the
     dynamics (platform_dynamics / forward_dynamics, inverse / forward kinematics) and two step sizes.
@@ -159,7 +189,8 @@ def test_plant_stepper_in_platform_coordinates_matches_joint_coordinates(robot, 
     from delta.model import Data, build_model
     from delta.trajectories import Helix
 
-    model, data, h, n = build_model(robot), Data(), 1e-3, 2000
+    masses = (LinearDeltaMasses if robot.kind == "linear" else RotaryDeltaMasses)(w_inertia=0.5, w_rotation=rotation)
+    model, data, h, n = build_model(robot, masses), Data(), 1e-3, 2000
     p_ref, v_ref, a_ref = Helix(**helix).sample(np.arange(n) * h)
     q_ref, qd_ref, qdd_ref = joint_references(model, p_ref, v_ref, a_ref)
     ctc_p, ctc_q = default_controller("ctc", robot, model), default_controller("ctc", robot, model)

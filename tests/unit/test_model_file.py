@@ -86,7 +86,8 @@ def test_shipped_ctc_scenarios_use_their_committed_identified_model(name):
     scenario = load_scenario(ROOT / "scenarios" / f"{name}.yaml")
     model = scenario.model_file()
     assert model is not None and model.robot == scenario.robot, (name, model)
-    assert set(model.parameters) == {"model.w_inertia", "model.w_gravity"}, model.parameters
+    assert set(model.parameters) == {"model.w_inertia", "model.w_gravity", "model.w_rotation"}, model.parameters
+    assert model.parameters["model.w_rotation"] == 1.0, "identified with the rods' rotational inertia"
     header = Path(model.path).read_text().splitlines()[1]
     assert header.startswith("# Written by: python -m cosim validate-model --robot " + scenario.robot), header
 
