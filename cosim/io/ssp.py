@@ -56,6 +56,7 @@ import json
 import math
 import os
 import posixpath
+import re
 import shutil
 import tempfile
 import zipfile
@@ -359,10 +360,21 @@ def _q(prefix: str, tag: str) -> str:
     return f"{{{NS[prefix]}}}{tag}"
 
 
+_ROOT_TAG = re.compile(rb"<[A-Za-z_][\w.:-]*")  # the first start tag (not <?xml, <!-- or <!DOCTYPE)
+
+
 def _parse_xml(data: bytes, ssp: Path, member: str) -> ET.Element:
+    """A member's XML. One repair, as libcosim makes it: published OSP files use the ``osp:`` prefix of their
+    annotations without declaring it (an unbound prefix, not well-formed XML); it gets OSP's namespace."""
     try:
         return ET.fromstring(data)
     except ET.ParseError as exc:
+        if "unbound prefix" in str(exc) and b"<osp:" in data and b"xmlns:osp" not in data:
+            declared = _ROOT_TAG.sub(lambda m: m.group(0) + f' xmlns:osp="{NS["osp"]}"'.encode(), data, count=1)
+            try:
+                return ET.fromstring(declared)
+            except ET.ParseError:
+                pass
         raise SspError(ssp, f"{member}: not well-formed XML ({exc})") from None
 
 

@@ -202,3 +202,27 @@ def test_ssp_2_namespace_is_named(tmp_path, test_fmus, capsys):
                                           'SystemStructureDescription" version="2.0" name="x"/>')
     rc, _, err = _cli(capsys, "run", ssp, "--no-log", "--quiet")
     assert rc == 2 and "SSP 2.0 is not supported" in err and len(err.strip().splitlines()) == 1, err
+
+
+def test_an_undeclared_osp_prefix_is_read_as_libcosim_reads_it(tmp_path, test_fmus):
+    """Published OSP files use ``osp:`` without declaring it (not well-formed XML); libcosim reads them, and so
+    do we: the annotation still makes the algorithm Jacobi with its base step. Another unbound prefix stays an
+    error naming the member."""
+    undeclared = HEAD.replace('    xmlns:osp="http://opensimulationplatform.com/SSP/OSPAnnotations"\n', "")
+    assert "xmlns:osp" not in undeclared
+    path = tmp_path / "undeclared.ssp"
+    with zipfile.ZipFile(path, "w") as z:
+        z.writestr("SystemStructure.ssd", undeclared.format(version="1.0", system_extra="", elements_extra="",
+                                                            connections_extra="", experiment=OSP_STEP))
+        z.write(test_fmus["CosimTSource"], "resources/source.fmu")
+        z.write(test_fmus["CosimTGain"], "resources/gain.fmu")
+    with open_ssp(path) as sc:
+        assert sc.algorithm == "jacobi" and sc.time.step == 0.1, (sc.algorithm, sc.time)
+    other = tmp_path / "other.ssp"
+    with zipfile.ZipFile(other, "w") as z:
+        z.writestr("SystemStructure.ssd", undeclared.format(version="1.0", system_extra="<foo:Bar/>",
+                                                            elements_extra="", connections_extra="",
+                                                            experiment=OSP_STEP))
+    with pytest.raises(SspError, match=r"SystemStructure.ssd: not well-formed XML \(unbound prefix"):
+        with open_ssp(other):
+            pass
