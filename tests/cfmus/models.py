@@ -199,8 +199,8 @@ def _forgetful(fmi: int) -> Model:
         "Forgetful",
         fmi,
         "forgetful.c",
-        "y = p, z an output with initial exact; FMI 2: setupExperiment forgets values set before it, log "
-        "messages carry no componentEnvironment",
+        "y = p, z an output with initial exact; FMI 2: setupExperiment forgets values set before it; log "
+        "messages carry no componentEnvironment (FMI 1.0: no component)",
         (
             _time(),
             Var("p", 1, "Float64", "parameter", "fixed", "exact", 1.0, "A parameter (must be >= 0)"),
@@ -383,6 +383,7 @@ MODEL_SPECS: dict[tuple[str, int], Model] = {
     ("Halving", 3): _halving(3),
     ("Horizon", 2): _horizon(2),
     ("Horizon", 3): _horizon(3),
+    ("Forgetful", 1): _forgetful(1),
     ("Forgetful", 2): _forgetful(2),
     ("Forgetful", 3): _forgetful(3),
 }

@@ -30,7 +30,8 @@ FMI_TYPE = {"cs": "CoSimulation", "me": "ModelExchange"}
 def _run(tmp_path: Path, fmi: int, interface: str, parameters: dict):
     text = yaml.safe_dump({
         "name": "start_values", "time": {"stop": STOP, "step": STEP},
-        "components": {"f": {"path": str(build("Forgetful", fmi)), "interface": interface,
+        "components": {"f": {"path": str(build("Forgetful", fmi, interface if fmi == 1 else None)),
+                             "interface": interface,
                              "parameters": parameters}},
         "logging": {"signals": "all"}})
     path = tmp_path / f"f{fmi}{interface}.yaml"
@@ -57,13 +58,16 @@ def test_start_values_reach_the_fmu_as_fmpy_sets_them(tmp_path, fmi, interface):
         assert np.array_equal(ours[: len(theirs)], theirs), f"FMI {fmi} {interface} {name}: {ours} vs FMPy {theirs}"
 
 
-@pytest.mark.parametrize("fmi", [2, 3])
-def test_a_failing_call_carries_the_fmus_message_even_without_its_environment(tmp_path, fmi):
-    """FMI 2: the message comes with a NULL componentEnvironment; it must still name the reason."""
+@pytest.mark.parametrize("fmi", [1, 2, 3])
+@pytest.mark.parametrize("interface", ["cs", "me"])
+def test_a_failing_call_carries_the_fmus_message_even_without_its_environment(tmp_path, fmi, interface):
+    """FMI 2: the message comes with a NULL componentEnvironment, FMI 1.0 with a NULL component (after
+    instantiation); it must still name the reason and the failing call."""
     with pytest.raises(FMIError) as exc:
-        _run(tmp_path, fmi, "cs", {"p": -1.0})
+        _run(tmp_path, fmi, interface, {"p": -1.0})
     text = str(exc.value)
-    assert "p = -1 is negative" in text and "ExitInitializationMode" in text, text
+    call = {1: "Initialize", 2: "ExitInitializationMode", 3: "ExitInitializationMode"}[fmi]
+    assert "p = -1 is negative" in text and call in text, text
 
 
 def test_an_output_calculated_by_the_fmu_is_still_refused(tmp_path):

@@ -45,7 +45,7 @@ typedef struct {
     in = CORE(c);                                                      \
     if (!core_allowed(in, __func__, (modes))) return fmi1Error
 
-/* FMI 1.0 loggers get the component itself (there is no componentEnvironment) */
+/* FMI 1.0 loggers get the component itself (there is no componentEnvironment); some exporters' send NULL */
 static void sink(void *env, const char *name, Status status, const char *category, const char *message)
 {
     Component *comp = env;
@@ -57,7 +57,7 @@ static void sink(void *env, const char *name, Status status, const char *categor
         escaped[j++] = message[i];
     }
     escaped[j] = '\0';
-    comp->callbacks.logger(comp, name, (fmi1Status)status, category, escaped);
+    comp->callbacks.logger(MODEL.null_log_environment ? NULL : comp, name, (fmi1Status)status, category, escaped);
 }
 
 static Component *instantiate(const char *fn, fmi1String instanceName, fmi1String guid,

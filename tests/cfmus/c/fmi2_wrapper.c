@@ -42,7 +42,7 @@ static void sink(void *env, const char *name, Status status, const char *categor
         escaped[j++] = message[i];
     }
     escaped[j] = '\0';
-    cb->logger(MODEL.fmi2_null_log_environment ? NULL : cb->componentEnvironment, name, (fmi2Status)status,
+    cb->logger(MODEL.null_log_environment ? NULL : cb->componentEnvironment, name, (fmi2Status)status,
                category, escaped);
 }
 

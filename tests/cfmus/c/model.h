@@ -131,9 +131,11 @@ typedef struct {
     /* NULL, or why the parameters are invalid (NULL: they are valid); ExitInitializationMode fails with it. */
     const char *(*invalid)(const void *d);
     /* FMI 2 only, as some exporters' FMUs do: fmi2SetupExperiment resets every variable to its default
-       (forgetting values set before it), and log messages carry a NULL componentEnvironment. */
+       (forgetting values set before it). */
     bool fmi2_setup_resets;
-    bool fmi2_null_log_environment;
+    /* As some exporters' FMUs do: log messages carry a NULL componentEnvironment (FMI 2) or a NULL
+       component (FMI 1.0, whose logger gets the component itself). */
+    bool null_log_environment;
 } ModelClass;
 
 extern const ModelClass MODEL;

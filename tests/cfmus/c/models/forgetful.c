@@ -5,7 +5,7 @@
  *
  * As some exporters' FMI 2 FMUs do, fmi2SetupExperiment resets every variable to its default (values
  * set before it are forgotten: FMPy and libcosim set start values after it), and log messages carry a
- * NULL componentEnvironment. ExitInitializationMode fails for p < 0, with the reason logged.
+ * NULL componentEnvironment (FMI 1.0: a NULL component). Initialization fails for p < 0, with the reason logged.
  */
 #include <stdio.h>
 
@@ -53,5 +53,5 @@ const ModelClass MODEL = {
     .outputs = outputs,
     .invalid = invalid,
     .fmi2_setup_resets = true,
-    .fmi2_null_log_environment = true,
+    .null_log_environment = true,
 };
