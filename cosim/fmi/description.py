@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 import zipfile
+from xml.etree import ElementTree
 from dataclasses import dataclass, replace
 from functools import cached_property
 from pathlib import Path
@@ -101,11 +102,13 @@ class FMUInfo:
 
     @cached_property
     def feedthrough(self) -> dict[str, list[str] | None]:
-        """Output name -> the inputs it depends on directly; None when the FMU does not declare it (FMI 1.0,
-        which has no ModelStructure: every output)."""
-        if self.fmi_major == 1:
-            return {v.name: None for v in self.variables.values() if v.causality == "output"}
+        """Output name -> the inputs it depends on directly; None when the FMU does not declare it (every input).
+        FMI 1.0 declares it per output as ``<DirectDependency><Name>input</Name>...</DirectDependency>`` (no
+        element: every input, FMI 1.0 section 2.10), which fmpy does not read: read here from the XML."""
         inputs = {v.name for v in self.variables.values() if v.causality == "input"}
+        if self.fmi_major == 1:
+            return _fmi1_direct_dependencies(self.model_description_xml(), inputs,
+                                             [v.name for v in self.variables.values() if v.causality == "output"])
         out: dict[str, list[str] | None] = {}
         for u in self.md.outputs:
             if u.dependencies is None:
@@ -150,6 +153,17 @@ def _shape(dims, by_vr: dict[int, int], name: str) -> tuple[int, ...]:
             size = by_vr[vr]
         shape.append(int(size))
     return tuple(shape)
+
+
+def _fmi1_direct_dependencies(xml: bytes, inputs: set[str], outputs: list[str]) -> dict[str, list[str] | None]:
+    """FMI 1.0 outputs' ``DirectDependency`` lists (None where an output has none: it depends on every input)."""
+    declared: dict[str, list[str]] = {}
+    for sv in ElementTree.fromstring(xml).iter("ScalarVariable"):
+        dep = sv.find("DirectDependency")
+        if dep is not None and sv.get("causality") == "output":
+            names = (n.text.strip() for n in dep.iter("Name") if n.text)
+            declared[sv.get("name", "")] = [n for n in names if n in inputs]
+    return {name: declared.get(name) for name in outputs}
 
 
 _CACHE: dict[Path, FMUInfo] = {}  # resolved path -> its description, read from the file of info.stamp

@@ -217,8 +217,8 @@ _FMI1_CAUSALITY = {"parameter": "internal", "local": "internal", "calculatedPara
 
 def _model_description_fmi1(model: Model, token: str, interface: str) -> ET.Element:
     """FMI 1.0: one interface per file (co-simulation announced by ``<Implementation>``), function names
-    prefixed with the model identifier, no ModelStructure (outputs depend on every input), the states
-    counted on the root element, no independent variable."""
+    prefixed with the model identifier, each output's ``DirectDependency`` (the inputs of its FMI 2 / 3
+    ModelStructure entry), the states counted on the root element, no independent variable."""
     root = ET.Element("fmiModelDescription", {
         "fmiVersion": "1.0", "modelName": model.name, "modelIdentifier": model.name, "guid": token,
         "description": model.description, "generationTool": GENERATOR, "variableNamingConvention": "structured",
@@ -237,6 +237,7 @@ def _model_description_fmi1(model: Model, token: str, interface: str) -> ET.Elem
                 ET.SubElement(enum, "Item", name=item, description=item)
     ET.SubElement(root, "DefaultExperiment", {k: repr(float(model.experiment[k])) for k in ("startTime", "stopTime")})
     mv = ET.SubElement(root, "ModelVariables")
+    inputs = {v.name for v in model.variables if v.causality == "input"}
     for v in model.variables:
         if v.causality == "independent":
             continue
@@ -254,6 +255,11 @@ def _model_description_fmi1(model: Model, token: str, interface: str) -> ET.Elem
         if v.start is not None and _effective_initial(v) != "calculated":
             a["start"] = _fmt(v.start)
         ET.SubElement(sv, _FMI2_TYPES[v.type], a)
+        if v.causality == "output" and model.outputs.get(v.name) is not None:  # FMI 1.0's ModelStructure
+            dep = ET.SubElement(sv, "DirectDependency")
+            for name in model.outputs[v.name]:
+                if name in inputs:
+                    ET.SubElement(dep, "Name").text = name
     if interface == "cs":
         cs = ET.SubElement(ET.SubElement(root, "Implementation"), "CoSimulation_StandAlone")
         ET.SubElement(cs, "Capabilities", canHandleVariableCommunicationStepSize="true", canHandleEvents="true",

@@ -57,14 +57,31 @@ def test_fmi1_fmus_pass_fmpy_validation(model, interface):
     assert problems == [], f"{model} FMI 1 {interface}: validate_fmu found {problems}, expected none"
 
 
-def test_fmi1_description_one_interface_and_unknown_feedthrough():
-    """FMI 1.0 has no ModelStructure: every output may depend on every input (None, as an FMI 2 output
-    without dependencies), which orders components conservatively; causality and variability are read in
-    FMI 2 terms (internal -> local, variability parameter -> causality parameter)."""
+def test_fmi1_description_one_interface_and_its_direct_dependencies(tmp_path):
+    """FMI 1.0 declares each output's direct dependencies as ``DirectDependency`` (fmpy does not read it: read
+    from the XML), the same as the FMI 2.0 build's ModelStructure; an output without the element depends on
+    every input (None). Causality and variability are read in FMI 2 terms (internal -> local, variability
+    parameter -> causality parameter)."""
+    import zipfile
+
     cs, me = load_fmu(build("Feedthrough", 1, "cs")), load_fmu(build("Feedthrough", 1, "me"))
     assert (cs.interfaces, me.interfaces) == (["cs"], ["me"]), (cs.interfaces, me.interfaces)
-    outputs = sorted(v.name for v in cs.variables.values() if v.causality == "output")
-    assert outputs and cs.feedthrough == {name: None for name in outputs}, cs.feedthrough
+    fmi2 = load_fmu(build("Feedthrough", 2)).feedthrough
+    assert cs.feedthrough == me.feedthrough == fmi2 and any(fmi2.values()), (cs.feedthrough, fmi2)
+    vdp = load_fmu(build("VanDerPol", 1, "cs")).feedthrough
+    assert vdp and all(deps == [] for deps in vdp.values()), vdp  # states only: no input
+    stripped = tmp_path / "Feedthrough.fmu"  # the same file without the DirectDependency elements
+    with zipfile.ZipFile(build("Feedthrough", 1, "cs")) as zin, zipfile.ZipFile(stripped, "w") as zout:
+        for item in zin.namelist():
+            data = zin.read(item)
+            if item == "modelDescription.xml":
+                import re
+
+                data = re.sub(rb"<DirectDependency>.*?</DirectDependency>|<DirectDependency\s*/>", b"", data,
+                              flags=re.S)
+                assert b"DirectDependency" not in data
+            zout.writestr(item, data)
+    assert load_fmu(stripped).feedthrough == {name: None for name in fmi2}, load_fmu(stripped).feedthrough
     p = cs.variables["Real_parameter"]
     assert (p.causality, p.variability) == ("parameter", "fixed"), (p.causality, p.variability)
     with pytest.raises(ComponentSourceError, match="has no me interface"):
