@@ -108,6 +108,9 @@ class Connection(_Model):
     model_config = ConfigDict(extra="forbid", frozen=True, populate_by_name=True)
     src: str = Field(alias="from", description="output, as component.variable")
     dst: str = Field(alias="to", description="input, as component.variable")
+    units: Literal["check", "as_is"] = Field(
+        "check", description="check (default): the two variables' units must agree; as_is: the numbers pass "
+                             "unconverted between different units (SSP's suppressUnitConversion)")
 
     @field_validator("src", "dst")
     @classmethod

@@ -290,8 +290,11 @@ def _links(scenario: Scenario, infos: dict[str, FMUInfo], idx: dict[str, int], i
                 issue(("connections", i), f"size mismatch: {c_src} has {src.count} element(s), {c_dst} has "
                                           f"{dst.count}")
                 continue
-            if src.var.unit and dst.var.unit and src.var.unit != dst.var.unit:
-                issue(("connections", i), f"unit mismatch: {_describe(c_src, src.var)} -> {_describe(c_dst, dst.var)}")
+            if c.units == "check" and src.var.unit and dst.var.unit and src.var.unit != dst.var.unit:
+                remedy = ('suppressUnitConversion="true" on the ssd:Connection' if
+                          (scenario.source or "").lower().endswith(".ssp") else "`units: as_is` on the connection")
+                issue(("connections", i), f"unit mismatch: {_describe(c_src, src.var)} -> {_describe(c_dst, dst.var)} "
+                                          f"(the master converts no units; {remedy} passes the numbers as they are)")
                 continue
             if c_dst in driven:  # after a prefix, or a prefix after an element line, or two prefixes
                 issue(("connections", i), f"input {c_dst} is already driven by connections[{driven[c_dst]}]")

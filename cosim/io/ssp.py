@@ -61,7 +61,7 @@ import shutil
 import tempfile
 import zipfile
 from contextlib import contextmanager
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Iterator
 from urllib.parse import unquote, urlparse
@@ -322,8 +322,11 @@ def export_ssp(scenario: Scenario, out: str | Path) -> ExportReport:
     if plan.links:
         conns = _el(system, "ssd:Connections")
         for link in plan.links:
-            _el(conns, "ssd:Connection", {"startElement": names[link.src.comp], "startConnector": _connector(link.src),
-                                          "endElement": names[link.dst.comp], "endConnector": _connector(link.dst)})
+            attrs = {"startElement": names[link.src.comp], "startConnector": _connector(link.src),
+                     "endElement": names[link.dst.comp], "endConnector": _connector(link.dst)}
+            if link.src.var.unit and link.dst.var.unit and link.src.var.unit != link.dst.var.unit:
+                attrs["suppressUnitConversion"] = "true"  # a connection with `units: as_is` (else refused)
+            _el(conns, "ssd:Connection", attrs)
     system.append(system_annotations)
     units = _unit_definitions(infos)
     used = {v.unit for info in infos for v in info.variables.values() if v.unit}
@@ -422,9 +425,42 @@ def _value(kind: str, text: str | None, ssp: Path, where: str) -> Any:
         raise SspError(ssp, f"{where}: {text!r} is not a valid {kind} value") from None
 
 
-def _parameter_set(pset: ET.Element, ssp: Path, where: str, prefix: str) -> dict[str, Any]:
+_BASE_UNITS = ("kg", "m", "s", "A", "K", "mol", "cd", "rad")
+
+
+@dataclass(frozen=True)
+class _Quantity:
+    """A Real parameter value with the unit its parameter set gives it (``ssv:Real unit``), converted to the unit
+    of the FMU variable it is bound to once the components' FMUs are read (:func:`_convert_units`). ``base``: the
+    unit's definition (base-unit exponents, factor, offset: value in SI = factor * value + offset) from the set's
+    ``ssv:Units`` or the SSD's ``ssd:Units``; None when neither defines it. ``where``: file and parameter."""
+
+    value: float
+    unit: str
+    base: tuple[tuple[int, ...], float, float] | None
+    where: str
+
+
+def _unit_table(parent: ET.Element | None, path: str, ssp: Path, where: str) -> dict[str, tuple]:
+    """``ssc:Unit`` definitions under ``parent`` (``ssv:Units`` or ``ssd:Units``): name -> (exponents, factor,
+    offset)."""
+    out: dict[str, tuple] = {}
+    for u in (parent.iterfind(path, NS) if parent is not None else ()):
+        base = u.find("ssc:BaseUnit", NS)
+        attrs = base.attrib if base is not None else {}
+        try:
+            out[u.get("name", "")] = (tuple(int(attrs.get(k, "0")) for k in _BASE_UNITS),
+                                      float(attrs.get("factor", "1")), float(attrs.get("offset", "0")))
+        except ValueError:
+            raise SspError(ssp, f"{where}: unit {u.get('name')!r}: its BaseUnit attributes are not numbers") from None
+    return out
+
+
+def _parameter_set(pset: ET.Element, ssp: Path, where: str, prefix: str,
+                   ssd_units: dict[str, tuple] | None = None) -> dict[str, Any]:
     if pset.tag != _q("ssv", "ParameterSet"):
         raise SspError(ssp, f"{where}: expected an ssv:ParameterSet, found {pset.tag}")
+    units = {**(ssd_units or {}), **_unit_table(pset, "ssv:Units/ssc:Unit", ssp, where)}
     values: dict[str, Any] = {}
     for p in pset.iterfind("ssv:Parameters/ssv:Parameter", NS):
         pname = p.get("name")
@@ -433,7 +469,11 @@ def _parameter_set(pset: ET.Element, ssp: Path, where: str, prefix: str) -> dict
         for kind in ("Real", "Integer", "Boolean", "String"):
             typed = p.find(f"ssv:{kind}", NS)
             if typed is not None:
-                values[prefix + pname] = _value(kind, typed.get("value"), ssp, f"{where}: parameter {pname}")
+                value = _value(kind, typed.get("value"), ssp, f"{where}: parameter {pname}")
+                if kind == "Real" and typed.get("unit"):
+                    value = _Quantity(value, typed.get("unit"), units.get(typed.get("unit")),
+                                      f"{where}: parameter {pname}")
+                values[prefix + pname] = value
                 break
         else:
             found = [child.tag.rsplit("}", 1)[-1] for child in p]
@@ -492,6 +532,10 @@ def _transform(value: Any, tr: ET.Element | None, ssp: Path, where: str) -> Any:
     if tr is None:
         return value
     kind = tr.tag.rsplit("}", 1)[1]
+    if isinstance(value, _Quantity):  # the transformation maps the number; the unit stays the set's
+        if kind != "LinearTransformation":
+            raise SspError(ssp, f"{where}: a {kind} cannot map a Real value with a unit ({value.unit})")
+        return replace(value, value=_transform(value.value, tr, ssp, where))
     if kind == "LinearTransformation":
         if isinstance(value, bool) or not isinstance(value, (int, float)):
             raise SspError(ssp, f"{where}: a LinearTransformation needs a Real or Integer value, got {value!r}")
@@ -521,10 +565,11 @@ def _int_text(text: str, ssp: Path, where: str) -> int:
         raise SspError(ssp, f"{where}: MapEntry target {text!r} is not an integer") from None
 
 
-def _binding_values(el: ET.Element, zf: zipfile.ZipFile, ssp: Path, where: str) -> list[tuple[str, Any, str]]:
+def _binding_values(el: ET.Element, zf: zipfile.ZipFile, ssp: Path, where: str,
+                    units: dict[str, tuple]) -> list[tuple[str, Any, str]]:
     """(name, value, file) of every parameter the ``ssd:ParameterBindings`` under ``el`` give, in order, each
     through its binding's parameter mapping (a mapped name takes the mapping's targets; an unmapped name stays)
-    and prefix."""
+    and prefix. ``units``: the SSD's unit definitions (a set's own ``ssv:Units`` come first)."""
     out: list[tuple[str, Any, str]] = []
     for b in el.iterfind("ssd:ParameterBindings/ssd:ParameterBinding", NS):
         btype = b.get("type", PARAMETER_SET_TYPE)
@@ -541,10 +586,10 @@ def _binding_values(el: ET.Element, zf: zipfile.ZipFile, ssp: Path, where: str) 
                 data = _read_member(zf, member, ssp)
             except KeyError:
                 raise SspError(ssp, f"{where}: parameter binding source {member} is not in the archive") from None
-            sets.append((member, _parameter_set(_parse_xml(data, ssp, member), ssp, member, "")))
+            sets.append((member, _parameter_set(_parse_xml(data, ssp, member), ssp, member, "", units)))
         for pset in b.iterfind("ssd:ParameterValues/ssv:ParameterSet", NS):
             label = f"{where}: inline parameter values"
-            sets.append((label, _parameter_set(pset, ssp, label, "")))
+            sets.append((label, _parameter_set(pset, ssp, label, "", units)))
         for file, values in sets:
             for name, value in values.items():
                 for target, tr in mapping.get(name, [(name, None)]):
@@ -553,36 +598,70 @@ def _binding_values(el: ET.Element, zf: zipfile.ZipFile, ssp: Path, where: str) 
     return out
 
 
-def _bindings(el: ET.Element, zf: zipfile.ZipFile, ssp: Path, comp: str) -> dict[str, Any]:
-    return {name: value for name, value, _ in _binding_values(el, zf, ssp, f"component {comp!r}")}
+def _bindings(el: ET.Element, zf: zipfile.ZipFile, ssp: Path, comp: str, units: dict[str, tuple]) -> dict[str, Any]:
+    return {name: value for name, value, _ in _binding_values(el, zf, ssp, f"component {comp!r}", units)}
 
 
-def _system_bindings(system: ET.Element, zf: zipfile.ZipFile, ssp: Path, components: dict[str, dict[str, Any]]) \
-        -> None:
+def _system_bindings(system: ET.Element, zf: zipfile.ZipFile, ssp: Path, components: dict[str, dict[str, Any]],
+                     units: dict[str, tuple], descriptions: dict[str, Any]) -> None:
     """Apply the system's own parameter bindings to the components they name (SSP 1.0: a parameter of a
     system-level set is named ``Component.parameter``; the longest component name that fits is taken, so
     names with dots need no quoting here). They come after the components' own bindings and win over them.
     A parameter that names no component, or no variable of it, is one error naming the file and the parameter."""
-    import fmpy  # lazy: --help loads this module without it
-
     names = sorted(components, key=len, reverse=True)
-    variables: dict[str, set[str]] = {}
-    for name, value, file in _binding_values(system, zf, ssp, "the system"):
+    for name, value, file in _binding_values(system, zf, ssp, "the system", units):
         comp = next((c for c in names if name.startswith(c + ".")), None)
         if comp is None:
             raise SspError(ssp, f"{file}: parameter {name!r} of a system-level binding names no component "
                                 f"(expected Component.parameter; components: {', '.join(components)})")
         var = name[len(comp) + 1:]
-        if comp not in variables:
-            path = components[comp]["path"]
-            try:
-                md = fmpy.read_model_description(path, validate=False)
-            except Exception as exc:  # noqa: BLE001 - a broken FMU, named
-                raise SspError(ssp, f"component {comp!r}: cannot read the FMU's modelDescription.xml ({exc})") from None
-            variables[comp] = {v.name for v in md.modelVariables}
-        if var not in variables[comp]:
+        if var not in _description(comp, components, descriptions, ssp)[1]:
             raise SspError(ssp, f"{file}: parameter {name!r}: component {comp!r} has no variable {var!r}")
         components[comp].setdefault("parameters", {})[var] = value
+
+
+def _description(comp: str, components: dict[str, dict[str, Any]], descriptions: dict[str, Any], ssp: Path):
+    """(model description, variables by name) of a component's FMU, read once."""
+    import fmpy  # lazy: --help loads this module without it
+
+    if comp not in descriptions:
+        try:
+            md = fmpy.read_model_description(components[comp]["path"], validate=False)
+        except Exception as exc:  # noqa: BLE001 - a broken FMU, named
+            raise SspError(ssp, f"component {comp!r}: cannot read the FMU's modelDescription.xml ({exc})") from None
+        descriptions[comp] = (md, {v.name: v for v in md.modelVariables})
+    return descriptions[comp]
+
+
+def _convert_units(components: dict[str, dict[str, Any]], ssp: Path, descriptions: dict[str, Any]) -> None:
+    """Every parameter value given with a unit (:class:`_Quantity`) in the unit of the FMU variable it is bound to
+    (SSP 1.0: the value in SI is ``factor * value + offset`` of its unit's BaseUnit, then back through the
+    variable's unit definition in the FMU). The same unit, or a variable without a unit: the number as given.
+    Units of different dimensions, or a unit defined nowhere, are one error naming the parameter."""
+    for comp, data in components.items():
+        params = data.get("parameters") or {}
+        for var, q in list(params.items()):
+            if not isinstance(q, _Quantity):
+                continue
+            md, variables = _description(comp, components, descriptions, ssp)
+            v = variables.get(var)
+            unit = None if v is None else (v.unit or getattr(v.declaredType, "unit", None))
+            if not unit or unit == q.unit:  # no variable (named later) or nothing to convert
+                params[var] = q.value
+                continue
+            target = next((u.baseUnit for u in md.unitDefinitions or [] if u.name == unit), None)
+            if q.base is None:
+                raise SspError(ssp, f"{q.where}: unit {q.unit!r} is defined in neither the parameter set's ssv:Units "
+                                    f"nor the SSD's ssd:Units: cannot convert it to {comp}.{var}'s unit {unit!r}")
+            if target is None:
+                raise SspError(ssp, f"{q.where}: {comp}.{var} is in {unit!r}, which its FMU does not define: cannot "
+                                    f"convert {q.unit!r} to it")
+            exps = tuple(int(getattr(target, k, 0) or 0) for k in _BASE_UNITS)
+            if exps != q.base[0]:
+                raise SspError(ssp, f"{q.where}: unit {q.unit!r} does not convert to {comp}.{var}'s unit {unit!r} "
+                                    "(other base units)")
+            si = q.base[1] * q.value + q.base[2]
+            params[var] = (si - float(target.offset or 0.0)) / float(target.factor or 1.0)
 
 
 def _osp_step(node: ET.Element | None, ssp: Path) -> float | None:
@@ -700,6 +779,7 @@ def read_ssp(ssp: str | Path, workdir: str | Path) -> dict[str, Any]:
                                 "give --out")
 
         components: dict[str, dict[str, Any]] = {}
+        ssd_units = _unit_table(root, "ssd:Units/ssc:Unit", ssp, SSD_NAME)
         connectors: dict[str, dict[str, str]] = {}  # component -> connector name -> kind
         hints: dict[str, float] = {}
         elements = system.find("ssd:Elements", NS)
@@ -740,7 +820,7 @@ def read_ssp(ssp: str | Path, workdir: str | Path) -> dict[str, Any]:
             if impl != "any":
                 comp["interface"] = _INTERFACE[impl]
             comp.update(options.get(name, {}))
-            params = _bindings(el, zf, ssp, name)
+            params = _bindings(el, zf, ssp, name, ssd_units)
             if params:
                 comp["parameters"] = params
             hint = _step_hint(el, ssp, name)
@@ -751,7 +831,9 @@ def read_ssp(ssp: str | Path, workdir: str | Path) -> dict[str, Any]:
             components[name] = comp
         if not components:
             raise SspError(ssp, f"{SSD_NAME}: the system has no components")
-        _system_bindings(system, zf, ssp, components)
+        descriptions: dict[str, Any] = {}
+        _system_bindings(system, zf, ssp, components, ssd_units, descriptions)
+        _convert_units(components, ssp, descriptions)
 
         connections = []
         for cn in system.iterfind("ssd:Connections/ssd:Connection", NS):
@@ -772,7 +854,10 @@ def read_ssp(ssp: str | Path, workdir: str | Path) -> dict[str, Any]:
             if cn.find("ssc:LinearTransformation", NS) is not None or any(
                     child.tag.endswith("MappingTransformation") for child in cn):
                 raise SspError(ssp, f"connection {ends[0]} -> {ends[1]}: transformations are not supported")
-            connections.append({"from": ends[0], "to": ends[1]})
+            connection = {"from": ends[0], "to": ends[1]}
+            if cn.get("suppressUnitConversion", "false").strip() in ("true", "1"):
+                connection["units"] = "as_is"  # the numbers pass as they are, whatever the connectors' units
+            connections.append(connection)
 
         exp = root.find("ssd:DefaultExperiment", NS)
         time: dict[str, float] = {}

@@ -23,7 +23,7 @@ from cosim.observers.recorders import Probe
 from cosim.engine.prepare import prepare
 from cosim.run import run_scenario
 from cosim.engine.scenario import apply_overrides, load_scenario
-from cosim.io.ssp import NS, export_ssp, open_ssp
+from cosim.io.ssp import NS, SspError, export_ssp, open_ssp
 
 pytestmark = pytest.mark.integration
 
@@ -589,3 +589,73 @@ def test_export_is_typed_for_omsimulator(ssp):
     with open_ssp(ssp) as sc:  # the OSP and OMSimulator steps agree; our annotation keeps the algorithm
         assert sc.time.step == 0.001 and sc.algorithm == "gauss_seidel", (sc.time, sc.algorithm)
     assert _initialization_loop(ssp) == []
+
+
+def _with_plant_set(ssp: Path, out: Path, units: str, z: str) -> Path:
+    """``ssp`` with the plant's set giving initial.p.z as ``z`` (an ssv:Real element) and ``units`` (ssv:Units)."""
+    with zipfile.ZipFile(ssp) as zin, zipfile.ZipFile(out, "w") as zout:
+        for item in zin.namelist():
+            data = zin.read(item)
+            if item == "resources/plant.ssv":
+                data = data.replace(b'<ssv:Real value="-0.45" />', z.encode())
+                data = data.replace(b"<ssv:Parameters>", units.encode() + b"<ssv:Parameters>")
+            zout.writestr(item, data)
+    return out
+
+
+MM = '<ssv:Units><ssc:Unit xmlns:ssc="http://ssp-standard.org/SSP1/SystemStructureCommon" name="mm">' \
+     '<ssc:BaseUnit m="1" factor="0.001"/></ssc:Unit></ssv:Units>'
+
+
+def test_parameter_values_with_units_are_converted_to_the_fmus(ssp, tmp_path):
+    """An ``ssv:Real`` with a ``unit`` is converted to the unit of the FMU variable it is bound to, through the
+    base units (mm in the set's ssv:Units -> the FMU's m): -450 mm is -0.45 m. A unit of other base units, or one
+    defined nowhere, is one error naming the file and parameter; the FMU's own unit is taken as is."""
+    converted = _with_plant_set(ssp, tmp_path / "mm.ssp", MM, '<ssv:Real value="-450" unit="mm"/>')
+    with open_ssp(converted) as sc:
+        assert sc.components["plant"].parameters["initial.p.z"] == -0.45, sc.components["plant"].parameters
+    same = _with_plant_set(ssp, tmp_path / "m.ssp", "", '<ssv:Real value="-0.4" unit="m"/>')  # the SSD defines m
+    with open_ssp(same) as sc:
+        assert sc.components["plant"].parameters["initial.p.z"] == -0.4
+    seconds = MM.replace('name="mm"', 'name="ms"').replace('m="1" factor', 's="1" factor')
+    for units, z, message in (
+            (seconds, '<ssv:Real value="-450" unit="ms"/>', "unit 'ms' does not convert to plant.initial.p.z's unit 'm'"),
+            ("", '<ssv:Real value="-450" unit="mm"/>', "unit 'mm' is defined in neither the parameter set's ssv:Units")):
+        bad = _with_plant_set(ssp, tmp_path / "bad.ssp", units, z)
+        with pytest.raises(SspError) as exc:
+            with open_ssp(bad):
+                pass
+        text = str(exc.value)
+        assert message in text and "resources/plant.ssv: parameter initial.p.z" in text, text
+
+
+def test_suppress_unit_conversion_passes_numbers_between_different_units(ssp, tmp_path, capsys):
+    """A connection between connectors of different units (here traj.a_ref.x, m/s2, to ik.v_ref.x, m/s) is
+    refused naming both, as the master converts no units; with SSP's ``suppressUnitConversion="true"`` the
+    numbers pass as they are (``units: as_is``), and an export writes it back."""
+    from cosim.cli import main
+
+    def rewired(name: str, extra: str) -> Path:
+        out = tmp_path / name
+        with zipfile.ZipFile(ssp) as zin, zipfile.ZipFile(out, "w") as zout:
+            for item in zin.namelist():
+                data = zin.read(item)
+                if item == "SystemStructure.ssd":
+                    data = data.replace(b'startElement="traj" startConnector="v_ref.x" endElement="ik" '
+                                        b'endConnector="v_ref.x"',
+                                        b'startElement="traj" startConnector="a_ref.x" endElement="ik" '
+                                        b'endConnector="v_ref.x"' + extra.encode())
+                zout.writestr(item, data)
+        return out
+
+    rc = main(["check", str(rewired("refused.ssp", ""))])
+    err = capsys.readouterr().err
+    assert rc == 2 and "unit mismatch: traj.a_ref.x (Real, m/s2) -> ik.v_ref.x (Real, m/s)" in err, err
+    assert 'suppressUnitConversion="true"' in err and len(err.strip().splitlines()) == 1, err
+    accepted = rewired("as_is.ssp", ' suppressUnitConversion="true"')
+    with open_ssp(accepted) as sc:
+        (conn,) = [c for c in sc.connections if c.dst == "ik.v_ref.x"]
+        assert (conn.src, conn.units) == ("traj.a_ref.x", "as_is"), conn
+        export_ssp(sc, tmp_path / "again.ssp")
+    text = zipfile.ZipFile(tmp_path / "again.ssp").read("SystemStructure.ssd").decode()
+    assert 'startConnector="a_ref.x" endElement="ik" endConnector="v_ref.x" suppressUnitConversion="true"' in text
