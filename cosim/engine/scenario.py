@@ -696,7 +696,7 @@ EFFECTIVE_ATTACHMENT = "effective/scenario.json"
 
 def effective_scenario(scenario: Scenario, log: str | Path | None = None) -> dict[str, Any]:
     """``scenario`` as it runs, every override applied, as a scenario mapping (JSON, valid YAML): every key with its
-    value, defaults included; the paths of FMU files absolute, ``logging.out`` the run's ``log`` (absolute) when
+    value, defaults included; the paths of FMU files and of the identified model absolute, ``logging.out`` the run's ``log`` (absolute) when
     given; a component parameter overridden by a number written as text (``1e3``) as that text, as a file gives it."""
 
     data = Scenario.model_dump(scenario, mode="json", by_alias=True)
@@ -704,6 +704,8 @@ def effective_scenario(scenario: Scenario, log: str | Path | None = None) -> dic
     for comp in data["components"].values():
         if comp.get("path") is not None:
             comp["path"] = os.path.normpath((base / comp["path"]).absolute())
+    if data.get("model") is not None:  # relative to the scenario file, as an FMU's path: absolute in the log
+        data["model"] = os.path.normpath((base / data["model"]).absolute())
     if log is not None:
         data["logging"]["out"] = os.path.normpath(Path(log).absolute())
     for path, text in scenario.sources.written.items():  # ("components", name, "parameters", variable)

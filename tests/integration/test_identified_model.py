@@ -40,3 +40,15 @@ def test_the_analytic_plant_takes_it_and_an_explicit_parameter_wins():
     ctl, _ = _start(scenario, "ctl")
     assert ctl["model.w_inertia"] == 0.25, ctl
     assert ctl["model.w_gravity"] == model["model.w_gravity"], (ctl, model)
+
+
+def test_the_scenario_as_run_names_the_model_file_so_that_a_log_runs_again_from_anywhere(tmp_path):
+    """The log's scenario as run (what ``run --from-log`` runs) names the identified model by its absolute path,
+    as it does the FMU files: read back from another folder it finds the same model."""
+    from cosim.engine.scenario import effective_scenario, scenario_from_data
+
+    scenario = load_scenario(ROOT / "scenarios" / "helix_ctc.yaml")
+    data = effective_scenario(scenario)
+    assert Path(data["model"]).is_absolute() and Path(data["model"]).is_file(), data["model"]
+    again = scenario_from_data(data, str(tmp_path / "elsewhere" / "run.mcap"))
+    assert again.model_file().parameters == scenario.model_file().parameters
