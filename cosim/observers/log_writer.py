@@ -21,7 +21,8 @@ sample); every other message (scene, transforms, events) comes encoded. Here:
   master that dies closes the pipe, and the child then writes what it has and exits, leaving the
   file unfinished (recoverable), as a killed writer in the master would.
 
-The child imports no numpy (it starts in about 0.1 s): rows are read with :mod:`struct`.
+The child needs no numpy or fmpy (rows are read with :mod:`struct`): this module imports neither, so an exec'd
+child starts in about 0.1 s, a forked one (see :class:`WriterProcess`) at once.
 """
 
 from __future__ import annotations
@@ -368,7 +369,7 @@ class LogSink(FoxgloveChannels):
     The writer was chosen by measurement: on helix_ctc's per-sample messages it writes about 2 us a
     message where the ``mcap`` package's ``Writer`` (pure Python) takes about 7
     (``benchmarks/mcap_writer.py``); the whole writer process of helix_ctc_analytic (10 s, samples
-    layout) costs about 17.5 us per step with it (``benchmarks/log_writer_process.py``), 40 with the ``mcap``
+    layout) costs about 14.7 us per step with it (``benchmarks/log_writer_process.py``), 40 with the ``mcap``
     package.
     """
 

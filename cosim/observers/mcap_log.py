@@ -89,7 +89,8 @@ class McapRecorder:
     ZSTD_LEVEL = 1
     """zstd level 1: on helix_ctc's messages faster than the default 3 and a smaller file (benchmarks/mcap_writer.py)."""
     PROCESS_MIN_STEPS = 2000
-    """Runs this long or longer write through a writer process (its start costs about 0.1 s of a core)."""
+    """Runs this long or longer write through a writer process (forked, or where it cannot be a new interpreter
+    whose start costs about 0.1 s of a core)."""
 
     def __init__(self, path: str | Path, publisher: Publisher, scenario=None, scenario_file: str | Path | None = None,
                  flush_interval: float = 1.0, process: bool | None = None):
