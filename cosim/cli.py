@@ -517,7 +517,8 @@ def _summary_text(res) -> str:
 
 
 def _open_scenario(args: argparse.Namespace, overrides: dict):
-    """The scenario of a YAML file, or of an SSP archive (unpacked for the ``with`` block only)."""
+    """The scenario of a YAML file, of an SSP archive or of a run's log (an archive unpacked for the ``with`` block
+    only)."""
     from contextlib import nullcontext
 
     from .engine.scenario import load_scenario
@@ -530,9 +531,9 @@ def _open_scenario(args: argparse.Namespace, overrides: dict):
         raise CosimError("run takes a scenario file or --from-log LOG, not both" if from_log else
                          "run needs a scenario file (or --from-log LOG: a run's log)")
     if from_log is not None:
-        from .io.runlog import scenario_from_log
+        from .io.runlog import open_from_log
 
-        return nullcontext(scenario_from_log(from_log, overrides))
+        return open_from_log(from_log, overrides)
     if is_ssp(args.scenario):
         return open_ssp(args.scenario, overrides)
     return nullcontext(load_scenario(args.scenario, overrides))

@@ -317,6 +317,36 @@ def test_run_from_a_log_that_cannot_say_how_it_was_made(run, tmp_path, write_sce
     assert not (tmp_path / "again.mcap").exists() and not (tmp_path / "g.mcap").exists()
 
 
+def test_a_run_of_an_ssp_archive_is_repeated_from_its_log(run, tmp_path):
+    """A run of an SSP archive ran FMUs unpacked into a temporary folder removed after it: its log names the archive
+    (and its SHA-256), and --from-log unpacks it again, giving the same signals bit for bit, also from the rerun's
+    own log; an archive that has changed since, or is gone, is one line naming the log and the archive, exit 2.
+    The fixture checks that no unpacked archive is left in the temporary folder."""
+    import json
+
+    from cosim.io.runlog import read_run
+
+    ssp, first, again, third = (tmp_path / n for n in ("h.ssp", "first.mcap", "again.mcap", "third.mcap"))
+    assert run("ssp", "export", SWEEP_SCENARIO, "-o", ssp, "--stop-time", "0.05").returncode == 0
+    r = run("run", ssp, "--set", "ctl.gain.kp[1]=2e4", "--out", first, "--quiet")
+    assert r.returncode == 0, r.stderr
+    recorded = read_run(first).metadata["ssp"]
+    assert recorded["file"] == str(ssp) and len(recorded["sha256"]) == 64, recorded
+    assert run("run", "--from-log", first, "--out", again, "--quiet").returncode == 0
+    assert _same_signals(first, again) > 20
+    assert run("run", "--from-log", again, "--out", third, "--quiet").returncode == 0  # a rerun's log reruns too
+    assert _same_signals(first, third) > 20
+    assert json.loads(read_run(again).attachments["effective/scenario.json"])["components"]["ctl"]["parameters"] \
+        == {"gain.kp[1]": "2e4"}  # the recorded values, not the archive's
+    ssp.write_bytes(ssp.read_bytes() + b"\0")
+    fails(run("run", "--from-log", first, "--out", tmp_path / "x.mcap"), 2,
+          "first.mcap: the run was made from the SSP archive " + re.escape(str(ssp)) + ", which has changed since")
+    ssp.unlink()
+    fails(run("run", "--from-log", again, "--out", tmp_path / "x.mcap"), 2,
+          "again.mcap: the run was made from the SSP archive " + re.escape(str(ssp)) + ", which is gone")
+    assert not (tmp_path / "x.mcap").exists()
+
+
 @pytest.mark.parametrize("build", ["python", "native"])
 def test_the_analytic_plant_stops_at_the_end_stop_as_the_exudyn_plant(run, build):
     """A diverging controller drives carriage 3 past its stroke (q_max = 580 mm) at t = 0.138 s: both builds of the
