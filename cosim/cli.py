@@ -590,24 +590,15 @@ def _cmd_run(args: argparse.Namespace) -> int:
 def _crashed(args: argparse.Namespace, record, reason: str) -> int:
     """The supervisor's report of a run (or a check) whose process died inside a component (cosim.engine.supervision): one
     line naming the component, the phase, the time and how it died, then where the log written so far is."""
-    from pathlib import Path
-
     from .fmi.extract import sweep_orphans
-    from .io.recover import recover
+    from .io.recover import recover_crashed
 
     sweep_orphans()  # the FMUs the dead child extracted
     message = f"{record.where()} {reason}"
     lines = [exit_text(message, "crash")]
-    info = record.info()
-    partial, target = info.get("partial"), info.get("target")
-    if partial and Path(partial).exists():
-        try:
-            report = recover(partial, target)
-            Path(partial).unlink(missing_ok=True)
-            lines.append(f"the log up to the crash ({report.messages} messages) is in {report.out}")
-        except CosimError as exc:
-            lines.append(f"the log written so far stays in {partial} ({exc}): `python -m cosim recover {partial}`")
-        Path(target + ".lock").unlink(missing_ok=True)
+    _, where = recover_crashed(record.info())
+    if where is not None:
+        lines.append(where)
     _error_json(args, message, "crash")
     print("\n".join(lines), file=sys.stderr)
     return EXIT_BAD_INPUT  # an error (2): the run failed
