@@ -7,6 +7,7 @@ empty afterwards, and writes nowhere but ``tmp_path``.
 
 from __future__ import annotations
 
+import math
 import os
 import re
 import resource
@@ -347,18 +348,88 @@ def test_a_run_of_an_ssp_archive_is_repeated_from_its_log(run, tmp_path):
     assert not (tmp_path / "x.mcap").exists()
 
 
-@pytest.mark.parametrize("build", ["python", "native"])
-def test_the_analytic_plant_stops_at_the_end_stop_as_the_exudyn_plant(run, build):
-    """A diverging controller drives carriage 3 past its stroke (q_max = 580 mm) at t = 0.138 s: both builds of the
-    analytic plant stop there, as the Exudyn plant does, naming the joint and the limit (they ran on to 'the platform
-    left the workspace', or to 'completed' with a carriage 1.1 m past its stroke)."""
+END_STOP_REASON = "leg 3 joint limit: q = 0.5832 m > q_max = 0.5800 m"
+"""Carriage 3 past its stroke (q_max = 580 mm) where a diverging controller (kp = 1e12) drives it, as each build of the
+analytic plant reports it: the joint value and the limit, as :func:`delta.kinematics.joint_limit_reason` writes them."""
+
+
+def _end_stop(message: str) -> str:
+    """The reason of an end stop in an error line: what follows END_STOP."""
     from delta.kinematics import END_STOP
 
-    r = run("run", SWEEP_SCENARIO, "--stop-time", "1", "--set", "ctl.gain.kp[1]=1e12", "--set", f"fmus={build}",
-            "--no-log")
-    message = fails(r, 2, "component 'plant': fmi2DoStep returned discard at t = 0.138 s", re.escape(END_STOP),
-                    "leg 3 (joint limit: q = 0.58\\d+ m > q_max = 0.5800 m|is beyond its joint limits)")
-    assert "left the workspace" not in message and "completed" not in r.stdout, (message, r.stdout)
+    assert END_STOP in message, message
+    return message.split(END_STOP, 1)[1]
+
+
+def test_the_analytic_plant_stops_at_the_end_stop_as_the_exudyn_plant(run):
+    """A diverging controller drives carriage 3 past its stroke at t = 0.138 s: both builds of the analytic plant stop
+    there, as the Exudyn plant does, naming the joint, its value and the limit, in the same words (they ran on to 'the
+    platform left the workspace', or to 'completed' with a carriage 1.1 m past its stroke; the native build named the
+    leg only)."""
+    reasons = {}
+    for build in ("python", "native"):
+        r = run("run", SWEEP_SCENARIO, "--stop-time", "1", "--set", "ctl.gain.kp[1]=1e12", "--set", f"fmus={build}",
+                "--no-log")
+        message = fails(r, 2, "component 'plant': fmi2DoStep returned discard at t = 0.138 s")
+        assert "left the workspace" not in message and "completed" not in r.stdout, (message, r.stdout)
+        reasons[build] = _end_stop(message)
+    assert reasons["python"] == reasons["native"] == f": {END_STOP_REASON}", reasons
+
+
+def test_the_model_exchange_plant_stops_at_the_end_stop_as_the_co_simulation_plant(run):
+    """The model-exchange builds of the analytic plant stop at the same end stop with the same reason, checked on the
+    states the master accepted: at the communication point (t = 0.139 s), where the python build's outputs are read
+    and the native build's completedIntegratorStep is called. They ran on past the stroke until DOP853 gave up at
+    t = 0.1847 s ('the model is stiff or diverging')."""
+    me = SWEEP_SCENARIO.with_name("helix_ctc_me.yaml")
+    calls = {"python": "fmi3GetFloat64 returned fatal", "native": "fmi2CompletedIntegratorStep returned error"}
+    for build, call in calls.items():
+        r = run("run", me, "--stop-time", "1", "--set", "ctl.gain.kp[1]=1e12", "--set", f"fmus={build}", "--no-log")
+        message = fails(r, 2, f"component 'plant': {call} at t = 0.139 s")
+        assert _end_stop(message) == f": {END_STOP_REASON}", message
+
+
+@pytest.mark.parametrize("build", ["python", "native"])
+def test_the_model_exchange_plant_checks_accepted_states_only(build, tmp_path):
+    """The integrator's trial states may pass the stroke (a rejected trial step): the derivatives there are given
+    without complaint; the end stop is an error only once such a state is accepted (outputs read, or
+    completedIntegratorStep), in the rotary build too (the joint in degrees)."""
+    import ctypes
+
+    from fmpy import extract, read_model_description
+    from fmpy.fmi3 import FMU3Model
+
+    from fmus import registry
+
+    md_path = registry.build("rotary_analytic_plant_me" if build == "python" else "rotary_analytic_plant", tmp_path,
+                             native=build == "native", fmi=3)
+    md = read_model_description(str(md_path))
+    vrs = {v.name: v.valueReference for v in md.modelVariables}
+    q_max = float(next(v.start for v in md.modelVariables if v.name == "geometry.q_max"))
+    messages: list[str] = []
+    fmu = FMU3Model(guid=md.guid, unzipDirectory=extract(str(md_path), tmp_path / "x"),
+                    modelIdentifier=md.modelExchange.modelIdentifier, instanceName="plant")
+    fmu.instantiate(loggingOn=True, logMessage=lambda *args: messages.append(args[-1].decode()))
+    try:
+        fmu.enterInitializationMode()
+        fmu.exitInitializationMode()
+        fmu.enterContinuousTimeMode()
+        x, dx = (ctypes.c_double * 6)(), (ctypes.c_double * 6)()
+        fmu.getContinuousStates(x, 6)
+        x[1] = q_max + 0.1  # q[2], 0.1 rad past the end stop: a trial state (q[1..3] then qd[1..3])
+        fmu.setContinuousStates(x, 6)
+        fmu.getContinuousStateDerivatives(dx, 6)
+        assert all(math.isfinite(d) for d in dx), f"derivatives at a trial state: {list(dx)}; {messages}"
+        assert not messages, messages
+        with pytest.raises(Exception):  # noqa: B017 - FMPy raises its FMICallException
+            if build == "native":
+                fmu.completedIntegratorStep(True)
+            else:
+                fmu.getFloat64([vrs["p.x"]])
+    finally:
+        fmu.freeInstance()
+    degrees = f"{math.degrees(q_max + 0.1):.2f} deg > q_max = {math.degrees(q_max):.2f} deg"
+    assert any(f"leg 2 joint limit: q = {degrees}" in m for m in messages), messages
 
 
 @pytest.mark.parametrize("item, cause", [
