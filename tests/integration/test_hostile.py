@@ -393,43 +393,39 @@ def test_the_model_exchange_plant_stops_at_the_end_stop_as_the_co_simulation_pla
 def test_the_model_exchange_plant_checks_accepted_states_only(build, tmp_path):
     """The integrator's trial states may pass the stroke (a rejected trial step): the derivatives there are given
     without complaint; the end stop is an error only once such a state is accepted (outputs read, or
-    completedIntegratorStep), in the rotary build too (the joint in degrees)."""
-    import ctypes
+    completedIntegratorStep), in the rotary build too (the joint in degrees). Through the master's FMU access, which
+    also makes a PythonFMU library safe to unload in this process."""
+    from ctypes import c_double
 
-    from fmpy import extract, read_model_description
-    from fmpy.fmi3 import FMU3Model
-
+    from cosim.errors import FMIError
+    from cosim.fmi import load_fmu, make_slave
     from fmus import registry
 
-    md_path = registry.build("rotary_analytic_plant_me" if build == "python" else "rotary_analytic_plant", tmp_path,
-                             native=build == "native", fmi=3)
-    md = read_model_description(str(md_path))
-    vrs = {v.name: v.valueReference for v in md.modelVariables}
-    q_max = float(next(v.start for v in md.modelVariables if v.name == "geometry.q_max"))
-    messages: list[str] = []
-    fmu = FMU3Model(guid=md.guid, unzipDirectory=extract(str(md_path), tmp_path / "x"),
-                    modelIdentifier=md.modelExchange.modelIdentifier, instanceName="plant")
-    fmu.instantiate(loggingOn=True, logMessage=lambda *args: messages.append(args[-1].decode()))
+    info = load_fmu(registry.build("rotary_analytic_plant_me" if build == "python" else "rotary_analytic_plant",
+                                   tmp_path, native=build == "native", fmi=3))
+    q_max = float(info.variables["geometry.q_max"].start)
+    slave = make_slave("plant", info, "me")
+    slave.instantiate()
     try:
-        fmu.enterInitializationMode()
-        fmu.exitInitializationMode()
-        fmu.enterContinuousTimeMode()
-        x, dx = (ctypes.c_double * 6)(), (ctypes.c_double * 6)()
-        fmu.getContinuousStates(x, 6)
-        x[1] = q_max + 0.1  # q[2], 0.1 rad past the end stop: a trial state (q[1..3] then qd[1..3])
-        fmu.setContinuousStates(x, 6)
-        fmu.getContinuousStateDerivatives(dx, 6)
-        assert all(math.isfinite(d) for d in dx), f"derivatives at a trial state: {list(dx)}; {messages}"
-        assert not messages, messages
-        with pytest.raises(Exception):  # noqa: B017 - FMPy raises its FMICallException
+        slave.setup_experiment(0.0, 1.0)
+        slave.set_start({})
+        slave.enter_initialization(0.0, 1.0)
+        slave.bind([], [info.variables["p.x"]])
+        slave.exit_initialization()
+        x, dx = (c_double * 6)(), (c_double * 6)()
+        slave.get_x(x)
+        x[1] = q_max + 0.1  # q[2], 0.1 rad past the end stop, as a trial state (q[1..3] then qd[1..3])
+        slave.set_x(x)
+        slave.get_dx(dx)  # raises for a failure or a non-finite derivative
+        with pytest.raises(FMIError) as failed:
             if build == "native":
-                fmu.completedIntegratorStep(True)
+                slave._completed_step()
             else:
-                fmu.getFloat64([vrs["p.x"]])
+                slave.get_outputs()
     finally:
-        fmu.freeInstance()
+        slave.free()
     degrees = f"{math.degrees(q_max + 0.1):.2f} deg > q_max = {math.degrees(q_max):.2f} deg"
-    assert any(f"leg 2 joint limit: q = {degrees}" in m for m in messages), messages
+    assert f"leg 2 joint limit: q = {degrees}" in str(failed.value), failed.value
 
 
 @pytest.mark.parametrize("item, cause", [
