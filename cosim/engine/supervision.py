@@ -248,7 +248,10 @@ def _watch(pid: int, rec: Record, stopped_at: list[float], wake: int | None = No
             reason = f"made no progress for {now - since:.3g} s (watchdog {budget:g} s) and could not be " \
                      f"stopped from inside: killed"
         if reason is not None:
-            os.killpg(pid, signal.SIGKILL)
+            try:
+                os.killpg(pid, signal.SIGKILL)
+            except ProcessLookupError:  # not a group of its own (its setpgid failed): the child alone
+                os.kill(pid, signal.SIGKILL)
             _, status = os.waitpid(pid, 0)
             _wait_for_writer(rec)
             return status, reason
