@@ -203,8 +203,8 @@ def _model_c(model: NativeModel, itf: Interface, token: str, functions: list[_Fu
             f"int model_{f.name}({args}) {{",
             f"    static const size_t sets[] = {{{', '.join(map(str, f.sets)) or '0'}}};",
             f"    static const size_t first_value[] = {{{', '.join(map(str, firsts)) or '0'}}};",
-            f"    double out[{max(n_sets, 1)}], new_state[{max(model.n_state, 1)}], ok[{max(n_checks, 1)}], "
-            f"details[{max(n_details, 1)}];",
+            (f"    double out[{max(n_sets, 1)}], new_state[{max(model.n_state, 1)}], ok[{max(n_checks, 1)}], "
+             f"details[{max(n_details, 1)}];"),
             f"    casadi_int iw[{max(f.n_iw, 1)}];",
             f"    casadi_real w[{max(f.n_w, 1)}];",
             "    double h_arg = " + ("h" if f.name == "advance" else "0.0") + ";",

@@ -297,7 +297,7 @@ class PIDController(Controller):
 WORKSPACE = "the platform left the workspace: "
 
 
-def _end_stops(model, leg: int, q) -> list[Check]:  # noqa: ANN001
+def _end_stops(model, leg: int, q) -> list[Check]:
     """Joint ``leg`` (0-based) within its range, below and above, each failing with the python build's reason
     (``END_STOP: leg 3 joint limit: q = 0.5803 m > q_max = 0.5800 m``): the joint value and the limit printed in C
     as the actuator shows them (:attr:`delta.actuators.Rail.Q_PRINTF`)."""
