@@ -527,7 +527,8 @@ def _summary_text(res) -> str:
 
 
 def _open_scenario(args: argparse.Namespace, overrides: dict):
-    """The scenario of a YAML file, or of an SSP archive (unpacked for the ``with`` block only)."""
+    """The scenario of a YAML file, of an SSP archive or of a run's log (an archive unpacked for the ``with`` block
+    only)."""
     from contextlib import nullcontext
 
     from .engine.scenario import load_scenario
@@ -540,9 +541,9 @@ def _open_scenario(args: argparse.Namespace, overrides: dict):
         raise CosimError("run takes a scenario file or --from-log LOG, not both" if from_log else
                          "run needs a scenario file (or --from-log LOG: a run's log)")
     if from_log is not None:
-        from .io.runlog import scenario_from_log
+        from .io.runlog import open_from_log
 
-        return nullcontext(scenario_from_log(from_log, overrides))
+        return open_from_log(from_log, overrides)
     if is_ssp(args.scenario):
         return open_ssp(args.scenario, overrides)
     return nullcontext(load_scenario(args.scenario, overrides))
@@ -599,24 +600,15 @@ def _cmd_run(args: argparse.Namespace) -> int:
 def _crashed(args: argparse.Namespace, record, reason: str) -> int:
     """The supervisor's report of a run (or a check) whose process died inside a component (cosim.engine.supervision): one
     line naming the component, the phase, the time and how it died, then where the log written so far is."""
-    from pathlib import Path
-
     from .fmi.extract import sweep_orphans
-    from .io.recover import recover
+    from .io.recover import recover_crashed
 
     sweep_orphans()  # the FMUs the dead child extracted
     message = f"{record.where()} {reason}"
     lines = [exit_text(message, "crash")]
-    info = record.info()
-    partial, target = info.get("partial"), info.get("target")
-    if partial and Path(partial).exists():
-        try:
-            report = recover(partial, target)
-            Path(partial).unlink(missing_ok=True)
-            lines.append(f"the log up to the crash ({report.messages} messages) is in {report.out}")
-        except CosimError as exc:
-            lines.append(f"the log written so far stays in {partial} ({exc}): `python -m cosim recover {partial}`")
-        Path(target + ".lock").unlink(missing_ok=True)
+    _, where = recover_crashed(record.info())
+    if where is not None:
+        lines.append(where)
     _error_json(args, message, "crash")
     print("\n".join(lines), file=sys.stderr)
     return EXIT_BAD_INPUT  # an error (2): the run failed

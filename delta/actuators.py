@@ -102,9 +102,13 @@ class Rail:
         """``V_i(q_i)``, zero at ``q = 0`` (the carriage height is ``-q``)."""
         return -weight * q
 
-    @staticmethod
-    def format_q(value: float) -> str:
-        return f"{value:.4f} m"
+    Q_PRINTF = ("%.4f m", 1.0)
+    """A joint value as people read it: (printf format, factor from SI); the native FMUs print it so in C."""
+
+    @classmethod
+    def format_q(cls, value: float) -> str:
+        fmt, factor = cls.Q_PRINTF
+        return fmt % (value * factor)
 
     @staticmethod
     def shown(q) -> tuple[list[float], str]:  # noqa: ANN001
@@ -208,9 +212,13 @@ class Arm:
     def potential(self, q, weight: float, xp):  # noqa: ANN001, ANN201
         return -weight * xp.sin(q)  # the lumps sit r sin q below the motor axis
 
-    @staticmethod
-    def format_q(value: float) -> str:
-        return f"{math.degrees(value):.2f} deg"
+    Q_PRINTF = ("%.2f deg", 180.0 / math.pi)  # the factor of math.degrees: the same double
+    """A joint value as people read it: (printf format, factor from SI); the native FMUs print it so in C."""
+
+    @classmethod
+    def format_q(cls, value: float) -> str:
+        fmt, factor = cls.Q_PRINTF
+        return fmt % (value * factor)
 
     @staticmethod
     def shown(q) -> tuple[list[float], str]:  # noqa: ANN001

@@ -60,6 +60,7 @@ __all__ = [
     "platform_offsets",
     "ik",
     "joint_limit_reason",
+    "JOINT_LIMIT",
     "fk",
     "rod_vectors",
     "jacobian",
@@ -413,13 +414,17 @@ def actuator_tangents(robot: Robot | Model, q: np.ndarray) -> np.ndarray:
     return np.stack([c[0] for c in legs[3:6]], axis=1)
 
 
+JOINT_LIMIT = ("leg {leg} joint limit: q = {q} < q_min = {limit}", "leg {leg} joint limit: q = {q} > q_max = {limit}")
+"""A joint beyond its range, below and above: ``q`` and ``limit`` as the actuator shows a joint value
+(:meth:`format_q`; the native FMUs put its printf format there and print it in C)."""
+
+
 def joint_limit_reason(robot: Robot | Model, leg: int, value: float) -> str:
     """``leg 2 joint limit: q = ... < q_min = ...`` for joint ``leg`` (1-based) at ``value``."""
     model = as_model(robot)
     fmt = model.actuator.format_q
-    if value < model.q_min:
-        return f"leg {leg} joint limit: q = {fmt(value)} < q_min = {fmt(model.q_min)}"
-    return f"leg {leg} joint limit: q = {fmt(value)} > q_max = {fmt(model.q_max)}"
+    above = not value < model.q_min
+    return JOINT_LIMIT[above].format(leg=leg, q=fmt(value), limit=fmt(model.q_max if above else model.q_min))
 
 
 def ik(robot: Robot | Model, p: np.ndarray) -> IKResult:

@@ -12,7 +12,11 @@
   worker ended between cases leaves nothing in the temporary directory, and a worker of a
   long-lived cluster never runs an FMU rebuilt since from an older extraction.
 - Cases run on Dask: an embedded ``LocalCluster`` of single-threaded worker processes, or an
-  existing cluster (``--scheduler tcp://host:8786``). A dead worker's cases are rescheduled.
+  existing cluster (``--scheduler tcp://host:8786``). A dead worker's cases are rescheduled. Each case runs
+  in a child process of its worker, supervised as ``python -m cosim run`` is (:func:`run_loaded_case`): an FMU
+  that segfaults, aborts or calls ``exit()`` fails its case, with the component, the time and the signal in
+  its message, and the worker goes on (it died instead, and Dask retried the case on 3 more workers, each
+  killed, then recorded it as ``lost: KilledWorker``, without the reason).
 - Every finished case is appended (and flushed) to ``DIR/results.csv`` as it arrives; running
   the same command again skips the cases already there (``ok`` or ``failed``).
 
@@ -50,11 +54,14 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from ..engine import supervision
 from ..engine.prepare import build_key, build_ours, locate_fmus
 from ..engine.scenario import dotted_overrides, parse_set_value, read_scenario
 from ..engine.system import build_plan
 from ..errors import CosimError, exit_now
 from ..fmi import cleanup_extracted
+from ..fmi.extract import sweep_orphans
+from ..io.recover import recover_crashed
 from ..observers.recorders import PeakEffort
 from ..run import run_scenario
 from .metrics import metric_names, metrics
@@ -190,13 +197,29 @@ def _failed(exc: Exception, t0: float) -> dict[str, Any]:
 def run_loaded_case(scenario: Scenario, fmu_files: dict[tuple[str, bool, int], str],
                     mcap: str | None = None) -> dict[str, Any]:
     """Run one case, a loaded :class:`~cosim.engine.scenario.Scenario` (in a Dask worker, or here); never
-    raises for a failing case.
+    raises for a failing case, and a case whose FMU crashes its process is a failed case, not the end of the worker.
 
     ``fmu_files``: our FMUs by :func:`cosim.engine.prepare.build_key`, built beforehand. The run is serial in its
-    process (``parallel: off``: the sweep already uses the cores). Returns the row of ``results.csv``
-    without the parameter columns: status, message, metrics, checks, mcap.
+    process (``parallel: off``: the sweep already uses the cores), a child forked for the case and supervised as
+    ``python -m cosim run`` is (:func:`cosim.engine.supervision.contained`): a segfault, an ``abort()`` or an
+    ``exit()`` inside an FMU, or a component that cannot be stopped, ends the child only, and the row's message names
+    the component, the phase, the time and how it died (the case's log, with ``mcap``, is recovered up to the crash).
+    ``COSIM_SUPERVISE=0`` (or a system without ``fork``) runs it in this process. Returns the row of
+    ``results.csv`` without the parameter columns: status, message, metrics, checks, mcap.
     """
+    if not hasattr(os, "fork") or os.environ.get("COSIM_SUPERVISE", "1") == "0":
+        return _run_case(scenario, fmu_files, mcap)
+    t0 = time.perf_counter()
+    row, why, rec = supervision.contained(lambda: _run_case(scenario, fmu_files, mcap))
+    if why is None:
+        return row
+    sweep_orphans()  # the FMUs the dead child extracted
+    log, _ = recover_crashed(rec.info())
+    return {**_failed(CosimError(why), t0), "mcap": log or ""}
 
+
+def _run_case(scenario: Scenario, fmu_files: dict[tuple[str, bool, int], str], mcap: str | None) -> dict[str, Any]:
+    """:func:`run_loaded_case` in this process."""
     t0 = time.perf_counter()
     row: dict[str, Any] = {"status": "failed", "message": "", "checks": "", "mcap": ""}
     try:

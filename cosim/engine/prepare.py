@@ -55,12 +55,13 @@ def locate_fmus(scenario: Scenario, fmu_files: Mapping[str, str | Path] | None =
 
 
 def input_files(scenario: Scenario) -> tuple[Path, ...]:
-    """The files a run of ``scenario`` reads: its file (or archive) and the FMUs its components give by ``path``;
+    """The files a run of ``scenario`` reads: its file (or archive, or log and archive) and the FMUs its components give by ``path``;
     no output may be written over one of them."""
     base = _scenario_dir(scenario)
     paths = [Path(c.path) if Path(c.path).is_absolute() else base / c.path
              for c in scenario.components.values() if c.path is not None]
-    return tuple(Path(p) for p in (scenario.source, *paths) if p is not None and p != "<string>")
+    archive = scenario.archive["file"] if scenario.archive else None  # a run from a log of an SSP archive's run
+    return tuple(Path(p) for p in (scenario.source, archive, *paths) if p is not None and p != "<string>")
 
 
 def _scenario_dir(scenario: Scenario) -> Path:

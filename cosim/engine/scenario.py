@@ -326,6 +326,7 @@ class Scenario(_Model):
     _sources: "SourceMap | None" = PrivateAttr(default=None)
     _trajectory: Any = PrivateAttr(default=None)  # built once: :meth:`trajectory_object`
     _model_file: Any = PrivateAttr(default=None)  # read once: :meth:`model_file`
+    _archive: dict[str, str] | None = PrivateAttr(default=None)  # set by cosim.io.ssp: :attr:`archive`
 
     def model_file(self) -> Any:
         """The identified model the ``model:`` key names (:class:`cosim.engine.model_file.ModelFile`), read
@@ -353,6 +354,14 @@ class Scenario(_Model):
             except (TypeError, ValueError) as exc:  # pydantic's ValidationError is a ValueError
                 raise ScenarioError(Issue("trajectory.params", f"{cls.__name__}: {exc}", self.source)) from None
         return self._trajectory
+
+    @property
+    def archive(self) -> dict[str, str] | None:
+        """The SSP archive the scenario was read from (set by :mod:`cosim.io.ssp`), None for a YAML scenario:
+        ``file`` (its absolute path), ``sha256`` (of its bytes) and ``unpacked`` (the temporary folder its FMUs were
+        unpacked to, where the component paths point). A run's log records it, so that ``run --from-log`` unpacks
+        the same archive again."""
+        return self._archive
 
     @property
     def sources(self) -> "SourceMap":

@@ -24,13 +24,15 @@ import ctypes
 import json
 import mmap
 import os
+import pickle
+import select
 import signal
 import time
 from typing import Any, Callable
 
-from ..errors import STOP_SIGNALS, printable
+from ..errors import STOP_SIGNALS, exit_now, printable
 
-__all__ = ["Record", "supervise", "record", "finished", "command_pid", "ENABLED", "MASTER", "PHASES"]
+__all__ = ["Record", "supervise", "contained", "record", "finished", "command_pid", "ENABLED", "MASTER", "PHASES"]
 
 MASTER = -1
 """``current[0]`` when no component has the turn (the master between turns, its observers)."""
@@ -101,9 +103,12 @@ def record() -> Record | None:
     return _RECORD
 
 
-def finished() -> None:
-    """The supervised child ends through our own exit: whatever its exit code, it is not a crash."""
+def finished(message: str | None = None) -> None:
+    """The supervised child ends through our own exit: whatever its exit code, it is not a crash; ``message``: the
+    error it printed, if any (a :func:`contained` call returns it)."""
     if _RECORD is not None:
+        if message is not None:
+            _RECORD.describe(exit_message=message)
         _RECORD.current[4] = 1.0
 
 
@@ -129,6 +134,64 @@ def supervise(on_crash: Callable[[Record, str], int]) -> int | None:
     return _wait(pid, rec, on_crash)
 
 
+_RESULT_BYTES = 16 * 1024 * 1024  # a contained call's pickled result (anonymous: only the pages written are used)
+
+
+def contained(fn: Callable[[], Any]) -> tuple[Any, str | None, Record]:
+    """``fn()`` in a forked child process, supervised as ``python -m cosim run`` is: ``(fn's result, None, record)``
+    when it returned; ``(None, why, record)`` when the child did not: it died inside a component (``why``:
+    ``component 'src' in its step at t = 0.004 s crashed (SIGSEGV)``), left through :func:`hard_exit` (a stalled
+    component: the error it printed), or was killed after no progress for its watchdog budget plus the grace.
+
+    For a sweep's case in a Dask worker: a crash takes the child, never the worker and its other cases. ``fn`` runs
+    with the child's :func:`record`, which the run's execution writes; what it returns must pickle (an exception it
+    raises is returned as its ``why``, ``TypeName: text``). Not for the main thread of ``python -m cosim`` (its
+    stop signals are not forwarded: the child leaves with its parent, ``PR_SET_PDEATHSIG``). POSIX only."""
+    global _RECORD
+    rec = Record()
+    out = mmap.mmap(-1, _RESULT_BYTES)
+    ending, ends = os.pipe()
+    pid = os.fork()
+    if pid == 0:
+        os.close(ending)
+        _RECORD = rec
+        status = 0
+        try:
+            try:
+                os.setpgid(0, 0)  # the supervisor kills the whole group (the log writer, the offload worker)
+            except OSError:
+                pass
+            _die_with_parent()
+            try:
+                data = pickle.dumps((True, fn()))
+            except BaseException as exc:  # noqa: BLE001 - said to the parent, as text (an exception may not pickle)
+                data = pickle.dumps((False, f"{type(exc).__name__}: {exc}"))
+            if len(data) > _RESULT_BYTES - 8:
+                data = pickle.dumps((False, f"the result is {len(data):,} bytes, more than {_RESULT_BYTES - 8:,}"))
+            out[8:8 + len(data)] = data
+            out[:8] = len(data).to_bytes(8, "little")
+            rec.current[4] = 1.0
+            os.write(ends, b"\0")
+        except BaseException:  # noqa: BLE001 - nothing may escape a forked child into its parent's code
+            status = 70
+        finally:
+            exit_now(status)
+    os.close(ends)
+    try:
+        status, reason = _watch(pid, rec, [], ending)
+        n = int.from_bytes(out[:8], "little")
+        if reason is None and n:
+            ok, value = pickle.loads(out[8:8 + n])
+            return (value, None, rec) if ok else (None, value, rec)
+        if reason is None and rec.current[4] == 1.0:  # our own exit without a result: the error it printed
+            reason = rec.info().get("exit_message") or f"ended with status {os.waitstatus_to_exitcode(status)}"
+            return None, reason, rec
+        return None, f"{rec.where()} {reason or _death(pid, status, rec)}", rec
+    finally:
+        out.close()
+        os.close(ending)
+
+
 def _die_with_parent() -> None:
     try:
         libc = ctypes.CDLL(None, use_errno=True)
@@ -150,46 +213,68 @@ def _wait(pid: int, rec: Record, on_crash: Callable[[Record, str], int]) -> int:
 
     previous = {s: signal.signal(s, forward) for s in STOP_SIGNALS}
     try:
-        seen, since = tuple(rec.current[:4]), time.monotonic()
-        while True:
-            try:
-                done, status = os.waitpid(pid, os.WNOHANG)
-            except ChildProcessError:
-                return 2
-            if done:
-                break
-            now = time.monotonic()
-            state = tuple(rec.current[:4])  # component, time, phase, steps: any change is progress
-            if state != seen:
-                seen, since = state, now
-            budget = rec.info().get("watchdog_s")
-            reason = None
-            if stopped_at and now - stopped_at[0] > _STOP_WAIT_S:
-                reason = f"did not stop within {_STOP_WAIT_S:g} s of the stop signal: killed"
-            elif budget and now - since > budget + 2 * _GRACE_S:
-                reason = f"made no progress for {now - since:.3g} s (watchdog {budget:g} s) and could not be " \
-                         f"stopped from inside: killed"
-            if reason is not None:
-                os.killpg(pid, signal.SIGKILL)
-                os.waitpid(pid, 0)
-                _wait_for_writer(rec)
-                return on_crash(rec, reason)
-            time.sleep(_POLL_S)
+        status, reason = _watch(pid, rec, stopped_at)
     finally:
         for s, h in previous.items():
             signal.signal(s, h)
-    if rec.current[4] == 1.0:  # ended through our exit: its code is the command's
+    if reason is None and rec.current[4] == 1.0:  # ended through our exit: its code is the command's
         return os.waitstatus_to_exitcode(status)
+    return on_crash(rec, reason or _death(pid, status, rec))
+
+
+def _watch(pid: int, rec: Record, stopped_at: list[float], wake: int | None = None) -> tuple[int, str | None]:
+    """Wait for the child ``pid``: (its wait status, None) once it ended; (its wait status, why) when it was killed
+    here: no end within :data:`_STOP_WAIT_S` of a stop signal (``stopped_at``), or no progress in ``rec`` for its
+    watchdog budget plus the grace. The log writer process is waited for after a kill. ``wake``: a pipe the child
+    writes a byte to just before it ends (its end is then seen at once, not at the next poll)."""
+    seen, since = tuple(rec.current[:4]), time.monotonic()
+    pause = _POLL_S
+    while True:
+        try:
+            done, status = os.waitpid(pid, os.WNOHANG)
+        except ChildProcessError:
+            return 0, "was lost (no such child process)"
+        if done:
+            return status, None
+        now = time.monotonic()
+        state = tuple(rec.current[:4])  # component, time, phase, steps: any change is progress
+        if state != seen:
+            seen, since = state, now
+        budget = rec.info().get("watchdog_s")
+        reason = None
+        if stopped_at and now - stopped_at[0] > _STOP_WAIT_S:
+            reason = f"did not stop within {_STOP_WAIT_S:g} s of the stop signal: killed"
+        elif budget and now - since > budget + 2 * _GRACE_S:
+            reason = f"made no progress for {now - since:.3g} s (watchdog {budget:g} s) and could not be " \
+                     f"stopped from inside: killed"
+        if reason is not None:
+            try:
+                os.killpg(pid, signal.SIGKILL)
+            except ProcessLookupError:  # not a group of its own (its setpgid failed): the child alone
+                os.kill(pid, signal.SIGKILL)
+            _, status = os.waitpid(pid, 0)
+            _wait_for_writer(rec)
+            return status, reason
+        if wake is None:
+            time.sleep(pause)
+        elif select.select([wake], [], [], _POLL_S)[0]:
+            os.read(wake, 1)
+            wake, pause = None, 0.001  # it is ending: see its end soon
+
+
+def _death(pid: int, status: int, rec: Record) -> str:
+    """How a child that did not end through our exit died (``crashed (SIGSEGV)``); what is left of its process group
+    is killed (the offload worker dies with it by itself) and its log writer waited for."""
     if os.WIFSIGNALED(status):
         reason = f"crashed ({signal.Signals(os.WTERMSIG(status)).name})"
     else:
         reason = f"exited with status {os.WEXITSTATUS(status)} (an exit() inside a component)"
-    try:  # what is left of its process group (the offload worker dies with it by itself)
+    try:
         os.killpg(pid, signal.SIGKILL)
-    except ProcessLookupError:
+    except (ProcessLookupError, PermissionError):
         pass
     _wait_for_writer(rec)
-    return on_crash(rec, reason)
+    return reason
 
 
 def _wait_for_writer(rec: Record) -> None:

@@ -167,5 +167,5 @@ def hard_exit(error: BaseException, lines: list[str]) -> None:
     message, kind, code = exit_status(error)
     for line in [exit_text(message, kind), *lines]:
         print(line, file=sys.stderr)
-    supervision.finished()  # our own exit, said: the supervisor passes its code on
+    supervision.finished(message)  # our own exit, said: the supervisor passes its code on
     exit_now(code)

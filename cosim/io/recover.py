@@ -10,7 +10,7 @@ from ..errors import CosimError
 from .output import check_output
 from .runlog import log_records
 
-__all__ = ["recover", "RecoveryReport"]
+__all__ = ["recover", "recover_crashed", "RecoveryReport"]
 
 
 @dataclass(frozen=True)
@@ -50,6 +50,25 @@ def recover(path: str | Path, out: str | Path | None = None) -> RecoveryReport:
         tmp.unlink(missing_ok=True)
         raise
     return report
+
+
+def recover_crashed(info: dict) -> tuple[str | None, str | None]:
+    """The log of a run whose process died (the description its supervisor's record holds,
+    :meth:`cosim.engine.supervision.Record.info`: ``partial``, ``target``): recovered into its target, the partial
+    file and the claim's lock removed. Returns (the recovered log or None, one line saying where the log is; None
+    without a log)."""
+    partial, target = info.get("partial"), info.get("target")
+    if not partial or not Path(partial).exists():
+        return None, None
+    try:
+        report = recover(partial, target)
+    except CosimError as exc:
+        return None, f"the log written so far stays in {partial} ({exc}): `python -m cosim recover {partial}`"
+    finally:
+        if target:
+            Path(target + ".lock").unlink(missing_ok=True)
+    Path(partial).unlink(missing_ok=True)
+    return report.out, f"the log up to the crash ({report.messages} messages) is in {report.out}"
 
 
 def _default_out(path: Path) -> Path:

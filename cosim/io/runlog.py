@@ -23,6 +23,7 @@ from __future__ import annotations
 import difflib
 import json
 import os
+from contextlib import contextmanager
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any, Iterable, Iterator, Sequence
@@ -38,8 +39,10 @@ from mcap.writer import CompressionType, Writer
 
 from ..engine.scenario import EFFECTIVE_ATTACHMENT, Scenario, scenario_from_data
 from ..errors import CosimError, Issue, ScenarioError
+from ..fmi.extract import SSP_PREFIX
+from .ssp import reopen_ssp
 
-__all__ = ["Signal", "RunLog", "read_run", "write_baseline", "log_records", "scenario_from_log", "time_offset_ns", "samples", "AXES",
+__all__ = ["Signal", "RunLog", "read_run", "write_baseline", "log_records", "open_from_log", "time_offset_ns", "samples", "AXES",
            "MAX_CHUNK_BYTES"]
 
 AXES = ("x", "y", "z")
@@ -410,20 +413,27 @@ def write_baseline(source: str | Path, out: str | Path, period: float = 0.01,
     return out, written
 
 
-def scenario_from_log(path: str | Path, overrides: dict[tuple, Any] | None = None) -> Scenario:
-    """The scenario a run log records (:data:`EFFECTIVE_ATTACHMENT`), with ``overrides`` on top, to run it again.
+@contextmanager
+def open_from_log(path: str | Path, overrides: dict[tuple, Any] | None = None) -> Iterator[Scenario]:
+    """The scenario a run log records (:data:`EFFECTIVE_ATTACHMENT`), with ``overrides`` on top, to run it again
+    inside the ``with`` block.
 
     Its log goes where ``--out`` says or to ``runs/<name>.mcap``, never to the recorded ``logging.out`` (the first
-    run's log). Raises :class:`ScenarioError` naming ``path`` when it is missing, not an MCAP log or records no
-    scenario; a recorded FMU file that is gone is reported when the FMUs are located, as for a scenario file.
+    run's log). A run made from an SSP archive recorded the archive (metadata ``ssp``): its FMUs, unpacked for that
+    run only, are unpacked again from it for the block (:func:`cosim.io.ssp.reopen_ssp`). Raises
+    :class:`ScenarioError` naming ``path`` when it is missing, not an MCAP log or records no scenario, or when the
+    archive is gone or has changed since; a recorded FMU file that is gone is reported when the FMUs are located, as
+    for a scenario file.
     """
     path = Path(path)
     if not path.is_file():
         raise ScenarioError(Issue("", "no such log file", str(path)))
-    found = None
+    found = archive = None
     try:
         with open(path, "rb") as f:
             for rec in log_records(f, path, chunks=False):
+                if isinstance(rec, Metadata) and rec.name == "ssp":  # written before the scenario as run
+                    archive = dict(rec.metadata)
                 if isinstance(rec, Attachment) and rec.name == EFFECTIVE_ATTACHMENT:
                     found = bytes(rec.data)
                     break
@@ -442,4 +452,21 @@ def scenario_from_log(path: str | Path, overrides: dict[tuple, Any] | None = Non
         raise ScenarioError(Issue("", f"{EFFECTIVE_ATTACHMENT} is not a scenario mapping", str(path)))
     if isinstance(data.get("logging"), dict):
         data["logging"]["out"] = None
-    return scenario_from_data(data, str(path), overrides)
+    if archive is not None:
+        with reopen_ssp(archive, data, str(path), overrides) as scenario:
+            yield scenario
+        return
+    _unpacked_archive_gone(data, path)
+    yield scenario_from_data(data, str(path), overrides)
+
+
+def _unpacked_archive_gone(data: dict[str, Any], path: Path) -> None:
+    """A log of an SSP archive's run written before logs recorded the archive: its FMU paths point into the archive's
+    temporary folder, removed after that run. One line saying so, rather than one "not found" per FMU."""
+    for name, comp in (data.get("components") or {}).items():
+        fmu = Path(comp["path"]) if isinstance(comp, dict) and isinstance(comp.get("path"), str) else None
+        if fmu is not None and len(fmu.parents) > 2 and fmu.parents[2].name.startswith(SSP_PREFIX) \
+                and not fmu.exists():  # <archive folder>/fmus/<place>/<name>.fmu (cosim.io.ssp.read_ssp)
+            raise ScenarioError(Issue(f"components.{name}.path", f"the run was made from an SSP archive, unpacked "
+                                      f"for that run only into {fmu.parents[2]} (gone), and the log (written by an "
+                                      "older version) does not name the archive: run the archive again", str(path)))

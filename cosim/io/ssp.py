@@ -36,7 +36,8 @@ an unmapped name stays as it is); the system's come last and win. Component name
 (``DP Controller``); in dotted names a name with a dot is quoted (:mod:`cosim.engine.names`), and a file
 made from a name is made safe first. The archive is
 unpacked into a temporary directory that :func:`open_ssp` removes when its block ends (also on
-error and Ctrl-C). Bad input raises :class:`SspError`: one line naming the file and the problem.
+error and Ctrl-C); the scenario names the archive and its SHA-256, which a run's log records, so that
+``run --from-log`` unpacks the same archive again (:func:`reopen_ssp`). Bad input raises :class:`SspError`: one line naming the file and the problem.
 Not supported (a clear error, never a silent change): SSP 2.0, nested systems, signal dictionaries,
 system-level connectors, connection transformations, components that are not FMUs, FMI 3 arrays.
 
@@ -52,6 +53,7 @@ namespaces properly, so files of other tools with other prefixes read too.
 
 from __future__ import annotations
 
+import hashlib
 import json
 import math
 import os
@@ -78,7 +80,7 @@ from .output import check_output
 if TYPE_CHECKING:  # the CLI imports this module to register its command: keep pydantic out of that
     from ..engine.scenario import Scenario
 
-__all__ = ["SspError", "ExportReport", "export_ssp", "read_ssp", "open_ssp", "is_ssp", "NS", "SSD_NAME", "register"]
+__all__ = ["SspError", "ExportReport", "export_ssp", "read_ssp", "open_ssp", "reopen_ssp", "is_ssp", "NS", "SSD_NAME", "register"]
 
 NS = {
     "ssd": "http://ssp-standard.org/SSP1/SystemStructureDescription",
@@ -916,19 +918,43 @@ def _fmu_defaults(ssp: Path, paths: list[Path]) -> tuple[float | None, float | N
     return (min(steps) if steps else None), (max(stops) if stops else None)
 
 
+def _sha256(path: Path) -> str:
+    digest = hashlib.sha256()
+    with open(path, "rb") as f:
+        for block in iter(lambda: f.read(1 << 20), b""):
+            digest.update(block)
+    return digest.hexdigest()
+
+
+@contextmanager
+def _unpacking(ssp: Path) -> Iterator[Path]:
+    """A temporary folder for ``ssp``'s FMUs, removed when the block ends (also on error)."""
+    sweep_orphans()  # archives unpacked by runs that were killed (SIGKILL) go now
+    tmp = Path(tempfile.mkdtemp(prefix=f"{SSP_PREFIX}{os.getpid()}-{ssp.stem}-"))
+    try:
+        yield tmp
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+
+
+def _archive(ssp: Path, tmp: Path, sha256: str) -> dict[str, str]:
+    """:attr:`cosim.engine.scenario.Scenario.archive` of a scenario read from ``ssp`` unpacked into ``tmp``."""
+    return {"file": os.path.normpath(ssp.absolute()), "sha256": sha256, "unpacked": str(tmp)}
+
+
 @contextmanager
 def open_ssp(ssp: str | Path, overrides: dict[tuple, Any] | None = None) -> Iterator[Scenario]:
     """The scenario of an SSP archive, valid inside the ``with`` block (its FMUs are unpacked into a
     temporary directory removed when the block ends, also on error).
 
     ``overrides`` as for :func:`cosim.engine.scenario.load_scenario` (``--set``, ``--stop-time``, and
-    ``("time", "step")`` for ``--step``).
+    ``("time", "step")`` for ``--step``). The scenario's :attr:`~cosim.engine.scenario.Scenario.archive` names the
+    archive and its SHA-256, which a run's log records for :func:`reopen_ssp`.
     """
     ssp = Path(ssp)
-    sweep_orphans()  # archives unpacked by runs that were killed (SIGKILL) go now
-    tmp = Path(tempfile.mkdtemp(prefix=f"{SSP_PREFIX}{os.getpid()}-{ssp.stem}-"))
-    try:
-        data = read_ssp(ssp, tmp)
+    with _unpacking(ssp) as tmp:
+        data = read_ssp(ssp, tmp)  # reads the file (an archive that is not one is named by it) before it is hashed
+        sha256 = _sha256(ssp)
         overrides = dict(overrides or {})
         missing = [(key, flag) for key, flag in (("step", "--step"), ("stop", "--stop-time"))
                    if key not in data["time"] and ("time", key) not in overrides]
@@ -936,10 +962,47 @@ def open_ssp(ssp: str | Path, overrides: dict[tuple, Any] | None = None) -> Iter
             what = " and ".join(f"the {'base step' if k == 'step' else 'stop time'}" for k, _ in missing)
             raise SspError(ssp, f"{what}: neither the SSD's default experiment nor the FMUs give it; "
                                 f"pass {' and '.join(f for _, f in missing)}")
+        scenario = scenario_from_data(data, str(ssp), overrides)
+        scenario._archive = _archive(ssp, tmp, sha256)
+        yield scenario
 
-        yield scenario_from_data(data, str(ssp), overrides)
-    finally:
-        shutil.rmtree(tmp, ignore_errors=True)
+
+@contextmanager
+def reopen_ssp(archive: dict[str, str], data: dict[str, Any], source: str,
+               overrides: dict[tuple, Any] | None = None) -> Iterator[Scenario]:
+    """The scenario ``data`` of a run made from an SSP archive (as its log records it: ``archive`` is the run's
+    :attr:`~cosim.engine.scenario.Scenario.archive`), with its FMUs unpacked again from that archive for the
+    ``with`` block; ``source`` names the log in messages.
+
+    Raises :class:`SspError` naming ``source`` and the archive when the archive is gone, or is not the file the
+    run was made from (its SHA-256 differs): the recorded scenario's values would not be the archive's.
+    """
+    try:
+        ssp, sha256, unpacked = Path(archive["file"]), archive["sha256"], archive["unpacked"]
+    except (KeyError, TypeError):
+        raise SspError(source, f"the log's ssp metadata is incomplete ({archive!r}): expected file, sha256 and "
+                               "unpacked") from None
+    head = f"the run was made from the SSP archive {ssp}, which"
+    try:
+        now = _sha256(ssp)
+    except FileNotFoundError:
+        raise SspError(source, f"{head} is gone: its FMUs were unpacked from it for the run only; put the archive "
+                               "back to run the log again") from None
+    except OSError as exc:
+        raise SspError(source, f"{head} cannot be read: {exc.strerror or exc}") from None
+    if now != sha256:
+        raise SspError(source, f"{head} has changed since (SHA-256 {sha256[:16]}... then, {now[:16]}... now): the "
+                               f"log's FMUs and values may no longer be the archive's; run the archive itself "
+                               f"(`python -m cosim run {ssp}`)")
+    with _unpacking(ssp) as tmp:
+        read_ssp(ssp, tmp)  # the FMUs go where they went for the run, relative to the folder (numbered by place)
+        for comp in (data.get("components") or {}).values():
+            path = comp.get("path") if isinstance(comp, dict) else None
+            if isinstance(path, str) and Path(path).is_relative_to(unpacked):
+                comp["path"] = str(tmp / Path(path).relative_to(unpacked))
+        scenario = scenario_from_data(data, source, overrides)
+        scenario._archive = _archive(ssp, tmp, sha256)
+        yield scenario
 
 
 def is_ssp(path: str | Path) -> bool:

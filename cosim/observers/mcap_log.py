@@ -147,6 +147,8 @@ class McapRecorder:
                 "name": s.name, "algorithm": s.algorithm, "step_s": repr(s.time.step), "stop_s": repr(s.time.stop),
                 "start_s": repr(s.time.start), "robot": str(s.robot), "components": ",".join(s.components),
                 "file": str(self.scenario_file or s.source or "")})
+            if s.archive is not None:  # before the scenario as run: `run --from-log` unpacks the archive again
+                w.metadata("ssp", dict(s.archive))
         w.metadata("command", {"argv": orjson.dumps(getattr(sys, "orig_argv", sys.argv)).decode(), "cwd": os.getcwd()})
         pub = self.publisher
         w.metadata("time", time_metadata(pub.stamps, pub.origin(rt), rt.start_ns))

@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 from delta.dynamics import forward_dynamics, platform_state
+from delta.errors import UnreachableError
+from delta.kinematics import END_STOP, joint_limit_reason
 from delta.model import Data, build_model
 
 from .._names import axis_names, joint_names
@@ -61,6 +63,16 @@ class AnalyticPlantME(AdapterME):
         self.put(DQD, forward_dynamics(self.model, self.data, self.vec3(Q), qd, self.vec3(U)))
 
     def outputs(self) -> None:
-        p, v = platform_state(self.model, self.data, self.vec3(Q), self.vec3(QD))
+        """p, v from the states; the end stops as the co-simulation plant's (:mod:`fmus.adapters.plants`): here,
+        on the states the importer accepted (the outputs are read at communication points, never at the
+        integrator's trial states, which only ``derivatives`` sees; pythonfmu3 does not pass
+        ``completedIntegratorStep`` on to Python)."""
+        q = self.vec3(Q)
+        model = self.model
+        for i, qi in enumerate(q):
+            if qi < model.q_min or qi > model.q_max:  # not NaN: the master names a NaN output itself
+                raise UnreachableError(f"{self.modelName} at t = {self.time:.6f} s: {END_STOP}: "
+                                       f"{joint_limit_reason(model, i + 1, qi)}")
+        p, v = platform_state(model, self.data, q, self.vec3(QD))
         self.put(P, p)
         self.put(V, v)

@@ -43,7 +43,8 @@ _ROOT = _HERE.parent.parent
 _GLUE = {2: ("runtime.c", "fmi2Functions.c"), 3: ("runtime.c", "fmi3Functions.c")}
 _HEADERS = {2: ("fmi2Functions.h", "fmi2FunctionTypes.h", "fmi2TypesPlatform.h"),
             3: ("fmi3Functions.h", "fmi3FunctionTypes.h", "fmi3PlatformTypes.h")}
-_FUNCTIONS = ("start", "refresh", "advance", "derivatives")
+_FUNCTIONS = ("start", "refresh", "advance", "derivatives", "accept")
+MAX_DETAIL = 4  # values a check may print into its reason (MODEL_MAX_DETAIL of c/model.h)
 CFLAGS = ("-std=c99", "-O2", "-fPIC", "-shared", "-Wall", "-Wextra")
 
 
@@ -87,7 +88,7 @@ def _digest(stats: tuple[tuple[Path, int, int], ...]) -> str:
 class _Function:
     name: str
     sets: list[int]  # value references the function writes, in output order
-    checks: list[tuple[str, bool]]  # (reason, is error), in output order
+    checks: list[tuple[str, bool, int]]  # (reason, is error, number of values it prints), in output order
     n_w: int
     n_iw: int
     sets_state: bool
@@ -119,9 +120,14 @@ def _trace(model: NativeModel, itf: Interface, which: str):  # noqa: ANN202
         raise NativeError(f"FMU {itf.name}: {which} gives {len(new_state)} state values, the model has {model.n_state}")
     out_state = ca.vertcat(*[ca.SX(x) for x in new_state]) if new_state else ca.SX(1, 1)
     checks = result.checks
+    wide = [c.reason for c in checks if len(c.values) > MAX_DETAIL]
+    if wide:
+        raise NativeError(f"FMU {itf.name}: {which}: checks print at most {MAX_DETAIL} values: {wide}")
     out_checks = ca.vertcat(*[ca.SX(c.ok) for c in checks]) if checks else ca.SX(1, 1)
-    fn = ca.Function(f"{itf.name}_{which}", [t, h, values, state], [out_values, out_state, out_checks])
-    return fn, _Function(which, sets, [(c.reason, c.error) for c in checks], fn.sz_w(), fn.sz_iw(),
+    details = [x for c in checks for x in c.values]
+    out_details = ca.vertcat(*[ca.SX(x) for x in details]) if details else ca.SX(1, 1)
+    fn = ca.Function(f"{itf.name}_{which}", [t, h, values, state], [out_values, out_state, out_checks, out_details])
+    return fn, _Function(which, sets, [(c.reason, c.error, len(c.values)) for c in checks], fn.sz_w(), fn.sz_iw(),
                          result.state is not None)
 
 
@@ -136,7 +142,7 @@ def _model_c(model: NativeModel, itf: Interface, token: str, functions: list[_Fu
                    "discrete": "VARIABILITY_DISCRETE", "continuous": "VARIABILITY_CONTINUOUS"}
     vtype = {"real": "TYPE_REAL", "boolean": "TYPE_BOOLEAN", "integer": "TYPE_INTEGER", "string": "TYPE_STRING"}
     vr = {v.name: v.vr for v in itf.variables}
-    checks: list[tuple[str, bool]] = []
+    checks: list[tuple[str, bool, int]] = []
     for f in functions:
         checks += f.checks
     lines = [
@@ -159,10 +165,12 @@ def _model_c(model: NativeModel, itf: Interface, token: str, functions: list[_Fu
         f"const size_t MODEL_STATE_VRS[] = {{{', '.join(str(vr[s]) for s, _ in itf.states) or '0'}}};",
         f"const size_t MODEL_DERIVATIVE_VRS[] = {{{', '.join(str(vr[d]) for _, d in itf.states) or '0'}}};",
         f"const size_t MODEL_N_CHECKS = {len(checks)};",
-        f"const char *const MODEL_CHECKS[] = {{{', '.join(_c_string(r) for r, _ in checks) or _c_string('')}}};",
-        f"const int MODEL_CHECK_IS_ERROR[] = {{{', '.join('1' if e else '0' for _, e in checks) or '0'}}};",
+        f"const char *const MODEL_CHECKS[] = {{{', '.join(_c_string(r) for r, _, _ in checks) or _c_string('')}}};",
+        f"const int MODEL_CHECK_IS_ERROR[] = {{{', '.join('1' if e else '0' for _, e, _ in checks) or '0'}}};",
+        f"const int MODEL_CHECK_N_VALUES[] = {{{', '.join(str(n) for _, _, n in checks) or '0'}}};",
         f"const size_t MODEL_MAX_STEP_VR = {vr[model.max_step] if model.max_step else 0};",
         f"const int MODEL_ME_ADVANCES = {1 if model.me_advances else 0};",
+        f"const int MODEL_ME_ACCEPTS = {1 if model.me_accepts else 0};",
         f"const double MODEL_DEFAULT_EXPERIMENT[3] = {{{', '.join(repr(float(x)) for x in itf.experiment)}}};",
     ]
     if checks:
@@ -184,24 +192,31 @@ def _model_c(model: NativeModel, itf: Interface, token: str, functions: list[_Fu
     for f in functions:
         fn = f"{itf.name}_{f.name}"
         n_sets, n_checks = len(f.sets), len(f.checks)
-        args = "double time, double h, double *values, double *state" if f.name == "advance" else \
-            "double time, double *values, double *state"
+        firsts, n_details = [], 0  # where each check's values start in the function's details
+        for _, _, n in f.checks:
+            firsts.append(n_details)
+            n_details += n
+        args = "double time, double h, double *values, double *state, double *detail" if f.name == "advance" else \
+            "double time, double *values, double *state, double *detail"
         lines += [
             "",
             f"int model_{f.name}({args}) {{",
             f"    static const size_t sets[] = {{{', '.join(map(str, f.sets)) or '0'}}};",
-            f"    double out[{max(n_sets, 1)}], new_state[{max(model.n_state, 1)}], ok[{max(n_checks, 1)}];",
+            f"    static const size_t first_value[] = {{{', '.join(map(str, firsts)) or '0'}}};",
+            (f"    double out[{max(n_sets, 1)}], new_state[{max(model.n_state, 1)}], ok[{max(n_checks, 1)}], "
+             f"details[{max(n_details, 1)}];"),
             f"    casadi_int iw[{max(f.n_iw, 1)}];",
             f"    casadi_real w[{max(f.n_w, 1)}];",
             "    double h_arg = " + ("h" if f.name == "advance" else "0.0") + ";",
             "    double state_arg[" + str(max(model.n_state, 1)) + "] = {0.0};",
             "    const casadi_real *arg[4];",
-            "    casadi_real *res[3];",
+            "    casadi_real *res[4];",
             "    size_t k;",
-            "    (void)sets; (void)k;",
+            "    int failed;",
+            "    (void)sets; (void)k; (void)first_value; (void)failed;",
             f"    memcpy(state_arg, state, sizeof(double) * {model.n_state});" if model.n_state else "    (void)state;",
             "    arg[0] = &time; arg[1] = &h_arg; arg[2] = values; arg[3] = state_arg;",
-            "    res[0] = out; res[1] = new_state; res[2] = ok;",
+            "    res[0] = out; res[1] = new_state; res[2] = ok; res[3] = details;",
             f"    if ({fn}(arg, res, iw, w, 0)) return -1;",
         ]
         if n_sets:
@@ -210,8 +225,17 @@ def _model_c(model: NativeModel, itf: Interface, token: str, functions: list[_Fu
             lines.append(f"    memcpy(state, INITIAL_STATE, sizeof(double) * {model.n_state});")
         if f.sets_state and model.n_state:
             lines.append(f"    memcpy(state, new_state, sizeof(double) * {model.n_state});")
-        done = f"    return first_failed(ok, {n_checks}, {offset});" if n_checks else "    (void)ok;\n    return 0;"
-        lines += [done, "}"]
+        if n_checks:
+            lines += [
+                f"    failed = first_failed(ok, {n_checks}, {offset});",
+                "    if (failed > 0)  /* the values its reason prints */",
+                "        for (k = 0; k < (size_t)MODEL_CHECK_N_VALUES[failed - 1]; k++)",
+                f"            detail[k] = details[first_value[failed - 1 - {offset}] + k];",
+                "    return failed;",
+            ]
+        else:
+            lines += ["    (void)ok; (void)details; (void)detail;", "    return 0;"]
+        lines.append("}")
         offset += n_checks
     return "\n".join(lines) + "\n"
 

@@ -45,6 +45,12 @@ class Interface:
     experiment: tuple[float, float, float]
     states: tuple[tuple[str, str], ...]  # (continuous state, its derivative), model exchange
     me_advances: bool = False  # model exchange commits the internal state at completed integrator steps
+    me_accepts: bool = False  # model exchange checks the state at completed integrator steps
+
+    @property
+    def needs_completed_step(self) -> bool:
+        """Model exchange needs ``completedIntegratorStep`` (to commit its internal state, or check the state)."""
+        return self.me_advances or self.me_accepts
 
     def by_name(self) -> dict[str, Variable]:
         return {v.name: v for v in self.variables}
@@ -91,7 +97,7 @@ def interface(name: str, model: NativeModel) -> Interface:
     if missing:
         raise ValueError(f"FMU {name}: model-exchange states {missing} are not variables of {model.adapter}")
     return Interface(name, adapter.description, tuple(variables), tuple(adapter.EXPERIMENT), model.continuous,
-                     model.me_advances)
+                     model.me_advances, model.me_accepts)
 
 
 # ----------------------------------------------------------------------------- modelDescription.xml
@@ -171,7 +177,7 @@ def _fmi2(itf: Interface, token: str, sources: list[str]) -> bytes:
         attrs = {"modelIdentifier": itf.name, "canGetAndSetFMUstate": "true", "canSerializeFMUstate": "true"}
         if element == "CoSimulation":
             attrs.update(canHandleVariableCommunicationStepSize="true")
-        elif itf.me_advances:
+        elif itf.needs_completed_step:
             attrs.update(completedIntegratorStepNotNeeded="false")
         node = SubElement(root, element, attrs)
         files = SubElement(node, "SourceFiles")
@@ -225,7 +231,7 @@ def _fmi3(itf: Interface, token: str) -> bytes:
                    description=itf.description, generationTool="delta-cosim fmus.native (CasADi)",
                    variableNamingConvention="structured")
     common = {"modelIdentifier": itf.name, "canGetAndSetFMUState": "true", "canSerializeFMUState": "true"}
-    SubElement(root, "ModelExchange", dict(common, needsCompletedIntegratorStep="true" if itf.me_advances else "false"))
+    SubElement(root, "ModelExchange", dict(common, needsCompletedIntegratorStep="true" if itf.needs_completed_step else "false"))
     SubElement(root, "CoSimulation", dict(common, canHandleVariableCommunicationStepSize="true",
                                           providesIntermediateUpdate="false", hasEventMode="false"))
     mvars = _common(root, itf, itf.variables)

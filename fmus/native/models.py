@@ -25,7 +25,7 @@ import casadi as ca
 
 from delta.control import CTC, PD, PID, PDPlus
 from delta.dynamics import forward_dynamics, platform_state, platform_step
-from delta.kinematics import (BEYOND_LIMITS, END_STOP, inverse_kinematics, proximity, set_pose,
+from delta.kinematics import (BEYOND_LIMITS, END_STOP, JOINT_LIMIT, inverse_kinematics, proximity, set_pose,
                               working_mode_fault)
 from delta.model import Data
 from delta.trajectories import PROFILES, TYPES
@@ -45,11 +45,13 @@ DQ, DQD = tuple(f"der({n})" for n in Q), tuple(f"der({n})" for n in QD)
 
 @dataclass(frozen=True)
 class Check:
-    """A condition (an ``SX``, 1 where it holds) and what it means when it fails."""
+    """A condition (an ``SX``, 1 where it holds) and what it means when it fails: ``reason``, or with ``values``
+    (at most ``MODEL_MAX_DETAIL``, ``SX``) a printf format the C glue prints them into when it fails."""
 
     ok: Any
     reason: str
     error: bool = True
+    values: tuple[Any, ...] = ()
 
 
 @dataclass
@@ -99,6 +101,7 @@ class NativeModel:
     choices: dict[str, tuple[str, ...]] = {}  # String parameters: the values each may take
     max_step: str | None = None  # the parameter that bounds one advance, if any
     me_advances = False
+    me_accepts = False  # model exchange checks each accepted state (:meth:`accept`)
     continuous: tuple[tuple[str, str], ...] = ()  # (state, derivative) variable names
 
     def __init__(self, adapter: str, kind: str | None, me_adapter: str | None = None) -> None:
@@ -116,6 +119,11 @@ class NativeModel:
         return model
 
     def start(self, sym: Symbols, trace: Trace) -> Result:
+        return Result()
+
+    def accept(self, sym: Symbols, trace: Trace) -> Result:
+        """Model exchange (with :attr:`me_accepts`): the checks of a state the importer accepted, at each completed
+        integrator step and event, never of its trial states (``derivatives``)."""
         return Result()
 
     def refresh(self, sym: Symbols, trace: Trace) -> Result:
@@ -289,6 +297,17 @@ class PIDController(Controller):
 WORKSPACE = "the platform left the workspace: "
 
 
+def _end_stops(model, leg: int, q) -> list[Check]:
+    """Joint ``leg`` (0-based) within its range, below and above, each failing with the python build's reason
+    (``END_STOP: leg 3 joint limit: q = 0.5803 m > q_max = 0.5800 m``): the joint value and the limit printed in C
+    as the actuator shows them (:attr:`delta.actuators.Rail.Q_PRINTF`)."""
+    fmt, factor = model.actuator.Q_PRINTF
+    return [Check(ok, f"{END_STOP}: " + JOINT_LIMIT[above].format(leg=leg + 1, q=fmt, limit=fmt),
+                  values=(q[leg] * factor, limit * factor))
+            for above, (ok, limit) in enumerate(((ca.logic_not(q[leg] < model.q_min), model.q_min),  # NaN holds:
+                                                 (ca.logic_not(q[leg] > model.q_max), model.q_max)))]  # named apart
+
+
 class AnalyticPlant(NativeModel):
     """As :class:`fmus.adapters.plants.AnalyticPlant` (co-simulation: RK4 in platform coordinates, the state
     ``p, v``, substeps of at most ``solver.max_step``) and :class:`fmus.adapters.plant_me.AnalyticPlantME`
@@ -297,6 +316,7 @@ class AnalyticPlant(NativeModel):
     n_state = 6
     max_step = "solver.max_step"
     continuous = tuple(zip(Q + QD, DQ + DQD))
+    me_accepts = True  # the end stops, on accepted states (derivatives see the integrator's trial states)
 
     def start(self, sym: Symbols, trace: Trace) -> Result:
         model = self.model(sym, trace)
@@ -313,9 +333,16 @@ class AnalyticPlant(NativeModel):
         p, v = sym.s[:3], sym.s[3:]
         checks = [Check(_all(SYMBOLIC.isfinite(x) for x in sym.s), "the state diverged (not finite)")]
         q, qd, _, _ = inverse_kinematics(model, p, v)  # at the step's end (no RK stage): the joint limits too
-        checks += [Check(c.ok, f"{END_STOP}: {c.reason.removeprefix(WORKSPACE)}")  # as the python build
-                   if c.reason.removeprefix(WORKSPACE) in BEYOND_LIMITS else c for c in _errors(trace, WORKSPACE)]
+        for c in _errors(trace, WORKSPACE):
+            beyond = c.reason.removeprefix(WORKSPACE)
+            checks += _end_stops(model, BEYOND_LIMITS.index(beyond), q) if beyond in BEYOND_LIMITS else [c]
         return Result(dict(zip(Q + QD + P + V, (*q, *qd, *p, *v))), checks=checks)
+
+    def accept(self, sym: Symbols, trace: Trace) -> Result:
+        model = self.model(sym, trace)
+        q = sym.vec(Q)
+        checks = [c for i in range(3) for c in _end_stops(model, i, q)]
+        return Result(checks=_errors(trace) + checks)
 
     def advance(self, sym: Symbols, trace: Trace) -> Result:
         model = self.model(sym, trace)

@@ -7,6 +7,7 @@ empty afterwards, and writes nowhere but ``tmp_path``.
 
 from __future__ import annotations
 
+import math
 import os
 import re
 import resource
@@ -318,18 +319,114 @@ def test_run_from_a_log_that_cannot_say_how_it_was_made(run, tmp_path, write_sce
     assert not (tmp_path / "again.mcap").exists() and not (tmp_path / "g.mcap").exists()
 
 
-@pytest.mark.parametrize("build", ["python", "native"])
-def test_the_analytic_plant_stops_at_the_end_stop_as_the_exudyn_plant(run, build):
-    """A diverging controller drives carriage 3 past its stroke (q_max = 580 mm) at t = 0.138 s: both builds of the
-    analytic plant stop there, as the Exudyn plant does, naming the joint and the limit (they ran on to 'the platform
-    left the workspace', or to 'completed' with a carriage 1.1 m past its stroke)."""
+def test_a_run_of_an_ssp_archive_is_repeated_from_its_log(run, tmp_path):
+    """A run of an SSP archive ran FMUs unpacked into a temporary folder removed after it: its log names the archive
+    (and its SHA-256), and --from-log unpacks it again, giving the same signals bit for bit, also from the rerun's
+    own log; an archive that has changed since, or is gone, is one line naming the log and the archive, exit 2.
+    The fixture checks that no unpacked archive is left in the temporary folder."""
+    import json
+
+    from cosim.io.runlog import read_run
+
+    ssp, first, again, third = (tmp_path / n for n in ("h.ssp", "first.mcap", "again.mcap", "third.mcap"))
+    assert run("ssp", "export", SWEEP_SCENARIO, "-o", ssp, "--stop-time", "0.05").returncode == 0
+    r = run("run", ssp, "--set", "ctl.gain.kp[1]=2e4", "--out", first, "--quiet")
+    assert r.returncode == 0, r.stderr
+    recorded = read_run(first).metadata["ssp"]
+    assert recorded["file"] == str(ssp) and len(recorded["sha256"]) == 64, recorded
+    assert run("run", "--from-log", first, "--out", again, "--quiet").returncode == 0
+    assert _same_signals(first, again) > 20
+    assert run("run", "--from-log", again, "--out", third, "--quiet").returncode == 0  # a rerun's log reruns too
+    assert _same_signals(first, third) > 20
+    assert json.loads(read_run(again).attachments["effective/scenario.json"])["components"]["ctl"]["parameters"] \
+        == {"gain.kp[1]": "2e4"}  # the recorded values, not the archive's
+    ssp.write_bytes(ssp.read_bytes() + b"\0")
+    fails(run("run", "--from-log", first, "--out", tmp_path / "x.mcap"), 2,
+          "first.mcap: the run was made from the SSP archive " + re.escape(str(ssp)) + ", which has changed since")
+    ssp.unlink()
+    fails(run("run", "--from-log", again, "--out", tmp_path / "x.mcap"), 2,
+          "again.mcap: the run was made from the SSP archive " + re.escape(str(ssp)) + ", which is gone")
+    assert not (tmp_path / "x.mcap").exists()
+
+
+END_STOP_REASON = "leg 3 joint limit: q = 0.5832 m > q_max = 0.5800 m"
+"""Carriage 3 past its stroke (q_max = 580 mm) where a diverging controller (kp = 1e12) drives it, as each build of the
+analytic plant reports it: the joint value and the limit, as :func:`delta.kinematics.joint_limit_reason` writes them."""
+
+
+def _end_stop(message: str) -> str:
+    """The reason of an end stop in an error line: what follows END_STOP."""
     from delta.kinematics import END_STOP
 
-    r = run("run", SWEEP_SCENARIO, "--stop-time", "1", "--set", "ctl.gain.kp[1]=1e12", "--set", f"fmus={build}",
-            "--no-log")
-    message = fails(r, 2, "component 'plant': fmi2DoStep returned discard at t = 0.138 s", re.escape(END_STOP),
-                    "leg 3 (joint limit: q = 0.58\\d+ m > q_max = 0.5800 m|is beyond its joint limits)")
-    assert "left the workspace" not in message and "completed" not in r.stdout, (message, r.stdout)
+    assert END_STOP in message, message
+    return message.split(END_STOP, 1)[1]
+
+
+def test_the_analytic_plant_stops_at_the_end_stop_as_the_exudyn_plant(run):
+    """A diverging controller drives carriage 3 past its stroke at t = 0.138 s: both builds of the analytic plant stop
+    there, as the Exudyn plant does, naming the joint, its value and the limit, in the same words (they ran on to 'the
+    platform left the workspace', or to 'completed' with a carriage 1.1 m past its stroke; the native build named the
+    leg only)."""
+    reasons = {}
+    for build in ("python", "native"):
+        r = run("run", SWEEP_SCENARIO, "--stop-time", "1", "--set", "ctl.gain.kp[1]=1e12", "--set", f"fmus={build}",
+                "--no-log")
+        message = fails(r, 2, "component 'plant': fmi2DoStep returned discard at t = 0.138 s")
+        assert "left the workspace" not in message and "completed" not in r.stdout, (message, r.stdout)
+        reasons[build] = _end_stop(message)
+    assert reasons["python"] == reasons["native"] == f": {END_STOP_REASON}", reasons
+
+
+def test_the_model_exchange_plant_stops_at_the_end_stop_as_the_co_simulation_plant(run):
+    """The model-exchange builds of the analytic plant stop at the same end stop with the same reason, checked on the
+    states the master accepted: at the communication point (t = 0.139 s), where the python build's outputs are read
+    and the native build's completedIntegratorStep is called. They ran on past the stroke until DOP853 gave up at
+    t = 0.1847 s ('the model is stiff or diverging')."""
+    me = SWEEP_SCENARIO.with_name("helix_ctc_me.yaml")
+    calls = {"python": "fmi3GetFloat64 returned fatal", "native": "fmi2CompletedIntegratorStep returned error"}
+    for build, call in calls.items():
+        r = run("run", me, "--stop-time", "1", "--set", "ctl.gain.kp[1]=1e12", "--set", f"fmus={build}", "--no-log")
+        message = fails(r, 2, f"component 'plant': {call} at t = 0.139 s")
+        assert _end_stop(message) == f": {END_STOP_REASON}", message
+
+
+@pytest.mark.parametrize("build", ["python", "native"])
+def test_the_model_exchange_plant_checks_accepted_states_only(build, tmp_path):
+    """The integrator's trial states may pass the stroke (a rejected trial step): the derivatives there are given
+    without complaint; the end stop is an error only once such a state is accepted (outputs read, or
+    completedIntegratorStep), in the rotary build too (the joint in degrees). Through the master's FMU access, which
+    also makes a PythonFMU library safe to unload in this process."""
+    from ctypes import c_double
+
+    from cosim.errors import FMIError
+    from cosim.fmi import load_fmu, make_slave
+    from fmus import registry
+
+    info = load_fmu(registry.build("rotary_analytic_plant_me" if build == "python" else "rotary_analytic_plant",
+                                   tmp_path, native=build == "native", fmi=3))
+    q_max = float(info.variables["geometry.q_max"].start)
+    slave = make_slave("plant", info, "me")
+    slave.instantiate()
+    try:
+        slave.setup_experiment(0.0, 1.0)
+        slave.set_start({})
+        slave.enter_initialization(0.0, 1.0)
+        slave.bind([], [info.variables["p.x"]])
+        slave.exit_initialization()
+        x, dx = (c_double * 6)(), (c_double * 6)()
+        slave.get_x(x)
+        x[1] = q_max + 0.1  # q[2], 0.1 rad past the end stop, as a trial state (q[1..3] then qd[1..3])
+        slave.set_x(x)
+        slave.get_dx(dx)  # raises for a failure or a non-finite derivative
+        with pytest.raises(FMIError) as failed:
+            if build == "native":
+                slave._completed_step()
+            else:
+                slave.get_outputs()
+    finally:
+        slave.free()
+    degrees = f"{math.degrees(q_max + 0.1):.2f} deg > q_max = {math.degrees(q_max):.2f} deg"
+    assert f"leg 2 joint limit: q = {degrees}" in str(failed.value), failed.value
 
 
 @pytest.mark.parametrize("item, cause", [

@@ -180,3 +180,56 @@ def test_sweep_report_without_its_sweep_json_says_so(tmp_path):
     (tmp_path / "results.csv").write_text("case,status,rmse\nabc,ok,1e-6\n")
     r = _cosim("sweep-report", str(tmp_path))
     assert r.returncode != 0 and "sweep.json: missing or without parameters" in r.stderr, r.stderr
+
+
+CRASH = """
+name: crash
+components:
+  src: {{path: "{crash}", parameters: {{mode: 0, at: 0.005}}}}
+  g: {{path: "{gain}"}}
+connections:
+  - {{from: src.y, to: g.u}}
+time: {{stop: 0.01, step: 0.001}}
+"""
+
+
+def test_a_case_whose_fmu_crashes_its_process_is_a_failed_case_with_the_reason(tmp_path, test_fmus):
+    """A segfault or an exit() inside a case's FMU ends that case's process only (a child of the Dask worker): the
+    case is failed, its message names the component, the time and how it died, its log is recovered up to the crash,
+    the other case runs, exit 1. (The worker died instead: the case was retried on 4 workers, each killed, and
+    recorded as 'lost: KilledWorker', without the reason.)"""
+    scenario = tmp_path / "crash.yaml"
+    scenario.write_text(CRASH.format(crash=test_fmus["CosimTCrash"], gain=test_fmus["CosimTGain"]))
+    out, tmp = tmp_path / "sweep", tmp_path / "tmp"
+    tmp.mkdir()
+    r = _cosim("sweep", scenario, "--grid", "src.mode=0,1,3", "--workers", "2", "--logs", "--out", out, "--quiet",
+               env={**os.environ, "TMPDIR": str(tmp)})
+    assert r.returncode == 1, r.stdout + r.stderr
+    assert "Traceback" not in r.stderr and "KilledWorker" not in r.stdout + r.stderr, r.stdout + r.stderr
+    rows = {x["src.mode"]: x for x in _rows(out)}
+    how = {"1": "crashed (SIGSEGV)", "3": "exited with status 3"}
+    assert rows["0"]["status"] == "ok" and rows["0"]["steps"] == "10", rows["0"]
+    for mode, reason in how.items():
+        row = rows[mode]
+        assert row["status"] == "failed", row
+        assert row["message"].startswith(f"component 'src' in its step at t = 0.004 s {reason}"), row
+        assert f"FAILED {row['case']} (src.mode={mode}): component 'src' in its step" in r.stdout, r.stdout
+        from cosim.io.runlog import read_run
+
+        read_run(row["mcap"])  # recovered: readable (10 steps write in the case's process: nothing flushed yet)
+    assert sorted(p.name for p in (out / "logs").iterdir()) == sorted(x["case"] + ".mcap" for x in rows.values())
+    assert not list(tmp.glob("cosim-*")), list(tmp.glob("cosim-*"))  # extracted FMUs removed
+
+
+def test_run_loaded_case_contains_a_crash_in_the_calling_process(test_fmus, tmp_path):
+    """The Python API of a case (what each Dask worker calls): an abort() inside the FMU is a failed row, and the
+    caller goes on."""
+    from cosim.analysis.sweep import run_loaded_case
+    from cosim.engine.scenario import load_scenario
+
+    scenario = tmp_path / "crash.yaml"
+    scenario.write_text(CRASH.format(crash=test_fmus["CosimTCrash"], gain=test_fmus["CosimTGain"]))
+    row = run_loaded_case(load_scenario(scenario, {("components", "src", "parameters", "mode"): 2}), {})
+    assert row["status"] == "failed" and row["message"] == "component 'src' in its step at t = 0.004 s crashed " \
+        "(SIGABRT)", row
+    assert run_loaded_case(load_scenario(scenario), {})["status"] == "ok"

@@ -35,7 +35,7 @@ class Native:
         self.vr = {v.name: v.vr for v in self.itf.variables}
         self.values = np.array([v.start or 0.0 for v in self.itf.variables], dtype=float)
         self.state = np.array(self.model.initial_state() or [0.0], dtype=float)
-        self.fns = {w: _trace(self.model, self.itf, w) for w in ("start", "refresh", "advance", "derivatives")}
+        self.fns = {w: _trace(self.model, self.itf, w) for w in ("start", "refresh", "advance", "derivatives", "accept")}
 
     def set(self, name: str, value: float) -> None:
         self.values[self.vr[name]] = value
@@ -45,13 +45,18 @@ class Native:
 
     def call(self, which: str, t: float = 0.0, h: float = 0.0) -> list[str]:
         fn, info = self.fns[which]
-        out, state, ok = (np.array(x).ravel() for x in fn(t, h, self.values, self.state))
+        out, state, ok, details = (np.array(x).ravel() for x in fn(t, h, self.values, self.state))
         self.values[info.sets] = out[:len(info.sets)]
         if which == "start" and self.model.n_state:
             self.state = np.array(self.model.initial_state(), dtype=float)
         if info.sets_state:
             self.state = state[:self.model.n_state]
-        return [reason for (reason, _), good in zip(info.checks, ok) if good == 0.0]
+        failed, first = [], 0
+        for (reason, _, n), good in zip(info.checks, ok):  # a reason with values: printed as the C glue prints it
+            if good == 0.0:
+                failed.append(reason % tuple(details[first:first + n]) if n else reason)
+            first += n
+        return failed
 
 
 def python_adapter(name: str):
@@ -66,10 +71,10 @@ def close(native: float, python: float, what: str, scale: float = 1e-3) -> None:
 
 
 def test_every_native_model_traces():
-    """Each model's four functions trace (no branch on a symbol) to finite expressions."""
+    """Each model's five functions trace (no branch on a symbol) to finite expressions."""
     for name in MODELS:
         native = Native(name)
-        assert native.fns["refresh"][0].n_out() == 3, name
+        assert native.fns["refresh"][0].n_out() == 4, name
 
 
 @pytest.mark.parametrize("t", [0.0, 0.37, 5.2, 12.0])
@@ -254,6 +259,57 @@ def test_analytic_plant_faults_are_checks(kind):
     assert failed and "has no solution" in failed[0], failed
 
 
+@pytest.mark.parametrize("kind", ["linear", "rotary"])
+@pytest.mark.parametrize("side", [0, 1])
+def test_analytic_plant_end_stop_names_the_joint_value_as_the_python_build(kind, side):
+    """A joint past its range (below or above) fails the model-exchange accept of an accepted state with the python
+    build's words: the leg, the joint value and the limit (delta.kinematics.joint_limit_reason); the model-exchange
+    derivatives, which the integrator's trial states see, do not check it."""
+    from delta.kinematics import END_STOP, inverse_kinematics, joint_limit_reason
+
+    native = Native(f"{kind}_analytic_plant")
+    native.call("start")
+    python = python_adapter(f"{kind}_analytic_plant")
+    python.start()
+    model = python.model
+    q = list(inverse_kinematics(model, list(native.state[:3]))[0])
+    q[1] = model.q_min - 0.01 if side == 0 else model.q_max + 0.01  # leg 2 past its end stop
+    for i, name in enumerate(("q[1]", "q[2]", "q[3]")):
+        native.set(name, q[i])
+    assert native.call("derivatives") == [], "a trial state is not checked"
+    failed = native.call("accept")
+    assert failed == [f"{END_STOP}: {joint_limit_reason(model, 2, q[1])}"], failed
+
+
+@pytest.mark.parametrize("kind", ["linear", "rotary"])
+def test_analytic_plant_step_end_stop_is_the_python_builds(kind):
+    """The co-simulation plant's state moved along each axis until a joint passes its range: the refresh at the step's end
+    fails with the python build's reason (fmus.adapters.plants.AnalyticPlant.advance), joint value included."""
+    from delta.kinematics import END_STOP, inverse_kinematics, joint_limit_reason
+
+    native = Native(f"{kind}_analytic_plant")
+    native.call("start")
+    python = python_adapter(f"{kind}_analytic_plant")
+    python.start()
+    model, p0 = python.model, native.state[:3].copy()
+    seen = 0
+    for direction in np.vstack([np.eye(3), -np.eye(3)]):
+        for k in range(1, 2000):  # 0.5 mm steps, up to 1 m
+            p = p0 + direction * 5e-4 * k
+            q, _, _, fault = inverse_kinematics(model, list(p), [0.0, 0.0, 0.0])
+            if fault > 0:  # no solution before a joint limit: not this direction
+                break
+            if fault < 0:
+                native.state[:3] = p
+                native.state[3:] = 0.0
+                expected = f"{END_STOP}: {joint_limit_reason(model, -fault, q[-fault - 1])}"
+                failed = native.call("refresh")  # the C glue reports the first
+                assert failed and failed[0] == expected, (direction, failed, expected)
+                seen += 1
+                break
+    assert seen, "no joint limit along any axis from the initial state"
+
+
 @pytest.mark.parametrize("name,parameter,value,reason", [
     ("linear_pd", "gain.kp[2]", -1.0, "PD.kp must be > 0 per joint (joint 2)"),
     ("rotary_pid", "gain.ki[1]", float("nan"), "PID.ki must be >= 0 per joint (joint 1)"),
@@ -277,5 +333,5 @@ def test_parameters_are_checked_as_the_python_build_checks_them(name, parameter,
     which = "start" if name.endswith("plant") else "refresh"
     failed = native.call(which)
     assert any(reason in f for f in failed), (failed, reason)
-    assert native.fns[which][1].checks[[r for r, _ in native.fns[which][1].checks].index(
+    assert native.fns[which][1].checks[[r for r, _, _ in native.fns[which][1].checks].index(
         next(f for f in failed if reason in f))][1], "a bad parameter must be an error"

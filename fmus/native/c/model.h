@@ -51,28 +51,41 @@ extern const size_t MODEL_DERIVATIVE_VRS[];      /* vr of its derivative (a loca
 extern const size_t MODEL_N_CHECKS;
 extern const char *const MODEL_CHECKS[];         /* reason of each check, e.g. "leg 1 has no solution" */
 extern const int MODEL_CHECK_IS_ERROR[];         /* 1: error, 0: warning */
+extern const int MODEL_CHECK_N_VALUES[];         /* 0: the reason is text; n (<= MODEL_MAX_DETAIL): a printf
+                                                    format of n doubles, which the failing model function
+                                                    wrote into its `detail` argument (the joint value and the
+                                                    limit of an end stop) */
 extern const size_t MODEL_MAX_STEP_VR;           /* 0: none; else the parameter that bounds one advance:
                                                     a step h is split into n = ceil(h / values[vr]) equal
                                                     calls of model_advance (n computed as Python's
                                                     max(1, -int(-h // max_step))) */
+extern const int MODEL_ME_ACCEPTS;               /* 1: in model exchange, model_accept checks the state at
+                                                    each completed integrator step and event */
 extern const int MODEL_ME_ADVANCES;              /* 1: in model exchange, model_advance(t_last, t - t_last)
                                                     commits the internal state at each completed
                                                     integrator step and event; 0: never called in ME */
 extern const double MODEL_DEFAULT_EXPERIMENT[3]; /* start, stop, step */
 
-/* ---- functions defined by the generated model.c ---- */
+#define MODEL_MAX_DETAIL 4                       /* values one check prints into its reason */
+
+/* ---- functions defined by the generated model.c ----
+ * Each returns the first failed check (see above) and writes the values its reason prints into `detail`
+ * (MODEL_MAX_DETAIL doubles). */
 /* Initial internal state (and, for model exchange, initial continuous states in values) from the
  * parameters and inputs. Called when the first output is read or at exitInitializationMode, and again
  * if a parameter changes before exitInitializationMode. */
-int model_start(double time, double *values, double *state);
+int model_start(double time, double *values, double *state, double *detail);
 /* Outputs (written into values) from the inputs, parameters and internal state at `time`; may update
  * `state` (e.g. the held references of an IK). Called before outputs are read whenever an input or a
  * parameter changed, and at the end of every step (a failed error check there fails the step). */
-int model_refresh(double time, double *values, double *state);
+int model_refresh(double time, double *values, double *state, double *detail);
 /* Co-simulation: advance the internal state from `time` by `h` (one substep, see MODEL_MAX_STEP_VR). */
-int model_advance(double time, double h, double *values, double *state);
+int model_advance(double time, double h, double *values, double *state, double *detail);
 /* Model exchange: derivatives (written at MODEL_DERIVATIVE_VRS) and outputs from the continuous states
  * (read at MODEL_STATE_VRS), inputs and parameters at `time`. */
-int model_derivatives(double time, double *values, double *state);
+int model_derivatives(double time, double *values, double *state, double *detail);
+/* Model exchange (MODEL_ME_ACCEPTS): the checks of the state the importer accepted (a completed integrator
+ * step, an event), never called on its trial states; sets nothing. */
+int model_accept(double time, double *values, double *state, double *detail);
 
 #endif

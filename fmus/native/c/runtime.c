@@ -146,6 +146,7 @@ void rt_reset(Instance *inst)
  * a warning is logged when no model function reported it on its last call, and the call succeeds. */
 static RtStatus check(Instance *inst, ModelCall call, int k, double t)
 {
+    char reason[768];
     int i, reported = 0;
     for (i = 0; i < N_CALLS; i++) reported |= inst->last_check[i] == k;
     inst->last_check[call] = k;
@@ -154,11 +155,17 @@ static RtStatus check(Instance *inst, ModelCall call, int k, double t)
         log_at(inst, t, RT_ERROR, "the model returned the unknown check %d", k);
         return RT_ERROR;
     }
+    if (MODEL_CHECK_N_VALUES[k - 1] > 0) {  /* a format of our generator's, the values the model wrote */
+        const double *d = inst->detail;
+        snprintf(reason, sizeof reason, MODEL_CHECKS[k - 1], d[0], d[1], d[2], d[3]);
+    } else {
+        snprintf(reason, sizeof reason, "%s", MODEL_CHECKS[k - 1]);
+    }
     if (MODEL_CHECK_IS_ERROR[k - 1]) {
-        log_at(inst, t, RT_ERROR, "%s", MODEL_CHECKS[k - 1]);
+        log_at(inst, t, RT_ERROR, "%s", reason);
         return RT_ERROR;
     }
-    if (!reported) log_at(inst, t, RT_WARNING, "%s", MODEL_CHECKS[k - 1]);
+    if (!reported) log_at(inst, t, RT_WARNING, "%s", reason);
     return RT_OK;
 }
 
@@ -166,15 +173,15 @@ RtStatus rt_update(Instance *inst)
 {
     int k;
     if (!inst->started) {
-        if (check(inst, CALL_START, model_start(inst->time, inst->values, inst->state), inst->time) != RT_OK)
+        if (check(inst, CALL_START, model_start(inst->time, inst->values, inst->state, inst->detail), inst->time) != RT_OK)
             return RT_ERROR;
         inst->started = 1;
     }
     if (inst->is_me && MODEL_N_CONTINUOUS > 0) {
-        k = model_derivatives(inst->time, inst->values, inst->state);
+        k = model_derivatives(inst->time, inst->values, inst->state, inst->detail);
         if (check(inst, CALL_DERIVATIVES, k, inst->time) != RT_OK) return RT_ERROR;
     } else {
-        k = model_refresh(inst->time, inst->values, inst->state);
+        k = model_refresh(inst->time, inst->values, inst->state, inst->detail);
         if (check(inst, CALL_REFRESH, k, inst->time) != RT_OK) return RT_ERROR;
     }
     inst->dirty = 0;
@@ -243,7 +250,7 @@ RtStatus rt_do_step(Instance *inst, double t, double h)
     dt = h / (double)n;
     for (k = 0; k < n; k++) {
         double tk = t + (double)k * dt;
-        if (check(inst, CALL_ADVANCE, model_advance(tk, dt, inst->values, inst->state), tk) != RT_OK) {
+        if (check(inst, CALL_ADVANCE, model_advance(tk, dt, inst->values, inst->state, inst->detail), tk) != RT_OK) {
             inst->failed = 1;
             return RT_DISCARD;
         }
@@ -259,11 +266,14 @@ RtStatus rt_do_step(Instance *inst, double t, double h)
 RtStatus rt_me_commit(Instance *inst)
 {
     if (MODEL_ME_ADVANCES && inst->time > inst->t_last) {
-        int k = model_advance(inst->t_last, inst->time - inst->t_last, inst->values, inst->state);
+        int k = model_advance(inst->t_last, inst->time - inst->t_last, inst->values, inst->state, inst->detail);
         if (check(inst, CALL_ADVANCE, k, inst->t_last) != RT_OK) return RT_ERROR;
         inst->dirty = 1;
     }
     inst->t_last = inst->time;
+    if (MODEL_ME_ACCEPTS && inst->started &&
+        check(inst, CALL_ACCEPT, model_accept(inst->time, inst->values, inst->state, inst->detail), inst->time) != RT_OK)
+        return RT_ERROR;
     return RT_OK;
 }
 

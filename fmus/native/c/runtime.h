@@ -25,7 +25,7 @@ typedef enum { MODE_INSTANTIATED = 1, MODE_INITIALIZATION = 2, MODE_STEP = 4, MO
                MODE_CONTINUOUS = 16, MODE_TERMINATED = 32 } Mode;
 #define MODES_ANY (MODE_INSTANTIATED | MODE_INITIALIZATION | MODE_STEP | MODE_EVENT | MODE_CONTINUOUS | MODE_TERMINATED)
 
-typedef enum { CALL_START, CALL_REFRESH, CALL_ADVANCE, CALL_DERIVATIVES, N_CALLS } ModelCall;
+typedef enum { CALL_START, CALL_REFRESH, CALL_ADVANCE, CALL_DERIVATIVES, CALL_ACCEPT, N_CALLS } ModelCall;
 
 typedef struct Instance Instance;
 typedef void (*LogFn)(Instance *inst, RtStatus status, const char *category, const char *message);
@@ -45,6 +45,7 @@ struct Instance {
     int started;                /* model_start ran with the current parameters */
     int failed;                 /* a step failed: no further steps */
     int last_check[N_CALLS];    /* last result of each model function (warnings are logged once) */
+    double detail[MODEL_MAX_DETAIL]; /* the values the last failed check's reason prints */
     char *name;
     const char *const *type_names; /* FMI names of TYPE_REAL, TYPE_BOOLEAN, TYPE_INTEGER, TYPE_STRING */
     LogFn log;
@@ -87,7 +88,8 @@ RtStatus rt_update(Instance *inst);
 RtStatus rt_exit_initialization(Instance *inst);
 /* One co-simulation step; RT_DISCARD (logged) when a check fails, the instance then failed. */
 RtStatus rt_do_step(Instance *inst, double t, double h);
-/* Model exchange: commit the internal state up to `time` (model_advance when MODEL_ME_ADVANCES). */
+/* Model exchange, at a completed integrator step or an event: commit the internal state up to `time`
+ * (model_advance when MODEL_ME_ADVANCES), then check the accepted state (model_accept when MODEL_ME_ACCEPTS). */
 RtStatus rt_me_commit(Instance *inst);
 void rt_set_time(Instance *inst, double time);
 RtStatus rt_get_states(Instance *inst, double *x, size_t nx, const char *function);
