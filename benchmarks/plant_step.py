@@ -41,7 +41,10 @@ fresh matrix, 2 iterations per step) moves helix_ctc_thesis's positions by 8e-9 
 and so does the kept matrix (~3 iterations per step, ``newton_rel_tol`` 1e-6 or 1e-10 alike): a
 cheaper Newton that converges cannot pass them, and looser ones drift further (kept matrix, 1 s open
 loop, platform from the fresh-matrix run: 2.5e-7 / 9.2e-7 / 2.2e-6 m at 1e-6 / 1e-5 / 3e-5).
-Not tried: an extrapolated predictor. Measured and dropped: Eigen's dense LU for the full models
+A better predictor cannot be set from Python: Exudyn's generalized-alpha Newton starts every step from
+zero accelerations (``ComputeNewtonUpdate(initial=True)`` in CSolverImplicitSecondOrder.cpp), and a
+``SetUserFunctionComputeNewtonUpdate`` function cannot call the built-in update (it recurses into
+itself) nor set the algorithmic accelerations (a getter, no setter). Measured and dropped: Eigen's dense LU for the full models
 (1.15x the sparse LU's time), ``jacobianConnectorDerivative = False`` (no gain measured),
 ``exudynCPPfast`` (``EXUDYN_MODULE=fast``: ``SolveSteps`` ~8 % faster, a process-wide import choice that
 prints on stdout, and not comparable in this one-process benchmark).
