@@ -46,6 +46,8 @@ zero accelerations (``ComputeNewtonUpdate(initial=True)`` in CSolverImplicitSeco
 ``SetUserFunctionComputeNewtonUpdate`` function cannot call the built-in update (it recurses into
 itself) nor set the algorithmic accelerations (a getter, no setter). Measured and dropped: Eigen's dense LU for the full models
 (1.15x the sparse LU's time), ``jacobianConnectorDerivative = False`` (no gain measured),
+``parallel.numberOfThreads = 2`` (linear full 1.02x in one run; Exudyn warns that its task manager is
+still running when a second plant is initialised in the process),
 ``exudynCPPfast`` (``EXUDYN_MODULE=fast``: ``SolveSteps`` ~8 % faster, a process-wide import choice that
 prints on stdout, and not comparable in this one-process benchmark).
 """
