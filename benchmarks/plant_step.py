@@ -1,11 +1,13 @@
 """Microseconds per 1 ms step of each Exudyn plant and fidelity, this checkout against a baseline commit.
 
-Run: ``python benchmarks/plant_step.py [--steps N] [--rounds R] [--baseline COMMIT] [--reuse-jacobian]``. The ``multibody/``
-package of ``COMMIT`` (default 288e832, where issue 27's plant work started) is taken from git into a
-temporary directory and imported under another name, so both versions run in this one process on the same
-``delta/``; rounds interleave every plant of both versions, so that load from other processes hits them
-alike (``--reuse-jacobian``: this checkout's plants with ``SolverSettings(reuse_jacobian=True)``). Printed per plant: the median and minimum over the rounds of both versions and the ratio of the
-medians (this / baseline), with issue 27's target for the full plants (at most 0.5). Efforts: analytic
+Run: ``python benchmarks/plant_step.py [--steps N] [--rounds R] [--baseline COMMIT] [--[no-]reuse-jacobian]``.
+The ``multibody/`` package of ``COMMIT`` (default 288e832, where issue 27's plant work started) is taken
+from git into a temporary directory and imported under another name, so both versions run in this one
+process on the same ``delta/``; rounds interleave every plant of both versions, so that load from other
+processes hits them alike (``--reuse-jacobian`` / ``--no-reuse-jacobian``: this checkout's plants with
+``SolverSettings(reuse_jacobian=True / False)`` instead of the per-model default). Printed per plant: the
+median and minimum over the rounds of both versions and the ratio of the medians (this / baseline), with
+issue 27's target for the full plants (at most 0.5). Efforts: analytic
 gravity compensation (constant), from the same pose each round.
 
 Where the time goes (``perf record``; Exudyn's ``solver.timer``), linear / rotary full at 288e832, about
@@ -17,6 +19,37 @@ six Exudyn output calls to read the arm angles, now read from the coordinates: 6
 With ``reuse_jacobian`` (linear / rotary): factorisation 2 us, Jacobian < 1 us per step; Newton takes
 ~2.9 iterations instead of ~1, so ~3.9 residual evaluations (56 / 85 us: constraint reactions, forces,
 constraints, mass matrix) and ~2.9 solves (12 / 15 us) are most of what is left, plus the Python above.
+
+Since the rotary arms are 1-DOF rotational bodies (e3da3b6) both full models have 95 unknowns and, with
+a fresh Newton matrix at every step, cost the same: ~145 us per step, of which ``SolveSteps`` ~122 us
+(factorisation about half, Jacobian a sixth, two residuals a quarter) and the Python around it ~21 us.
+Since 72f1ee9 the full rotary plant keeps its Newton matrix by default (``SolverSettings.reuse_jacobian``
+is per model). Measured 2026-11-26 on the shared 2-core machine (load average 1.4-2.3), ratios of the
+interleaved medians, ranges over the runs named (baseline 288e832, 140-143 / 249-272 us full):
+
+    python benchmarks/plant_step.py --rounds 5                       (3 runs)
+        linear full 0.99-1.04, rotary full 0.34-0.36 (91-92 us); linear lumped 0.97-1.00, rotary lumped 0.25-0.26
+    python benchmarks/plant_step.py --rounds 5 --no-reuse-jacobian   (2 runs)
+        linear full 1.00-1.04, rotary full 0.58 (147-148 us)
+    python benchmarks/plant_step.py --rounds 5 --reuse-jacobian      (2 runs)
+        linear full 0.62 (86-87 us), rotary full 0.35-0.36; linear lumped 1.07, rotary lumped 0.30-0.31
+
+Issue 27's 0.5: met by the rotary plant, not by the linear plant's default. Its numerics are pinned by
+the golden baselines: they record one full Newton iteration per step with the matrix fresh at every
+step, which ends a few nm from the converged step: converging it (``newton_rel_tol = 1e-10`` with a
+fresh matrix, 2 iterations per step) moves helix_ctc_thesis's positions by 8e-9 m (tolerance 1e-9 m),
+and so does the kept matrix (~3 iterations per step, ``newton_rel_tol`` 1e-6 or 1e-10 alike): a
+cheaper Newton that converges cannot pass them, and looser ones drift further (kept matrix, 1 s open
+loop, platform from the fresh-matrix run: 2.5e-7 / 9.2e-7 / 2.2e-6 m at 1e-6 / 1e-5 / 3e-5).
+A better predictor cannot be set from Python: Exudyn's generalized-alpha Newton starts every step from
+zero accelerations (``ComputeNewtonUpdate(initial=True)`` in CSolverImplicitSecondOrder.cpp), and a
+``SetUserFunctionComputeNewtonUpdate`` function cannot call the built-in update (it recurses into
+itself) nor set the algorithmic accelerations (a getter, no setter). Measured and dropped: Eigen's dense LU for the full models
+(1.15x the sparse LU's time), ``jacobianConnectorDerivative = False`` (no gain measured),
+``parallel.numberOfThreads = 2`` (linear full 1.02x in one run; Exudyn warns that its task manager is
+still running when a second plant is initialised in the process),
+``exudynCPPfast`` (``EXUDYN_MODULE=fast``: ``SolveSteps`` ~8 % faster, a process-wide import choice that
+prints on stdout, and not comparable in this one-process benchmark).
 """
 
 from __future__ import annotations
@@ -82,8 +115,9 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--rounds", type=_positive, default=7, help="interleaved rounds; medians are printed (default 7)")
     ap.add_argument("--baseline", default=DEFAULT_BASELINE, metavar="COMMIT",
                     help=f"commit whose multibody/ is timed alongside this checkout's (default {DEFAULT_BASELINE})")
-    ap.add_argument("--reuse-jacobian", action="store_true",
-                    help="time this checkout's plants with SolverSettings(reuse_jacobian=True)")
+    ap.add_argument("--reuse-jacobian", action=argparse.BooleanOptionalAction, default=None,
+                    help="time this checkout's plants with SolverSettings(reuse_jacobian=True / False) "
+                         "(default: the per-model default)")
     args = ap.parse_args(argv)
 
     import multibody
@@ -97,7 +131,8 @@ def main(argv: list[str] | None = None) -> None:
         plants = {}
         for name, robot, fidelity in CASES:
             for version, package in versions.items():
-                settings = multibody.SolverSettings(reuse_jacobian=True) if version == "this" and args.reuse_jacobian else None
+                forced = version == "this" and args.reuse_jacobian is not None
+                settings = multibody.SolverSettings(reuse_jacobian=args.reuse_jacobian) if forced else None
                 plant = package.make_plant(robot, fidelity=fidelity, p0=P0, settings=settings)
                 u = analytic_model(robot, plant.masses).gravity_term(plant.output.q)
                 plants[name, version] = (plant, u)
@@ -111,7 +146,7 @@ def main(argv: list[str] | None = None) -> None:
                 samples[key].append((time.perf_counter() - t0) / args.steps * 1e6)
 
     print(f"us per 1 ms step: median (min) over {args.rounds} interleaved rounds of {args.steps} steps; "
-          f"baseline = multibody/ at {args.baseline}{'; this: reuse_jacobian=True' if args.reuse_jacobian else ''}")
+          f"baseline = multibody/ at {args.baseline}{f'; this: reuse_jacobian={args.reuse_jacobian}' if args.reuse_jacobian is not None else ''}")
     print(f"{'plant':15s} {'baseline':>17s} {'this':>17s} {'ratio':>7s} {'target':>13s}")
     for name, _, _ in CASES:
         old, new = samples[name, "baseline"], samples[name, "this"]

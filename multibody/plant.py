@@ -69,14 +69,19 @@ class SolverSettings:
         to step: the pattern never changes); False = Eigen's dense LU; None (default) = the
         faster per model as measured by ``benchmarks/plant_step.py`` (sparse for the full models,
         dense for the small lumped ones).
-    reuse_jacobian : bool
+    reuse_jacobian : bool or None
         Keep the factorised Newton matrix from one macro step to the next (Exudyn refactorises it on
         every ``SolveSteps`` entry otherwise). Newton still iterates to the same tolerances, and the
         matrix is refactorised when modified Newton has not converged within
         ``REUSE_MAX_MODIFIED_ITERATIONS`` iterations, when the step size changes and after a reset.
-        Off by default: the converged steps are more accurate than the default's single full Newton
-        iteration (platform off FK(q) by < 1e-11 m instead of a few nm), which moves the full linear
-        plant's platform position by up to 8e-9 m on helix_ctc, past the golden baselines' 1e-9 m.
+        Its steps take ~3 modified Newton iterations where a fresh matrix takes one, and end elsewhere
+        by the Newton error: 8e-9 m on helix_ctc_thesis's platform (linear, closed loop), 6.4e-10 m,
+        2.2e-9 rad, 7.2e-6 rad/s and 5.5e-5 N*m on rotary_pick_place_ctc (rotary), both runs against the
+        same run with a fresh matrix at every step. None (default) = per model (``_default_reuse``): on
+        for the full rotary plant (0.6x its time per step; no golden baseline runs it), off for the
+        lumped plants (their factorisation is cheap: the kept matrix costs more than it saves) and for
+        the full linear plant, whose golden baselines (tests/golden/) record the fresh matrix's single
+        iteration and allow 1e-9 m.
     """
 
     spectral_radius: float = 0.8
@@ -87,7 +92,7 @@ class SolverSettings:
     sparse: bool | None = None
     max_step: float | None = None
     min_step: float = 1e-9
-    reuse_jacobian: bool = False
+    reuse_jacobian: bool | None = None
 
     def __post_init__(self) -> None:
         if not 0.0 <= self.spectral_radius <= 1.0:
@@ -404,7 +409,8 @@ class DeltaPlant:
         ti.newton.useModifiedNewton = s.modified_newton
         ti.newton.relativeTolerance = s.newton_rel_tol
         ti.newton.absoluteTolerance = s.newton_abs_tol
-        if s.reuse_jacobian:
+        reuse = _default_reuse(self.kind, self.fidelity) if s.reuse_jacobian is None else s.reuse_jacobian
+        if reuse:
             ti.newton.maxModifiedNewtonIterations = REUSE_MAX_MODIFIED_ITERATIONS
         sim.solution.file.write = False
         sim.solution.sensors.active = False
@@ -424,7 +430,7 @@ class DeltaPlant:
         # with reuse_jacobian, refactorise on the next step (InitializeSolver's factorisation is of its
         # initial-acceleration system, and step() sets it when the step size changes)
         self._refactorise = [True]
-        if s.reuse_jacobian:
+        if reuse:
             self._solver.SetUserFunctionFinishStep(self.mbs, _keep_jacobian(self._refactorise))
         self._it = self._solver.it
         self._solve_steps = self._solver.SolveSteps
@@ -478,10 +484,17 @@ def _keep_jacobian(refactorise: list[bool]):
 
 def _default_sparse(kind: str, fidelity: str) -> bool:
     """Linear solver per model, the faster one measured with ``benchmarks/plant_step.py``:
-    sparse LU (pattern analysed once) for the full models (95 and 134 unknowns), Eigen's dense
-    LU for the lumped ones (9 and 48 unknowns). Exudyn's own EXUdense inverts the matrix and is
-    slower than both from ~50 unknowns on."""
+    sparse LU (pattern analysed once) for the full models (95 unknowns each; dense LU takes 1.15x
+    as long), Eigen's dense LU for the lumped ones (9 unknowns each). Exudyn's own EXUdense inverts
+    the matrix and is slower than both from ~50 unknowns on."""
     return fidelity == "full"
+
+
+def _default_reuse(kind: str, fidelity: str) -> bool:
+    """``SolverSettings.reuse_jacobian`` per model (see there): the full rotary plant keeps its Newton matrix
+    (``benchmarks/plant_step.py``: 0.34-0.37x the per-step time of 288e832, against 0.55-0.58x refactorising
+    every step); the lumped plants and the full linear plant (pinned by the golden baselines) do not."""
+    return kind == "rotary" and fidelity == "full"
 
 
 def rod_inertia(mass: float, radius: float, length: float, axis: np.ndarray) -> np.ndarray:

@@ -121,3 +121,20 @@ def test_reused_jacobian_keeps_kinematics_and_refactorises_rarely(robot, n):
           f"Newton iterations per step {plant._it.newtonStepsCount / n:.2f}")
     assert fk_err < FK_TOL, f"|p - FK(q)| = {fk_err} m >= {FK_TOL} m"
     assert factorisations <= REUSE_FACTORISATIONS, f"{factorisations} factorisations per step > {REUSE_FACTORISATIONS}"
+
+
+@pytest.mark.parametrize("robot,fidelity,kept", [(linear_delta_thesis, "full", False), (linear_delta_thesis, "lumped", False),
+                                                 (rotary_delta_prototype, "full", True), (rotary_delta_prototype, "lumped", False)],
+                         ids=["linear-full", "linear-lumped", "rotary-full", "rotary-lumped"])
+def test_default_reuse_jacobian_is_per_model(robot, fidelity, kept):
+    """SolverSettings() (reuse_jacobian=None): the full rotary plant keeps its Newton matrix; the full linear plant
+    factorises it at every step, as its golden baselines were recorded, and so do the lumped plants."""
+    n = 50
+    plant = make_plant(robot, fidelity=fidelity, p0=(0.03, -0.02, -0.45))
+    for _ in _drive(plant, n):
+        pass
+    factorisations = plant._it.newtonJacobiCount / n
+    if kept:
+        assert factorisations <= REUSE_FACTORISATIONS, f"{factorisations} factorisations per step"
+    else:
+        assert factorisations >= 1.0, f"{factorisations} factorisations per step"
