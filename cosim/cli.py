@@ -626,7 +626,7 @@ def _cmd_check(args: argparse.Namespace) -> int:
 
     n_steps = scenario.time.n_steps  # a logged run of these steps writes through a writer process (cosim.observers.mcap_log)
     _, parallel = choose(plan, scenario.parallel, n_steps,
-                         scenario.logging.enabled and n_steps >= McapRecorder.PROCESS_MIN_STEPS)
+                         scenario.logging.enabled and McapRecorder.writes_in_a_process(n_steps))
     payload = {"scenario": scenario.name, "ok": True, "preflight": report, "order": [plan.names[c] for c in plan.order],
                "connections": len(plan.links), "parallel": parallel}
     _emit(args, payload, f"{scenario.name}: ok\n  pre-flight: {report}\n  order: {order}\n"

@@ -293,7 +293,7 @@ def _run_claimed(scenario: Scenario, output, held: Extractions, options: RunOpti
               for i, n in enumerate(plan.names)]
     for s in slaves:
         ex.add_slave(s)
-    writer_process = logging_on and ex.n_steps >= McapRecorder.PROCESS_MIN_STEPS  # a writer process takes a CPU
+    writer_process = logging_on and McapRecorder.writes_in_a_process(ex.n_steps)  # a writer process takes a CPU
     ahead, note = choose(plan, scenario.parallel, ex.n_steps, writer_process)
     offload: Offload | None = None
     tracking = None

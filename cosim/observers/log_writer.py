@@ -54,7 +54,7 @@ from ..errors import STOP_SIGNALS
 
 __all__ = ["BlockLayout", "FoxgloveChannels", "encode_block", "encode_messages", "encode_samples", "row_format",
            "samples_helper",
-           "LogSink", "WriterProcess", "WriterFailed", "live_view_serving"]
+           "LogSink", "WriterProcess", "WriterFailed", "live_view_serving", "writer_forks"]
 
 
 # --------------------------------------------------------------------------- block messages
@@ -559,6 +559,11 @@ class _ForkedWriter:
                 os.kill(self.pid, signal.SIGKILL)
             except ProcessLookupError:
                 pass
+
+
+def writer_forks() -> bool:
+    """Whether a :class:`WriterProcess` made now would be a fork of this process (it then starts at once)."""
+    return _ForkedWriter.possible()
 
 
 def live_view_serving(serving: bool) -> None:

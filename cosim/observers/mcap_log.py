@@ -6,12 +6,12 @@
   serves, written by :mod:`cosim.observers.log_writer` (foxglove-sdk's MCAP writer); component channels in
   the scenario's ``logging.layout``: one message per sample (``samples``, the default) or per
   block of samples (``blocks``);
-- a run of :attr:`McapRecorder.PROCESS_MIN_STEPS` steps or more writes through a writer process
-  (:class:`cosim.observers.log_writer.WriterProcess`, started when the recorder is made, so it is ready
-  when the loop starts): the master only copies each step's values into blocks, and the child
-  encodes the JSON messages (one per sample in the ``samples`` layout), compresses and writes on
-  the other core. Shorter runs write in this process (a child would cost more to start than it
-  saves);
+- a run writes through a writer process (:class:`cosim.observers.log_writer.WriterProcess`, started when the
+  recorder is made, so it is ready when the loop starts) where the writer is a fork of the master (it starts at
+  once), else from :attr:`McapRecorder.PROCESS_MIN_STEPS` steps on (a new interpreter costs about 0.1 s of a
+  core): the master only copies each step's values into blocks, and the child encodes the JSON messages (one
+  per sample in the ``samples`` layout), compresses and writes on the other core, and keeps what it was sent
+  when the master crashes. Other runs write in this process (:meth:`McapRecorder.writes_in_a_process`);
 - metadata (scenario, versions, platform, the command line and its folder, time stamps: see
   :func:`cosim.observers.publish.time_metadata`) and attachments (the scenario file, the scenario as run with every
   override applied, :func:`cosim.engine.scenario.effective_scenario`, and each FMU's modelDescription.xml);
@@ -44,7 +44,7 @@ import orjson
 from ..engine.execution import Execution
 from ..engine.scenario import EFFECTIVE_ATTACHMENT, effective_scenario
 from ..errors import CosimError
-from .log_writer import LogSink, WriterFailed, WriterProcess, os_reason
+from .log_writer import LogSink, WriterFailed, WriterProcess, os_reason, writer_forks
 from .publish import Publisher, time_metadata
 
 __all__ = ["McapRecorder"]
@@ -89,8 +89,15 @@ class McapRecorder:
     ZSTD_LEVEL = 1
     """zstd level 1: on helix_ctc's messages faster than the default 3 and a smaller file (benchmarks/mcap_writer.py)."""
     PROCESS_MIN_STEPS = 2000
-    """Runs this long or longer write through a writer process (forked, or where it cannot be a new interpreter
-    whose start costs about 0.1 s of a core)."""
+    """Where the writer cannot be forked, runs this long or longer write through a new interpreter (its start
+    costs about 0.1 s of a core)."""
+
+    @classmethod
+    def writes_in_a_process(cls, n_steps: int) -> bool:
+        """Whether a logged run of ``n_steps`` writes through a writer process: always where the writer is a fork
+        (it starts at once; a crash of the master then loses only the rows not sent yet, where a log written in
+        the master keeps only what it flushed), else from :attr:`PROCESS_MIN_STEPS` steps on."""
+        return n_steps >= cls.PROCESS_MIN_STEPS or writer_forks()
 
     def __init__(self, path: str | Path, publisher: Publisher, scenario=None, scenario_file: str | Path | None = None,
                  flush_interval: float = 1.0, process: bool | None = None):
@@ -100,7 +107,7 @@ class McapRecorder:
         self.scenario_file = Path(scenario_file) if scenario_file else None
         self.flush_interval = flush_interval
         if process is None:
-            process = scenario is not None and _steps(scenario) >= self.PROCESS_MIN_STEPS
+            process = scenario is not None and self.writes_in_a_process(_steps(scenario))
         self._process = WriterProcess() if process else None  # now: it starts while the FMUs load
         self._sink = None
 

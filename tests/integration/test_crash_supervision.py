@@ -124,3 +124,19 @@ def test_check_kills_a_component_that_holds_the_python_lock_in_its_initializatio
     assert r.stderr.startswith("error: component 'src' in its initialization at t = 0 s made no progress"), r.stderr
     assert time.monotonic() - t0 < 30
     assert not list(tmp.glob("cosim-*")), list(tmp.glob("cosim-*"))
+
+
+def test_a_short_run_that_crashes_keeps_its_log_up_to_the_last_block_sent(write_scenario, tmp_path):
+    """A run too short to flush its log even once (0.5 s, 500 steps, a fraction of a second) writes through a
+    forked writer process, which keeps every block of samples the master sent (one per 1/30 s of simulated
+    time) when the master dies: the recovered log reaches to within a block of the crash."""
+    from cosim.observers.log_writer import writer_forks
+
+    if not writer_forks():
+        pytest.skip("the writer cannot be forked here: short runs log in the master")
+    tmp = Path(tempfile.mkdtemp(dir=tmp_path))
+    path = write_scenario(SCENARIO.format(mode=1, at=0.4, stop=0.5, extra=""))
+    out = tmp_path / "logs" / "short.mcap"
+    proc = _start(path, out, tmp)
+    _check_after(proc, out, tmp, "component 'src' in its step at t = 0.399 s crashed (SIGSEGV)", 0.4)
+    assert read_run(out).signal("g.y").t[-1] >= 0.4 - 1 / 30 - 1e-3, read_run(out).signal("g.y").t[-1]

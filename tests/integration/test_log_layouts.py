@@ -65,12 +65,20 @@ def test_default_layout_logs_one_message_per_sample_as_the_golden_logs(tmp_path)
         assert stamps == [k * 1_000_000 for k in range(51)], f"{topic}: stamps {stamps[:5]}..."
 
 
-@pytest.mark.parametrize("stop", [0.5, 2.5], ids=["in-process", "writer-process"])
-def test_both_layouts_read_back_to_identical_signals(tmp_path, stop):
-    """helix_ctc_analytic on native FMUs in both layouts (``blocks`` set as on the command line): the
-    same signals, stamps and values exactly; ``blocks`` holds blocks, valid against its schema."""
+@pytest.mark.parametrize("stop,writer", [(0.5, "in-process"), (0.5, "forked"), (2.5, "new interpreter")],
+                         ids=["in-process", "forked-writer", "exec-writer"])
+def test_both_layouts_read_back_to_identical_signals(tmp_path, stop, writer, monkeypatch):
+    """helix_ctc_analytic on native FMUs in both layouts (``blocks`` set as on the command line), written in
+    the master, by a forked writer and by a new interpreter: the same signals, stamps and values exactly;
+    ``blocks`` holds blocks, valid against its schema."""
+    from cosim.observers import log_writer
+
     steps = round(stop / 0.001)
-    assert (steps >= McapRecorder.PROCESS_MIN_STEPS) == (stop > 2), "the two cases must take both paths"
+    if writer == "forked" and not log_writer.writer_forks():
+        pytest.skip("the writer cannot be forked here")
+    if writer != "forked":  # the other two paths: no fork, then the run's length decides
+        monkeypatch.setattr(log_writer._ForkedWriter, "possible", classmethod(lambda cls: False))
+    assert McapRecorder.writes_in_a_process(steps) == (writer != "in-process"), "each case takes its path"
     scenario = str(ROOT / "scenarios" / "helix_ctc_analytic.yaml")
     logs = {}
     for layout in ("samples", "blocks"):
