@@ -41,6 +41,7 @@ import sys
 import threading
 import time
 import traceback
+import warnings
 from dataclasses import dataclass, field
 from functools import partial
 from itertools import accumulate, repeat
@@ -510,7 +511,9 @@ class _ForkedWriter:
     def start(cls) -> "_ForkedWriter":
         pipes = [os.pipe() for _ in range(3)]  # (read, write) of the child's stdin, stdout, stderr
         keep = (pipes[0][0], pipes[1][1], pipes[2][1])
-        pid = os.fork()
+        with warnings.catch_warnings():  # Python >= 3.12 warns of any other OS thread (OpenBLAS' idle pool here):
+            warnings.simplefilter("ignore", DeprecationWarning)  # the child calls none of them (see the class)
+            pid = os.fork()
         if pid == 0:  # the child: never returns
             code = 1
             try:
