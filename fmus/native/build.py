@@ -27,9 +27,10 @@ import shutil
 import subprocess
 import tempfile
 import zipfile
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from functools import lru_cache
 from pathlib import Path
+from typing import Any
 
 from .errors import CompilerMissingError, NativeError
 from .interface import Interface, interface, model_description
@@ -138,7 +139,8 @@ def _c_string(text: str) -> str:
     return json.dumps(text)
 
 
-def _model_c(model: NativeModel, itf: Interface, token: str, functions: list[_Function]) -> str:
+def _model_c(model: NativeModel, itf: Interface, token: str, functions: list[_Function], constants: Any,
+             params: list[int]) -> str:
     causality = {"parameter": "CAUSALITY_PARAMETER", "input": "CAUSALITY_INPUT", "output": "CAUSALITY_OUTPUT",
                  "local": "CAUSALITY_LOCAL", "independent": "CAUSALITY_INDEPENDENT"}
     variability = {"constant": "VARIABILITY_CONSTANT", "fixed": "VARIABILITY_FIXED", "tunable": "VARIABILITY_TUNABLE",
@@ -175,6 +177,30 @@ def _model_c(model: NativeModel, itf: Interface, token: str, functions: list[_Fu
         f"const int MODEL_ME_ADVANCES = {1 if model.me_advances else 0};",
         f"const int MODEL_ME_ACCEPTS = {1 if model.me_accepts else 0};",
         f"const double MODEL_DEFAULT_EXPERIMENT[3] = {{{', '.join(repr(float(x)) for x in itf.experiment)}}};",
+        f"const size_t MODEL_N_SCRATCH = {1 + len(params) + constants.nnz_out(0)};",
+        "",
+        "/* The constants (what depends on parameters only), kept after the variables (MODEL_N_SCRATCH): a flag, the",
+        "   parameter values they were computed from, the constants; computed again when a parameter differs. */",
+        f"static const size_t PARAMETER_VRS[] = {{{', '.join(map(str, params)) or '0'}}};",
+        "static const double *constants(double *values) {",
+        "    double *scratch = values + MODEL_N_VARIABLES + 1, *known = scratch + 1;",
+        f"    double *k = known + {len(params)};",
+        "    const casadi_real *arg[1];",
+        "    casadi_real *res[1];",
+        f"    casadi_int iw[{max(constants.sz_iw(), 1)}];",
+        f"    casadi_real w[{max(constants.sz_w(), 1)}];",
+        "    size_t i;",
+        "    int same = scratch[0] != 0.0;",
+        f"    for (i = 0; same && i < {len(params)}; i++)",
+        "        same = memcmp(&known[i], &values[PARAMETER_VRS[i]], sizeof(double)) == 0;",
+        "    if (same) return k;",
+        "    arg[0] = values; res[0] = k;",
+        f"    if ({itf.name}_constants(arg, res, iw, w, 0)) return k;",
+        f"    for (i = 0; i < {len(params)}; i++) known[i] = values[PARAMETER_VRS[i]];",
+        "    scratch[0] = 1.0;",
+        "    (void)PARAMETER_VRS;",
+        "    return k;",
+        "}",
     ]
     if checks:
         lines += [
@@ -212,13 +238,13 @@ def _model_c(model: NativeModel, itf: Interface, token: str, functions: list[_Fu
             f"    casadi_real w[{max(f.n_w, 1)}];",
             "    double h_arg = " + ("h" if f.name == "advance" else "0.0") + ";",
             "    double state_arg[" + str(max(model.n_state, 1)) + "] = {0.0};",
-            "    const casadi_real *arg[4];",
+            "    const casadi_real *arg[5];",
             "    casadi_real *res[4];",
             "    size_t k;",
             "    int failed;",
             "    (void)sets; (void)k; (void)first_value; (void)failed;",
             f"    memcpy(state_arg, state, sizeof(double) * {model.n_state});" if model.n_state else "    (void)state;",
-            "    arg[0] = &time; arg[1] = &h_arg; arg[2] = values; arg[3] = state_arg;",
+            "    arg[0] = &time; arg[1] = &h_arg; arg[2] = values; arg[3] = state_arg; arg[4] = constants(values);",
             "    res[0] = out; res[1] = new_state; res[2] = ok; res[3] = details;",
             f"    if ({fn}(arg, res, iw, w, 0)) return -1;",
         ]
@@ -251,13 +277,43 @@ def generate(name: str, out: Path, token: str) -> tuple[Interface, list[str]]:
     model = native_model(name)
     itf = interface(name, model)
     traced = [_trace(model, itf, which) for which in _FUNCTIONS]
+    functions, constants, params = _hoisted(itf, traced)
     gen = ca.CodeGenerator("model_functions.c", {"with_header": True, "casadi_real": "double",
                                                  "casadi_int": "long long int"})
-    for fn, _ in traced:
+    for fn in (constants, *(fn for fn, _ in functions)):
         gen.add(fn)
     gen.generate(str(out) + os.sep)
-    (out / "model.c").write_text(_model_c(model, itf, token, [f for _, f in traced]))
+    (out / "model.c").write_text(_model_c(model, itf, token, [f for _, f in functions], constants, params))
     return itf, ["model_functions.c", "model.c"]
+
+
+def _hoisted(itf: Interface, traced: list) -> tuple[list, Any, list[int]]:
+    """The traced functions with what depends on parameters only taken out of them (``casadi.extract_parametric``
+    over all of them at once): ``(functions taking the constants as a fifth input, the constants function of the
+    values, the parameters' value references)``. The generated glue computes the constants when the parameters
+    change (:func:`_model_c`), not at every call: the leg angles' cosines, the mass lumps, the geometry's squares.
+    The same operations on the same numbers, so the same results."""
+    import casadi as ca
+
+    n_state = traced[0][0].size1_in(3)
+    t, h = ca.SX.sym("t"), ca.SX.sym("h")
+    values, state = ca.SX.sym("v", len(itf.variables)), ca.SX.sym("s", n_state)
+    params = [v.vr for v in itf.variables if v.causality == "parameter"]
+    outs = [fn.call([t, h, values, state]) for fn, _ in traced]
+    flat = ca.vertcat(*[o for os_ in outs for o in os_])
+    expr, syms, parametric = ca.extract_parametric(flat, ca.vertcat(*[values[i] for i in params]))
+    k = ca.vertcat(*syms) if len(syms) else ca.SX.sym("k", 0)
+    constants = ca.Function(f"{itf.name}_constants", [values], [ca.vertcat(*parametric) if len(parametric) else
+                                                                ca.SX(0, 1)], {"cse": True})
+    functions, at = [], 0
+    for (fn, f), os_ in zip(traced, outs):
+        parts = []
+        for o in os_:
+            parts.append(ca.reshape(expr[at:at + o.numel()], o.size1(), o.size2()))
+            at += o.numel()
+        hoisted = ca.Function(fn.name(), [t, h, values, state, k], parts, {"cse": True})
+        functions.append((hoisted, replace(f, n_w=hoisted.sz_w(), n_iw=hoisted.sz_iw())))
+    return functions, constants, params
 
 
 # ----------------------------------------------------------------------------- FMU assembly

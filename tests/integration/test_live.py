@@ -319,6 +319,8 @@ def test_a_hundred_viewers_do_not_change_the_run(tmp_path):
     finally:
         stop.set()
         proc.kill()
+        for t in threads:  # none left behind: a later run in this process forks its log writer only without threads
+            t.join(timeout=20)
     wall = time.monotonic() - t0
     assert proc.returncode == 0 and "Traceback" not in err, err
     assert wall < stop_s + 40, f"{wall:.1f} s for a {stop_s} s run at wall-clock pace"

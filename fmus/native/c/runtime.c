@@ -105,7 +105,7 @@ Instance *rt_new(size_t size, const char *name, int is_me, const char *const *ty
     inst->log = log;
     inst->is_me = is_me;
     inst->type_names = type_names;
-    inst->values = (double *)alloc(MODEL_N_VARIABLES + 1, sizeof(double));
+    inst->values = (double *)alloc(MODEL_N_VARIABLES + 1 + MODEL_N_SCRATCH, sizeof(double));
     inst->state = (double *)alloc(MODEL_N_STATES + 1, sizeof(double));
     inst->name = (char *)alloc(strlen(name) + 1, 1);
     if (!inst->values || !inst->state || !inst->name) {
@@ -113,6 +113,7 @@ Instance *rt_new(size_t size, const char *name, int is_me, const char *const *ty
         return NULL;
     }
     strcpy(inst->name, name);
+    memset(inst->values + MODEL_N_VARIABLES, 0, (1 + MODEL_N_SCRATCH) * sizeof(double));  /* no constants yet */
     rt_reset(inst);
     return inst;
 }
