@@ -233,3 +233,25 @@ def test_run_loaded_case_contains_a_crash_in_the_calling_process(test_fmus, tmp_
     assert row["status"] == "failed" and row["message"] == "component 'src' in its step at t = 0.004 s crashed " \
         "(SIGABRT)", row
     assert run_loaded_case(load_scenario(scenario), {})["status"] == "ok"
+
+
+def test_a_case_whose_fmu_holds_the_python_lock_is_killed_and_named(test_fmus, tmp_path):
+    """A case whose FMU blocks in C with the Python lock held (the case's own watchdog thread cannot run): its
+    supervised process is killed after the watchdog's budget and a grace, the row is failed naming the component,
+    its call and the time, and the caller goes on."""
+    import time
+
+    from cosim.analysis.sweep import run_loaded_case
+    from cosim.engine.scenario import load_scenario
+
+    scenario = tmp_path / "held.yaml"
+    scenario.write_text(CRASH.format(crash=test_fmus["CosimTCrash"], gain=test_fmus["CosimTGain"]))
+    t0 = time.monotonic()
+    row = run_loaded_case(load_scenario(scenario, {("components", "src", "parameters", "mode"): 4,
+                                                   ("components", "src", "parameters", "hold"): 60,
+                                                   ("watchdog_s",): 1.0}), {})
+    assert row["status"] == "failed", row
+    assert row["message"].startswith("component 'src' in its step at t = 0.004 s made no progress for ") and \
+        "could not be stopped from inside: killed" in row["message"], row
+    assert time.monotonic() - t0 < 30, f"{time.monotonic() - t0:.1f} s for a case stalled 60 s"
+    assert run_loaded_case(load_scenario(scenario), {})["status"] == "ok"
