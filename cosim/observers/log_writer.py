@@ -31,6 +31,7 @@ import ctypes
 import errno
 import fcntl
 import logging
+import mmap
 import os
 import pickle
 import re
@@ -55,7 +56,7 @@ from ..errors import STOP_SIGNALS
 
 __all__ = ["BlockLayout", "FoxgloveChannels", "encode_block", "encode_messages", "encode_samples", "row_format",
            "samples_helper",
-           "LogSink", "WriterProcess", "WriterFailed", "live_view_serving", "writer_forks"]
+           "LogSink", "RowMirror", "WriterProcess", "WriterFailed", "live_view_serving", "writer_forks"]
 
 
 # --------------------------------------------------------------------------- block messages
@@ -511,6 +512,7 @@ class _ForkedWriter:
     def start(cls) -> "_ForkedWriter":
         pipes = [os.pipe() for _ in range(3)]  # (read, write) of the child's stdin, stdout, stderr
         keep = (pipes[0][0], pipes[1][1], pipes[2][1])
+        shared = mmap.mmap(-1, RowMirror.BYTES)  # anonymous, shared with the child across the fork
         with warnings.catch_warnings():  # Python >= 3.12 warns of any other OS thread (OpenBLAS' idle pool here):
             warnings.simplefilter("ignore", DeprecationWarning)  # the child calls none of them (see the class)
             pid = os.fork()
@@ -525,7 +527,7 @@ class _ForkedWriter:
                 os.closerange(3, _max_fd())
                 import foxglove  # noqa: F401  # lazy: the master's --help loads this module without it
 
-                code = _serve(os.fdopen(0, "rb"), os.fdopen(1, "wb", buffering=0))
+                code = _serve(os.fdopen(0, "rb"), os.fdopen(1, "wb", buffering=0), shared)
             except BaseException:  # noqa: BLE001 - said on the stderr pipe, read by WriterProcess._reason
                 try:
                     os.write(2, traceback.format_exc().encode(errors="replace"))
@@ -535,10 +537,11 @@ class _ForkedWriter:
                 os._exit(code)
         for fd in keep:
             os.close(fd)
-        return cls(pid, pipes[0][1], pipes[1][0], pipes[2][0])
+        return cls(pid, pipes[0][1], pipes[1][0], pipes[2][0], shared)
 
-    def __init__(self, pid: int, stdin: int, stdout: int, stderr: int) -> None:
+    def __init__(self, pid: int, stdin: int, stdout: int, stderr: int, shared: mmap.mmap | None = None) -> None:
         self.pid = pid
+        self.shared = shared
         self.stdin = os.fdopen(stdin, "wb", buffering=0)
         self.stdout = os.fdopen(stdout, "rb")
         self.stderr = os.fdopen(stderr, "rb")
@@ -562,6 +565,54 @@ class _ForkedWriter:
                 os.kill(self.pid, signal.SIGKILL)
             except ProcessLookupError:
                 pass
+
+
+class RowMirror:
+    """The joint rows of a run (:class:`cosim.observers.publish._Joint`: every logged component's values of one
+    step, the common case) that the master has not sent to its forked writer yet, copied into memory the writer
+    shares (made before the fork): if the master dies inside an FMU, the writer writes them after the last block it
+    received, and the recovered log reaches the last step the master completed, not the last block it sent.
+
+    Layout: the row count (u64, written after its row, so a counted row is complete), then ``cap`` stamps (i64),
+    then ``cap`` rows of ``width`` bytes. The publisher flushes before ``cap`` rows (its block's rows) are pending.
+    """
+
+    BYTES = 4 << 20
+
+    def __init__(self, shared: mmap.mmap, width: int, cap: int) -> None:
+        self._shared, self._width, self._rows = shared, width, 8 + 8 * cap
+        self._count = 0
+        self._pack = struct.Struct("<q").pack_into
+        self._pack_count = struct.Struct("<Q").pack_into
+
+    @classmethod
+    def fits(cls, width: int, cap: int) -> bool:
+        return 8 + cap * (8 + width) <= cls.BYTES
+
+    def put(self, stamp: int, row: bytes) -> None:
+        i, w = self._count, self._width
+        self._pack(self._shared, 8 + 8 * i, stamp)
+        at = self._rows + i * w
+        self._shared[at:at + w] = row
+        self._count = i + 1
+        self._pack_count(self._shared, 0, i + 1)
+
+    def sent(self) -> None:
+        """The rows so far reached the writer (the pipe holds them): start again."""
+        self._count = 0
+        self._pack_count(self._shared, 0, 0)
+
+    @staticmethod
+    def unsent(shared: mmap.mmap, parts: list, width: int, cap: int, after: int) -> list:
+        """The blocks (as :meth:`LogSink.blocks` takes them) of the counted rows whose stamps are later than
+        ``after``; ``parts``: per joint channel (cid, byte offset in the row, bytes)."""
+        n = min(struct.unpack_from("<Q", shared, 0)[0], cap)
+        stamps = list(struct.unpack_from(f"<{n}q", shared, 8))
+        first = next((i for i, t in enumerate(stamps) if t > after), n)
+        if first == n:
+            return []
+        rows = bytes(shared[8 + 8 * cap + first * width:8 + 8 * cap + n * width])
+        return [(cid, stamps[first:], rows, (at, width - at - size)) for cid, at, size in parts]
 
 
 def writer_forks() -> bool:
@@ -645,6 +696,16 @@ class WriterProcess:
     def open(self, path: str | Path, chunk_size: int, zstd_level: int) -> None:
         self._send("open", str(path), chunk_size, zstd_level)
 
+    def mirror(self, parts: list, width: int, cap: int, offset_ns: int) -> RowMirror | None:
+        """A :class:`RowMirror` for the run's joint rows (``parts``: per channel (cid, byte offset, bytes) in a row of
+        ``width`` bytes; at most ``cap`` rows pending; ``offset_ns``: the publisher's log-time offset), or None when
+        this writer shares no memory with the master (a new interpreter) or the rows do not fit."""
+        shared = getattr(self._proc, "shared", None)
+        if shared is None or not RowMirror.fits(width, cap):
+            return None
+        self._send("mirror", list(parts), width, cap, offset_ns)
+        return RowMirror(shared, width, cap)
+
     def channel(self, *args) -> None:
         self._send("channel", *args)
 
@@ -700,16 +761,26 @@ def _read_exactly(stream, n: int) -> bytes | None:
     return data
 
 
-def _serve(inp, out) -> int:
+def _serve(inp, out, shared=None) -> int:
     """The child's loop: calls from the master until ``finish`` (exit 0, ``ok``) or the end of the pipe
-    (the master died: the file is left unfinished). A failure is one line ``error: reason``, exit 1."""
+    (the master died: the file is left unfinished). A failure is one line ``error: reason``, exit 1.
+
+    ``shared``: the memory a forked child shares with its master (:class:`RowMirror`); when the master dies, the
+    rows it had not sent yet are read from there and written too (those not already received), so the log reaches
+    the last step the master completed."""
     sink: LogSink | None = None
+    mirror = None  # the layout the master declared (op "mirror")
+    last_joint = -1  # the last stamp of the joint rows received through the pipe
     try:
         while True:
             head = _read_exactly(inp, _FRAME.size)
             payload = None if head is None else _read_exactly(inp, _FRAME.unpack(head)[0])
             if payload is None:  # the master is gone: leave the file unfinished, as a killed writer would
                 if sink is not None:
+                    if shared is not None and mirror is not None:
+                        blocks = RowMirror.unsent(shared, *mirror[:3], after=last_joint)
+                        if blocks:
+                            sink.blocks(mirror[3], blocks)
                     sink.flush()
                 os._exit(0)  # now, the writer still referenced: collecting it would finish the file
             op, args = pickle.loads(payload)
@@ -720,7 +791,13 @@ def _serve(inp, out) -> int:
                 out.write(_SUCCESS)
                 out.flush()
                 return 0
+            elif op == "mirror":
+                mirror = args
             else:
+                if op == "blocks" and mirror is not None:
+                    joint = [stamps for _, stamps, _, skip in args[1] if skip is not None and stamps]
+                    if joint:
+                        last_joint = joint[0][-1]
                 getattr(sink, op)(*args)
     except OSError as exc:
         out.write(f"error: {os_reason(exc)}\n".encode())

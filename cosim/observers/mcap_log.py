@@ -66,6 +66,17 @@ class _Checked:
     def message(self, *args) -> None:
         self._call(self._sink.message, args)
 
+    def mirror(self, *args):
+        """The writer's :class:`cosim.observers.log_writer.RowMirror` of the joint rows, or None (a log in this
+        process, or a writer that shares no memory with it)."""
+        make = getattr(self._sink, "mirror", None)
+        if make is None:
+            return None
+        try:
+            return make(*args)
+        except (OSError, WriterFailed) as exc:
+            raise self._recorder._failure(exc) from None
+
     def _call(self, f, args) -> None:
         try:
             f(*args)

@@ -440,6 +440,7 @@ class Publisher:
         self.reference_signals = list(reference_signals) if reference_signals else None
         self.offset_ns: int | None = None
         self._sinks: list[Any] = []
+        self._mirrors: list[Any] = []
         self._pending: list[_Rows] = []
         self._n = 0  # steps with samples not handed over
 
@@ -477,6 +478,8 @@ class Publisher:
         blocks += [rows.take() for rows in self._pending if rows.stamps]
         for sink in self._sinks:
             sink.blocks(self.offset_ns, blocks)
+        for m in self._mirrors:  # sent: down the pipe
+            m.sent()
 
     # -- observer protocol
     def start(self, rt: Execution) -> None:
@@ -533,9 +536,18 @@ class Publisher:
             self._joint = _Joint([self._rows_of[c] for c in logged], self.BLOCK_BYTES)
             self._cap = min(self._cap, self._joint.cap)
         self._n = 0
+        self._mirrors = []  # the writers' copies of the joint rows not sent yet (a crash of this process keeps them)
         if self._joint is not None:
-            self._joint.data.append(self._joint.capture())
+            for sink in self._sinks:
+                mirror = getattr(sink, "mirror", None)
+                made = mirror(self._joint.parts, self._joint.width, self._cap, self.offset_ns) if mirror else None
+                if made is not None:
+                    self._mirrors.append(made)
+            row = self._joint.capture()
+            self._joint.data.append(row)
             self._joint.stamps.append(rt.start_ns)
+            for m in self._mirrors:
+                m.put(rt.start_ns, row)
             self._n = 1
         else:
             for entry in self._by_comp:
@@ -583,8 +595,11 @@ class Publisher:
     def stepped(self, k: int, t_ns: int, active: Sequence[int]) -> None:
         joint = self._joint
         if joint is not None and self._rt.t_end_ns is None:  # every logged component stepped, to t_ns
-            joint.data.append(joint.capture())
+            row = joint.capture()
+            joint.data.append(row)
             joint.stamps.append(t_ns)
+            for m in self._mirrors:
+                m.put(t_ns, row)
         else:
             if joint is not None:  # the last step of a run an FMU ended: some components only
                 self.flush()
