@@ -347,7 +347,28 @@ Status core_after_set(Instance *in, const char *fn, const VarInfo *v, const void
 /* The current numbers (they follow structural parameters until initialisation ends). */
 size_t core_n_states(const Instance *in)
 {
-    return MODEL.n_states ? MODEL.n_states(in->data) : 0;
+    return MODEL.n_states ? MODEL.n_states(in->data) : MODEL.n_fixed_states;
+}
+
+/* The model's continuous states out of (get) or into (set) its data: its functions, else its fixed states. */
+static void model_get_states(const Instance *in, double *x)
+{
+    if (MODEL.get_states) {
+        MODEL.get_states(in->data, x);
+        return;
+    }
+    for (size_t i = 0; i < MODEL.n_fixed_states; i++)
+        memcpy(&x[i], (const char *)in->data + MODEL.state_offsets[i], sizeof(double));
+}
+
+static void model_set_states(Instance *in, const double *x)
+{
+    if (MODEL.set_states) {
+        MODEL.set_states(in->data, x);
+        return;
+    }
+    for (size_t i = 0; i < MODEL.n_fixed_states; i++)
+        memcpy((char *)in->data + MODEL.state_offsets[i], &x[i], sizeof(double));
 }
 
 size_t core_n_indicators(const Instance *in)
@@ -371,11 +392,11 @@ Status core_states(Instance *in, const char *fn, double *x, size_t n, bool set)
     if (n != nx) return core_fail(in, fn, "nx = %zu but the model has %zu continuous states", n, nx);
     if (n == 0) return ST_OK;
     if (set) {
-        MODEL.set_states(in->data, x);
+        model_set_states(in, x);
         in->dirty = true;
     } else {
         core_update(in);
-        MODEL.get_states(in->data, x);
+        model_get_states(in, x);
     }
     return ST_OK;
 }
@@ -400,7 +421,10 @@ Status core_nominals(Instance *in, const char *fn, double *nominal, size_t n)
 {
     size_t nx = core_n_states(in);
     if (n != nx) return core_fail(in, fn, "nx = %zu but the model has %zu continuous states", n, nx);
-    if (n) MODEL.nominals(in->data, nominal);
+    if (n && MODEL.nominals)
+        MODEL.nominals(in->data, nominal);
+    else
+        for (size_t i = 0; i < n; i++) nominal[i] = 1.0;
     return ST_OK;
 }
 
@@ -424,19 +448,19 @@ static void rk4(Instance *in, double t, double dt, double *x_out)
     const double *x0 = in->x_start;
     size_t i;
 
-    MODEL.set_states(in->data, x0);
+    model_set_states(in, x0);
     MODEL.derivatives(in->data, t, k1);
     for (i = 0; i < n; i++) tmp[i] = x0[i] + 0.5 * dt * k1[i];
-    MODEL.set_states(in->data, tmp);
+    model_set_states(in, tmp);
     MODEL.derivatives(in->data, t + 0.5 * dt, k2);
     for (i = 0; i < n; i++) tmp[i] = x0[i] + 0.5 * dt * k2[i];
-    MODEL.set_states(in->data, tmp);
+    model_set_states(in, tmp);
     MODEL.derivatives(in->data, t + 0.5 * dt, k3);
     for (i = 0; i < n; i++) tmp[i] = x0[i] + dt * k3[i];
-    MODEL.set_states(in->data, tmp);
+    model_set_states(in, tmp);
     MODEL.derivatives(in->data, t + dt, k4);
     for (i = 0; i < n; i++) x_out[i] = x0[i] + dt / 6.0 * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i]);
-    MODEL.set_states(in->data, x_out);
+    model_set_states(in, x_out);
 }
 
 /* Whether some event indicator changed sign (or reached zero) between
@@ -463,7 +487,7 @@ static bool advance(Instance *in, double dt)
         in->time = t0 + dt;
         return false;
     }
-    MODEL.get_states(in->data, in->x_start);
+    model_get_states(in, in->x_start);
     if (in->nz) MODEL.indicators(in->data, t0, in->z_start);
     rk4(in, t0, dt, in->x);
     if (!crossed(in, t0 + dt)) {
@@ -481,7 +505,7 @@ static bool advance(Instance *in, double dt)
             lo = mid;
         }
     }
-    MODEL.set_states(in->data, in->x);
+    model_set_states(in, in->x);
     in->time = t0 + hi;
     return true;
 }

@@ -17,6 +17,8 @@
 #include <stddef.h>
 #include <stdint.h>
 
+#define MODEL_MAX_FIXED_STATES 4
+
 /* Same numbering as fmi2Status and fmi3Status. */
 typedef enum { ST_OK = 0, ST_WARNING = 1, ST_DISCARD = 2, ST_ERROR = 3, ST_FATAL = 4 } Status;
 
@@ -106,11 +108,15 @@ typedef struct {
     bool (*resize)(void *d);
     /* Compute the calculated start values (states from parameters) at time t. */
     void (*initialize)(void *d, double t);
-    size_t (*n_states)(const void *d);      /* NULL: no continuous states */
+    size_t (*n_states)(const void *d);      /* NULL: the fixed states below, if any */
     size_t (*n_indicators)(const void *d);  /* NULL: no event indicators */
-    void (*get_states)(const void *d, double *x);
-    void (*set_states)(void *d, const double *x);
-    void (*nominals)(const void *d, double *nominal);
+    void (*get_states)(const void *d, double *x);      /* NULL: the fixed states below */
+    void (*set_states)(void *d, const double *x);      /* NULL: the fixed states below */
+    void (*nominals)(const void *d, double *nominal);  /* NULL: every nominal 1 */
+    /* A model with a fixed number of continuous states, each a double of its data, gives their
+       offsets (offsetof(ModelData, x)) instead of the four functions above. */
+    size_t n_fixed_states;
+    size_t state_offsets[MODEL_MAX_FIXED_STATES];
     void (*derivatives)(const void *d, double t, double *dx);
     void (*indicators)(const void *d, double t, double *z);
     /* Bring every output and exposed local up to date with states, time and inputs. */

@@ -41,37 +41,10 @@ static void initialize(void *p, double t)
     d->resting = false;
 }
 
-static size_t n_states(const void *p)
-{
-    (void)p;
-    return 2;
-}
-
 static size_t n_indicators(const void *p)
 {
     (void)p;
     return 1;
-}
-
-static void get_states(const void *p, double *x)
-{
-    const ModelData *d = p;
-    x[0] = d->h;
-    x[1] = d->v;
-}
-
-static void set_states(void *p, const double *x)
-{
-    ModelData *d = p;
-    d->h = x[0];
-    d->v = x[1];
-}
-
-static void nominals(const void *p, double *nominal)
-{
-    (void)p;
-    nominal[0] = 1.0;
-    nominal[1] = 1.0;
 }
 
 static void derivatives(const void *p, double t, double *dx)
@@ -115,13 +88,11 @@ static void event(void *p, double t, EventUpdate *ev)
 
 const ModelClass MODEL = {
     .data_size = sizeof(ModelData),
+    .n_fixed_states = 2,
+    .state_offsets = {offsetof(ModelData, h), offsetof(ModelData, v)},
     .defaults = defaults,
     .initialize = initialize,
-    .n_states = n_states,
     .n_indicators = n_indicators,
-    .get_states = get_states,
-    .set_states = set_states,
-    .nominals = nominals,
     .derivatives = derivatives,
     .indicators = indicators,
     .outputs = outputs,

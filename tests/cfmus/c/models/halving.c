@@ -35,28 +35,6 @@ static void initialize(void *p, double t)
     (void)t;
 }
 
-static size_t n_states(const void *p)
-{
-    (void)p;
-    return 1;
-}
-
-static void get_states(const void *p, double *x)
-{
-    x[0] = ((const ModelData *)p)->x;
-}
-
-static void set_states(void *p, const double *x)
-{
-    ((ModelData *)p)->x = x[0];
-}
-
-static void nominals(const void *p, double *nominal)
-{
-    (void)p;
-    nominal[0] = 1.0;
-}
-
 static void derivatives(const void *p, double t, double *dx)
 {
     const ModelData *d = p;
@@ -90,12 +68,10 @@ static void event(void *p, double t, EventUpdate *ev)
 
 const ModelClass MODEL = {
     .data_size = sizeof(ModelData),
+    .n_fixed_states = 1,
+    .state_offsets = {offsetof(ModelData, x)},
     .defaults = defaults,
     .initialize = initialize,
-    .n_states = n_states,
-    .get_states = get_states,
-    .set_states = set_states,
-    .nominals = nominals,
     .derivatives = derivatives,
     .outputs = outputs,
     .event = event,

@@ -29,28 +29,6 @@ static void initialize(void *p, double t)
     ((ModelData *)p)->t_reached = t;
 }
 
-static size_t n_states(const void *p)
-{
-    (void)p;
-    return 1;
-}
-
-static void get_states(const void *p, double *x)
-{
-    x[0] = ((const ModelData *)p)->x;
-}
-
-static void set_states(void *p, const double *x)
-{
-    ((ModelData *)p)->x = x[0];
-}
-
-static void nominals(const void *p, double *nominal)
-{
-    (void)p;
-    nominal[0] = 1.0;
-}
-
 static void derivatives(const void *p, double t, double *dx)
 {
     (void)p;
@@ -67,12 +45,10 @@ static void outputs(void *p, double t)
 
 const ModelClass MODEL = {
     .data_size = sizeof(ModelData),
+    .n_fixed_states = 1,
+    .state_offsets = {offsetof(ModelData, x)},
     .defaults = defaults,
     .initialize = initialize,
-    .n_states = n_states,
-    .get_states = get_states,
-    .set_states = set_states,
-    .nominals = nominals,
     .derivatives = derivatives,
     .outputs = outputs,
     .strict_stop_time = true,

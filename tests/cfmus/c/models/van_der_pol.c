@@ -26,26 +26,6 @@ static void initialize(void *p, double t)
     (void)t;
 }
 
-static size_t n_states(const void *p)
-{
-    (void)p;
-    return 2;
-}
-
-static void get_states(const void *p, double *x)
-{
-    const ModelData *d = p;
-    x[0] = d->x0;
-    x[1] = d->x1;
-}
-
-static void set_states(void *p, const double *x)
-{
-    ModelData *d = p;
-    d->x0 = x[0];
-    d->x1 = x[1];
-}
-
 static void nominals(const void *p, double *nominal)
 {
     (void)p;
@@ -72,11 +52,10 @@ static void outputs(void *p, double t)
 
 const ModelClass MODEL = {
     .data_size = sizeof(ModelData),
+    .n_fixed_states = 2,
+    .state_offsets = {offsetof(ModelData, x0), offsetof(ModelData, x1)},
     .defaults = defaults,
     .initialize = initialize,
-    .n_states = n_states,
-    .get_states = get_states,
-    .set_states = set_states,
     .nominals = nominals,
     .derivatives = derivatives,
     .outputs = outputs,
