@@ -73,7 +73,8 @@ from ..engine.names import ref, safe_stem
 from ..engine.prepare import input_files, prepare
 from ..engine.scenario import Component, apply_overrides, load_scenario, scenario_from_data
 from ..engine.wiring import index_text
-from ..errors import Issue, ScenarioError
+from ..errors import CosimError, Issue, ScenarioError
+from ..fmi.description import FMUInfo, load_fmu
 from ..fmi.extract import MAX_FMU_BYTES, SSP_PREFIX, sweep_orphans
 from .output import check_output
 
@@ -605,7 +606,7 @@ def _bindings(el: ET.Element, zf: zipfile.ZipFile, ssp: Path, comp: str, units: 
 
 
 def _system_bindings(system: ET.Element, zf: zipfile.ZipFile, ssp: Path, components: dict[str, dict[str, Any]],
-                     units: dict[str, tuple], descriptions: dict[str, Any]) -> None:
+                     units: dict[str, tuple]) -> None:
     """Apply the system's own parameter bindings to the components they name (SSP 1.0: a parameter of a
     system-level set is named ``Component.parameter``; the longest component name that fits is taken, so
     names with dots need no quoting here). They come after the components' own bindings and win over them.
@@ -617,25 +618,21 @@ def _system_bindings(system: ET.Element, zf: zipfile.ZipFile, ssp: Path, compone
             raise SspError(ssp, f"{file}: parameter {name!r} of a system-level binding names no component "
                                 f"(expected Component.parameter; components: {', '.join(components)})")
         var = name[len(comp) + 1:]
-        if var not in _description(comp, components, descriptions, ssp)[1]:
+        if var not in _description(comp, components, ssp).variables:
             raise SspError(ssp, f"{file}: parameter {name!r}: component {comp!r} has no variable {var!r}")
         components[comp].setdefault("parameters", {})[var] = value
 
 
-def _description(comp: str, components: dict[str, dict[str, Any]], descriptions: dict[str, Any], ssp: Path):
-    """(model description, variables by name) of a component's FMU, read once."""
-    import fmpy  # lazy: --help loads this module without it
-
-    if comp not in descriptions:
-        try:
-            md = fmpy.read_model_description(components[comp]["path"], validate=False)
-        except Exception as exc:  # noqa: BLE001 - a broken FMU, named
-            raise SspError(ssp, f"component {comp!r}: cannot read the FMU's modelDescription.xml ({exc})") from None
-        descriptions[comp] = (md, {v.name: v for v in md.modelVariables})
-    return descriptions[comp]
+def _description(comp: str, components: dict[str, dict[str, Any]], ssp: Path) -> FMUInfo:
+    """A component's FMU as the run will read it (:func:`cosim.fmi.load_fmu`: checked, read once per file and
+    process, so the run's own preparation reuses it)."""
+    try:
+        return load_fmu(components[comp]["path"])
+    except CosimError as exc:
+        raise SspError(ssp, f"component {comp!r}: {exc}") from None
 
 
-def _convert_units(components: dict[str, dict[str, Any]], ssp: Path, descriptions: dict[str, Any]) -> None:
+def _convert_units(components: dict[str, dict[str, Any]], ssp: Path) -> None:
     """Every parameter value given with a unit (:class:`_Quantity`) in the unit of the FMU variable it is bound to
     (SSP 1.0: the value in SI is ``factor * value + offset`` of its unit's BaseUnit, then back through the
     variable's unit definition in the FMU). The same unit, or a variable without a unit: the number as given.
@@ -645,13 +642,13 @@ def _convert_units(components: dict[str, dict[str, Any]], ssp: Path, description
         for var, q in list(params.items()):
             if not isinstance(q, _Quantity):
                 continue
-            md, variables = _description(comp, components, descriptions, ssp)
-            v = variables.get(var)
-            unit = None if v is None else (v.unit or getattr(v.declaredType, "unit", None))
+            info = _description(comp, components, ssp)
+            v = info.variables.get(var)
+            unit = None if v is None else v.unit
             if not unit or unit == q.unit:  # no variable (named later) or nothing to convert
                 params[var] = q.value
                 continue
-            target = next((u.baseUnit for u in md.unitDefinitions or [] if u.name == unit), None)
+            target = next((u.baseUnit for u in info.md.unitDefinitions or [] if u.name == unit), None)
             if q.base is None:
                 raise SspError(ssp, f"{q.where}: unit {q.unit!r} is defined in neither the parameter set's ssv:Units "
                                     f"nor the SSD's ssd:Units: cannot convert it to {comp}.{var}'s unit {unit!r}")
@@ -833,9 +830,8 @@ def read_ssp(ssp: str | Path, workdir: str | Path) -> dict[str, Any]:
             components[name] = comp
         if not components:
             raise SspError(ssp, f"{SSD_NAME}: the system has no components")
-        descriptions: dict[str, Any] = {}
-        _system_bindings(system, zf, ssp, components, ssd_units, descriptions)
-        _convert_units(components, ssp, descriptions)
+        _system_bindings(system, zf, ssp, components, ssd_units)
+        _convert_units(components, ssp)
 
         connections = []
         for cn in system.iterfind("ssd:Connections/ssd:Connection", NS):
@@ -900,15 +896,14 @@ def read_ssp(ssp: str | Path, workdir: str | Path) -> dict[str, Any]:
 
 
 def _fmu_defaults(ssp: Path, paths: list[Path]) -> tuple[float | None, float | None]:
-    """(smallest default step, largest default stop time) over the FMUs' DefaultExperiment."""
-    import fmpy  # lazy: --help loads this module without it
-
+    """(smallest default step, largest default stop time) over the FMUs' DefaultExperiment (read as the run reads
+    them, once: :func:`cosim.fmi.load_fmu`)."""
     steps, stops = [], []
     for path in paths:
         try:
-            de = fmpy.read_model_description(str(path), validate=False).defaultExperiment
-        except Exception as exc:  # noqa: BLE001 - a broken FMU, named
-            raise SspError(ssp, f"{path.parent.name}: cannot read the FMU's modelDescription.xml ({exc})") from None
+            de = load_fmu(path).md.defaultExperiment
+        except CosimError as exc:
+            raise SspError(ssp, f"{path.parent.name}: {exc}") from None
         if de is None:
             continue
         if de.stepSize is not None:
