@@ -452,11 +452,18 @@ def _unit_table(parent: ET.Element | None, path: str, ssp: Path, where: str) -> 
         base = u.find("ssc:BaseUnit", NS)
         attrs = base.attrib if base is not None else {}
         try:
-            out[u.get("name", "")] = (tuple(int(attrs.get(k, "0")) for k in _BASE_UNITS),
-                                      float(attrs.get("factor", "1")), float(attrs.get("offset", "0")))
+            factor, offset = float(attrs.get("factor", "1")), float(attrs.get("offset", "0"))
+            out[u.get("name", "")] = (tuple(int(attrs.get(k, "0")) for k in _BASE_UNITS), factor, offset)
         except ValueError:
             raise SspError(ssp, f"{where}: unit {u.get('name')!r}: its BaseUnit attributes are not numbers") from None
+        if not _conversion_ok(factor, offset):
+            raise SspError(ssp, f"{where}: unit {u.get('name')!r}: BaseUnit factor {factor!r}, offset {offset!r}: a "
+                                "unit needs a finite factor other than 0 and a finite offset")
     return out
+
+
+def _conversion_ok(factor: float, offset: float) -> bool:
+    return math.isfinite(factor) and factor != 0.0 and math.isfinite(offset)
 
 
 def _parameter_set(pset: ET.Element, ssp: Path, where: str, prefix: str,
@@ -659,8 +666,12 @@ def _convert_units(components: dict[str, dict[str, Any]], ssp: Path) -> None:
             if exps != q.base[0]:
                 raise SspError(ssp, f"{q.where}: unit {q.unit!r} does not convert to {comp}.{var}'s unit {unit!r} "
                                     "(other base units)")
-            si = q.base[1] * q.value + q.base[2]
-            params[var] = (si - float(target.offset or 0.0)) / float(target.factor or 1.0)
+            factor = 1.0 if target.factor is None else float(target.factor)
+            offset = 0.0 if target.offset is None else float(target.offset)
+            if not _conversion_ok(factor, offset):
+                raise SspError(ssp, f"{q.where}: {comp}.{var}'s unit {unit!r} has factor {factor!r}, offset {offset!r} "
+                                    "in its FMU: cannot convert to it")
+            params[var] = (q.base[1] * q.value + q.base[2] - offset) / factor
 
 
 def _osp_step(node: ET.Element | None, ssp: Path) -> float | None:
