@@ -28,7 +28,7 @@ from delta.dynamics import LinearDeltaMasses
 from delta.kinematics import actuator_points, joint_state_from_platform, leg_axes, platform_offsets
 from delta.robots import LinearDelta
 
-from .plant import MIN_ROD_MASS, DeltaPlant, JointTrajectory, RobotTypeError, SolverSettings, tilt_angle
+from .plant import MIN_ROD_MASS, DeltaPlant, JointTrajectory, RobotTypeError, SolverSettings
 
 __all__ = ["LinearDeltaPlant", "MIN_ROD_MASS", "PLATFORM_THICKNESS"]
 
@@ -102,9 +102,6 @@ class LinearDeltaPlant(DeltaPlant):
 
         self._carriages: list[int] = []
         self._carriage_markers: list[int] = []
-        self._effort_values: list = []  # symbolic variables returned by the actuator loads
-        self._drives: list[int] = []
-        self._carriage_nodes: list[int] = []
         ground_node = mbs.AddNode(NodePointGround(referenceCoordinates=[0.0, 0.0, 0.0]))
         ground_coord = mbs.AddMarker(MarkerNodeCoordinate(nodeNumber=ground_node, coordinate=0))
         rail_down = [[0.0, 0.0, 1.0], [0.0, 1.0, 0.0], [-1.0, 0.0, 0.0]]  # local x -> global -z
@@ -121,7 +118,7 @@ class LinearDeltaPlant(DeltaPlant):
             self._bodies.append((carriage, carriage_mass, None))
             self._add_weight(carriage, (0.0, 0.0, 0.0), carriage_weight)
             self._carriages.append(carriage)
-            self._carriage_nodes.append(node)
+            self._joint_nodes.append(node)
             marker = mbs.AddMarker(MarkerBodyPosition(bodyNumber=carriage, localPosition=[0.0, 0.0, 0.0]))
             self._carriage_markers.append(marker)
             coord = mbs.AddMarker(MarkerNodeCoordinate(nodeNumber=node, coordinate=0))
@@ -151,31 +148,3 @@ class LinearDeltaPlant(DeltaPlant):
         def offset_t(mbs, t, item, l_offset):
             return float(self.prescribed(t)[1][i])
         return offset_t
-
-    # ------------------------------------------------------------------------------------
-    def _apply_effort(self, u: list[float]) -> None:
-        for value, ui in zip(self._effort_values, u):
-            value.SetValue(ui)
-
-    def _after_assemble(self) -> None:
-        self._q_index = np.array([self.mbs.systemData.GetNodeLTGODE2(n)[0] for n in self._carriage_nodes])
-
-    def _read_joints(self, coords: np.ndarray, coords_t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        return self._q0 + coords[self._q_index], coords_t[self._q_index]
-
-    def _read_prescribed_reaction(self) -> np.ndarray:
-        import exudyn as exu
-
-        f = [self.mbs.GetObjectOutput(j, exu.OutputVariableType.Force) for j in self._drives]
-        return _DRIVE_SIGN * np.array(f, dtype=float)
-
-    def platform_tilt(self) -> float:
-        import exudyn as exu
-
-        if self.fidelity != "full":
-            return 0.0
-        rot = self.mbs.GetObjectOutputBody(self._platform, exu.OutputVariableType.RotationMatrix, [0.0, 0.0, 0.0])
-        return tilt_angle(rot)
-
-
-_DRIVE_SIGN = -1.0  # CoordinateConstraint force acts on the ground side: flip to "effort on the carriage along +q"

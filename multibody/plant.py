@@ -49,7 +49,11 @@ class SolverSettings:
         Generalized-alpha spectral radius at infinity (0.8: stable at h = 1 ms for
         every delta tried; use ~0.5 with small steps for force comparisons).
     newton_rel_tol : float
-        Relative Newton tolerance (1e-6 halves the cost of the default with identical results).
+        Relative Newton tolerance (Exudyn's, against the step's initial residual). 1e-10 converges every step:
+        on pick_place_ctc (full linear plant, closed loop, 2 s) the platform closes on its joints
+        (``|p - fk(q)|``) within 1.0e-11 m at every 1 ms sample with the kept Newton matrix, 8.8e-12 m with a
+        fresh one, and the two runs end within 1.2e-11 m of each other. At 1e-6 a fresh matrix stops after one
+        iteration, up to 7.3e-7 m off that closure at the cycle's jerk steps; a kept matrix up to 6.1e-9 m.
     newton_abs_tol : float
         Absolute Newton tolerance (Exudyn's default scale for these small systems).
     modified_newton : bool
@@ -74,18 +78,14 @@ class SolverSettings:
         every ``SolveSteps`` entry otherwise). Newton still iterates to the same tolerances, and the
         matrix is refactorised when modified Newton has not converged within
         ``REUSE_MAX_MODIFIED_ITERATIONS`` iterations, when the step size changes and after a reset.
-        Its steps take ~3 modified Newton iterations where a fresh matrix takes one, and end elsewhere
-        by the Newton error: 8e-9 m on helix_ctc_thesis's platform (linear, closed loop), 6.4e-10 m,
-        2.2e-9 rad, 7.2e-6 rad/s and 5.5e-5 N*m on rotary_pick_place_ctc (rotary), both runs against the
-        same run with a fresh matrix at every step. None (default) = per model (``_default_reuse``): on
-        for the full rotary plant (0.6x its time per step; no golden baseline runs it), off for the
-        lumped plants (their factorisation is cheap: the kept matrix costs more than it saves) and for
-        the full linear plant, whose golden baselines (tests/golden/) record the fresh matrix's single
-        iteration and allow 1e-9 m.
+        Its steps take ~3 modified Newton iterations where a fresh matrix takes one or two; at the default
+        tolerance both converge to the same step (see ``newton_rel_tol``). None (default) = per model
+        (``_default_reuse``): on for the full plants, off for the lumped plants (their factorisation is
+        cheap: the kept matrix costs more than it saves).
     """
 
     spectral_radius: float = 0.8
-    newton_rel_tol: float = 1e-6
+    newton_rel_tol: float = 1e-10
     newton_abs_tol: float = 1e-10
     modified_newton: bool = True
     substeps: int = 1
@@ -132,10 +132,12 @@ class PlantOutput:
     reaction: np.ndarray
 
 
-REUSE_MAX_MODIFIED_ITERATIONS = 2
+REUSE_MAX_MODIFIED_ITERATIONS = 4
 """With ``SolverSettings.reuse_jacobian``: modified Newton iterations on a kept matrix before it is
-refactorised (Exudyn's ``maxModifiedNewtonIterations``; its default 8 with contractivity 0.5 let a stale
-matrix take 4-5 residual evaluations per step, each ~15 us, more than refactorising)."""
+refactorised (Exudyn's ``maxModifiedNewtonIterations``, default 8). Converging to the default 1e-10 takes a
+kept matrix 4-6 iterations while the platform moves (a 2 Hz effort wobble, tests/integration/
+test_multibody_plants.py): with 2 the full linear plant refactorised on 0.91 of its steps, with 4 on 0.14,
+with 6 on 0.07, and 4 was the fastest (0.84x / 0.70x the fresh matrix's time per step, linear / rotary)."""
 
 
 def _time_tolerance(t: float) -> float:
@@ -164,20 +166,24 @@ class DeltaPlant:
 
     # -- subclass interface -------------------------------------------------------------
     def _build(self, p0: np.ndarray, v0: np.ndarray, t0: float) -> None:  # pragma: no cover
+        """Build the system at the platform state (p0, v0). Appends, in joint order, each joint's 1-coordinate node
+        (carriage, arm) to ``self._joint_nodes``, and each actuator's effort variable (:meth:`_symbolic_load`) to
+        ``self._effort_values``, or in prescribed-motion mode its drive constraint to ``self._drives``."""
         raise NotImplementedError
 
-    def _after_assemble(self) -> None:
-        """Hook: cache coordinate indices and item accessors (valid only after ``Assemble``)."""
+    def _read_joints(self, coords: np.ndarray, coords_t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Joint positions and velocities from the ODE2 coordinates and velocities (each (n,), fresh arrays)."""
+        return self._q0 + coords[self._q_index], coords_t[self._q_index]
 
-    def _read_joints(self, coords: np.ndarray, coords_t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:  # pragma: no cover
-        """Joint positions and velocities from the ODE2 coordinates and velocities (each (n,))."""
-        raise NotImplementedError
+    def _apply_effort(self, u: list[float]) -> None:
+        for value, ui in zip(self._effort_values, u):
+            value.SetValue(ui)
 
-    def _apply_effort(self, u: list[float]) -> None:  # pragma: no cover
-        raise NotImplementedError
+    def _read_prescribed_reaction(self) -> np.ndarray:
+        import exudyn as exu
 
-    def _read_prescribed_reaction(self) -> np.ndarray:  # pragma: no cover
-        raise NotImplementedError
+        f = [self.mbs.GetObjectOutput(j, exu.OutputVariableType.Force) for j in self._drives]
+        return _DRIVE_SIGN * np.array(f, dtype=float)
 
     # -- public API ---------------------------------------------------------------------
     @property
@@ -209,14 +215,17 @@ class DeltaPlant:
         self._bodies: list[tuple[int, float, np.ndarray | None]] = []
         self._weights: list[tuple[int, list[float], float]] = []
         self._symbolic: list = []  # symbolic user functions and their variables, kept alive with the system
+        self._joint_nodes: list[int] = []
+        self._effort_values: list = []
+        self._drives: list[int] = []
         self._build(p0, v0, self._t)
         self.mbs.Assemble()
         self._system_data = self.mbs.systemData
+        self._q_index = _gather([int(self._system_data.GetNodeLTGODE2(n)[0]) for n in self._joint_nodes])
         node = self.mbs.GetObject(self._platform)["nodeNumber"]
         first = int(self._system_data.GetNodeLTGODE2(node)[0])
         self._p_slice = slice(first, first + 3)  # a node's coordinates are contiguous: position first
         self._p_ref = np.asarray(self.mbs.GetNode(node)["referenceCoordinates"][:3], dtype=float)
-        self._after_assemble()
         self._init_solver(self._h_nominal)
         self._output = self._make_output(self._u if self.prescribed is None else self._read_prescribed_reaction())
         return self._output
@@ -286,8 +295,7 @@ class DeltaPlant:
             it.maxStepSize = step_size
             it.initialStepSize = step_size
             self._step_size = step_size
-        self._ti.endTime = t_end
-        self._it.endTime = t_end
+        self._it.endTime = t_end  # what SolveSteps reads (the settings' endTime is only InitializeSolver's)
         try:
             ok = self._solve_steps(self.mbs, self._sim)
         except Exception as exc:  # Exudyn raises plain RuntimeError/ValueError
@@ -335,7 +343,12 @@ class DeltaPlant:
 
     def platform_tilt(self) -> float:
         """Rotation angle of the platform from level, rad (0 for the translational lumped platform)."""
-        return 0.0
+        import exudyn as exu
+
+        if self.fidelity != "full":
+            return 0.0
+        rot = self.mbs.GetObjectOutputBody(self._platform, exu.OutputVariableType.RotationMatrix, [0.0, 0.0, 0.0])
+        return tilt_angle(rot)
 
     # -- helpers ------------------------------------------------------------------------
     def _add_body(self, mass: float, inertia: np.ndarray | None, position, velocity,
@@ -382,13 +395,21 @@ class DeltaPlant:
         return rod
 
     def _add_weight(self, body: int, local, gravity_mass: float) -> None:
-        """Apply the weight of ``gravity_mass`` at body-local point ``local`` (-z)."""
-        from exudyn.itemInterface import LoadForceVector, MarkerBodyPosition
+        """Apply the weight of ``gravity_mass`` at body-local point ``local`` (-z).
+
+        At a rigid body's or mass point's reference point (its centre of mass, ``local`` = 0) the weight acts on
+        its node's position coordinates directly: the same generalized force as through a body marker, whose
+        position Jacobian there is [I, 0], without evaluating the body's rotation at every residual."""
+        from exudyn.itemInterface import LoadForceVector, MarkerBodyPosition, MarkerNodePosition
 
         if gravity_mass == 0.0 or self.masses.gravity == 0.0:
             return
         local = [float(x) for x in local]
-        marker = self.mbs.AddMarker(MarkerBodyPosition(bodyNumber=body, localPosition=local))
+        item = self.mbs.GetObject(body)
+        if not any(local) and item["objectType"] in ("RigidBody", "MassPoint"):
+            marker = self.mbs.AddMarker(MarkerNodePosition(nodeNumber=item["nodeNumber"]))
+        else:
+            marker = self.mbs.AddMarker(MarkerBodyPosition(bodyNumber=body, localPosition=local))
         self.mbs.AddLoad(LoadForceVector(markerNumber=marker,
                                          loadVector=[0.0, 0.0, -gravity_mass * self.masses.gravity]))
         self._weights.append((body, local, gravity_mass))
@@ -409,7 +430,7 @@ class DeltaPlant:
         ti.newton.useModifiedNewton = s.modified_newton
         ti.newton.relativeTolerance = s.newton_rel_tol
         ti.newton.absoluteTolerance = s.newton_abs_tol
-        reuse = _default_reuse(self.kind, self.fidelity) if s.reuse_jacobian is None else s.reuse_jacobian
+        reuse = _default_reuse(self.fidelity) if s.reuse_jacobian is None else s.reuse_jacobian
         if reuse:
             ti.newton.maxModifiedNewtonIterations = REUSE_MAX_MODIFIED_ITERATIONS
         sim.solution.file.write = False
@@ -424,7 +445,6 @@ class DeltaPlant:
         else:
             sim.linearSolver.solverType = exu.LinearSolverType.EigenDense
         self._sim = sim
-        self._ti = sim.timeIntegration  # references into sim / the solver, cached for step()
         self._solver = exu.MainSolverImplicitSecondOrder()
         self._solver.InitializeSolver(self.mbs, sim)
         # with reuse_jacobian, refactorise on the next step (InitializeSolver's factorisation is of its
@@ -465,6 +485,19 @@ class DeltaPlant:
         return variable
 
 
+_DRIVE_SIGN = -1.0
+"""A drive (``CoordinateConstraint``) reports its force on the ground side: flipped, the effort on the joint along +q."""
+
+
+def _gather(index: list[int]) -> slice | np.ndarray:
+    """Indexing that picks ``index`` from a coordinate vector: a slice (a view, ~10x cheaper than an index array)
+    when the indices are evenly spaced, as the joints' are (each leg's bodies are added alike)."""
+    stride = index[1] - index[0] if len(index) > 1 else 1
+    if stride > 0 and index == list(range(index[0], index[-1] + 1, stride)):
+        return slice(index[0], index[-1] + 1, stride)
+    return np.array(index)
+
+
 def _keep_jacobian(refactorise: list[bool]):
     """Exudyn's ``FinishStep`` replaced (it only prints, writes files and draws, all off in a plant) by one
     that keeps the factorised Newton matrix: ``SolveSteps`` requests a new one on entry, just before it calls
@@ -490,11 +523,11 @@ def _default_sparse(kind: str, fidelity: str) -> bool:
     return fidelity == "full"
 
 
-def _default_reuse(kind: str, fidelity: str) -> bool:
-    """``SolverSettings.reuse_jacobian`` per model (see there): the full rotary plant keeps its Newton matrix
-    (``benchmarks/plant_step.py``: 0.34-0.37x the per-step time of 288e832, against 0.55-0.58x refactorising
-    every step); the lumped plants and the full linear plant (pinned by the golden baselines) do not."""
-    return kind == "rotary" and fidelity == "full"
+def _default_reuse(fidelity: str) -> bool:
+    """``SolverSettings.reuse_jacobian`` per model (see there): the full plants keep their Newton matrix
+    (``benchmarks/plant_step.py``, against 288e832: linear 0.6x, rotary 0.35x the per-step time, against 1.0x /
+    0.58x refactorising every step); the lumped plants (9 unknowns) do not."""
+    return fidelity == "full"
 
 
 def rod_inertia(mass: float, radius: float, length: float, axis: np.ndarray) -> np.ndarray:

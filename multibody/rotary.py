@@ -34,7 +34,7 @@ from delta.kinematics import actuator_points, actuator_tangents, joint_state_fro
 from delta.robots import RotaryDelta
 
 from .linear import PLATFORM_THICKNESS
-from .plant import DeltaPlant, JointTrajectory, RobotTypeError, SolverSettings, point_inertia, rod_inertia, tilt_angle
+from .plant import DeltaPlant, JointTrajectory, RobotTypeError, SolverSettings, point_inertia, rod_inertia
 
 __all__ = ["RotaryDeltaPlant", "ARM_RADIUS"]
 
@@ -100,8 +100,7 @@ class RotaryDeltaPlant(DeltaPlant):
 
         elbow_mass = m.elbow if full else m.elbow + 2.0 * (1.0 - w_i) * m.rod
         elbow_weight = m.elbow if full else m.elbow + 2.0 * (1.0 - w_g) * m.rod
-        self._arms, self._drives, self._arm_nodes = [], [], []
-        self._effort_values = []  # symbolic variables returned by the motor loads
+        self._arms = []
         ground_node = mbs.AddNode(NodePointGround(referenceCoordinates=[0.0, 0.0, 0.0]))
         ground_coord = mbs.AddMarker(MarkerNodeCoordinate(nodeNumber=ground_node, coordinate=0))
         for i in range(3):
@@ -123,7 +122,7 @@ class RotaryDeltaPlant(DeltaPlant):
                                                        referencePosition=[float(x) for x in origin],
                                                        referenceRotation=frame.tolist()))
             self._arms.append(arm)
-            self._arm_nodes.append(node)
+            self._joint_nodes.append(node)
             self._bodies.append((arm, 0.0, np.diag([0.0, 0.0, axial])))  # energy: w (local) = (0, 0, qd[i])
 
             def local(point, frame=frame, origin=origin):
@@ -161,30 +160,3 @@ class RotaryDeltaPlant(DeltaPlant):
         def offset_t(mbs, t, item, l_offset):
             return float(self.prescribed(t)[1][i])
         return offset_t
-
-    def _apply_effort(self, u: list[float]) -> None:
-        for value, ui in zip(self._effort_values, u):
-            value.SetValue(ui)
-
-    def _after_assemble(self) -> None:
-        self._q_index = np.array([self.mbs.systemData.GetNodeLTGODE2(n)[0] for n in self._arm_nodes])
-
-    def _read_joints(self, coords: np.ndarray, coords_t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        return self._q0 + coords[self._q_index], coords_t[self._q_index]
-
-    def _read_prescribed_reaction(self) -> np.ndarray:
-        import exudyn as exu
-
-        f = [self.mbs.GetObjectOutput(j, exu.OutputVariableType.Force) for j in self._drives]
-        return _DRIVE_SIGN * np.array(f, dtype=float)
-
-    def platform_tilt(self) -> float:
-        import exudyn as exu
-
-        if self.fidelity != "full":
-            return 0.0
-        rot = self.mbs.GetObjectOutputBody(self._platform, exu.OutputVariableType.RotationMatrix, [0.0, 0.0, 0.0])
-        return tilt_angle(rot)
-
-
-_DRIVE_SIGN = -1.0  # CoordinateConstraint force acts on the ground side: flip to "torque on the arm along +q"
