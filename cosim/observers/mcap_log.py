@@ -67,8 +67,8 @@ class _Checked:
         self._call(self._sink.message, args)
 
     def mirror(self, *args):
-        """The writer's :class:`cosim.observers.log_writer.RowMirror` of the joint rows, or None (a log in this
-        process, or a writer that shares no memory with it)."""
+        """The writer's :class:`cosim.observers.log_writer.RowMirror` of the publisher's batches of rows, or None (a
+        log in this process, a writer that shares no memory with it, or rows that do not fit)."""
         make = getattr(self._sink, "mirror", None)
         if make is None:
             return None

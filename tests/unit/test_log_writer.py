@@ -294,3 +294,83 @@ def test_forked_writer_keeps_none_of_the_masters_files(tmp_path):
     finally:
         server.close()
         held.close()
+
+
+ROW_BYTES = struct.calcsize("=" + FMT)
+
+
+def test_row_mirror_gives_each_sections_rows_after_the_last_stamp_received_of_its_channels():
+    """Two batches in one shared memory: a joint one (channels 0 and 1 in each row, 3 and ROW_BYTES bytes) and a
+    channel's own rows (channel 2). Each section's rows come back as blocks as the publisher sends them (the joint
+    rows with the bytes around each channel, the channel's own with none), minus those whose stamps its channels'
+    last block received already has; a batch whose rows were sent (``sent``) gives nothing."""
+    import mmap
+
+    shared = mmap.mmap(-1, log_writer.RowMirror.BYTES)
+    joint_width = 3 + ROW_BYTES
+    sections = [([(0, 0, 3), (1, 3, ROW_BYTES)], joint_width, 4), ([(2, 0, ROW_BYTES)], ROW_BYTES, 4)]
+    m = log_writer.RowMirror(shared, sections)
+    joint, own = m.sections
+    for t, s in zip([10, 20, 30], SAMPLES):
+        joint.put(t, b"abc" + _rows([s]))
+    own.put(20, _rows(SAMPLES[:1]))
+    own.put(40, _rows(SAMPLES[1:2]))
+    got = log_writer.RowMirror.unsent(shared, sections, {0: 10, 1: 10, 2: 20})
+    assert got == [(0, [20, 30], b"abc" + _rows([SAMPLES[1]]) + b"abc" + _rows([SAMPLES[2]]), (0, ROW_BYTES)),
+                   (1, [20, 30], b"abc" + _rows([SAMPLES[1]]) + b"abc" + _rows([SAMPLES[2]]), (3, 0)),
+                   (2, [40], _rows(SAMPLES[1:2]), None)], got
+    assert encode_block(LAYOUT, got[1][1], got[1][2], got[1][3]) == encode_block(LAYOUT, [20, 30], _rows(SAMPLES[1:]))
+    assert [b[1] for b in log_writer.RowMirror.unsent(shared, sections, {})] == [[10, 20, 30]] * 2 + [[20, 40]]
+    assert log_writer.RowMirror.unsent(shared, sections, {0: 30, 1: 30, 2: 40}) == []
+    m.sent()
+    assert log_writer.RowMirror.unsent(shared, sections, {}) == []
+
+
+def test_rows_that_do_not_fit_the_shared_memory_have_no_mirror(tmp_path):
+    """The shared memory is made with the writer, before the run's rows are known: when every batch's section does
+    not fit, there is no mirror at all (the writer keeps the blocks sent alone, see RowMirror)."""
+    if not log_writer._ForkedWriter.possible():
+        pytest.skip("a forked writer is not possible here")
+    cap = 256
+    size = log_writer.RowMirror.size(ROW_BYTES, cap)
+    assert size == 8 + cap * (8 + ROW_BYTES), size
+    n = log_writer.RowMirror.BYTES // size
+    fitting = [([(cid, 0, ROW_BYTES)], ROW_BYTES, cap) for cid in range(n)]
+    assert log_writer.RowMirror.fits(fitting) and not log_writer.RowMirror.fits(fitting + fitting[:1])
+    w = WriterProcess()
+    w.open(tmp_path / "f.mcap", 1024, 1)
+    assert w.mirror(fitting + fitting[:1], 0) is None
+    assert w.mirror([], 0) is None
+    assert isinstance(w.mirror(fitting, 0), log_writer.RowMirror)
+    w.finish()
+
+
+def test_writer_left_by_its_master_writes_each_channels_mirrored_rows_after_its_last_block(tmp_path):
+    """A multi-rate run's channels, each batched and mirrored apart (/a every step, /b every other one): the master
+    dies after sending a block it had not marked sent yet (the mirror holds those rows too) and one more step. The
+    writer writes, per channel, the mirrored rows later than its last block received: every row once, none lost."""
+    if not log_writer._ForkedWriter.possible():
+        pytest.skip("a forked writer is not possible here")
+    path = tmp_path / "m.mcap"
+    w = WriterProcess()
+    w.open(path, 1024, 1)
+    for cid, name in enumerate("ab"):
+        w.channel(cid, f"/{name}", f"cosim.{name}", b"{}", {"layout": "samples"},
+                  dataclasses.replace(LAYOUT, per_sample=True))
+    m = w.mirror([([(0, 0, ROW_BYTES)], ROW_BYTES, 4), ([(1, 0, ROW_BYTES)], ROW_BYTES, 4)], 0)
+    a, b = m.sections
+    for t in (0, 1):
+        a.put(t, _rows(SAMPLES[t:t + 1]))
+    b.put(0, _rows(SAMPLES[:1]))
+    w.blocks(0, [(0, [0, 1], _rows(SAMPLES[:2]), None), (1, [0], _rows(SAMPLES[:1]), None)])
+    m.sent()
+    a.put(2, _rows(SAMPLES[2:]))
+    b.put(2, _rows(SAMPLES[2:]))
+    w.blocks(0, [(0, [2], _rows(SAMPLES[2:]), None), (1, [2], _rows(SAMPLES[2:]), None)])  # the master dies here,
+    a.put(3, _rows(SAMPLES[:1]))  # before marking them sent; then one more step
+    w.abandon()
+    assert w._proc.returncode == 0, w._proc.stderr.read()
+    signals = _recovered(path, tmp_path, 6)
+    assert signals["a.p.x"].t_ns.tolist() == [0, 1, 2, 3], signals["a.p.x"].t_ns
+    assert signals["b.p.x"].t_ns.tolist() == [0, 2], signals["b.p.x"].t_ns
+    assert signals["a.n"].y.tolist() == [[7, -8], [2 ** 62, 0], [-1, 1], [7, -8]], signals["a.n"].y
