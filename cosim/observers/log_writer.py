@@ -578,8 +578,8 @@ class RowMirror:
     (:class:`cosim.observers.publish._Rows`: a multi-rate run's, each component's rows at its own steps). A section is
     ``(parts, width, cap)``: per channel in its rows ``(cid, byte offset in the row, bytes)``, the bytes of a row, and
     the rows it holds at most (the publisher hands its rows over before any batch holds more). The sections lie one
-    after the other in :attr:`BYTES` of shared memory, each its row count (u64, written after its row, so a counted
-    row is complete), then ``cap`` stamps (i64), then ``cap`` rows.
+    after the other in :attr:`BYTES` of shared memory, each its row count (i64, written after its row, so a counted
+    row is complete), then ``cap`` stamps (i64), then ``cap`` rows, in this machine's byte order.
 
     The memory is made with the writer, before the run's channels are known: rows that do not fit (:meth:`fits`:
     the rows of every channel over one block, some 60 channels of full 64 KiB blocks) have no mirror at all (not a
@@ -599,8 +599,9 @@ class RowMirror:
 
     @staticmethod
     def size(width: int, cap: int) -> int:
-        """The bytes of a section of ``cap`` rows of ``width`` bytes."""
-        return 8 + cap * (8 + width)
+        """The bytes of a section of ``cap`` rows of ``width`` bytes (a multiple of 8: each section's count and stamps
+        are aligned)."""
+        return 8 + 8 * cap + (cap * width + 7) // 8 * 8
 
     @classmethod
     def fits(cls, sections: list) -> bool:
@@ -617,8 +618,8 @@ class RowMirror:
         later than ``last[cid]``, the last stamp received of its channels (all of them, none received)."""
         blocks, at = [], 0
         for parts, width, cap in sections:
-            n = min(struct.unpack_from("<Q", shared, at)[0], cap)
-            stamps = list(struct.unpack_from(f"<{n}q", shared, at + 8))
+            n = max(0, min(struct.unpack_from("=q", shared, at)[0], cap))
+            stamps = list(struct.unpack_from(f"={n}q", shared, at + 8))
             after = last.get(parts[0][0])
             first = 0 if after is None else next((i for i, t in enumerate(stamps) if t > after), n)
             if first < n:
@@ -631,29 +632,30 @@ class RowMirror:
 
 
 class _Section:
-    """One batch's rows in a :class:`RowMirror` (at byte ``at`` of the shared memory)."""
+    """One batch's rows in a :class:`RowMirror` (at byte ``at`` of the shared memory), written through memoryviews of
+    it (a stamp, a row and the count: about 0.25 us a row, where ``struct.pack_into`` and an mmap slice took 0.5)."""
 
-    __slots__ = ("_at", "_count", "_pack", "_pack_count", "_rows", "_shared", "_stamps", "_width")
+    __slots__ = ("_count", "_counter", "_row_views", "_stamps")
 
     def __init__(self, shared: mmap.mmap, at: int, width: int, cap: int) -> None:
-        self._shared, self._at, self._width = shared, at, width
-        self._stamps, self._rows = at + 8, at + 8 + 8 * cap
+        view = memoryview(shared)
+        self._counter = view[at:at + 8].cast("q")
+        self._stamps = view[at + 8:at + 8 + 8 * cap].cast("q")
+        rows = at + 8 + 8 * cap
+        self._row_views = [view[rows + i * width:rows + (i + 1) * width] for i in range(cap)]
         self._count = 0
-        self._pack = struct.Struct("<q").pack_into
-        self._pack_count = struct.Struct("<Q").pack_into
-        self._pack_count(shared, at, 0)
+        self._counter[0] = 0
 
     def put(self, stamp: int, row: bytes) -> None:
-        i, w = self._count, self._width
-        self._pack(self._shared, self._stamps + 8 * i, stamp)
-        at = self._rows + i * w
-        self._shared[at:at + w] = row
+        i = self._count
+        self._stamps[i] = stamp
+        self._row_views[i][:] = row
         self._count = i + 1
-        self._pack_count(self._shared, self._at, i + 1)
+        self._counter[0] = i + 1
 
     def sent(self) -> None:
         self._count = 0
-        self._pack_count(self._shared, self._at, 0)
+        self._counter[0] = 0
 
 
 def writer_forks() -> bool:

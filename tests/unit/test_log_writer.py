@@ -333,7 +333,7 @@ def test_rows_that_do_not_fit_the_shared_memory_have_no_mirror(tmp_path):
         pytest.skip("a forked writer is not possible here")
     cap = 256
     size = log_writer.RowMirror.size(ROW_BYTES, cap)
-    assert size == 8 + cap * (8 + ROW_BYTES), size
+    assert size == 8 + cap * 8 + (cap * ROW_BYTES + 7) // 8 * 8 and size % 8 == 0, size
     n = log_writer.RowMirror.BYTES // size
     fitting = [([(cid, 0, ROW_BYTES)], ROW_BYTES, cap) for cid in range(n)]
     assert log_writer.RowMirror.fits(fitting) and not log_writer.RowMirror.fits(fitting + fitting[:1])
