@@ -581,11 +581,12 @@ class RowMirror:
     after the other in :attr:`BYTES` of shared memory, each its row count (i64, written after its row, so a counted
     row is complete), then ``cap`` stamps (i64), then ``cap`` rows, in this machine's byte order.
 
-    The memory is made with the writer, before the run's channels are known: rows that do not fit (:meth:`fits`:
-    the rows of every channel over one block, some 60 channels of full 64 KiB blocks) have no mirror at all (not a
-    part of them: every channel then ends at the same block), and a crash keeps the blocks sent alone (up to
-    1 / ``scene_rate_hz`` of simulated time less), as a writer that shares no memory (a new interpreter) does. A
-    channel of strings or binaries (values as lists, not rows of bytes) has no section: a crash keeps its blocks sent.
+    The memory is made with the writer, before the run's channels are known: rows that do not fit (:meth:`fits`: the
+    rows of every channel over one block; any 60 channels of rows up to 64 KiB fit, a block holding at most 64 KiB)
+    have no mirror at all (not a part of them: every channel then ends at the same block), and a crash keeps the
+    blocks sent alone (up to 1 / ``scene_rate_hz`` of simulated time less), as a writer that shares no memory (a new
+    interpreter) does. A channel of strings or binaries (values as lists, not rows of bytes) has no section: a crash
+    keeps its blocks sent.
     """
 
     BYTES = 4 << 20
