@@ -579,14 +579,15 @@ class RowMirror:
     ``(parts, width, cap)``: per channel in its rows ``(cid, byte offset in the row, bytes)``, the bytes of a row, and
     the rows it holds at most (the publisher hands its rows over before any batch holds more). The sections lie one
     after the other in :attr:`BYTES` of shared memory, each its row count (i64, written after its row, so a counted
-    row is complete), then ``cap`` stamps (i64), then ``cap`` rows, in this machine's byte order.
+    row is complete), then ``cap`` stamps (i64), then ``cap`` rows, in this machine's byte order. A channel of strings
+    or binaries (values as lists, not rows of bytes) has ``width`` None: its rows are pickled (see
+    :class:`_ValuesSection`).
 
     The memory is made with the writer, before the run's channels are known: rows that do not fit (:meth:`fits`: the
     rows of every channel over one block; any 60 channels of rows up to 64 KiB fit, a block holding at most 64 KiB)
     have no mirror at all (not a part of them: every channel then ends at the same block), and a crash keeps the
     blocks sent alone (up to 1 / ``scene_rate_hz`` of simulated time less), as a writer that shares no memory (a new
-    interpreter) does. A channel of strings or binaries (values as lists, not rows of bytes) has no section: a crash
-    keeps its blocks sent.
+    interpreter) does.
     """
 
     BYTES = 4 << 20
@@ -595,13 +596,19 @@ class RowMirror:
         self.sections: list[_Section] = []
         at = 0
         for _, width, cap in sections:
-            self.sections.append(_Section(shared, at, width, cap))
+            self.sections.append((_Section if width is not None else _ValuesSection)(shared, at, width, cap))
             at += self.size(width, cap)
 
-    @staticmethod
-    def size(width: int, cap: int) -> int:
-        """The bytes of a section of ``cap`` rows of ``width`` bytes (a multiple of 8: each section's count and stamps
-        are aligned)."""
+    VALUES_BYTES = 64 * 1024
+    """The pickled rows of values a section of a channel of strings or binaries holds at most (then it holds no more
+    until they are sent: a crash keeps the rows up to there)."""
+
+    @classmethod
+    def size(cls, width: int | None, cap: int) -> int:
+        """The bytes of a section of ``cap`` rows of ``width`` bytes, or of values (``width`` None), a multiple of 8
+        (each section's count and stamps are aligned)."""
+        if width is None:
+            return 8 + 16 * cap + cls.VALUES_BYTES
         return 8 + 8 * cap + (cap * width + 7) // 8 * 8
 
     @classmethod
@@ -623,7 +630,13 @@ class RowMirror:
             stamps = list(struct.unpack_from(f"={n}q", shared, at + 8))
             after = last.get(parts[0][0])
             first = 0 if after is None else next((i for i, t in enumerate(stamps) if t > after), n)
-            if first < n:
+            if first < n and width is None:  # rows of values, each pickled: its end after the stamps
+                ends = struct.unpack_from(f"={n}q", shared, at + 8 + 8 * cap)
+                area = at + 8 + 16 * cap
+                values = [pickle.loads(shared[area + (ends[i - 1] if i else 0):area + ends[i]])
+                          for i in range(first, n)]
+                blocks.append((parts[0][0], stamps[first:], values, None))
+            elif first < n:
                 rows = bytes(shared[at + 8 + 8 * cap + first * width:at + 8 + 8 * cap + n * width])
                 whole = len(parts) == 1  # a channel's own rows: as the publisher sends them, no other bytes around
                 blocks += [(cid, stamps[first:], rows, None if whole else (off, width - off - size))
@@ -656,6 +669,43 @@ class _Section:
 
     def sent(self) -> None:
         self._count = 0
+        self._counter[0] = 0
+
+
+class _ValuesSection:
+    """A channel's rows of values (lists with strings, as :class:`cosim.observers.publish._Rows` reads them) in a
+    :class:`RowMirror`: per row its stamp and the end of its pickle in an area of :attr:`RowMirror.VALUES_BYTES`.
+    A row that does not fit is not put, nor any after it until the rows are sent (the counted ones stay a prefix)."""
+
+    __slots__ = ("_area", "_count", "_counter", "_ends", "_full", "_stamps", "_used")
+
+    def __init__(self, shared: mmap.mmap, at: int, width: None, cap: int) -> None:
+        view = memoryview(shared)
+        self._counter = view[at:at + 8].cast("q")
+        self._stamps = view[at + 8:at + 8 + 8 * cap].cast("q")
+        self._ends = view[at + 8 + 8 * cap:at + 8 + 16 * cap].cast("q")
+        self._area = view[at + 8 + 16 * cap:at + 8 + 16 * cap + RowMirror.VALUES_BYTES]
+        self.sent()
+
+    def put(self, stamp: int, values: list) -> None:
+        if self._full:
+            return
+        data = pickle.dumps(values, protocol=pickle.HIGHEST_PROTOCOL)
+        start = self._used
+        end = start + len(data)
+        if end > len(self._area):
+            self._full = True
+            return
+        i = self._count
+        self._stamps[i] = stamp
+        self._area[start:end] = data
+        self._ends[i] = self._used = end
+        self._count = i + 1
+        self._counter[0] = i + 1
+
+    def sent(self) -> None:
+        self._count = self._used = 0
+        self._full = False
         self._counter[0] = 0
 
 

@@ -183,7 +183,7 @@ class _Rows:
         self.data: list = []
         self.raw = runs is not None
         self.sources = None
-        self.width = 0  # bytes of a row (raw)
+        self.width: int | None = None  # bytes of a row; None: rows of values (not raw)
         self.puts: tuple = ()  # each mirror's put of a row, when its rows are a batch mirrored (Publisher.start)
         if runs is None:
             self.capture = partial(_values_any, readers)
@@ -195,7 +195,7 @@ class _Rows:
             self.cap = max(1, min(_BLOCK_ROWS, block_bytes // max(1, self.width)))
 
     @property
-    def parts(self) -> list[tuple[int, int, int]]:
+    def parts(self) -> list[tuple[int, int, int | None]]:
         """Its channel's place in a row (as :attr:`_Joint.parts`): all of it."""
         return [(self.cid, 0, self.width)]
 
@@ -404,7 +404,7 @@ class Publisher:
     - optionally ``mirror(sections, offset_ns)``, once before the first sample: a
       :class:`cosim.observers.log_writer.RowMirror` into which each row is also copied until its block is handed
       over (so a crash of this process loses no completed step), one section per batch of rows (the joint rows,
-      else each channel's rows of numbers), or None.
+      else each channel's rows), or None.
 
     Samples are copied from the FMU buffers at each step (about 0.2 us per component) and handed
     over every ``1 / scene_rate_hz`` of simulated time (whether or not a scene is drawn), before
@@ -544,9 +544,9 @@ class Publisher:
             self._joint = _Joint([self._rows_of[c] for c in logged], self.BLOCK_BYTES)
             self._cap = min(self._cap, self._joint.cap)
         self._n = 0
-        # the writers' copies of the rows not sent yet (a crash of this process keeps them): one section per batch,
-        # the joint rows or each channel's rows of numbers (cosim.observers.log_writer.RowMirror)
-        batches = [self._joint] if self._joint is not None else [rows for rows in self._pending if rows.raw]
+        # the writers' copies of the rows not sent yet (a crash of this process keeps them): one section per batch, the
+        # joint rows or each channel's rows, of bytes or of values (width None; cosim.observers.log_writer.RowMirror)
+        batches = [self._joint] if self._joint is not None else self._pending
         sections = [(batch.parts, batch.width, self._cap) for batch in batches]
         self._mirrors = []
         for sink in self._sinks:
