@@ -11,7 +11,9 @@
   once), else from :attr:`McapRecorder.PROCESS_MIN_STEPS` steps on (a new interpreter costs about 0.1 s of a
   core): the master only copies each step's values into blocks, and the child encodes the JSON messages (one
   per sample in the ``samples`` layout), compresses and writes on the other core, and keeps what it was sent
-  when the master crashes. Other runs write in this process (:meth:`McapRecorder.writes_in_a_process`);
+  when the master crashes (a forked child also the rows of each step completed since, which the master mirrors
+  into memory they share: :class:`cosim.observers.log_writer.RowMirror`). Other runs write in this process
+  (:meth:`McapRecorder.writes_in_a_process`);
 - metadata (scenario, versions, platform, the command line and its folder, time stamps: see
   :func:`cosim.observers.publish.time_metadata`) and attachments (the scenario file, the scenario as run with every
   override applied, :func:`cosim.engine.scenario.effective_scenario`, and each FMU's modelDescription.xml);
@@ -67,8 +69,8 @@ class _Checked:
         self._call(self._sink.message, args)
 
     def mirror(self, *args):
-        """The writer's :class:`cosim.observers.log_writer.RowMirror` of the joint rows, or None (a log in this
-        process, or a writer that shares no memory with it)."""
+        """The writer's :class:`cosim.observers.log_writer.RowMirror` of the publisher's batches of rows, or None (a
+        log in this process, a writer that shares no memory with it, or rows that do not fit)."""
         make = getattr(self._sink, "mirror", None)
         if make is None:
             return None

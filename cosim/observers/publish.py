@@ -174,7 +174,7 @@ class _Rows:
     rows of bytes copied from the FMU buffers (``runs``, see :func:`block_layout`) or, without runs,
     as lists (``readers``, see :func:`_values_any`)."""
 
-    __slots__ = ("cid", "cap", "capture", "stamps", "data", "raw", "sources")
+    __slots__ = ("cid", "cap", "capture", "stamps", "data", "raw", "sources", "width", "puts")
 
     def __init__(self, cid: int, runs, readers, block_bytes: int):
 
@@ -183,13 +183,21 @@ class _Rows:
         self.data: list = []
         self.raw = runs is not None
         self.sources = None
+        self.width: int | None = None  # bytes of a row; None: rows of values (not raw)
+        self.puts: tuple = ()  # each mirror's put of a row, when its rows are a batch mirrored (Publisher.start)
         if runs is None:
             self.capture = partial(_values_any, readers)
             self.cap = _BLOCK_ROWS
         else:  # one join per sample: the runs' bytes in one new bytes object
             self.sources = [byte_view(arr, i, n) for arr, i, n in runs]
             self.capture = partial(b"".join, self.sources)
-            self.cap = max(1, min(_BLOCK_ROWS, block_bytes // max(1, sum(len(v) for v in self.sources))))
+            self.width = sum(len(v) for v in self.sources)
+            self.cap = max(1, min(_BLOCK_ROWS, block_bytes // max(1, self.width)))
+
+    @property
+    def parts(self) -> list[tuple[int, int, int | None]]:
+        """Its channel's place in a row (as :attr:`_Joint.parts`): all of it."""
+        return [(self.cid, 0, self.width)]
 
     def take(self) -> tuple[int, list[int], bytes | list, None]:
         """The block so far; the lists are emptied in place (the publisher holds their ``append``)."""
@@ -208,15 +216,15 @@ class _Joint:
         self.parts = []  # (channel, byte offset in the joint row, bytes)
         sources, at = [], 0
         for rows in channels:
-            size = sum(len(v) for v in rows.sources)
-            self.parts.append((rows.cid, at, size))
+            self.parts.append((rows.cid, at, rows.width))
             sources += rows.sources
-            at += size
+            at += rows.width
         self.width = at
         self.capture = partial(b"".join, sources)
         self.cap = max(1, min(_BLOCK_ROWS, block_bytes // max(1, at)))
         self.stamps: list[int] = []
         self.data: list[bytes] = []
+        self.puts: tuple = ()  # each mirror's put of a row (see Publisher.start)
 
     def take(self) -> list[tuple[int, list[int], bytes, tuple[int, int]]]:
         rows, stamps = b"".join(self.data), self.stamps[:]  # one object: pickled once for every channel
@@ -392,7 +400,11 @@ class Publisher:
       (simulation ns; raw values, see :class:`_Rows` and :class:`_Joint`), made into the channel's
       messages in its layout by :func:`cosim.observers.log_writer.encode_messages` (log times: stamps +
       ``offset_ns``);
-    - ``message(cid, log_time, data)``: any other message, JSON encoded.
+    - ``message(cid, log_time, data)``: any other message, JSON encoded;
+    - optionally ``mirror(sections, offset_ns)``, once before the first sample: a
+      :class:`cosim.observers.log_writer.RowMirror` into which each row is also copied until its block is handed
+      over (so a crash of this process loses no completed step), one section per batch of rows (the joint rows,
+      else each channel's rows), or None.
 
     Samples are copied from the FMU buffers at each step (about 0.2 us per component) and handed
     over every ``1 / scene_rate_hz`` of simulated time (whether or not a scene is drawn), before
@@ -489,12 +501,9 @@ class Publisher:
         self._n_channels = 0
         self._pending = []
         self._n = 0
-        # per component: None (not logged) or (add a row, read a row, add a stamp, own step in ns)
-        self._by_comp: list[tuple[Any, Any, Any, int] | None] = []
         self._rows_of: dict[int, _Rows] = {}
         for c, name in enumerate(plan.names):
             if not (plan.logged and plan.logged[c]):
-                self._by_comp.append(None)
                 continue
             schema, readers = component_schema(rt, c)
             per_sample = self.layout == "samples"
@@ -506,7 +515,6 @@ class Publisher:
             rows = _Rows(cid, runs, readers, self.BLOCK_BYTES)
             self._pending.append(rows)
             self._rows_of[c] = rows
-            self._by_comp.append((rows.data.append, rows.capture, rows.stamps.append, rt.multiples[c]))
         self._grid = rt.grid
         self._rt = rt
         self._scene = None
@@ -530,30 +538,44 @@ class Publisher:
             self._events_cid = self._channel("/events", "cosim.events", EVENTS_SCHEMA)
         # a block is handed over before any channel's can be full (the fastest fills one sample a step)
         self._cap = min((rows.cap for rows in self._pending), default=_BLOCK_ROWS)
-        logged = [c for c in plan.order if self._by_comp[c] is not None]
+        logged = [c for c in plan.order if c in self._rows_of]
         self._joint = None
         if logged and all(rt.multiples[c] == 1 and self._rows_of[c].raw for c in logged):
             self._joint = _Joint([self._rows_of[c] for c in logged], self.BLOCK_BYTES)
             self._cap = min(self._cap, self._joint.cap)
         self._n = 0
-        self._mirrors = []  # the writers' copies of the joint rows not sent yet (a crash of this process keeps them)
+        # the writers' copies of the rows not sent yet (a crash of this process keeps them): one section per batch, the
+        # joint rows or each channel's rows, of bytes or of values (width None; cosim.observers.log_writer.RowMirror)
+        batches = [self._joint] if self._joint is not None else self._pending
+        sections = [(batch.parts, batch.width, self._cap) for batch in batches]
+        self._mirrors = []
+        for sink in self._sinks:
+            mirror = getattr(sink, "mirror", None)
+            made = mirror(sections, self.offset_ns) if mirror is not None and sections else None
+            if made is not None:
+                self._mirrors.append(made)
+        for i, batch in enumerate(batches):
+            batch.puts = tuple(m.sections[i].put for m in self._mirrors)
+        # per component: None (not logged) or (add a row, read a row, add a stamp, step multiple, mirror the row)
+        self._by_comp: list[tuple[Any, Any, Any, int, tuple] | None] = [None] * len(plan.names)
+        for c, rows in self._rows_of.items():
+            self._by_comp[c] = (rows.data.append, rows.capture, rows.stamps.append, rt.multiples[c], rows.puts)
         if self._joint is not None:
-            for sink in self._sinks:
-                mirror = getattr(sink, "mirror", None)
-                made = mirror(self._joint.parts, self._joint.width, self._cap, self.offset_ns) if mirror else None
-                if made is not None:
-                    self._mirrors.append(made)
             row = self._joint.capture()
             self._joint.data.append(row)
             self._joint.stamps.append(rt.start_ns)
-            for m in self._mirrors:
-                m.put(rt.start_ns, row)
+            for put in self._joint.puts:
+                put(rt.start_ns, row)
             self._n = 1
         else:
             for entry in self._by_comp:
                 if entry is not None:
-                    entry[0](entry[1]())
-                    entry[2](rt.start_ns)
+                    add, read, stamp, _, puts = entry
+                    row = read()
+                    add(row)
+                    stamp(rt.start_ns)
+                    for put in puts:
+                        put(rt.start_ns, row)
                     self._n = 1
         self._next_tick = rt.start_ns
         self._tick(rt.start_ns)
@@ -598,8 +620,8 @@ class Publisher:
             row = joint.capture()
             joint.data.append(row)
             joint.stamps.append(t_ns)
-            for m in self._mirrors:
-                m.put(t_ns, row)
+            for put in joint.puts:
+                put(t_ns, row)
         else:
             if joint is not None:  # the last step of a run an FMU ended: some components only
                 self.flush()
@@ -609,11 +631,16 @@ class Publisher:
             for c in active:
                 entry = by_comp[c]
                 if entry is not None:
-                    add, read, stamp, m = entry
-                    add(read())
+                    add, read, stamp, m, puts = entry
+                    row = read()
+                    add(row)
                     # the end of this component's own (possibly multi-rate) step
                     t_end = grid.t_ns(grid.end(k, m))
-                    stamp(min(t_end, t_ns) if ended else t_end)
+                    if ended:
+                        t_end = min(t_end, t_ns)
+                    stamp(t_end)
+                    for put in puts:
+                        put(t_end, row)
         self._n += 1
         if self._n >= self._cap:
             self.flush()

@@ -221,8 +221,9 @@ def _messages_on_disk(path) -> int:
     return count
 
 
-def _recovered(path, tmp_path, messages: int) -> dict:
-    """Recover ``path`` (which the indexed reader refuses: no summary): its ``messages`` and the signals."""
+def _recovered(path, tmp_path, messages: int, channels: int = 2) -> dict:
+    """Recover ``path`` (which the indexed reader refuses: no summary): its ``channels`` and ``messages`` and the
+    signals."""
     from mcap.exceptions import McapError
 
     from cosim.io.recover import recover
@@ -231,7 +232,7 @@ def _recovered(path, tmp_path, messages: int) -> dict:
     with open(path, "rb") as f, pytest.raises(McapError):  # unfinished: no footer, no summary
         make_reader(f).get_summary()
     rep = recover(path, tmp_path / "fixed.mcap")
-    assert (rep.channels, rep.messages) == (2, messages), rep
+    assert (rep.channels, rep.messages) == (channels, messages), rep
     return read_run(tmp_path / "fixed.mcap").signals
 
 
@@ -294,3 +295,116 @@ def test_forked_writer_keeps_none_of_the_masters_files(tmp_path):
     finally:
         server.close()
         held.close()
+
+
+ROW_BYTES = struct.calcsize("=" + FMT)
+
+
+def test_row_mirror_gives_each_sections_rows_after_the_last_stamp_received_of_its_channels():
+    """Two batches in one shared memory: a joint one (channels 0 and 1 in each row, 3 and ROW_BYTES bytes) and a
+    channel's own rows (channel 2). Each section's rows come back as blocks as the publisher sends them (the joint
+    rows with the bytes around each channel, the channel's own with none), minus those whose stamps its channels'
+    last block received already has; a batch whose rows were sent (``sent``) gives nothing."""
+    import mmap
+
+    shared = mmap.mmap(-1, log_writer.RowMirror.BYTES)
+    joint_width = 3 + ROW_BYTES
+    sections = [([(0, 0, 3), (1, 3, ROW_BYTES)], joint_width, 4), ([(2, 0, ROW_BYTES)], ROW_BYTES, 4)]
+    m = log_writer.RowMirror(shared, sections)
+    joint, own = m.sections
+    for t, s in zip([10, 20, 30], SAMPLES):
+        joint.put(t, b"abc" + _rows([s]))
+    own.put(20, _rows(SAMPLES[:1]))
+    own.put(40, _rows(SAMPLES[1:2]))
+    got = log_writer.RowMirror.unsent(shared, sections, {0: 10, 1: 10, 2: 20})
+    assert got == [(0, [20, 30], b"abc" + _rows([SAMPLES[1]]) + b"abc" + _rows([SAMPLES[2]]), (0, ROW_BYTES)),
+                   (1, [20, 30], b"abc" + _rows([SAMPLES[1]]) + b"abc" + _rows([SAMPLES[2]]), (3, 0)),
+                   (2, [40], _rows(SAMPLES[1:2]), None)], got
+    assert encode_block(LAYOUT, got[1][1], got[1][2], got[1][3]) == encode_block(LAYOUT, [20, 30], _rows(SAMPLES[1:]))
+    assert [b[1] for b in log_writer.RowMirror.unsent(shared, sections, {})] == [[10, 20, 30]] * 2 + [[20, 40]]
+    assert log_writer.RowMirror.unsent(shared, sections, {0: 30, 1: 30, 2: 40}) == []
+    m.sent()
+    assert log_writer.RowMirror.unsent(shared, sections, {}) == []
+
+
+def test_row_mirror_keeps_a_channels_rows_of_values_as_a_prefix_of_what_fits():
+    """A channel of strings (rows of values, width None): its rows come back as the lists the publisher sends; a row
+    that does not fit its section is not kept, nor any after it until the rows are sent (those kept stay every row up
+    to a step, never a row with a gap before it)."""
+    import mmap
+
+    shared = mmap.mmap(-1, log_writer.RowMirror.BYTES)
+    sections = [([(0, 0, ROW_BYTES)], ROW_BYTES, 4), ([(5, 0, None)], None, 4)]
+    assert log_writer.RowMirror.size(None, 4) == 8 + 16 * 4 + log_writer.RowMirror.VALUES_BYTES
+    m = log_writer.RowMirror(shared, sections)
+    numbers, values = m.sections
+    numbers.put(1, _rows(SAMPLES[:1]))
+    rows = [["text", 1.5, [1, 2]], ["", -0.0, [3, 4]]]
+    values.put(1, rows[0])
+    values.put(2, rows[1])
+    got = log_writer.RowMirror.unsent(shared, sections, {0: 1})
+    assert got == [(5, [1, 2], rows, None)], got
+    assert log_writer.RowMirror.unsent(shared, sections, {5: 1}) == [(0, [1], _rows(SAMPLES[:1]), None),
+                                                                      (5, [2], rows[1:], None)]
+    values.put(3, ["x" * log_writer.RowMirror.VALUES_BYTES, 0.0, [0, 0]])  # does not fit: nor does any row after it
+    values.put(4, rows[0])
+    assert log_writer.RowMirror.unsent(shared, sections, {0: 1, 5: 0}) == [(5, [1, 2], rows, None)]
+    m.sent()
+    values.put(5, rows[1])
+    assert log_writer.RowMirror.unsent(shared, sections, {0: 1, 5: 2}) == [(5, [5], rows[1:], None)]
+
+
+def test_rows_that_do_not_fit_the_shared_memory_have_no_mirror(tmp_path):
+    """The shared memory is made with the writer, before the run's rows are known: when every batch's section does
+    not fit, there is no mirror at all (the writer keeps the blocks sent alone, see RowMirror)."""
+    if not log_writer._ForkedWriter.possible():
+        pytest.skip("a forked writer is not possible here")
+    cap = 256
+    size = log_writer.RowMirror.size(ROW_BYTES, cap)
+    assert size == 8 + cap * 8 + (cap * ROW_BYTES + 7) // 8 * 8 and size % 8 == 0, size
+    n = log_writer.RowMirror.BYTES // size
+    fitting = [([(cid, 0, ROW_BYTES)], ROW_BYTES, cap) for cid in range(n)]
+    assert log_writer.RowMirror.fits(fitting) and not log_writer.RowMirror.fits(fitting + fitting[:1])
+    w = WriterProcess()
+    w.open(tmp_path / "f.mcap", 1024, 1)
+    assert w.mirror(fitting + fitting[:1], 0) is None
+    assert w.mirror([], 0) is None
+    assert isinstance(w.mirror(fitting, 0), log_writer.RowMirror)
+    w.finish()
+
+
+def test_writer_left_by_its_master_writes_each_channels_mirrored_rows_after_its_last_block(tmp_path):
+    """A multi-rate run's channels, each batched and mirrored apart (/a every step, /b every other one, /c a channel
+    of values read one by one, as strings are, every third): the master dies after sending a block it had not marked
+    sent yet (the mirror holds those rows too) and one more step. The writer writes, per channel, the mirrored rows
+    later than its last block received: every row once, none lost."""
+    if not log_writer._ForkedWriter.possible():
+        pytest.skip("a forked writer is not possible here")
+    path = tmp_path / "m.mcap"
+    w = WriterProcess()
+    w.open(path, 1024, 1)
+    for cid, name in enumerate("ab"):
+        w.channel(cid, f"/{name}", f"cosim.{name}", b"{}", {"layout": "samples"},
+                  dataclasses.replace(LAYOUT, per_sample=True))
+    w.channel(2, "/c", "cosim.c", b"{}", {"layout": "samples"}, BlockLayout(("v",), per_sample=True))
+    m = w.mirror([([(0, 0, ROW_BYTES)], ROW_BYTES, 4), ([(1, 0, ROW_BYTES)], ROW_BYTES, 4), ([(2, 0, None)], None, 4)],
+                 0)
+    a, b, c = m.sections
+    for t in (0, 1):
+        a.put(t, _rows(SAMPLES[t:t + 1]))
+    b.put(0, _rows(SAMPLES[:1]))
+    c.put(0, [0.5])
+    w.blocks(0, [(0, [0, 1], _rows(SAMPLES[:2]), None), (1, [0], _rows(SAMPLES[:1]), None), (2, [0], [[0.5]], None)])
+    m.sent()
+    a.put(2, _rows(SAMPLES[2:]))
+    b.put(2, _rows(SAMPLES[2:]))
+    w.blocks(0, [(0, [2], _rows(SAMPLES[2:]), None), (1, [2], _rows(SAMPLES[2:]), None)])  # the master dies here,
+    a.put(3, _rows(SAMPLES[:1]))  # before marking them sent; then one more step
+    c.put(3, [-1.25])
+    w.abandon()
+    assert w._proc.returncode == 0, w._proc.stderr.read()
+    signals = _recovered(path, tmp_path, 8, channels=3)
+    assert signals["c.v"].t_ns.tolist() == [0, 3] and signals["c.v"].y.tolist() == [0.5, -1.25], signals["c.v"]
+    assert signals["a.p.x"].t_ns.tolist() == [0, 1, 2, 3], signals["a.p.x"].t_ns
+    assert signals["b.p.x"].t_ns.tolist() == [0, 2], signals["b.p.x"].t_ns
+    assert signals["a.n"].y.tolist() == [[7, -8], [2 ** 62, 0], [-1, 1], [7, -8]], signals["a.n"].y
