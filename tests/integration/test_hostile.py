@@ -17,6 +17,7 @@ import pytest
 from cli_helpers import cosim
 from test_faults import SMALL, fails
 
+from cosim.engine.scenario import EFFECTIVE_ATTACHMENT
 from cosim.io.runlog import MAX_CHUNK_BYTES
 
 pytestmark = pytest.mark.integration
@@ -288,18 +289,41 @@ def test_a_run_is_repeated_from_its_log_alone(run, tmp_path):
         _same_signals(first, plain)
 
 
+def _copy_log(src: Path, dst: Path, leave_out: str) -> None:
+    """A copy of the MCAP log ``src`` without its attachment named ``leave_out``."""
+    from mcap.reader import make_reader
+    from mcap.writer import Writer
+
+    with open(src, "rb") as f, open(dst, "wb") as g:
+        reader, writer = make_reader(f), Writer(g)
+        writer.start(profile=reader.get_header().profile, library="tests")
+        schemas, channels = {}, {}
+        for schema, channel, message in reader.iter_messages(log_time_order=False):
+            if schema is not None and schema.id not in schemas:
+                schemas[schema.id] = writer.register_schema(schema.name, schema.encoding, schema.data)
+            if channel.id not in channels:
+                channels[channel.id] = writer.register_channel(channel.topic, channel.message_encoding,
+                                                               schemas.get(channel.schema_id, 0), channel.metadata)
+            writer.add_message(channels[channel.id], message.log_time, message.data, message.publish_time,
+                               message.sequence)
+        for attachment in reader.iter_attachments():
+            if attachment.name != leave_out:
+                writer.add_attachment(attachment.create_time, attachment.log_time, attachment.name,
+                                      attachment.media_type, attachment.data)
+        for metadata in reader.iter_metadata():
+            writer.add_metadata(metadata.name, metadata.metadata)
+        writer.finish()
+
+
 def test_run_from_a_log_that_cannot_say_how_it_was_made(run, tmp_path, write_scenario):
     """A log that is missing, not an MCAP file, records no scenario (an older log), or whose FMU files are gone:
     one line naming the log and the cause, exit 2, no log written."""
     import shutil
 
-    # a log written before logs recorded the scenario as run (this baseline was kept as it was then)
-    golden = Path(__file__).resolve().parents[1] / "golden" / "helix_ctc_thesis.mcap"
     fails(run("run", "--from-log", tmp_path / "none.mcap"), 2, "none.mcap: no such log file")
     fails(run("run", "--from-log", SWEEP_SCENARIO), 2, "helix_ctc_analytic.yaml: not a readable MCAP log")
-    fails(run("run", "--from-log", golden, "--out", tmp_path / "g.mcap"), 2,
-          "helix_ctc_thesis.mcap: the log records no scenario as run")
-    fails(run("run", SWEEP_SCENARIO, "--from-log", golden), 2, "a scenario file or --from-log LOG, not both")
+    fails(run("run", SWEEP_SCENARIO, "--from-log", tmp_path / "none.mcap"), 2,
+          "a scenario file or --from-log LOG, not both")
     fails(run("run"), 2, "run needs a scenario file \\(or --from-log LOG")
     fmus = tmp_path / "fmus"
     fmus.mkdir()
@@ -313,6 +337,10 @@ def test_run_from_a_log_that_cannot_say_how_it_was_made(run, tmp_path, write_sce
     scenario.write_text(source)
     small = tmp_path / "small.mcap"
     assert run("run", scenario, "--out", small, "--quiet").returncode == 0
+    older = tmp_path / "older.mcap"  # as logs were before they recorded the scenario as run
+    _copy_log(small, older, leave_out=EFFECTIVE_ATTACHMENT)
+    fails(run("run", "--from-log", older, "--out", tmp_path / "g.mcap"), 2,
+          "older.mcap: the log records no scenario as run")
     (fmus / "CosimTGain.fmu").unlink()
     fails(run("run", "--from-log", small, "--out", tmp_path / "again.mcap"), 2,
           "small.mcap: components.g.path: FMU file not found: ", re.escape(str(fmus / "CosimTGain.fmu")))
