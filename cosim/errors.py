@@ -6,10 +6,13 @@ and from the builtin that matches its meaning, so callers can catch either.
 
 from __future__ import annotations
 
+import argparse
+import math
 import os
 import signal
 import sys
 from dataclasses import dataclass
+from typing import Callable
 
 from delta.errors import CosimError, UnreachableError, printable
 
@@ -28,6 +31,7 @@ __all__ = [
     "ComponentSourceError",
     "Interrupted",
     "StallError",
+    "number_option",
     "UnknownSignalError",
     "EXIT_BAD_INPUT",
     "exit_status",
@@ -183,3 +187,31 @@ def exit_now(code: int) -> None:
         except (OSError, ValueError):  # closed or broken pipe: nothing more can be written
             pass
     os._exit(code)
+
+
+# --------------------------------------------------------------------------- numbers given as options
+
+def number_option(*, gt: float | None = None, ge: float | None = None, le: float | None = None,
+                  whole: bool = False, nan: bool = False) -> Callable[[str], float]:
+    """The argparse ``type`` of every numeric option of the command line (one rule for all of them): the text as a
+    finite number (``whole``: an integer) within the bounds, else argparse's error naming the option, what is valid
+    and what was given (exit 2). ``nan``: the text 'nan' is a value of its own (a quantity to be found)."""
+    bounds = [f"> {gt:g}" if gt is not None else "", f">= {ge:g}" if ge is not None else "",
+              f"<= {le:g}" if le is not None else ""]
+    if ge is not None and le is not None:
+        bounds = [f"in [{ge:g}, {le:g}]"]
+    wanted = " ".join(["a whole number" if whole else "a finite number", *filter(None, bounds)])
+    if nan:
+        wanted += " (or nan)"
+
+    def parse(text: str) -> float:
+        x = int(text) if whole else float(text)  # not a number: argparse's "invalid float value: 'a'"
+        if nan and x != x:
+            return x
+        if not math.isfinite(x) or (gt is not None and not x > gt) or (ge is not None and not x >= ge) or \
+                (le is not None and not x <= le):
+            raise argparse.ArgumentTypeError(f"expected {wanted}, got {text!r}")
+        return x
+
+    parse.__name__ = "int" if whole else "float"  # named in argparse's message for a text that is no number
+    return parse

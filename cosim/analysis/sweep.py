@@ -58,7 +58,7 @@ from ..engine import supervision
 from ..engine.prepare import build_key, build_ours, locate_fmus
 from ..engine.scenario import dotted_overrides, parse_set_value, read_scenario
 from ..engine.system import build_plan
-from ..errors import CosimError, exit_now
+from ..errors import CosimError, exit_now, number_option
 from ..fmi import cleanup_extracted
 from ..fmi.extract import sweep_orphans
 from ..io.recover import recover_crashed
@@ -146,6 +146,8 @@ def parse_random(items: Sequence[str]) -> dict[str, tuple[str, float, float]]:
             a, b = float(m[2]), float(m[3])
         except ValueError:
             raise SweepError(f"--random {item}: the bounds must be numbers") from None
+        if not math.isfinite(b - a):  # nan, an infinity, or a span past the largest double (-1e308, 1e308)
+            raise SweepError(f"--random {item}: the bounds must be finite numbers whose difference is finite")
         if m[1] == "uniform" and not a < b:
             raise SweepError(f"--random {item}: uniform(A,B) needs A < B")
         if m[1] == "normal" and not b >= 0:
@@ -156,6 +158,10 @@ def parse_random(items: Sequence[str]) -> dict[str, tuple[str, float, float]]:
 
 MAX_CASES = 1_000_000
 """Cases one sweep may hold (its table and case list live in memory; at 0.1 s a case that is a day on 2 workers)."""
+
+MAX_WORKERS = 4 * (os.cpu_count() or 1)
+"""Processes of the embedded cluster, at most: more only share the same CPUs (each case is single-threaded), and
+each costs its memory and start-up (a hundred thousand never started, and the sweep hung)."""
 
 
 def make_cases(grid: dict[str, list[Any]], random: dict[str, tuple[str, float, float]], n: int | None,
@@ -660,13 +666,13 @@ def register(sub) -> None:
                    "(repeatable: the cartesian product)")
     p.add_argument("--random", action="append", default=[], metavar="NAME=uniform(A,B)|normal(MU,SIGMA)",
                    help="draws of NAME (repeatable; needs -n)")
-    p.add_argument("-n", type=int, default=None, metavar="N", help="number of random draws")
-    p.add_argument("--seed", type=int, default=None, help="seed of the random draws (default: fresh each time)")
+    p.add_argument("-n", type=number_option(whole=True, ge=1, le=MAX_CASES), default=None, metavar="N", help="number of random draws")
+    p.add_argument("--seed", type=number_option(whole=True, ge=0), default=None, help="seed of the random draws (default: fresh each time)")
     p.add_argument("--set", action="append", default=[], metavar="NAME=VALUE",
                    help="fixed override for every case (repeatable)")
-    p.add_argument("--stop-time", type=float, help="override time.stop for every case, s")
+    p.add_argument("--stop-time", type=number_option(), help="override time.stop for every case, s")
     g = p.add_mutually_exclusive_group()
-    g.add_argument("--workers", type=int, default=None, metavar="W",
+    g.add_argument("--workers", type=number_option(whole=True, ge=1, le=MAX_WORKERS), default=None, metavar="W",
                    help="embedded Dask LocalCluster of W single-threaded worker processes (default: CPU count)")
     g.add_argument("--scheduler", metavar="ADDRESS", help="run on an existing Dask cluster (tcp://host:8786)")
     p.add_argument("--out", required=True, metavar="DIR", help="directory of results.csv (and logs/)")

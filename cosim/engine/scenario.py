@@ -17,10 +17,10 @@ import re
 import typing
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Literal, Union
+from typing import Annotated, Any, Literal, Union
 
 import yaml
-from pydantic import BaseModel, ConfigDict, Field, PrivateAttr, ValidationError, field_validator, model_validator
+from pydantic import AllowInfNan, BaseModel, ConfigDict, Field, PrivateAttr, ValidationError, field_validator, model_validator
 
 from delta.robots import PRESETS
 from delta.trajectories import TYPES
@@ -28,7 +28,7 @@ from delta.trajectories import TYPES
 from ..errors import Issue, ScenarioError
 from .algorithm import ALGORITHMS, DEFAULT
 from .bounded_yaml import YamlTooLarge, load_yaml
-from .grid import NS_PER_S, Grid, grid_error
+from .grid import MAX_TIME_S, NS_PER_S, Grid, grid_error
 from .model_file import read_model_file
 from .names import name_problem, quote, split_ref
 
@@ -62,11 +62,17 @@ __all__ = [
 
 # a list sets name[1], name[2], ... (FMI 2 structured names) or a whole FMI 3 array; nested lists
 # give a matrix row by row
-ParamValue = Union[bool, int, float, str, list[Union[bool, int, float, str]], list[list[Union[bool, int, float]]]]
+# a parameter's nan or infinity is let through here, to be refused naming its FMU variable and type
+# (cosim.engine.system.typed_value)
+_Number = Annotated[float, AllowInfNan(True)]
+ParamValue = Union[bool, int, _Number, str, list[Union[bool, int, _Number, str]],
+                   list[list[Union[bool, int, _Number]]]]
 
 
 class _Model(BaseModel):
-    model_config = ConfigDict(extra="forbid", frozen=True)
+    # every number of a scenario (times, tolerances, rates, the watchdog) is finite: a .nan or .inf in a file, an
+    # option or an archive is one error naming it, never a value the run trips over later
+    model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False)
 
 
 class Component(_Model):
@@ -129,9 +135,9 @@ class TimeGrid(_Model):
     """Stop time and base communication step, s. Converted once to integer nanoseconds (the step rounded to the
     nanosecond when it is no whole number of them: :mod:`cosim.engine.grid`)."""
 
-    stop: float = Field(gt=0, description="stop time, s")
-    step: float = Field(gt=0, description="base communication step, s")
-    start: float = Field(0.0, ge=0, description="start time, s")
+    stop: float = Field(gt=0, le=MAX_TIME_S, description="stop time, s")
+    step: float = Field(gt=0, le=MAX_TIME_S, description="base communication step, s")
+    start: float = Field(0.0, ge=0, le=MAX_TIME_S, description="start time, s")
 
     @model_validator(mode="after")
     def _grid(self) -> "TimeGrid":

@@ -37,6 +37,7 @@ from mcap.records import Attachment, Channel, Chunk, Footer, Message, Metadata, 
 from mcap.stream_reader import StreamReader, breakup_chunk
 from mcap.writer import CompressionType, Writer
 
+from ..engine.grid import MAX_TIME_S
 from ..engine.scenario import EFFECTIVE_ATTACHMENT, Scenario, scenario_from_data
 from ..errors import CosimError, Issue, ScenarioError
 from ..fmi.extract import SSP_PREFIX
@@ -334,8 +335,8 @@ def write_baseline(source: str | Path, out: str | Path, period: float = 0.01,
     period of each block otherwise. Returns (path, samples kept).
     """
     source, out = Path(source), Path(out)
-    if period <= 0:
-        raise CosimError(f"baseline period must be > 0 s, got {period}")
+    if not 1e-9 <= period <= MAX_TIME_S:  # nan and infinities too: stamps are whole nanoseconds of a grid
+        raise CosimError(f"baseline period must be from 1 ns to {MAX_TIME_S:g} s, got {period:g} s")
     if out.resolve() == source.resolve():
         raise CosimError(f"{out}: the baseline must not overwrite its source")
     period_ns = int(round(period * 1e9))

@@ -73,7 +73,7 @@ from ..engine.names import ref, safe_stem
 from ..engine.prepare import input_files, prepare
 from ..engine.scenario import Component, apply_overrides, load_scenario, scenario_from_data
 from ..engine.wiring import index_text
-from ..errors import CosimError, Issue, ScenarioError
+from ..errors import CosimError, Issue, ScenarioError, number_option
 from ..fmi.description import FMUInfo, load_fmu
 from ..fmi.extract import MAX_FMU_BYTES, SSP_PREFIX, sweep_orphans
 from .output import check_output
@@ -1028,7 +1028,7 @@ def register(sub) -> None:
                                     "resources/) that OSP libcosim and other SSP tools run.")
     e.add_argument("scenario", help="scenario file (YAML)")
     e.add_argument("-o", "--out", required=True, help="the .ssp file to write")
-    e.add_argument("--stop-time", type=float, help="override time.stop, s")
+    e.add_argument("--stop-time", type=number_option(), help="override time.stop, s")
     e.add_argument("--set", action="append", default=[], metavar="NAME=VALUE",
                    help="override by dotted name (repeatable): a component parameter (ctl.gain.kp[1]=4e4), the trajectory (trajectory.params.rx=0.05), the time grid (time.stop=0.5), any scenario key")
     e.add_argument("--json", action="store_true")

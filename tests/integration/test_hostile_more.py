@@ -1,0 +1,125 @@
+"""Hostile inputs, round 3: the classes around issue 25's cases, through ``python -m cosim`` as a user runs it.
+
+Numbers (every numeric option, every number of a scenario: nan, infinities, past the largest time or double),
+files that are not regular files (a FIFO, a device), and more. Each case asserts the exit code, one line naming
+the cause, no traceback, an empty temporary folder (the ``run`` fixture of ``test_hostile``) and no output left.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+from test_faults import SMALL, fails
+from test_hostile import run  # noqa: F401 - the fixture: a private TMPDIR, left empty
+
+pytestmark = pytest.mark.integration
+
+ROOT = Path(__file__).resolve().parents[2]
+GOLDEN = ROOT / "tests" / "golden" / "helix_ctc.mcap"
+
+
+@pytest.fixture
+def small(write_scenario) -> Path:
+    return write_scenario(SMALL)
+
+
+# --------------------------------------------------------------------------- numbers given as options
+
+# (command and options before the value, the option, a bad value): every numeric option refuses nan, infinities and
+# values outside its range with argparse's error naming it (they were taken: --watchdog -1 and nan meant "no limit",
+# --margin nan passed every check; or a traceback: --period nan, --seed -1, --spacing inf, robot ik 0 0 nan)
+BAD_OPTIONS = [
+    (("run", "{S}", "--no-log"), "--watchdog", "-1"),
+    (("run", "{S}", "--no-log"), "--watchdog", "nan"),
+    (("run", "{S}", "--no-log"), "--watchdog", "inf"),
+    (("baseline", str(GOLDEN), "--out", "{T}/b.mcap"), "--period", "nan"),
+    (("baseline", str(GOLDEN), "--out", "{T}/b.mcap"), "--period", "inf"),
+    (("robot", "workspace", "--robot", "linear_delta_thesis"), "--spacing", "inf"),
+    (("robot", "workspace", "--robot", "linear_delta_thesis"), "--margin", "nan"),
+    (("robot", "singularity", "--robot", "linear_delta_thesis", "--p", "0", "0", "-0.6"), "--margin", "inf"),
+    (("robot", "ik", "--robot", "linear_delta_thesis", "--margin", "0.01", "0", "0"), "Z", "nan"),
+    (("robot", "workspace", "--robot", "linear_delta_thesis", "--cylinder", "0.01", "0.01", "{V}"), "--cylinder", "inf"),
+    (("sweep", "{S}", "--out", "{T}/sw", "--random", "g.k=uniform(1,2)", "-n", "1"), "--seed", "-1"),
+    (("sweep", "{S}", "--out", "{T}/sw", "--grid", "g.k=1"), "--workers", "100000"),
+    (("validate-model", "--robot", "linear_delta_thesis"), "--duration", "inf"),
+    (("validate-model", "--robot", "linear_delta_thesis"), "--w-rotation", "nan"),
+    (("ssp", "export", "{S}", "-o", "{T}/x.ssp"), "--stop-time", "nan"),
+    (("run", "{S}", "--no-log"), "--stop-time", "inf"),
+    (("check", "{S}"), "--step", "-inf"),
+]
+
+
+@pytest.mark.parametrize("before, option, value", BAD_OPTIONS, ids=[f"{b[0]}{o}={v}" for b, o, v in BAD_OPTIONS])
+def test_every_numeric_option_refuses_what_is_no_value_of_it(run, small, tmp_path, before, option, value):
+    args = [a.replace("{S}", str(small)).replace("{T}", str(tmp_path)).replace("{V}", value) for a in before]
+    if "{V}" not in before:  # a positional, or OPTION=VALUE (a value may start with -)
+        args.append(value if not option.startswith("-") else f"{option}={value}")
+    message = fails(run(*args), 2, f"argument {option}: expected a (finite|whole) number", f"got '{value}'",
+                    usage=True)
+    assert "invalid" not in message, message
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["s.yaml", "tmp"], "an output was written"
+
+
+def test_watchdog_zero_still_means_no_limit(run, small):
+    assert run("run", small, "--no-log", "--quiet", "--watchdog", "0").returncode == 0
+
+
+# --------------------------------------------------------------------------- numbers of a scenario
+
+@pytest.mark.parametrize("args, cause", [
+    (("--set", "time.stop=.inf"), "--set time.stop=.inf: Input should be a finite number"),
+    (("--stop-time", "1e308"), "--stop-time 1e\\+308: Input should be less than or equal to 9000000000"),
+    (("--step", "1e308"), "--step 1e\\+308: Input should be less than or equal to 9000000000"),
+    (("--set", "time.start=1e308"), "--set time.start=1e308: Input should be less than or equal to 9000000000"),
+    (("--set", "watchdog_s=.inf"), "--set watchdog_s=.inf: Input should be a finite number"),
+    (("--set", "logging.flush_interval=.nan"), "--set logging.flush_interval=.nan: Input should be a finite number"),
+    (("--set", "g.k=.inf"), "--set g.k=.inf: k is Real: expected a finite number, got inf"),
+    (("--set", "g.k=1e400"), "--set g.k=1e400: k is Real: expected a finite number, got '1e400'"),
+    (("--set", "g.k=" + "9" * 400), "k is Real: expected a finite number, got 999"),
+])
+@pytest.mark.parametrize("command", ["check", "run"])
+def test_a_number_no_run_can_use_is_one_line_naming_it(run, small, tmp_path, command, args, cause):
+    """Times past the longest grid (whose nanoseconds overflowed: a traceback blamed on 'an exit() inside a
+    component'), infinities taken as a watchdog or a gain, a whole number past the largest double."""
+    out = ["--out", tmp_path / "x.mcap"] if command == "run" else []
+    fails(run(command, small, *args, *out), 2, cause)
+    assert not list(tmp_path.glob("x.mcap*")), "a refused run left output files"
+
+
+@pytest.mark.parametrize("line, cause", [
+    ("time: {stop: 1e308, step: 0.01}", r"s.yaml:\d+: time.stop: Input should be less than or equal to 9000000000"),
+    ("time: {stop: .inf, step: 0.01}", r"s.yaml:\d+: time.stop: Input should be a finite number"),
+    ("time: {stop: 0.2, step: 0.01, start: 1e308}", r"s.yaml:\d+: time.start: Input should be less than or equal"),
+    ("time: {stop: 0.2, step: .inf}", r"s.yaml:\d+: time.step: Input should be a finite number"),
+])
+def test_a_time_no_grid_can_hold_in_a_file_names_its_line(run, write_scenario, line, cause):
+    fails(run("check", write_scenario(SMALL.replace("time: {stop: 0.2, step: 0.01}", line))), 2, cause)
+
+
+@pytest.mark.parametrize("value, cause", [(".inf", "got inf"), ("-.inf", "got -inf"), ("1e400", "got '1e400'")])
+def test_an_infinite_real_parameter_in_a_file_is_refused(run, write_scenario, value, cause):
+    fails(run("check", write_scenario(SMALL.replace("k: 2.0", f"k: {value}"))), 2,
+          r"s.yaml:\d+: components.g.parameters.k: k is Real: expected a finite number, " + cause)
+
+
+# --------------------------------------------------------------------------- numbers inside other options
+
+def test_a_baseline_period_below_the_stamps_resolution_is_refused(run, tmp_path):
+    """1e-300 s is 0 ns: the decimation divided by zero, reported as a damaged log."""
+    for period in ("1e-300", "1e308"):
+        fails(run("baseline", GOLDEN, "--out", tmp_path / "b.mcap", "--period", period), 2,
+              f"baseline period must be from 1 ns to 9e\\+09 s, got {period.replace('e', 'e[+]?')} s")
+    assert not (tmp_path / "b.mcap").exists()
+
+
+def test_an_infinite_tolerance_is_no_tolerance(run):
+    fails(run("compare", GOLDEN, GOLDEN, "--tol", "plant.p=inf"), 2, "--tol 'plant.p=inf': expected "
+          "SIGNAL_PATTERN=POSITIVE_NUMBER \\(finite\\)")
+
+
+@pytest.mark.parametrize("dist", ["uniform(0,inf)", "uniform(-1e308,1e308)", "normal(nan,1)"])
+def test_a_random_draw_over_no_finite_range_is_refused(run, small, tmp_path, dist):
+    fails(run("sweep", small, "--random", f"g.k={dist}", "-n", "1", "--out", tmp_path / "sw", "--workers", "1"), 2,
+          f"--random g.k={dist.replace('(', '[(]').replace(')', '[)]')}: the bounds must be finite numbers")
+    assert not (tmp_path / "sw").exists()
