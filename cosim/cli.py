@@ -403,6 +403,10 @@ def _cmd_validate_model(args: argparse.Namespace) -> int:
         raise CosimError("validate-model: --duration and --no-separate apply to one motion without --out")
     if args.out is not None and not Path(args.out).parent.resolve().is_dir():
         raise CosimError(f"--out: no folder {Path(args.out).parent} to write {Path(args.out).name} into")
+    if args.out is not None:
+        from .io.output import check_output  # lazy: the CLI imports each command's modules in the command
+
+        check_output(Path(args.out))  # a regular file or nothing: never renamed over a FIFO or a device
     bar = None
     progress = None
     if not (args.quiet or args.json):

@@ -10,6 +10,7 @@ import argparse
 import math
 import os
 import signal
+import stat
 import sys
 from dataclasses import dataclass
 from typing import Callable
@@ -32,6 +33,7 @@ __all__ = [
     "Interrupted",
     "StallError",
     "number_option",
+    "file_problem",
     "UnknownSignalError",
     "EXIT_BAD_INPUT",
     "exit_status",
@@ -215,3 +217,27 @@ def number_option(*, gt: float | None = None, ge: float | None = None, le: float
 
     parse.__name__ = "int" if whole else "float"  # named in argparse's message for a text that is no number
     return parse
+
+
+# --------------------------------------------------------------------------- files given as inputs
+
+_KINDS = ((stat.S_ISFIFO, "a FIFO"), (stat.S_ISCHR, "a character device"), (stat.S_ISBLK, "a block device"),
+          (stat.S_ISSOCK, "a socket"))
+
+
+def file_problem(path: str | os.PathLike, directory_ok: bool = False) -> str | None:
+    """Why ``path`` cannot be read as an input file (None: it is a regular file, or with ``directory_ok`` a
+    directory): missing, a directory, or a FIFO, a device or a socket, whose reading may block for ever (a FIFO
+    nobody writes) or never end (``/dev/zero``). Every input file of a command is checked so before it is opened."""
+    try:
+        st = os.stat(path)
+    except (FileNotFoundError, NotADirectoryError):
+        return "no such file"
+    except OSError as exc:
+        return f"cannot read it: {exc.strerror or exc}"
+    if stat.S_ISDIR(st.st_mode):
+        return None if directory_ok else "is a directory, not a file"
+    if not stat.S_ISREG(st.st_mode):
+        kind = next((name for test, name in _KINDS if test(st.st_mode)), "not a file")
+        return f"not a regular file ({kind})"
+    return None

@@ -58,7 +58,8 @@ from ..engine import supervision
 from ..engine.prepare import build_key, build_ours, locate_fmus
 from ..engine.scenario import dotted_overrides, parse_set_value, read_scenario
 from ..engine.system import build_plan
-from ..errors import CosimError, exit_now, number_option
+from ..errors import CosimError, exit_now, file_problem, number_option
+from ..io.output import check_output
 from ..fmi import cleanup_extracted
 from ..fmi.extract import sweep_orphans
 from ..io.recover import recover_crashed
@@ -278,10 +279,19 @@ class SweepSummary:
 def read_results(out: str | Path) -> list[dict[str, str]]:
     """The rows of ``out/results.csv`` (strings, as written)."""
     path = Path(out) / RESULTS
-    if not path.exists():
+    if not os.path.lexists(path):
         return []
-    with path.open(newline="") as f:
-        return list(csv.DictReader(f))
+    problem = file_problem(path)  # a directory, or a FIFO read for ever
+    if problem is not None:
+        raise SweepError(f"{path}: {problem}; use another --out")
+    try:
+        with path.open(newline="", encoding="utf-8") as f:
+            rows = list(csv.DictReader(f))
+    except (OSError, UnicodeDecodeError, csv.Error) as exc:
+        raise SweepError(f"{path}: not a sweep's results table ({exc}); use another --out") from None
+    if rows and (None in rows[0] or not {"case", "status"} <= set(rows[0])):
+        raise SweepError(f"{path}: not a sweep's results table (no case and status columns); use another --out")
+    return rows
 
 
 def prebuild(scenarios: Iterable[Any]) -> dict[tuple[str, bool, int], str]:
@@ -579,11 +589,20 @@ def report(out: str | Path, metric: str = "rmse", fig: str | Path | None = None)
     rows = read_results(out)
     if not rows:
         raise SweepError(f"{Path(out) / RESULTS}: no results")
-    meta = json.loads((Path(out) / "sweep.json").read_text()) if (Path(out) / "sweep.json").exists() else {}
-    params = meta.get("parameters")
-    if not params:
-        raise SweepError(f"{Path(out) / 'sweep.json'}: missing or without parameters; it is written by the sweep "
-                         "next to results.csv")
+    meta_path = Path(out) / "sweep.json"
+    meta = {}
+    if os.path.lexists(meta_path):
+        problem = file_problem(meta_path)
+        if problem is not None:
+            raise SweepError(f"{meta_path}: {problem}")
+        try:
+            meta = json.loads(meta_path.read_text(encoding="utf-8"))
+        except (OSError, UnicodeDecodeError, ValueError) as exc:
+            raise SweepError(f"{meta_path}: not the sweep's JSON ({exc})") from None
+    params = meta.get("parameters") if isinstance(meta, dict) else None
+    if not params or not isinstance(params, list) or not all(isinstance(p, str) and p in rows[0] for p in params):
+        raise SweepError(f"{Path(out) / 'sweep.json'}: missing, or without the parameters of results.csv; it is "
+                         "written by the sweep next to results.csv")
     if metric not in rows[0]:
         valid = [c for c in rows[0] if c not in ("case", "status", "checks", "mcap", "message", *params)]
         raise SweepError(f"--metric {metric}: not a column; valid: {', '.join(valid)}")
@@ -591,8 +610,14 @@ def report(out: str | Path, metric: str = "rmse", fig: str | Path | None = None)
     n_bad = len(rows) - len(ok)
     swept = [p for p in params if len({r[p] for r in rows}) > 1] or params[:1]
     fig_path = Path(fig) if fig is not None else Path(out) / f"sweep_{metric}.png"
+    check_output(fig_path, (Path(out) / RESULTS,))  # a regular file or nothing, never a FIFO, a device or the table
+    try:
+        y = np.array([float(r[metric]) for r in ok])
+    except (TypeError, ValueError):
+        bad = next(r for r in ok if not _is_number(r[metric]))
+        raise SweepError(f"{Path(out) / RESULTS}: case {bad['case']}: {metric} = {bad[metric]!r} is not a "
+                         "number") from None
     f, ax = plt.subplots(figsize=(6.4, 4.6), layout="constrained")
-    y = np.array([float(r[metric]) for r in ok])
 
     def axis(name: str) -> tuple[np.ndarray, list[str]]:
         """Numbers, or the positions of list values (``[1e4, 1e4, 1e4]``) ordered by their first element."""
@@ -600,7 +625,7 @@ def report(out: str | Path, metric: str = "rmse", fig: str | Path | None = None)
         try:
             return np.array([float(c) for c in cells]), []
         except ValueError:
-            labels = sorted(set(cells), key=lambda c: (json.loads(c)[0] if c.startswith("[") else c))
+            labels = sorted(set(cells), key=_first_element)
             return np.array([labels.index(c) for c in cells], dtype=float), [_short(c) for c in labels]
 
     if len(swept) == 1:
@@ -637,9 +662,33 @@ def report(out: str | Path, metric: str = "rmse", fig: str | Path | None = None)
         ax.set_ylabel(b)
     scenario = Path(meta.get("scenario", "")).stem
     ax.set_title(f"{scenario}: {metric}, {len(ok)} cases" + (f" ({n_bad} failed, not shown)" if n_bad else ""))
-    f.savefig(fig_path, dpi=120)
-    plt.close(f)
+    tmp = fig_path.with_name(f".{fig_path.name}.{os.getpid()}.tmp")  # renamed into place only when complete
+    try:
+        f.savefig(tmp, dpi=120, format="png")
+        os.replace(tmp, fig_path)
+    except OSError as exc:
+        raise SweepError(f"{fig_path}: cannot write the figure: {exc.strerror or exc}") from None
+    finally:
+        plt.close(f)
+        tmp.unlink(missing_ok=True)
     return fig_path
+
+
+def _is_number(cell: Any) -> bool:
+    try:
+        float(cell)
+    except (TypeError, ValueError):
+        return False
+    return True
+
+
+def _first_element(cell: str) -> tuple:
+    """The order of list values (``[1e4, 1e4, 1e4]``) by their first element; other text after them, as text."""
+    try:
+        first = json.loads(cell)[0] if cell.startswith("[") else None
+        return (0, float(first), "") if first is not None else (1, 0.0, cell)
+    except (ValueError, TypeError, IndexError, KeyError):
+        return (1, 0.0, cell)
 
 
 def _short(cell: str) -> str:
@@ -695,8 +744,9 @@ def _cmd_sweep(args) -> int:
         raise SweepError(f"-n must be from 1 to {MAX_CASES}, got {args.n}")
     if args.workers is not None and args.workers < 1:
         raise SweepError(f"--workers must be >= 1, got {args.workers}")
-    if not Path(args.scenario).is_file():
-        raise SweepError(f"{args.scenario}: no such scenario file")
+    problem = file_problem(args.scenario)
+    if problem is not None:
+        raise SweepError(f"{args.scenario}: {problem.replace('no such file', 'no such scenario file')}")
     fixed: dict[str, Any] = {}
     for item in args.set:
         name, sep, raw = item.partition("=")

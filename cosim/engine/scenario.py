@@ -25,7 +25,7 @@ from pydantic import AllowInfNan, BaseModel, ConfigDict, Field, PrivateAttr, Val
 from delta.robots import PRESETS
 from delta.trajectories import TYPES
 
-from ..errors import Issue, ScenarioError
+from ..errors import Issue, ScenarioError, file_problem
 from .algorithm import ALGORITHMS, DEFAULT
 from .bounded_yaml import YamlTooLarge, load_yaml
 from .grid import MAX_TIME_S, NS_PER_S, Grid, grid_error
@@ -683,6 +683,11 @@ def trajectory_params_issues(spec: TrajectorySpec) -> list[tuple[tuple, str]]:
     return []
 
 
+MAX_SCENARIO_BYTES = 16 * 2 ** 20
+"""Bytes a scenario file may hold (the shipped ones hold a few kB; :data:`~cosim.engine.bounded_yaml.MAX_YAML_NODES`
+bounds what it expands to)."""
+
+
 def load_scenario(path: str | Path, overrides: dict[tuple, Any] | None = None) -> Scenario:
     """Load a scenario file. ``overrides`` maps key paths to values (``--set``, ``--stop-time``)."""
     return read_scenario(path).load(overrides)
@@ -692,10 +697,18 @@ def read_scenario(path: str | Path) -> ScenarioFile:
     """Read and parse a scenario file, not yet validated (:meth:`ScenarioFile.load`); raises
     :class:`ScenarioError` for a file that cannot be read, is not UTF-8 or not YAML."""
     path = Path(path)
-    try:
-        raw = path.read_bytes()
-    except OSError as exc:
-        raise ScenarioError(Issue("", f"cannot read scenario: {exc.strerror}", str(path))) from None
+    problem = file_problem(path)
+    if problem is None:
+        try:
+            with open(path, "rb") as f:
+                raw = f.read(MAX_SCENARIO_BYTES + 1)
+        except OSError as exc:
+            problem = exc.strerror or str(exc)
+    if problem is not None:
+        raise ScenarioError(Issue("", f"cannot read scenario: {problem}", str(path))) from None
+    if len(raw) > MAX_SCENARIO_BYTES:
+        raise ScenarioError(Issue("", f"the file is larger than {MAX_SCENARIO_BYTES // 2 ** 20} MiB, more than any "
+                                      "scenario holds (cosim.engine.scenario.MAX_SCENARIO_BYTES): refused", str(path)))
     try:
         text = raw.decode("utf-8")
     except UnicodeDecodeError as exc:

@@ -10,7 +10,7 @@ from functools import cached_property
 from pathlib import Path
 from typing import Any
 
-from ..errors import ComponentSourceError, Issue
+from ..errors import ComponentSourceError, Issue, file_problem
 from .extract import check_archive, extraction, file_stamp, forget_extractions
 
 REAL, INTEGER, BOOLEAN, STRING, BINARY, CLOCK = "Real", "Integer", "Boolean", "String", "Binary", "Clock"
@@ -192,6 +192,9 @@ def load_fmu(path: str | Path) -> FMUInfo:
         st = path.stat()
     except OSError:
         raise ComponentSourceError(Issue("", f"FMU not found: {path}")) from None
+    problem = file_problem(path, directory_ok=True)  # an .fmu file, or the folder of an unpacked one
+    if problem is not None:
+        raise ComponentSourceError(Issue("", f"{path}: {problem}")) from None
     stamp = file_stamp(st)
     cached = _CACHE.get(path)
     if cached is not None:

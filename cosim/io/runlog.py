@@ -39,8 +39,9 @@ from mcap.writer import CompressionType, Writer
 
 from ..engine.grid import MAX_TIME_S
 from ..engine.scenario import EFFECTIVE_ATTACHMENT, Scenario, scenario_from_data
-from ..errors import CosimError, Issue, ScenarioError
+from ..errors import CosimError, Issue, ScenarioError, file_problem
 from ..fmi.extract import SSP_PREFIX
+from .output import check_output
 from .ssp import reopen_ssp
 
 __all__ = ["Signal", "RunLog", "read_run", "write_baseline", "log_records", "open_from_log", "time_offset_ns", "samples", "AXES",
@@ -219,8 +220,9 @@ def read_run(path: str | Path, components: Iterable[str] | None = None) -> RunLo
     :data:`MAX_CHUNK_BYTES`.
     """
     path = Path(path)
-    if not path.is_file():
-        raise CosimError(f"{path}: no such file")
+    problem = file_problem(path)
+    if problem is not None:
+        raise CosimError(f"{path}: {problem}")
     wanted = None if components is None else {f"/{c}" for c in components}
     columns: dict[str, dict[str, list]] = {}  # per component, per key (t included): the values in file order
     stamps: dict[str, list[int]] = {}  # simulation time (blocks) or log time (one sample a message), ns
@@ -335,14 +337,17 @@ def write_baseline(source: str | Path, out: str | Path, period: float = 0.01,
     period of each block otherwise. Returns (path, samples kept).
     """
     source, out = Path(source), Path(out)
+    problem = file_problem(source)
+    if problem is not None:
+        raise CosimError(f"{source}: {problem}")
     if not 1e-9 <= period <= MAX_TIME_S:  # nan and infinities too: stamps are whole nanoseconds of a grid
         raise CosimError(f"baseline period must be from 1 ns to {MAX_TIME_S:g} s, got {period:g} s")
-    if out.resolve() == source.resolve():
-        raise CosimError(f"{out}: the baseline must not overwrite its source")
+    # as every output: a regular file or nothing (a device or a FIFO was replaced by a regular file: as root,
+    # --out /dev/null destroyed /dev/null), never the source, its folder made
+    check_output(out, (source,))
     period_ns = int(round(period * 1e9))
     wanted = None if components is None else {f"/{c}" for c in components}
-    tmp = out.with_name(out.name + ".part")
-    out.parent.mkdir(parents=True, exist_ok=True)
+    tmp = out.with_name(f".{out.name}.{os.getpid()}.part")  # renamed into place only when complete
     written = 0
     try:
         with open(source, "rb") as f, open(tmp, "wb") as dst:
@@ -427,8 +432,9 @@ def open_from_log(path: str | Path, overrides: dict[tuple, Any] | None = None) -
     for a scenario file.
     """
     path = Path(path)
-    if not path.is_file():
-        raise ScenarioError(Issue("", "no such log file", str(path)))
+    problem = file_problem(path)
+    if problem is not None:
+        raise ScenarioError(Issue("", problem.replace("no such file", "no such log file"), str(path)))
     found = archive = None
     try:
         with open(path, "rb") as f:

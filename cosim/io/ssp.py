@@ -73,7 +73,7 @@ from ..engine.names import ref, safe_stem
 from ..engine.prepare import input_files, prepare
 from ..engine.scenario import Component, apply_overrides, load_scenario, scenario_from_data
 from ..engine.wiring import index_text
-from ..errors import CosimError, Issue, ScenarioError, number_option
+from ..errors import CosimError, Issue, ScenarioError, file_problem, number_option
 from ..fmi.description import FMUInfo, load_fmu
 from ..fmi.extract import MAX_FMU_BYTES, SSP_PREFIX, sweep_orphans
 from .output import check_output
@@ -747,6 +747,9 @@ def read_ssp(ssp: str | Path, workdir: str | Path) -> dict[str, Any]:
     ``--step`` / ``--stop-time`` overrides fill them in).
     """
     ssp, workdir = Path(ssp), Path(workdir)
+    problem = file_problem(ssp)  # a FIFO or /dev/zero named .ssp: zipfile would read it for ever
+    if problem is not None:
+        raise SspError(ssp, problem)
     try:
         zf = zipfile.ZipFile(ssp)
     except FileNotFoundError:
@@ -989,6 +992,9 @@ def reopen_ssp(archive: dict[str, str], data: dict[str, Any], source: str,
         raise SspError(source, f"the log's ssp metadata is incomplete ({archive!r}): expected file, sha256 and "
                                "unpacked") from None
     head = f"the run was made from the SSP archive {ssp}, which"
+    problem = file_problem(ssp)  # the log names it: a FIFO or a device would be hashed for ever
+    if problem not in (None, "no such file"):
+        raise SspError(source, f"{head} cannot be read: {problem}")
     try:
         now = _sha256(ssp)
     except FileNotFoundError:

@@ -123,3 +123,130 @@ def test_a_random_draw_over_no_finite_range_is_refused(run, small, tmp_path, dis
     fails(run("sweep", small, "--random", f"g.k={dist}", "-n", "1", "--out", tmp_path / "sw", "--workers", "1"), 2,
           f"--random g.k={dist.replace('(', '[(]').replace(')', '[)]')}: the bounds must be finite numbers")
     assert not (tmp_path / "sw").exists()
+
+
+# --------------------------------------------------------------------------- inputs that are not regular files
+
+@pytest.fixture
+def fifo(tmp_path) -> Path:
+    """A FIFO nobody writes: reading it blocks for ever."""
+    import os
+
+    path = tmp_path / "fifo"
+    os.mkfifo(path)
+    return path
+
+
+def _inputs(kind: str, tmp_path: Path, fifo: Path) -> tuple[Path, str]:
+    """(a path of ``kind``, what the message says of it)."""
+    if kind == "fifo":
+        return fifo, r"not a regular file \(a FIFO\)"
+    if kind == "device":
+        return Path("/dev/zero"), r"not a regular file \(a character device\)"  # never ends
+    d = tmp_path / "folder"
+    d.mkdir(exist_ok=True)
+    return d, "is a directory, not a file"
+
+
+@pytest.mark.parametrize("kind", ["fifo", "device", "directory"])
+@pytest.mark.parametrize("command", ["check", "run", "sweep", "ssp", "recover", "table", "report", "baseline",
+                                     "compare", "from-log"])
+def test_an_input_that_is_not_a_regular_file_is_refused_at_once(run, tmp_path, fifo, small, kind, command):
+    """A FIFO, /dev/zero or a directory as a command's input: check, run and baseline hung reading a FIFO or
+    /dev/zero, an .ssp that is one hung, and every log reader said 'no such file'."""
+    path, says = _inputs(kind, tmp_path, fifo)
+    if command == "ssp":  # an archive given by a name ending in .ssp: a link to it
+        link = tmp_path / "archive.ssp"
+        link.symlink_to(path)
+        path = link
+    out = tmp_path / "out.mcap"
+    args = {"check": ("check", path), "run": ("run", path, "--out", out), "ssp": ("run", path, "--out", out),
+            "sweep": ("sweep", path, "--grid", "g.k=1", "--out", tmp_path / "sw", "--workers", "1"),
+            "recover": ("recover", path, "--out", out), "table": ("table", path),
+            "report": ("report", path, "--out", tmp_path / "rep"), "baseline": ("baseline", path, "--out", out),
+            "compare": ("compare", GOLDEN, path), "from-log": ("run", "--from-log", path, "--out", out)}[command]
+    if command == "compare":  # named as a log
+        link = tmp_path / "other.mcap"
+        link.symlink_to(path)
+        args = ("compare", GOLDEN, link)
+    fails(run(*args, timeout=30), 2, says)
+    assert not any(p.name.startswith(("out", "sw", "rep")) for p in tmp_path.iterdir()), sorted(tmp_path.iterdir())
+
+
+@pytest.mark.parametrize("kind", ["fifo", "device"])
+def test_a_component_whose_fmu_is_not_a_regular_file_is_named(run, write_scenario, tmp_path, fifo, kind):
+    path, says = _inputs(kind, tmp_path, fifo)
+    scenario = write_scenario(SMALL.replace("{CosimTSource}", str(path)))  # before the fixture fills it in
+    fails(run("check", scenario, timeout=30), 2, r"s.yaml:\d+: components.src: ", says)
+
+
+def test_a_scenario_file_larger_than_any_scenario_is_refused_unread(run, tmp_path):
+    from cosim.engine.scenario import MAX_SCENARIO_BYTES
+
+    big = tmp_path / "big.yaml"
+    with big.open("wb") as f:
+        f.truncate(MAX_SCENARIO_BYTES + 1)  # sparse: no disk
+    fails(run("check", big, limit_memory=True), 2, f"big.yaml: the file is larger than "
+                                                   f"{MAX_SCENARIO_BYTES // 2 ** 20} MiB")
+
+
+# --------------------------------------------------------------------------- outputs that are not regular files
+
+@pytest.mark.parametrize("command", ["baseline", "validate-model", "sweep-report"])
+def test_no_output_replaces_a_fifo(run, tmp_path, fifo, small, command):
+    """--out naming a FIFO (or, as root, a device: /dev/null became a regular file): refused before any work, the
+    FIFO left as it was; run, recover and ssp export refused it already."""
+    import stat
+
+    sweep = tmp_path / "sw"
+    if command == "sweep-report":
+        assert run("sweep", small, "--grid", "g.k=1,2", "--out", sweep, "--workers", "1", "--quiet").returncode == 0
+    args = {"baseline": ("baseline", GOLDEN, "--out", fifo),
+            "validate-model": ("validate-model", "--robot", "linear_delta_thesis", "--out", fifo, "--quiet"),
+            "sweep-report": ("sweep-report", sweep, "--out", fifo)}[command]
+    fails(run(*args, timeout=60), 2, "fifo: is not a regular file")
+    assert stat.S_ISFIFO(fifo.stat().st_mode), "the FIFO was replaced"
+    assert not [p for p in tmp_path.rglob(".*") if p.is_file()], "a temporary output was left"
+
+
+def test_a_baseline_never_writes_over_its_source_or_into_a_directory(run, tmp_path):
+    import shutil
+
+    log = tmp_path / "log.mcap"
+    shutil.copy(GOLDEN, log)
+    before = log.read_bytes()
+    fails(run("baseline", log, "--out", log), 2, "log.mcap: is this command's own input")
+    (tmp_path / "d.mcap").mkdir()
+    fails(run("baseline", log, "--out", tmp_path / "d.mcap"), 2, "d.mcap: is a directory")  # was 'cannot read'
+    assert log.read_bytes() == before
+
+
+# --------------------------------------------------------------------------- a sweep's folder that is not one
+
+@pytest.mark.parametrize("content, says", [
+    (b"\xff\xfe garbage \x00\x01", "not a sweep's results table \\('utf-8' codec can't decode"),
+    (b"a,b\n1,2,3\n", "not a sweep's results table \\(no case and status columns\\)"),
+])
+@pytest.mark.parametrize("command", ["sweep", "sweep-report"])
+def test_a_results_table_that_is_not_one_is_named(run, tmp_path, small, content, says, command):
+    sweep = tmp_path / "sw"
+    sweep.mkdir()
+    (sweep / "results.csv").write_bytes(content)
+    args = ("sweep", small, "--grid", "g.k=1", "--out", sweep, "--workers", "1") if command == "sweep" else \
+        ("sweep-report", sweep)
+    fails(run(*args), 2, "results.csv: " + says)
+    assert (sweep / "results.csv").read_bytes() == content
+
+
+def test_a_sweep_json_or_metric_that_is_not_the_sweeps_is_named(run, tmp_path, small):
+    sweep = tmp_path / "sw"
+    assert run("sweep", small, "--grid", "g.k=1,2", "--out", sweep, "--workers", "1", "--quiet").returncode == 0
+    (sweep / "sweep.json").write_text('{"parameters": 5}')
+    fails(run("sweep-report", sweep), 2, "sweep.json: missing, or without the parameters of results.csv")
+    (sweep / "sweep.json").write_text('{"parameters": [')
+    fails(run("sweep-report", sweep), 2, "sweep.json: not the sweep's JSON")
+    (sweep / "sweep.json").write_text('{"parameters": ["g.k"]}')
+    fails(run("sweep-report", sweep, "--metric", "case"), 2, "results.csv: case [0-9a-f]+: case = '[0-9a-f]+' is "
+                                                             "not a number")
+    assert run("sweep-report", sweep).returncode == 0
+    assert sorted(p.name for p in sweep.iterdir()) == ["results.csv", "sweep.json", "sweep_rmse.png"]
