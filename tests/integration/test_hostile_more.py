@@ -7,6 +7,7 @@ the cause, no traceback, an empty temporary folder (the ``run`` fixture of ``tes
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
 import pytest
@@ -250,3 +251,89 @@ def test_a_sweep_json_or_metric_that_is_not_the_sweeps_is_named(run, tmp_path, s
                                                              "not a number")
     assert run("sweep-report", sweep).returncode == 0
     assert sorted(p.name for p in sweep.iterdir()) == ["results.csv", "sweep.json", "sweep_rmse.png"]
+
+
+# --------------------------------------------------------------------------- SSP archives
+
+@pytest.fixture
+def small_ssp(run, small, tmp_path) -> Path:
+    """SMALL exported as an SSP archive (src -> g, g's k in resources/g.ssv)."""
+    ssp = tmp_path / "small.ssp"
+    assert run("ssp", "export", small, "-o", ssp).returncode == 0
+    return ssp
+
+
+def _rewrite(ssp: Path, out: Path, ssd=lambda s: s, ssv=lambda s: s, extra=()) -> Path:
+    """A copy of ``ssp`` with its .ssd and g.ssv edited and ``extra`` (name, bytes) members appended."""
+    import warnings
+    import zipfile
+
+    with zipfile.ZipFile(ssp) as src, zipfile.ZipFile(out, "w") as dst:
+        for name in src.namelist():
+            data = src.read(name)
+            if name == "SystemStructure.ssd":
+                data = ssd(data.decode()).encode()
+            elif name == "resources/g.ssv":
+                data = ssv(data.decode()).encode()
+            dst.writestr(name, data)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")  # zipfile's "Duplicate name": wanted here
+            for name, data in extra:
+                dst.writestr(name, data)
+    return out
+
+
+U_INPUT = '<ssd:Connector name="u" kind="input">\n            <ssc:Real />'
+BAD_SSP = {
+    # an archive whose members repeat means one thing to one zip reader and another to the next (the last won)
+    "duplicate_fmu": (dict(extra=[("resources/g.fmu", b"not a zip")]),
+                      "the archive holds two members named 'resources/g.fmu': refused"),
+    "duplicate_ssd": (dict(extra=[("SystemStructure.ssd", b"<x/>")]),
+                      "the archive holds two members named 'SystemStructure.ssd'"),
+    # connectors that say what their FMU's variables are not (taken as the FMU's)
+    "kind_unknown": (dict(ssd=lambda s: s.replace(U_INPUT, U_INPUT.replace("input", "sideways"))),
+                     "component 'g': connector 'u': kind 'sideways' is not an SSP connector kind"),
+    "kind_wrong": (dict(ssd=lambda s: s.replace(U_INPUT, U_INPUT.replace("input", "output"))),
+                   "component 'g': connector 'u': declared an output, but its FMU's variable u is an input"),
+    "type_wrong": (dict(ssd=lambda s: s.replace(U_INPUT, U_INPUT.replace("Real", "Boolean"))),
+                   "component 'g': connector 'u': declared Boolean, but its FMU's variable u is Real"),
+    # a parameter given twice in one set (the last won)
+    "parameter_twice": (dict(ssv=lambda s: s.replace("</ssv:Parameters>", '<ssv:Parameter name="k"><ssv:Real '
+                                                     'value="5"/></ssv:Parameter></ssv:Parameters>')),
+                        "resources/g.ssv: parameter k is given twice"),
+    # our annotation: JSON no scenario holds (tracebacks: nesting, a 5000-digit number; silently ignored or last)
+    "annotation_deep": (dict(ssd=lambda s: s.replace('"description": ""', '"description": ' + "[" * 100_000
+                                                     + "]" * 100_000)),
+                        "annotation org.delta-cosim.engine.scenario: not a scenario's JSON \\(maximum recursion"),
+    "annotation_digits": (dict(ssd=lambda s: s.replace('"flush_interval": 1.0', '"flush_interval": 1' + "0" * 5000)),
+                          "annotation org.delta-cosim.engine.scenario: not a scenario's JSON \\(Exceeds the limit"),
+    "annotation_key_twice": (dict(ssd=lambda s: s.replace('"name": "small",', '"name": "small", "name": "x",')),
+                             "annotation org.delta-cosim.engine.scenario: the key 'name' is given twice"),
+    "annotation_components": (dict(ssd=lambda s: s.replace('"name": "small",', '"name": "small", "components": '
+                                                           '{"x": {"path": "/etc/passwd"}},')),
+                              "annotation org.delta-cosim.engine.scenario: unknown key 'components'"),
+    "annotation_not_object": (dict(ssd=lambda s: re.sub(r"<dcs:Scenario>.*</dcs:Scenario>",
+                                                        "<dcs:Scenario>[1, 2]</dcs:Scenario>", s, flags=re.S)),
+                              "annotation org.delta-cosim.engine.scenario: expected a JSON object, got list"),
+    # a stop time past the longest grid overflowed into a traceback
+    "stop_past_the_grid": (dict(ssd=lambda s: s.replace('stopTime="0.2"', 'stopTime="1e308"')),
+                           "time.stop: Input should be less than or equal to 9000000000"),
+    "stop_nan": (dict(ssd=lambda s: s.replace('stopTime="0.2"', 'stopTime="NaN"')),
+                 "time.stop: Input should be a finite number"),
+}
+
+
+@pytest.mark.parametrize("case", list(BAD_SSP))
+@pytest.mark.parametrize("command", ["check", "run"])
+def test_a_hostile_archive_is_one_line_naming_what_is_wrong(run, small_ssp, tmp_path, case, command):
+    kwargs, says = BAD_SSP[case]
+    bad = _rewrite(small_ssp, tmp_path / f"{case}.ssp", **kwargs)
+    out = ["--out", tmp_path / "x.mcap"] if command == "run" else []
+    fails(run(command, bad, *out), 2, re.escape(str(bad)) + ": ", says)
+    assert not list(tmp_path.glob("x.mcap*")), "a refused archive left output files"
+
+
+def test_the_archive_as_exported_still_runs(run, small_ssp, tmp_path):
+    """The checks above refuse what is wrong only: the exporter's own archive checks and runs."""
+    assert run("check", small_ssp).returncode == 0
+    assert run("run", small_ssp, "--out", tmp_path / "x.mcap", "--quiet").returncode == 0
