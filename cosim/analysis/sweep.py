@@ -59,7 +59,7 @@ from ..engine.prepare import build_key, build_ours, locate_fmus
 from ..engine.scenario import dotted_overrides, parse_set_value, read_scenario
 from ..engine.system import build_plan
 from ..errors import CosimError, exit_now, file_problem, number_option
-from ..io.output import check_output
+from ..io.output import check_output, output_dir
 from ..fmi import cleanup_extracted
 from ..fmi.extract import sweep_orphans
 from ..io.recover import recover_crashed
@@ -342,7 +342,7 @@ def run_sweep(scenario: str | Path, cases: list[Case], out: str | Path, *, worke
     loaded = [source.load(dotted_overrides(c.values, "sweep case")) for c in cases]
     params = list(dict.fromkeys(k for c in cases for k in c.values))
     columns = _columns(params, metric_names(loaded[0]))
-    out.mkdir(parents=True, exist_ok=True)
+    output_dir(out)
     table = out / RESULTS
     done_rows = read_results(out)
     if done_rows and list(done_rows[0]) != columns:
@@ -597,12 +597,12 @@ def report(out: str | Path, metric: str = "rmse", fig: str | Path | None = None)
             raise SweepError(f"{meta_path}: {problem}")
         try:
             meta = json.loads(meta_path.read_text(encoding="utf-8"))
-        except (OSError, UnicodeDecodeError, ValueError) as exc:
-            raise SweepError(f"{meta_path}: not the sweep's JSON ({exc})") from None
+        except (OSError, UnicodeDecodeError, ValueError, RecursionError) as exc:
+            raise SweepError(f"{meta_path}: not the sweep's JSON ({str(exc)[:120]})") from None
     params = meta.get("parameters") if isinstance(meta, dict) else None
     if not params or not isinstance(params, list) or not all(isinstance(p, str) and p in rows[0] for p in params):
-        raise SweepError(f"{Path(out) / 'sweep.json'}: missing, or without the parameters of results.csv; it is "
-                         "written by the sweep next to results.csv")
+        raise SweepError(f"{Path(out) / 'sweep.json'}: missing or without parameters (the columns of results.csv "
+                         "it swept); it is written by the sweep next to results.csv")
     if metric not in rows[0]:
         valid = [c for c in rows[0] if c not in ("case", "status", "checks", "mcap", "message", *params)]
         raise SweepError(f"--metric {metric}: not a column; valid: {', '.join(valid)}")
@@ -687,7 +687,7 @@ def _first_element(cell: str) -> tuple:
     try:
         first = json.loads(cell)[0] if cell.startswith("[") else None
         return (0, float(first), "") if first is not None else (1, 0.0, cell)
-    except (ValueError, TypeError, IndexError, KeyError):
+    except (ValueError, TypeError, IndexError, KeyError, RecursionError):
         return (1, 0.0, cell)
 
 
@@ -695,7 +695,7 @@ def _short(cell: str) -> str:
     """A list value as a tick label: ``[2500.0, 2500.0, 2500.0]`` -> ``2500 (x3)``."""
     try:
         values = json.loads(cell)
-    except ValueError:
+    except (ValueError, RecursionError):
         return cell
     if isinstance(values, list) and values and len(set(map(str, values))) == 1:
         return f"{values[0]:g} (x{len(values)})" if isinstance(values[0], (int, float)) else cell

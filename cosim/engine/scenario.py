@@ -500,12 +500,18 @@ def _parse_yaml(text: str, file: str) -> ScenarioFile:
         raise ScenarioError(Issue("", str(exc), file, 1)) from None
     except yaml.YAMLError as exc:
         mark = getattr(exc, "problem_mark", None)
-        raise ScenarioError(Issue("", f"invalid YAML: {getattr(exc, 'problem', exc)}", file,
-                                  mark.line + 1 if mark else None)) from None
+        problem = " ".join(str(getattr(exc, "problem", None) or exc).split())  # one line, whatever YAML says
+        line = mark.line + 1 if mark else None
+        if isinstance(exc, yaml.reader.ReaderError):  # a character YAML refuses (NUL, a control character)
+            line = text[:exc.position].count("\n") + 1
+            code = exc.character if isinstance(exc.character, int) else ord(exc.character)
+            problem = f"the character U+{code:04X} at offset {exc.position} is not allowed in YAML"
+        raise ScenarioError(Issue("", f"invalid YAML: {problem}", file, line)) from None
     lines: dict[tuple, int] = {}
     if root is not None:
         _collect_lines(root, (), lines)
-    data = data or {}
+    if data is None:  # an empty file, or only comments: one line, not every key it lacks
+        raise ScenarioError(Issue("", "the file holds no scenario (it is empty, or only comments)", file, 1))
     if not isinstance(data, dict):
         raise ScenarioError(Issue("", "a scenario is a mapping (components, connections, time, ...)", file, 1))
     return ScenarioFile(file, data, lines)
@@ -534,6 +540,9 @@ def scenario_from_data(data: dict[str, Any], file: str = "<string>", overrides: 
             path = resolve_name(path[1], data, origin)
             origins[path] = origin
         components = data.get("components") or {}
+        if path[0] == "components" and len(path) == 1:  # the whole mapping replaced by an option's value
+            raise ScenarioError(Issue("", "name a component's parameter (NAME.PARAM=VALUE), not all of components",
+                                      origins.get(path, "--set components")))
         if path[0] == "components" and path[1] not in components:
             close = difflib.get_close_matches(path[1], list(components), n=3)
             hint = f"did you mean {', '.join(close)}? " if close else ""

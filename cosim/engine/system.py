@@ -233,6 +233,12 @@ def _start_values(scenario: Scenario, infos: dict[str, FMUInfo], idx: dict[str, 
                     continue
                 targets = [(pname, flat)]
             elif isinstance(value, list):
+                if whole is not None:  # one value: a list named k[1], k[2] ... and an issue for each
+                    issue(loc, f"{pname} is one {whole.fmi_type} value, not a list: got a list of {len(value)}")
+                    continue
+                if not value:  # set nothing, silently
+                    issue(loc, f"an empty list sets none of {pname}[1], {pname}[2], ...: give their values")
+                    continue
                 targets = [(f"{pname}[{k + 1}]", v) for k, v in enumerate(value)]
             else:
                 targets = [(pname, value)]

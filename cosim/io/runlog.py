@@ -453,7 +453,7 @@ def open_from_log(path: str | Path, overrides: dict[tuple, Any] | None = None) -
                                   str(path)))
     try:
         data = json.loads(found)
-    except ValueError as exc:
+    except (ValueError, RecursionError) as exc:  # RecursionError: nested past the parser's depth
         raise ScenarioError(Issue("", f"{EFFECTIVE_ATTACHMENT} is not JSON ({exc})", str(path))) from None
     if not isinstance(data, dict):
         raise ScenarioError(Issue("", f"{EFFECTIVE_ATTACHMENT} is not a scenario mapping", str(path)))

@@ -7,6 +7,7 @@ the cause, no traceback, an empty temporary folder (the ``run`` fixture of ``tes
 
 from __future__ import annotations
 
+import os
 import re
 from pathlib import Path
 
@@ -243,7 +244,8 @@ def test_a_sweep_json_or_metric_that_is_not_the_sweeps_is_named(run, tmp_path, s
     sweep = tmp_path / "sw"
     assert run("sweep", small, "--grid", "g.k=1,2", "--out", sweep, "--workers", "1", "--quiet").returncode == 0
     (sweep / "sweep.json").write_text('{"parameters": 5}')
-    fails(run("sweep-report", sweep), 2, "sweep.json: missing, or without the parameters of results.csv")
+    fails(run("sweep-report", sweep), 2,
+          "sweep.json: missing or without parameters \\(the columns of results.csv it swept\\)")
     (sweep / "sweep.json").write_text('{"parameters": [')
     fails(run("sweep-report", sweep), 2, "sweep.json: not the sweep's JSON")
     (sweep / "sweep.json").write_text('{"parameters": ["g.k"]}')
@@ -337,3 +339,142 @@ def test_the_archive_as_exported_still_runs(run, small_ssp, tmp_path):
     """The checks above refuse what is wrong only: the exporter's own archive checks and runs."""
     assert run("check", small_ssp).returncode == 0
     assert run("run", small_ssp, "--out", tmp_path / "x.mcap", "--quiet").returncode == 0
+
+
+# --------------------------------------------------------------------------- FMUs whose modelDescription.xml lies
+
+def _fmu_with(src: Path, out: Path, edit) -> Path:
+    """A copy of the FMU ``src`` with its modelDescription.xml edited."""
+    import zipfile
+
+    with zipfile.ZipFile(src) as z, zipfile.ZipFile(out, "w", zipfile.ZIP_DEFLATED) as dst:
+        for name in z.namelist():
+            data = z.read(name)
+            dst.writestr(name, edit(data.decode()).encode() if name == "modelDescription.xml" else data)
+    return out
+
+
+K_START = '<Real start="1"/>'
+BAD_FMU = {
+    # the model identifier names the library loaded: a path loaded one outside the FMU
+    "identifier_path": (lambda s: s.replace('modelIdentifier="CosimTGain"', 'modelIdentifier="../../../../x/evil"'),
+                        "coSimulation modelIdentifier '../../../../x/evil' is not a C identifier"),
+    "identifier_absolute": (lambda s: s.replace('modelIdentifier="CosimTGain"', 'modelIdentifier="/x/evil"'),
+                            "coSimulation modelIdentifier '/x/evil' is not a C identifier"),
+    "identifier_missing": (lambda s: s.replace(' modelIdentifier="CosimTGain"', ""),
+                           "coSimulation modelIdentifier None is not a C identifier"),  # was a NoneType + str
+    "guid_missing": (lambda s: re.sub(r' guid="[^"]*"', "", s), "no guid"),  # was a NoneType .encode at t = 0
+    # an input and an output on one value reference: setting u changed y (ran, silently)
+    "shared_reference": (lambda s: s.replace('name="u" valueReference="1"', 'name="u" valueReference="2"'),
+                         "u \\(input\\), y \\(output\\) share the Real valueReference 2"),
+    "negative_reference": (lambda s: s.replace('name="u" valueReference="1"', 'name="u" valueReference="-1"'),
+                           "variable u: valueReference -1 is not an unsigned 32-bit integer"),
+    "name_twice": (lambda s: s.replace('name="u" valueReference="1"', 'name="k" valueReference="1"'),
+                   "two variables named 'k'"),
+    # start, min and max of another type, or no number (taken, and never checked)
+    "start_text": (lambda s: s.replace(K_START, '<Real start="abc"/>'), "variable k: start 'abc' is not a Real value"),
+    "start_nan": (lambda s: s.replace(K_START, '<Real start="NaN"/>'),
+                  "variable k \\(parameter\\): start 'NaN' is not a finite number"),
+    "start_inf": (lambda s: s.replace(K_START, '<Real start="1e999"/>'),
+                  "variable k \\(parameter\\): start '1e999' is not a finite number"),
+    "min_text": (lambda s: s.replace(K_START, '<Real start="1" min="abc"/>'), "variable k: min 'abc' is not a Real"),
+    "empty_range": (lambda s: s.replace(K_START, '<Real start="1" min="5" max="0"/>'),
+                    "variable k: min 5 > max 0: no value is in range"),
+}
+
+
+@pytest.mark.parametrize("case", list(BAD_FMU))
+def test_an_fmu_whose_description_lies_is_named_before_it_is_loaded(run, write_scenario, test_fmus, tmp_path, case):
+    edit, says = BAD_FMU[case]
+    fmu = _fmu_with(test_fmus["CosimTGain"], tmp_path / f"{case}.fmu", edit)
+    scenario = write_scenario(SMALL.replace("{CosimTGain}", str(fmu)).replace("{k: 2.0}", "{}"))
+    message = fails(run("run", scenario, "--out", tmp_path / "x.mcap"), 2,
+                    r"s.yaml:\d+: components.g: " + re.escape(str(fmu)) + ": modelDescription.xml: ", says)
+    assert "load library" not in message, message
+    assert not list(tmp_path.glob("x.mcap*")), "a refused FMU left output files"
+
+
+def test_the_fmu_as_built_still_loads(run, write_scenario, test_fmus, tmp_path):
+    fmu = _fmu_with(test_fmus["CosimTGain"], tmp_path / "same.fmu", lambda s: s)
+    assert run("check", write_scenario(SMALL.replace("{CosimTGain}", str(fmu)))).returncode == 0
+
+
+# --------------------------------------------------------------------------- scenario files and --set values
+
+@pytest.mark.parametrize("text, says", [
+    ("", r"s.yaml:1: the file holds no scenario \(it is empty, or only comments\)"),  # two lines: every key missing
+    ("# only a comment\n", r"s.yaml:1: the file holds no scenario"),
+    ("name: x\x00\n", r"s.yaml:1: invalid YAML: the character U\+0000 at offset 7 is not allowed in YAML"),  # 2 lines
+    ("name: x\ndescription: \"a\x1b[2J\"\n", r"s.yaml:2: invalid YAML: the character U\+001B at offset 23"),
+])
+def test_a_file_that_holds_no_scenario_is_one_line(run, tmp_path, text, says):
+    path = tmp_path / "s.yaml"
+    path.write_text(text)
+    fails(run("check", path), 2, says)
+
+
+@pytest.mark.parametrize("item, says", [
+    ("g.k=[]", r"--set g\.k=\[\]: k is one Real value, not a list: got a list of 0"),  # set nothing, silently
+    ("g.k=[1,2]", r"--set g\.k=\[1,2\]: k is one Real value, not a list: got a list of 2"),  # one line, not two
+    ("components=1", "--set components=1: name a component's parameter"),  # an IndexError traceback
+])
+def test_odd_set_values_are_one_line_naming_the_option(run, small, item, says):
+    fails(run("check", small, "--set", item), 2, says)
+
+
+def test_a_list_for_a_scalar_in_a_file_is_one_line(run, write_scenario):
+    fails(run("check", write_scenario(SMALL.replace("k: 2.0", "k: [1, 2, 3]"))), 2,
+          r"s.yaml:\d+: components.g.parameters.k: k is one Real value, not a list: got a list of 3")
+
+
+@pytest.mark.parametrize("command", ["report", "sweep"])
+def test_an_output_folder_that_is_a_file_is_one_line(run, tmp_path, small, fifo, command):
+    """report --out naming a file, a FIFO or a device was a FileExistsError traceback; sweep --out too."""
+    import stat
+
+    for target in (small, fifo, Path("/dev/null")):
+        args = ("report", GOLDEN, "--out", target) if command == "report" else \
+            ("sweep", small, "--grid", "g.k=1", "--out", target, "--workers", "1")
+        fails(run(*args), 2, f"--out {re.escape(str(target))}: is a file, not a folder")
+    assert stat.S_ISFIFO(fifo.stat().st_mode) and stat.S_ISCHR(os.stat("/dev/null").st_mode)
+    fails(run("report", GOLDEN, "--out", small / "sub"), 2, "cannot make the folder: .*s.yaml is a file, not a folder")
+
+
+# --------------------------------------------------------------------------- forged logs for --from-log
+
+def _forge_effective(src: Path, out: Path, data: bytes) -> Path:
+    """A copy of the log ``src`` whose recorded scenario (effective/scenario.json) is ``data``."""
+    from mcap.reader import make_reader
+    from mcap.writer import Writer
+
+    from cosim.engine.scenario import EFFECTIVE_ATTACHMENT
+
+    with open(src, "rb") as f, open(out, "wb") as o:
+        r, w = make_reader(f), Writer(o)
+        w.start(profile="", library="forged")
+        summary = r.get_summary()
+        schemas = {s.id: w.register_schema(s.name, s.encoding, s.data) for s in summary.schemas.values()}
+        channels = {c.id: w.register_channel(c.topic, c.message_encoding, schemas[c.schema_id], dict(c.metadata))
+                    for c in summary.channels.values()}
+        for _, c, m in r.iter_messages():
+            w.add_message(channels[c.id], m.log_time, m.data, m.publish_time)
+        for a in r.iter_attachments():
+            w.add_attachment(a.create_time, a.log_time, a.name, a.media_type,
+                             data if a.name == EFFECTIVE_ATTACHMENT else a.data)
+        for md in r.iter_metadata():
+            w.add_metadata(md.name, dict(md.metadata))
+        w.finish()
+    return out
+
+
+@pytest.mark.parametrize("data, says", [
+    (b"[" * 100_000 + b"]" * 100_000, "effective/scenario.json is not JSON \\(maximum recursion depth"),  # traceback
+    (b'{"a": 1' + b"0" * 5000 + b"}", "effective/scenario.json is not JSON \\(Exceeds the limit"),
+    (b"[1, 2]", "effective/scenario.json is not a scenario mapping"),
+])
+def test_a_log_whose_recorded_scenario_is_forged_is_one_line(run, small, tmp_path, data, says):
+    log = tmp_path / "log.mcap"
+    assert run("run", small, "--out", log, "--quiet").returncode == 0
+    forged = _forge_effective(log, tmp_path / "forged.mcap", data)
+    fails(run("run", "--from-log", forged, "--out", tmp_path / "again.mcap"), 2, "forged.mcap: " + says)
+    assert not list(tmp_path.glob("again.mcap*"))
