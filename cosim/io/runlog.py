@@ -23,6 +23,7 @@ from __future__ import annotations
 import difflib
 import json
 import os
+import struct
 from contextlib import contextmanager
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -209,6 +210,8 @@ def log_records(f, path: str | Path, chunks: bool = True) -> Iterator:
 
 
 def _open_error(path: Path, exc: Exception) -> CosimError:
+    if isinstance(exc, (struct.error, EOFError)):  # the mcap reader's own error for a record cut short
+        exc = EOFError(f"the file ends inside a record ({exc})")
     return CosimError(f"{path}: cannot read the MCAP log ({type(exc).__name__}: {exc}); if the run was killed, "
                       f"rewrite it first with `python -m cosim recover {path}`")
 
@@ -280,8 +283,8 @@ def read_run(path: str | Path, components: Iterable[str] | None = None) -> RunLo
                     footer = True
         if not footer:
             raise McapError("no footer (unfinished log)")
-    except (McapError, OSError, ValueError, orjson.JSONDecodeError) as exc:
-        raise _open_error(path, exc) from None
+    except (McapError, OSError, ValueError, orjson.JSONDecodeError, struct.error, EOFError) as exc:
+        raise _open_error(path, exc) from None  # struct.error: a record cut short (the mcap reader's own error)
     if wanted is not None:
         missing = sorted(w[1:] for w in wanted if w[1:] not in columns)
         if missing:
@@ -444,7 +447,7 @@ def open_from_log(path: str | Path, overrides: dict[tuple, Any] | None = None) -
                 if isinstance(rec, Attachment) and rec.name == EFFECTIVE_ATTACHMENT:
                     found = bytes(rec.data)
                     break
-    except (McapError, OSError, ValueError) as exc:  # before the attachment: read up to it otherwise
+    except (McapError, OSError, ValueError, struct.error, EOFError) as exc:  # before the attachment: up to it
         raise ScenarioError(Issue("", f"not a readable MCAP log ({type(exc).__name__}: {exc}); give a run's log",
                                   str(path))) from None
     if found is None:
