@@ -732,7 +732,11 @@ class _Parser(argparse.ArgumentParser):
             close = difflib.get_close_matches(m.group(1), choices, n=2, cutoff=0.6)
             if close:
                 message += f"; did you mean {' or '.join(close)}?"
-        super().error(message)
+        self.print_usage(sys.stderr)
+        sys.stderr.write(f"{self.prog}: error: {message}\n")
+        exc = SystemExit(EXIT_BAD_INPUT)
+        exc.message = f"{self.prog}: {message}"  # for --json's error object (main)
+        raise exc
 
 
 def _terminate_as_interrupt(signum, frame) -> None:
@@ -755,12 +759,17 @@ def main(argv: Sequence[str] | None = None) -> int:
     try:
         parser = build_parser()
         args, extra = parser.parse_known_args(argv)
+        if extra:
+            _unknown(parser, argv, extra)
     except KeyboardInterrupt as exc:  # Ctrl-C while starting (imports): interrupted, no traceback
         message, kind, code = exit_status(exc)
         print(exit_text(message, kind), file=sys.stderr)
         return code
-    if extra:
-        _unknown(parser, argv, extra)
+    except SystemExit as exc:  # a usage error (a bad option or value): with --json, a JSON object on stdout too
+        if exc.code == EXIT_BAD_INPUT and "--json" in argv:
+            print(json.dumps({"ok": False, "error": getattr(exc, "message", "invalid arguments"), "kind": "usage"},
+                             indent=2))
+        raise
     handler: Handler = args.handler
     if threading_main():  # the same shutdown path as Ctrl-C (logs finished, worker stopped, temp files removed)
         for sig in STOP_SIGNALS:
