@@ -494,3 +494,35 @@ def test_a_log_cut_inside_a_record_is_one_line_for_every_reader(run, tmp_path, k
             "compare": ("compare", cut, GOLDEN), "baseline": ("baseline", cut, "--out", tmp_path / "b.mcap")}[command]
     fails(run(*args), 2, "cut.mcap: cannot read the MCAP log", "recover")
     assert sorted(p.name for p in tmp_path.iterdir()) == ["cut.mcap", "tmp"], sorted(tmp_path.iterdir())
+
+
+@pytest.mark.parametrize("args, says", [
+    (("run", "{S}", "--watchdog", "-1", "--json"), "argument --watchdog: expected a finite number >= 0, got '-1'"),
+    (("robot", "ik", "--robot", "linear_delta_thesis", "--json", "0", "0", "nan"), "argument Z: expected a finite"),
+    (("run", "{S}", "--outt", "x.mcap", "--json"), "unrecognized arguments: --outt x.mcap"),
+])
+def test_with_json_a_usage_error_is_a_json_object_too(run, small, args, says):
+    """--json promises a JSON object on stdout whatever happens; a bad option value (now argparse's error, as every
+    numeric option's) printed nothing there."""
+    import json
+
+    r = run(*[str(small) if a == "{S}" else a for a in args])
+    fails(r, 2, says, usage=True)
+    error = json.loads(r.stdout)
+    assert error["ok"] is False and error["kind"] == "usage" and says in error["error"], error
+
+
+def test_an_internal_error_is_one_line_naming_it_not_a_component_exit(capsys, monkeypatch):
+    """A defect an input reaches (the exceptions above were such): one line with the exception and where it was
+    raised, exit 2 (it was the interpreter's traceback, which the supervisor then reported as 'exited with status 1
+    (an exit() inside a component)')."""
+    from cosim.__main__ import _internal_error
+
+    monkeypatch.delenv("COSIM_TRACEBACK", raising=False)
+    try:
+        {}["missing"]
+    except KeyError as exc:
+        code = _internal_error(exc)
+    err = capsys.readouterr().err
+    assert code == 2 and "Traceback" not in err and len(err.strip().splitlines()) == 1, err
+    assert err.startswith("error: internal error (KeyError: 'missing') at test_hostile_more.py:"), err
