@@ -29,11 +29,13 @@ always the command's.
 """
 
 import atexit
+import os
 import sys
+import traceback
 
 from .cli import main
 from .engine import supervision
-from .errors import exit_now
+from .errors import exit_now, printable
 
 
 def _exit(code: object) -> None:
@@ -55,10 +57,27 @@ def _exit(code: object) -> None:
         exit_now(status)
 
 
+def _internal_error(exc: Exception) -> int:
+    """An exception no command turned into its error (a defect): one line naming it and where it was raised, exit 2;
+    the whole traceback with ``COSIM_TRACEBACK=1``. Without this the interpreter printed the traceback and the
+    supervisor reported the exit as 'an exit() inside a component'."""
+    if os.environ.get("COSIM_TRACEBACK"):
+        traceback.print_exception(exc)
+    frame = traceback.extract_tb(exc.__traceback__)[-1] if exc.__traceback__ else None
+    where = f" at {os.path.basename(frame.filename)}:{frame.lineno}" if frame else ""
+    text = " ".join(f"{type(exc).__name__}: {exc}".split())[:300]
+    print(printable(f"error: internal error ({text}){where}; a defect of delta-cosim, not of the input alone: "
+                    "please report it with the command line (COSIM_TRACEBACK=1 shows the traceback)"),
+          file=sys.stderr)
+    return 2
+
+
 if __name__ == "__main__":  # also imported by multiprocessing's spawned workers
     supervision.ENABLED = True  # `run` forks its supervisor here, never in a library user's process
     try:
         result = main()
     except SystemExit as stop:
         result = stop.code
+    except Exception as exc:  # a defect of ours that an input reached: one line, never "an exit() in a component"
+        result = _internal_error(exc)
     _exit(result)

@@ -20,7 +20,12 @@ from typing import Callable, Sequence
 
 from delta.errors import CosimError, UnreachableError
 
-from .errors import EXIT_BAD_INPUT, STOP_SIGNALS, exit_status, exit_text
+from .errors import EXIT_BAD_INPUT, STOP_SIGNALS, exit_status, exit_text, number_option
+
+NUMBER = number_option()
+"""A finite number (every numeric option refuses nan and infinities: :func:`cosim.errors.number_option`)."""
+MARGIN = number_option(ge=0, le=1)
+POSITIVE = number_option(gt=0)
 
 EXIT_OK = 0
 EXIT_CHECK_FAILED = 1
@@ -55,7 +60,7 @@ def _robot_parser(sub: argparse._SubParsersAction) -> None:
     _three(p, "xyz", ("X", "Y", "Z"), "platform position {} (m, or mm with --mm)")
     p.add_argument("--mm", action="store_true", help="position given in millimetres (linear joints shown in mm)")
     p.add_argument("--deg", action="store_true", help="rotary delta: joint angles in degrees in the JSON output too")
-    p.add_argument("--margin", type=float, default=None, help="margin on the singularity proximity (0..1)")
+    p.add_argument("--margin", type=MARGIN, default=None, help="margin on the singularity proximity (0..1)")
     p.set_defaults(handler=_cmd_ik)
 
     p = rsub.add_parser("fk", help="forward kinematics: joint values -> platform position")
@@ -68,12 +73,12 @@ def _robot_parser(sub: argparse._SubParsersAction) -> None:
 
     p = rsub.add_parser("workspace", help="sampled workspace, or a cylinder check")
     common(p)
-    p.add_argument("--spacing", type=float, default=0.01, help="grid step, m (default 0.01)")
-    p.add_argument("--margin", type=float, default=None, help="margin on the singularity proximity (0..1)")
-    p.add_argument("--cylinder", nargs=3, type=float, metavar=("Z_BELOW", "Z_ABOVE", "R"),
+    p.add_argument("--spacing", type=POSITIVE, default=0.01, help="grid step, m (default 0.01)")
+    p.add_argument("--margin", type=MARGIN, default=None, help="margin on the singularity proximity (0..1)")
+    p.add_argument("--cylinder", nargs=3, type=number_option(nan=True), metavar=("Z_BELOW", "Z_ABOVE", "R"),
                    help="check a cylinder around --centre instead (m, or mm with --mm); "
                         "give one value as 'nan' to find its largest reachable value")
-    p.add_argument("--centre", nargs=3, type=float, metavar=("X", "Y", "Z"),
+    p.add_argument("--centre", nargs=3, type=NUMBER, metavar=("X", "Y", "Z"),
                    help="cylinder centre (default: home of a rotary delta, mid-stroke of a linear one)")
     p.add_argument("--surface", action="store_true", help="check the lateral surface only (seed 004's path)")
     p.add_argument("--no-limits", action="store_true", help="ignore joint limits (real solutions only)")
@@ -83,12 +88,12 @@ def _robot_parser(sub: argparse._SubParsersAction) -> None:
     p = rsub.add_parser("singularity", help="classify a pose (type 1 / type 2) and measure its proximity")
     common(p)
     g = p.add_mutually_exclusive_group(required=True)
-    g.add_argument("--q", nargs=3, type=float, metavar=("Q1", "Q2", "Q3"),
+    g.add_argument("--q", nargs=3, type=NUMBER, metavar=("Q1", "Q2", "Q3"),
                    help="joint values: m (mm with --mm) or rad (deg with --deg)")
-    g.add_argument("--p", nargs=3, type=float, metavar=("X", "Y", "Z"), help="platform position, m (mm with --mm)")
+    g.add_argument("--p", nargs=3, type=NUMBER, metavar=("X", "Y", "Z"), help="platform position, m (mm with --mm)")
     p.add_argument("--mm", action="store_true", help="--p, and a linear delta's --q, in millimetres")
     p.add_argument("--deg", action="store_true", help="a rotary delta's --q in degrees")
-    p.add_argument("--margin", type=float, default=0.01, help="margin on the singularity proximity (default 0.01)")
+    p.add_argument("--margin", type=MARGIN, default=0.01, help="margin on the singularity proximity (default 0.01)")
     p.set_defaults(handler=_cmd_singularity)
 
 
@@ -96,7 +101,7 @@ def _three(p: argparse.ArgumentParser, dest: str, names: tuple[str, str, str], h
     """Three positional numbers as three arguments: argparse's help and its 'missing argument'
     message cannot format one ``nargs=3`` positional with a tuple metavar."""
     for i, name in enumerate(names):
-        p.add_argument(f"{dest}_{i}", type=float, metavar=name, help=help.format(name))
+        p.add_argument(f"{dest}_{i}", type=NUMBER, metavar=name, help=help.format(name))
 
 
 def _units(args: argparse.Namespace, robot, lengths: bool) -> None:
@@ -272,8 +277,8 @@ def _cosim_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--from-log", metavar="LOG", help="instead of a scenario file: run again the scenario a run's "
                                                      ".mcap log records, as it ran (every override applied)")
     p.add_argument("--out", help="MCAP output path (default: the scenario's logging.out or runs/<name>.mcap)")
-    p.add_argument("--stop-time", type=float, help="override time.stop, s")
-    p.add_argument("--step", type=float, help="override time.step (the base communication step), s")
+    p.add_argument("--stop-time", type=NUMBER, help="override time.stop, s")
+    p.add_argument("--step", type=NUMBER, help="override time.step (the base communication step), s")
     p.add_argument("--set", action="append", default=[], metavar="NAME=VALUE",
                    help="override by dotted name (repeatable): a component parameter (ctl.gain.kp[1]=4e4), the trajectory (trajectory.params.rx=0.05), the time grid (time.stop=0.5), any scenario key")
     p.add_argument("--no-log", action="store_true", help="do not write an MCAP file")
@@ -289,7 +294,7 @@ def _cosim_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--sim-stamps", action="store_true",
                    help="log times in pure simulation time (default: from the run's wall-clock start, so viewers "
                         "show the real date; the message field t is simulation time either way)")
-    p.add_argument("--watchdog", type=float, metavar="SECONDS",
+    p.add_argument("--watchdog", type=number_option(ge=0), metavar="SECONDS",
                    help="override watchdog_s: wall-clock seconds a step may take before the run stops naming the "
                         "stalled component (0: no limit)")
     p.add_argument("--quiet", action="store_true", help="no progress bar and no summary")
@@ -300,8 +305,8 @@ def _cosim_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("scenario")
     p.add_argument("--set", action="append", default=[], metavar="NAME=VALUE",
                    help="override by dotted name (repeatable): a component parameter (ctl.gain.kp[1]=4e4), the trajectory (trajectory.params.rx=0.05), the time grid (time.stop=0.5), any scenario key")
-    p.add_argument("--stop-time", type=float, help="override time.stop, s")
-    p.add_argument("--step", type=float, help="override time.step, s")
+    p.add_argument("--stop-time", type=NUMBER, help="override time.stop, s")
+    p.add_argument("--step", type=NUMBER, help="override time.step, s")
     p.add_argument("--json", action="store_true")
     p.set_defaults(handler=_cmd_check)
 
@@ -332,7 +337,7 @@ def _regression_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--signals", action="append", default=[], metavar="PATTERN",
                    help="compare only these signals (repeatable; default all common signals)")
     p.add_argument("--out-dir", default="runs", help="with a scenario: where the two logs go (default runs/)")
-    p.add_argument("--stop-time", type=float, help="with a scenario: override time.stop, s")
+    p.add_argument("--stop-time", type=NUMBER, help="with a scenario: override time.stop, s")
     p.add_argument("--set", action="append", default=[], metavar="NAME=VALUE",
                    help="with a scenario: override by dotted name, as for run (both runs)")
     p.add_argument("--checked-only", action="store_true", help="list only signals that have a tolerance")
@@ -343,7 +348,7 @@ def _regression_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("baseline", help="decimate a run log into a small baseline for regression tests")
     p.add_argument("log", help="the run's .mcap log")
     p.add_argument("--out", required=True, help="baseline .mcap path")
-    p.add_argument("--period", type=float, default=0.01, help="one sample per component every PERIOD s "
+    p.add_argument("--period", type=POSITIVE, default=0.01, help="one sample per component every PERIOD s "
                                                               "(default 0.01)")
     p.add_argument("--components", nargs="+", help="keep only these components' channels")
     p.add_argument("--json", action="store_true")
@@ -361,16 +366,16 @@ def _regression_parser(sub: argparse._SubParsersAction) -> None:
                         "the split is identified jointly over them")
     p.add_argument("--out", help="write the identified model (robot, motions, fitted parameters, fit figures) "
                                  "to this YAML file, for a scenario's `model:` key")
-    p.add_argument("--w", type=float, nargs="+", metavar="W",
+    p.add_argument("--w", type=MARGIN, nargs="+", metavar="W",
                    help="w values to sweep (default 0, 0.1, ..., 1)")
     p.add_argument("--no-separate", action="store_true", help="skip the separate inertia / gravity fit")
-    p.add_argument("--w-rotation", type=float, default=None, metavar="W",
+    p.add_argument("--w-rotation", type=MARGIN, default=None, metavar="W",
                    help="share of the rods' rotational inertia in the model, held during the fit (0: the thesis's "
                         "two point masses per rod; 1: uniform rods). Default: 1 when identifying (several "
                         "motions or --out), 0 for one motion's sweep")
     p.add_argument("--fidelity", choices=("full", "lumped"), default="full", help="Exudyn plant (default full)")
-    p.add_argument("--step", type=float, default=2e-4, help="plant step, s (default 2e-4)")
-    p.add_argument("--duration", type=float, help="simulated time, s (default: the whole motion)")
+    p.add_argument("--step", type=POSITIVE, default=2e-4, help="plant step, s (default 2e-4)")
+    p.add_argument("--duration", type=POSITIVE, help="simulated time, s (default: the whole motion)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.add_argument("--json", action="store_true")
     p.set_defaults(handler=_cmd_validate_model)
@@ -398,6 +403,10 @@ def _cmd_validate_model(args: argparse.Namespace) -> int:
         raise CosimError("validate-model: --duration and --no-separate apply to one motion without --out")
     if args.out is not None and not Path(args.out).parent.resolve().is_dir():
         raise CosimError(f"--out: no folder {Path(args.out).parent} to write {Path(args.out).name} into")
+    if args.out is not None:
+        from .io.output import check_output  # lazy: the CLI imports each command's modules in the command
+
+        check_output(Path(args.out))  # a regular file or nothing: never renamed over a FIFO or a device
     bar = None
     progress = None
     if not (args.quiet or args.json):
@@ -723,7 +732,11 @@ class _Parser(argparse.ArgumentParser):
             close = difflib.get_close_matches(m.group(1), choices, n=2, cutoff=0.6)
             if close:
                 message += f"; did you mean {' or '.join(close)}?"
-        super().error(message)
+        self.print_usage(sys.stderr)
+        sys.stderr.write(f"{self.prog}: error: {message}\n")
+        exc = SystemExit(EXIT_BAD_INPUT)
+        exc.message = f"{self.prog}: {message}"  # for --json's error object (main)
+        raise exc
 
 
 def _terminate_as_interrupt(signum, frame) -> None:
@@ -746,12 +759,17 @@ def main(argv: Sequence[str] | None = None) -> int:
     try:
         parser = build_parser()
         args, extra = parser.parse_known_args(argv)
+        if extra:
+            _unknown(parser, argv, extra)
     except KeyboardInterrupt as exc:  # Ctrl-C while starting (imports): interrupted, no traceback
         message, kind, code = exit_status(exc)
         print(exit_text(message, kind), file=sys.stderr)
         return code
-    if extra:
-        _unknown(parser, argv, extra)
+    except SystemExit as exc:  # a usage error (a bad option or value): with --json, a JSON object on stdout too
+        if exc.code == EXIT_BAD_INPUT and "--json" in argv:
+            print(json.dumps({"ok": False, "error": getattr(exc, "message", "invalid arguments"), "kind": "usage"},
+                             indent=2))
+        raise
     handler: Handler = args.handler
     if threading_main():  # the same shutdown path as Ctrl-C (logs finished, worker stopped, temp files removed)
         for sig in STOP_SIGNALS:

@@ -6,10 +6,14 @@ and from the builtin that matches its meaning, so callers can catch either.
 
 from __future__ import annotations
 
+import argparse
+import math
 import os
 import signal
+import stat
 import sys
 from dataclasses import dataclass
+from typing import Callable
 
 from delta.errors import CosimError, UnreachableError, printable
 
@@ -28,6 +32,8 @@ __all__ = [
     "ComponentSourceError",
     "Interrupted",
     "StallError",
+    "number_option",
+    "file_problem",
     "UnknownSignalError",
     "EXIT_BAD_INPUT",
     "exit_status",
@@ -183,3 +189,55 @@ def exit_now(code: int) -> None:
         except (OSError, ValueError):  # closed or broken pipe: nothing more can be written
             pass
     os._exit(code)
+
+
+# --------------------------------------------------------------------------- numbers given as options
+
+def number_option(*, gt: float | None = None, ge: float | None = None, le: float | None = None,
+                  whole: bool = False, nan: bool = False) -> Callable[[str], float]:
+    """The argparse ``type`` of every numeric option of the command line (one rule for all of them): the text as a
+    finite number (``whole``: an integer) within the bounds, else argparse's error naming the option, what is valid
+    and what was given (exit 2). ``nan``: the text 'nan' is a value of its own (a quantity to be found)."""
+    bounds = [f"> {gt:g}" if gt is not None else "", f">= {ge:g}" if ge is not None else "",
+              f"<= {le:g}" if le is not None else ""]
+    if ge is not None and le is not None:
+        bounds = [f"in [{ge:g}, {le:g}]"]
+    wanted = " ".join(["a whole number" if whole else "a finite number", *filter(None, bounds)])
+    if nan:
+        wanted += " (or nan)"
+
+    def parse(text: str) -> float:
+        x = int(text) if whole else float(text)  # not a number: argparse's "invalid float value: 'a'"
+        if nan and x != x:
+            return x
+        if not math.isfinite(x) or (gt is not None and not x > gt) or (ge is not None and not x >= ge) or \
+                (le is not None and not x <= le):
+            raise argparse.ArgumentTypeError(f"expected {wanted}, got {text!r}")
+        return x
+
+    parse.__name__ = "int" if whole else "float"  # named in argparse's message for a text that is no number
+    return parse
+
+
+# --------------------------------------------------------------------------- files given as inputs
+
+_KINDS = ((stat.S_ISFIFO, "a FIFO"), (stat.S_ISCHR, "a character device"), (stat.S_ISBLK, "a block device"),
+          (stat.S_ISSOCK, "a socket"))
+
+
+def file_problem(path: str | os.PathLike, directory_ok: bool = False) -> str | None:
+    """Why ``path`` cannot be read as an input file (None: it is a regular file, or with ``directory_ok`` a
+    directory): missing, a directory, or a FIFO, a device or a socket, whose reading may block for ever (a FIFO
+    nobody writes) or never end (``/dev/zero``). Every input file of a command is checked so before it is opened."""
+    try:
+        st = os.stat(path)
+    except (FileNotFoundError, NotADirectoryError):
+        return "no such file"
+    except OSError as exc:
+        return f"cannot read it: {exc.strerror or exc}"
+    if stat.S_ISDIR(st.st_mode):
+        return None if directory_ok else "is a directory, not a file"
+    if not stat.S_ISREG(st.st_mode):
+        kind = next((name for test, name in _KINDS if test(st.st_mode)), "not a file")
+        return f"not a regular file ({kind})"
+    return None

@@ -8,6 +8,8 @@ singularity proximity stays at or above that margin (see
 
 from __future__ import annotations
 
+import math
+
 from dataclasses import dataclass
 from enum import Enum
 from typing import Callable
@@ -164,15 +166,16 @@ def sample_workspace(
     The volume is the number of reachable grid points times ``spacing**3``; its
     error shrinks with the grid step (first order in ``spacing`` at the boundary).
     """
-    if not spacing > 0.0:
-        raise ParameterError(f"spacing must be > 0, got {spacing}")
+    if not 0.0 < spacing < math.inf:
+        raise ParameterError(f"spacing must be a finite length > 0, got {spacing}")
     lo, hi = default_bounds(robot) if bounds is None else (np.asarray(bounds[0]), np.asarray(bounds[1]))
-    counts_per_axis = [max(0, int(np.ceil((hi[k] - lo[k] - spacing / 2) / spacing))) for k in range(3)]
-    n_grid = counts_per_axis[0] * counts_per_axis[1] * counts_per_axis[2]
+    # counted in floats: a spacing of 1e-300 m gives 1e900 points, past any integer a message can format
+    counts_per_axis = [max(0.0, math.ceil((hi[k] - lo[k] - spacing / 2) / spacing)) for k in range(3)]
+    n_grid = float(counts_per_axis[0]) * counts_per_axis[1] * counts_per_axis[2]
     if n_grid > MAX_GRID_POINTS:
         raise ParameterError(f"spacing {spacing:g} m gives about {n_grid:.3g} grid points in the robot's bounding box "
                              f"(at most {MAX_GRID_POINTS:.0e}); use a spacing of at least "
-                             f"{spacing * (n_grid / MAX_GRID_POINTS) ** (1 / 3):.2g} m")
+                             f"{(float(np.prod(hi - lo)) / MAX_GRID_POINTS) ** (1 / 3):.2g} m")
     axes = [np.arange(lo[k] + spacing / 2, hi[k], spacing) for k in range(3)]
     grid = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 3)
     kept = []

@@ -136,8 +136,8 @@ def parse_tolerances(items: Sequence[str]) -> dict[str, float]:
             value = float(raw)
         except ValueError:
             value = math.nan
-        if not sep or not key or not value > 0:
-            raise CosimError(f"--tol {item!r}: expected SIGNAL_PATTERN=POSITIVE_NUMBER, e.g. plant.p=1e-6")
+        if not sep or not key or not 0 < value < math.inf:  # nan and inf are no tolerance
+            raise CosimError(f"--tol {item!r}: expected SIGNAL_PATTERN=POSITIVE_NUMBER (finite), e.g. plant.p=1e-6")
         out[key.strip()] = value
     return out
 

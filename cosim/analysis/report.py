@@ -42,6 +42,7 @@ from fmus import registry
 from ..engine.bounded_yaml import load_yaml
 from ..engine.scenario import Compare, expand_signal
 from ..errors import CosimError
+from ..io.output import output_dir
 from ..io.runlog import AXES, RunLog, read_run
 from ..observers.stats import ErrorStats
 
@@ -567,8 +568,7 @@ def make_report(run: RunLog | str | Path, out_dir: str | Path | None = None) -> 
     """
     tr = tracking(run)
     log = tr.run
-    out = Path(out_dir) if out_dir is not None else log.path.with_name(f"{log.path.stem}_report")
-    out.mkdir(parents=True, exist_ok=True)
+    out = output_dir(Path(out_dir) if out_dir is not None else log.path.with_name(f"{log.path.stem}_report"))
     title = log.name
     figures: dict[str, Path] = {}
     if tr.is_platform:

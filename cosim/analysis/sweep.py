@@ -58,7 +58,8 @@ from ..engine import supervision
 from ..engine.prepare import build_key, build_ours, locate_fmus
 from ..engine.scenario import dotted_overrides, parse_set_value, read_scenario
 from ..engine.system import build_plan
-from ..errors import CosimError, exit_now
+from ..errors import CosimError, exit_now, file_problem, number_option
+from ..io.output import check_output, output_dir
 from ..fmi import cleanup_extracted
 from ..fmi.extract import sweep_orphans
 from ..io.recover import recover_crashed
@@ -146,6 +147,8 @@ def parse_random(items: Sequence[str]) -> dict[str, tuple[str, float, float]]:
             a, b = float(m[2]), float(m[3])
         except ValueError:
             raise SweepError(f"--random {item}: the bounds must be numbers") from None
+        if not math.isfinite(b - a):  # nan, an infinity, or a span past the largest double (-1e308, 1e308)
+            raise SweepError(f"--random {item}: the bounds must be finite numbers whose difference is finite")
         if m[1] == "uniform" and not a < b:
             raise SweepError(f"--random {item}: uniform(A,B) needs A < B")
         if m[1] == "normal" and not b >= 0:
@@ -156,6 +159,10 @@ def parse_random(items: Sequence[str]) -> dict[str, tuple[str, float, float]]:
 
 MAX_CASES = 1_000_000
 """Cases one sweep may hold (its table and case list live in memory; at 0.1 s a case that is a day on 2 workers)."""
+
+MAX_WORKERS = 4 * (os.cpu_count() or 1)
+"""Processes of the embedded cluster, at most: more only share the same CPUs (each case is single-threaded), and
+each costs its memory and start-up (a hundred thousand never started, and the sweep hung)."""
 
 
 def make_cases(grid: dict[str, list[Any]], random: dict[str, tuple[str, float, float]], n: int | None,
@@ -272,10 +279,19 @@ class SweepSummary:
 def read_results(out: str | Path) -> list[dict[str, str]]:
     """The rows of ``out/results.csv`` (strings, as written)."""
     path = Path(out) / RESULTS
-    if not path.exists():
+    if not os.path.lexists(path):
         return []
-    with path.open(newline="") as f:
-        return list(csv.DictReader(f))
+    problem = file_problem(path)  # a directory, or a FIFO read for ever
+    if problem is not None:
+        raise SweepError(f"{path}: {problem}; use another --out")
+    try:
+        with path.open(newline="", encoding="utf-8") as f:
+            rows = list(csv.DictReader(f))
+    except (OSError, UnicodeDecodeError, csv.Error) as exc:
+        raise SweepError(f"{path}: not a sweep's results table ({exc}); use another --out") from None
+    if rows and (None in rows[0] or not {"case", "status"} <= set(rows[0])):
+        raise SweepError(f"{path}: not a sweep's results table (no case and status columns); use another --out")
+    return rows
 
 
 def prebuild(scenarios: Iterable[Any]) -> dict[tuple[str, bool, int], str]:
@@ -326,7 +342,7 @@ def run_sweep(scenario: str | Path, cases: list[Case], out: str | Path, *, worke
     loaded = [source.load(dotted_overrides(c.values, "sweep case")) for c in cases]
     params = list(dict.fromkeys(k for c in cases for k in c.values))
     columns = _columns(params, metric_names(loaded[0]))
-    out.mkdir(parents=True, exist_ok=True)
+    output_dir(out)
     table = out / RESULTS
     done_rows = read_results(out)
     if done_rows and list(done_rows[0]) != columns:
@@ -573,11 +589,20 @@ def report(out: str | Path, metric: str = "rmse", fig: str | Path | None = None)
     rows = read_results(out)
     if not rows:
         raise SweepError(f"{Path(out) / RESULTS}: no results")
-    meta = json.loads((Path(out) / "sweep.json").read_text()) if (Path(out) / "sweep.json").exists() else {}
-    params = meta.get("parameters")
-    if not params:
-        raise SweepError(f"{Path(out) / 'sweep.json'}: missing or without parameters; it is written by the sweep "
-                         "next to results.csv")
+    meta_path = Path(out) / "sweep.json"
+    meta = {}
+    if os.path.lexists(meta_path):
+        problem = file_problem(meta_path)
+        if problem is not None:
+            raise SweepError(f"{meta_path}: {problem}")
+        try:
+            meta = json.loads(meta_path.read_text(encoding="utf-8"))
+        except (OSError, UnicodeDecodeError, ValueError, RecursionError) as exc:
+            raise SweepError(f"{meta_path}: not the sweep's JSON ({str(exc)[:120]})") from None
+    params = meta.get("parameters") if isinstance(meta, dict) else None
+    if not params or not isinstance(params, list) or not all(isinstance(p, str) and p in rows[0] for p in params):
+        raise SweepError(f"{Path(out) / 'sweep.json'}: missing or without parameters (the columns of results.csv "
+                         "it swept); it is written by the sweep next to results.csv")
     if metric not in rows[0]:
         valid = [c for c in rows[0] if c not in ("case", "status", "checks", "mcap", "message", *params)]
         raise SweepError(f"--metric {metric}: not a column; valid: {', '.join(valid)}")
@@ -585,8 +610,14 @@ def report(out: str | Path, metric: str = "rmse", fig: str | Path | None = None)
     n_bad = len(rows) - len(ok)
     swept = [p for p in params if len({r[p] for r in rows}) > 1] or params[:1]
     fig_path = Path(fig) if fig is not None else Path(out) / f"sweep_{metric}.png"
+    check_output(fig_path, (Path(out) / RESULTS,))  # a regular file or nothing, never a FIFO, a device or the table
+    try:
+        y = np.array([float(r[metric]) for r in ok])
+    except (TypeError, ValueError):
+        bad = next(r for r in ok if not _is_number(r[metric]))
+        raise SweepError(f"{Path(out) / RESULTS}: case {bad['case']}: {metric} = {bad[metric]!r} is not a "
+                         "number") from None
     f, ax = plt.subplots(figsize=(6.4, 4.6), layout="constrained")
-    y = np.array([float(r[metric]) for r in ok])
 
     def axis(name: str) -> tuple[np.ndarray, list[str]]:
         """Numbers, or the positions of list values (``[1e4, 1e4, 1e4]``) ordered by their first element."""
@@ -594,7 +625,7 @@ def report(out: str | Path, metric: str = "rmse", fig: str | Path | None = None)
         try:
             return np.array([float(c) for c in cells]), []
         except ValueError:
-            labels = sorted(set(cells), key=lambda c: (json.loads(c)[0] if c.startswith("[") else c))
+            labels = sorted(set(cells), key=_first_element)
             return np.array([labels.index(c) for c in cells], dtype=float), [_short(c) for c in labels]
 
     if len(swept) == 1:
@@ -631,16 +662,40 @@ def report(out: str | Path, metric: str = "rmse", fig: str | Path | None = None)
         ax.set_ylabel(b)
     scenario = Path(meta.get("scenario", "")).stem
     ax.set_title(f"{scenario}: {metric}, {len(ok)} cases" + (f" ({n_bad} failed, not shown)" if n_bad else ""))
-    f.savefig(fig_path, dpi=120)
-    plt.close(f)
+    tmp = fig_path.with_name(f".{fig_path.name}.{os.getpid()}.tmp")  # renamed into place only when complete
+    try:
+        f.savefig(tmp, dpi=120, format="png")
+        os.replace(tmp, fig_path)
+    except OSError as exc:
+        raise SweepError(f"{fig_path}: cannot write the figure: {exc.strerror or exc}") from None
+    finally:
+        plt.close(f)
+        tmp.unlink(missing_ok=True)
     return fig_path
+
+
+def _is_number(cell: Any) -> bool:
+    try:
+        float(cell)
+    except (TypeError, ValueError):
+        return False
+    return True
+
+
+def _first_element(cell: str) -> tuple:
+    """The order of list values (``[1e4, 1e4, 1e4]``) by their first element; other text after them, as text."""
+    try:
+        first = json.loads(cell)[0] if cell.startswith("[") else None
+        return (0, float(first), "") if first is not None else (1, 0.0, cell)
+    except (ValueError, TypeError, IndexError, KeyError, RecursionError):
+        return (1, 0.0, cell)
 
 
 def _short(cell: str) -> str:
     """A list value as a tick label: ``[2500.0, 2500.0, 2500.0]`` -> ``2500 (x3)``."""
     try:
         values = json.loads(cell)
-    except ValueError:
+    except (ValueError, RecursionError):
         return cell
     if isinstance(values, list) and values and len(set(map(str, values))) == 1:
         return f"{values[0]:g} (x{len(values)})" if isinstance(values[0], (int, float)) else cell
@@ -660,13 +715,13 @@ def register(sub) -> None:
                    "(repeatable: the cartesian product)")
     p.add_argument("--random", action="append", default=[], metavar="NAME=uniform(A,B)|normal(MU,SIGMA)",
                    help="draws of NAME (repeatable; needs -n)")
-    p.add_argument("-n", type=int, default=None, metavar="N", help="number of random draws")
-    p.add_argument("--seed", type=int, default=None, help="seed of the random draws (default: fresh each time)")
+    p.add_argument("-n", type=number_option(whole=True, ge=1, le=MAX_CASES), default=None, metavar="N", help="number of random draws")
+    p.add_argument("--seed", type=number_option(whole=True, ge=0), default=None, help="seed of the random draws (default: fresh each time)")
     p.add_argument("--set", action="append", default=[], metavar="NAME=VALUE",
                    help="fixed override for every case (repeatable)")
-    p.add_argument("--stop-time", type=float, help="override time.stop for every case, s")
+    p.add_argument("--stop-time", type=number_option(), help="override time.stop for every case, s")
     g = p.add_mutually_exclusive_group()
-    g.add_argument("--workers", type=int, default=None, metavar="W",
+    g.add_argument("--workers", type=number_option(whole=True, ge=1, le=MAX_WORKERS), default=None, metavar="W",
                    help="embedded Dask LocalCluster of W single-threaded worker processes (default: CPU count)")
     g.add_argument("--scheduler", metavar="ADDRESS", help="run on an existing Dask cluster (tcp://host:8786)")
     p.add_argument("--out", required=True, metavar="DIR", help="directory of results.csv (and logs/)")
@@ -689,8 +744,9 @@ def _cmd_sweep(args) -> int:
         raise SweepError(f"-n must be from 1 to {MAX_CASES}, got {args.n}")
     if args.workers is not None and args.workers < 1:
         raise SweepError(f"--workers must be >= 1, got {args.workers}")
-    if not Path(args.scenario).is_file():
-        raise SweepError(f"{args.scenario}: no such scenario file")
+    problem = file_problem(args.scenario)
+    if problem is not None:
+        raise SweepError(f"{args.scenario}: {problem.replace('no such file', 'no such scenario file')}")
     fixed: dict[str, Any] = {}
     for item in args.set:
         name, sep, raw = item.partition("=")

@@ -22,9 +22,13 @@ import math
 
 import numpy as np
 
-__all__ = ["Grid", "NS_PER_S", "grid_error", "step_between"]
+__all__ = ["Grid", "MAX_TIME_S", "NS_PER_S", "grid_error", "step_between"]
 
 NS_PER_S = 1_000_000_000
+
+MAX_TIME_S = 9e9
+"""The latest time of a grid, s (285 years): its nanoseconds fit a signed 64-bit integer (9.2e18), as the log's
+stamps (the run's wall-clock start, about 1.8e18 ns, added) fit MCAP's unsigned 64-bit ones."""
 
 
 def grid_error(start_ns: int, stop_ns: int, step_ns: int) -> str | None:

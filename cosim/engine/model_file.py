@@ -18,7 +18,7 @@ from typing import Any
 
 import yaml
 
-from ..errors import Issue, ScenarioError
+from ..errors import Issue, ScenarioError, file_problem
 from .bounded_yaml import load_yaml
 
 __all__ = ["FORMAT", "PARAMETERS", "ModelFile", "read_model_file", "write_model_file", "model_start_values"]
@@ -51,6 +51,9 @@ def _fail(path: str, message: str) -> ScenarioError:
 def read_model_file(path: str | Path) -> ModelFile:
     """Read and check an identified model file; :class:`ScenarioError` naming the file and what is wrong."""
     path = str(path)
+    problem = file_problem(path)
+    if problem is not None:
+        raise _fail(path, problem)
     try:
         data = load_yaml(Path(path).read_text(encoding="utf-8"))[0]  # bounded: a model file is outside input
     except OSError as exc:

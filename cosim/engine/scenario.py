@@ -17,18 +17,18 @@ import re
 import typing
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Literal, Union
+from typing import Annotated, Any, Literal, Union
 
 import yaml
-from pydantic import BaseModel, ConfigDict, Field, PrivateAttr, ValidationError, field_validator, model_validator
+from pydantic import AllowInfNan, BaseModel, ConfigDict, Field, PrivateAttr, ValidationError, field_validator, model_validator
 
 from delta.robots import PRESETS
 from delta.trajectories import TYPES
 
-from ..errors import Issue, ScenarioError
+from ..errors import Issue, ScenarioError, file_problem
 from .algorithm import ALGORITHMS, DEFAULT
 from .bounded_yaml import YamlTooLarge, load_yaml
-from .grid import NS_PER_S, Grid, grid_error
+from .grid import MAX_TIME_S, NS_PER_S, Grid, grid_error
 from .model_file import read_model_file
 from .names import name_problem, quote, split_ref
 
@@ -62,11 +62,17 @@ __all__ = [
 
 # a list sets name[1], name[2], ... (FMI 2 structured names) or a whole FMI 3 array; nested lists
 # give a matrix row by row
-ParamValue = Union[bool, int, float, str, list[Union[bool, int, float, str]], list[list[Union[bool, int, float]]]]
+# a parameter's nan or infinity is let through here, to be refused naming its FMU variable and type
+# (cosim.engine.system.typed_value)
+_Number = Annotated[float, AllowInfNan(True)]
+ParamValue = Union[bool, int, _Number, str, list[Union[bool, int, _Number, str]],
+                   list[list[Union[bool, int, _Number]]]]
 
 
 class _Model(BaseModel):
-    model_config = ConfigDict(extra="forbid", frozen=True)
+    # every number of a scenario (times, tolerances, rates, the watchdog) is finite: a .nan or .inf in a file, an
+    # option or an archive is one error naming it, never a value the run trips over later
+    model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False)
 
 
 class Component(_Model):
@@ -129,9 +135,9 @@ class TimeGrid(_Model):
     """Stop time and base communication step, s. Converted once to integer nanoseconds (the step rounded to the
     nanosecond when it is no whole number of them: :mod:`cosim.engine.grid`)."""
 
-    stop: float = Field(gt=0, description="stop time, s")
-    step: float = Field(gt=0, description="base communication step, s")
-    start: float = Field(0.0, ge=0, description="start time, s")
+    stop: float = Field(gt=0, le=MAX_TIME_S, description="stop time, s")
+    step: float = Field(gt=0, le=MAX_TIME_S, description="base communication step, s")
+    start: float = Field(0.0, ge=0, le=MAX_TIME_S, description="start time, s")
 
     @model_validator(mode="after")
     def _grid(self) -> "TimeGrid":
@@ -494,12 +500,18 @@ def _parse_yaml(text: str, file: str) -> ScenarioFile:
         raise ScenarioError(Issue("", str(exc), file, 1)) from None
     except yaml.YAMLError as exc:
         mark = getattr(exc, "problem_mark", None)
-        raise ScenarioError(Issue("", f"invalid YAML: {getattr(exc, 'problem', exc)}", file,
-                                  mark.line + 1 if mark else None)) from None
+        problem = " ".join(str(getattr(exc, "problem", None) or exc).split())  # one line, whatever YAML says
+        line = mark.line + 1 if mark else None
+        if isinstance(exc, yaml.reader.ReaderError):  # a character YAML refuses (NUL, a control character)
+            line = text[:exc.position].count("\n") + 1
+            code = exc.character if isinstance(exc.character, int) else ord(exc.character)
+            problem = f"the character U+{code:04X} at offset {exc.position} is not allowed in YAML"
+        raise ScenarioError(Issue("", f"invalid YAML: {problem}", file, line)) from None
     lines: dict[tuple, int] = {}
     if root is not None:
         _collect_lines(root, (), lines)
-    data = data or {}
+    if data is None:  # an empty file, or only comments: one line, not every key it lacks
+        raise ScenarioError(Issue("", "the file holds no scenario (it is empty, or only comments)", file, 1))
     if not isinstance(data, dict):
         raise ScenarioError(Issue("", "a scenario is a mapping (components, connections, time, ...)", file, 1))
     return ScenarioFile(file, data, lines)
@@ -528,6 +540,9 @@ def scenario_from_data(data: dict[str, Any], file: str = "<string>", overrides: 
             path = resolve_name(path[1], data, origin)
             origins[path] = origin
         components = data.get("components") or {}
+        if path[0] == "components" and len(path) == 1:  # the whole mapping replaced by an option's value
+            raise ScenarioError(Issue("", "name a component's parameter (NAME.PARAM=VALUE), not all of components",
+                                      origins.get(path, "--set components")))
         if path[0] == "components" and path[1] not in components:
             close = difflib.get_close_matches(path[1], list(components), n=3)
             hint = f"did you mean {', '.join(close)}? " if close else ""
@@ -677,6 +692,11 @@ def trajectory_params_issues(spec: TrajectorySpec) -> list[tuple[tuple, str]]:
     return []
 
 
+MAX_SCENARIO_BYTES = 16 * 2 ** 20
+"""Bytes a scenario file may hold (the shipped ones hold a few kB; :data:`~cosim.engine.bounded_yaml.MAX_YAML_NODES`
+bounds what it expands to)."""
+
+
 def load_scenario(path: str | Path, overrides: dict[tuple, Any] | None = None) -> Scenario:
     """Load a scenario file. ``overrides`` maps key paths to values (``--set``, ``--stop-time``)."""
     return read_scenario(path).load(overrides)
@@ -686,10 +706,18 @@ def read_scenario(path: str | Path) -> ScenarioFile:
     """Read and parse a scenario file, not yet validated (:meth:`ScenarioFile.load`); raises
     :class:`ScenarioError` for a file that cannot be read, is not UTF-8 or not YAML."""
     path = Path(path)
-    try:
-        raw = path.read_bytes()
-    except OSError as exc:
-        raise ScenarioError(Issue("", f"cannot read scenario: {exc.strerror}", str(path))) from None
+    problem = file_problem(path)
+    if problem is None:
+        try:
+            with open(path, "rb") as f:
+                raw = f.read(MAX_SCENARIO_BYTES + 1)
+        except OSError as exc:
+            problem = exc.strerror or str(exc)
+    if problem is not None:
+        raise ScenarioError(Issue("", f"cannot read scenario: {problem}", str(path))) from None
+    if len(raw) > MAX_SCENARIO_BYTES:
+        raise ScenarioError(Issue("", f"the file is larger than {MAX_SCENARIO_BYTES // 2 ** 20} MiB, more than any "
+                                      "scenario holds (cosim.engine.scenario.MAX_SCENARIO_BYTES): refused", str(path)))
     try:
         text = raw.decode("utf-8")
     except UnicodeDecodeError as exc:

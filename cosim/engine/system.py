@@ -88,9 +88,12 @@ def typed_value(var: Variable, value: Any) -> tuple[Any, str]:
         if isinstance(x, bool) or not isinstance(x, (int, float)):
             return None, bad.format("a number")
         if var.kind == "Real":
-            x = float(x)
-            if math.isnan(x):
-                return None, bad.format("a number")
+            try:
+                x = float(x)
+            except OverflowError:  # a whole number past the largest double (1e309 written out)
+                return None, bad.format("a finite number")
+            if not math.isfinite(x):  # nan, or an infinity the FMU would compute with as if it were a value
+                return None, bad.format("a finite number")
             return x, _out_of_range(var, x)
         if isinstance(x, float) and not x.is_integer():
             return None, bad.format("a whole number")
@@ -230,6 +233,12 @@ def _start_values(scenario: Scenario, infos: dict[str, FMUInfo], idx: dict[str, 
                     continue
                 targets = [(pname, flat)]
             elif isinstance(value, list):
+                if whole is not None:  # one value: a list named k[1], k[2] ... and an issue for each
+                    issue(loc, f"{pname} is one {whole.fmi_type} value, not a list: got a list of {len(value)}")
+                    continue
+                if not value:  # set nothing, silently
+                    issue(loc, f"an empty list sets none of {pname}[1], {pname}[2], ...: give their values")
+                    continue
                 targets = [(f"{pname}[{k + 1}]", v) for k, v in enumerate(value)]
             else:
                 targets = [(pname, value)]

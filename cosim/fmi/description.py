@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import re
 import zipfile
 from xml.etree import ElementTree
 from dataclasses import dataclass, replace
@@ -10,7 +11,7 @@ from functools import cached_property
 from pathlib import Path
 from typing import Any
 
-from ..errors import ComponentSourceError, Issue
+from ..errors import ComponentSourceError, Issue, file_problem
 from .extract import check_archive, extraction, file_stamp, forget_extractions
 
 REAL, INTEGER, BOOLEAN, STRING, BINARY, CLOCK = "Real", "Integer", "Boolean", "String", "Binary", "Clock"
@@ -183,6 +184,64 @@ def _attr(v: Any, name: str) -> str | None:
     return None if value is None else str(value)
 
 
+_IDENTIFIER = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")
+_SET_BY_MASTER = ("input", "parameter", "structuralParameter")
+
+
+def _numbers(text: str, kind: str) -> list[float]:
+    """A start, min or max attribute as numbers (an FMI 3.0 array start holds several); ValueError if one is not."""
+    if kind == BOOLEAN:
+        return [float(("false", "true").index(w) if w in ("false", "true") else int(w)) for w in text.split()]
+    return [float(w) if kind == REAL else float(int(w)) for w in text.split()]
+
+
+def _check_description(path: Path, md: Any) -> None:
+    """What fmpy reads without validation but the master relies on, one error naming the variable: a model
+    identifier that is a C identifier (it names the library loaded: '../../x' or '/x' loaded a library outside the
+    FMU), a GUID, unique names, value references that are unsigned 32-bit, no input or parameter sharing its value
+    reference with another variable (setting one silently changed the other), and start, min and max values of the
+    variable's type (a Real start 'abc', NaN or INF of a parameter or an input was taken), with min <= max."""
+    def fail(message: str) -> ComponentSourceError:
+        return ComponentSourceError(Issue("", f"{path}: modelDescription.xml: {message}"))
+
+    for kind in ("coSimulation", "modelExchange", "scheduledExecution"):
+        interface = getattr(md, kind, None)
+        if interface is not None and not _IDENTIFIER.match(str(interface.modelIdentifier or "")):
+            raise fail(f"{kind} modelIdentifier {interface.modelIdentifier!r} is not a C identifier (it names the "
+                       "FMU's library: letters, digits and _)")
+    if not str(md.fmiVersion or "").startswith("3") and not md.guid:
+        raise fail("no guid (fmi2Instantiate checks it)")
+    seen: dict[str, Any] = {}
+    aliases: dict[tuple, list[Any]] = {}
+    for v in md.modelVariables:
+        if v.name in seen:
+            raise fail(f"two variables named {v.name!r}")
+        seen[v.name] = v
+        vr = v.valueReference
+        if not isinstance(vr, int) or not 0 <= vr < 2 ** 32:
+            raise fail(f"variable {v.name}: valueReference {vr!r} is not an unsigned 32-bit integer")
+        kind = _KIND.get(v.type, v.type)
+        aliases.setdefault((kind, vr), []).append(v)
+        for attr in ("start", "min", "max"):
+            text = v.start if attr == "start" else getattr(v, attr, None)
+            if text is None or kind not in (REAL, INTEGER, BOOLEAN):
+                continue
+            try:
+                values = _numbers(str(text), kind)
+            except ValueError:
+                raise fail(f"variable {v.name}: {attr} {str(text)[:40]!r} is not a {v.type} value") from None
+            if v.causality in _SET_BY_MASTER and not all(map(math.isfinite, values)):
+                raise fail(f"variable {v.name} ({v.causality}): {attr} {str(text)[:40]!r} is not a finite number")
+        lo, hi = getattr(v, "min", None), getattr(v, "max", None)
+        if lo is not None and hi is not None and kind in (REAL, INTEGER) and float(lo) > float(hi):
+            raise fail(f"variable {v.name}: min {lo} > max {hi}: no value is in range")
+    for (kind, vr), group in aliases.items():
+        causalities = {v.causality for v in group}
+        if len(group) > 1 and len(causalities) > 1 and causalities & set(_SET_BY_MASTER):
+            names = ", ".join(f"{v.name} ({v.causality})" for v in group[:4])
+            raise fail(f"{names} share the {kind} valueReference {vr}: setting one would change the other")
+
+
 def load_fmu(path: str | Path) -> FMUInfo:
     """Read the model description (once per path and process); nothing is extracted yet."""
     import fmpy  # lazy: --help loads this module without it
@@ -192,6 +251,9 @@ def load_fmu(path: str | Path) -> FMUInfo:
         st = path.stat()
     except OSError:
         raise ComponentSourceError(Issue("", f"FMU not found: {path}")) from None
+    problem = file_problem(path, directory_ok=True)  # an .fmu file, or the folder of an unpacked one
+    if problem is not None:
+        raise ComponentSourceError(Issue("", f"{path}: {problem}")) from None
     stamp = file_stamp(st)
     cached = _CACHE.get(path)
     if cached is not None:
@@ -209,6 +271,7 @@ def load_fmu(path: str | Path) -> FMUInfo:
         names = ", ".join(f"{v.name} (vr {v.valueReference})" for v in clocks[:5])
         raise ComponentSourceError(Issue("", f"{path.name} declares Clock variables ({names}): clocks (FMI 3.0 "
                                              "scheduled execution and synchronous clocks) are not supported"))
+    _check_description(path, md)
     variables = {}
     for i, v in enumerate(md.modelVariables, start=1):
         dims = tuple((int(d.start) if d.start is not None else None, d.valueReference) for d in v.dimensions)

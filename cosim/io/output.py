@@ -21,7 +21,7 @@ from pathlib import Path
 from ..engine import supervision
 from ..errors import CosimError
 
-__all__ = ["OutputError", "OutputClaim", "check_output", "claim", "partial_path", "writable_parent"]
+__all__ = ["OutputError", "OutputClaim", "check_output", "claim", "output_dir", "partial_path", "writable_parent"]
 
 
 class OutputError(CosimError, OSError):
@@ -106,6 +106,24 @@ def _describe_owner(lock: Path) -> str:
     started = fields.get("started", "")
     when = time.strftime("%H:%M:%S", time.localtime(float(started))) if started.replace(".", "").isdigit() else "?"
     return f"another run (pid {fields.get('pid', '?')}, started {when}: {fields.get('command', '?')})"
+
+
+def output_dir(target: str | Path, option: str = "--out") -> Path:
+    """``target`` as the folder a command writes its files in, made if need be; OutputError (one line) when it is a
+    file, a device or a FIFO, or cannot be made (a report written 'into' a file was a FileExistsError traceback)."""
+    target = Path(target)
+    if os.path.lexists(target) and not target.is_dir():
+        raise OutputError(f"{option} {target}: is a file, not a folder: give a folder to write into")
+    for parent in target.parents:
+        if parent.exists():
+            if not parent.is_dir():
+                raise OutputError(f"{option} {target}: cannot make the folder: {parent} is a file, not a folder")
+            break
+    try:
+        target.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise OutputError(f"{option} {target}: cannot make the folder: {exc.strerror or exc}") from None
+    return target
 
 
 def check_output(target: Path, inputs: tuple[str | Path | None, ...] = ()) -> None:

@@ -6,7 +6,7 @@ import os
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
-from ..errors import CosimError
+from ..errors import CosimError, file_problem
 from .output import check_output
 from .runlog import log_records
 
@@ -35,8 +35,9 @@ def recover(path: str | Path, out: str | Path | None = None) -> RecoveryReport:
 
     path = Path(path)
     out = Path(out) if out else _default_out(path)
-    if not path.is_file():
-        raise CosimError(f"{path}: no such file")
+    problem = file_problem(path)
+    if problem is not None:
+        raise CosimError(f"{path}: {problem}")
     check_output(out, (path,))
     tmp = out.with_name(f".{out.name}.{os.getpid()}.tmp")  # renamed into place only when complete
     try:

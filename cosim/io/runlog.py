@@ -23,6 +23,7 @@ from __future__ import annotations
 import difflib
 import json
 import os
+import struct
 from contextlib import contextmanager
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -37,9 +38,11 @@ from mcap.records import Attachment, Channel, Chunk, Footer, Message, Metadata, 
 from mcap.stream_reader import StreamReader, breakup_chunk
 from mcap.writer import CompressionType, Writer
 
+from ..engine.grid import MAX_TIME_S
 from ..engine.scenario import EFFECTIVE_ATTACHMENT, Scenario, scenario_from_data
-from ..errors import CosimError, Issue, ScenarioError
+from ..errors import CosimError, Issue, ScenarioError, file_problem
 from ..fmi.extract import SSP_PREFIX
+from .output import check_output
 from .ssp import reopen_ssp
 
 __all__ = ["Signal", "RunLog", "read_run", "write_baseline", "log_records", "open_from_log", "time_offset_ns", "samples", "AXES",
@@ -207,6 +210,8 @@ def log_records(f, path: str | Path, chunks: bool = True) -> Iterator:
 
 
 def _open_error(path: Path, exc: Exception) -> CosimError:
+    if isinstance(exc, (struct.error, EOFError)):  # the mcap reader's own error for a record cut short
+        exc = EOFError(f"the file ends inside a record ({exc})")
     return CosimError(f"{path}: cannot read the MCAP log ({type(exc).__name__}: {exc}); if the run was killed, "
                       f"rewrite it first with `python -m cosim recover {path}`")
 
@@ -218,8 +223,9 @@ def read_run(path: str | Path, components: Iterable[str] | None = None) -> RunLo
     :data:`MAX_CHUNK_BYTES`.
     """
     path = Path(path)
-    if not path.is_file():
-        raise CosimError(f"{path}: no such file")
+    problem = file_problem(path)
+    if problem is not None:
+        raise CosimError(f"{path}: {problem}")
     wanted = None if components is None else {f"/{c}" for c in components}
     columns: dict[str, dict[str, list]] = {}  # per component, per key (t included): the values in file order
     stamps: dict[str, list[int]] = {}  # simulation time (blocks) or log time (one sample a message), ns
@@ -277,8 +283,8 @@ def read_run(path: str | Path, components: Iterable[str] | None = None) -> RunLo
                     footer = True
         if not footer:
             raise McapError("no footer (unfinished log)")
-    except (McapError, OSError, ValueError, orjson.JSONDecodeError) as exc:
-        raise _open_error(path, exc) from None
+    except (McapError, OSError, ValueError, orjson.JSONDecodeError, struct.error, EOFError) as exc:
+        raise _open_error(path, exc) from None  # struct.error: a record cut short (the mcap reader's own error)
     if wanted is not None:
         missing = sorted(w[1:] for w in wanted if w[1:] not in columns)
         if missing:
@@ -334,14 +340,17 @@ def write_baseline(source: str | Path, out: str | Path, period: float = 0.01,
     period of each block otherwise. Returns (path, samples kept).
     """
     source, out = Path(source), Path(out)
-    if period <= 0:
-        raise CosimError(f"baseline period must be > 0 s, got {period}")
-    if out.resolve() == source.resolve():
-        raise CosimError(f"{out}: the baseline must not overwrite its source")
+    problem = file_problem(source)
+    if problem is not None:
+        raise CosimError(f"{source}: {problem}")
+    if not 1e-9 <= period <= MAX_TIME_S:  # nan and infinities too: stamps are whole nanoseconds of a grid
+        raise CosimError(f"baseline period must be from 1 ns to {MAX_TIME_S:g} s, got {period:g} s")
+    # as every output: a regular file or nothing (a device or a FIFO was replaced by a regular file: as root,
+    # --out /dev/null destroyed /dev/null), never the source, its folder made
+    check_output(out, (source,))
     period_ns = int(round(period * 1e9))
     wanted = None if components is None else {f"/{c}" for c in components}
-    tmp = out.with_name(out.name + ".part")
-    out.parent.mkdir(parents=True, exist_ok=True)
+    tmp = out.with_name(f".{out.name}.{os.getpid()}.part")  # renamed into place only when complete
     written = 0
     try:
         with open(source, "rb") as f, open(tmp, "wb") as dst:
@@ -426,8 +435,9 @@ def open_from_log(path: str | Path, overrides: dict[tuple, Any] | None = None) -
     for a scenario file.
     """
     path = Path(path)
-    if not path.is_file():
-        raise ScenarioError(Issue("", "no such log file", str(path)))
+    problem = file_problem(path)
+    if problem is not None:
+        raise ScenarioError(Issue("", problem.replace("no such file", "no such log file"), str(path)))
     found = archive = None
     try:
         with open(path, "rb") as f:
@@ -437,7 +447,7 @@ def open_from_log(path: str | Path, overrides: dict[tuple, Any] | None = None) -
                 if isinstance(rec, Attachment) and rec.name == EFFECTIVE_ATTACHMENT:
                     found = bytes(rec.data)
                     break
-    except (McapError, OSError, ValueError) as exc:  # before the attachment: read up to it otherwise
+    except (McapError, OSError, ValueError, struct.error, EOFError) as exc:  # before the attachment: up to it
         raise ScenarioError(Issue("", f"not a readable MCAP log ({type(exc).__name__}: {exc}); give a run's log",
                                   str(path))) from None
     if found is None:
@@ -446,7 +456,7 @@ def open_from_log(path: str | Path, overrides: dict[tuple, Any] | None = None) -
                                   str(path)))
     try:
         data = json.loads(found)
-    except ValueError as exc:
+    except (ValueError, RecursionError) as exc:  # RecursionError: nested past the parser's depth
         raise ScenarioError(Issue("", f"{EFFECTIVE_ATTACHMENT} is not JSON ({exc})", str(path))) from None
     if not isinstance(data, dict):
         raise ScenarioError(Issue("", f"{EFFECTIVE_ATTACHMENT} is not a scenario mapping", str(path)))

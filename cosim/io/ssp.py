@@ -69,11 +69,12 @@ from typing import TYPE_CHECKING, Any, Iterator
 from urllib.parse import unquote, urlparse
 from xml.etree import ElementTree as ET
 
+from ..engine.grid import MAX_TIME_S
 from ..engine.names import ref, safe_stem
 from ..engine.prepare import input_files, prepare
 from ..engine.scenario import Component, apply_overrides, load_scenario, scenario_from_data
 from ..engine.wiring import index_text
-from ..errors import CosimError, Issue, ScenarioError
+from ..errors import CosimError, Issue, ScenarioError, file_problem, number_option
 from ..fmi.description import FMUInfo, load_fmu
 from ..fmi.extract import MAX_FMU_BYTES, SSP_PREFIX, sweep_orphans
 from .output import check_output
@@ -483,6 +484,8 @@ def _parameter_set(pset: ET.Element, ssp: Path, where: str, prefix: str,
                 if kind == "Real" and typed.get("unit"):
                     value = _Quantity(value, typed.get("unit"), units.get(typed.get("unit")),
                                       f"{where}: parameter {pname}")
+                if prefix + pname in values:  # which one would be meant: refused, not the last one silently
+                    raise SspError(ssp, f"{where}: parameter {pname} is given twice")
                 values[prefix + pname] = value
                 break
         else:
@@ -735,8 +738,9 @@ def _step_hint(el: ET.Element, ssp: Path, comp: str) -> float | None:
 
 
 def _time(x: float) -> float:
-    """A time read as a double, rounded to whole nanoseconds (the master's resolution)."""
-    return round(x * 1e9) / 1e9
+    """A time read as a double, rounded to whole nanoseconds (the master's resolution); one no grid can hold (nan,
+    an infinity, past :data:`~cosim.engine.grid.MAX_TIME_S`) as it is, for the scenario's check to name."""
+    return round(x * 1e9) / 1e9 if abs(x) <= MAX_TIME_S else x
 
 
 def read_ssp(ssp: str | Path, workdir: str | Path) -> dict[str, Any]:
@@ -747,6 +751,9 @@ def read_ssp(ssp: str | Path, workdir: str | Path) -> dict[str, Any]:
     ``--step`` / ``--stop-time`` overrides fill them in).
     """
     ssp, workdir = Path(ssp), Path(workdir)
+    problem = file_problem(ssp)  # a FIFO or /dev/zero named .ssp: zipfile would read it for ever
+    if problem is not None:
+        raise SspError(ssp, problem)
     try:
         zf = zipfile.ZipFile(ssp)
     except FileNotFoundError:
@@ -754,7 +761,12 @@ def read_ssp(ssp: str | Path, workdir: str | Path) -> dict[str, Any]:
     except (zipfile.BadZipFile, OSError) as exc:
         raise SspError(ssp, f"not an SSP archive (a zip file): {exc}") from None
     with zf:
-        members = set(zf.namelist())
+        names = zf.namelist()
+        members = set(names)
+        if len(members) != len(names):  # zip readers differ on which copy they take: the archive means two things
+            twice = sorted({n for n in names if names.count(n) > 1})
+            raise SspError(ssp, f"the archive holds two members named {twice[0]!r}"
+                                + (f" (and {len(twice) - 1} more)" if len(twice) > 1 else "") + ": refused")
         if SSD_NAME not in members:
             found = ", ".join(sorted(m for m in members if m.endswith(".ssd"))) or "none"
             raise SspError(ssp, f"no {SSD_NAME} at the top of the archive (.ssd files found: {found})")
@@ -778,10 +790,7 @@ def read_ssp(ssp: str | Path, workdir: str | Path) -> dict[str, Any]:
                     *root.iterfind("ssd:Annotations/ssc:Annotation", NS)]:  # archives written before
             if ann.get("type") == OUR_ANNOTATION:
                 node = ann.find("dcs:Scenario", NS)
-                try:
-                    extras = json.loads(node.text or "{}") if node is not None else {}
-                except json.JSONDecodeError as exc:
-                    raise SspError(ssp, f"{SSD_NAME}: annotation {OUR_ANNOTATION}: not valid JSON ({exc})") from None
+                extras = _annotation(node.text or "{}", ssp) if node is not None else {}
         options = extras.pop("component_options", {}) or {}
         if isinstance(extras.get("logging"), dict) and extras["logging"].get("out") is not None:
             raise SspError(ssp, f"{SSD_NAME}: annotation {OUR_ANNOTATION} sets logging.out "
@@ -841,6 +850,8 @@ def read_ssp(ssp: str | Path, workdir: str | Path) -> dict[str, Any]:
             components[name] = comp
         if not components:
             raise SspError(ssp, f"{SSD_NAME}: the system has no components")
+        for el in (list(elements) if elements is not None else []):
+            _check_connectors(el, components, ssp)
         _system_bindings(system, zf, ssp, components, ssd_units)
         _convert_units(components, ssp)
 
@@ -904,6 +915,62 @@ def read_ssp(ssp: str | Path, workdir: str | Path) -> dict[str, Any]:
         data["description"] = root.get("description")
     data.update({k: v for k, v in extras.items() if k in _EXTRAS})
     return data
+
+
+def _annotation(text: str, ssp: Path) -> dict[str, Any]:
+    """Our annotation's JSON: an object, each key once, with keys of the scenario's sections only; nesting, numbers
+    and everything else JSON allows but no scenario holds are one error naming the annotation."""
+    where = f"{SSD_NAME}: annotation {OUR_ANNOTATION}"
+
+    def pairs(items: list[tuple[str, Any]]) -> dict[str, Any]:
+        keys = [k for k, _ in items]
+        twice = next((k for k in keys if keys.count(k) > 1), None)
+        if twice is not None:
+            raise SspError(ssp, f"{where}: the key {twice!r} is given twice")
+        return dict(items)
+
+    try:
+        data = json.loads(text, object_pairs_hook=pairs)
+    except json.JSONDecodeError as exc:
+        raise SspError(ssp, f"{where}: not valid JSON ({exc})") from None
+    except SspError:  # a key given twice
+        raise
+    except (RecursionError, ValueError) as exc:  # nested too deep, an integer of thousands of digits
+        raise SspError(ssp, f"{where}: not a scenario's JSON ({str(exc)[:120]})") from None
+    if not isinstance(data, dict):
+        raise SspError(ssp, f"{where}: expected a JSON object, got {type(data).__name__}")
+    unknown = sorted(set(data) - {*_EXTRAS, "name", "component_options"})
+    if unknown:
+        raise SspError(ssp, f"{where}: unknown key {unknown[0]!r} (an archive's annotation carries "
+                            f"{', '.join(_EXTRAS)}, name and component_options)")
+    return data
+
+
+_CONNECTOR_KINDS = ("input", "output", "inout", "parameter", "calculatedParameter")
+
+
+def _check_connectors(el: ET.Element, components: dict[str, dict[str, Any]], ssp: Path) -> None:
+    """A component's connectors as its FMU declares them: a kind SSP knows, an input or an output where the FMU
+    variable is one, and its type (a connector declared Boolean on a Real variable, or an output on an input, was
+    taken as the FMU's)."""
+    name = el.get("name")
+    info = None
+    for c in el.iterfind("ssd:Connectors/ssd:Connector", NS):
+        cname, kind = c.get("name", ""), c.get("kind", "")
+        label = f"component {name!r}: connector {cname!r}"
+        if kind not in _CONNECTOR_KINDS:
+            raise SspError(ssp, f"{label}: kind {kind!r} is not an SSP connector kind ({', '.join(_CONNECTOR_KINDS)})")
+        info = info or _description(name, components, ssp)
+        var = info.variables.get(cname)
+        if var is None:  # named in a connection later, or never used
+            continue
+        if kind in ("input", "output") and var.causality in ("input", "output") and kind != var.causality:
+            raise SspError(ssp, f"{label}: declared an {kind}, but its FMU's variable {cname} is an {var.causality}")
+        declared = next((child.tag.rsplit("}", 1)[-1] for child in c if child.tag.startswith("{" + NS["ssc"] + "}")),
+                        None)
+        want = _SSP_TYPE.get(var.fmi_type)
+        if declared in ("Real", "Integer", "Boolean", "String") and want is not None and declared != want:
+            raise SspError(ssp, f"{label}: declared {declared}, but its FMU's variable {cname} is {var.fmi_type}")
 
 
 def _fmu_defaults(ssp: Path, paths: list[Path]) -> tuple[float | None, float | None]:
@@ -989,6 +1056,9 @@ def reopen_ssp(archive: dict[str, str], data: dict[str, Any], source: str,
         raise SspError(source, f"the log's ssp metadata is incomplete ({archive!r}): expected file, sha256 and "
                                "unpacked") from None
     head = f"the run was made from the SSP archive {ssp}, which"
+    problem = file_problem(ssp)  # the log names it: a FIFO or a device would be hashed for ever
+    if problem not in (None, "no such file"):
+        raise SspError(source, f"{head} cannot be read: {problem}")
     try:
         now = _sha256(ssp)
     except FileNotFoundError:
@@ -1028,7 +1098,7 @@ def register(sub) -> None:
                                     "resources/) that OSP libcosim and other SSP tools run.")
     e.add_argument("scenario", help="scenario file (YAML)")
     e.add_argument("-o", "--out", required=True, help="the .ssp file to write")
-    e.add_argument("--stop-time", type=float, help="override time.stop, s")
+    e.add_argument("--stop-time", type=number_option(), help="override time.stop, s")
     e.add_argument("--set", action="append", default=[], metavar="NAME=VALUE",
                    help="override by dotted name (repeatable): a component parameter (ctl.gain.kp[1]=4e4), the trajectory (trajectory.params.rx=0.05), the time grid (time.stop=0.5), any scenario key")
     e.add_argument("--json", action="store_true")

@@ -23,3 +23,19 @@ def test_sweep_with_too_many_cases_is_refused_before_they_are_made():
         make_cases({}, {"ctl.gain.kp[1]": ("uniform", 1e4, 2e4)}, MAX_CASES + 1, 1)
     with pytest.raises(SweepError, match="cases"):
         make_cases({"a": list(range(1001)), "b": list(range(1001))}, {}, None, None)
+
+
+def test_a_spacing_too_fine_to_count_is_refused_with_a_finite_spacing():
+    """1e-300 m: the grid's point count overflowed the message's float formatting (a traceback), and the spacing
+    that fits came out infinite."""
+    import re
+
+    from delta.robots import get_preset
+    from delta.workspace import sample_workspace
+
+    with pytest.raises(ParameterError, match=r"use a spacing of at least") as info:
+        sample_workspace(get_preset("linear_delta_thesis"), spacing=1e-300)
+    fits = float(re.search(r"at least (\S+) m", str(info.value))[1])
+    assert 1e-4 < fits < 1e-2, info.value  # a spacing that fits 2e7 points in a box of about 0.6 m a side
+    with pytest.raises(ParameterError, match="finite length > 0"):
+        sample_workspace(get_preset("linear_delta_thesis"), spacing=float("inf"))
