@@ -391,13 +391,6 @@ def _cmd_validate_model(args: argparse.Namespace) -> int:
 
     if args.robot not in PRESETS:
         raise CosimError(f"--robot: unknown preset {args.robot!r}; valid: {', '.join(PRESETS)}")
-    for name, value in (("--step", args.step), ("--duration", args.duration)):
-        if value is not None and not value > 0:
-            raise CosimError(f"{name} must be > 0 s, got {value}")
-    if args.w is not None and any(not 0.0 <= w <= 1.0 for w in args.w):
-        raise CosimError(f"--w: every w must lie in [0, 1], got {args.w}")
-    if args.w_rotation is not None and not 0.0 <= args.w_rotation <= 1.0:
-        raise CosimError(f"--w-rotation must lie in [0, 1], got {args.w_rotation}")
     several = len(args.trajectory) > 1 or args.out is not None
     if several and (args.duration is not None or args.no_separate):
         raise CosimError("validate-model: --duration and --no-separate apply to one motion without --out")

@@ -50,6 +50,7 @@ pick_place helix``).
 
 from __future__ import annotations
 
+import math
 from dataclasses import asdict, dataclass
 from typing import Callable
 
@@ -132,6 +133,25 @@ def _default_masses(robot):
     return kind_of(robot.kind).masses_type()
 
 
+MAX_PRESCRIBED_STEPS = 1_000_000
+"""Plant steps of one prescribed run at most (200 s of motion at the default 2e-4 s; about 100 MB of recorded
+joint states and efforts, a few minutes of the full plant): a longer step or a shorter duration goes beyond it."""
+
+
+def prescribed_steps(duration: float, h: float) -> int:
+    """The plant steps of ``h`` s that cover ``duration`` s; a step longer than the motion, or more steps than
+    :data:`MAX_PRESCRIBED_STEPS`, is a :class:`ParameterError` naming both."""
+    if not (0.0 < h < math.inf and 0.0 < duration < math.inf):
+        raise ParameterError(f"step {h!r} s and duration {duration!r} s must be finite times > 0 s")
+    n = round(duration / h)
+    if n < 1:
+        raise ParameterError(f"step {h:g} s is longer than the motion ({duration:g} s): not one plant step fits")
+    if n > MAX_PRESCRIBED_STEPS:
+        raise ParameterError(f"{duration:g} s at a step of {h:g} s is {n:.3g} plant steps, more than the "
+                             f"{MAX_PRESCRIBED_STEPS:.0e} a prescribed run takes: a longer step or a shorter duration")
+    return n
+
+
 def run_prescribed(robot, trajectory, masses=None, h: float = 2e-4, duration: float | None = None,
                    fidelity: str = "full", settings: SolverSettings | None = None,
                    progress: Progress | None = None) -> PrescribedRun:
@@ -142,8 +162,7 @@ def run_prescribed(robot, trajectory, masses=None, h: float = 2e-4, duration: fl
     from . import make_plant
 
     motion = _JointMotion(robot, trajectory)
-    end = float(trajectory.duration if duration is None else duration)
-    n = int(round(end / h))
+    n = prescribed_steps(float(trajectory.duration if duration is None else duration), h)
     p0, v0, _ = trajectory.evaluate(0.0)
     plant = make_plant(robot, masses, fidelity=fidelity, settings=settings or FORCE_COMPARISON_SETTINGS,
                        p0=p0, v0=v0, prescribed=motion, h_nominal=h)
@@ -494,7 +513,7 @@ def identify_model(robot_preset: str, trajectories=("pick_place", "helix"), mass
     motions = [(name, validation_trajectory(robot, name)) for name in dict.fromkeys(trajectories)]
     if not motions:
         raise ParameterError("identify_model needs at least one validation trajectory")
-    steps = [int(round(float(m.duration) / h)) for _, m in motions]
+    steps = [prescribed_steps(float(m.duration), h) for _, m in motions]
     total = sum(steps) + len(motions) * (5 + len(ws)) + 2 * len(motions)
     done = [0]
 

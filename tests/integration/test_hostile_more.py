@@ -63,6 +63,19 @@ def test_every_numeric_option_refuses_what_is_no_value_of_it(run, small, tmp_pat
     assert sorted(p.name for p in tmp_path.iterdir()) == ["s.yaml", "tmp"], "an output was written"
 
 
+@pytest.mark.parametrize("args, cause", [
+    (("--step", "1e308"), "step 1e\\+308 s is longer than the motion \\(0.5 s\\)"),
+    (("--step", "0.5", "--duration", "0.1"), "step 0.5 s is longer than the motion \\(0.1 s\\)"),
+    (("--duration", "9e9"), "9e\\+09 s at a step of 0.0002 s is 4.5e\\+13 plant steps, more than the 1e\\+06"),
+    (("--step", "1e-300"), "is 5e\\+299 plant steps, more than the 1e\\+06 a prescribed run takes"),
+])
+def test_validate_model_refuses_a_step_past_the_motion_and_runs_past_its_limit(run, args, cause):
+    """A finite step longer than the motion was 'operands could not be broadcast'; a huge duration or a tiny step
+    allocated and ran billions of plant steps: one line each, before the plant is built."""
+    fails(run("validate-model", "--robot", "linear_delta_thesis", "--trajectory", "pick_place", "--quiet", *args), 2,
+          f"validate-model: .*{cause}")
+
+
 def test_watchdog_zero_still_means_no_limit(run, small):
     assert run("run", small, "--no-log", "--quiet", "--watchdog", "0").returncode == 0
 
