@@ -23,24 +23,31 @@ constraints, mass matrix) and ~2.9 solves (12 / 15 us) are most of what is left,
 Since the rotary arms are 1-DOF rotational bodies (e3da3b6) both full models have 95 unknowns and, with
 a fresh Newton matrix at every step, cost the same: ~145 us per step, of which ``SolveSteps`` ~122 us
 (factorisation about half, Jacobian a sixth, two residuals a quarter) and the Python around it ~21 us.
-Since 72f1ee9 the full rotary plant keeps its Newton matrix by default (``SolverSettings.reuse_jacobian``
-is per model). Measured 2026-11-26 on the shared 2-core machine (load average 1.4-2.3), ratios of the
-interleaved medians, ranges over the runs named (baseline 288e832, 140-143 / 249-272 us full):
 
-    python benchmarks/plant_step.py --rounds 5                       (3 runs)
-        linear full 0.99-1.04, rotary full 0.34-0.36 (91-92 us); linear lumped 0.97-1.00, rotary lumped 0.25-0.26
-    python benchmarks/plant_step.py --rounds 5 --no-reuse-jacobian   (2 runs)
-        linear full 1.00-1.04, rotary full 0.58 (147-148 us)
-    python benchmarks/plant_step.py --rounds 5 --reuse-jacobian      (2 runs)
-        linear full 0.62 (86-87 us), rotary full 0.35-0.36; linear lumped 1.07, rotary lumped 0.30-0.31
+Since 37fe5f9 both full plants converge every step: ``newton_rel_tol`` 1e-10 (was 1e-6, which accepted
+Newton's first iterate: up to 7.3e-7 m off the mechanism's closure at pick_place_ctc's jerk steps) and the
+Newton matrix kept across steps (``REUSE_MAX_MODIFIED_ITERATIONS`` 4). A kept matrix takes ~4.4 modified
+iterations a step here (static), ~4.9 while the platform moves; each is a residual (mass matrix, forces,
+constraint reactions, constraints: ~17 us) and a solve (~4 us), so the linear step is ~90 us of
+``SolveSteps`` plus ~20 us of Python. A fresh matrix needs 2.9 iterations to converge (Exudyn's Newton
+matrix is not the exact Jacobian: convergence is linear, ~1e-3 a step, with a fresh one too) plus the
+factorisation and Jacobian (~80 us). Measured 2026-11-26 on the 2-core machine, quiet (load average 0.6),
+baseline 288e832 (139-145 / 248-257 us full):
 
-Issue 27's 0.5: met by the rotary plant, not by the linear plant's default. Its numerics are pinned by
-the golden baselines: they record one full Newton iteration per step with the matrix fresh at every
-step, which ends a few nm from the converged step: converging it (``newton_rel_tol = 1e-10`` with a
-fresh matrix, 2 iterations per step) moves helix_ctc_thesis's positions by 8e-9 m (tolerance 1e-9 m),
-and so does the kept matrix (~3 iterations per step, ``newton_rel_tol`` 1e-6 or 1e-10 alike): a
-cheaper Newton that converges cannot pass them, and looser ones drift further (kept matrix, 1 s open
-loop, platform from the fresh-matrix run: 2.5e-7 / 9.2e-7 / 2.2e-6 m at 1e-6 / 1e-5 / 3e-5).
+    python benchmarks/plant_step.py --rounds 5                       (2 runs)
+        linear full 0.76-0.77 (110-111 us), rotary full 0.46 (116-119 us); lumped 0.94-0.95 / 0.27-0.29
+    python benchmarks/plant_step.py --rounds 5 --no-reuse-jacobian   (1 run: converged, fresh matrix)
+        linear full 1.12 (159 us), rotary full 0.63 (160 us)
+
+Whole runs (``python benchmarks/against_commit.py --baseline 8bdb6fc scenarios/X.yaml --rounds 3``, against
+the unconverged plant of 8bdb6fc): helix_ctc 0.95x (1.88 s against 1.98 s), pick_place_ctc 1.04-1.11x (its
+7 g cycle takes more iterations to converge).
+
+Issue 27's 0.5: met by the rotary plant, not by the linear one (0.76). Before 37fe5f9 the linear plant's
+numerics were pinned by golden baselines of Newton's first iterate (7.9e-9 m off the closure, past their
+1e-9 m tolerance), so no converging Newton could pass them; they now record converged steps, which the kept
+and a fresh matrix reach within 1.2e-11 m (tests/golden/README.md). What is left is Exudyn's per-iteration
+cost times the iterations a converged step takes; the predictor and the Newton matrix are Exudyn's.
 A better predictor cannot be set from Python: Exudyn's generalized-alpha Newton starts every step from
 zero accelerations (``ComputeNewtonUpdate(initial=True)`` in CSolverImplicitSecondOrder.cpp), and a
 ``SetUserFunctionComputeNewtonUpdate`` function cannot call the built-in update (it recurses into
