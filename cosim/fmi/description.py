@@ -199,7 +199,8 @@ def _check_description(path: Path, md: Any) -> None:
     """What fmpy reads without validation but the master relies on, one error naming the variable: a model
     identifier that is a C identifier (it names the library loaded: '../../x' or '/x' loaded a library outside the
     FMU), a GUID, unique names, value references that are unsigned 32-bit, no input or parameter sharing its value
-    reference with another variable (setting one silently changed the other), and start, min and max values of the
+    reference with another of them (an alias set holds at most one: setting one silently changed the other; an
+    output or a local may alias an input or a parameter), and start, min and max values of the
     variable's type (a Real start 'abc', NaN or INF of a parameter or an input was taken), with min <= max."""
     def fail(message: str) -> ComponentSourceError:
         return ComponentSourceError(Issue("", f"{path}: modelDescription.xml: {message}"))
@@ -236,10 +237,11 @@ def _check_description(path: Path, md: Any) -> None:
         if lo is not None and hi is not None and kind in (REAL, INTEGER) and float(lo) > float(hi):
             raise fail(f"variable {v.name}: min {lo} > max {hi}: no value is in range")
     for (kind, vr), group in aliases.items():
-        causalities = {v.causality for v in group}
-        if len(group) > 1 and len(causalities) > 1 and causalities & set(_SET_BY_MASTER):
-            names = ", ".join(f"{v.name} ({v.causality})" for v in group[:4])
-            raise fail(f"{names} share the {kind} valueReference {vr}: setting one would change the other")
+        settable = [v for v in group if v.causality in _SET_BY_MASTER]
+        if len(settable) > 1:  # aliases are legal, but a set of them holds at most one parameter or input
+            names = ", ".join(f"{v.name} ({v.causality})" for v in settable[:4])
+            raise fail(f"{names} share the {kind} valueReference {vr}: setting one would change the other (a set "
+                       "of aliases holds at most one parameter or input)")
 
 
 def load_fmu(path: str | Path) -> FMUInfo:

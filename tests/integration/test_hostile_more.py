@@ -377,9 +377,10 @@ BAD_FMU = {
     "identifier_missing": (lambda s: s.replace(' modelIdentifier="CosimTGain"', ""),
                            "coSimulation modelIdentifier None is not a C identifier"),  # was a NoneType + str
     "guid_missing": (lambda s: re.sub(r' guid="[^"]*"', "", s), "no guid"),  # was a NoneType .encode at t = 0
-    # an input and an output on one value reference: setting u changed y (ran, silently)
-    "shared_reference": (lambda s: s.replace('name="u" valueReference="1"', 'name="u" valueReference="2"'),
-                         "u \\(input\\), y \\(output\\) share the Real valueReference 2"),
+    # a parameter and an input on one value reference: setting u changed k (ran, silently). An output aliasing an
+    # input is legal (test_an_output_may_alias_an_input): an alias set holds at most one parameter or input
+    "shared_reference": (lambda s: s.replace('name="u" valueReference="1"', 'name="u" valueReference="0"'),
+                         "k \\(parameter\\), u \\(input\\) share the Real valueReference 0"),
     "negative_reference": (lambda s: s.replace('name="u" valueReference="1"', 'name="u" valueReference="-1"'),
                            "variable u: valueReference -1 is not an unsigned 32-bit integer"),
     "name_twice": (lambda s: s.replace('name="u" valueReference="1"', 'name="k" valueReference="1"'),
@@ -405,6 +406,14 @@ def test_an_fmu_whose_description_lies_is_named_before_it_is_loaded(run, write_s
                     r"s.yaml:\d+: components.g: " + re.escape(str(fmu)) + ": modelDescription.xml: ", says)
     assert "load library" not in message, message
     assert not list(tmp_path.glob("x.mcap*")), "a refused FMU left output files"
+
+
+def test_an_output_may_alias_an_input(run, write_scenario, test_fmus, tmp_path):
+    """FMI 2.0 and 3.0 allow aliases (variables on one value reference); a set of them holds at most one parameter
+    or input, and may hold outputs and locals: such an FMU loads."""
+    fmu = _fmu_with(test_fmus["CosimTGain"], tmp_path / "alias.fmu",
+                    lambda s: s.replace('name="u" valueReference="1"', 'name="u" valueReference="2"'))
+    assert run("check", write_scenario(SMALL.replace("{CosimTGain}", str(fmu)))).returncode == 0
 
 
 def test_the_fmu_as_built_still_loads(run, write_scenario, test_fmus, tmp_path):
