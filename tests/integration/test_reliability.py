@@ -143,8 +143,8 @@ def test_me_derivative_failure_is_an_error_not_a_crash():
 INF_GAIN = """
 name: inf
 components:
-  src: {path: "{CosimTSource}", parameters: {offset: 1.0}}
-  g: {path: "{CosimTGain}", parameters: {k: .inf}}
+  src: {path: "{CosimTSource}", parameters: {offset: 1.0e10}}
+  g: {path: "{CosimTGain}", parameters: {k: 1.0e300}}   # finite parameters (an infinite one is refused at load)
 connections:
   - {from: src.y, to: g.u}
 time: {stop: 0.01, step: 0.001}
