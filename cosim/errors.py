@@ -12,8 +12,10 @@ import os
 import signal
 import stat
 import sys
+from contextlib import contextmanager
 from dataclasses import dataclass
-from typing import Callable
+from pathlib import Path
+from typing import Callable, Iterator
 
 from delta.errors import CosimError, UnreachableError, printable
 
@@ -34,6 +36,7 @@ __all__ = [
     "StallError",
     "number_option",
     "file_problem",
+    "written_by_rename",
     "UnknownSignalError",
     "EXIT_BAD_INPUT",
     "exit_status",
@@ -241,3 +244,17 @@ def file_problem(path: str | os.PathLike, directory_ok: bool = False) -> str | N
         kind = next((name for test, name in _KINDS if test(st.st_mode)), "not a file")
         return f"not a regular file ({kind})"
     return None
+
+
+@contextmanager
+def written_by_rename(target: str | os.PathLike) -> Iterator[Path]:
+    """A path beside ``target`` to write a whole output file to: renamed onto ``target`` when the block completes
+    (atomically: the same folder), removed when it raises. ``target`` never holds a half-written file, and nothing
+    is left beside it. The one way every command of ours writes a file that is not a run's log."""
+    target = Path(target)
+    tmp = target.with_name(f".{target.name}.{os.getpid()}.tmp")
+    try:
+        yield tmp
+        os.replace(tmp, target)
+    finally:
+        tmp.unlink(missing_ok=True)

@@ -41,7 +41,7 @@ from fmus import registry
 
 from ..engine.bounded_yaml import load_yaml
 from ..engine.scenario import Compare, expand_signal
-from ..errors import CosimError
+from ..errors import CosimError, written_by_rename
 from ..io.output import output_dir
 from ..io.runlog import AXES, RunLog, read_run
 from ..observers.stats import ErrorStats
@@ -323,8 +323,7 @@ def _plot_path(tr: Tracking, title: str, out: Path) -> Path:
                  "see errors.png)", fontsize=10)
     ax.legend(loc="upper left", fontsize=8)
     path = out / "path_3d.png"
-    fig.savefig(path)
-    return path
+    return _save(fig, path)
 
 
 def _plot_position(tr: Tracking, title: str, out: Path) -> Path:
@@ -340,8 +339,7 @@ def _plot_position(tr: Tracking, title: str, out: Path) -> Path:
                   bbox_to_anchor=(0.5, 1.0), ncol=2, fontsize=8, frameon=False)
     fig.suptitle(f"{title}: platform position, desired vs actual")
     path = out / "position.png"
-    fig.savefig(path)
-    return path
+    return _save(fig, path)
 
 
 _FLAT = 0.05  # an axis whose values span less than this share of the widest axis's span is drawn at that share
@@ -414,8 +412,7 @@ def _plot_errors(tr: Tracking, title: str, out: Path) -> Path:
     note = "" if tr.velocity is not None else " (no velocity signals logged)"
     fig.suptitle(f"{title}: tracking error, actual - desired{note}")
     path = out / "errors.png"
-    fig.savefig(path)
-    return path
+    return _save(fig, path)
 
 
 def _plot_joints(tr: Tracking, title: str, out: Path) -> Path | None:
@@ -435,8 +432,7 @@ def _plot_joints(tr: Tracking, title: str, out: Path) -> Path | None:
     kind = {"m": "carriage travel", "rad": "arm angle"}.get(q.unit, "joint value")
     fig.suptitle(f"{title}: joint-space tracking ({kind}), desired vs actual and error")
     path = out / "joints.png"
-    fig.savefig(path)
-    return path
+    return _save(fig, path)
 
 
 def _plot_efforts(tr: Tracking, title: str, out: Path) -> Path | None:
@@ -457,8 +453,7 @@ def _plot_efforts(tr: Tracking, title: str, out: Path) -> Path | None:
     axs[-1].set_xlabel("time (s)")
     fig.suptitle(f"{title}: actuator efforts")
     path = out / "efforts.png"
-    fig.savefig(path)
-    return path
+    return _save(fig, path)
 
 
 # --------------------------------------------------------------------------- report
@@ -584,8 +579,16 @@ def make_report(run: RunLog | str | Path, out_dir: str | Path | None = None) -> 
     p = tr.position
     rep = Report(str(log.path), title, log.robot, log.status, float(p.t[-1] - p.t[0]), out, out / "report.md",
                  figures, tr.position_stats(), tr.velocity_stats(), tr.source, tr.joint_stats())
-    rep.markdown.write_text(_markdown(tr, rep))
+    with written_by_rename(rep.markdown) as tmp:
+        tmp.write_text(_markdown(tr, rep))
     return rep
+
+
+def _save(fig, path: Path) -> Path:
+    """``fig`` as the PNG ``path``, written by rename (never half a figure there)."""
+    with written_by_rename(path) as tmp:
+        fig.savefig(tmp, format="png")
+    return path
 
 
 # --------------------------------------------------------------------------- controller table

@@ -58,7 +58,7 @@ from ..engine import supervision
 from ..engine.prepare import build_key, build_ours, locate_fmus
 from ..engine.scenario import dotted_overrides, parse_set_value, read_scenario
 from ..engine.system import build_plan
-from ..errors import CosimError, exit_now, file_problem, number_option
+from ..errors import CosimError, exit_now, file_problem, number_option, written_by_rename
 from ..io.output import check_output, output_dir
 from ..fmi import cleanup_extracted
 from ..fmi.extract import sweep_orphans
@@ -351,8 +351,8 @@ def run_sweep(scenario: str | Path, cases: list[Case], out: str | Path, *, worke
     failed = {f"{cid} ({', '.join(f'{k}={r[k]}' for k in params)})": r["message"] or "acceptance check failed"
               for cid, r in finished.items() if r["status"] == "failed" or r["checks"] == "FAILED"}
     todo = [(c, sc) for c, sc in zip(cases, loaded) if c.id not in finished]
-    (out / "sweep.json").write_text(json.dumps({"scenario": scenario, "parameters": params,
-                                                "cases": len(cases)}, indent=2))
+    with written_by_rename(out / "sweep.json") as tmp:
+        tmp.write_text(json.dumps({"scenario": scenario, "parameters": params, "cases": len(cases)}, indent=2))
     summary = SweepSummary(out, len(cases), len(todo), len(cases) - len(todo), failed)
     if on_progress is not None:
         on_progress(len(finished), len(failed), len(cases))
@@ -662,15 +662,13 @@ def report(out: str | Path, metric: str = "rmse", fig: str | Path | None = None)
         ax.set_ylabel(b)
     scenario = Path(meta.get("scenario", "")).stem
     ax.set_title(f"{scenario}: {metric}, {len(ok)} cases" + (f" ({n_bad} failed, not shown)" if n_bad else ""))
-    tmp = fig_path.with_name(f".{fig_path.name}.{os.getpid()}.tmp")  # renamed into place only when complete
     try:
-        f.savefig(tmp, dpi=120, format="png")
-        os.replace(tmp, fig_path)
+        with written_by_rename(fig_path) as tmp:
+            f.savefig(tmp, dpi=120, format="png")
     except OSError as exc:
         raise SweepError(f"{fig_path}: cannot write the figure: {exc.strerror or exc}") from None
     finally:
         plt.close(f)
-        tmp.unlink(missing_ok=True)
     return fig_path
 
 
@@ -740,10 +738,6 @@ def register(sub) -> None:
 
 def _cmd_sweep(args) -> int:
 
-    if args.n is not None and not 1 <= args.n <= MAX_CASES:
-        raise SweepError(f"-n must be from 1 to {MAX_CASES}, got {args.n}")
-    if args.workers is not None and args.workers < 1:
-        raise SweepError(f"--workers must be >= 1, got {args.workers}")
     problem = file_problem(args.scenario)
     if problem is not None:
         raise SweepError(f"{args.scenario}: {problem.replace('no such file', 'no such scenario file')}")

@@ -10,15 +10,13 @@ start values from it (:func:`model_start_values`, applied by :func:`cosim.engine
 from __future__ import annotations
 
 import math
-import os
-import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import yaml
 
-from ..errors import Issue, ScenarioError, file_problem
+from ..errors import Issue, ScenarioError, file_problem, written_by_rename
 from .bounded_yaml import load_yaml
 
 __all__ = ["FORMAT", "PARAMETERS", "ModelFile", "read_model_file", "write_model_file", "model_start_values"]
@@ -89,14 +87,8 @@ def write_model_file(path: str | Path, robot: str, parameters: dict[str, float],
     text = (f"# Identified model of {robot}: the analytic model's leg mass split fitted to the Exudyn plant.\n"
             f"# Written by: {command}\n# Scenarios use it with the top-level key  model: <path to this file>\n"
             + yaml.safe_dump(body, sort_keys=False, default_flow_style=False))
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8") as fh:
-            fh.write(text)
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+    with written_by_rename(path) as tmp:
+        tmp.write_text(text, encoding="utf-8")
 
 
 def model_based(entry: Any) -> bool:

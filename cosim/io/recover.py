@@ -6,7 +6,7 @@ import os
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
-from ..errors import CosimError, file_problem
+from ..errors import CosimError, file_problem, written_by_rename
 from .output import check_output
 from .runlog import log_records
 
@@ -39,17 +39,12 @@ def recover(path: str | Path, out: str | Path | None = None) -> RecoveryReport:
     if problem is not None:
         raise CosimError(f"{path}: {problem}")
     check_output(out, (path,))
-    tmp = out.with_name(f".{out.name}.{os.getpid()}.tmp")  # renamed into place only when complete
     try:
-        report = _copy(path, tmp, out)
-        os.replace(tmp, out)
+        with written_by_rename(out) as tmp:
+            report = _copy(path, tmp, out)
     except OSError as exc:
-        tmp.unlink(missing_ok=True)
         raise CosimError(f"{out}: cannot write the recovered log: {exc.strerror or exc}; nothing was written "
                          f"({path} is unchanged)") from None
-    except BaseException:
-        tmp.unlink(missing_ok=True)
-        raise
     return report
 
 

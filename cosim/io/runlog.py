@@ -40,7 +40,7 @@ from mcap.writer import CompressionType, Writer
 
 from ..engine.grid import MAX_TIME_S
 from ..engine.scenario import EFFECTIVE_ATTACHMENT, Scenario, scenario_from_data
-from ..errors import CosimError, Issue, ScenarioError, file_problem
+from ..errors import CosimError, Issue, ScenarioError, file_problem, written_by_rename
 from ..fmi.extract import SSP_PREFIX
 from .output import check_output
 from .ssp import reopen_ssp
@@ -350,10 +350,9 @@ def write_baseline(source: str | Path, out: str | Path, period: float = 0.01,
     check_output(out, (source,))
     period_ns = int(round(period * 1e9))
     wanted = None if components is None else {f"/{c}" for c in components}
-    tmp = out.with_name(f".{out.name}.{os.getpid()}.part")  # renamed into place only when complete
     written = 0
     try:
-        with open(source, "rb") as f, open(tmp, "wb") as dst:
+        with written_by_rename(out) as tmp, open(source, "rb") as f, open(tmp, "wb") as dst:
             schemas: dict[int, Schema] = {}  # first pass: what comes before or after the messages
             channels: dict[int, Channel] = {}
             metadata: list[Metadata] = []
@@ -412,12 +411,9 @@ def write_baseline(source: str | Path, out: str | Path, period: float = 0.01,
             for att in attachments:
                 w.add_attachment(att.create_time, att.log_time, att.name, att.media_type, att.data)
             w.finish()
-        tmp.replace(out)
     except CosimError:
-        tmp.unlink(missing_ok=True)
         raise
     except Exception as exc:  # the source is unreadable: no half-written baseline is left behind
-        tmp.unlink(missing_ok=True)
         raise _open_error(source, exc) from None
     return out, written
 

@@ -164,7 +164,7 @@ def test_baseline_keeps_every_period_sample_exactly(tmp_path):
     assert base.metadata["baseline"]["period_s"] == "0.02", base.metadata
     cmp = compare_logs(base, src)
     assert all(d.max_error == 0.0 and d.samples == 51 for d in cmp.diffs), cmp.text()
-    assert not (tmp_path / "base.mcap.part").exists()
+    assert not list(tmp_path.glob(".base.mcap.*")), "a temporary file was left beside the baseline"
 
 
 def test_unreadable_logs_name_the_file(tmp_path):
@@ -176,7 +176,7 @@ def test_unreadable_logs_name_the_file(tmp_path):
         read_run(junk)
     with pytest.raises(CosimError, match=r"junk\.mcap: cannot read"):
         write_baseline(junk, tmp_path / "b.mcap")
-    assert not (tmp_path / "b.mcap").exists() and not (tmp_path / "b.mcap.part").exists()
+    assert not (tmp_path / "b.mcap").exists() and not list(tmp_path.glob(".b.mcap.*")), "a (partial) baseline was left"
 
 
 def test_cli_exit_codes_and_default_tolerances_from_the_baseline(tmp_path, capsys):
