@@ -200,18 +200,19 @@ def log_records(f, path: str | Path, chunks: bool = True) -> Iterator:
 
     src = _Clamped(f)
     start = 8  # the first record follows the magic
-    for rec in StreamReader(src, emit_chunks=True, record_size_limit=src.size).records:
-        if isinstance(rec, Chunk):
-            if chunks:
-                yield from breakup_chunk(replace(rec, compression="", data=_inflate(rec, Path(path), start)))
-        else:
-            yield rec
-        start = f.tell()
+    try:
+        for rec in StreamReader(src, emit_chunks=True, record_size_limit=src.size).records:
+            if isinstance(rec, Chunk):
+                if chunks:
+                    yield from breakup_chunk(replace(rec, compression="", data=_inflate(rec, Path(path), start)))
+            else:
+                yield rec
+            start = f.tell()
+    except (struct.error, EOFError) as exc:  # the mcap reader's own errors for a record cut short: as its others
+        raise McapError(f"the file ends inside a record ({exc})") from None
 
 
 def _open_error(path: Path, exc: Exception) -> CosimError:
-    if isinstance(exc, (struct.error, EOFError)):  # the mcap reader's own error for a record cut short
-        exc = EOFError(f"the file ends inside a record ({exc})")
     return CosimError(f"{path}: cannot read the MCAP log ({type(exc).__name__}: {exc}); if the run was killed, "
                       f"rewrite it first with `python -m cosim recover {path}`")
 
@@ -283,8 +284,8 @@ def read_run(path: str | Path, components: Iterable[str] | None = None) -> RunLo
                     footer = True
         if not footer:
             raise McapError("no footer (unfinished log)")
-    except (McapError, OSError, ValueError, orjson.JSONDecodeError, struct.error, EOFError) as exc:
-        raise _open_error(path, exc) from None  # struct.error: a record cut short (the mcap reader's own error)
+    except (McapError, OSError, ValueError, orjson.JSONDecodeError) as exc:
+        raise _open_error(path, exc) from None
     if wanted is not None:
         missing = sorted(w[1:] for w in wanted if w[1:] not in columns)
         if missing:
@@ -443,7 +444,7 @@ def open_from_log(path: str | Path, overrides: dict[tuple, Any] | None = None) -
                 if isinstance(rec, Attachment) and rec.name == EFFECTIVE_ATTACHMENT:
                     found = bytes(rec.data)
                     break
-    except (McapError, OSError, ValueError, struct.error, EOFError) as exc:  # before the attachment: up to it
+    except (McapError, OSError, ValueError) as exc:  # before the attachment: read up to it otherwise
         raise ScenarioError(Issue("", f"not a readable MCAP log ({type(exc).__name__}: {exc}); give a run's log",
                                   str(path))) from None
     if found is None:
