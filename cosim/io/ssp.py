@@ -74,7 +74,7 @@ from ..engine.names import ref, safe_stem
 from ..engine.prepare import input_files, prepare
 from ..engine.scenario import Component, apply_overrides, load_scenario, scenario_from_data
 from ..engine.wiring import index_text
-from ..errors import CosimError, Issue, ScenarioError, file_problem, number_option
+from ..errors import CosimError, Issue, ScenarioError, file_problem, number_option, written_by_rename
 from ..fmi.description import FMUInfo, load_fmu
 from ..fmi.extract import MAX_FMU_BYTES, SSP_PREFIX, sweep_orphans
 from .output import check_output
@@ -346,17 +346,12 @@ def export_ssp(scenario: Scenario, out: str | Path) -> ExportReport:
     ours = _el(system_annotations, "ssc:Annotation", {"type": OUR_ANNOTATION})
     _el(ours, "dcs:Scenario").text = json.dumps(_extras(scenario), indent=1)
     check_output(out, (*input_files(scenario), *(info.path for info in infos)))
-    partial = out.with_name(f".{out.name}.partial")
-    try:
-        with zipfile.ZipFile(partial, "w", zipfile.ZIP_DEFLATED) as z:
-            z.writestr(SSD_NAME, _xml(root))
-            for arc, data in ssv_files.items():
-                z.writestr(arc, data)
-            for stem, info in zip(stems, infos):
-                z.write(info.path, f"resources/{stem}.fmu", compress_type=zipfile.ZIP_STORED)  # already deflated
-        partial.replace(out)
-    finally:
-        partial.unlink(missing_ok=True)
+    with written_by_rename(out) as partial, zipfile.ZipFile(partial, "w", zipfile.ZIP_DEFLATED) as z:
+        z.writestr(SSD_NAME, _xml(root))
+        for arc, data in ssv_files.items():
+            z.writestr(arc, data)
+        for stem, info in zip(stems, infos):
+            z.write(info.path, f"resources/{stem}.fmu", compress_type=zipfile.ZIP_STORED)  # already deflated
     return ExportReport(out, list(names), len(plan.links), n_params, t.step, t.stop)
 
 
