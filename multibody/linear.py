@@ -2,11 +2,14 @@
 
 Full fidelity
     Three carriages on vertical prismatic rails, each leg a parallelogram of two rigid rods (solid cylinders of
-    ``masses.rod`` kg and radius ``masses.rod_radius``) with spherical joints at both
-    ends, ``masses.parallelogram_width`` apart along the rail tangent, and a rigid
-    free-floating platform (disc of radius ``platform_radius``, 10 mm thick) kept level
-    by the parallelograms. Each rod keeps an idle spin about its own axis (inertia
-    ``m r^2 / 2``), which is never excited.
+    ``masses.rod`` kg and radius ``masses.rod_radius``) with spherical joints at both ends, ``masses.parallelogram_width``
+    apart along the rail tangent, and a rigid free-floating platform (disc of radius ``platform_radius``, 10 mm
+    thick) kept level by the parallelograms. A rod is represented by its two ends (its kinetic energy a constant
+    quadratic form of their velocities, :func:`multibody.plant.rod_end_masses`, its weight half at each end) and
+    its length by one distance constraint: its lower end is a point of its carriage, its upper end a point node
+    joined to the platform. The spin of a cylinder about its own axis is never excited between spherical joints
+    and is left out; what remains is the rigid cylinder's motion exactly (the golden baselines, recorded with the
+    rods as rigid bodies on Euler parameters, hold to 5e-13 m).
 Lumped fidelity
     The analytic model's assumptions: each rod's mass split ``(1 - w)`` to the carriage
     and ``w`` to the platform (``masses.w_inertia`` for inertia, ``masses.w_gravity`` for
@@ -14,8 +17,11 @@ Lumped fidelity
     constraint of rod length between carriage joint and platform joint.
 
 Carriages: an ideal prismatic rail locks every carriage motion but the travel, so a carriage is
-modelled exactly as a 1-DOF mass (``ObjectMass1D``) whose coordinate *is* ``q[i]`` (its rotational
-inertia never enters); this removes six constraints per carriage from the rigid model.
+modelled exactly as a 1-DOF body (``ObjectMass1D``) whose coordinate *is* ``q[i]`` (its rotational
+inertia never enters); this removes six constraints per carriage from the rigid model. Its points move linearly
+with ``q[i]``, so its mass and weight, and its rods' lower ends, are point masses of one constant mass matrix per
+leg (:meth:`LinearDeltaPlant._add_leg`). The full model has 53 unknowns (28 coordinates, 25 constraint
+equations); with the rods as rigid bodies on Euler parameters it had 95.
 
 Actuator effort ``u[i]``: force on carriage i along +q (down the rail), N.
 """
@@ -28,12 +34,15 @@ from delta.dynamics import LinearDeltaMasses
 from delta.kinematics import actuator_points, joint_state_from_platform, leg_axes, platform_offsets
 from delta.robots import LinearDelta
 
-from .plant import MIN_ROD_MASS, DeltaPlant, JointTrajectory, RobotTypeError, SolverSettings
+from .plant import MIN_ROD_MASS, DeltaPlant, JointTrajectory, RobotTypeError, SolverSettings, rod_end_masses
 
 __all__ = ["LinearDeltaPlant", "MIN_ROD_MASS", "PLATFORM_THICKNESS"]
 
 PLATFORM_THICKNESS = 0.01
 """Platform disc thickness, m."""
+
+RAIL = np.array([0.0, 0.0, -1.0])
+"""Direction in which a carriage moves as its coordinate q grows (down its vertical rail)."""
 
 
 class LinearDeltaPlant(DeltaPlant):
@@ -104,19 +113,17 @@ class LinearDeltaPlant(DeltaPlant):
         self._carriage_markers: list[int] = []
         ground_node = mbs.AddNode(NodePointGround(referenceCoordinates=[0.0, 0.0, 0.0]))
         ground_coord = mbs.AddMarker(MarkerNodeCoordinate(nodeNumber=ground_node, coordinate=0))
-        rail_down = [[0.0, 0.0, 1.0], [0.0, 1.0, 0.0], [-1.0, 0.0, 0.0]]  # local x -> global -z
+        rail_down = [[0.0, 0.0, 1.0], [0.0, 1.0, 0.0], [-1.0, 0.0, 0.0]]  # local x -> global -z (RAIL)
         carriage_mass = m.carriage if full else m.carriage + 2.0 * (1.0 - w_i) * m.rod
         carriage_weight = m.carriage if full else m.carriage + 2.0 * (1.0 - w_g) * m.rod
         for i in range(3):
-            vel_c = np.array([0.0, 0.0, -qd0[i]])
-            # carriage on its rail: a 1-DOF mass whose total coordinate is q_i (rail top at z = 0)
+            # carriage on its rail: a 1-DOF node whose total coordinate is q_i (rail top at z = 0); the Mass1D is the
+            # carriage's geometry (its points for the markers), its mass and weight are point masses of its leg
             node = mbs.AddNode(Node1D(referenceCoordinates=[float(q0[i])], initialCoordinates=[0.0],
                                       initialVelocities=[float(qd0[i])]))
-            carriage = mbs.AddObject(Mass1D(mass=carriage_mass, nodeNumber=node,
+            carriage = mbs.AddObject(Mass1D(mass=0.0, nodeNumber=node,
                                             referencePosition=[float(x) for x in robot.rail_radius * e[i]],
                                             referenceRotation=rail_down))
-            self._bodies.append((carriage, carriage_mass, None))
-            self._add_weight(carriage, (0.0, 0.0, 0.0), carriage_weight)
             self._carriages.append(carriage)
             self._joint_nodes.append(node)
             marker = mbs.AddMarker(MarkerBodyPosition(bodyNumber=carriage, localPosition=[0.0, 0.0, 0.0]))
@@ -129,14 +136,41 @@ class LinearDeltaPlant(DeltaPlant):
                 self._drives.append(mbs.AddObject(CoordinateConstraint(
                     markerNumbers=[ground_coord, coord], offsetUserFunction=self._coord_offset(i),
                     offsetUserFunction_t=self._coord_offset_t(i))))
-            # leg
             if full:
-                for side in (-0.5, 0.5):
-                    offset = side * m.parallelogram_width * tangent[i]
-                    self._add_rod(carriage, B[i] + offset, p0 + b[i] + offset, vel_c, v0)
+                self._add_leg(carriage, node, B[i], [(B[i] + offset, p0 + b[i] + offset) for offset in
+                                                     (side * m.parallelogram_width * tangent[i] for side in (-0.5, 0.5))],
+                              v0, carriage_mass)
             else:
+                self._add_point_masses([node], RAIL.reshape(3, 1), B[i].reshape(1, 3), np.array([[carriage_mass]]),
+                                       np.array([carriage_weight]))
                 pm = mbs.AddMarker(MarkerBodyPosition(bodyNumber=self._platform, localPosition=list(b[i])))
                 mbs.AddObject(DistanceConstraint(markerNumbers=[marker, pm], distance=length))
+
+    def _add_leg(self, carriage: int, node: int, centre: np.ndarray, rods: list[tuple[np.ndarray, np.ndarray]],
+                 v0: np.ndarray, carriage_mass: float) -> None:
+        """A full leg: the carriage (point mass at ``centre``) and its parallelogram's rods, each ``(lower, upper)``
+        end at the reset pose, as one set of point masses (:meth:`DeltaPlant._add_point_masses`). A rod's lower end
+        is a point of the carriage, moving with ``RAIL * qd``: linear in the carriage's coordinate, it needs no
+        coordinates and no joint of its own, only the rod's distance constraint to its upper end (a point node
+        joined to the platform, :meth:`DeltaPlant._add_rod_end`). Rod masses: :func:`multibody.plant.rod_end_masses`."""
+        m = self.masses
+        ups = [self._add_rod_end(self._body_marker(carriage, low), low, up, v0) for low, up in rods]
+        n = 1 + 3 * len(rods)
+        points = [centre] + [end for rod in rods for end in rod]  # C, then each rod's lower and upper end
+        jacobian = np.zeros((3 * len(points), n))
+        jacobian[0:3, 0] = RAIL
+        mass = np.zeros((len(points), len(points)))
+        mass[0, 0] = carriage_mass
+        weight = np.full(len(points), 0.5 * m.rod)
+        weight[0] = m.carriage
+        for k, (low, up) in enumerate(rods):
+            lo, hi = 1 + 2 * k, 2 + 2 * k  # point indices
+            jacobian[3 * lo:3 * lo + 3, 0] = RAIL
+            jacobian[3 * hi:3 * hi + 3, 1 + 3 * k:4 + 3 * k] = np.eye(3)
+            a, b = rod_end_masses(max(m.rod, MIN_ROD_MASS), m.rod_radius, float(np.linalg.norm(up - low)))
+            mass[lo, lo] = mass[hi, hi] = a
+            mass[lo, hi] = mass[hi, lo] = b
+        self._add_point_masses([node] + ups, jacobian, np.stack(points), mass, weight)
 
     # prescribed-motion offsets (relative to the reset pose) ---------------------------
     def _coord_offset(self, i: int):

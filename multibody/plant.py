@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Callable
+from typing import Callable, NamedTuple
 
 import numpy as np
 
@@ -28,7 +28,8 @@ JointTrajectory = Callable[[float], tuple[np.ndarray, np.ndarray]]
 
 
 MIN_ROD_MASS = 1e-6
-"""kg. A rigid rod body needs a regular mass matrix: a zero rod mass is represented by this."""
+"""kg. A zero rod mass is represented by this in the rods' end masses (their weight stays zero), so that a rod's
+end nodes keep a regular mass matrix."""
 
 
 class PlantError(CosimError, RuntimeError):
@@ -78,7 +79,7 @@ class SolverSettings:
         every ``SolveSteps`` entry otherwise). Newton still iterates to the same tolerances, and the
         matrix is refactorised when modified Newton has not converged within
         ``REUSE_MAX_MODIFIED_ITERATIONS`` iterations, when the step size changes and after a reset.
-        Its steps take ~3 modified Newton iterations where a fresh matrix takes one or two; at the default
+        Its steps take ~4 modified Newton iterations where a fresh matrix takes two; at the default
         tolerance both converge to the same step (see ``newton_rel_tol``). None (default) = per model
         (``_default_reuse``): on for the full plants, off for the lumped plants (their factorisation is
         cheap: the kept matrix costs more than it saves).
@@ -105,8 +106,7 @@ class SolverSettings:
             raise ParameterError(f"SolverSettings.min_step must be a finite time >= 0 s, got {self.min_step!r}")
 
 
-@dataclass(frozen=True)
-class PlantOutput:
+class PlantOutput(NamedTuple):
     """Plant outputs after a step (or after ``reset``).
 
     Attributes
@@ -122,6 +122,8 @@ class PlantOutput:
         the carriage down; rotary: N*m, positive turns the arm down). With applied efforts it
         equals the effort u held during the step; in prescribed-motion mode it is the drive
         constraint's reaction, i.e. the effort needed to follow the prescribed q(t).
+
+    A named tuple (immutable, a quarter of a frozen dataclass's cost to build: one per plant step).
     """
 
     t: float
@@ -132,12 +134,16 @@ class PlantOutput:
     reaction: np.ndarray
 
 
-REUSE_MAX_MODIFIED_ITERATIONS = 4
+REUSE_MAX_MODIFIED_ITERATIONS = 3
 """With ``SolverSettings.reuse_jacobian``: modified Newton iterations on a kept matrix before it is
-refactorised (Exudyn's ``maxModifiedNewtonIterations``, default 8). Converging to the default 1e-10 takes a
-kept matrix 4-6 iterations while the platform moves (a 2 Hz effort wobble, tests/integration/
-test_multibody_plants.py): with 2 the full linear plant refactorised on 0.91 of its steps, with 4 on 0.14,
-with 6 on 0.07, and 4 was the fastest (0.84x / 0.70x the fresh matrix's time per step, linear / rotary)."""
+refactorised (Exudyn's ``maxModifiedNewtonIterations``, default 8). A kept matrix contracts Newton's error by
+~1e-4 a step after it was factorised and by ~1e-3 some steps later (the constraint Jacobians turn with the rods),
+so converging to the default 1e-10 takes it 3, then 4 iterations; a fresh one takes 2. With 3 the matrix is
+refactorised as soon as it needs a 4th. Measured with the rods' end-point model (``benchmarks/plant_step.py``
+conditions, full linear plant): 3.8 iterations and 0.02 factorisations per step with 3, 4.3 and 0.007 with 4,
+4.7 with 5, and 3 the fastest (74 against 77 us); while the platform moves (a 2 Hz effort wobble,
+tests/integration/test_multibody_plants.py) 3, 4 and 5 take the same time (0.24 / 0.09 / 0.04 factorisations
+per step)."""
 
 
 def _time_tolerance(t: float) -> float:
@@ -214,6 +220,7 @@ class DeltaPlant:
         self.mbs = self._sc.AddSystem()
         self._bodies: list[tuple[int, float, np.ndarray | None]] = []
         self._weights: list[tuple[int, list[float], float]] = []
+        self._point_masses: list[tuple] = []  # (item, jacobian, reference, mass, weight): _add_point_masses
         self._symbolic: list = []  # symbolic user functions and their variables, kept alive with the system
         self._joint_nodes: list[int] = []
         self._effort_values: list = []
@@ -339,6 +346,14 @@ class DeltaPlant:
         for body, local, gravity_mass in self._weights:
             pos = np.asarray(self.mbs.GetObjectOutputBody(body, ovt.Position, list(local)))
             pot += gravity_mass * self.masses.gravity * pos[2]
+        if self._point_masses:
+            coords, coords_t = self._system_data.GetODE2Coordinates(), self._system_data.GetODE2Coordinates_t()
+        for item, jacobian, reference, mass, weight in self._point_masses:
+            index = np.asarray(self._system_data.GetObjectLTGODE2(item), dtype=int)
+            v = (jacobian @ coords_t[index]).reshape(-1, 3)
+            z = (reference + jacobian @ coords[index])[2::3]
+            kin += 0.5 * float(np.sum(mass * (v @ v.T)))
+            pot += float(weight @ z) * self.masses.gravity
         return kin, pot
 
     def platform_tilt(self) -> float:
@@ -379,20 +394,84 @@ class DeltaPlant:
         return body
 
     def _add_rod(self, parent: int, start: np.ndarray, end: np.ndarray, v_start: np.ndarray,
-                 v_end: np.ndarray) -> int:
-        """One parallelogram rod from ``start`` (on ``parent``) to ``end`` (on the platform): a
-        uniform rigid cylinder with spherical joints at both ends, initial motion from the end
-        velocities (the spin about its own axis is zero)."""
+                 v_end: np.ndarray) -> None:
+        """One parallelogram rod from ``start`` (on ``parent``) to ``end`` (on the platform), spherical joints at
+        both ends: its two ends are point nodes (initial velocities ``v_start``, ``v_end``) carrying the rod's
+        mass and weight (:func:`rod_end_masses`, :meth:`_add_point_masses`), held at the rod's length by one
+        distance constraint. A rod whose lower end moves linearly with a joint coordinate (a linear delta's
+        carriage) is built by the plant with :meth:`_add_rod_end` alone, its lower end a point of the carriage."""
+        from exudyn.itemInterface import MarkerNodePosition
+
         m = self.masses
-        rod_mass = max(m.rod, MIN_ROD_MASS)
-        length = float(np.linalg.norm(end - start))
-        omega = np.cross(end - start, v_end - v_start) / length**2
-        rod = self._add_body(rod_mass, rod_inertia(rod_mass, m.rod_radius, length, (end - start) / length),
-                             0.5 * (start + end), 0.5 * (v_start + v_end), omega)
-        self._add_weight(rod, (0.0, 0.0, 0.0), m.rod)
-        self.mbs.CreateSphericalJoint(itemNumbers=[parent, rod], position=list(start), show=False)
-        self.mbs.CreateSphericalJoint(itemNumbers=[rod, self._platform], position=list(end), show=False)
-        return rod
+        low = self._add_node_point(start, v_start)
+        low_marker = self.mbs.AddMarker(MarkerNodePosition(nodeNumber=low))
+        self._add_spherical_joint(parent, start, low_marker)
+        up = self._add_rod_end(low_marker, start, end, v_end)
+        a, b = rod_end_masses(max(m.rod, MIN_ROD_MASS), m.rod_radius, float(np.linalg.norm(end - start)))
+        self._add_point_masses([low, up], np.eye(6), np.stack([start, end]), np.array([[a, b], [b, a]]),
+                               np.array([0.5 * m.rod, 0.5 * m.rod]))
+
+    def _add_rod_end(self, low_marker: int, start: np.ndarray, end: np.ndarray, v_end: np.ndarray) -> int:
+        """A rod's upper end: a point node at ``end`` (initial velocity ``v_end``) joined to the platform by a
+        spherical joint, at the rod's length from the lower end's marker ``low_marker`` (at ``start`` now) by a
+        distance constraint. Returns the node; its mass is the caller's (:meth:`_add_point_masses`)."""
+        from exudyn.itemInterface import DistanceConstraint, MarkerNodePosition, VObjectConnectorDistance
+
+        up = self._add_node_point(end, v_end)
+        up_marker = self.mbs.AddMarker(MarkerNodePosition(nodeNumber=up))
+        self._add_spherical_joint(self._platform, end, up_marker)
+        self.mbs.AddObject(DistanceConstraint(markerNumbers=[low_marker, up_marker],
+                                              distance=float(np.linalg.norm(end - start)),
+                                              visualization=VObjectConnectorDistance(show=False)))
+        return up
+
+    def _add_point_masses(self, nodes: list[int], jacobian: np.ndarray, reference: np.ndarray, mass: np.ndarray,
+                          weight: np.ndarray) -> int:
+        """Masses at points that move linearly with the coordinates x of ``nodes`` (in their order, each node's
+        coordinates relative to its reference): point k is at ``reference[k] + jacobian[3k:3k+3] @ x``, the
+        kinetic energy is ``sum_kl mass[k, l] v_k.v_l / 2`` (``mass`` symmetric, kg) and ``weight[k]`` kg weigh
+        at point k. Both are constant in x: an Exudyn ``ObjectGenericODE2`` with the mass matrix
+        ``J^T (mass (x) I3) J`` and the weights' generalized force ``J^T w``, no rotation parameters and nothing
+        evaluated per Newton iteration but a product with a constant matrix."""
+        import exudyn as exu
+        from exudyn.itemInterface import ObjectGenericODE2, VObjectGenericODE2
+
+        jacobian = np.asarray(jacobian, dtype=float)
+        forces = np.zeros(jacobian.shape[0])
+        forces[2::3] = -np.asarray(weight, dtype=float) * self.masses.gravity
+        matrix = exu.MatrixContainer()
+        matrix.SetWithDenseMatrix(jacobian.T @ np.kron(mass, np.eye(3)) @ jacobian, useDenseMatrix=False)
+        item = self.mbs.AddObject(ObjectGenericODE2(nodeNumbers=list(nodes), massMatrix=matrix,
+                                                    forceVector=(jacobian.T @ forces).tolist(),
+                                                    visualization=VObjectGenericODE2(show=False)))
+        self._point_masses.append((item, jacobian, np.asarray(reference, dtype=float).reshape(-1),
+                                   np.asarray(mass, dtype=float), np.asarray(weight, dtype=float)))
+        return item
+
+    def _add_node_point(self, position: np.ndarray, velocity: np.ndarray) -> int:
+        from exudyn.itemInterface import NodePoint
+
+        return self.mbs.AddNode(NodePoint(referenceCoordinates=[float(x) for x in position],
+                                          initialVelocities=[float(x) for x in velocity]))
+
+    def _body_marker(self, body: int, point: np.ndarray) -> int:
+        """A position marker on ``body`` at the global point ``point`` of the reset pose."""
+        import exudyn as exu
+        from exudyn.itemInterface import MarkerBodyPosition
+
+        ovt, reference = exu.OutputVariableType, exu.ConfigurationType.Reference
+        origin = np.asarray(self.mbs.GetObjectOutputBody(body, ovt.Position, [0.0, 0.0, 0.0], configuration=reference))
+        rotation = np.asarray(self.mbs.GetObjectOutputBody(body, ovt.RotationMatrix, [0.0, 0.0, 0.0],
+                                                           configuration=reference)).reshape(3, 3)
+        local = rotation.T @ (np.asarray(point, dtype=float) - origin)
+        return self.mbs.AddMarker(MarkerBodyPosition(bodyNumber=body, localPosition=[float(x) for x in local]))
+
+    def _add_spherical_joint(self, body: int, point: np.ndarray, marker: int) -> None:
+        """Join ``marker`` to ``body`` at the global point ``point`` of the reset pose."""
+        from exudyn.itemInterface import SphericalJoint, VObjectJointSpherical
+
+        self.mbs.AddObject(SphericalJoint(markerNumbers=[self._body_marker(body, point), marker],
+                                          visualization=VObjectJointSpherical(show=False)))
 
     def _add_weight(self, body: int, local, gravity_mass: float) -> None:
         """Apply the weight of ``gravity_mass`` at body-local point ``local`` (-z).
@@ -463,9 +542,8 @@ class DeltaPlant:
         coords = sd.GetODE2Coordinates()  # fresh numpy arrays (copies of the solver state)
         coords_t = sd.GetODE2Coordinates_t()
         q, qd = self._read_joints(coords, coords_t)
-        p = self._p_ref + coords[self._p_slice]
-        v = coords_t[self._p_slice].copy()
-        return PlantOutput(t=self._t, q=q, qd=qd, p=p, v=v, reaction=reaction)
+        # v: a view of the fresh coords_t, which only this output holds
+        return PlantOutput(self._t, q, qd, self._p_ref + coords[self._p_slice], coords_t[self._p_slice], reaction)
 
     def _symbolic_load(self, load: int, parameter: str, value):
         """Drive load ``load``'s ``parameter`` through a symbolic user function returning a
@@ -517,17 +595,34 @@ def _keep_jacobian(refactorise: list[bool]):
 
 def _default_sparse(kind: str, fidelity: str) -> bool:
     """Linear solver per model, the faster one measured with ``benchmarks/plant_step.py``:
-    sparse LU (pattern analysed once) for the full models (95 unknowns each; dense LU takes 1.15x
-    as long), Eigen's dense LU for the lumped ones (9 unknowns each). Exudyn's own EXUdense inverts
-    the matrix and is slower than both from ~50 unknowns on."""
+    sparse LU (pattern analysed once) for the full models (53 unknowns linear, 89 rotary; with the rods as rigid
+    bodies, 95 each, dense LU took 1.15x as long, and at 53 the two take the same time), Eigen's dense LU for the
+    lumped ones (9 unknowns each). Exudyn's own EXUdense inverts the matrix and is slower than both from ~50
+    unknowns on."""
     return fidelity == "full"
 
 
 def _default_reuse(fidelity: str) -> bool:
-    """``SolverSettings.reuse_jacobian`` per model (see there): the full plants keep their Newton matrix
-    (``benchmarks/plant_step.py``, against 288e832: linear 0.6x, rotary 0.35x the per-step time, against 1.0x /
-    0.58x refactorising every step); the lumped plants (9 unknowns) do not."""
+    """``SolverSettings.reuse_jacobian`` per model (see there): the full plants keep their Newton matrix (a fresh
+    one costs a Jacobian and a sparse LU, ~50 us of the linear plant's step against ~25 us for the two iterations
+    it saves); the lumped plants (9 unknowns) do not: their factorisation is cheap."""
     return fidelity == "full"
+
+
+def rod_end_masses(mass: float, radius: float, length: float) -> tuple[float, float]:
+    """A uniform rigid cylinder's kinetic energy as a quadratic form of its end velocities, kg:
+    ``T = (a |v_A|^2 + 2 b v_A.v_B + a |v_B|^2) / 2``.
+
+    Derivation: the centre moves with ``(v_A + v_B) / 2``, and a rod of constant length turns with
+    ``|w_perp| = |v_B - v_A| / L`` (its ends' relative velocity is perpendicular to it), so with the
+    transverse moment of inertia ``J = m (3 r^2 + L^2) / 12``
+    ``T = m |v_A + v_B|^2 / 8 + J |v_B - v_A|^2 / (2 L^2)``: ``a = m / 4 + J / L^2``, ``b = m / 4 - J / L^2``
+    (a thin rod, r = 0: m / 3 and m / 6). The spin about the rod's own axis is left out: between spherical
+    joints nothing applies a torque about that axis, so a cylinder that starts without spin never spins
+    (Euler's equations of an axisymmetric body). On the constraint |x_B - x_A| = L this is the cylinder's
+    exact kinetic energy, constant in the ends' coordinates."""
+    transverse = mass * (3.0 * radius**2 + length**2) / 12.0 / length**2
+    return mass / 4.0 + transverse, mass / 4.0 - transverse
 
 
 def rod_inertia(mass: float, radius: float, length: float, axis: np.ndarray) -> np.ndarray:

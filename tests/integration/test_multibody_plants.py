@@ -104,7 +104,9 @@ def test_lumped_plant_matches_analytic_with_rod_mass():
     assert rms < LUMPED_FORCE_TOL, f"RMS force error {rms} >= {LUMPED_FORCE_TOL}"
 
 
-REUSE_FACTORISATIONS = 0.25  # per step: at most one in four (measured ~0.01-0.07 with the wobble below; 1.0 without reuse)
+REUSE_FACTORISATIONS = 0.5  # per step: at most one in two (1.0 without reuse). Measured with the wobble below, since a
+# kept matrix is refactorised once modified Newton needs a 4th iteration (REUSE_MAX_MODIFIED_ITERATIONS = 3): linear 0.24,
+# rotary 0.13 (0.09 / 0.04 with 4, at the same time per step while the platform moves)
 
 
 @pytest.mark.parametrize("robot,n", [(linear_delta_thesis, 300), (rotary_delta_prototype, 200)], ids=["linear", "rotary"])
@@ -134,7 +136,7 @@ def test_kept_and_fresh_newton_matrix_reach_the_same_steps(robot, n):
     for a, b in zip(_drive(kept, n), _drive(fresh, n)):
         worst = np.maximum(worst, [np.abs(a.p - b.p).max(), np.abs(a.q - b.q).max(), np.abs(a.qd - b.qd).max()])
     print(f"{robot.name}: kept vs fresh matrix, max |dp| {worst[0]:.2e} m, |dq| {worst[1]:.2e}, |dqd| {worst[2]:.2e}")
-    assert kept._it.newtonJacobiCount < n / 4 <= fresh._it.newtonJacobiCount  # the two paths did differ
+    assert kept._it.newtonJacobiCount < n * REUSE_FACTORISATIONS < n <= fresh._it.newtonJacobiCount  # the paths differ
     assert worst[0] <= 1e-10 and worst[1] <= 1e-10 and worst[2] <= 1e-9, worst
 
 
