@@ -43,11 +43,24 @@ Whole runs (``python benchmarks/against_commit.py --baseline 8bdb6fc scenarios/X
 the unconverged plant of 8bdb6fc): helix_ctc 0.95x (1.88 s against 1.98 s), pick_place_ctc 1.04-1.11x (its
 7 g cycle takes more iterations to converge).
 
-Issue 27's 0.5: met by the rotary plant, not by the linear one (0.76). Before 37fe5f9 the linear plant's
-numerics were pinned by golden baselines of Newton's first iterate (7.9e-9 m off the closure, past their
-1e-9 m tolerance), so no converging Newton could pass them; they now record converged steps, which the kept
-and a fresh matrix reach within 1.2e-11 m (tests/golden/README.md). What is left is Exudyn's per-iteration
-cost times the iterations a converged step takes; the predictor and the Newton matrix are Exudyn's.
+Since 509e323 the rods are masses at their two ends (``multibody.plant.rod_end_masses``: the cylinder's
+kinetic energy as a constant quadratic form of its end velocities) held at their length by one distance
+constraint, instead of rigid bodies on Euler parameters; a linear delta's lower rod ends are points of their
+carriage, so each leg is one constant mass matrix: 53 unknowns instead of 95 (rotary 89), a residual ~8.5 us
+instead of ~13.5 (``solver.ComputeNewtonResidual``), and a kept Newton matrix refactorised once it needs a
+4th modified iteration (``REUSE_MAX_MODIFIED_ITERATIONS`` 3: 3.8 iterations a step here). The golden baselines
+of the helices hold to 4e-13 m; pick_place_ctc's moved by 7.9e-9 m, the two discretisations' difference
+(tests/golden/README.md). Measured 2026-11-26 on the 2-core machine, quiet (load average 0.4-0.5), baseline
+288e832 (141-147 / 251-253 us full)::
+
+    python benchmarks/plant_step.py --rounds 5                       (2 runs)
+        linear full 0.47-0.48 (68-69 us), rotary full 0.36-0.37 (91-93 us); lumped 0.91-0.92 / 0.26-0.27
+    python benchmarks/plant_step.py --rounds 5 --no-reuse-jacobian   (1 run: a fresh matrix every step)
+        linear full 0.69 (100 us), rotary full 0.50 (128 us)
+
+Issue 27's 0.5: met by both full plants. Before 509e323 the linear plant stood at 0.76 (110 us): a converged
+step took ~4.4 modified Newton iterations of a 95-unknown residual.
+
 A better predictor cannot be set from Python: Exudyn's generalized-alpha Newton starts every step from
 zero accelerations (``ComputeNewtonUpdate(initial=True)`` in CSolverImplicitSecondOrder.cpp), and a
 ``SetUserFunctionComputeNewtonUpdate`` function cannot call the built-in update (it recurses into
@@ -56,7 +69,11 @@ itself) nor set the algorithmic accelerations (a getter, no setter). Measured an
 ``parallel.numberOfThreads = 2`` (linear full 1.02x in one run; Exudyn warns that its task manager is
 still running when a second plant is initialised in the process),
 ``exudynCPPfast`` (``EXUDYN_MODULE=fast``: ``SolveSteps`` ~8 % faster, a process-wide import choice that
-prints on stdout, and not comparable in this one-process benchmark).
+prints on stdout, and not comparable in this one-process benchmark). With the end-point rods: the platform on
+Tait-Bryan angles instead of Euler parameters (no faster), Eigen's dense LU (the same time as the sparse at 53
+unknowns), refreshing the Newton matrix every k steps (a fresh one costs a Jacobian, 16 us, and an LU, 33 us,
+more than the ~2 iterations it saves), and leaving the step-size settings alone when span / n only wanders by
+ulps (it moved helix_ctc by 1.1e-9 m at one sample, past its baseline).
 """
 
 from __future__ import annotations
