@@ -21,7 +21,7 @@ Carriages: an ideal prismatic rail locks every carriage motion but the travel, s
 modelled exactly as a 1-DOF body (``ObjectMass1D``) whose coordinate *is* ``q[i]`` (its rotational
 inertia never enters); this removes six constraints per carriage from the rigid model. Its points move linearly
 with ``q[i]``, so its mass and weight, and its rods' lower ends, are point masses of one constant mass matrix per
-leg (:meth:`LinearDeltaPlant._add_leg`). The full model has 53 unknowns (28 coordinates, 25 constraint
+leg (:meth:`LinearDeltaPlant._add_leg`). The full model has 51 unknowns (27 coordinates, 24 constraint
 equations); with the rods as rigid bodies on Euler parameters it had 95.
 
 Actuator effort ``u[i]``: force on carriage i along +q (down the rail), N.
