@@ -58,6 +58,17 @@ of the helices hold to 4e-13 m; pick_place_ctc's moved by 7.9e-9 m, the two disc
     python benchmarks/plant_step.py --rounds 5 --no-reuse-jacobian   (1 run: a fresh matrix every step)
         linear full 0.69 (100 us), rotary full 0.50 (128 us)
 
+Since 83498e2 the platform turns on a rotation-vector node integrated on the rotation group (Exudyn's
+``NodeRigidBodyRotVecLG``), whose mass matrix is constant: with the end-point rods every body's is, and Exudyn
+builds the system's mass matrix once instead of at every residual; no Euler-parameter constraint (51 / 87
+unknowns). The same samples as on Euler parameters within 3e-16 m on pick_place_ctc. Against the commit before
+(``--baseline 44ac33c``): linear full 0.94x (64.3 against 68.4 us), rotary 0.98x. Against 288e832::
+
+    python benchmarks/plant_step.py [--rounds 5]                     (3 runs)
+        linear full 0.44-0.47 (64-67 us), rotary full 0.34-0.36 (88-94 us); lumped 0.92-0.94 / 0.24-0.26
+    python benchmarks/plant_step.py --rounds 5 --no-reuse-jacobian   (1 run)
+        linear full 0.72 (101 us), rotary full 0.56 (144 us)
+
 Issue 27's 0.5: met by both full plants. Before 509e323 the linear plant stood at 0.76 (110 us): a converged
 step took ~4.4 modified Newton iterations of a 95-unknown residual.
 
