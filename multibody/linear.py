@@ -35,7 +35,7 @@ from delta.dynamics import LinearDeltaMasses
 from delta.kinematics import actuator_points, joint_state_from_platform, leg_axes, platform_offsets
 from delta.robots import LinearDelta
 
-from .plant import MIN_ROD_MASS, DeltaPlant, JointTrajectory, RobotTypeError, SolverSettings, rod_end_masses
+from .plant import MIN_ROD_MASS, DeltaPlant, JointTrajectory, RobotTypeError, SolverSettings
 
 __all__ = ["LinearDeltaPlant", "MIN_ROD_MASS", "PLATFORM_THICKNESS"]
 
@@ -138,9 +138,8 @@ class LinearDeltaPlant(DeltaPlant):
                     markerNumbers=[ground_coord, coord], offsetUserFunction=self._coord_offset(i),
                     offsetUserFunction_t=self._coord_offset_t(i))))
             if full:
-                self._add_leg(carriage, node, B[i], [(B[i] + offset, p0 + b[i] + offset) for offset in
-                                                     (side * m.parallelogram_width * tangent[i] for side in (-0.5, 0.5))],
-                              v0, carriage_mass)
+                offsets = [side * m.parallelogram_width * tangent[i] for side in (-0.5, 0.5)]
+                self._add_leg(carriage, node, B[i], [(B[i] + o, p0 + b[i] + o) for o in offsets], v0)
             else:
                 self._add_point_masses([node], RAIL.reshape(3, 1), B[i].reshape(1, 3), np.array([[carriage_mass]]),
                                        np.array([carriage_weight]))
@@ -148,12 +147,12 @@ class LinearDeltaPlant(DeltaPlant):
                 mbs.AddObject(DistanceConstraint(markerNumbers=[marker, pm], distance=length))
 
     def _add_leg(self, carriage: int, node: int, centre: np.ndarray, rods: list[tuple[np.ndarray, np.ndarray]],
-                 v0: np.ndarray, carriage_mass: float) -> None:
+                 v0: np.ndarray) -> None:
         """A full leg: the carriage (point mass at ``centre``) and its parallelogram's rods, each ``(lower, upper)``
         end at the reset pose, as one set of point masses (:meth:`DeltaPlant._add_point_masses`). A rod's lower end
         is a point of the carriage, moving with ``RAIL * qd``: linear in the carriage's coordinate, it needs no
         coordinates and no joint of its own, only the rod's distance constraint to its upper end (a point node
-        joined to the platform, :meth:`DeltaPlant._add_rod_end`). Rod masses: :func:`multibody.plant.rod_end_masses`."""
+        joined to the platform, :meth:`DeltaPlant._add_rod_end`). Rod masses: :meth:`DeltaPlant._rod_mass`."""
         m = self.masses
         ups = [self._add_rod_end(self._body_marker(carriage, low), low, up, v0) for low, up in rods]
         n = 1 + 3 * len(rods)
@@ -161,16 +160,14 @@ class LinearDeltaPlant(DeltaPlant):
         jacobian = np.zeros((3 * len(points), n))
         jacobian[0:3, 0] = RAIL
         mass = np.zeros((len(points), len(points)))
-        mass[0, 0] = carriage_mass
+        mass[0, 0] = m.carriage
         weight = np.full(len(points), 0.5 * m.rod)
         weight[0] = m.carriage
         for k, (low, up) in enumerate(rods):
             lo, hi = 1 + 2 * k, 2 + 2 * k  # point indices
             jacobian[3 * lo:3 * lo + 3, 0] = RAIL
             jacobian[3 * hi:3 * hi + 3, 1 + 3 * k:4 + 3 * k] = np.eye(3)
-            a, b = rod_end_masses(max(m.rod, MIN_ROD_MASS), m.rod_radius, float(np.linalg.norm(up - low)))
-            mass[lo, lo] = mass[hi, hi] = a
-            mass[lo, hi] = mass[hi, lo] = b
+            mass[np.ix_([lo, hi], [lo, hi])] = self._rod_mass(low, up)
         self._add_point_masses([node] + ups, jacobian, np.stack(points), mass, weight)
 
     # prescribed-motion offsets (relative to the reset pose) ---------------------------

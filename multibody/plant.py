@@ -55,8 +55,8 @@ class SolverSettings:
         (``|p - fk(q)|``) within 1.0e-11 m at every 1 ms sample with the kept Newton matrix, 8.8e-12 m with a
         fresh one, and the two runs end within 1.2e-11 m of each other. At 1e-6 a fresh matrix stops after one
         iteration, up to 7.3e-7 m off that closure at the cycle's jerk steps; a kept matrix up to 6.1e-9 m.
-        (Measured with the rods as rigid bodies; with their end-point masses the closure holds to 1.6e-15 m at
-        every 1 ms sample of pick_place_ctc, 6.5e-16 m on the helices: tests/integration/test_golden.py.)
+        (Measured with the rods as rigid bodies; with their end-point masses the closure holds to 1.7e-15 m at
+        every 1 ms sample of pick_place_ctc, 4.5e-16 m on the helices: tests/integration/test_golden.py.)
     newton_abs_tol : float
         Absolute Newton tolerance (Exudyn's default scale for these small systems).
     modified_newton : bool
@@ -368,17 +368,16 @@ class DeltaPlant:
         return tilt_angle(rot)
 
     # -- helpers ------------------------------------------------------------------------
-    def _add_body(self, mass: float, inertia: np.ndarray | None, position, velocity,
-                  angular_velocity=(0.0, 0.0, 0.0)) -> int:
+    def _add_body(self, mass: float, inertia: np.ndarray | None, position, velocity) -> int:
         """Add a rigid body (``inertia`` given, about its centre of mass, base axes) or a point mass.
 
         The body reference point is its centre of mass, so the kinetic energy is
         ``m v.v / 2 + w.J w / 2``. A rigid body turns on a rotation-vector node integrated on the rotation group
         (Exudyn's ``NodeRigidBodyRotVecLG``): its mass matrix is constant (the mass, and the inertia tensor in body
         axes), so with the rods' and carriages' constant ones Exudyn builds the system's mass matrix once instead
-        of at every Newton residual, and it needs no Euler-parameter constraint. The platforms it carries hardly
-        turn: pick_place_ctc and the helices give the same samples as on Euler parameters within 3e-16 m and
-        4e-13 m.
+        of at every Newton residual, and it needs no Euler-parameter constraint. The platform, the one rigid body
+        of the full plants, hardly turns: pick_place_ctc and the helices give the same samples as on Euler
+        parameters within 3e-16 m and 4e-13 m.
         """
         import exudyn as exu
         from exudyn.itemInterface import MassPoint, NodePoint
@@ -393,7 +392,6 @@ class DeltaPlant:
                 referencePosition=position,
                 referenceRotationMatrix=np.eye(3),
                 initialVelocity=velocity,
-                initialAngularVelocity=[float(x) for x in angular_velocity],
                 inertia=_inertia(mass, inertia),
                 nodeType=exu.NodeType.RotationRotationVector,
             )
@@ -414,9 +412,15 @@ class DeltaPlant:
         low_marker = self.mbs.AddMarker(MarkerNodePosition(nodeNumber=low))
         self._add_spherical_joint(parent, start, low_marker)
         up = self._add_rod_end(low_marker, start, end, v_end)
-        a, b = rod_end_masses(max(m.rod, MIN_ROD_MASS), m.rod_radius, float(np.linalg.norm(end - start)))
-        self._add_point_masses([low, up], np.eye(6), np.stack([start, end]), np.array([[a, b], [b, a]]),
+        self._add_point_masses([low, up], np.eye(6), np.stack([start, end]), self._rod_mass(start, end),
                                np.array([0.5 * m.rod, 0.5 * m.rod]))
+
+    def _rod_mass(self, start: np.ndarray, end: np.ndarray) -> np.ndarray:
+        """The (2, 2) mass matrix of the rod from ``start`` to ``end`` over its two ends (:func:`rod_end_masses`;
+        a zero rod mass counts as :data:`MIN_ROD_MASS`); its weight is ``masses.rod``, half at each end."""
+        a, b = rod_end_masses(max(self.masses.rod, MIN_ROD_MASS), self.masses.rod_radius,
+                              float(np.linalg.norm(end - start)))
+        return np.array([[a, b], [b, a]])
 
     def _add_rod_end(self, low_marker: int, start: np.ndarray, end: np.ndarray, v_end: np.ndarray) -> int:
         """A rod's upper end: a point node at ``end`` (initial velocity ``v_end``) joined to the platform by a
@@ -524,7 +528,7 @@ class DeltaPlant:
         sim.solution.sensors.writePeriod = 1e30
         sim.show.computationTime = False
         sim.show.statistics = False
-        sparse = _default_sparse(self.kind, self.fidelity) if s.sparse is None else s.sparse
+        sparse = _default_sparse(self.fidelity) if s.sparse is None else s.sparse
         if sparse:
             sim.linearSolver.solverType = exu.LinearSolverType.EigenSparse
             sim.linearSolver.reuseAnalyzedPattern = True  # the sparsity pattern is fixed: analyse it once
@@ -600,7 +604,7 @@ def _keep_jacobian(refactorise: list[bool]):
     return finish_step
 
 
-def _default_sparse(kind: str, fidelity: str) -> bool:
+def _default_sparse(fidelity: str) -> bool:
     """Linear solver per model, the faster one measured with ``benchmarks/plant_step.py``:
     sparse LU (pattern analysed once) for the full models (51 unknowns linear, 87 rotary; with the rods as rigid
     bodies, 95 each, dense LU took 1.15x as long, and at 53 the two took the same time), Eigen's dense LU for the
