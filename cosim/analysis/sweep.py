@@ -601,7 +601,7 @@ def report(out: str | Path, metric: str = "rmse", fig: str | Path | None = None)
             raise SweepError(f"{meta_path}: not the sweep's JSON ({str(exc)[:120]})") from None
     params = meta.get("parameters") if isinstance(meta, dict) else None
     if not params or not isinstance(params, list) or not all(isinstance(p, str) and p in rows[0] for p in params):
-        raise SweepError(f"{Path(out) / 'sweep.json'}: missing or without parameters (the columns of results.csv "
+        raise SweepError(f"{meta_path}: missing or without parameters (the columns of results.csv "
                          "it swept); it is written by the sweep next to results.csv")
     if metric not in rows[0]:
         valid = [c for c in rows[0] if c not in ("case", "status", "checks", "mcap", "message", *params)]
