@@ -15,7 +15,9 @@ import argparse
 import contextlib
 import json
 import os
+import shlex
 import sys
+from pathlib import Path
 from typing import Callable, Sequence
 
 from delta.errors import CosimError, UnreachableError
@@ -297,6 +299,15 @@ def _cosim_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--watchdog", type=number_option(ge=0), metavar="SECONDS",
                    help="override watchdog_s: wall-clock seconds a step may take before the run stops naming the "
                         "stalled component (0: no limit)")
+    p.add_argument("--checkpoint-at", type=number_option(ge=0), metavar="T",
+                   help="write a checkpoint (every component's state, the scenario as run) when the run reaches "
+                        "simulation time T, s (the first grid point at or after it)")
+    p.add_argument("--checkpoint-out", metavar="FILE",
+                   help="the checkpoint's path (default: beside the log, suffix .ckpt)")
+    p.add_argument("--resume", metavar="FILE",
+                   help="continue the run a checkpoint holds from its time (to its stop time unless --stop-time); "
+                        "--set NAME=VALUE then sets component.variable at that time, as an event; a scenario file "
+                        "given too must be the checkpoint's")
     p.add_argument("--quiet", action="store_true", help="no progress bar and no summary")
     p.add_argument("--json", action="store_true", help="summary as JSON on stdout")
     p.set_defaults(handler=_cmd_run)
@@ -588,15 +599,49 @@ def _cmd_run(args: argparse.Namespace) -> int:
         from .observers.realtime import parse_factor
 
         realtime = parse_factor(args.realtime)
-    with _stdout_kept_for_json(args.json), _open_scenario(args, overrides) as scenario:
-        res = run_scenario(scenario, out=args.out, log=False if args.no_log else None,
-                           progress=not (args.quiet or args.json), live=live, realtime=realtime,
-                           stamps="simulation" if args.sim_stamps else "wall")
+    command = " ".join(["python -m cosim", *(shlex.quote(a) for a in sys.argv[1:])])
+    if args.resume is not None:
+        with _stdout_kept_for_json(args.json):
+            res = _resume_run(args, live, realtime, command)
+    else:
+        with _stdout_kept_for_json(args.json), _open_scenario(args, overrides) as scenario:
+            res = run_scenario(scenario, out=args.out, log=False if args.no_log else None,
+                               progress=not (args.quiet or args.json), live=live, realtime=realtime,
+                               stamps="simulation" if args.sim_stamps else "wall", checkpoint_at=args.checkpoint_at,
+                               checkpoint_out=args.checkpoint_out, command=command)
     if args.json:
         print(json.dumps(res.as_dict(), indent=2))
     elif not args.quiet:
         print(_summary_text(res))
     return EXIT_OK if res.passed else EXIT_CHECK_FAILED
+
+
+def _resume_run(args: argparse.Namespace, live, realtime, command: str):
+    """``run --resume FILE``: the checkpoint's scenario (``--stop-time`` moves its end; a scenario file given too
+    must be the checkpoint's), its state restored, ``--set`` values set at its time."""
+    from .engine.scenario import load_scenario, parse_set_value
+    from .io.checkpoint import read_checkpoint
+    from .run import resumed_scenario, run_scenario
+
+    if args.from_log is not None:
+        raise CosimError("run takes --resume FILE or --from-log LOG, not both")
+    for option, value in (("--step", args.step), ("--parallel", args.parallel), ("--watchdog", args.watchdog)):
+        if value is not None:
+            raise CosimError(f"{option} cannot change a resumed run: it continues the checkpoint's run as it was")
+    checkpoint = read_checkpoint(args.resume)
+    named = load_scenario(args.scenario) if args.scenario is not None else None
+    scenario = resumed_scenario(checkpoint, args.stop_time, named)
+    sets = {}
+    for item in args.set:
+        name, sep, raw = item.partition("=")
+        if not sep or not name.strip():
+            raise CosimError(f"--set {item}: expected component.variable=VALUE")
+        sets[name.strip()] = parse_set_value(raw, f"--set {item}")
+    out = args.out if args.out is not None else Path(checkpoint.path).with_suffix(".resumed.mcap")
+    return run_scenario(scenario, out=out, log=False if args.no_log else None,
+                        progress=not (args.quiet or args.json), live=live, realtime=realtime,
+                        stamps="simulation" if args.sim_stamps else "wall", resume=checkpoint, resume_sets=sets,
+                        checkpoint_at=args.checkpoint_at, checkpoint_out=args.checkpoint_out, command=command)
 
 
 def _crashed(args: argparse.Namespace, record, reason: str) -> int:

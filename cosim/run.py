@@ -14,11 +14,13 @@ from .engine.execution import Execution, Observer, StopRequest
 from .engine.names import safe_stem
 from .engine.offload import Offload, choose
 from .engine.prepare import input_files, prepare
-from .engine.scenario import Scenario, expand_signal, load_scenario
+from .engine.events import EventState, event_at, resolve_sets
+from .engine.scenario import Scenario, effective_scenario, expand_signal, load_scenario, scenario_from_data
 from .engine.watchdog import Watchdog, hard_exit
 from .errors import CosimError
 from .fmi import Extractions, cleanup_extracted, make_slave
-from .io.output import OutputError, claim
+from .io.checkpoint import CheckpointError, default_checkpoint_path, write_checkpoint
+from .io.output import OutputError, check_output, claim
 from .observers.live import LiveView
 from .observers.mcap_log import McapRecorder
 from .observers.publish import Publisher, reference_path
@@ -26,7 +28,7 @@ from .observers.realtime import RealTime
 from .observers.recorders import ErrorObserver
 from .observers.stats import ErrorStats
 
-__all__ = ["RunOptions", "RunResult", "progress_bar", "run_scenario"]
+__all__ = ["RunOptions", "RunResult", "progress_bar", "run_scenario", "resumed_scenario"]
 
 
 @dataclass
@@ -48,6 +50,8 @@ class RunResult:
     terminated_by: str | None = None  # the component that ended the simulation before the stop time
     events: dict[str, int] = field(default_factory=dict)  # events handled per model-exchange component
     realtime: dict[str, float] = field(default_factory=dict)  # with real-time pacing: factor, lag (cosim.observers.realtime)
+    fired: list[dict] = field(default_factory=list)  # the scenario's events that fired: t, event, set
+    checkpoint: str | None = None  # the checkpoint written (run --checkpoint-at)
 
     @property
     def real_time_factor(self) -> float:
@@ -63,7 +67,8 @@ class RunResult:
                 "real_time_factor": self.real_time_factor, "component_time_s": self.component_time,
                 "errors": [e.as_dict(*_SUMMARY_KEYS) for e in self.errors], "checks": self.checks, "passed": self.passed,
                 "mcap": self.mcap, "notes": self.notes, "worker_time_s": self.worker_time,
-                "terminated_by": self.terminated_by, "events": self.events, "realtime": self.realtime}
+                "terminated_by": self.terminated_by, "events": self.events, "realtime": self.realtime,
+                "fired": self.fired, "checkpoint": self.checkpoint}
 
 
 # one compared pair in the run summary (its name is the actual signal; the run's checks are ``checks``)
@@ -85,6 +90,11 @@ class RunOptions:
     (:mod:`cosim.observers.publish`); ``read_all``: read every output of every component at every step, also
     without a log (for an observer of every signal, :class:`cosim.api.SignalRecorder`); ``fmu_files``: our
     FMUs already built, by :func:`~cosim.engine.prepare.build_key` (a sweep builds them once).
+    ``checkpoint_at``: write a checkpoint (:mod:`cosim.io.checkpoint`) when the run reaches this time, s (the
+    first grid point at or after it), to ``checkpoint_out`` (default: beside the log, suffix ``.ckpt``);
+    ``resume``: a :class:`~cosim.io.checkpoint.Checkpoint` to continue (the scenario must be the one it holds,
+    :func:`resumed_scenario`), with ``resume_sets`` (``component.variable: value``) set at its time as an event;
+    ``command``: the command line, written into a checkpoint.
     """
 
     out: str | Path | None = None
@@ -97,6 +107,11 @@ class RunOptions:
     stamps: str = "wall"
     read_all: bool = False
     fmu_files: Mapping[Any, str | Path] | None = None
+    checkpoint_at: float | None = None
+    checkpoint_out: str | Path | None = None
+    resume: Any = None
+    resume_sets: Mapping[str, Any] | None = None
+    command: str = ""
 
 
 def progress_bar():
@@ -275,6 +290,79 @@ def _settle(output, error: BaseException | None) -> None:
                           f"`python -m cosim recover {output.partial}`") from None
 
 
+def _checkpointing(ex: Execution, scenario: Scenario, options: RunOptions, output) -> tuple[Any, dict | None]:
+    """(macro step, hook) writing ``--checkpoint-at``'s checkpoint after the macro step reaching that time, and a
+    record of what it wrote (``path``, ``bytes``, ``t``); (None, None) without the option. Raises CheckpointError for a time outside the run
+    or an FMU that cannot serialize its state (before any step)."""
+    if options.checkpoint_at is None:
+        return None, None
+    t = float(options.checkpoint_at)
+    t_ns = round(t * 1e9)
+    first = ex.t_ns(options.resume.k_done) if options.resume is not None else ex.start_ns
+    if not first < t_ns <= ex.stop_ns:
+        raise CheckpointError(f"--checkpoint-at {t:g} s is outside the run ({first * 1e-9:g} s, "
+                              f"{ex.stop_ns * 1e-9:g} s]")
+    k_at = -(-(t_ns - ex.start_ns) // ex.step_ns)  # the first grid point at or after t
+    k_at = min(k_at, ex.n_steps)
+    while ex.t_ns(k_at) < t_ns:  # a grid whose last step is shorter
+        k_at += 1
+    target = Path(options.checkpoint_out) if options.checkpoint_out is not None else default_checkpoint_path(
+        output.target if output is not None else None, safe_stem(scenario.name))
+    inputs = (*input_files(scenario), options.resume.path if options.resume is not None else None,
+              output.target if output is not None else None)
+    check_output(target, inputs)
+    record: dict = {}
+
+    def hook(k_done: int) -> None:
+        size = write_checkpoint(target, ex, effective_scenario(scenario, output.target if output is not None else None),
+                                options.command)
+        record.update(path=str(target), bytes=size, t=ex.t_ns(k_done) * 1e-9)
+
+    return (k_at, hook), record
+
+
+def _resume_event(ex: Execution, options: RunOptions) -> Any:
+    """A resumed run's ``--set`` values as an event at the checkpoint's time (resolved before the run starts)."""
+    if options.resume is None or not options.resume_sets:
+        return None
+    changes = resolve_sets(dict(options.resume_sets), ex.plan)
+    return event_at(changes, dict(options.resume_sets), options.resume.t_ns)
+
+
+def _resume(ex: Execution, scenario: Scenario, checkpoint, event) -> None:
+    """Continue from ``checkpoint``: the system checked against it, its state restored, the events' progress taken
+    over, the resumed run's ``--set`` fired at its time."""
+    checkpoint.check_system(ex, scenario.name)
+    state = checkpoint.restore_into(ex)
+    ex.free_state(state)
+    if event is not None and ex.events is None:
+        ex.events = EventState([])
+    if ex.events is not None:
+        ex.events.resume(checkpoint.header.get("events"), checkpoint.t_ns)
+    if event is not None:
+        ex.fire(event, checkpoint.time)
+
+
+def resumed_scenario(checkpoint, stop_time: float | None = None, scenario: Scenario | None = None) -> Scenario:
+    """The scenario a checkpoint holds (as it ran), to ``stop_time`` (default: its own); ``scenario``: the one the
+    user named, which must be that one (else CheckpointError: a checkpoint of another scenario)."""
+    data = dict(checkpoint.scenario)
+    if scenario is not None:
+        mine = effective_scenario(scenario)
+        theirs = {k: v for k, v in data.items() if k not in ("logging", "time")}
+        if {k: v for k, v in mine.items() if k not in ("logging", "time")} != theirs or \
+                {k: v for k, v in mine["time"].items() if k != "stop"} != \
+                {k: v for k, v in data["time"].items() if k != "stop"}:
+            raise CheckpointError(f"{checkpoint.path} is a checkpoint of scenario {data.get('name')!r} as it ran "
+                                  f"then; {scenario.source} differs from it: a checkpoint of another scenario")
+    if stop_time is not None:
+        data["time"] = {**data["time"], "stop": stop_time}
+    else:
+        data["time"] = {**data["time"], "stop": checkpoint.header["grid"]["stop_ns"] * 1e-9}
+    data.get("logging", {}).pop("out", None)  # the resumed run's log is its own (--out, or the default)
+    return scenario_from_data(data, str(checkpoint.path))
+
+
 def _run_claimed(scenario: Scenario, output, held: Extractions, options: RunOptions) -> RunResult:
     logging_on = output is not None
     published = logging_on or options.live is not None  # the log's and the live view's signals: logging.signals
@@ -293,8 +381,14 @@ def _run_claimed(scenario: Scenario, output, held: Extractions, options: RunOpti
               for i, n in enumerate(plan.names)]
     for s in slaves:
         ex.add_slave(s)
+    ex.set_events(plan.events)
+    checkpoint_hook, checkpoint_path = _checkpointing(ex, scenario, options, output)
     writer_process = logging_on and McapRecorder.writes_in_a_process(ex.n_steps)  # a writer process takes a CPU
     ahead, note = choose(plan, scenario.parallel, ex.n_steps, writer_process)
+    if ahead and (plan.events or options.resume is not None or checkpoint_hook is not None):
+        # a component in a worker process can neither save its state nor take an event's values
+        ahead, note = [], "serial: events and checkpoints need every component in this process"
+    resume_event = _resume_event(ex, options)
     offload: Offload | None = None
     tracking = None
     if scenario.compare is not None:
@@ -339,7 +433,12 @@ def _run_claimed(scenario: Scenario, output, held: Extractions, options: RunOpti
         watchdog = Watchdog(ex, scenario.watchdog_s, stop, abort)  # after the worker's fork: a thread of its own
         with stop, watchdog:
             try:
-                ex.initialize()
+                ex.initialize(start_observers=options.resume is None)
+                if options.resume is not None:  # the checkpoint's state, its --set at its time, then the log starts
+                    _resume(ex, scenario, options.resume, resume_event)
+                    ex.start_observers()
+                if checkpoint_hook is not None:
+                    ex.hooks.setdefault(checkpoint_hook[0], []).append(checkpoint_hook[1])
                 if supervised is not None and recorder is not None:
                     supervised.describe(writer_pid=recorder.writer_pid)
                 t_wall = time.perf_counter()
@@ -370,10 +469,26 @@ def _run_claimed(scenario: Scenario, output, held: Extractions, options: RunOpti
     if error is not None:  # a failure at the end (fmi2Terminate, the worker's report) fails the run too
         raise error
     t_end_ns = ex.t_end_ns if ex.t_end_ns is not None else ex.t_ns(ex.k_done)
-    result = RunResult(scenario.name, ex.k_done, (t_end_ns - ex.start_ns) * 1e-9, wall,
+    k_start = options.resume.k_done if options.resume is not None else 0
+    t_start_ns = ex.t_ns(k_start)
+    result = RunResult(scenario.name, ex.k_done - k_start, (t_end_ns - t_start_ns) * 1e-9, wall,
                        dict(zip(plan.names, ex.comp_time)), mcap=str(mcap_path) if mcap_path else None,
                        notes=[note] if note else [], worker_time=offload.worker_time if offload else {})
     result.events = {n: s.events for n, s in zip(plan.names, ex.slaves) if s.model_exchange}
+    if ex.events is not None:
+        result.fired = [{"t": e.t, "event": e.event, "set": e.set} for e in ex.events.fired]
+        result.notes += ex.events.warnings
+        if ex.events.located:
+            result.notes.append(f"{ex.events.located} state event(s) located by {ex.events.restarts} re-step(s)")
+    if options.resume is not None:
+        result.notes.append(f"resumed from {options.resume.path} at t = {options.resume.time:g} s")
+    if checkpoint_path is not None:
+        result.checkpoint = checkpoint_path.get("path")
+        if result.checkpoint is None:
+            result.notes.append("no checkpoint written: the run ended before its time")
+        else:
+            result.notes.append(f"checkpoint at t = {checkpoint_path['t']:g} s: {result.checkpoint} "
+                                f"({checkpoint_path['bytes']} bytes)")
     result.notes += [o.summary() for o in ex.observers if hasattr(o, "summary")]  # live view, real time
     if pacing is not None:
         result.realtime = pacing.figures()

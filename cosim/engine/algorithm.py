@@ -52,6 +52,12 @@ class Algorithm(Protocol):
         whose active components were ``active`` (in order)."""
         ...
 
+    def span(self, ex: "Execution", active: Sequence[int], t: float, ends: Sequence[float]) -> None:
+        """Part of a macro step (an event cuts it): the ``active`` components, each from ``t`` to its own
+        ``ends[i]``, in this algorithm's order of exchange. Slower than :meth:`macro_step`'s loop; used only
+        around events and while one is located."""
+        ...
+
 
 def _loop_state(ex: "Execution") -> tuple[list, int, list[float], Any, Callable[[], float],
                                           Callable[[int, int, float], float]]:
@@ -89,6 +95,17 @@ class GaussSeidel:
 
     def read_after_termination(self, active: Sequence[int], c_term: int) -> list[int]:
         return [c_term]  # those before it were read after their turn; those after it did not step
+
+    def span(self, ex: "Execution", active: Sequence[int], t: float, ends: Sequence[float]) -> None:
+        current, ctime, clock = ex.current, ex.comp_time, _time.perf_counter
+        t_prev = clock()
+        for c, t_end in zip(active, ends):
+            current[0] = c
+            ex.pull(c)
+            ex.slaves[c].set_step_get(t, t_end - t)
+            now = clock()
+            ctime[c] += now - t_prev
+            t_prev = now
 
 
 class Jacobi:
@@ -131,6 +148,19 @@ class Jacobi:
 
     def read_after_termination(self, active: Sequence[int], c_term: int) -> list[int]:
         return list(active[: active.index(c_term) + 1]) if c_term in active else [c_term]
+
+    def span(self, ex: "Execution", active: Sequence[int], t: float, ends: Sequence[float]) -> None:
+        current, slaves = ex.current, ex.slaves
+        for c in active:
+            current[0] = c
+            ex.pull(c)
+            slaves[c].set_inputs()
+        for c, t_end in zip(active, ends):
+            current[0] = c
+            slaves[c].step(t, t_end - t)
+        for c in active:
+            current[0] = c
+            slaves[c].get_outputs()
 
 
 ALGORITHMS: dict[str, type[Algorithm]] = {a.name: a for a in (GaussSeidel, Jacobi)}

@@ -24,14 +24,16 @@ import threading
 import time as _time
 from typing import Any, Callable, Protocol, Sequence
 
-from ..errors import STOP_SIGNALS, CosimError, Interrupted
+from ..errors import STOP_SIGNALS, CosimError, FMIError, Interrupted
 from ..fmi import Slave, Terminated
+from ..fmi.slave import ComponentState
 from .algorithm import ALGORITHMS, DEFAULT, Algorithm
+from .events import EventSpec, EventState, FiredEvent
 from .grid import Grid
 from .supervision import MASTER, PHASES, Record
 from .system import SystemPlan
 
-__all__ = ["Observer", "Execution", "StopRequest", "byte_view"]
+__all__ = ["Observer", "Execution", "SystemState", "StopRequest", "byte_view"]
 
 _CHUNK = 4096  # base steps whose times and step sizes the grid computes at once
 
@@ -42,6 +44,17 @@ class Observer(Protocol):
     def start(self, ex: "Execution") -> None: ...
     def stepped(self, k: int, t_ns: int, active: Sequence[int]) -> None: ...
     def finish(self, ex: "Execution", error: BaseException | None) -> None: ...
+
+
+class SystemState:
+    """Every component's saved state at the end of macro step ``k_done`` (libcosim's ``save_state`` of a whole
+    execution): a checkpoint written to a file holds one, and state events are located by restoring one."""
+
+    __slots__ = ("k_done", "components")
+
+    def __init__(self, k_done: int, components: list[ComponentState]):
+        self.k_done = k_done
+        self.components = components
 
 
 class Execution:
@@ -70,6 +83,8 @@ class Execution:
         self.moves: list[list[tuple[memoryview, memoryview]]] = []  # (dst bytes, src bytes) per component
         self.terminated: Terminated | None = None
         self.t_end_ns: int | None = None
+        self.events: EventState | None = None  # the scenario's events (set_events)
+        self.hooks: dict[int, list[Callable[[int], None]]] = {}  # k_done -> called after that macro step (checkpoints)
         # component with the turn (MASTER: none), simulation time (s) of the macro step, phase (PHASES index), steps
         # done: written by the main thread, read by the watchdog's thread and by a supervisor process (``record``:
         # the one it reads, cosim.engine.supervision)
@@ -99,6 +114,11 @@ class Execution:
 
     def t_ns(self, k: int) -> int:
         return self.grid.t_ns(k)
+
+    @property
+    def now_ns(self) -> int:
+        """The time reached (the end of macro step :attr:`k_done`): the start time, or a restored checkpoint's."""
+        return self.grid.t_ns(self.k_done)
 
     def schedule(self) -> list[list[int]]:
         """Active components (in order) for each base step of one hyper-period."""
@@ -138,6 +158,64 @@ class Execution:
         for dv, di, sv, si in self.copies[c]:
             dv[di] = sv[si]
 
+    # -- state (libcosim's save_state / restore_state, for the whole system)
+    @property
+    def stateless(self) -> list[str]:
+        """The components whose state cannot be saved (no ``canGetAndSetFMUstate``, FMI 1.0, a worker's proxy)."""
+        return [n for n, s in zip(self.plan.names, self.slaves) if not getattr(s, "can_save_state", False)]
+
+    def save_state(self, into: SystemState | None = None) -> SystemState:
+        """Every component's state now (after macro step :attr:`k_done`); ``into``: a saved state to overwrite."""
+        cur = self.current
+        comps = []
+        for c, s in enumerate(self.slaves):
+            cur[0] = c
+            comps.append(s.save_state(into.components[c] if into is not None else None))
+        cur[0] = MASTER
+        if into is None:
+            return SystemState(self.k_done, comps)
+        into.k_done = self.k_done
+        return into
+
+    def restore_state(self, state: SystemState) -> None:
+        """Back to ``state``: every component, and the macro steps done."""
+        cur = self.current
+        for c, (s, cs) in enumerate(zip(self.slaves, state.components)):
+            cur[0] = c
+            s.restore_state(cs)
+        cur[0] = MASTER
+        cur[3] = self.k_done = state.k_done
+        cur[1] = self.grid.time(state.k_done)
+
+    def free_state(self, state: SystemState) -> None:
+        for s, cs in zip(self.slaves, state.components):
+            s.free_state(cs)
+
+    # -- events
+    def set_events(self, specs: Sequence[EventSpec]) -> None:
+        """The scenario's events (:func:`cosim.engine.events.resolve_events`), fired by :meth:`simulate_until`."""
+        self.events = EventState(list(specs)) if specs else None
+
+    def fire(self, spec: EventSpec, t: float) -> None:
+        """Set event ``spec``'s values now (at time ``t``, s), and record it (:attr:`EventState.fired`)."""
+        by_comp: dict[int, dict] = {}
+        for ch in spec.changes:
+            by_comp.setdefault(ch.comp, {})[ch.var] = list(ch.values)
+        cur = self.current
+        for c, values in by_comp.items():
+            cur[0] = c
+            self.slaves[c].set_values(values)
+        cur[0] = MASTER
+        self.events.fired.append(FiredEvent(float(t), spec.index, spec.shown))
+
+    def _g(self) -> dict[int, float]:
+        """The crossing function of every state event at the current values."""
+        out = {}
+        for spec in self.events.state:
+            arr, i = self.where(spec.signal)
+            out[spec.index] = spec.g(arr[i])
+        return out
+
     # -- running
     def initialize(self, start_observers: bool = True) -> None:
         """Instantiate, set up the experiment, set start values, initialization mode, propagate outputs in order,
@@ -174,9 +252,14 @@ class Execution:
             self.slaves[c].get_outputs()
         cur[0], cur[2] = MASTER, PHASES.index("step")
         if start_observers:
-            for o in self.observers:
-                o.start(self)
-                self.started.append(o)
+            self.start_observers()
+
+    def start_observers(self) -> None:
+        """Start the observers, each in turn (:attr:`started`): after :meth:`initialize`, or after a checkpoint's
+        state was restored into the initialized system (a resumed run's log starts at its time)."""
+        for o in self.observers:
+            o.start(self)
+            self.started.append(o)
 
     def step(self, stop: "StopRequest | None" = None) -> None:
         """One macro step."""
@@ -194,6 +277,20 @@ class Execution:
         if self.terminated is not None:  # ended before (at initialization, or an earlier call)
             return
         k_end = self.n_steps if t_ns is None else self.grid.index(t_ns)
+        if self.events is not None:
+            self._simulate_managed(k_end, stop, progress, progress_every)
+            return
+        for k_hook in sorted(k for k in self.hooks if self.k_done < k <= k_end):
+            self._simulate_fast(k_hook, stop, progress, progress_every)
+            if self.terminated is not None:
+                return
+            for hook in self.hooks[k_hook]:
+                hook(k_hook)
+        self._simulate_fast(k_end, stop, progress, progress_every)
+
+    def _simulate_fast(self, k_end: int, stop: "StopRequest | None", progress: Callable[[int], None] | None,
+                       progress_every: int) -> None:
+        """The macro steps up to ``k_end``, without events: the hot loop."""
         schedule = self.schedule()
         period = len(schedule)
         macro_step = self.algorithm.macro_step(self)
@@ -222,6 +319,181 @@ class Execution:
                 k = k_next
         except Terminated as term:
             self._end_at(term, k, schedule[k % period], stepped)
+
+    def _simulate_managed(self, k_end: int, stop: "StopRequest | None", progress: Callable[[int], None] | None,
+                          progress_every: int) -> None:
+        """:meth:`simulate_until` with events and hooks: per macro step, the time events at its start, those inside
+        it (the step cut at each), the state events (located by restoring and stepping again), then the hooks."""
+        schedule = self.schedule()
+        period = len(schedule)
+        macro_step = self.algorithm.macro_step(self)
+        cur = self.current
+        stepped = [o.stepped for o in self.observers]
+        report = progress if progress is not None and progress_every else None
+        ev = self.events
+        grid = self.grid
+        saved: SystemState | None = None
+        locate = False
+        if ev is not None and ev.state:
+            ev.g_prev = self._g()
+            missing = self.stateless
+            locate = not missing
+            if missing:
+                ev.warnings.append(f"state events fire at the end of the macro step in which they are seen, not at "
+                                   f"the crossing: {', '.join(missing)} cannot save and restore its state")
+        k = self.k_done
+        try:
+            while k < k_end:
+                t0_ns = grid.t_ns(k)
+                t0, t1 = grid.time(k), grid.time(k + 1)
+                active = schedule[k % period]
+                if ev is not None:
+                    for spec in ev.due(t0_ns):
+                        self.fire(spec, t0)
+                    if ev.state:
+                        ev.g_prev = self._g()  # the values the step starts from (time events may change them)
+                if locate:
+                    saved = self.save_state(saved)
+                cuts = ev.inside(t0_ns, grid.t_ns(k + 1)) if ev is not None else []
+                if cuts:
+                    self._advance(k, active, t0, None, cuts)
+                else:
+                    macro_step(k, t0, t1 - t0)
+                if ev is not None and ev.state:
+                    self._state_events(k, active, t0, cuts, saved)
+                cur[0] = MASTER
+                cur[3] = self.k_done = k + 1
+                if stepped:
+                    t_end = grid.t_ns(k + 1)
+                    for f in stepped:
+                        f(k, t_end, active)
+                for hook in self.hooks.get(k + 1, ()):
+                    hook(k + 1)
+                if report is not None and (k + 1) % progress_every == 0:
+                    report(k + 1)
+                if stop is not None and stop.requested:
+                    raise stop.interrupted()
+                k += 1
+        except Terminated as term:
+            self._end_at(term, k, schedule[k % period], stepped)
+        finally:
+            if saved is not None:
+                self.free_state(saved)
+
+    def _advance(self, k: int, active: Sequence[int], t: float, t_stop: float | None,
+                 cuts: Sequence[EventSpec], fire: bool = True) -> None:
+        """Base step ``k``'s ``active`` components from ``t`` to ``t_stop`` (None: the end of each one's own step),
+        cut at each time event of ``cuts`` (sorted) inside that interval, whose values are set there (and recorded
+        when ``fire``; while an event is located the steps are taken again without recording)."""
+        grid = self.grid
+        own = [grid.time(grid.end(k, self.multiples[c])) for c in active]
+        for spec in cuts:
+            if t_stop is not None and spec.at >= t_stop:
+                break
+            if spec.at <= t:
+                continue
+            self.algorithm.span(self, active, t, [spec.at] * len(active))
+            t = spec.at
+            if fire:
+                self.fire(spec, t)
+                self.events.next_timed += 1
+            else:
+                self._set_quietly(spec)
+        if t_stop is None:
+            self.algorithm.span(self, active, t, own)
+        elif t_stop > t:
+            self.algorithm.span(self, active, t, [t_stop] * len(active))
+
+    def _set_quietly(self, spec: EventSpec) -> None:
+        """A time event's values set again while a state event is located (it fired already in this step)."""
+        by_comp: dict[int, dict] = {}
+        for ch in spec.changes:
+            by_comp.setdefault(ch.comp, {})[ch.var] = list(ch.values)
+        for c, values in by_comp.items():
+            self.slaves[c].set_values(values)
+
+    def _crossed(self, g0: dict[int, float], g1: dict[int, float]) -> list[EventSpec]:
+        ev = self.events
+        return [s for s in ev.state if ev.armed[s.index] and g0[s.index] >= 0.0 > g1[s.index]]
+
+    def _state_events(self, k: int, active: Sequence[int], t0: float, cuts: Sequence[EventSpec],
+                      saved: SystemState | None) -> None:  # noqa: C901 - one loop: detect, locate, fire, go on
+        """After macro step ``k`` (from ``t0``, restorable from ``saved`` when every component has state): fire the
+        state events whose condition came to hold in it, each at its located crossing, the step continued from
+        there (where another may cross)."""
+        ev = self.events
+        t1 = self.grid.time(k + 1)
+        start, g_start = t0, ev.g_prev
+        done_cuts = list(cuts)  # time events fired in this step: set again when the step is retaken
+        while True:
+            g_end = self._g()
+            crossed = self._crossed(g_start, g_end)
+            if not crossed:
+                break
+            if saved is None:  # no state to go back to: at the end of the step
+                for spec in crossed:
+                    self._fire_state(spec, t1)
+                break
+            t_event, first = t1, []
+            for spec in crossed:
+                t_s = self._locate(spec, k, active, start, t1, g_start[spec.index], g_end[spec.index], saved,
+                                   done_cuts)
+                if t_s < t_event - 1e-15:
+                    t_event, first = t_s, [spec]
+                elif abs(t_s - t_event) <= 1e-15:
+                    first.append(spec)
+            self.restore_state(saved)
+            whole = t_event >= t1  # located at the step's end: each component to the end of its own step
+            self._advance(k, active, start, None if whole else t_event, done_cuts, fire=False)
+            g_at = self._g()
+            for spec in crossed:  # every event whose condition holds at the located time fires there
+                if spec in first or g_start[spec.index] >= 0.0 > g_at[spec.index]:
+                    self._fire_state(spec, t_event)
+            ev.located += 1
+            g_start = self._g()
+            if whole:
+                break
+            # the rest of the step from the event; the step's start state now includes it
+            saved = self.save_state(saved)
+            done_cuts = [c for c in done_cuts if c.at > t_event]
+            self._advance(k, active, t_event, None, done_cuts, fire=False)
+            start = t_event
+        ev.g_prev = self._g()
+
+    def _fire_state(self, spec: EventSpec, t: float) -> None:
+        self.fire(spec, t)
+        if not spec.repeat:
+            self.events.armed[spec.index] = False
+
+    def _locate(self, spec: EventSpec, k: int, active: Sequence[int], a: float, b: float, ga: float, gb: float,
+                saved: SystemState, cuts: Sequence[EventSpec]) -> float:
+        """The time, within ``spec.tolerance`` after it, at which ``spec``'s condition comes to hold between ``a``
+        (``ga >= 0``) and ``b`` (``gb < 0``): Illinois (regula falsi that halves the weight of an end kept twice),
+        each trial point reached by restoring ``saved`` (the state at ``a``'s step start) and stepping again."""
+        start = a
+        side = 0
+        for _ in range(200):
+            if b - a <= spec.tolerance:
+                break
+            t = (a * gb - b * ga) / (gb - ga)
+            lo, hi = a + 0.01 * (b - a), b - 0.01 * (b - a)  # never at an end: the bracket must shrink
+            t = min(max(t, lo), hi)
+            self.restore_state(saved)
+            self._advance(k, active, start, t, cuts, fire=False)
+            self.events.restarts += 1
+            arr, i = self.where(spec.signal)
+            gt = spec.g(arr[i])
+            if gt < 0.0:
+                b, gb = t, gt
+                if side == -1:
+                    ga *= 0.5
+                side = -1
+            else:
+                a, ga = t, gt
+                if side == 1:
+                    gb *= 0.5
+                side = 1
+        return b
 
     def end(self, terminate: bool = True) -> BaseException | None:
         """Terminate (when ``terminate``) and free every component, each recorded as having the turn in the

@@ -13,6 +13,7 @@ from fmus.native.errors import CompilerMissingError
 
 from ..errors import ComponentSourceError, Issue, ScenarioError
 from ..fmi import FMUInfo, load_fmu
+from .events import resolve_events
 from .model_file import model_based, model_start_values
 from .preflight import initial_state_values, preflight, trajectory_start_values
 from .scenario import Scenario
@@ -132,4 +133,5 @@ def prepare(scenario: Scenario, log_signals: str | None = None, *,
                                       f"{', '.join(missing)} (set initial_state.position/velocity to its start "
                                       f"parameters, or from_trajectory: false)", scenario.source))
         plan.start_values[c] = {**init, **plan.start_values[c]}  # explicit parameters win
+    plan.events = resolve_events(scenario, plan)
     return plan, report

@@ -10,6 +10,7 @@ Unknown keys are rejected. Every problem is reported at once as
 from __future__ import annotations
 
 import copy
+import math
 import dataclasses
 import difflib
 import os
@@ -34,6 +35,8 @@ from .names import name_problem, quote, split_ref
 
 __all__ = [
     "Scenario",
+    "Event",
+    "parse_condition",
     "Component",
     "Connection",
     "TimeGrid",
@@ -287,6 +290,59 @@ class Regression(_Model):
         return v
 
 
+_CONDITION = re.compile(r"^\s*([^\s<>=]+)\s*([<>])\s*([^\s<>=]+)\s*$")
+
+
+def parse_condition(text: str) -> tuple[str, str, float]:
+    """``"SIGNAL < VALUE"`` -> (signal, "<", value); raises ValueError saying what a condition looks like."""
+    m = _CONDITION.match(text)
+    value = None
+    if m:
+        try:
+            value = float(m.group(3))
+        except ValueError:
+            value = None
+    if m is None or value is None or not math.isfinite(value):
+        raise ValueError(f"condition {text!r} is not 'SIGNAL < VALUE' or 'SIGNAL > VALUE' (SIGNAL a "
+                         "component.variable, VALUE a finite number)")
+    return m.group(1), m.group(2), value
+
+
+def condition_issue(text: str) -> str | None:
+    try:
+        parse_condition(text)
+    except ValueError as exc:
+        return str(exc)
+    return None
+
+
+class Event(_Model):
+    """A change during the run (``events:`` items): values set at a time, or when a signal crosses a value.
+
+    ``at``: a time event, s (on the time grid or between two points: the macro step is cut there).
+    ``when``: a state event, ``"SIGNAL < VALUE"`` or ``"SIGNAL > VALUE"`` (``component.variable``): it fires once,
+    when the signal crosses the value in that direction (``repeat: true``: at every such crossing), located
+    inside the macro step to ``tolerance`` seconds by restoring every component's state and stepping again.
+    ``set``: ``component.variable: value``; an input no connection drives or a tunable parameter.
+    """
+
+    at: float | None = Field(None, ge=0, le=MAX_TIME_S, description="time of a time event, s")
+    when: str | None = Field(None, description='condition of a state event: "SIGNAL < VALUE" or "SIGNAL > VALUE"')
+    set: dict[str, ParamValue] = Field(description="component.variable: value, set when the event fires")
+    repeat: bool = Field(False, description="a state event fires at every crossing (default: once)")
+    tolerance: float = Field(1e-6, gt=0, le=1.0, description="a state event is located to within this time, s")
+
+    @model_validator(mode="after")
+    def _one_kind(self) -> "Event":
+        if (self.at is None) == (self.when is None):
+            raise ValueError("an event has either 'at' (a time) or 'when' (a condition), not both or neither")
+        if self.repeat and self.when is None:
+            raise ValueError("'repeat' is for a state event ('when'); a time event fires once")
+        if not self.set:
+            raise ValueError("'set' names at least one component.variable")
+        return self
+
+
 class Scenario(_Model):
     """A co-simulation scenario."""
 
@@ -326,6 +382,8 @@ class Scenario(_Model):
     compare: Compare | None = None
     checks: Checks | None = None
     regression: Regression = Field(default_factory=Regression)
+    events: list[Event] = Field(default_factory=list, description="values set during the run: at a time, or when a "
+                                                                   "signal crosses a value (cosim.engine.events)")
     # set by the loader, not part of the file format
     source: str | None = Field(None, exclude=True, json_schema_extra={"readOnly": True})
     # where the values came from (set by the loader): :attr:`sources`
@@ -641,6 +699,17 @@ def _semantic_issues(s: Scenario) -> list[tuple[tuple, str]]:
                 comp_of(sig, ("compare", key))
     if s.checks is not None and s.compare is None:
         out.append((("checks",), "acceptance checks need a 'compare' section"))
+    for i, e in enumerate(s.events):
+        if e.at is not None and not s.time.start <= e.at <= s.time.stop:
+            out.append((("events", i, "at"), f"{e.at:g} s is outside the run [{s.time.start:g}, {s.time.stop:g}] s"))
+        if e.when is not None:
+            problem = condition_issue(e.when)
+            if problem:
+                out.append((("events", i, "when"), problem))
+            else:
+                comp_of(parse_condition(e.when)[0], ("events", i, "when"))
+        for name in e.set:
+            comp_of(name, ("events", i, "set", name))
     return out
 
 

@@ -154,6 +154,7 @@ class SystemPlan:
     inputs: list[list[Variable]]  # connected inputs, per component
     outputs: list[list[Variable]]  # outputs read every step, per component
     logged: list[list[Variable]] = field(default_factory=list)  # inputs + outputs recorded, per component
+    events: list = field(default_factory=list)  # the scenario's events resolved (cosim.engine.events.EventSpec)
 
     def port(self, ref: str) -> Port:
         comp, name, _ = split_ref(ref)

@@ -197,6 +197,33 @@ class ModelExchange:
             b.applied = b.snapshot()
         self._restart = True
 
+    # -- state: the FMU's, and the master's event bookkeeping beside it (cosim.fmi.slave.Base.save_state)
+    def _extra_state(self) -> dict:
+        return {"next_event": self.next_event, "events": self.events,
+                "applied": [b.applied.hex() if isinstance(b.applied, bytes) else b.applied for b in self.in_bufs]}
+
+    def _restore_extra(self, extra: dict) -> None:
+        """After the FMU's state is back: its event bookkeeping, and the integrator re-started at the restored
+        time on the next step (its multistep history belongs to the abandoned future)."""
+        self.next_event = extra["next_event"]
+        self.events = extra["events"]
+        for b, applied in zip(self.in_bufs, extra["applied"]):
+            b.applied = bytes.fromhex(applied) if isinstance(applied, str) else applied
+        self.event_log.clear()
+        self._restart = True
+
+    def set_values(self, values) -> None:
+        """An event's changes between steps, in event mode (FMI: tunable parameters and discrete inputs change
+        there), followed by the event iteration; the integrator re-starts at the next step."""
+        self._enter_event_mode()
+        for var, flat in values.items():
+            self._set_values(var, flat, f"set {var.name} at an event")
+        self.events += 1
+        self.event_log.append((self.time, "input"))
+        self._event_iteration()
+        self._enter_continuous_mode()
+        self._restart = True
+
     MAX_EVENTS_AT_ONE_TIME = 1000  # event iterations at one instant before the FMU is called stuck
 
     def step(self, t: float, h: float) -> None:

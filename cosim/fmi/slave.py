@@ -37,6 +37,21 @@ class Terminated(Exception):
         super().__init__(f"component {component!r} ended the simulation at t = {time:.9g} s ({function})")
 
 
+class ComponentState:
+    """One component's saved state (libcosim's ``save_state``): the FMU's state handle (FMI 2.0 / 3.0 FMUstate),
+    the time the component had reached, the master's copies of its exchanged values (input and output buffers)
+    and what a wrapper keeps beside the FMU (:meth:`Base._extra_state`: a model-exchange wrapper's event
+    bookkeeping). Reused by :meth:`Base.save_state` (``into``): the FMU overwrites the handle's state."""
+
+    __slots__ = ("handle", "time", "buffers", "extra")
+
+    def __init__(self, handle: Any, time: float, buffers: list, extra: dict):
+        self.handle = handle
+        self.time = time
+        self.buffers = buffers
+        self.extra = extra
+
+
 class Slave(Protocol):
     """What the execution and its algorithms need from a component, whatever its FMI version and kind (the four
     wrappers here, and the offload's proxy of a component run by a worker process)."""
@@ -64,6 +79,16 @@ class Slave(Protocol):
     def set_step_get(self, t: float, h: float) -> None: ...  # set_inputs, step, get_outputs
     def terminate(self) -> None: ...
     def free(self) -> None: ...
+
+    # FMU state (FMI 2.0 / 3.0; libcosim's save_state / restore_state / export_state / import_state)
+    can_save_state: bool
+    can_serialize_state: bool
+    def save_state(self, into: "ComponentState | None" = None) -> "ComponentState": ...
+    def restore_state(self, state: "ComponentState") -> None: ...
+    def free_state(self, state: "ComponentState") -> None: ...
+    def export_state(self, state: "ComponentState") -> bytes: ...
+    def import_state(self, data: bytes, time: float, buffers: list, extra: dict) -> "ComponentState": ...
+    def set_values(self, values: dict[Variable, list]) -> None: ...  # an event's changes, between steps
 
 
 class Buffers:
@@ -96,6 +121,13 @@ class Buffers:
 
     def snapshot(self) -> bytes | list:
         return list(self.values) if self.ctype_free else bytes(self.values)
+
+    def restore(self, saved: bytes | list) -> None:
+        """Put back the values of a :meth:`snapshot`."""
+        if self.ctype_free:
+            self.values[:] = saved
+        else:
+            ctypes.memmove(self.values, saved, len(saved))
 
 
 def _status_ok(exchange: Callable[[Buffers], None], b: Buffers) -> int:
@@ -300,6 +332,96 @@ class Base:
         factory = ctypes.PYFUNCTYPE if self._pythonfmu else ctypes.CFUNCTYPE
         proto = factory(f.restype) if argtypes is None else factory(f.restype, *argtypes)
         return proto(ctypes.cast(f, ctypes.c_void_p).value)
+
+    # -- FMU state: FMI 2.0 / 3.0 get, set, free, serialize (FMI 1.0 has none)
+    def _capabilities(self) -> Any:
+        md = self.info.md
+        return md.modelExchange if self.model_exchange else md.coSimulation
+
+    @property
+    def can_save_state(self) -> bool:
+        """The FMU declares ``canGetAndSetFMUstate`` (FMI 3.0: ``canGetAndSetFMUState``) for the interface in use."""
+        kind = self._capabilities()
+        return self.fmi >= 2 and kind is not None and bool(getattr(kind, "canGetAndSetFMUstate", False))
+
+    @property
+    def can_serialize_state(self) -> bool:
+        """The FMU also declares ``canSerializeFMUstate`` (FMI 3.0: ``canSerializeFMUState``)."""
+        kind = self._capabilities()
+        return self.can_save_state and bool(getattr(kind, "canSerializeFMUstate", False))
+
+    def _state_function(self, name: str) -> tuple[str, Any]:
+        """(C name, fmpy's status-checked function) of FMU-state function ``name`` (``Get``, ``Set``, ``Free``)."""
+        c_name = f"fmi2{name}FMUstate" if self.fmi == 2 else f"fmi3{name}FMUState"
+        return c_name, getattr(self.fmu, c_name)
+
+    def _require_state(self, what: str) -> None:
+        if not self.can_save_state:
+            raise FMIError(self.name, what, self.time, None, "the FMU does not declare canGetAndSetFMUstate: its "
+                           "state cannot be saved or restored")
+
+    def save_state(self, into: ComponentState | None = None) -> ComponentState:
+        """The FMU's state now, with the master's copies of its exchanged values; ``into``: a saved state to
+        overwrite (its FMU state handle reused, as FMI allows)."""
+        c_name, get = self._state_function("Get")
+        self._require_state(c_name)
+        handle = into.handle if into is not None else ctypes.c_void_p()
+        self._guard(c_name, get, self._c, ctypes.byref(handle))
+        buffers = [b.snapshot() for b in (*self.in_bufs, *self.out_bufs)]
+        if into is None:
+            return ComponentState(handle, self.time, buffers, self._extra_state())
+        into.time, into.buffers, into.extra = self.time, buffers, self._extra_state()
+        return into
+
+    def restore_state(self, state: ComponentState) -> None:
+        """Back to ``state``: the FMU's state, the time, the exchanged values, the wrapper's bookkeeping."""
+        c_name, set_ = self._state_function("Set")
+        self._require_state(c_name)
+        self._guard(c_name, set_, self._c, state.handle)
+        for b, saved in zip((*self.in_bufs, *self.out_bufs), state.buffers):
+            b.restore(saved)
+        self.time = state.time
+        self._restore_extra(state.extra)
+
+    def free_state(self, state: ComponentState) -> None:
+        if self.fmu is None or self._fatal or not state.handle:
+            return
+        c_name, free = self._state_function("Free")
+        self._guard(c_name, free, self._c, ctypes.byref(state.handle))
+
+    def export_state(self, state: ComponentState) -> bytes:
+        """The FMU's serialized state (fmi2SerializeFMUstate / fmi3SerializeFMUState)."""
+        what = "fmi2SerializeFMUstate" if self.fmi == 2 else "fmi3SerializeFMUState"
+        if not self.can_serialize_state:
+            raise FMIError(self.name, what, self.time, None, "the FMU does not declare canSerializeFMUstate: its "
+                           "state cannot be written to a checkpoint")
+        serialize = self.fmu.serializeFMUstate if self.fmi == 2 else self.fmu.serializeFMUState
+        return bytes(self._guard(what, serialize, state.handle))
+
+    def import_state(self, data: bytes, time: float, buffers: list, extra: dict) -> ComponentState:
+        """A state from :meth:`export_state` bytes (the FMU checks they are its own), with the master's part."""
+        what = "fmi2DeSerializeFMUstate" if self.fmi == 2 else "fmi3DeserializeFMUState"
+        if not self.can_serialize_state:
+            raise FMIError(self.name, what, self.time, None, "the FMU does not declare canSerializeFMUstate")
+        deserialize = self.fmu.deSerializeFMUstate if self.fmi == 2 else self.fmu.deserializeFMUState
+        handle = self._guard(what, deserialize, bytes(data))
+        sizes = [len(b.snapshot()) for b in (*self.in_bufs, *self.out_bufs)]
+        if [len(b) for b in buffers] != sizes:
+            raise FMIError(self.name, what, time, None, f"the checkpoint's exchanged values ({[len(b) for b in buffers]}"
+                           f" bytes) do not fit this system's ({sizes} bytes)")
+        return ComponentState(handle, time, buffers, extra)
+
+    def _extra_state(self) -> dict:
+        """What a wrapper keeps beside the FMU that a restored state needs (plain data: a checkpoint holds it)."""
+        return {}
+
+    def _restore_extra(self, extra: dict) -> None:
+        """Put back :meth:`_extra_state`."""
+
+    def set_values(self, values: dict[Variable, list]) -> None:
+        """Set variables between two steps (an event's changes: inputs no connection drives, tunable parameters)."""
+        for var, flat in values.items():
+            self._set_values(var, flat, f"set {var.name} at an event")
 
     # -- the per-step exchange: numbers through bound C calls, strings and binaries through fmpy
     def set_inputs(self) -> None:

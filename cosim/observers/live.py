@@ -128,8 +128,8 @@ class LiveView:
         self._sink = _ContextSink(context)
         self.publisher.attach(self._sink)
         self._offset = self.publisher.origin(rt)
-        self._next_time = rt.start_ns
-        self.server.broadcast_time(rt.start_ns + self._offset)
+        self._next_time = rt.now_ns
+        self.server.broadcast_time(rt.now_ns + self._offset)
 
     def stepped(self, k: int, t_ns: int, active: Sequence[int]) -> None:
         if t_ns >= self._next_time:

@@ -92,13 +92,18 @@ _JSON_TYPE = {REAL: {"type": "number"}, INTEGER: {"type": "integer"}, BOOLEAN: {
 
 EVENTS_SCHEMA = {
     "title": "cosim.Event",
-    "description": "An event handled by the master in a model-exchange component (FMI event mode)",
+    "description": "An event: one of the scenario's events that fired (event, set), or one the master handled in a "
+                   "model-exchange component (component, kind: FMI event mode)",
     "type": "object",
     "properties": {
-        "t": {"type": "number", "description": "event time", "unit": "s"},
-        "component": {"type": "string", "description": "the component in event mode"},
+        "t": {"type": "number", "description": "event time (a state event's located crossing)", "unit": "s"},
+        "event": {"type": "integer", "description": "the scenario event's index in its events list, from 0 (-1: the "
+                                                   "--set of a resumed run, at the checkpoint's time)"},
+        "set": {"type": "object", "description": "the values the scenario event set, component.variable: value"},
+        "component": {"type": "string", "description": "the model-exchange component in event mode"},
         "kind": {"type": "string", "description": "what triggered it: state, time, step or input (joined by +)"},
     },
+    "required": ["t"],
 }
 
 
@@ -529,12 +534,14 @@ class Publisher:
             keep = max(2, round(_TRAIL_S * 1e9 / self.scene_period_ns) + 1)
             self._trail: deque = deque(maxlen=keep)  # points as JSON fragments: each serialised once
             self._ref_points: list = [] if self.reference is None else [_point(v) for v in self.reference]
-            self._next_reference = rt.start_ns
+            self._next_reference = rt.now_ns
             self._drawing = _drawing(self.scene_robot)
         # model-exchange components report their events (time, kind) on one /events channel
         self._event_sources = [(c, s) for c, s in enumerate(rt.slaves) if hasattr(s, "event_log")]
+        self._fired = rt.events.fired if rt.events is not None else None  # the scenario's events
+        self._n_fired = 0
         self._events_cid = None
-        if self._event_sources:
+        if self._event_sources or self._fired is not None:
             self._events_cid = self._channel("/events", "cosim.events", EVENTS_SCHEMA)
         # a block is handed over before any channel's can be full (the fastest fills one sample a step)
         self._cap = min((rows.cap for rows in self._pending), default=_BLOCK_ROWS)
@@ -563,9 +570,9 @@ class Publisher:
         if self._joint is not None:
             row = self._joint.capture()
             self._joint.data.append(row)
-            self._joint.stamps.append(rt.start_ns)
+            self._joint.stamps.append(rt.now_ns)
             for put in self._joint.puts:
-                put(rt.start_ns, row)
+                put(rt.now_ns, row)
             self._n = 1
         else:
             for entry in self._by_comp:
@@ -573,12 +580,12 @@ class Publisher:
                     add, read, stamp, _, puts = entry
                     row = read()
                     add(row)
-                    stamp(rt.start_ns)
+                    stamp(rt.now_ns)
                     for put in puts:
-                        put(rt.start_ns, row)
+                        put(rt.now_ns, row)
                     self._n = 1
-        self._next_tick = rt.start_ns
-        self._tick(rt.start_ns)
+        self._next_tick = rt.now_ns
+        self._tick(rt.now_ns)
 
     def _tick(self, t_ns: int) -> None:
         """Every scene period: the samples so far, then the scene."""
@@ -603,6 +610,12 @@ class Publisher:
             self._send(ref_cid, stamp, orjson.dumps(_reference_update(self._ref_points, stamp)))
 
     def _log_events(self) -> None:
+        fired = self._fired
+        if fired is not None and len(fired) > self._n_fired:
+            for e in fired[self._n_fired:]:
+                self._send(self._events_cid, round(e.t * 1e9) + self.offset_ns,
+                           orjson.dumps({"t": e.t, "event": e.event, "set": e.set}))
+            self._n_fired = len(fired)
         names = self._rt.plan.names
         for c, slave in self._event_sources:
             events = slave.event_log
@@ -644,7 +657,7 @@ class Publisher:
         self._n += 1
         if self._n >= self._cap:
             self.flush()
-        if self._event_sources:
+        if self._events_cid is not None:
             self._log_events()
         if t_ns >= self._next_tick:
             self._tick(t_ns)

@@ -53,10 +53,10 @@ class RealTime:
         # Everything alive now (FMUs, their modules, the plan) lives as long as the run: keep it out of
         # the garbage collector's full passes, which otherwise stall a step by 20-50 ms every few seconds
         gc.freeze()
-        self._t0 = rt.start_ns
+        self._t0 = rt.now_ns
         self._lags = np.zeros(max(1, rt.n_steps - rt.k_done), dtype=np.int64)
         self._n = 0
-        self._t_last = rt.start_ns
+        self._t_last = rt.now_ns
         self._w0 = time.perf_counter_ns()
 
     def stepped(self, k: int, t_ns: int, active: Sequence[int]) -> None:

@@ -32,9 +32,9 @@ class ErrorObserver:
         n = len(self._pairs)
         self.sq = [0.0] * n
         self.mx = [0.0] * n
-        self.t_mx = [rt.start_ns] * n
+        self.t_mx = [rt.now_ns] * n
         self.n = 0
-        self.stepped(-1, rt.start_ns, ())
+        self.stepped(-1, rt.now_ns, ())
 
     def stepped(self, k: int, t_ns: int, active: Sequence[int]) -> None:
         sq, mx = self.sq, self.mx
@@ -68,7 +68,7 @@ class Probe:
         self._src = []
         for s in self.signals:
             self._src.append(rt.where(rt.plan.port(s)))
-        self.stepped(-1, rt.start_ns, ())
+        self.stepped(-1, rt.now_ns, ())
 
     def stepped(self, k: int, t_ns: int, active: Sequence[int]) -> None:
         self.t_ns.append(t_ns)
@@ -96,7 +96,7 @@ class PeakEffort:
                     arr, i = rt.where(Port(c, var))
                     self._src += [(arr, i + e) for e in range(var.count)]
         self.peak = 0.0 if self._src else math.nan
-        self.stepped(-1, rt.start_ns, ())
+        self.stepped(-1, rt.now_ns, ())
 
     def stepped(self, k: int, t_ns: int, active: Sequence[int]) -> None:
         for arr, i in self._src:

@@ -76,12 +76,18 @@ def _mass_class(kind: str):
     return kind_of(kind).masses_type
 
 
+TUNABLE_MASSES = ("payload",)
+"""Mass fields that may change during a run (FMI ``variability="tunable"``): a part picked and placed changes the
+payload; every other mass and the geometry are fixed."""
+
+
 def declare_masses(fmu, kind: str) -> None:
-    """Fixed ``mass.*`` / ``model.*`` parameters, start values from the mass dataclass defaults."""
+    """``mass.*`` / ``model.*`` parameters, start values from the mass dataclass defaults; those of
+    :data:`TUNABLE_MASSES` tunable, the others fixed."""
     defaults = _mass_class(kind)()
     for f in fields(defaults):
         name, unit, text = _MASSES[f.name]
-        fmu.parameter(name, float(getattr(defaults, f.name)), unit, text)
+        fmu.parameter(name, float(getattr(defaults, f.name)), unit, text, tunable=f.name in TUNABLE_MASSES)
 
 
 def mass_values(kind: str, values) -> dict:  # noqa: ANN001

@@ -1,0 +1,215 @@
+"""Checkpoint files: a whole co-simulation's state at one time, written by ``run --checkpoint-at`` and continued by
+``run --resume`` (as libcosim's ``export_current_state`` / ``import_state`` of an execution, with the scenario inside).
+
+A checkpoint is a zip archive (each member with its CRC, so damage is found, never read as a state):
+
+- ``checkpoint.json``: format and version; the time (``t_ns``, the macro steps done), the time grid and algorithm;
+  per component its name, the FMU's guid (instantiation token) and the SHA-256 of its file, the time it reached,
+  the master's copies of its exchanged values and the wrapper's bookkeeping, the name, size and SHA-256 of its
+  serialized FMU state; the events' progress (time events fired, state events armed); the command that wrote it;
+- ``scenario.json``: the scenario as it ran (every override applied, FMU paths absolute);
+- ``states/<i>.bin``: component ``i``'s FMU state as the FMU serialized it (``fmi2SerializeFMUstate``).
+
+Nothing but plain data is read from it: the FMU states go back to the FMUs, which check them themselves.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import zipfile
+import zlib
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from ..engine.execution import Execution, SystemState
+from ..errors import CosimError, written_by_rename
+
+__all__ = ["FORMAT", "VERSION", "CheckpointError", "Checkpoint", "write_checkpoint", "read_checkpoint",
+           "file_sha256", "default_checkpoint_path"]
+
+FORMAT = "delta-cosim checkpoint"
+VERSION = 1
+_MAX_MEMBER = 1 << 30  # bytes: no member of a checkpoint of ours comes near (an Exudyn plant's state is ~30 kB)
+
+
+class CheckpointError(CosimError, ValueError):
+    """A checkpoint that cannot be written, read or continued (damaged, of another scenario or FMU build, a time
+    outside the run)."""
+
+
+def file_sha256(path: str | Path) -> str:
+    h = hashlib.sha256()
+    with open(path, "rb") as f:
+        for block in iter(lambda: f.read(1 << 20), b""):
+            h.update(block)
+    return h.hexdigest()
+
+
+def default_checkpoint_path(log: str | Path | None, scenario_name: str) -> Path:
+    """Beside the log, with the suffix ``.ckpt`` (``runs/helix_ctc.mcap`` -> ``runs/helix_ctc.ckpt``); without a log,
+    ``runs/<scenario>.ckpt``."""
+    if log is not None:
+        return Path(log).with_suffix(".ckpt")
+    return Path("runs") / f"{scenario_name}.ckpt"
+
+
+@dataclass
+class Checkpoint:
+    """A checkpoint read back: its header (``checkpoint.json``), the scenario as run, the components' FMU states."""
+
+    path: Path
+    header: dict
+    scenario: dict
+    states: list[bytes]
+
+    @property
+    def t_ns(self) -> int:
+        return int(self.header["t_ns"])
+
+    @property
+    def time(self) -> float:
+        return self.t_ns * 1e-9
+
+    @property
+    def k_done(self) -> int:
+        return int(self.header["k_done"])
+
+    def component(self, name: str) -> dict:
+        for c in self.header["components"]:
+            if c["name"] == name:
+                return c
+        raise CheckpointError(f"{self.path}: no state of component {name!r} (it holds "
+                              f"{', '.join(c['name'] for c in self.header['components'])})")
+
+    def check_system(self, ex: Execution, scenario_name: str) -> None:
+        """The system to continue is the one that wrote this checkpoint: the same components, each on the same FMU
+        (guid and file), the same time grid and algorithm; raises :class:`CheckpointError` naming what differs."""
+        h = self.header
+        names = [c["name"] for c in h["components"]]
+        if names != list(ex.plan.names):
+            raise CheckpointError(f"{self.path} holds the components {', '.join(names)}; scenario {scenario_name!r} "
+                                  f"has {', '.join(ex.plan.names)}: a checkpoint of another scenario")
+        if (h["grid"]["start_ns"], h["grid"]["step_ns"]) != (ex.start_ns, ex.step_ns):
+            raise CheckpointError(f"{self.path} was written on a time grid from {h['grid']['start_ns'] * 1e-9:g} s "
+                                  f"in steps of {h['grid']['step_ns'] * 1e-9:g} s; this run's starts at "
+                                  f"{ex.start_ns * 1e-9:g} s in steps of {ex.step_ns * 1e-9:g} s")
+        if h["algorithm"] != ex.algorithm_name:
+            raise CheckpointError(f"{self.path} was written by the {h['algorithm']} algorithm; this run uses "
+                                  f"{ex.algorithm_name}")
+        if not self.t_ns < ex.stop_ns:
+            raise CheckpointError(f"{self.path} is at t = {self.time:g} s, not before this run's stop time "
+                                  f"{ex.stop_ns * 1e-9:g} s: nothing to continue (give a later --stop-time)")
+        if ex.grid.t_ns(self.k_done) != self.t_ns:
+            raise CheckpointError(f"{self.path}: t = {self.time:g} s is not the end of macro step {self.k_done} of "
+                                  "this run's grid")
+        for c, (entry, info) in enumerate(zip(h["components"], ex.plan.infos)):
+            guid = info.md.guid
+            if entry["guid"] != guid:
+                raise CheckpointError(f"{self.path}: component {entry['name']!r} was saved from the FMU with guid "
+                                      f"{entry['guid']}; this run's {info.path.name} has guid {guid}: a checkpoint "
+                                      "of another FMU build")
+            digest = file_sha256(info.path)
+            if entry["fmu_sha256"] != digest:
+                raise CheckpointError(f"{self.path}: component {entry['name']!r} was saved from an FMU file with "
+                                      f"SHA-256 {entry['fmu_sha256'][:16]}...; {info.path} has {digest[:16]}...: "
+                                      "a checkpoint of another FMU build")
+
+    def restore_into(self, ex: Execution) -> SystemState:
+        """The saved state imported into ``ex``'s initialized components and restored (the FMUs check their own
+        states); returns it (the caller frees it)."""
+        comps = []
+        for c, (entry, slave) in enumerate(zip(self.header["components"], ex.slaves)):
+            ex.current[0] = c
+            buffers = [bytes.fromhex(b) if isinstance(b, str) else b for b in entry["buffers"]]
+            comps.append(slave.import_state(self.states[c], float(entry["time"]), buffers, entry["extra"]))
+        state = SystemState(self.k_done, comps)
+        ex.restore_state(state)
+        return state
+
+
+def write_checkpoint(path: str | Path, ex: Execution, scenario: dict, command: str = "") -> int:
+    """Write ``ex``'s state now (after macro step ``ex.k_done``) to ``path`` (whole or not at all); returns its
+    size in bytes. ``scenario``: the scenario as run (:func:`cosim.engine.scenario.effective_scenario`)."""
+    missing = [n for n, s in zip(ex.plan.names, ex.slaves) if not getattr(s, "can_serialize_state", False)]
+    if missing:
+        raise CheckpointError(f"cannot write a checkpoint: {', '.join(missing)} cannot serialize its state (its FMU "
+                              "does not declare canSerializeFMUstate)")
+    state = ex.save_state()
+    try:
+        blobs = [s.export_state(cs) for s, cs in zip(ex.slaves, state.components)]
+    finally:
+        ex.free_state(state)
+    components = []
+    for c, (name, info, cs, blob) in enumerate(zip(ex.plan.names, ex.plan.infos, state.components, blobs)):
+        components.append({
+            "name": name, "fmu": info.path.name, "guid": info.md.guid, "fmu_sha256": file_sha256(info.path),
+            "fmi": info.fmi_major, "time": cs.time,
+            "buffers": [b.hex() if isinstance(b, bytes) else b for b in cs.buffers], "extra": cs.extra,
+            "state": f"states/{c}.bin", "state_bytes": len(blob), "state_sha256": hashlib.sha256(blob).hexdigest(),
+        })
+    ev = ex.events
+    header = {
+        "format": FORMAT, "version": VERSION, "scenario": scenario.get("name"), "t_ns": ex.t_ns(ex.k_done),
+        "k_done": ex.k_done, "grid": {"start_ns": ex.start_ns, "stop_ns": ex.stop_ns, "step_ns": ex.step_ns},
+        "algorithm": ex.algorithm_name, "components": components, "command": command,
+        "events": None if ev is None else ev.progress(),
+    }
+    path = Path(path)
+    with written_by_rename(path) as tmp:
+        with zipfile.ZipFile(tmp, "w", compression=zipfile.ZIP_DEFLATED) as z:
+            z.writestr("checkpoint.json", json.dumps(header, indent=1, allow_nan=True))
+            z.writestr("scenario.json", json.dumps(scenario, indent=1, allow_nan=True))
+            for entry, blob in zip(components, blobs):
+                z.writestr(entry["state"], blob)
+        size = tmp.stat().st_size
+    return size
+
+
+def read_checkpoint(path: str | Path) -> Checkpoint:
+    """Read and verify a checkpoint (format, version, every member's CRC and SHA-256); raises
+    :class:`CheckpointError` naming the file and what is wrong."""
+    path = Path(path)
+    if not path.is_file():
+        raise CheckpointError(f"{path}: no such checkpoint file")
+    try:
+        with zipfile.ZipFile(path) as z:
+            def member(name: str) -> bytes:
+                try:
+                    info = z.getinfo(name)
+                except KeyError:
+                    raise CheckpointError(f"{path}: not a complete checkpoint (no {name})") from None
+                if info.file_size > _MAX_MEMBER:
+                    raise CheckpointError(f"{path}: {name} claims {info.file_size} bytes; refused")
+                return z.read(name)
+
+            header = _json(path, "checkpoint.json", member("checkpoint.json"))
+            if header.get("format") != FORMAT:
+                raise CheckpointError(f"{path}: not a delta-cosim checkpoint")
+            if header.get("version") != VERSION:
+                raise CheckpointError(f"{path}: checkpoint format version {header.get('version')!r}; this version "
+                                      f"of delta-cosim reads version {VERSION}")
+            scenario = _json(path, "scenario.json", member("scenario.json"))
+            states = []
+            for entry in header["components"]:
+                blob = member(entry["state"])
+                if len(blob) != entry["state_bytes"] or hashlib.sha256(blob).hexdigest() != entry["state_sha256"]:
+                    raise CheckpointError(f"{path}: the state of component {entry['name']!r} is damaged "
+                                          f"({len(blob)} bytes, its checksum does not match)")
+                states.append(blob)
+    except CheckpointError:
+        raise
+    except (zipfile.BadZipFile, zlib.error, EOFError, OSError, KeyError, TypeError, ValueError) as exc:
+        raise CheckpointError(f"{path}: damaged or truncated checkpoint ({type(exc).__name__}: {exc})") from None
+    return Checkpoint(path, header, scenario, states)
+
+
+def _json(path: Path, name: str, data: bytes) -> Any:
+    try:
+        value = json.loads(data)
+    except (UnicodeDecodeError, ValueError) as exc:
+        raise CheckpointError(f"{path}: {name} is not valid JSON ({exc})") from None
+    if not isinstance(value, dict):
+        raise CheckpointError(f"{path}: {name} is not a JSON object")
+    return value
