@@ -42,6 +42,8 @@ class FakeSlave:
 
     model_exchange = False
     events = 0
+    can_save_state = True  # set False on an instance: a component without FMU state
+    can_serialize_state = True
 
     def __init__(self, name: str, inputs: Sequence[str], outputs: Sequence[str], step: StepFunction,
                  initial: Sequence[float] | None = None, end_at: float | None = None):
@@ -120,6 +122,34 @@ class FakeSlave:
 
     def free(self) -> None:
         self.calls.append(("free",))
+
+    # -- state (FMI getFMUstate / setFMUstate) and an event's changes
+    def save_state(self, into=None):
+        from cosim.fmi.slave import ComponentState
+
+        self.calls.append(("save_state", self.time))
+        buffers = [bytes(self.in_values), bytes(self.out_values)]
+        handle = (dict(self.state), list(self._computed), list(getattr(self, "_inputs", [])))
+        if into is None:
+            return ComponentState(handle, self.time, buffers, {})
+        into.handle, into.time, into.buffers = handle, self.time, buffers
+        return into
+
+    def restore_state(self, saved) -> None:
+        self.calls.append(("restore_state", saved.time))
+        state, computed, inputs = saved.handle
+        self.state, self._computed, self._inputs = dict(state), list(computed), list(inputs)
+        ctypes.memmove(self.in_values, saved.buffers[0], len(saved.buffers[0]))
+        ctypes.memmove(self.out_values, saved.buffers[1], len(saved.buffers[1]))
+        self.time = saved.time
+
+    def free_state(self, saved) -> None:
+        self.calls.append(("free_state",))
+
+    def set_values(self, values: dict) -> None:
+        self.calls.append(("set_values", self.time, {v.name: list(x) for v, x in values.items()}))
+        for var, flat in values.items():
+            self.state[var.name] = flat[0] if len(flat) == 1 else list(flat)
 
     # -- helpers
     def _output_names(self) -> list[str]:
