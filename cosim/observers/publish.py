@@ -575,14 +575,18 @@ class Publisher:
                 put(rt.now_ns, row)
             self._n = 1
         else:
-            for entry in self._by_comp:
+            for c, entry in enumerate(self._by_comp):
                 if entry is not None:
-                    add, read, stamp, _, puts = entry
+                    add, read, stamp, m, puts = entry
                     row = read()
                     add(row)
-                    stamp(rt.now_ns)
+                    # the time the component's values are of: a multi-rate component in a run resumed inside its
+                    # step is at the end of that step
+                    k = rt.k_done
+                    t_own = rt.now_ns if k == 0 or m == 1 else self._grid.t_ns(self._grid.end((k - 1) // m * m, m))
+                    stamp(t_own)
                     for put in puts:
-                        put(rt.now_ns, row)
+                        put(t_own, row)
                     self._n = 1
         self._next_tick = rt.now_ns
         self._tick(rt.now_ns)
