@@ -326,6 +326,22 @@ def _plot_path(tr: Tracking, title: str, out: Path) -> Path:
     return _save(fig, path)
 
 
+def _mark_events(tr: Tracking, axs) -> None:
+    """A dotted vertical line at each scenario event of the run (the log's /events channel, fields t and event;
+    a model-exchange component's own events are not drawn), labelled with its index (#0, #1, ...) on the top axis."""
+    fired = [e for e in tr.run.events if "event" in e]
+    if not fired:
+        return
+    axs = list(np.ravel(axs))
+    for ax in axs:
+        for e in fired:
+            ax.axvline(float(e["t"]), color="0.35", lw=0.8, ls=":", zorder=0)
+    top = axs[0]
+    for e in fired:
+        top.annotate(f"#{e['event']}", (float(e["t"]), 1.0), xycoords=("data", "axes fraction"),
+                     xytext=(2, -2), textcoords="offset points", fontsize=7, color="0.3", va="top")
+
+
 def _plot_position(tr: Tracking, title: str, out: Path) -> Path:
     p = tr.position
     n = len(tr.axes)
@@ -333,6 +349,7 @@ def _plot_position(tr: Tracking, title: str, out: Path) -> Path:
     axs = fig.subplots(n, 1, sharex=True, squeeze=False)[:, 0]
     f, unit = (1e3, "mm") if p.unit == "m" else (1.0, _pretty_unit(p.unit))
     _values_column(axs, p, f, unit, tr.axes)
+    _mark_events(tr, axs)
     axs[-1].set_xlabel("time (s)")
     names = (p.reference_names[0][:-2], p.actual_names[0][:-2]) if tr.is_platform else ("reference", "actual")
     axs[0].legend(axs[0].lines, [f"desired ({names[0]})", f"actual ({names[1]})"], loc="lower center",
@@ -409,6 +426,7 @@ def _plot_errors(tr: Tracking, title: str, out: Path) -> Path:
     _error_column(axs[:, 0], tr.position, tr.position_stats(), tr.axes, "position error")
     if tr.velocity is not None:
         _error_column(axs[:, 1], tr.velocity, tr.velocity_stats(), tr.axes, "velocity error")
+    _mark_events(tr, axs)
     note = "" if tr.velocity is not None else " (no velocity signals logged)"
     fig.suptitle(f"{title}: tracking error, actual - desired{note}")
     path = out / "errors.png"
@@ -429,6 +447,7 @@ def _plot_joints(tr: Tracking, title: str, out: Path) -> Path | None:
     axs[-1, 0].set_xlabel("time (s)")
     axs[0, 0].legend(axs[0, 0].lines[:2], ["desired", "actual"], loc="best", fontsize=8)
     _error_column(axs[:, 1], q, tr.joint_stats(), _JOINTS, "joint error")
+    _mark_events(tr, axs)
     kind = {"m": "carriage travel", "rad": "arm angle"}.get(q.unit, "joint value")
     fig.suptitle(f"{title}: joint-space tracking ({kind}), desired vs actual and error")
     path = out / "joints.png"
@@ -450,6 +469,7 @@ def _plot_efforts(tr: Tracking, title: str, out: Path) -> Path | None:
         ax.set_title(f"{name} (leg {j + 1}): range {np.nanmin(u[:, j]):.3g} .. {np.nanmax(u[:, j]):.3g} "
                      f"{_pretty_unit(unit)}", fontsize=9)
         ax.grid(True, alpha=0.3)
+    _mark_events(tr, axs)
     axs[-1].set_xlabel("time (s)")
     fig.suptitle(f"{title}: actuator efforts")
     path = out / "efforts.png"

@@ -95,7 +95,8 @@ class RunLog:
     metadata: dict[str, dict[str, str]] = field(default_factory=dict)
     attachments: dict[str, bytes] = field(default_factory=dict)
     channel_metadata: dict[str, dict[str, str]] = field(default_factory=dict)
-    events: list[dict] = field(default_factory=list)  # the /events channel: {"t", "component", "kind"}, in time order
+    events: list[dict] = field(default_factory=list)  # the /events channel in time order: {"t", "event", "set"} (a
+    # scenario event) or {"t", "component", "kind"} (a model-exchange component's own)
 
     @property
     def name(self) -> str:
