@@ -122,7 +122,8 @@ class Checkpoint:
         comps = []
         for c, (entry, slave) in enumerate(zip(self.header["components"], ex.slaves)):
             ex.current[0] = c
-            buffers = [bytes.fromhex(b) if isinstance(b, str) else b for b in entry["buffers"]]
+            buffers = entry["decoded"]
+            slave.time = float(entry["time"])  # an FMU refusing the state is named at the checkpoint's time
             comps.append(slave.import_state(self.states[c], float(entry["time"]), buffers, entry["extra"]))
         state = SystemState(self.k_done, comps)
         ex.restore_state(state)
@@ -146,7 +147,7 @@ def write_checkpoint(path: str | Path, ex: Execution, scenario: dict, command: s
         components.append({
             "name": name, "fmu": info.path.name, "guid": info.md.guid, "fmu_sha256": file_sha256(info.path),
             "fmi": info.fmi_major, "time": cs.time,
-            "buffers": [b.hex() if isinstance(b, bytes) else b for b in cs.buffers], "extra": cs.extra,
+            "buffers": [_encode_buffer(b) for b in cs.buffers], "extra": cs.extra,
             "state": f"states/{c}.bin", "state_bytes": len(blob), "state_sha256": hashlib.sha256(blob).hexdigest(),
         })
     ev = ex.events
@@ -191,6 +192,7 @@ def read_checkpoint(path: str | Path) -> Checkpoint:
                 raise CheckpointError(f"{path}: checkpoint format version {header.get('version')!r}; this version "
                                       f"of delta-cosim reads version {VERSION}")
             scenario = _json(path, "scenario.json", member("scenario.json"))
+            _check_header(path, header)
             states = []
             for entry in header["components"]:
                 blob = member(entry["state"])
@@ -203,6 +205,53 @@ def read_checkpoint(path: str | Path) -> Checkpoint:
     except (zipfile.BadZipFile, zlib.error, EOFError, OSError, KeyError, TypeError, ValueError) as exc:
         raise CheckpointError(f"{path}: damaged or truncated checkpoint ({type(exc).__name__}: {exc})") from None
     return Checkpoint(path, header, scenario, states)
+
+
+_HEADER = {"t_ns": int, "k_done": int, "grid": dict, "algorithm": str, "components": list}
+_COMPONENT = {"name": str, "guid": str, "fmu_sha256": str, "time": (int, float), "buffers": list, "extra": dict,
+              "state": str, "state_bytes": int, "state_sha256": str}
+
+
+def _check_header(path: Path, header: dict) -> None:
+    """Every key of ``checkpoint.json`` present with its type, and the exchanged values decoded (into each
+    component's ``decoded``); raises CheckpointError naming the first key that is not."""
+    def bad(what: str) -> CheckpointError:
+        return CheckpointError(f"{path}: checkpoint.json is malformed ({what})")
+
+    for key, kind in _HEADER.items():
+        if not isinstance(header.get(key), kind) or isinstance(header.get(key), bool):
+            raise bad(f"{key} missing or not a {kind.__name__}")
+    for key in ("start_ns", "stop_ns", "step_ns"):
+        if not isinstance(header["grid"].get(key), int):
+            raise bad(f"grid.{key} missing or not an integer")
+    for i, entry in enumerate(header["components"]):
+        if not isinstance(entry, dict):
+            raise bad(f"components[{i}] is not an object")
+        for key, kind in _COMPONENT.items():
+            if not isinstance(entry.get(key), kind):
+                raise bad(f"components[{i}].{key} missing or of the wrong type")
+        try:
+            entry["decoded"] = [_decode_buffer(b) for b in entry["buffers"]]
+        except (TypeError, ValueError, KeyError, AttributeError):
+            raise bad(f"components[{i}].buffers do not decode") from None
+
+
+def _encode_buffer(values: bytes | list) -> Any:
+    """A buffer snapshot as JSON: the bytes of a numeric buffer as hex; a String buffer as its list; a Binary
+    buffer (a list of bytes) as ``{"binary": [hex, ...]}``."""
+    if isinstance(values, bytes):
+        return values.hex()
+    if any(isinstance(v, (bytes, bytearray)) for v in values):
+        return {"binary": [bytes(v).hex() for v in values]}
+    return list(values)
+
+
+def _decode_buffer(data: Any) -> bytes | list:
+    if isinstance(data, str):
+        return bytes.fromhex(data)
+    if isinstance(data, dict):
+        return [bytes.fromhex(v) for v in data["binary"]]
+    return list(data)
 
 
 def _json(path: Path, name: str, data: bytes) -> Any:

@@ -78,7 +78,7 @@ def _compile(model: str, fmi: int, token: str, workdir: Path) -> Path:
     cmd = [
         "gcc", *CFLAGS,
         f"-I{C_DIR}", f"-I{_fmi_headers()}", f"-I{workdir}",
-        f"-DINSTANTIATION_TOKEN=\"{token}\"", f"-DMODEL_IDENTIFIER={model}",
+        f"-DINSTANTIATION_TOKEN=\"{token}\"", f"-DMODEL_IDENTIFIER={model}", f"-DCFMU_FMU_STATE={int(spec.fmu_state)}",
         str(C_DIR / "core.c"), str(C_DIR / f"fmi{fmi}_wrapper.c"), str(C_DIR / "models" / spec.source),
         "-o", str(library), "-lm",
     ]

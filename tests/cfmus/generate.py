@@ -90,21 +90,22 @@ def _common_root(model: Model, token: str) -> ET.Element:
 
 
 def _interfaces(root: ET.Element, model: Model) -> None:
+    state = "true" if model.fmu_state else "false"  # get/set and serialize come together, as in the Reference FMUs
     if model.fmi == 2:
         ET.SubElement(root, "ModelExchange", modelIdentifier=model.name,
                       completedIntegratorStepNotNeeded="false" if model.step_events else "true",
-                      canNotUseMemoryManagementFunctions="true", canGetAndSetFMUstate="false",
-                      canSerializeFMUstate="false")
+                      canNotUseMemoryManagementFunctions="true", canGetAndSetFMUstate=state,
+                      canSerializeFMUstate=state)
         ET.SubElement(root, "CoSimulation", modelIdentifier=model.name, canHandleVariableCommunicationStepSize="true",
-                      canNotUseMemoryManagementFunctions="true", canGetAndSetFMUstate="false",
-                      canSerializeFMUstate="false")
+                      canNotUseMemoryManagementFunctions="true", canGetAndSetFMUstate=state,
+                      canSerializeFMUstate=state)
     else:
         ET.SubElement(root, "ModelExchange", modelIdentifier=model.name,
                       needsCompletedIntegratorStep="true" if model.step_events else "false",
-                      canGetAndSetFMUState="false", canSerializeFMUState="false")
+                      canGetAndSetFMUState=state, canSerializeFMUState=state)
         cs = ET.SubElement(root, "CoSimulation", modelIdentifier=model.name,
                            canHandleVariableCommunicationStepSize="true", fixedInternalStepSize=repr(CS_FIXED_STEP),
-                           canGetAndSetFMUState="false", canSerializeFMUState="false")
+                           canGetAndSetFMUState=state, canSerializeFMUState=state)
         if model.might_return_early:
             cs.set("mightReturnEarlyFromDoStep", "true")
 

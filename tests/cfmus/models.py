@@ -59,6 +59,7 @@ class Model:
     enumerations: dict = field(default_factory=dict)  # type name -> ((item, value), ...)
     might_return_early: bool = False
     step_events: bool = False  # model exchange needs fmi{2,3}CompletedIntegratorStep (c: MODEL.step_event)
+    fmu_state: bool = False  # get, set and serialize the FMU state (c: core_get_state ..., -DCFMU_FMU_STATE=1)
 
 
 def _time() -> Var:
@@ -100,6 +101,7 @@ def _bouncing_ball(fmi: int) -> Model:
         event_indicators={"h": ["h"]},
         experiment={"startTime": 0.0, "stopTime": 3.0, "stepSize": 0.01},
         units=("s", "m", "m/s", "m/s2"),
+        fmu_state=fmi > 1,  # as the Reference FMUs' BouncingBall (FMI 1.0 has no FMU state)
     )
 
 
@@ -169,6 +171,28 @@ def _van_der_pol(fmi: int) -> Model:
         derivatives={"der(x0)": ["x1"], "der(x1)": ["x0", "x1"]},
         experiment={"startTime": 0.0, "stopTime": 20.0, "stepSize": 0.01},
         units=("s",),
+    )
+
+
+def _integrator(fmi: int) -> Model:
+    return Model(
+        "Integrator",
+        fmi,
+        "integrator.c",
+        "der(x) = k u: integrates its input, k tunable; declares FMU state",
+        (
+            _time(),
+            Var("x", 1, "Float64", "output", "continuous", "exact", 0.0, "Integral of k u", nominal=1.0),
+            Var("der(x)", 2, "Float64", "local", "continuous", "calculated", field="der_x",
+                description="Derivative of x", derivative="x"),
+            Var("u", 3, "Float64", "input", "continuous", None, 0.0, "Integrand"),
+            Var("k", 4, "Float64", "parameter", "tunable", "exact", 1.0, "Gain on u"),
+        ),
+        outputs={"x": ["x"]},
+        derivatives={"der(x)": ["u"]},
+        experiment={"startTime": 0.0, "stopTime": 1.0, "stepSize": 0.01},
+        units=("s",),
+        fmu_state=True,
     )
 
 
@@ -383,6 +407,8 @@ MODEL_SPECS: dict[tuple[str, int], Model] = {
     ("Halving", 3): _halving(3),
     ("Horizon", 2): _horizon(2),
     ("Horizon", 3): _horizon(3),
+    ("Integrator", 2): _integrator(2),
+    ("Integrator", 3): _integrator(3),
     ("Forgetful", 1): _forgetful(1),
     ("Forgetful", 2): _forgetful(2),
     ("Forgetful", 3): _forgetful(3),

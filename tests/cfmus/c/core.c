@@ -438,6 +438,74 @@ void core_event_update(Instance *in, EventUpdate *ev)
     in->dirty = true;
 }
 
+/* ---------------------------------------------------------------- FMU state */
+
+size_t core_state_size(void)
+{
+    return sizeof(Instance) + MODEL.data_size;
+}
+
+Status core_get_state(Instance *in, const char *fn, void **state)
+{
+    if (MODEL.release)  /* pointers into allocated arrays or strings: a byte copy would share them */
+        return core_fail(in, fn, "the model's data holds allocated memory: its state cannot be copied");
+    if (!*state) {  /* a state given back is overwritten, as FMI allows */
+        *state = malloc(core_state_size());
+        if (!*state) return core_fail(in, fn, "out of memory");
+    }
+    memcpy(*state, in, sizeof(Instance));
+    memcpy((char *)*state + sizeof(Instance), in->data, MODEL.data_size);
+    return ST_OK;
+}
+
+Status core_set_state(Instance *in, const char *fn, const void *state)
+{
+    Instance s;
+    if (!state) return core_fail(in, fn, "the FMU state is NULL");
+    memcpy(&s, state, sizeof s);
+    in->mode = s.mode;
+    in->dirty = s.dirty;
+    in->time = s.time;
+    in->stop_defined = s.stop_defined;
+    in->stop_time = s.stop_time;
+    in->next_time_defined = s.next_time_defined;
+    in->next_time = s.next_time;
+    in->terminate_requested = s.terminate_requested;
+    in->last_successful_time = s.last_successful_time;
+    in->early_return_allowed = s.early_return_allowed;
+    memcpy(in->data, (const char *)state + sizeof(Instance), MODEL.data_size);
+    return ST_OK;
+}
+
+void core_free_state(void **state)
+{
+    free(*state);
+    *state = NULL;
+}
+
+Status core_serialize_state(Instance *in, const char *fn, const void *state, unsigned char *bytes, size_t size)
+{
+    if (!state) return core_fail(in, fn, "the FMU state is NULL");
+    if (size != core_state_size())
+        return core_fail(in, fn, "size = %zu but a serialized state of this FMU has %zu bytes", size,
+                         core_state_size());
+    memcpy(bytes, state, size);
+    return ST_OK;
+}
+
+Status core_deserialize_state(Instance *in, const char *fn, const unsigned char *bytes, size_t size, void **state)
+{
+    if (size != core_state_size())
+        return core_fail(in, fn, "size = %zu but a serialized state of this FMU has %zu bytes: not a state of this "
+                         "FMU", size, core_state_size());
+    if (!*state) {
+        *state = malloc(size);
+        if (!*state) return core_fail(in, fn, "out of memory");
+    }
+    memcpy(*state, bytes, size);
+    return ST_OK;
+}
+
 /* ---------------------------------------------------------------- co-simulation */
 
 /* One classical Runge-Kutta step of size dt from (t, x_start) into x_out. */

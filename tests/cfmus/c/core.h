@@ -101,6 +101,22 @@ Status core_indicators(Instance *in, const char *fn, double *z, size_t n);
 Status core_nominals(Instance *in, const char *fn, double *nominal, size_t n);
 void core_event_update(Instance *in, EventUpdate *ev);
 
+/* FMU state, as the Modelica Reference FMUs keep it (their cosimulation.c getFMUState / setFMUState and
+   fmi2Functions.c): a state is a copy of the instance followed by a copy of the model's data; setting it copies
+   back what the simulation depends on (time, mode, pending events, the model's data), not the name, the
+   callbacks or the scratch arrays; serialized, it is those bytes, and de-serializing checks only their size.
+   Built in only when the model declares state (compile with -DCFMU_FMU_STATE=1, from models.py); otherwise the
+   wrappers return an error, as modelDescription.xml announces. */
+#ifndef CFMU_FMU_STATE
+#define CFMU_FMU_STATE 0
+#endif
+size_t core_state_size(void);
+Status core_get_state(Instance *in, const char *fn, void **state);
+Status core_set_state(Instance *in, const char *fn, const void *state);
+void core_free_state(void **state);
+Status core_serialize_state(Instance *in, const char *fn, const void *state, unsigned char *bytes, size_t size);
+Status core_deserialize_state(Instance *in, const char *fn, const unsigned char *bytes, size_t size, void **state);
+
 /* Co-simulation: one communication step from t to t + h. On STEP_TERMINATED
    the model asked to stop at *t_end (< t + h possibly); on STEP_REJECTED
    nothing changed and the reason was logged. */

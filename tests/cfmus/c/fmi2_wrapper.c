@@ -1,9 +1,9 @@
 /*
  * fmi2_wrapper.c - the FMI 2.0 C API (Model Exchange and Co-Simulation in one
  * binary) on top of core.c. Functions the test models do not support
- * (FMU state, directional derivatives, input derivatives, asynchronous steps)
- * are present and return fmi2Error with a message, as their capability flags
- * in modelDescription.xml announce.
+ * (directional derivatives, input derivatives, asynchronous steps; FMU state
+ * unless the model declares it) are present and return fmi2Error with a
+ * message, as their capability flags in modelDescription.xml announce.
  */
 #include <stdlib.h>
 #include <string.h>
@@ -251,45 +251,49 @@ static fmi2Status unsupported(fmi2Component c, const char *fn, const char *what)
     return fmi2Error;
 }
 
+/* ---------------------------------------------------------------- FMU state (core.h; models that declare it) */
+
+#define BEGIN_STATE(c, what)                                                           \
+    BEGIN(c, ~0u);                                                                     \
+    if (!CFMU_FMU_STATE) return unsupported(c, __func__, what)
+
 fmi2Status fmi2GetFMUstate(fmi2Component c, fmi2FMUstate *s)
 {
-    (void)s;
-    return unsupported(c, __func__, "getting the FMU state");
+    BEGIN_STATE(c, "getting the FMU state");
+    return (fmi2Status)core_get_state(in, __func__, s);
 }
 
 fmi2Status fmi2SetFMUstate(fmi2Component c, fmi2FMUstate s)
 {
-    (void)s;
-    return unsupported(c, __func__, "setting the FMU state");
+    BEGIN_STATE(c, "setting the FMU state");
+    return (fmi2Status)core_set_state(in, __func__, s);
 }
 
 fmi2Status fmi2FreeFMUstate(fmi2Component c, fmi2FMUstate *s)
 {
-    (void)s;
-    return unsupported(c, __func__, "freeing an FMU state");
+    BEGIN_STATE(c, "freeing an FMU state");
+    if (s) core_free_state(s);
+    return fmi2OK;
 }
 
 fmi2Status fmi2SerializedFMUstateSize(fmi2Component c, fmi2FMUstate s, size_t *size)
 {
+    BEGIN_STATE(c, "serializing the FMU state");
     (void)s;
-    (void)size;
-    return unsupported(c, __func__, "serializing the FMU state");
+    *size = core_state_size();
+    return fmi2OK;
 }
 
 fmi2Status fmi2SerializeFMUstate(fmi2Component c, fmi2FMUstate s, fmi2Byte bytes[], size_t size)
 {
-    (void)s;
-    (void)bytes;
-    (void)size;
-    return unsupported(c, __func__, "serializing the FMU state");
+    BEGIN_STATE(c, "serializing the FMU state");
+    return (fmi2Status)core_serialize_state(in, __func__, s, (unsigned char *)bytes, size);
 }
 
 fmi2Status fmi2DeSerializeFMUstate(fmi2Component c, const fmi2Byte bytes[], size_t size, fmi2FMUstate *s)
 {
-    (void)bytes;
-    (void)size;
-    (void)s;
-    return unsupported(c, __func__, "de-serializing the FMU state");
+    BEGIN_STATE(c, "de-serializing the FMU state");
+    return (fmi2Status)core_deserialize_state(in, __func__, (const unsigned char *)bytes, size, s);
 }
 
 fmi2Status fmi2GetDirectionalDerivative(fmi2Component c, const fmi2ValueReference vUnknown[], size_t nUnknown,

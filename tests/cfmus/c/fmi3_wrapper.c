@@ -4,10 +4,10 @@
  *
  * Array variables are read and written with nValues = the total number of
  * elements of the variables requested; any other count is an error that is
- * logged. Optional features the models do not declare (FMU state,
- * directional/adjoint derivatives, output derivatives, clock intervals, event
- * mode in co-simulation, dependencies at run time) return fmi3Error with a
- * message.
+ * logged. Optional features the models do not declare (FMU state unless
+ * the model declares it, directional/adjoint derivatives, output derivatives,
+ * clock intervals, event mode in co-simulation, dependencies at run time)
+ * return fmi3Error with a message.
  */
 #include <stdlib.h>
 #include <string.h>
@@ -389,47 +389,51 @@ fmi3Status fmi3GetVariableDependencies(fmi3Instance instance, fmi3ValueReference
     return unsupported(instance, __func__, "querying dependencies at run time (see ModelStructure)");
 }
 
+/* FMU state (core.h; models that declare it) */
+
+#define BEGIN_STATE(c, what)                                                           \
+    BEGIN(c, ~0u);                                                                     \
+    if (!CFMU_FMU_STATE) return unsupported(c, __func__, what)
+
 fmi3Status fmi3GetFMUState(fmi3Instance instance, fmi3FMUState *FMUState)
 {
-    (void)FMUState;
-    return unsupported(instance, __func__, "getting the FMU state");
+    BEGIN_STATE(instance, "getting the FMU state");
+    return (fmi3Status)core_get_state(in, __func__, FMUState);
 }
 
 fmi3Status fmi3SetFMUState(fmi3Instance instance, fmi3FMUState FMUState)
 {
-    (void)FMUState;
-    return unsupported(instance, __func__, "setting the FMU state");
+    BEGIN_STATE(instance, "setting the FMU state");
+    return (fmi3Status)core_set_state(in, __func__, FMUState);
 }
 
 fmi3Status fmi3FreeFMUState(fmi3Instance instance, fmi3FMUState *FMUState)
 {
-    (void)FMUState;
-    return unsupported(instance, __func__, "freeing an FMU state");
+    BEGIN_STATE(instance, "freeing an FMU state");
+    if (FMUState) core_free_state(FMUState);
+    return fmi3OK;
 }
 
 fmi3Status fmi3SerializedFMUStateSize(fmi3Instance instance, fmi3FMUState FMUState, size_t *size)
 {
+    BEGIN_STATE(instance, "serializing the FMU state");
     (void)FMUState;
-    (void)size;
-    return unsupported(instance, __func__, "serializing the FMU state");
+    *size = core_state_size();
+    return fmi3OK;
 }
 
 fmi3Status fmi3SerializeFMUState(fmi3Instance instance, fmi3FMUState FMUState, fmi3Byte serializedState[],
                                  size_t size)
 {
-    (void)FMUState;
-    (void)serializedState;
-    (void)size;
-    return unsupported(instance, __func__, "serializing the FMU state");
+    BEGIN_STATE(instance, "serializing the FMU state");
+    return (fmi3Status)core_serialize_state(in, __func__, FMUState, serializedState, size);
 }
 
 fmi3Status fmi3DeserializeFMUState(fmi3Instance instance, const fmi3Byte serializedState[], size_t size,
                                    fmi3FMUState *FMUState)
 {
-    (void)serializedState;
-    (void)size;
-    (void)FMUState;
-    return unsupported(instance, __func__, "de-serializing the FMU state");
+    BEGIN_STATE(instance, "de-serializing the FMU state");
+    return (fmi3Status)core_deserialize_state(in, __func__, serializedState, size, FMUState);
 }
 
 fmi3Status fmi3GetDirectionalDerivative(fmi3Instance instance, const fmi3ValueReference unknowns[],
