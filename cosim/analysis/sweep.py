@@ -19,6 +19,12 @@
   killed, then recorded it as ``lost: KilledWorker``, without the reason).
 - Every finished case is appended (and flushed) to ``DIR/results.csv`` as it arrives; running
   the same command again skips the cases already there (``ok`` or ``failed``).
+- A warm sweep (``--from-checkpoint FILE``, :func:`run_sweep`'s ``checkpoint``) starts every case from a checkpoint
+  of the scenario's run (:mod:`cosim.io.checkpoint`): the case's values are set at the checkpoint's time, as
+  ``run --resume FILE --set`` does (:func:`cosim.run.resumed_scenario`), so only component variables settable
+  during a run can be swept (tunable parameters, inputs no connection drives; anything else is refused before a
+  case runs), and a case costs only the time after the checkpoint. The checkpoint reaches the workers as its path
+  and each case reads it in its own process (FMU states and handles never travel).
 
 ``results.csv``: one row per case: ``case`` (a hash of its parameter values), ``status``
 (``ok``: the run completed and passed its acceptance checks; ``failed``: it raised or missed a
@@ -27,7 +33,8 @@ check, ``message`` says why), one column per swept name, then :func:`cosim.analy
 ``rmse`` and ``max_error`` the largest over the axes, ``peak_effort`` N or N*m, ``sim_time_s``,
 ``steps``, ``wall_time_s`` of the case), ``checks`` (the scenario's acceptance checks:
 ``ok``/``FAILED``/empty), ``mcap`` (with ``--logs``) and ``message``. Floats are written with
-``repr`` (they read back to the same double).
+``repr`` (they read back to the same double). A warm sweep's table has two more columns, ``start_time_s`` (the
+checkpoint's time) and ``checkpoint`` (its path); its metrics cover the time after the checkpoint only.
 """
 
 from __future__ import annotations
@@ -55,16 +62,19 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from ..engine import supervision
+from ..engine.events import resolve_sets
+from ..engine.execution import Execution
 from ..engine.prepare import build_key, build_ours, locate_fmus
-from ..engine.scenario import dotted_overrides, parse_set_value, read_scenario
-from ..engine.system import build_plan
-from ..errors import CosimError, exit_now, file_problem, number_option, written_by_rename
+from ..engine.scenario import dotted_overrides, load_scenario, parse_set_value, read_scenario
+from ..engine.system import SystemPlan, build_plan
+from ..errors import CosimError, ScenarioError, exit_now, file_problem, number_option, written_by_rename
 from ..io.output import check_output, output_dir
-from ..fmi import cleanup_extracted
+from ..fmi import cleanup_extracted, make_slave
 from ..fmi.extract import sweep_orphans
+from ..io.checkpoint import Checkpoint, file_sha256, read_checkpoint
 from ..io.recover import recover_crashed
 from ..observers.recorders import PeakEffort
-from ..run import run_scenario
+from ..run import resumed_scenario, run_scenario
 from .metrics import metric_names, metrics
 
 if TYPE_CHECKING:
@@ -75,6 +85,7 @@ __all__ = [
     "Case",
     "SweepError",
     "SweepSummary",
+    "WarmStart",
     "make_cases",
     "parse_grid",
     "parse_random",
@@ -84,6 +95,8 @@ __all__ = [
 ]
 
 RESULTS = "results.csv"
+WARM_COLUMNS = ("start_time_s", "checkpoint")
+"""The columns a warm sweep's table has besides a cold one's: the checkpoint's time, s, and its path."""
 _RANDOM = re.compile(r"^(uniform|normal)\(\s*([^,()]+)\s*,\s*([^,()]+)\s*\)$")
 
 
@@ -101,6 +114,25 @@ class Case:
     def id(self) -> str:
         text = json.dumps(sorted((k, repr(v)) for k, v in self.values.items()))
         return hashlib.sha256(text.encode()).hexdigest()[:12]
+
+
+@dataclass(frozen=True)
+class WarmStart:
+    """Where a warm sweep's cases start (plain data: it travels to the workers, each case reads the checkpoint in its
+    own process). ``checkpoint``: the file's absolute path; ``time``: its time, s; ``sha256``: the file's;
+    ``stop_time``: the cases' end, s."""
+
+    checkpoint: str
+    time: float
+    sha256: str
+    stop_time: float
+
+    def record(self) -> dict[str, Any]:
+        """What ``sweep.json`` says of it (``warm_start``)."""
+        return {"checkpoint": self.checkpoint, "time": self.time, "stop_time": self.stop_time, "sha256": self.sha256}
+
+    def text(self) -> str:
+        return f"warm-started from {self.checkpoint} at t = {self.time:g} s"
 
 
 def _value(text: str, where: str) -> Any:
@@ -202,7 +234,8 @@ def _failed(exc: Exception, t0: float) -> dict[str, Any]:
 
 
 def run_loaded_case(scenario: Scenario, fmu_files: dict[tuple[str, bool, int], str],
-                    mcap: str | None = None) -> dict[str, Any]:
+                    mcap: str | None = None, warm: WarmStart | None = None,
+                    sets: dict[str, Any] | None = None) -> dict[str, Any]:
     """Run one case, a loaded :class:`~cosim.engine.scenario.Scenario` (in a Dask worker, or here); never
     raises for a failing case, and a case whose FMU crashes its process is a failed case, not the end of the worker.
 
@@ -213,11 +246,14 @@ def run_loaded_case(scenario: Scenario, fmu_files: dict[tuple[str, bool, int], s
     the component, the phase, the time and how it died (the case's log, with ``mcap``, is recovered up to the crash).
     ``COSIM_SUPERVISE=0`` (or a system without ``fork``) runs it in this process. Returns the row of
     ``results.csv`` without the parameter columns: status, message, metrics, checks, mcap.
+
+    ``warm``: a warm case, ``scenario`` being the checkpoint's (:func:`cosim.run.resumed_scenario`): the checkpoint
+    read here, its state restored, ``sets`` (``component.variable: value``) set at its time.
     """
     if not hasattr(os, "fork") or os.environ.get("COSIM_SUPERVISE", "1") == "0":
-        return _run_case(scenario, fmu_files, mcap)
+        return _run_case(scenario, fmu_files, mcap, warm, sets)
     t0 = time.perf_counter()
-    row, why, rec = supervision.contained(lambda: _run_case(scenario, fmu_files, mcap))
+    row, why, rec = supervision.contained(lambda: _run_case(scenario, fmu_files, mcap, warm, sets))
     if why is None:
         return row
     sweep_orphans()  # the FMUs the dead child extracted
@@ -225,15 +261,19 @@ def run_loaded_case(scenario: Scenario, fmu_files: dict[tuple[str, bool, int], s
     return {**_failed(CosimError(why), t0), "mcap": log or ""}
 
 
-def _run_case(scenario: Scenario, fmu_files: dict[tuple[str, bool, int], str], mcap: str | None) -> dict[str, Any]:
+def _run_case(scenario: Scenario, fmu_files: dict[tuple[str, bool, int], str], mcap: str | None,
+              warm: WarmStart | None = None, sets: dict[str, Any] | None = None) -> dict[str, Any]:
     """:func:`run_loaded_case` in this process."""
     t0 = time.perf_counter()
     row: dict[str, Any] = {"status": "failed", "message": "", "checks": "", "mcap": ""}
     try:
         sc = scenario.model_copy(update={"parallel": "off"})  # a valid value: nothing to validate again
         peak = PeakEffort()
+        resume = {}
+        if warm is not None:  # read here: FMU states are restored in the process that runs the case
+            resume = {"resume": read_checkpoint(warm.checkpoint), "resume_sets": dict(sets or {})}
         res = run_scenario(sc, out=mcap, log=mcap is not None, progress=False, observers=[peak],
-                           fmu_files=fmu_files)
+                           fmu_files=fmu_files, **resume)
         row.update(metrics(sc, res, peak.peak))
         row["status"] = "ok"  # completed, or ended early by an FMU (the message says which and when)
         row["message"] = res.message
@@ -260,6 +300,7 @@ class SweepSummary:
     failed: dict[str, str] = field(default_factory=dict)
     wall_time: float = 0.0
     workers: str = ""
+    warm: WarmStart | None = None
 
     @property
     def ok(self) -> bool:
@@ -267,8 +308,8 @@ class SweepSummary:
 
     def text(self) -> str:
         lines = [f"sweep: {self.total} cases, {self.total - len(self.failed)} ok, {len(self.failed)} failed "
-                 f"({self.ran} run now in {self.wall_time:.1f} s on {self.workers}, {self.skipped} already done) "
-                 f"-> {self.out / RESULTS}"]
+                 f"({self.ran} run now in {self.wall_time:.1f} s on {self.workers}, {self.skipped} already done"
+                 f"{'; ' + self.warm.text() if self.warm is not None else ''}) -> {self.out / RESULTS}"]
         for cid, msg in list(self.failed.items())[:10]:
             lines.append(f"  FAILED {cid}: {msg}")
         if len(self.failed) > 10:
@@ -312,8 +353,71 @@ def _check_names(scenarios: list[Any], fmu_files: dict[tuple[str, bool, int], st
         build_plan(sc, infos)
 
 
-def _columns(params: list[str], metric_names: list[str]) -> list[str]:
-    return ["case", "status", *params, *metric_names, "checks", "mcap", "message"]
+def _columns(params: list[str], metric_names: list[str], warm: bool = False) -> list[str]:
+    return ["case", "status", *params, *metric_names, *(WARM_COLUMNS if warm else ()), "checks", "mcap", "message"]
+
+
+def _warm_scenario(scenario: str, checkpoint: str | Path, stop_time: float | None,
+                   params: list[str]) -> tuple[Checkpoint, Scenario]:
+    """The checkpoint read and its scenario to ``stop_time`` (``scenario``, the file named, must be the one it holds:
+    CheckpointError); a swept name that is a scenario key, not a component's variable, refused (SweepError)."""
+    ck = read_checkpoint(checkpoint)
+    sc = resumed_scenario(ck, stop_time, load_scenario(scenario))
+    for name in params:
+        comp, dot, _ = name.partition(".")
+        if not dot or comp not in sc.components:
+            raise SweepError(f"{name}: a scenario key, not a variable of a component ({', '.join(sc.components)}); a "
+                             f"warm sweep continues the checkpoint's run as it was from t = {ck.time:g} s and sets "
+                             "only component variables settable during a run (tunable parameters, inputs no "
+                             "connection drives)")
+    return ck, sc
+
+
+def _warm_system(scenario: Scenario, ck: Checkpoint, fmu_files: dict[tuple[str, bool, int], str]) -> SystemPlan:
+    """The warm cases' system, checked against the checkpoint before any case runs (the same components on the same
+    FMU files, time grid and algorithm, a stop time after it: :meth:`Checkpoint.check_system`; no FMU
+    instantiated). A checkpoint holds its exchanged values by variable, so a case with or without a log takes it."""
+    infos = locate_fmus(scenario, fmu_files)
+    plan = build_plan(scenario, infos, "none")
+    ex = Execution(plan, scenario.time.start_ns, scenario.time.stop_ns, scenario.time.step_ns,
+                   [scenario.components[n].step_multiple for n in plan.names], scenario.algorithm)
+    for n, info in zip(plan.names, plan.infos):
+        c = scenario.components[n]
+        ex.add_slave(make_slave(n, info, c.interface, c.rtol, c.solver, c.max_step))  # buffers, no instance
+    ck.check_system(ex, scenario.name)
+    return plan
+
+
+def _check_sets(cases: list[Case], plan: SystemPlan, t: float) -> None:
+    """Every warm case's values resolved as the run resolves a resumed run's ``--set`` (:func:`resolve_sets`): a
+    name not settable during a run (a fixed parameter, a connected input, an output) or a bad value stops the sweep
+    before it starts, one line naming the name and why."""
+    for c in cases:
+        try:
+            resolve_sets(dict(c.values), plan, "sweep")
+        except ScenarioError as exc:
+            why = exc.issues[0].message if exc.issues else str(exc)
+            raise SweepError(f"{why} (a warm sweep sets each case's values at the checkpoint's time, t = {t:g} s, "
+                             "as an event)") from None
+
+
+def _meta(out: Path) -> dict[str, Any]:
+    """``out/sweep.json`` as written by an earlier sweep; {} when it is missing or unreadable."""
+    path = out / "sweep.json"
+    if not os.path.lexists(path) or file_problem(path) is not None:
+        return {}
+    try:
+        meta = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, ValueError, RecursionError):
+        return {}
+    return meta if isinstance(meta, dict) else {}
+
+
+def _started(record: Any) -> str:
+    """The start a ``sweep.json``'s ``warm_start`` record names, in words."""
+    if isinstance(record, dict) and {"checkpoint", "time", "stop_time"} <= set(record):
+        return f"warm-started from {record['checkpoint']} at t = {record['time']} s to {record['stop_time']} s"
+    return "its sweep.json names no warm start"
 
 
 def _cell(v: Any) -> str:
@@ -326,34 +430,58 @@ def _cell(v: Any) -> str:
 
 def run_sweep(scenario: str | Path, cases: list[Case], out: str | Path, *, workers: int | None = None,
               scheduler: str | None = None, logs: bool = False,
-              on_progress: Callable[[int, int, int], None] | None = None) -> SweepSummary:
+              on_progress: Callable[[int, int, int], None] | None = None,
+              checkpoint: str | Path | None = None, stop_time: float | None = None) -> SweepSummary:
     """Run ``cases`` of ``scenario`` on Dask, appending each result to ``out/results.csv``.
 
     Cases already in the table are skipped. ``workers``: size of the embedded ``LocalCluster``
     (default: the CPU count); ``scheduler``: address of an existing cluster instead.
     ``on_progress(done, failed, total)`` after each case. Raises :class:`ScenarioError` for a bad
     override name or value (checked for every case before anything runs).
+
+    ``checkpoint``: a warm sweep: every case continues this checkpoint of ``scenario``'s run
+    (:mod:`cosim.io.checkpoint`) to ``stop_time`` (s; default: the checkpoint's run's), its values
+    (``component.variable``: tunable parameters, inputs no connection drives) set at the checkpoint's
+    time; anything else, a checkpoint of another scenario or FMU build, or a stop time not after the
+    checkpoint raises before anything runs (SweepError, CheckpointError).
     """
 
     t_start = time.perf_counter()
     scenario = str(Path(scenario).resolve())
     out = Path(out)
-    source = read_scenario(scenario)  # read once: every case is derived from it
-    loaded = [source.load(dotted_overrides(c.values, "sweep case")) for c in cases]
     params = list(dict.fromkeys(k for c in cases for k in c.values))
-    columns = _columns(params, metric_names(loaded[0]))
+    ck = warm = None
+    if checkpoint is None:
+        if stop_time is not None:
+            raise SweepError("stop_time is a warm sweep's (with checkpoint=); a case from t = 0 takes time.stop "
+                             "among its values")
+        source = read_scenario(scenario)  # read once: every case is derived from it
+        loaded = [source.load(dotted_overrides(c.values, "sweep case")) for c in cases]
+    else:
+        ck, warm_scenario = _warm_scenario(scenario, checkpoint, stop_time, params)
+        warm = WarmStart(str(Path(ck.path).resolve()), ck.time, file_sha256(ck.path), warm_scenario.time.stop)
+        loaded = [warm_scenario] * len(cases)  # one scenario: a case's values are set during its run
+    columns = _columns(params, metric_names(loaded[0]), warm is not None)
     output_dir(out)
     table = out / RESULTS
     done_rows = read_results(out)
     if done_rows and list(done_rows[0]) != columns:
         raise SweepError(f"{table} holds another sweep (columns {', '.join(done_rows[0])}); use another --out")
+    if done_rows and warm is not None:
+        before = _meta(out).get("warm_start")
+        if before != warm.record():
+            raise SweepError(f"{table} holds another sweep ({_started(before)}, not {warm.text()} to "
+                             f"{warm.stop_time:g} s); use another --out")
     finished = {r["case"]: r for r in done_rows if r["status"] in ("ok", "failed")}
     failed = {f"{cid} ({', '.join(f'{k}={r[k]}' for k in params)})": r["message"] or "acceptance check failed"
               for cid, r in finished.items() if r["status"] == "failed" or r["checks"] == "FAILED"}
     todo = [(c, sc) for c, sc in zip(cases, loaded) if c.id not in finished]
+    meta: dict[str, Any] = {"scenario": scenario, "parameters": params, "cases": len(cases)}
+    if warm is not None:
+        meta["warm_start"] = warm.record()
     with written_by_rename(out / "sweep.json") as tmp:
-        tmp.write_text(json.dumps({"scenario": scenario, "parameters": params, "cases": len(cases)}, indent=2))
-    summary = SweepSummary(out, len(cases), len(todo), len(cases) - len(todo), failed)
+        tmp.write_text(json.dumps(meta, indent=2))
+    summary = SweepSummary(out, len(cases), len(todo), len(cases) - len(todo), failed, warm=warm)
     if on_progress is not None:
         on_progress(len(finished), len(failed), len(cases))
     if not todo:
@@ -362,8 +490,14 @@ def run_sweep(scenario: str | Path, cases: list[Case], out: str | Path, *, worke
         return summary
     cluster = SweepCluster(workers, scheduler).start()  # its workers start while the FMUs are built and checked
     try:
-        fmu_files = prebuild(loaded)
-        _check_names(loaded, fmu_files)
+        if warm is None:
+            fmu_files = prebuild(loaded)
+            _check_names(loaded, fmu_files)
+        else:
+            fmu_files = prebuild(loaded[:1])
+            plan = _warm_system(loaded[0], ck, fmu_files)
+            _check_sets(cases, plan, ck.time)
+            warm = summary.warm = WarmStart(warm.checkpoint, warm.time, warm.sha256, warm.stop_time)
     except BaseException:
         cluster.close()
         raise
@@ -380,7 +514,8 @@ def run_sweep(scenario: str | Path, cases: list[Case], out: str | Path, *, worke
         futures = {}
         for c, sc in todo:
             mcap = str((out / "logs" / f"{c.id}.mcap").resolve()) if logs else None
-            fut = client.submit(run_loaded_case, sc, fmu_files, mcap, key=f"case-{c.id}", pure=False)
+            fut = client.submit(run_loaded_case, sc, fmu_files, mcap, warm, c.values if warm is not None else None,
+                                key=f"case-{c.id}", pure=False)
             futures[fut] = c
         n_done = len(finished)
         for fut in as_completed(futures):
@@ -390,6 +525,8 @@ def run_sweep(scenario: str | Path, cases: list[Case], out: str | Path, *, worke
             except Exception as exc:  # the task itself was lost (e.g. every worker it ran on died)
                 row = {"status": "lost", "message": f"{type(exc).__name__}: {exc}"}
             row = {"case": c.id, **{k: c.values.get(k) for k in params}, **row}
+            if warm is not None:
+                row.update(start_time_s=warm.time, checkpoint=warm.checkpoint)
             writer.writerow([_cell(row.get(k)) for k in columns])
             f.flush()
             n_done += 1
@@ -604,7 +741,8 @@ def report(out: str | Path, metric: str = "rmse", fig: str | Path | None = None)
         raise SweepError(f"{meta_path}: missing or without parameters (the columns of results.csv "
                          "it swept); it is written by the sweep next to results.csv")
     if metric not in rows[0]:
-        valid = [c for c in rows[0] if c not in ("case", "status", "checks", "mcap", "message", *params)]
+        valid = [c for c in rows[0] if c not in ("case", "status", "checks", "mcap", "message", *WARM_COLUMNS,
+                                                 *params)]
         raise SweepError(f"--metric {metric}: not a column; valid: {', '.join(valid)}")
     ok = [r for r in rows if r["status"] == "ok"]
     n_bad = len(rows) - len(ok)
@@ -661,7 +799,12 @@ def report(out: str | Path, metric: str = "rmse", fig: str | Path | None = None)
         ax.set_xlabel(a)
         ax.set_ylabel(b)
     scenario = Path(meta.get("scenario", "")).stem
-    ax.set_title(f"{scenario}: {metric}, {len(ok)} cases" + (f" ({n_bad} failed, not shown)" if n_bad else ""))
+    warm = meta.get("warm_start")
+    start = ""
+    if isinstance(warm, dict) and _is_number(warm.get("time")):  # a warm sweep: its metrics are those after the start
+        start = f"\nwarm-started at t = {float(warm['time']):g} s from {Path(str(warm.get('checkpoint', ''))).name}"
+    ax.set_title(f"{scenario}: {metric}, {len(ok)} cases" + (f" ({n_bad} failed, not shown)" if n_bad else "") + start,
+                 fontsize="medium" if start else None)
     try:
         with written_by_rename(fig_path) as tmp:
             f.savefig(tmp, dpi=120, format="png")
@@ -707,7 +850,9 @@ def register(sub) -> None:
                                    "Names as for --set (ctl.gain.kp[1], plant.mass.payload, "
                                    "trajectory.params.rx, time.stop). Results go to DIR/results.csv as they "
                                    "arrive; the same command again skips the finished cases. Exit 1 if a case "
-                                   "failed.")
+                                   "failed. With --from-checkpoint, every case continues a checkpoint of the "
+                                   "scenario's run (run --checkpoint-at) with its values set at the checkpoint's "
+                                   "time: only component variables settable during a run (plant.mass.payload).")
     p.add_argument("scenario", help="scenario file (.yaml)")
     p.add_argument("--grid", action="append", default=[], metavar="NAME=V1,V2,...", help="values of NAME "
                    "(repeatable: the cartesian product)")
@@ -718,6 +863,11 @@ def register(sub) -> None:
     p.add_argument("--set", action="append", default=[], metavar="NAME=VALUE",
                    help="fixed override for every case (repeatable)")
     p.add_argument("--stop-time", type=number_option(), help="override time.stop for every case, s")
+    p.add_argument("--from-checkpoint", metavar="FILE",
+                   help="warm sweep: every case starts from this checkpoint of the scenario's run (written by run "
+                        "--checkpoint-at T), its --grid/--random/--set values set at T as run --resume --set does "
+                        "(tunable parameters, inputs no connection drives); a case runs only from T to the stop "
+                        "time")
     g = p.add_mutually_exclusive_group()
     g.add_argument("--workers", type=number_option(whole=True, ge=1, le=MAX_WORKERS), default=None, metavar="W",
                    help="embedded Dask LocalCluster of W single-threaded worker processes (default: CPU count)")
@@ -747,7 +897,8 @@ def _cmd_sweep(args) -> int:
         if not sep or not name:
             raise SweepError(f"--set {item}: expected NAME=VALUE")
         fixed[name] = parse_set_value(raw, f"--set {item}")
-    if args.stop_time is not None:
+    warm = args.from_checkpoint is not None
+    if args.stop_time is not None and not warm:  # a warm sweep's stop time is the resumed scenario's
         fixed["time.stop"] = args.stop_time
     cases = make_cases(parse_grid(args.grid), parse_random(args.random), args.n, args.seed)
     cases = [Case({**fixed, **c.values}) for c in cases]
@@ -774,14 +925,16 @@ def _cmd_sweep(args) -> int:
         progress = show
     try:
         summary = run_sweep(args.scenario, cases, args.out, workers=args.workers, scheduler=args.scheduler,
-                            logs=args.logs, on_progress=progress)
+                            logs=args.logs, on_progress=progress, checkpoint=args.from_checkpoint,
+                            stop_time=args.stop_time if warm else None)
     finally:
         if bar is not None:
             bar.stop()
     if args.json:
         print(json.dumps({"ok": summary.ok, "out": str(summary.out / RESULTS), "total": summary.total,
                           "ran": summary.ran, "skipped": summary.skipped, "failed": summary.failed,
-                          "wall_time_s": summary.wall_time}, indent=2))
+                          "wall_time_s": summary.wall_time,
+                          "warm_start": summary.warm.record() if summary.warm is not None else None}, indent=2))
     else:
         print(summary.text())
     return 0 if summary.ok else 1

@@ -43,13 +43,14 @@ class ComponentState:
     and what a wrapper keeps beside the FMU (:meth:`Base._extra_state`: a model-exchange wrapper's event
     bookkeeping). Reused by :meth:`Base.save_state` (``into``): the FMU overwrites the handle's state."""
 
-    __slots__ = ("handle", "time", "buffers", "extra")
+    __slots__ = ("handle", "time", "buffers", "extra", "refresh")
 
-    def __init__(self, handle: Any, time: float, buffers: list, extra: dict):
+    def __init__(self, handle: Any, time: float, buffers: list, extra: dict, refresh: bool = False):
         self.handle = handle
         self.time = time
         self.buffers = buffers
         self.extra = extra
+        self.refresh = refresh  # outputs this system reads that the state does not hold: read from the FMU
 
 
 class Slave(Protocol):
@@ -87,7 +88,8 @@ class Slave(Protocol):
     def restore_state(self, state: "ComponentState") -> None: ...
     def free_state(self, state: "ComponentState") -> None: ...
     def export_state(self, state: "ComponentState") -> bytes: ...
-    def import_state(self, data: bytes, time: float, buffers: list, extra: dict) -> "ComponentState": ...
+    def exchanged(self, state: "ComponentState") -> dict[str, Any]: ...
+    def import_state(self, data: bytes, time: float, exchanged: dict, extra: dict) -> "ComponentState": ...
     def set_values(self, values: dict[Variable, list]) -> None: ...  # an event's changes, between steps
 
 
@@ -382,6 +384,9 @@ class Base:
             b.restore(saved)
         self.time = state.time
         self._restore_extra(state.extra)
+        if state.refresh:
+            self.get_outputs()
+            state.refresh = False
 
     def free_state(self, state: ComponentState) -> None:
         if self.fmu is None or self._fatal or not state.handle:
@@ -398,18 +403,47 @@ class Base:
         serialize = self.fmu.serializeFMUstate if self.fmi == 2 else self.fmu.serializeFMUState
         return bytes(self._guard(what, serialize, state.handle))
 
-    def import_state(self, data: bytes, time: float, buffers: list, extra: dict) -> ComponentState:
-        """A state from :meth:`export_state` bytes (the FMU checks they are its own), with the master's part."""
+    def exchanged(self, state: ComponentState) -> dict[str, Any]:
+        """The exchanged values of ``state`` by variable (``in:NAME`` / ``out:NAME`` -> its bytes, or its list of
+        strings or binaries): what a checkpoint keeps, independent of how this run grouped them into buffers."""
+        out: dict[str, Any] = {}
+        for prefix, bufs, saved in (("in", self.in_bufs, state.buffers[:len(self.in_bufs)]),
+                                    ("out", self.out_bufs, state.buffers[len(self.in_bufs):])):
+            for b, snap in zip(bufs, saved):
+                size = 1 if b.ctype_free else ctypes.sizeof(b.values._type_)
+                for v, offset in zip(b.variables, b.offsets):
+                    out[f"{prefix}:{v.name}"] = snap[offset * size:(offset + v.count) * size]
+        return out
+
+    def import_state(self, data: bytes, time: float, exchanged: dict, extra: dict) -> ComponentState:
+        """A state from :meth:`export_state` bytes (the FMU checks they are its own) and :meth:`exchanged` values.
+        Outputs this system reads that ``exchanged`` lacks (a run that logs more than the one that saved) are read
+        from the FMU once its state is restored."""
         what = "fmi2DeSerializeFMUstate" if self.fmi == 2 else "fmi3DeserializeFMUState"
         if not self.can_serialize_state:
             raise FMIError(self.name, what, self.time, None, "the FMU does not declare canSerializeFMUstate")
+        buffers, refresh = [], False
+        for prefix, bufs in (("in", self.in_bufs), ("out", self.out_bufs)):
+            for b in bufs:
+                snap = b.snapshot()
+                size = 1 if b.ctype_free else ctypes.sizeof(b.values._type_)
+                parts = []
+                for v, offset in zip(b.variables, b.offsets):
+                    value = exchanged.get(f"{prefix}:{v.name}")
+                    expected = v.count * size
+                    if value is None or len(value) != expected:
+                        if prefix == "in" or value is not None:
+                            raise FMIError(self.name, what, time, None, f"the checkpoint holds no value of "
+                                           f"{prefix}put {v.name} of this system" if value is None else
+                                           f"the checkpoint's {prefix}put {v.name} has {len(value)} bytes, this "
+                                           f"system's {expected}")
+                        refresh = True
+                        value = snap[offset * size:(offset + v.count) * size]
+                    parts.append(value)
+                buffers.append(b"".join(parts) if not b.ctype_free else [x for p in parts for x in p])
         deserialize = self.fmu.deSerializeFMUstate if self.fmi == 2 else self.fmu.deserializeFMUState
         handle = self._guard(what, deserialize, bytes(data))
-        sizes = [len(b.snapshot()) for b in (*self.in_bufs, *self.out_bufs)]
-        if [len(b) for b in buffers] != sizes:
-            raise FMIError(self.name, what, time, None, f"the checkpoint's exchanged values ({[len(b) for b in buffers]}"
-                           f" bytes) do not fit this system's ({sizes} bytes)")
-        return ComponentState(handle, time, buffers, extra)
+        return ComponentState(handle, time, buffers, extra, refresh)
 
     def _extra_state(self) -> dict:
         """What a wrapper keeps beside the FMU that a restored state needs (plain data: a checkpoint holds it)."""

@@ -5,7 +5,7 @@ A checkpoint is a zip archive (each member with its CRC, so damage is found, nev
 
 - ``checkpoint.json``: format and version; the time (``t_ns``, the macro steps done), the time grid and algorithm;
   per component its name, the FMU's guid (instantiation token) and the SHA-256 of its file, the time it reached,
-  the master's copies of its exchanged values and the wrapper's bookkeeping, the name, size and SHA-256 of its
+  the master's copies of its exchanged values by variable (``in:NAME`` / ``out:NAME``) and the wrapper's bookkeeping, the name, size and SHA-256 of its
   serialized FMU state; the events' progress (time events fired, state events armed); the command that wrote it;
 - ``scenario.json``: the scenario as it ran (every override applied, FMU paths absolute);
 - ``states/<i>.bin``: component ``i``'s FMU state as the FMU serialized it (``fmi2SerializeFMUstate``).
@@ -147,7 +147,7 @@ def write_checkpoint(path: str | Path, ex: Execution, scenario: dict, command: s
         components.append({
             "name": name, "fmu": info.path.name, "guid": info.md.guid, "fmu_sha256": file_sha256(info.path),
             "fmi": info.fmi_major, "time": cs.time,
-            "buffers": [_encode_buffer(b) for b in cs.buffers], "extra": cs.extra,
+            "exchanged": {k: _encode_buffer(v) for k, v in ex.slaves[c].exchanged(cs).items()}, "extra": cs.extra,
             "state": f"states/{c}.bin", "state_bytes": len(blob), "state_sha256": hashlib.sha256(blob).hexdigest(),
         })
     ev = ex.events
@@ -208,7 +208,7 @@ def read_checkpoint(path: str | Path) -> Checkpoint:
 
 
 _HEADER = {"t_ns": int, "k_done": int, "grid": dict, "algorithm": str, "components": list}
-_COMPONENT = {"name": str, "guid": str, "fmu_sha256": str, "time": (int, float), "buffers": list, "extra": dict,
+_COMPONENT = {"name": str, "guid": str, "fmu_sha256": str, "time": (int, float), "exchanged": dict, "extra": dict,
               "state": str, "state_bytes": int, "state_sha256": str}
 
 
@@ -231,9 +231,9 @@ def _check_header(path: Path, header: dict) -> None:
             if not isinstance(entry.get(key), kind):
                 raise bad(f"components[{i}].{key} missing or of the wrong type")
         try:
-            entry["decoded"] = [_decode_buffer(b) for b in entry["buffers"]]
+            entry["decoded"] = {k: _decode_buffer(v) for k, v in entry["exchanged"].items()}
         except (TypeError, ValueError, KeyError, AttributeError):
-            raise bad(f"components[{i}].buffers do not decode") from None
+            raise bad(f"components[{i}].exchanged does not decode") from None
 
 
 def _encode_buffer(values: bytes | list) -> Any:

@@ -185,3 +185,21 @@ def test_time_and_state_events_set_the_payload_and_are_logged(tmp_path):
     # located inside its step: x is at or above 0.07 m at the sample before the located time, below after it
     # (the located time against an analytic crossing: tests/unit/test_events.py)
     assert x.y[i - 1] >= 0.07 > x.y[i], f"x around {t_e} s: {x.y[i - 1]}, {x.y[i]}"
+
+
+def test_a_checkpoint_does_not_depend_on_what_the_writing_run_logged(tmp_path):
+    """A run without a log reads fewer outputs than a logged one; its checkpoint resumes into a logged run (the
+    outputs it lacks read from the restored FMUs), and a logged run's into one without a log."""
+    full, quiet_ckpt, logged_ckpt = tmp_path / "full.mcap", tmp_path / "quiet.ckpt", tmp_path / "logged.ckpt"
+    r = cosim("run", ANALYTIC, "--set", "fmus=native", "--stop-time", "0.3", "--checkpoint-at", "0.1",
+              "--checkpoint-out", str(logged_ckpt), "--out", str(full), "--sim-stamps")
+    assert r.returncode == 0, r.stderr
+    r = cosim("run", ANALYTIC, "--set", "fmus=native", "--stop-time", "0.3", "--checkpoint-at", "0.1",
+              "--checkpoint-out", str(quiet_ckpt), "--no-log")
+    assert r.returncode == 0, r.stderr
+    resumed = tmp_path / "resumed.mcap"
+    r = cosim("run", "--resume", str(quiet_ckpt), "--out", str(resumed), "--sim-stamps")
+    assert r.returncode == 0, r.stderr
+    _assert_same_after(full, resumed, 0.1)
+    r = cosim("run", "--resume", str(logged_ckpt), "--no-log", "--json")
+    assert r.returncode == 0, r.stderr
