@@ -24,6 +24,14 @@ standard allows). A plant or controller with no direct feedthrough declares ``de
 A step that cannot be taken (the adapter's ``advance`` raises) returns ``fmi2Discard`` with
 the reason logged through the FMI logger (status error), never ``fmi2Fatal``; the instance
 then refuses further steps, since its state after a failed step is undefined.
+
+FMU state: every adapter can get, set and serialize its state (``canGetAndSetFMUstate``,
+``canSerializeFMUstate``; :class:`fmus._names.StateAccess`, with the adapter's
+:meth:`~fmus._names.StateAccess.internal_state` hook). After initialization a tunable parameter
+takes effect at once through the adapter's :meth:`~fmus._names.StateAccess.retune` (the motion
+state kept), and setting a fixed one is refused with the reason logged. pythonfmu's binary gives
+Python code no failing status but fmi2Fatal (any exception), so a refusal is fmi2Fatal; the
+instance stays valid (:func:`fmus._names.spare_wrapper_references`).
 """
 
 from __future__ import annotations
@@ -38,8 +46,8 @@ from pythonfmu.enums import Fmi2Status
 from pythonfmu.default_experiment import DefaultExperiment
 from pythonfmu.variables import Boolean, Integer, Real, String
 
-from ._names import (UNITS, XYZ, ValueAccess, axis_names, compensate_exporter_refcount, initial_knowns, joint_names,
-                     writer)
+from ._names import (UNITS, XYZ, StateAccess, ValueAccess, axis_names, compensate_exporter_refcount, initial_knowns,
+                     joint_names, writer)
 
 __all__ = ["Adapter", "Depends", "UNITS", "XYZ", "joint_names", "axis_names", "DefaultExperiment", "writer"]
 
@@ -78,9 +86,10 @@ class _UnitReal(Real):
 _CAUSALITY = {c.name: c for c in Fmi2Causality}
 _VARIABILITY = {v.name: v for v in Fmi2Variability}
 _TYPES = {"real": float, "integer": int, "boolean": bool, "string": str}
+_STATE_CAPABILITIES = {"canGetAndSetFMUstate": True, "canSerializeFMUstate": True}
 
 
-class Adapter(ValueAccess, Fmi2Slave):
+class Adapter(StateAccess, ValueAccess, Fmi2Slave):
     """FMI 2.0 co-simulation slave declared from :class:`Spec` records.
 
     Subclasses set the class attributes ``KIND`` (robot kind, or None) and
@@ -90,10 +99,12 @@ class Adapter(ValueAccess, Fmi2Slave):
 
     KIND: str | None = None
     EXPERIMENT: tuple[float, float, float] = (0.0, 1.0, 1e-3)
+    _STATUS_ERROR = Fmi2Status.error
 
     def __init__(self, **kwargs: Any) -> None:
         compensate_exporter_refcount(type(self))
         super().__init__(**kwargs)
+        self._hosted = "logger" in kwargs  # made by pythonfmu's binary (it passes its logger), not in Python
         self.author = "delta-cosim"
         start, stop, step = self.EXPERIMENT
         self.default_experiment = DefaultExperiment(start_time=start, stop_time=stop, step_size=step)
@@ -112,6 +123,8 @@ class Adapter(ValueAccess, Fmi2Slave):
         self._built = False  # start() has run with the current parameter values
         self._initialized = False  # exitInitializationMode done: parameters no longer rebuild
         self._failed: str | None = None  # why the last step failed (the instance cannot continue)
+        self._parameters: list[str] = []  # parameter names, in declaration order
+        self._fixed: set[str] = set()  # the fixed ones: refused after initialization
         self.time = 0.0
 
     # ------------------------------------------------------------------ declaration
@@ -144,6 +157,9 @@ class Adapter(ValueAccess, Fmi2Slave):
             self._output_vrs.add(vr)
         elif spec.causality == "parameter":
             self._param_vrs.add(vr)
+            self._parameters.append(name)
+            if spec.variability == "fixed":
+                self._fixed.add(name)
         if spec.kind == "real":
             self._real_get[vr] = name
             if settable:
@@ -170,11 +186,27 @@ class Adapter(ValueAccess, Fmi2Slave):
         cast = _TYPES[kind]
 
         def set_(value: Any) -> None:
+            if is_parameter:
+                self._set_parameters((name,), lambda values, new: values.__setitem__(name, cast(new[0])), (value,))
+                return
             self.values[name] = cast(value)
             self._dirty = True
-            if is_parameter and not self._initialized:
-                self._built = False
         return set_
+
+    def _set_parameters(self, names: tuple[str, ...], write, new) -> None:  # noqa: ANN001
+        """Store ``new`` (``write(values, new)``), which sets the parameters ``names``: before initialization the
+        core objects are rebuilt when next needed; after it a fixed one is refused (nothing stored) and the tunable
+        ones that changed are retuned (:meth:`retune`)."""
+        if not self._initialized:
+            write(self.values, new)
+            self._dirty = True
+            self._built = False
+            return
+        self._refuse_fixed(names)
+        before = {n: self.values[n] for n in names}
+        write(self.values, new)
+        self._dirty = True
+        self._retune_changed(before)
 
     def input(self, name: str, unit: str | None, description: str, start: Any = 0.0, kind: str = "real") -> None:
         self._declare(Spec(name, kind, "input", "continuous" if kind == "real" else "discrete",
@@ -240,6 +272,8 @@ class Adapter(ValueAccess, Fmi2Slave):
         if not all(vr in self._real_get for vr in vrs):
             return None
         names = [self._real_get[vr] for vr in vrs]
+        if not names:  # fmi2GetReal of no variables
+            return False, lambda values: []
         if len(names) == 1:
             name = names[0]
             read = lambda values: [values[name]]  # noqa: E731
@@ -257,18 +291,20 @@ class Adapter(ValueAccess, Fmi2Slave):
             plan = self._set_plans[key] = self._set_plan(key)
         if plan is None:  # not all settable Reals: pythonfmu's error, before anything is stored
             return super().set_real(vrs, values)
-        write, sets_parameters = plan
+        write, parameters = plan
+        if parameters:
+            self._set_parameters(parameters, write, values)
+            return
         write(self.values, values)  # fmi2SetReal hands over Python floats
         self._dirty = True
-        if sets_parameters and not self._initialized:
-            self._built = False
 
-    def _set_plan(self, vrs: tuple[int, ...]) -> tuple[Any, bool] | None:
-        """(write, whether a parameter is set): ``write(values, new values)`` stores under the names of
-        ``vrs``; None if one is not a settable Real."""
+    def _set_plan(self, vrs: tuple[int, ...]) -> tuple[Any, tuple[str, ...]] | None:
+        """(write, the parameters set): ``write(values, new values)`` stores under the names of ``vrs``; None if
+        one is not a settable Real."""
         if not vrs or not all(vr in self._real_set for vr in vrs):
             return None
-        return writer([self._real_set[vr] for vr in vrs]), not self._param_vrs.isdisjoint(vrs)
+        return writer([self._real_set[vr] for vr in vrs]), tuple(self._real_set[vr] for vr in vrs
+                                                                 if vr in self._param_vrs)
 
     def setup_experiment(self, start_time: float, stop_time: float | None = None, tolerance: float | None = None):
         self.time = float(start_time)
@@ -291,6 +327,9 @@ class Adapter(ValueAccess, Fmi2Slave):
                      f"got {step_size!r}", Fmi2Status.error)
             return False
         try:
+            if not self._built:  # a state set from before the build (taken in initialization mode)
+                self.start()
+                self._built = True
             self.advance(current_time, step_size)
         except Exception as exc:  # noqa: BLE001 - reported through the FMI logger, never fmi2Fatal
             self._failed = f"{type(exc).__name__}: {exc}"
@@ -301,8 +340,19 @@ class Adapter(ValueAccess, Fmi2Slave):
         self._dirty = True  # outputs are recomputed once, when next read
         return True
 
+    # ------------------------------------------------------------------ FMU state (fmus._names.StateAccess)
+    def _flags(self) -> dict:
+        return {"dirty": self._dirty, "built": self._built, "initialized": self._initialized, "failed": self._failed}
+
+    def _restore_flags(self, flags: dict) -> None:
+        self._dirty, self._built = flags["dirty"], flags["built"]
+        self._initialized, self._failed = flags["initialized"], flags["failed"]
+
+    def _broken(self, reason: str) -> None:
+        self._failed = reason  # doStep refuses from now on
+
     def to_xml(self, model_options: dict[str, str] = dict()) -> Element:  # noqa: B006 (pythonfmu signature)
-        root = super().to_xml(model_options)
+        root = super().to_xml({**model_options, **_STATE_CAPABILITIES})
         used = sorted({s.unit for s in self.specs if s.unit is not None})
         units = Element("UnitDefinitions")
         for name in used:

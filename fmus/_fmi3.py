@@ -6,7 +6,13 @@ initialization mode included (the model is built from the parameter values of th
 again if a parameter changes before ``exitInitializationMode``), and ModelStructure is exact:
 each output and state derivative lists the inputs and states it depends on (``depends=``),
 and each InitialUnknown the inputs among those plus the parameters (all of them, an
-over-approximation the standard allows)."""
+over-approximation the standard allows).
+
+FMU state as in :mod:`fmus._fmi` (``canGetAndSetFMUState``, ``canSerializeFMUState``;
+:class:`fmus._names.StateAccess`): the continuous states are variable values, so the state is the
+values, the time and the flags. A tunable parameter set after initialization takes effect at the
+next evaluation (:meth:`~fmus._names.StateAccess.retune`), a fixed one is refused (fmi3Fatal: see
+:func:`fmus._names.spare_wrapper_references`)."""
 
 from __future__ import annotations
 
@@ -29,22 +35,26 @@ from pythonfmu3 import (
 
 from delta.errors import ParameterError
 
-from ._names import UNITS, ValueAccess, compensate_exporter_refcount, initial_knowns
+from ._names import UNITS, StateAccess, ValueAccess, compensate_exporter_refcount, initial_knowns
 
 __all__ = ["AdapterME"]
 
+_STATE_CAPABILITIES = {"canGetAndSetFMUState": True, "canSerializeFMUState": True}
 
-class AdapterME(ValueAccess, Fmi3SlaveBase, ModelExchange):
+
+class AdapterME(StateAccess, ValueAccess, Fmi3SlaveBase, ModelExchange):
     """Model-exchange slave: subclasses declare variables and implement ``start`` and ``derivatives``."""
 
     KIND: str | None = None
     EXPERIMENT: tuple[float, float, float] = (0.0, 1.0, 1e-3)
     LINEAR: frozenset[tuple[str, str]] = frozenset()
     """(unknown, known) pairs where the known enters as a constant factor (dependenciesKind "constant")."""
+    _STATUS_ERROR = Fmi3Status.error
 
     def __init__(self, **kwargs: Any) -> None:
         compensate_exporter_refcount(type(self))
         super().__init__(**kwargs)
+        self._hosted = "logger" in kwargs  # made by pythonfmu3's binary (it passes its logger), not in Python
         self.author = "delta-cosim"
         start, stop, step = self.EXPERIMENT
         self.default_experiment = DefaultExperiment(start_time=start, stop_time=stop, step_size=step)
@@ -54,6 +64,8 @@ class AdapterME(ValueAccess, Fmi3SlaveBase, ModelExchange):
         self._built = False  # start() has run with the current parameter values
         self._initialized = False  # exitInitializationMode done: parameters no longer rebuild
         self._stale = True
+        self._parameters: list[str] = []  # parameter names, in declaration order
+        self._fixed: set[str] = set()  # the fixed ones: refused after initialization
         self.time = 0.0
         self._units: set[str] = set()
         self.register_variable(Float64("time", causality=Fmi3Causality.independent,
@@ -80,16 +92,21 @@ class AdapterME(ValueAccess, Fmi3SlaveBase, ModelExchange):
         var = Float64(name, start=start, unit=unit, causality=causality, variability=variability, initial=initial,
                       derivative=derivative, description=description, getter=getter, setter=setter)
         self.register_variable(var, nested=False)
+        if kind == "parameter":
+            self._parameters.append(name)
+            if variability is Fmi3Variability.fixed:
+                self._fixed.add(name)
         return var.value_reference
 
-    def parameter(self, name: str, start: float, unit: str | None, description: str) -> None:
-        self._add(name, start, unit, description, Fmi3Causality.parameter, Fmi3Variability.fixed,
+    def parameter(self, name: str, start: float, unit: str | None, description: str, *, tunable: bool = False) -> None:
+        self._add(name, start, unit, description, Fmi3Causality.parameter,
+                  Fmi3Variability.tunable if tunable else Fmi3Variability.fixed,
                   Fmi3Initial.exact, settable=True, kind="parameter")
 
     def parameters3(self, names: Iterable[str], start: Iterable[float], unit: str, description: str, *,
                     tunable: bool = False) -> None:
         for i, (n, s) in enumerate(zip(names, start)):
-            self.parameter(n, float(s), unit, f"{description} (leg {i + 1})")
+            self.parameter(n, float(s), unit, f"{description} (leg {i + 1})", tunable=tunable)
 
     def input(self, name: str, unit: str | None, description: str, start: float = 0.0) -> None:
         self._add(name, start, unit, description, Fmi3Causality.input, Fmi3Variability.continuous, settable=True,
@@ -113,10 +130,25 @@ class AdapterME(ValueAccess, Fmi3SlaveBase, ModelExchange):
         self._depends[der_name] = tuple(depends)
 
     def _set(self, name: str, value: float) -> None:
-        self.values[name] = float(value)
-        self._stale = True
-        if self._kinds[name] == "parameter" and not self._initialized:
+        if self._kinds[name] != "parameter":
+            self.values[name] = float(value)
+            self._stale = True
+        elif not self._initialized:
+            self.values[name] = float(value)
+            self._stale = True
             self._built = False
+        else:  # a tunable one (set_float64 refused fixed ones): retuned if it changed
+            before = {name: self.values[name]}
+            self.values[name] = float(value)
+            self._stale = True
+            self._retune_changed(before)
+
+    def set_float64(self, vrs: list[int], values: list[float]) -> None:
+        """fmi3SetFloat64; after initialization a fixed parameter among ``vrs`` is refused before anything is
+        stored."""
+        if self._initialized:
+            self._refuse_fixed([self.vars[vr].name for vr in vrs if vr in self.vars])
+        super().set_float64(vrs, values)
 
     def _build(self) -> None:
         """Build the model and the initial states from the current parameters if not done yet."""
@@ -204,8 +236,15 @@ class AdapterME(ValueAccess, Fmi3SlaveBase, ModelExchange):
         return [v.value_reference for v in self.vars.values()
                 if isinstance(v, Float64) and v.derivative is not None]
 
+    # -- FMU state (fmus._names.StateAccess)
+    def _flags(self) -> dict:
+        return {"built": self._built, "initialized": self._initialized, "stale": self._stale}
+
+    def _restore_flags(self, flags: dict) -> None:
+        self._built, self._initialized, self._stale = flags["built"], flags["initialized"], flags["stale"]
+
     def to_xml(self, model_options: dict[str, str] = dict()) -> Element:  # noqa: B006 (pythonfmu3 signature)
-        root = super().to_xml(model_options)
+        root = super().to_xml({**model_options, **_STATE_CAPABILITIES})
         vr = {v.name: v.value_reference for v in self.vars.values()}
         name = {r: n for n, r in vr.items()}
         unknown = set().union(*self._depends.values()) - {n for n, k in self._kinds.items() if k in ("input", "state")}

@@ -9,6 +9,10 @@
 Fidelities: ``"full"`` (rigid rods with spherical joints, rigid platform) and ``"lumped"``
 (rod masses lumped at the rod ends as the analytic model assumes, rods as distance constraints).
 No renderer is ever started and no solution file is written.
+
+``plant.get_state()`` / ``plant.set_state(state)`` save and restore the whole plant and solver state as
+plain data (stepping on repeats the original bit for bit, in this plant or in another built alike), and
+``plant.set_payload(kg)`` changes the payload in the running system.
 """
 
 from __future__ import annotations

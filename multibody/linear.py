@@ -35,12 +35,9 @@ from delta.dynamics import LinearDeltaMasses
 from delta.kinematics import actuator_points, joint_state_from_platform, leg_axes, platform_offsets
 from delta.robots import LinearDelta
 
-from .plant import MIN_ROD_MASS, DeltaPlant, JointTrajectory, RobotTypeError, SolverSettings
+from .plant import MIN_ROD_MASS, PLATFORM_THICKNESS, DeltaPlant, JointTrajectory, RobotTypeError, SolverSettings
 
 __all__ = ["LinearDeltaPlant", "MIN_ROD_MASS", "PLATFORM_THICKNESS"]
-
-PLATFORM_THICKNESS = 0.01
-"""Platform disc thickness, m."""
 
 RAIL = np.array([0.0, 0.0, -1.0])
 """Direction in which a carriage moves as its coordinate q grows (down its vertical rail)."""
@@ -99,16 +96,7 @@ class LinearDeltaPlant(DeltaPlant):
         full = self.fidelity == "full"
         self._ground = mbs.AddObject(ObjectGround())
         w_i, w_g = m.w_inertia, m.w_gravity
-        platform_mass = m.platform + m.payload + (0.0 if full else 6.0 * w_i * m.rod)
-        platform_weight = m.platform + m.payload + (0.0 if full else 6.0 * w_g * m.rod)
-        if full:
-            radius = robot.platform_radius
-            j_plat = np.diag([platform_mass * (3 * radius**2 + PLATFORM_THICKNESS**2) / 12.0] * 2
-                             + [platform_mass * radius**2 / 2.0])
-            self._platform = self._add_body(platform_mass, j_plat, p0, v0)
-        else:
-            self._platform = self._add_body(platform_mass, None, p0, v0)
-        self._add_weight(self._platform, (0.0, 0.0, 0.0), platform_weight)
+        self._add_platform(p0, v0)
 
         self._carriages: list[int] = []
         self._carriage_markers: list[int] = []

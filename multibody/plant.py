@@ -6,6 +6,10 @@ sets *both* ``timeIntegration.endTime`` and ``solver.it.endTime`` and calls
 ``SolveSteps`` (see docs/architecture.md, "Findings"). The renderer is never
 started and no solution file is written.
 
+``get_state`` / ``set_state`` save and restore everything a later step depends on,
+so stepping on from a restored state repeats the original bit for bit, and
+``set_payload`` changes the payload in the running system.
+
 Every body is created in its reference configuration at the reset pose with
 the identity as reference rotation, so body-local axes coincide with the base
 frame at ``reset`` time and inertia tensors are given in base-frame axes.
@@ -15,7 +19,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Callable, NamedTuple
+from typing import Any, Callable, NamedTuple
 
 import numpy as np
 
@@ -30,6 +34,9 @@ JointTrajectory = Callable[[float], tuple[np.ndarray, np.ndarray]]
 MIN_ROD_MASS = 1e-6
 """kg. A zero rod mass is represented by this in the rods' end masses (their weight stays zero), so that a rod's
 end nodes keep a regular mass matrix."""
+
+PLATFORM_THICKNESS = 0.01
+"""Platform disc thickness, m (the full plants' platform inertia)."""
 
 
 class PlantError(CosimError, RuntimeError):
@@ -150,6 +157,14 @@ per step)."""
 
 def _time_tolerance(t: float) -> float:
     return 1e-9 * max(1.0, abs(t))
+
+
+_ITERATION = ("adaptiveStep", "automaticStepSize", "automaticStepSizeError", "currentStepIndex", "currentStepSize",
+              "currentTime", "discontinuousIteration", "discontinuousIterationsCount", "endTime", "initialStepSize",
+              "lastStepSize", "maxStepSize", "minStepSize", "newtonJacobiCount", "newtonSteps", "newtonStepsCount",
+              "numberOfSteps", "recommendedStepSize", "rejectedAutomaticStepSizeSteps", "rejectedModifiedNewtonSteps",
+              "startTime")
+"""The solver's iteration data (``solver.it``) a state holds: every field (time, step sizes, counters)."""
 
 
 class DeltaPlant:
@@ -358,6 +373,139 @@ class DeltaPlant:
             pot += float(weight @ z) * self.masses.gravity
         return kin, pot
 
+    def get_state(self) -> dict[str, Any]:
+        """Everything a later :meth:`step` depends on, as plain data (floats, ints, bools, lists; no numpy).
+
+        Captured:
+
+        - the plant's own: time ``t``, the last effort ``u``, the integrator step size in use, whether the Newton
+          matrix is to be refactorised at the next step, the payload;
+        - Exudyn's current state: the ODE2 coordinates, velocities and accelerations, the algebraic (AE)
+          coordinates (Lagrange multipliers), the data coordinates (none in these systems) and the system time;
+        - the generalized-alpha solver's algorithmic accelerations (``GetAAlgorithmic``) and iteration data
+          (every field of ``solver.it``: time, end time, step sizes, counters);
+        - the Newton matrix the solver holds factorised (kept across steps with ``reuse_jacobian``; otherwise the
+          last one, whose sparsity pattern Eigen's LU keeps analysed): its non-zero entries (row-major flat
+          ``index`` into the ``size`` x ``size`` matrix, and ``values``).
+
+        Not captured, because they are the same in any plant built from the same robot, masses, fidelity and
+        settings: the system's structure, the constant mass matrix, the solver settings. The systems have no ODE1
+        coordinates.
+        """
+        sd, solver = self._system_data, self._solver
+        jacobian = solver.GetSystemJacobian()
+        index = np.flatnonzero(jacobian)
+        return {
+            "t": self._t, "u": self._u.tolist(), "step_size": self._step_size, "refactorise": self._refactorise[0],
+            "payload": float(self.masses.payload), "time": sd.GetTime(),
+            "q": sd.GetODE2Coordinates().tolist(), "v": sd.GetODE2Coordinates_t().tolist(),
+            "a": sd.GetODE2Coordinates_tt().tolist(), "a_algorithmic": solver.GetAAlgorithmic().tolist(),
+            "ae": sd.GetAECoordinates().tolist(), "data": sd.GetDataCoordinates().tolist(),
+            "iteration": {name: getattr(solver.it, name) for name in _ITERATION},
+            "jacobian": {"size": int(jacobian.shape[0]), "index": index.tolist(),
+                         "values": jacobian.ravel()[index].tolist()},
+        }
+
+    def set_state(self, state: dict[str, Any]) -> None:
+        """Continue from ``state`` (:meth:`get_state` of this plant or of another built from the same robot, masses
+        (the payload aside), fidelity and settings), in place: the system is not rebuilt.
+
+        A different payload is set first (:meth:`set_payload`). The solver then gets back what :meth:`get_state`
+        lists; three parts have no setter in Exudyn's Python API and take a detour:
+
+        - the Newton matrix: Exudyn factorises a matrix only inside ``Newton``, so one Newton iteration runs with a
+          ``ComputeNewtonJacobian`` user function that only sets the saved matrix (removed again), on the state
+          being restored (overwritten afterwards). An identity is factorised the same way just before: Eigen's
+          sparse LU reuses its analysis of the sparsity pattern (its column ordering) while the number of
+          non-zeros stays the same, so without it the factorisation would depend on what this plant factorised
+          before; after it, the saved matrix's own pattern is analysed, as where it was first factorised (the
+          dense LU of the lumped plants keeps no such analysis: no identity there);
+        - the algorithmic accelerations: ``InitializeSolverInitialConditions`` without computing initial
+          accelerations sets them to the accelerations of the system's initial configuration, so the state is
+          written there (with them as accelerations; the initial configuration keeps it, nothing reads it after
+          the solver's initialization), the call copies it into the current state, and the real accelerations are
+          written back;
+        - the iteration data that call resets is set again.
+
+        Raises
+        ------
+        PlantError
+            The state's sizes are not this system's (a plant of another robot kind or fidelity).
+        """
+        import exudyn as exu
+
+        sd, solver, mbs = self._system_data, self._solver, self.mbs
+        sizes = {"q": sd.ODE2Size(), "v": sd.ODE2Size(), "a": sd.ODE2Size(), "a_algorithmic": sd.ODE2Size(),
+                 "ae": sd.AEsize(), "data": sd.DataSize()}
+        wrong = {k: (len(state[k]), n) for k, n in sizes.items() if len(state[k]) != n}
+        n_sys = sizes["q"] + sizes["ae"]
+        if wrong or state["jacobian"]["size"] != n_sys:
+            raise PlantError(f"{type(self).__name__}.set_state: the state's sizes (saved, this system's) differ: "
+                             f"{wrong}, Newton matrix {state['jacobian']['size']} vs {n_sys}: a state of another "
+                             "model")
+        if state["payload"] != self.masses.payload:
+            self.set_payload(state["payload"])
+        it = solver.it
+        self._set_iteration(state["iteration"])
+        if not it.currentStepSize > 0.0:  # before the first step: the factorising iteration needs a step
+            it.currentStepSize = self._h_nominal
+        sd.SetODE2Coordinates(state["q"])
+        sd.SetODE2Coordinates_t(state["v"])
+        sd.SetODE2Coordinates_tt(state["a"])
+        sd.SetAECoordinates(state["ae"])
+        sd.SetDataCoordinates(state["data"])
+        jacobian = np.zeros(n_sys * n_sys)
+        jacobian[state["jacobian"]["index"]] = state["jacobian"]["values"]
+        if self._sparse:
+            self._factorise(np.eye(n_sys))
+        self._factorise(jacobian.reshape(n_sys, n_sys))
+        initial = exu.ConfigurationType.Initial
+        sd.SetODE2Coordinates(state["q"], initial)
+        sd.SetODE2Coordinates_t(state["v"], initial)
+        sd.SetODE2Coordinates_tt(state["a_algorithmic"], initial)
+        sd.SetAECoordinates(state["ae"], initial)
+        sd.SetDataCoordinates(state["data"], initial)
+        alpha = self._sim.timeIntegration.generalizedAlpha
+        flags = alpha.computeInitialAccelerations, alpha.resetAccelerations
+        alpha.computeInitialAccelerations, alpha.resetAccelerations = False, False
+        try:
+            solver.InitializeSolverInitialConditions(mbs, self._sim)  # current = initial; aAlgorithmic = its accel.
+        finally:
+            alpha.computeInitialAccelerations, alpha.resetAccelerations = flags
+        sd.SetODE2Coordinates_tt(state["a"])
+        sd.SetTime(state["time"])
+        self._set_iteration(state["iteration"])
+        self._t, self._u = state["t"], np.array(state["u"], dtype=float)
+        self._step_size, self._refactorise[0] = state["step_size"], state["refactorise"]
+        if self.prescribed is None:
+            self._apply_effort(state["u"])
+        self._output = self._make_output(self._u.copy() if self.prescribed is None
+                                         else self._read_prescribed_reaction())
+
+    def set_payload(self, payload: float) -> None:
+        """Carry ``payload`` kg on the platform from the next step on, in the running system (not rebuilt).
+
+        The platform body's mass (full fidelity: and its inertia, a uniform disc) and its weight load change; the
+        solver's mass matrix, which Exudyn computes once for these constant-mass systems, is computed again, and the
+        Newton matrix is refactorised at the next step. The motion state is kept. Raises
+        :class:`delta.errors.ParameterError` for a payload the masses refuse (nothing changes then).
+        """
+        if payload == self.masses.payload:
+            return
+        masses = self.masses.with_(payload=float(payload))
+        mass, weight = self._platform_masses(masses)
+        mbs, body = self.mbs, self._platform
+        inertia = self._platform_inertia(mass) if self.fidelity == "full" else None
+        mbs.SetObjectParameter(body, "mass", mass)
+        if inertia is not None:
+            mbs.SetObjectParameter(body, "inertia", _inertia(mass, inertia).GetInertia6D())
+        mbs.SetLoadParameter(self._platform_weight, "loadVector", [0.0, 0.0, -weight * masses.gravity])
+        self.masses = masses
+        self._bodies = [(body, mass, inertia) if entry[0] == body else entry for entry in self._bodies]
+        self._weights = [(body, entry[1], weight) if entry[0] == body else entry for entry in self._weights]
+        self._solver.ComputeMassMatrix(mbs)
+        self._refactorise[0] = True
+
     def platform_tilt(self) -> float:
         """Rotation angle of the platform from level, rad (0 for the translational lumped platform)."""
         import exudyn as exu
@@ -368,6 +516,53 @@ class DeltaPlant:
         return tilt_angle(rot)
 
     # -- helpers ------------------------------------------------------------------------
+    def _set_iteration(self, fields: dict[str, Any]) -> None:
+        it = self._solver.it
+        for name in _ITERATION:
+            setattr(it, name, fields[name])
+
+    def _factorise(self, matrix: np.ndarray) -> None:
+        """Leave ``matrix`` factorised as the solver's Newton matrix (see :meth:`set_state`): one Newton iteration
+        whose Jacobian is ``matrix``, through a ``ComputeNewtonJacobian`` user function that only sets it; it holds
+        no reference to the plant or the solver."""
+        solver, mbs = self._solver, self.mbs
+
+        def give(solver_, mbs_, settings) -> bool:  # noqa: ANN001
+            solver_.SetSystemJacobian(matrix)
+            return True
+
+        newton = solver.newton
+        iterations = newton.maxIterations
+        solver.SetUserFunctionComputeNewtonJacobian(mbs, give)
+        try:
+            newton.maxIterations = 1
+            solver.conv.jacobianUpdateRequested = True
+            solver.Newton(mbs, self._sim)
+        finally:
+            newton.maxIterations = iterations
+            solver.SetUserFunctionComputeNewtonJacobian(mbs, None)
+
+    def _platform_masses(self, masses) -> tuple[float, float]:  # noqa: ANN001
+        """(mass, weight) of the platform body, kg: platform and payload, plus (lumped fidelity) six rods' shares
+        ``w_inertia * rod`` and ``w_gravity * rod`` (thesis eq. (28))."""
+        full = self.fidelity == "full"
+        return (masses.platform + masses.payload + (0.0 if full else 6.0 * masses.w_inertia * masses.rod),
+                masses.platform + masses.payload + (0.0 if full else 6.0 * masses.w_gravity * masses.rod))
+
+    def _platform_inertia(self, mass: float) -> np.ndarray:
+        """Inertia tensor (3, 3) about its centre of the full plants' platform: a uniform disc of ``mass`` kg, radius
+        ``robot.platform_radius`` and :data:`PLATFORM_THICKNESS`, kg m^2."""
+        r = self.robot.platform_radius
+        return np.diag([mass * (3 * r**2 + PLATFORM_THICKNESS**2) / 12.0] * 2 + [mass * r**2 / 2.0])
+
+    def _add_platform(self, p0: np.ndarray, v0: np.ndarray) -> None:
+        """The platform body at (p0, v0) and its weight (a load even when it weighs nothing, for :meth:`set_payload`):
+        a rigid disc (full fidelity) or a point mass carrying the rods' shares (lumped)."""
+        mass, weight = self._platform_masses(self.masses)
+        inertia = self._platform_inertia(mass) if self.fidelity == "full" else None
+        self._platform = self._add_body(mass, inertia, p0, v0)
+        self._platform_weight = self._add_weight(self._platform, (0.0, 0.0, 0.0), weight, keep=True)
+
     def _add_body(self, mass: float, inertia: np.ndarray | None, position, velocity) -> int:
         """Add a rigid body (``inertia`` given, about its centre of mass, base axes) or a point mass.
 
@@ -484,25 +679,27 @@ class DeltaPlant:
         self.mbs.AddObject(SphericalJoint(markerNumbers=[self._body_marker(body, point), marker],
                                           visualization=VObjectJointSpherical(show=False)))
 
-    def _add_weight(self, body: int, local, gravity_mass: float) -> None:
-        """Apply the weight of ``gravity_mass`` at body-local point ``local`` (-z).
+    def _add_weight(self, body: int, local, gravity_mass: float, keep: bool = False) -> int | None:
+        """Apply the weight of ``gravity_mass`` at body-local point ``local`` (-z); returns the load, None when
+        nothing weighs (zero mass or gravity) unless ``keep``.
 
         At a rigid body's or mass point's reference point (its centre of mass, ``local`` = 0) the weight acts on
         its node's position coordinates directly: the same generalized force as through a body marker, whose
         position Jacobian there is [I, 0], without evaluating the body's rotation at every residual."""
         from exudyn.itemInterface import LoadForceVector, MarkerBodyPosition, MarkerNodePosition
 
-        if gravity_mass == 0.0 or self.masses.gravity == 0.0:
-            return
+        if not keep and (gravity_mass == 0.0 or self.masses.gravity == 0.0):
+            return None
         local = [float(x) for x in local]
         item = self.mbs.GetObject(body)
         if not any(local) and item["objectType"] in ("RigidBody", "MassPoint"):
             marker = self.mbs.AddMarker(MarkerNodePosition(nodeNumber=item["nodeNumber"]))
         else:
             marker = self.mbs.AddMarker(MarkerBodyPosition(bodyNumber=body, localPosition=local))
-        self.mbs.AddLoad(LoadForceVector(markerNumber=marker,
-                                         loadVector=[0.0, 0.0, -gravity_mass * self.masses.gravity]))
+        load = self.mbs.AddLoad(LoadForceVector(markerNumber=marker,
+                                                loadVector=[0.0, 0.0, -gravity_mass * self.masses.gravity]))
         self._weights.append((body, local, gravity_mass))
+        return load
 
     def _init_solver(self, h: float) -> None:
         import exudyn as exu
@@ -528,7 +725,7 @@ class DeltaPlant:
         sim.solution.sensors.writePeriod = 1e30
         sim.show.computationTime = False
         sim.show.statistics = False
-        sparse = _default_sparse(self.fidelity) if s.sparse is None else s.sparse
+        sparse = self._sparse = _default_sparse(self.fidelity) if s.sparse is None else s.sparse
         if sparse:
             sim.linearSolver.solverType = exu.LinearSolverType.EigenSparse
             sim.linearSolver.reuseAnalyzedPattern = True  # the sparsity pattern is fixed: analyse it once

@@ -34,7 +34,6 @@ from delta.dynamics import RotaryDeltaMasses
 from delta.kinematics import actuator_points, actuator_tangents, joint_state_from_platform, leg_axes, platform_offsets
 from delta.robots import RotaryDelta
 
-from .linear import PLATFORM_THICKNESS
 from .plant import DeltaPlant, JointTrajectory, RobotTypeError, SolverSettings, point_inertia, rod_inertia
 
 __all__ = ["RotaryDeltaPlant", "ARM_RADIUS"]
@@ -88,16 +87,7 @@ class RotaryDeltaPlant(DeltaPlant):
         w_i, w_g = m.w_inertia, m.w_gravity
         self._ground = mbs.AddObject(ObjectGround())
 
-        platform_mass = m.platform + m.payload + (0.0 if full else 6.0 * w_i * m.rod)
-        platform_weight = m.platform + m.payload + (0.0 if full else 6.0 * w_g * m.rod)
-        if full:
-            r = robot.platform_radius
-            j_plat = np.diag([platform_mass * (3 * r**2 + PLATFORM_THICKNESS**2) / 12.0] * 2
-                             + [platform_mass * r**2 / 2.0])
-            self._platform = self._add_body(platform_mass, j_plat, p0, v0)
-        else:
-            self._platform = self._add_body(platform_mass, None, p0, v0)
-        self._add_weight(self._platform, (0.0, 0.0, 0.0), platform_weight)
+        self._add_platform(p0, v0)
 
         elbow_mass = m.elbow if full else m.elbow + 2.0 * (1.0 - w_i) * m.rod
         elbow_weight = m.elbow if full else m.elbow + 2.0 * (1.0 - w_g) * m.rod

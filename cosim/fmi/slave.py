@@ -368,6 +368,9 @@ class Base:
         c_name, get = self._state_function("Get")
         self._require_state(c_name)
         handle = into.handle if into is not None else ctypes.c_void_p()
+        if self._pythonfmu and handle:  # PythonFMU's get makes a new state without freeing the one it is given
+            self.free_state(into)
+            handle = into.handle = ctypes.c_void_p()
         self._guard(c_name, get, self._c, ctypes.byref(handle))
         buffers = [b.snapshot() for b in (*self.in_bufs, *self.out_bufs)]
         if into is None:

@@ -91,6 +91,34 @@ class _Controller(Adapter):
         if self.law.stateful:  # stateless laws: the effort output before the step is all there is
             self.law.step(*self._inputs())
 
+    def retune(self, names: tuple[str, ...]) -> None:
+        """Gains, the saturation or (model-based laws) the payload changed: the law of the new values, with the
+        period and the state (a PID's integral) of the current one."""
+        self.u_max = self.values["limit.u_max"] or None
+        if self.law is not None:
+            law = self.make_law(self.law.h)
+            if law.stateful:
+                law.integral = list(self.law.integral)
+            self.law = law
+
+    def internal_state(self) -> dict:
+        """The law's period and (PID) integral; no law yet (none is made before the first output or step)."""
+        law = self.law
+        if law is None:
+            return {"law": False}
+        return {"law": True, "h": law.h, "integral": list(law.integral) if law.stateful else []}
+
+    def restore_internal(self, state: dict) -> None:
+        """The law is made again only if there is none: one of the current parameters is the state's."""
+        if not state["law"]:
+            self.law = None
+            return
+        if self.law is None:
+            self.law = self.make_law(state["h"])
+        self.law.h = state["h"]
+        if self.law.stateful:
+            self.law.integral = list(state["integral"])
+
     def refresh(self) -> None:
         # Direct feedthrough without side effects: the master sets the step's inputs,
         # reads u, then calls doStep, which commits the state (see advance). The law's

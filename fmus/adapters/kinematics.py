@@ -111,6 +111,18 @@ class InverseKinematics(Adapter):
         self._reachable = True
         self._pending_pose = None
 
+    def internal_state(self) -> dict:
+        """Whether the last reference was reachable (the warning is logged once, when it leaves the workspace)
+        and the pose whose proximity is pending (see the class docstring)."""
+        pending = self._pending_pose
+        return {"reachable": self._reachable,
+                "pending": None if pending is None else [list(pending[0]), list(pending[1])]}
+
+    def restore_internal(self, state: dict) -> None:
+        self._reachable = state["reachable"]
+        pending = state["pending"]
+        self._pending_pose = None if pending is None else (tuple(pending[0]), tuple(pending[1]))
+
     def _unreachable_reason(self, p, q, fault: int) -> tuple[str | None, float | None]:
         """Why ``p_ref`` is not reachable (None if it is) and its singularity proximity (0 when unknown,
         None when not needed yet: see the class docstring), with the checks and messages of

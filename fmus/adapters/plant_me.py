@@ -57,6 +57,10 @@ class AnalyticPlantME(AdapterME):
         self.put(Q, q)
         self.put(QD, qd)
 
+    def retune(self, names: tuple[str, ...]) -> None:
+        """The payload changed: the model of the new masses; the states are the importer's."""
+        self.model = build_model(robot_from(self, self.KIND), masses_from(self, self.KIND))
+
     def derivatives(self) -> None:
         qd = self.vec3(QD)
         self.put(DQ, qd)

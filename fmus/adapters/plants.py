@@ -55,7 +55,7 @@ class AnalyticPlant(Adapter):
     16-substep reference (RK3: 1.1e-11 m, the midpoint rule: 1.7e-8 m, which already changes the
     tracking RMSE by 16 %). A state that leaves the workspace or the joint range (the end stops, as the Exudyn
     plant), meets a singularity or stops being finite (an absurd effort) fails the step (fmi2Discard) with the
-    reason logged.
+    reason logged. ``mass.payload`` (tunable) takes effect at the next step, the motion kept.
     """
 
     EXPERIMENT = (0.0, 1.0, 1e-3)
@@ -91,6 +91,16 @@ class AnalyticPlant(Adapter):
     def refresh(self) -> None:
         _WRITE_STATE(self.values, self.q, self.qd, self.p, self.v)
 
+    def retune(self, names: tuple[str, ...]) -> None:
+        """The payload changed: the model of the new masses, the motion (p, v, q, qd) kept."""
+        self.model = build_model(robot_from(self, self.KIND), masses_from(self, self.KIND))
+
+    def internal_state(self) -> dict:
+        """The integrated platform state and its joints (the outputs hold them only until the next step's refresh)."""
+        return {"q": list(self.q), "qd": list(self.qd), "p": list(self.p), "v": list(self.v)}
+
+    def restore_internal(self, state: dict) -> None:
+        self.q, self.qd, self.p, self.v = (tuple(state[k]) for k in ("q", "qd", "p", "v"))
 
 
 class ExudynPlant(Adapter):
@@ -102,6 +112,10 @@ class ExudynPlant(Adapter):
     1e-13 s last step of a tool that adds float steps, is absorbed: the FMU's time advances, the
     outputs keep the state at most 1 ns old, and the next step integrates that interval with its
     own. A step the solver cannot take returns fmi2Discard with the solver's message logged.
+
+    ``mass.payload`` (tunable) changes the platform's mass and weight in the running system; the FMU state holds
+    the whole multibody and solver state (:meth:`multibody.DeltaPlant.get_state`), and setting one rebuilds the
+    system only when a fixed parameter differs.
     """
 
     EXPERIMENT = (0.0, 0.5, 1e-3)
@@ -140,3 +154,15 @@ class ExudynPlant(Adapter):
 
     def advance(self, t: float, h: float) -> None:
         self._show(self.plant.step(t, h, self.vec3(U)))
+
+    def retune(self, names: tuple[str, ...]) -> None:
+        """The payload changed: the platform carries it from the next step on, in the running system
+        (:meth:`multibody.DeltaPlant.set_payload`)."""
+        self.plant.set_payload(self.values["mass.payload"])
+
+    def internal_state(self) -> dict:
+        """The whole multibody and solver state (:meth:`multibody.DeltaPlant.get_state`)."""
+        return self.plant.get_state()
+
+    def restore_internal(self, state: dict) -> None:
+        self.plant.set_state(state)
