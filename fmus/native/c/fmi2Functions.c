@@ -71,7 +71,7 @@ fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, fmi2Str
                               "fmi2Instantiate: unknown fmuType %d", (int)fmuType);
         return NULL;
     }
-    f = (Fmi2Instance *)rt_new(sizeof(Fmi2Instance), name, fmuType == fmi2ModelExchange, TYPE_NAMES,
+    f = (Fmi2Instance *)rt_new(sizeof(Fmi2Instance), name, fmuType == fmi2ModelExchange, 2, TYPE_NAMES,
                                functions->allocateMemory, functions->freeMemory, forward_log);
     if (!f) {
         if (functions->logger)
@@ -217,23 +217,19 @@ fmi2Status fmi2SetString(fmi2Component c, const fmi2ValueReference vr[], size_t 
 fmi2Status fmi2GetFMUstate(fmi2Component c, fmi2FMUstate *FMUstate)
 {
     BEGIN(fmi2GetFMUstate, MODES_ANY);
-    return (fmi2Status)rt_get_snapshot(inst, (Snapshot **)FMUstate);
+    return (fmi2Status)rt_get_snapshot(inst, (Snapshot **)FMUstate, "fmi2GetFMUstate");
 }
 
 fmi2Status fmi2SetFMUstate(fmi2Component c, fmi2FMUstate FMUstate)
 {
     BEGIN(fmi2SetFMUstate, MODES_ANY);
-    return (fmi2Status)rt_set_snapshot(inst, (const Snapshot *)FMUstate);
+    return (fmi2Status)rt_set_snapshot(inst, (const Snapshot *)FMUstate, "fmi2SetFMUstate");
 }
 
 fmi2Status fmi2FreeFMUstate(fmi2Component c, fmi2FMUstate *FMUstate)
 {
     BEGIN(fmi2FreeFMUstate, MODES_ANY);
-    if (FMUstate) {
-        rt_free_snapshot(inst, (Snapshot *)*FMUstate);
-        *FMUstate = NULL;
-    }
-    return fmi2OK;
+    return (fmi2Status)rt_free_snapshot(inst, (Snapshot **)FMUstate, "fmi2FreeFMUstate");
 }
 
 fmi2Status fmi2SerializedFMUstateSize(fmi2Component c, fmi2FMUstate FMUstate, size_t *size)
@@ -247,14 +243,16 @@ fmi2Status fmi2SerializedFMUstateSize(fmi2Component c, fmi2FMUstate FMUstate, si
 fmi2Status fmi2SerializeFMUstate(fmi2Component c, fmi2FMUstate FMUstate, fmi2Byte serializedState[], size_t size)
 {
     BEGIN(fmi2SerializeFMUstate, MODES_ANY);
-    return (fmi2Status)rt_serialize(inst, (const Snapshot *)FMUstate, (unsigned char *)serializedState, size);
+    return (fmi2Status)rt_serialize(inst, (const Snapshot *)FMUstate, (unsigned char *)serializedState, size,
+                                    "fmi2SerializeFMUstate");
 }
 
 fmi2Status fmi2DeSerializeFMUstate(fmi2Component c, const fmi2Byte serializedState[], size_t size,
                                    fmi2FMUstate *FMUstate)
 {
     BEGIN(fmi2DeSerializeFMUstate, MODES_ANY);
-    return (fmi2Status)rt_deserialize(inst, (const unsigned char *)serializedState, size, (Snapshot **)FMUstate);
+    return (fmi2Status)rt_deserialize(inst, (const unsigned char *)serializedState, size, (Snapshot **)FMUstate,
+                                      "fmi2DeSerializeFMUstate");
 }
 
 fmi2Status fmi2GetDirectionalDerivative(fmi2Component c, const fmi2ValueReference vUnknown_ref[], size_t nUnknown,

@@ -59,7 +59,7 @@ static fmi3Instance instantiate(fmi3String instanceName, fmi3String instantiatio
         }
         return NULL;
     }
-    f = (Fmi3Instance *)rt_new(sizeof(Fmi3Instance), name, is_me, TYPE_NAMES, calloc, free, forward_log);
+    f = (Fmi3Instance *)rt_new(sizeof(Fmi3Instance), name, is_me, 3, TYPE_NAMES, calloc, free, forward_log);
     if (!f) {
         if (logMessage) logMessage(env, fmi3Error, "logStatusError", "out of memory");
         return NULL;
@@ -474,23 +474,19 @@ fmi3Status fmi3ActivateModelPartition(fmi3Instance instance, fmi3ValueReference 
 fmi3Status fmi3GetFMUState(fmi3Instance instance, fmi3FMUState *FMUState)
 {
     BEGIN(fmi3GetFMUState, MODES_ANY);
-    return (fmi3Status)rt_get_snapshot(inst, (Snapshot **)FMUState);
+    return (fmi3Status)rt_get_snapshot(inst, (Snapshot **)FMUState, "fmi3GetFMUState");
 }
 
 fmi3Status fmi3SetFMUState(fmi3Instance instance, fmi3FMUState FMUState)
 {
     BEGIN(fmi3SetFMUState, MODES_ANY);
-    return (fmi3Status)rt_set_snapshot(inst, (const Snapshot *)FMUState);
+    return (fmi3Status)rt_set_snapshot(inst, (const Snapshot *)FMUState, "fmi3SetFMUState");
 }
 
 fmi3Status fmi3FreeFMUState(fmi3Instance instance, fmi3FMUState *FMUState)
 {
     BEGIN(fmi3FreeFMUState, MODES_ANY);
-    if (FMUState) {
-        rt_free_snapshot(inst, (Snapshot *)*FMUState);
-        *FMUState = NULL;
-    }
-    return fmi3OK;
+    return (fmi3Status)rt_free_snapshot(inst, (Snapshot **)FMUState, "fmi3FreeFMUState");
 }
 
 fmi3Status fmi3SerializedFMUStateSize(fmi3Instance instance, fmi3FMUState FMUState, size_t *size)
@@ -505,14 +501,14 @@ fmi3Status fmi3SerializeFMUState(fmi3Instance instance, fmi3FMUState FMUState, f
                                  size_t size)
 {
     BEGIN(fmi3SerializeFMUState, MODES_ANY);
-    return (fmi3Status)rt_serialize(inst, (const Snapshot *)FMUState, serializedState, size);
+    return (fmi3Status)rt_serialize(inst, (const Snapshot *)FMUState, serializedState, size, "fmi3SerializeFMUState");
 }
 
 fmi3Status fmi3DeserializeFMUState(fmi3Instance instance, const fmi3Byte serializedState[], size_t size,
                                    fmi3FMUState *FMUState)
 {
     BEGIN(fmi3DeserializeFMUState, MODES_ANY);
-    return (fmi3Status)rt_deserialize(inst, serializedState, size, (Snapshot **)FMUState);
+    return (fmi3Status)rt_deserialize(inst, serializedState, size, (Snapshot **)FMUState, "fmi3DeserializeFMUState");
 }
 
 /* ------------------------------------------------------------------ event mode (model exchange, and

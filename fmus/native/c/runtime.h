@@ -27,6 +27,9 @@ typedef enum { MODE_INSTANTIATED = 1, MODE_INITIALIZATION = 2, MODE_STEP = 4, MO
 
 typedef enum { CALL_START, CALL_REFRESH, CALL_ADVANCE, CALL_DERIVATIVES, CALL_ACCEPT, N_CALLS } ModelCall;
 
+/* Bytes kept of MODEL_TOKEN (NUL-padded) in an instance and in an FMU state; the builds' tokens are 38 characters. */
+#define RT_TOKEN_SIZE 64
+
 typedef struct Instance Instance;
 typedef void (*LogFn)(Instance *inst, RtStatus status, const char *category, const char *message);
 typedef void *(*AllocFn)(size_t n, size_t size);   /* zero-filled, like calloc */
@@ -39,6 +42,7 @@ struct Instance {
     double t_last;              /* model exchange: time of the last model_advance commit */
     Mode mode;
     int is_me;                  /* model exchange instance (else co-simulation) */
+    int fmi_version;            /* 2 or 3: the glue this instance was made by */
     int event_mode_used;        /* FMI 3 co-simulation: exitInitializationMode enters event mode */
     int logging_on;
     int dirty;                  /* an input, parameter, time or state changed: outputs are stale */
@@ -47,6 +51,7 @@ struct Instance {
     int last_check[N_CALLS];    /* last result of each model function (warnings are logged once) */
     double detail[MODEL_MAX_DETAIL]; /* the values the last failed check's reason prints */
     char *name;
+    char token[RT_TOKEN_SIZE];  /* MODEL_TOKEN, NUL-padded: what an FMU state is stamped with */
     const char *const *type_names; /* FMI names of TYPE_REAL, TYPE_BOOLEAN, TYPE_INTEGER, TYPE_STRING */
     LogFn log;
     AllocFn alloc;
@@ -54,7 +59,7 @@ struct Instance {
 };
 
 /* Allocates `size` (>= sizeof(Instance)) zero-filled bytes, the values and state; NULL on failure. */
-Instance *rt_new(size_t size, const char *name, int is_me, const char *const *type_names,
+Instance *rt_new(size_t size, const char *name, int is_me, int fmi_version, const char *const *type_names,
                  AllocFn alloc, FreeFn free_fn, LogFn log);
 void rt_free(Instance *inst);
 void rt_reset(Instance *inst);    /* back to instantiated, start values, time 0 */
@@ -101,14 +106,21 @@ RtStatus rt_check_event_indicators(Instance *inst, size_t ni, const char *functi
 /* Number of substeps of a step h: Python's max(1, -int(-h // max_step)); 0 (logged) if impossible. */
 unsigned long long rt_substeps(Instance *inst, double h);
 
-/* FMU state: snapshot of values, state, time and flags (the mode is not part of it). */
+/* FMU state: a snapshot of the variable values, the internal state, time, t_last and the flags (dirty, started,
+ * failed, the last check results), stamped with a magic, the model's token, the FMI version and the interface; the
+ * mode is not part of it (the importer's calling sequence keeps it; see rt_set_snapshot in runtime.c). Each call
+ * refuses, with RT_ERROR and a logged message, a NULL state and a state of another model, build, FMI version or
+ * interface (`function` names the FMI function in the message). */
 typedef struct Snapshot Snapshot;
-RtStatus rt_get_snapshot(Instance *inst, Snapshot **snapshot);   /* reuses *snapshot when not NULL */
-RtStatus rt_set_snapshot(Instance *inst, const Snapshot *snapshot);
-void rt_free_snapshot(Instance *inst, Snapshot *snapshot);
+RtStatus rt_get_snapshot(Instance *inst, Snapshot **snapshot, const char *function); /* reuses *snapshot if not NULL */
+RtStatus rt_set_snapshot(Instance *inst, const Snapshot *snapshot, const char *function);
+RtStatus rt_free_snapshot(Instance *inst, Snapshot **snapshot, const char *function); /* NULL *snapshot: nothing */
 size_t rt_serialized_size(void);
-RtStatus rt_serialize(Instance *inst, const Snapshot *snapshot, unsigned char *bytes, size_t size);
-RtStatus rt_deserialize(Instance *inst, const unsigned char *bytes, size_t size, Snapshot **snapshot); /* new */
+RtStatus rt_serialize(Instance *inst, const Snapshot *snapshot, unsigned char *bytes, size_t size,
+                      const char *function);
+/* A new snapshot from bytes of rt_serialize, checked (format, byte order, token, size, checksum) before use. */
+RtStatus rt_deserialize(Instance *inst, const unsigned char *bytes, size_t size, Snapshot **snapshot,
+                        const char *function);
 
 #if defined(__GNUC__) && !defined(_WIN32)
 #pragma GCC visibility pop
