@@ -51,9 +51,11 @@ def _run(name: str, out: Path, overrides: dict | None = None):
 @pytest.mark.parametrize("build", ["python", "native"])
 @pytest.mark.parametrize("name", ["helix_ctc", "helix_ctc_thesis", "pick_place_ctc"])
 def test_run_matches_its_golden_baseline(name, build, tmp_path):
-    """Both builds of our FMUs (issue 23) pass the same baseline with the same tolerances."""
+    """Both builds of our FMUs (issue 23) pass the same baseline with the same tolerances. pick_place_ctc's baseline
+    is its cycle with an empty gripper, as it was recorded: the run drops the scenario's pick and place events
+    (``events: []``; the picking runs are checked in tests/integration/test_pick_place_payload.py)."""
     out = tmp_path / f"{name}.mcap"
-    scenario = _run(name, out, {("fmus",): build})
+    scenario = _run(name, out, {("fmus",): build, **({("events",): []} if name == "pick_place_ctc" else {})})
     tol = scenario.regression.tolerances
     cmp = compare_logs(GOLDEN / f"{name}.mcap", out, tol)
     unchecked = [d.name for d in cmp.diffs if d.tolerance is None]
