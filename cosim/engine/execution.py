@@ -84,6 +84,7 @@ class Execution:
         self.terminated: Terminated | None = None
         self.t_end_ns: int | None = None
         self.events: EventState | None = None  # the scenario's events (set_events)
+        self._g_sources: list | None = None  # (event, values array, index) of each state event's signal
         self.hooks: dict[int, list[Callable[[int], None]]] = {}  # k_done -> called after that macro step (checkpoints)
         # component with the turn (MASTER: none), simulation time (s) of the macro step, phase (PHASES index), steps
         # done: written by the main thread, read by the watchdog's thread and by a supervisor process (``record``:
@@ -210,11 +211,10 @@ class Execution:
 
     def _g(self) -> dict[int, float]:
         """The crossing function of every state event at the current values."""
-        out = {}
-        for spec in self.events.state:
-            arr, i = self.where(spec.signal)
-            out[spec.index] = spec.g(arr[i])
-        return out
+        sources = self._g_sources
+        if sources is None:  # where each signal's value lives: found once (the buffers never move)
+            sources = self._g_sources = [(spec, *self.where(spec.signal)) for spec in self.events.state]
+        return {spec.index: spec.g(arr[i]) for spec, arr, i in sources}
 
     # -- running
     def initialize(self, start_observers: bool = True) -> None:
@@ -481,8 +481,7 @@ class Execution:
             self.restore_state(saved)
             self._advance(k, active, start, t, cuts, fire=False)
             self.events.restarts += 1
-            arr, i = self.where(spec.signal)
-            gt = spec.g(arr[i])
+            gt = self._g()[spec.index]
             if gt < 0.0:
                 b, gb = t, gt
                 if side == -1:

@@ -170,6 +170,7 @@ class Base:
         self._terminated = False
         self._fatal = False  # after fmi2Fatal/fmi3Fatal no FMI function may be called, freeInstance included
         self._error_log: tuple[float, str] | None = None  # (time, text) of the last error-status log message
+        self._fast_get: tuple | None = None  # fmiXGetFMUstate bound for save_state
 
     # -- the one place where statuses are checked
     def _check(self, status: int, function: str) -> None:
@@ -279,6 +280,7 @@ class Base:
             # still holds objects it created crashes at garbage collection
             self._instantiated = False
             self.fmu = None
+            self._fast_get = None
 
     def _load_library(self) -> Any:
         """fmpy's FMU object with the library loaded.
@@ -371,7 +373,16 @@ class Base:
         if self._pythonfmu and handle:  # PythonFMU's get makes a new state without freeing the one it is given
             self.free_state(into)
             handle = into.handle = ctypes.c_void_p()
-        self._guard(c_name, get, self._c, ctypes.byref(handle))
+        if self._fast_get is None:  # the C function called as the hot path calls: no conversions per call
+            self._fast_get = (self._prototype(getattr(self.fmu.dll, c_name), None), ctypes.c_void_p(self._c))
+        fn, instance = self._fast_get
+        before, CALLING.slave = getattr(CALLING, "slave", None), self  # its log messages are this component's
+        try:
+            status = fn(instance, ctypes.byref(handle))
+        finally:
+            CALLING.slave = before
+        if status > 1:
+            self._check(status, c_name)
         buffers = [b.snapshot() for b in (*self.in_bufs, *self.out_bufs)]
         if into is None:
             return ComponentState(handle, self.time, buffers, self._extra_state())
