@@ -385,9 +385,10 @@ def _run_claimed(scenario: Scenario, output, held: Extractions, options: RunOpti
     checkpoint_hook, checkpoint_path = _checkpointing(ex, scenario, options, output)
     writer_process = logging_on and McapRecorder.writes_in_a_process(ex.n_steps)  # a writer process takes a CPU
     ahead, note = choose(plan, scenario.parallel, ex.n_steps, writer_process)
-    if ahead and (plan.events or options.resume is not None or checkpoint_hook is not None):
-        # a component in a worker process can neither save its state nor take an event's values
-        ahead, note = [], "serial: events and checkpoints need every component in this process"
+    if ahead and (options.resume is not None or checkpoint_hook is not None):
+        # a component in a worker process cannot save its state (events: choose runs them serial already)
+        ahead, note = [], (f"parallel: {scenario.parallel}: serial run (a checkpoint saves every component's state "
+                           "in this process)")
     resume_event = _resume_event(ex, options)
     offload: Offload | None = None
     tracking = None

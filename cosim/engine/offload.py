@@ -96,7 +96,9 @@ def choose(plan: SystemPlan, mode: str, n_steps: int, writer_process: bool = Fal
     group = feedforward(plan)
     names = ", ".join(plan.names[c] for c in group)
     why = ""
-    if not group:
+    if plan.events:
+        why = "the scenario has events, which set values in and save the state of every component in this process"
+    elif not group:
         why = "every component is in a feedback loop"
     elif len(group) == len(plan.names):
         why = "every component is feed-forward: nothing would be left to overlap with"
