@@ -478,6 +478,9 @@ def _run_claimed(scenario: Scenario, output, held: Extractions, options: RunOpti
     result.events = {n: s.events for n, s in zip(plan.names, ex.slaves) if s.model_exchange}
     if ex.events is not None:
         result.fired = [{"t": e.t, "event": e.event, "set": e.set} for e in ex.events.fired]
+        late = [s.index for s in ex.events.timed[ex.events.next_timed:]]
+        if late and ex.terminated is None:
+            result.notes.append(f"events {', '.join(map(str, late))} come after the stop time: not fired")
         result.notes += ex.events.warnings
         if ex.events.located:
             result.notes.append(f"{ex.events.located} state event(s) located by {ex.events.restarts} re-step(s)")

@@ -613,7 +613,7 @@ def scenario_from_data(data: dict[str, Any], file: str = "<string>", overrides: 
                 written.pop(path, None)
         node = data
         for key in path[:-1]:
-            node = node.setdefault(key, {})
+            node = node[key] if isinstance(node, list) else node.setdefault(key, {})
         node[path[-1]] = value
     data["source"] = file
     try:
@@ -700,8 +700,8 @@ def _semantic_issues(s: Scenario) -> list[tuple[tuple, str]]:
     if s.checks is not None and s.compare is None:
         out.append((("checks",), "acceptance checks need a 'compare' section"))
     for i, e in enumerate(s.events):
-        if e.at is not None and not s.time.start <= e.at <= s.time.stop:
-            out.append((("events", i, "at"), f"{e.at:g} s is outside the run [{s.time.start:g}, {s.time.stop:g}] s"))
+        if e.at is not None and e.at < s.time.start:  # after the stop time it is simply not reached (--stop-time)
+            out.append((("events", i, "at"), f"{e.at:g} s is before the run's start, {s.time.start:g} s"))
         if e.when is not None:
             problem = condition_issue(e.when)
             if problem:
@@ -932,12 +932,32 @@ def _split(text: str, origin: str) -> tuple[str, str | None]:
     return head, rest
 
 
+_LIST_ITEM = re.compile(r"^([A-Za-z_]\w*)\[(\d+)\]$")
+
+
+def _dotted(path: tuple) -> str:
+    """A key path as a dotted name: ``("events", 0, "at")`` -> ``events[0].at``."""
+    out = ""
+    for p in path:
+        out += f"[{p}]" if isinstance(p, int) else (("." if out else "") + quote(str(p)))
+    return out
+
+
+def _list_model(annotation: Any) -> type[BaseModel] | None:
+    """The model of the items of a ``list[Model]`` field (``events``), else None."""
+    if typing.get_origin(annotation) is list:
+        args = typing.get_args(annotation)
+        return _model_of(args[0]) if args else None
+    return None
+
+
 def resolve_name(name: str, data: dict[str, Any], origin: str = "--set") -> tuple:
     """The key path a dotted override name addresses in scenario ``data``.
 
     ``COMP.PARAM`` (``ctl.gain.kp[1]``, ``plant.mass.payload``) is a component parameter;
     otherwise the name walks the scenario's sections: ``time.stop``, ``trajectory.params.rx``,
-    ``algorithm``, ``logging.enabled``, ``components.ctl.parameters.gain.kp[1]``. A mapping
+    ``algorithm``, ``logging.enabled``, ``components.ctl.parameters.gain.kp[1]``, ``events[0].at`` (an item of a
+    list of sections, numbered from 0; it must exist). A mapping
     (parameters, ``trajectory.params``) takes the rest of the name as one key. A component name
     with a dot is quoted (``'Ship.Engine'.rpm``, ``components.'Ship.Engine'.step_multiple``;
     :mod:`cosim.engine.names`). An unknown name raises :class:`ScenarioError`, one line citing
@@ -955,8 +975,25 @@ def resolve_name(name: str, data: dict[str, Any], origin: str = "--set") -> tupl
     path: tuple = ()
     while remaining is not None:
         fields = {(f.alias or n): f for n, f in model.model_fields.items() if n != "source"}
-        prefix = ".".join(quote(str(p)) for p in path) + "." if path else ""
+        prefix = _dotted(path) + "." if path else ""
         key, remaining = _split(remaining, origin)
+        item = _LIST_ITEM.match(key)
+        if item is not None and item.group(1) in fields and _list_model(fields[item.group(1)].annotation):
+            # one item of a list of sections (events[0].at): 0-based, as the log numbers events
+            base, index = item.group(1), int(item.group(2))
+            node = data
+            for k in path:
+                node = node.get(k, {}) if isinstance(node, dict) else {}
+            items = node.get(base) if isinstance(node, dict) else None
+            if not isinstance(items, list) or index >= len(items):
+                count = len(items) if isinstance(items, list) else 0
+                raise ScenarioError(Issue("", f"{name!r}: {prefix}{base} has {count} item(s), numbered from 0",
+                                          origin))
+            path += (base, index)
+            model = _list_model(fields[base].annotation)
+            if remaining is None:
+                return path
+            continue
         if key not in fields:
             top = list(components) + list(fields) if not path else list(fields)
             raise _unknown_name(name, prefix, key, top, origin)

@@ -212,6 +212,11 @@ class ModelExchange:
         self.event_log.clear()
         self._restart = True
 
+    def restart(self) -> None:
+        """Re-start the integrator at the next step: a run that writes a checkpoint does, as the run resumed from it
+        must (an integrator's multistep history is not part of the FMU's state), so the two continue alike."""
+        self._restart = True
+
     def set_values(self, values) -> None:
         """An event's changes between steps, in event mode (FMI: tunable parameters and discrete inputs change
         there), followed by the event iteration; the integrator re-starts at the next step."""

@@ -51,6 +51,7 @@ CASES = {
     "native": (ANALYTIC, ["--set", "fmus=native"], 0.4, 0.2),
     "multi_rate": (ANALYTIC, ["--set", "fmus=native", "--set", "components.ctl.step_multiple=2"], 0.4, 0.201),
     "exudyn": (EXUDYN, [], 0.2, 0.1),
+    "model_exchange": (str(ROOT / "scenarios" / "helix_ctc_me.yaml"), [], 0.3, 0.15),
 }
 
 
@@ -159,7 +160,7 @@ def _scenario_with(tmp_path: Path, events: str, stop: float = 0.3) -> Path:
     ('events:\n  - {at: 0.1, set: {plant.nope: 1.0}}\n', ["events.yaml:", "plant.nope"]),
     ('events:\n  - {at: 0.1, set: {"ctl.q[1]": 1.0}}\n', ["events.yaml:", "driven by a connection"]),
     ('events:\n  - {when: "plant.p.z <= 0", set: {plant.mass.payload: 1.0}}\n', ["events.yaml:", "when"]),
-    ('events:\n  - {at: 99, set: {plant.mass.payload: 1.0}}\n', ["events.yaml:", "outside the run"]),
+    ('events:\n  - {at: -1, set: {plant.mass.payload: 1.0}}\n', ["events.yaml:", "events[0].at"]),
 ])
 def test_bad_events_are_refused_before_the_run_with_file_and_line(tmp_path, events, words):
     p = _scenario_with(tmp_path, events)
@@ -203,3 +204,24 @@ def test_a_checkpoint_does_not_depend_on_what_the_writing_run_logged(tmp_path):
     _assert_same_after(full, resumed, 0.1)
     r = cosim("run", "--resume", str(logged_ckpt), "--no-log", "--json")
     assert r.returncode == 0, r.stderr
+
+
+def test_an_event_after_the_stop_time_is_not_reached_and_the_summary_says_so(tmp_path):
+    p = _scenario_with(tmp_path, 'events:\n  - {at: 0.05, set: {plant.mass.payload: 0.1}}\n'
+                                 '  - {at: 5.0, set: {plant.mass.payload: 0.0}}\n')
+    r = cosim("run", str(p), "--set", "fmus=native", "--stop-time", "0.1", "--no-log", "--json")
+    assert r.returncode in (0, 1), r.stderr
+    summary = json.loads(r.stdout)
+    assert [e["event"] for e in summary["fired"]] == [0], f"fired {summary['fired']}"
+    assert any("events 1 come after the stop time" in n for n in summary["notes"]), summary["notes"]
+
+
+def test_one_event_of_the_list_is_changed_by_its_index(tmp_path):
+    p = _scenario_with(tmp_path, 'events:\n  - {at: 0.05, set: {plant.mass.payload: 0.1}}\n')
+    r = cosim("run", str(p), "--set", "fmus=native", "--stop-time", "0.1", "--no-log", "--json",
+              "--set", "events[0].at=0.02", "--set", "events[0].set={plant.mass.payload: 0.3}")
+    assert r.returncode in (0, 1), r.stderr
+    fired = json.loads(r.stdout)["fired"]
+    assert fired == [{"t": 0.02, "event": 0, "set": {"plant.mass.payload": 0.3}}], f"fired {fired}"
+    r = cosim("check", str(p), "--set", "fmus=native", "--set", "events[3].at=0.02")
+    _refused(r, "events has 1 item(s)")
