@@ -288,15 +288,18 @@ class Execution:
                 hook(k_hook)
         self._simulate_fast(k_end, stop, progress, progress_every)
 
+    def _loop(self, progress: Callable[[int], None] | None, progress_every: int) -> tuple:
+        """What a loop over macro steps reads, as locals: the schedule of the hyper-period and its length, the
+        algorithm's macro step, the watchdog's record, the observers' ``stepped``, the progress callback (or None)."""
+        schedule = self.schedule()
+        report = progress if progress is not None and progress_every else None
+        return (schedule, len(schedule), self.algorithm.macro_step(self), self.current,
+                [o.stepped for o in self.observers], report)
+
     def _simulate_fast(self, k_end: int, stop: "StopRequest | None", progress: Callable[[int], None] | None,
                        progress_every: int) -> None:
         """The macro steps up to ``k_end``, without events: the hot loop."""
-        schedule = self.schedule()
-        period = len(schedule)
-        macro_step = self.algorithm.macro_step(self)
-        cur = self.current
-        stepped = [o.stepped for o in self.observers]
-        report = progress if progress is not None and progress_every else None
+        schedule, period, macro_step, cur, stepped, report = self._loop(progress, progress_every)
         chunk, t_ns = self.grid.chunk, self.grid.t_ns
         k = self.k_done
         try:
@@ -324,12 +327,7 @@ class Execution:
                           progress_every: int) -> None:
         """:meth:`simulate_until` with events and hooks: per macro step, the time events at its start, those inside
         it (the step cut at each), the state events (located by restoring and stepping again), then the hooks."""
-        schedule = self.schedule()
-        period = len(schedule)
-        macro_step = self.algorithm.macro_step(self)
-        cur = self.current
-        stepped = [o.stepped for o in self.observers]
-        report = progress if progress is not None and progress_every else None
+        schedule, period, macro_step, cur, stepped, report = self._loop(progress, progress_every)
         ev = self.events
         grid = self.grid
         saved: SystemState | None = None
