@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import os
 import zipfile
 import zlib
 from dataclasses import dataclass
@@ -51,7 +52,7 @@ def default_checkpoint_path(log: str | Path | None, scenario_name: str) -> Path:
     """Beside the log, with the suffix ``.ckpt`` (``runs/helix_ctc.mcap`` -> ``runs/helix_ctc.ckpt``); without a log,
     ``runs/<scenario>.ckpt``."""
     if log is not None:
-        return Path(log).with_suffix(".ckpt")
+        return Path(os.path.normpath(Path(log).with_suffix(".ckpt")))
     return Path("runs") / f"{scenario_name}.ckpt"
 
 
