@@ -30,9 +30,10 @@ from .engine.wiring import index_text
 from .errors import ScenarioError, UnknownSignalError
 from .fmi import BOOLEAN, INTEGER, REAL
 from .observers.recorders import PeakEffort
-from .run import RunResult, run_scenario
+from .io.checkpoint import read_checkpoint
+from .run import RunResult, resumed_scenario, run_scenario
 
-__all__ = ["PeakEffort", "Result", "SignalRecorder", "load", "metric_names", "metrics", "run"]
+__all__ = ["PeakEffort", "Result", "SignalRecorder", "load", "metric_names", "metrics", "resume", "run"]
 
 _NUMERIC = (REAL, INTEGER, BOOLEAN)
 
@@ -77,7 +78,7 @@ class SignalRecorder:
                     label = index_text(var, e) if var.shape else ""
                     self.names.append(f"{name}.{var.name}{label}")
                     self._src.append((arr, i + e))
-        self.stepped(-1, rt.start_ns, ())
+        self.stepped(-1, rt.now_ns, ())  # the start, or a resumed run's checkpoint time
 
     def stepped(self, k: int, t_ns: int, active: Sequence[int]) -> None:
         self.t_ns.append(t_ns)
@@ -128,7 +129,8 @@ class Result:
 
 
 def run(scenario: str | Path | Scenario, overrides: Mapping[str, Any] | None = None, *, log: bool = False,
-        out: str | Path | None = None, signals: bool = True, progress: bool = False) -> Result:
+        out: str | Path | None = None, signals: bool = True, progress: bool = False,
+        checkpoint_at: float | None = None, checkpoint_out: str | Path | None = None) -> Result:
     """Run a scenario (path or :func:`load`-ed) with ``overrides`` (dotted names) and return a :class:`Result`.
 
     Parameters
@@ -136,17 +138,43 @@ def run(scenario: str | Path | Scenario, overrides: Mapping[str, Any] | None = N
     log : write the MCAP log (to ``out``, else the scenario's ``logging.out``)
     signals : keep every signal in memory (every output of every component, and the connected inputs)
     progress : show the progress bar
+    checkpoint_at : write a checkpoint when the run reaches this time, s (to ``checkpoint_out``, else beside the
+        log with the suffix ``.ckpt``); :func:`resume` continues it
 
     Raises :class:`~cosim.errors.CosimError` subclasses (bad input, pre-flight, FMU failure).
     """
-    sc = load(scenario, overrides)
+    return _run(load(scenario, overrides), log=log, out=out, signals=signals, progress=progress,
+                checkpoint_at=checkpoint_at, checkpoint_out=checkpoint_out)
+
+
+def resume(checkpoint: str | Path, sets: Mapping[str, Any] | None = None, *, stop_time: float | None = None,
+           log: bool = False, out: str | Path | None = None, signals: bool = True, progress: bool = False) -> Result:
+    """Continue the run a checkpoint holds (``python -m cosim run --resume``) and return a :class:`Result` of the
+    time after it.
+
+    Parameters
+    ----------
+    checkpoint : a file written by ``run(..., checkpoint_at=T)`` or ``python -m cosim run --checkpoint-at T``
+    sets : {component.variable: value} set at the checkpoint's time, as an event (tunable parameters and inputs
+        no connection drives, e.g. ``{"plant.mass.payload": 0.3}``)
+    stop_time : the end, s (default: the stop time of the run that wrote the checkpoint)
+
+    Raises :class:`~cosim.errors.CosimError` subclasses (a damaged checkpoint, one of another FMU build, a name
+    that cannot be set during a run, ...).
+    """
+    ck = read_checkpoint(checkpoint)
+    return _run(resumed_scenario(ck, stop_time), log=log, out=out, signals=signals, progress=progress, resume=ck,
+                resume_sets=dict(sets or {}))
+
+
+def _run(sc: Scenario, *, signals: bool, **options: Any) -> Result:
     peak = PeakEffort()
     observers: list[Any] = [peak]
     recorder = None
     if signals:
         recorder = SignalRecorder()
         observers.append(recorder)
-    res = run_scenario(sc, out=out, log=log, progress=progress, observers=observers,
-                       read_all=signals)  # every output read each step, also without a log
+    res = run_scenario(sc, observers=observers, read_all=signals,  # every output read each step, also without a log
+                       **options)
     t, values = recorder.arrays() if recorder is not None else (np.zeros(0), {})
     return Result(res, metrics(sc, res, peak.peak), t, values)

@@ -225,3 +225,18 @@ def test_one_event_of_the_list_is_changed_by_its_index(tmp_path):
     assert fired == [{"t": 0.02, "event": 0, "set": {"plant.mass.payload": 0.3}}], f"fired {fired}"
     r = cosim("check", str(p), "--set", "fmus=native", "--set", "events[3].at=0.02")
     _refused(r, "events has 1 item(s)")
+
+
+def test_the_python_api_writes_and_resumes_checkpoints(tmp_path):
+    from cosim import api
+
+    ckpt = tmp_path / "api.ckpt"
+    full = api.run(ANALYTIC, {"time.stop": 0.3, "fmus": "native"}, checkpoint_at=0.1, checkpoint_out=ckpt)
+    resumed = api.resume(ckpt)
+    i = int(np.searchsorted(full.time, 0.1))
+    assert resumed.time[0] == pytest.approx(0.1, abs=1e-12), f"resumed signals start at {resumed.time[0]} s"
+    for name in ("plant.p.x", "ctl.u[1]", "traj.p_ref.z"):
+        assert np.array_equal(full[name][i:], resumed[name]), f"{name} differs after the checkpoint"
+    heavy = api.resume(ckpt, {"plant.mass.payload": 0.5}, stop_time=0.2)
+    assert heavy.time[-1] == pytest.approx(0.2, abs=1e-12), f"stopped at {heavy.time[-1]} s"
+    assert heavy.run.fired == [{"t": 0.1, "event": -1, "set": {"plant.mass.payload": 0.5}}], heavy.run.fired
