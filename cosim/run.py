@@ -296,6 +296,10 @@ def _checkpointing(ex: Execution, scenario: Scenario, options: RunOptions, outpu
     or an FMU that cannot serialize its state (before any step)."""
     if options.checkpoint_at is None:
         return None, None
+    missing = [n for n, s in zip(ex.plan.names, ex.slaves) if not getattr(s, "can_serialize_state", False)]
+    if missing:  # known from the model descriptions: refused before any step
+        raise CheckpointError(f"--checkpoint-at: no checkpoint of this system can be written: the state of "
+                              f"{', '.join(missing)} cannot be serialized (no canSerializeFMUstate in its FMU)")
     t = float(options.checkpoint_at)
     t_ns = round(t * 1e9)
     first = ex.t_ns(options.resume.k_done) if options.resume is not None else ex.start_ns

@@ -136,8 +136,8 @@ def write_checkpoint(path: str | Path, ex: Execution, scenario: dict, command: s
     size in bytes. ``scenario``: the scenario as run (:func:`cosim.engine.scenario.effective_scenario`)."""
     missing = [n for n, s in zip(ex.plan.names, ex.slaves) if not getattr(s, "can_serialize_state", False)]
     if missing:
-        raise CheckpointError(f"cannot write a checkpoint: {', '.join(missing)} cannot serialize its state (its FMU "
-                              "does not declare canSerializeFMUstate)")
+        raise CheckpointError(f"cannot write a checkpoint: the state of {', '.join(missing)} cannot be serialized "
+                              "(no canSerializeFMUstate in its FMU)")
     state = ex.save_state()
     try:
         blobs = [s.export_state(cs) for s, cs in zip(ex.slaves, state.components)]
@@ -207,7 +207,8 @@ def read_checkpoint(path: str | Path) -> Checkpoint:
     except CheckpointError:
         raise
     except (zipfile.BadZipFile, zlib.error, EOFError, OSError, KeyError, TypeError, ValueError) as exc:
-        raise CheckpointError(f"{path}: damaged or truncated checkpoint ({type(exc).__name__}: {exc})") from None
+        raise CheckpointError(f"{path}: not a checkpoint, or a damaged or truncated one ({type(exc).__name__}: "
+                              f"{exc})") from None
     return Checkpoint(path, header, scenario, states)
 
 

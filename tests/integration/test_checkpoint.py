@@ -240,3 +240,21 @@ def test_the_python_api_writes_and_resumes_checkpoints(tmp_path):
     heavy = api.resume(ckpt, {"plant.mass.payload": 0.5}, stop_time=0.2)
     assert heavy.time[-1] == pytest.approx(0.2, abs=1e-12), f"stopped at {heavy.time[-1]} s"
     assert heavy.run.fired == [{"t": 0.1, "event": -1, "set": {"plant.mass.payload": 0.5}}], heavy.run.fired
+
+
+def test_a_checkpoint_of_a_system_without_serializable_state_is_refused_before_the_run(tmp_path, write_scenario):
+    p = write_scenario(
+        "name: loop\n"
+        "components:\n"
+        "  ctl: {path: '{CosimTGain}', parameters: {k: -5.0}}\n"
+        "  plant: {path: '{CosimTIntegrator}', parameters: {x0: 0.5}}\n"
+        "connections:\n"
+        "  - {from: plant.x, to: ctl.u}\n"
+        "  - {from: ctl.y, to: plant.u}\n"
+        "time: {stop: 1.0, step: 0.001}\n")
+    out = tmp_path / "loop.ckpt"
+    r = cosim("run", str(p), "--checkpoint-at", "0.5", "--checkpoint-out", str(out), "--no-log", "--json")
+    refusal = json.loads(r.stdout)
+    assert r.returncode == 2 and "cannot be serialized" in refusal["error"], (r.returncode, r.stdout)
+    assert "ctl, plant" in refusal["error"], refusal["error"]
+    assert not out.exists(), "a refused checkpoint was written"
