@@ -109,7 +109,7 @@ _SSP_TYPE = {"Real": "Real", "Float64": "Real", "Float32": "Real", "Integer": "I
              "String": "String"}
 # scenario sections carried in our annotation (SSP has no place for them)
 _EXTRAS = ("description", "robot", "algorithm", "parallel", "trajectory", "initial_state", "logging", "compare",
-           "checks", "regression")
+           "checks", "regression", "events")
 _COMPONENT_OPTIONS = ("interface", "feedthrough", "rtol", "solver", "max_step")
 
 
@@ -138,15 +138,20 @@ class ExportReport:
     parameters: dict[str, int]  # component -> number of start values in its .ssv
     step: float
     stop: float
+    events: int = 0  # the scenario's events, carried in our annotation only
 
     def as_dict(self) -> dict[str, Any]:
         return {"ssp": str(self.path), "components": self.components, "connections": self.connections,
-                "parameters": self.parameters, "step_s": self.step, "stop_s": self.stop}
+                "parameters": self.parameters, "step_s": self.step, "stop_s": self.stop, "events": self.events}
 
     def text(self) -> str:
         n = sum(self.parameters.values())
-        return (f"{self.path}: {len(self.components)} components ({', '.join(self.components)}), "
+        text = (f"{self.path}: {len(self.components)} components ({', '.join(self.components)}), "
                 f"{self.connections} connections, {n} start values, step {self.step:g} s, stop {self.stop:g} s")
+        if self.events:
+            text += (f"\n  {self.events} event(s) kept in the delta-cosim annotation: SSP 1.0 cannot express values "
+                     "set during a run, so other SSP tools run the system without them")
+        return text
 
 
 def _el(parent: ET.Element | None, tag: str, attrib: dict[str, str] | None = None) -> ET.Element:
@@ -352,7 +357,7 @@ def export_ssp(scenario: Scenario, out: str | Path) -> ExportReport:
             z.writestr(arc, data)
         for stem, info in zip(stems, infos):
             z.write(info.path, f"resources/{stem}.fmu", compress_type=zipfile.ZIP_STORED)  # already deflated
-    return ExportReport(out, list(names), len(plan.links), n_params, t.step, t.stop)
+    return ExportReport(out, list(names), len(plan.links), n_params, t.step, t.stop, len(scenario.events))
 
 
 # --------------------------------------------------------------------------- import

@@ -663,3 +663,14 @@ def test_suppress_unit_conversion_passes_numbers_between_different_units(ssp, tm
         export_ssp(sc, tmp_path / "again.ssp")
     text = zipfile.ZipFile(tmp_path / "again.ssp").read("SystemStructure.ssd").decode()
     assert 'startConnector="a_ref.x" endElement="ik" endConnector="v_ref.x" suppressUnitConversion="true"' in text
+
+
+def test_events_travel_in_our_annotation_and_the_export_says_other_tools_drop_them(tmp_path):
+    scenario = load_scenario(Path(__file__).resolve().parents[2] / "scenarios" / "pick_place_ctc.yaml",
+                             apply_overrides(["fmus=native"], 0.6))
+    report = export_ssp(scenario, tmp_path / "pp.ssp")
+    assert report.events == 8 and "other SSP tools run the system without them" in report.text(), report.text()
+    with open_ssp(tmp_path / "pp.ssp") as again:
+        assert again.events == scenario.events, f"events after the round trip: {again.events}"
+        res = run_scenario(again, log=False)
+    assert [e["t"] for e in res.fired] == [0.0, 0.25, 0.5], f"fired {res.fired}"
