@@ -20,20 +20,20 @@ motion state reached); a heavier payload sags the platform held by the same effo
 analytic one. A fixed parameter set after initialization is refused with the reason logged.
 
 Model exchange steps are explicit Euler steps driven from here (setTime, setContinuousStates, derivatives,
-completedIntegratorStep), as in the native test. The FMUs are built into the project's .fmu_cache (reused while
-their sources do not change).
+completedIntegratorStep) by tests/fmu_state_harness.py, as in the native test. The FMUs are built into the project's
+.fmu_cache (reused while their sources do not change).
 """
 
 from __future__ import annotations
 
-import ctypes
 import math
-from dataclasses import dataclass
 from functools import lru_cache
 from pathlib import Path
 
 import numpy as np
 import pytest
+from fmu_state_harness import (H, Built, Instances, across_initialization, differ, probe, refused, same_bits,
+                               set_tunable)
 
 from fmus import registry
 
@@ -42,233 +42,28 @@ pytestmark = pytest.mark.integration
 ROOT = Path(__file__).resolve().parents[2]
 NAMES = registry.available()
 K, N = 5, 5  # steps before the state is taken, steps compared after it
-H = 1e-3  # communication / Euler step, s (every FMU's default experiment step)
 PAYLOAD = "mass.payload"
 PAYLOAD_CHANGE = 0.5  # kg added to the payload: a part picked up
 FATAL = 4  # what pythonfmu's binary returns when Python code refuses (see the module docstring)
+INTERFACE = {2: "cs", 3: "me"}  # pythonfmu builds FMI 2.0 co-simulation FMUs, pythonfmu3 FMI 3.0 model exchange ones
 LUMPED = {"model.fidelity": "lumped"}
-_FMI2_LOGS: dict[str, list[str]] = {}
-"""FMI 2.0 log messages by instance name: FMPy's logger proxy (which formats the variadic message) holds one
-callback for every instance, the last one given, so every instance's callback files messages by the instance name
-the FMU passes."""
 CASES = [(n, {}) for n in NAMES] + [(n, LUMPED) for n in NAMES if n.endswith("exudyn_plant")]
 CASE_IDS = [n + ("-lumped" if start else "") for n, start in CASES]
 
 
-@dataclass(frozen=True)
-class Built:
-    """One built FMU, unzipped once."""
-
-    name: str
-    fmi: int
-    md: object
-    unzip: str
-
-    def var(self, name: str):  # noqa: ANN201
-        return next(v for v in self.md.modelVariables if v.name == name)
-
-    def has(self, name: str) -> bool:
-        return any(v.name == name for v in self.md.modelVariables)
-
-
 @lru_cache(maxsize=None)
 def _built(name: str) -> Built:
-    from fmpy import extract, read_model_description
-
     path = registry.build(name, ROOT / ".fmu_cache")
-    return Built(name, registry.get(name).fmi, read_model_description(str(path)), extract(str(path)))
-
-
-class Instance:
-    """One instance driven from here (FMI 2.0 co-simulation or FMI 3.0 model exchange): inputs varied with the step
-    index, CS doStep or ME explicit Euler steps; the FMU's log messages collected in ``messages``."""
-
-    def __init__(self, built: Built, label: str = "a") -> None:
-        from fmpy.fmi2 import FMU2Slave
-        from fmpy.fmi3 import FMU3Model
-
-        self.built, self.fmi = built, built.fmi
-        md = built.md
-        self.messages: list[str] = []
-        if self.fmi == 2:
-            from fmpy.fmi2 import (
-                calloc,
-                fmi2CallbackAllocateMemoryTYPE,
-                fmi2CallbackFreeMemoryTYPE,
-                fmi2CallbackFunctions,
-                fmi2CallbackLoggerTYPE,
-                free,
-            )
-            from fmpy.logging import addLoggerProxy
-
-            self.fmu = FMU2Slave(guid=md.guid, unzipDirectory=built.unzip,
-                                 modelIdentifier=md.coSimulation.modelIdentifier, instanceName=f"{built.name}_{label}")
-            _FMI2_LOGS[f"{built.name}_{label}"] = self.messages
-            self._callbacks = callbacks = fmi2CallbackFunctions()
-            callbacks.logger = fmi2CallbackLoggerTYPE(
-                lambda env, name, status, category, message: _FMI2_LOGS[name.decode()].append(message.decode()))
-            callbacks.allocateMemory = fmi2CallbackAllocateMemoryTYPE(calloc)
-            callbacks.freeMemory = fmi2CallbackFreeMemoryTYPE(free)
-            addLoggerProxy(ctypes.byref(callbacks))  # formats the variadic message
-            self.fmu.instantiate(callbacks=callbacks, loggingOn=True)  # pythonfmu logs only with logging on
-        else:
-            self.fmu = FMU3Model(guid=md.guid, unzipDirectory=built.unzip,
-                                 modelIdentifier=md.modelExchange.modelIdentifier, instanceName=f"{built.name}_{label}")
-            self.fmu.instantiate(loggingOn=True, logMessage=lambda *args: self.messages.append(args[-1].decode()))
-        variables = md.modelVariables
-        real = ("Real", "Float64")
-        self.inputs = [v for v in variables if v.causality == "input" and v.type in real]
-        self.real_out = [v.valueReference for v in variables if v.causality == "output" and v.type in real]
-        self.bool_out = [v.valueReference for v in variables if v.causality == "output" and v.type == "Boolean"]
-        self.nx = len(md.derivatives) if self.fmi == 3 else 0
-        self.x = (ctypes.c_double * max(self.nx, 1))()
-        self.dx = (ctypes.c_double * max(self.nx, 1))()
-        self.k, self.t = 0, 0.0
-        self.wobble = 1e-3  # relative size of the input variation (0: the inputs stay at their start values)
-
-    # -- values
-    def set_real(self, names_values: dict[str, float]) -> None:
-        vrs = [self.built.var(n).valueReference for n in names_values]
-        (self.fmu.setReal if self.fmi == 2 else self.fmu.setFloat64)(vrs, [float(x) for x in names_values.values()])
-
-    def get_real(self, names: list[str]) -> list[float]:
-        vrs = [self.built.var(n).valueReference for n in names]
-        return list((self.fmu.getReal if self.fmi == 2 else self.fmu.getFloat64)(vrs))
-
-    def set_start(self, start: dict) -> None:
-        """Parameters: strings through setString, numbers through setReal / setFloat64."""
-        strings = {n: v for n, v in start.items() if isinstance(v, str)}
-        if strings:
-            self.fmu.setString([self.built.var(n).valueReference for n in strings], list(strings.values()))
-        numbers = {n: v for n, v in start.items() if not isinstance(v, str)}
-        if numbers:
-            self.set_real(numbers)
-
-    def set_inputs(self) -> None:
-        """Inputs of step ``k``: their start values (a valid pose, the hold efforts) moved by a few thousandths."""
-        if not self.inputs:
-            return
-        values = [float(v.start or 0.0) for v in self.inputs]
-        values = [s + self.wobble * max(1.0, abs(s)) * math.sin(0.7 * self.k + 1.3 * i) for i, s in enumerate(values)]
-        (self.fmu.setReal if self.fmi == 2 else self.fmu.setFloat64)([v.valueReference for v in self.inputs], values)
-
-    def outputs(self) -> np.ndarray:
-        """Every output (booleans as 0/1), then (ME) the continuous states the importer holds."""
-        real = (self.fmu.getReal if self.fmi == 2 else self.fmu.getFloat64)(self.real_out) if self.real_out else []
-        boolean = [float(b) for b in self.fmu.getBoolean(self.bool_out)] if self.bool_out else []
-        return np.array([*real, *boolean, *self.x[:self.nx]], dtype=float)
-
-    # -- life cycle
-    def initialize(self, start: dict | None = None, t0: float = 0.0, *, exit_: bool = True) -> None:
-        """Initialization mode at ``t0`` with the parameters ``start`` and the inputs of step 0; then (``exit_``)
-        out of it, into step mode (CS) or continuous-time mode (ME)."""
-        if self.fmi == 2:
-            self.fmu.setupExperiment(startTime=t0)
-            self.fmu.enterInitializationMode()
-        else:
-            self.fmu.enterInitializationMode(startTime=t0)
-        self.t, self.k = t0, 0
-        if start:
-            self.set_start(start)
-        self.set_inputs()
-        if exit_:
-            self.exit_initialization()
-
-    def exit_initialization(self) -> None:
-        self.fmu.exitInitializationMode()
-        if self.fmi == 3:
-            self.fmu.updateDiscreteStates()
-            self.fmu.enterContinuousTimeMode()
-            self.read_states()
-
-    def read_states(self) -> None:
-        """The importer's copy of the continuous states from the FMU (after an FMU state was set)."""
-        if self.nx:
-            self.fmu.getContinuousStates(self.x, self.nx)
-
-    def derivatives(self) -> np.ndarray:
-        self.fmu.getContinuousStateDerivatives(self.dx, self.nx)
-        return np.array(self.dx[:self.nx])
-
-    def step(self) -> np.ndarray:
-        """One step with the inputs of step ``k``; the outputs after it."""
-        self.set_inputs()
-        if self.fmi == 2:
-            self.fmu.doStep(self.t, H)
-        else:
-            self.fmu.setTime(self.t)
-            self.fmu.setContinuousStates(self.x, self.nx)
-            dx = self.derivatives()
-            for i in range(self.nx):
-                self.x[i] += H * dx[i]
-            self.fmu.setTime(self.t + H)
-            self.fmu.setContinuousStates(self.x, self.nx)
-            self.fmu.completedIntegratorStep()
-        self.t += H
-        self.k += 1
-        return self.outputs()
-
-    def steps(self, n: int) -> np.ndarray:
-        return np.stack([self.step() for _ in range(n)])
-
-    # -- FMU state
-    def get_state(self):  # noqa: ANN201
-        return self.fmu.getFMUstate() if self.fmi == 2 else self.fmu.getFMUState()
-
-    def set_state(self, state, k: int, t: float) -> None:  # noqa: ANN001
-        """The FMU state, and the importer's part: step index, time, (ME) continuous states read back."""
-        (self.fmu.setFMUstate if self.fmi == 2 else self.fmu.setFMUState)(state)
-        self.k, self.t = k, t
-        self.read_states()
-
-    def free_state(self, state) -> None:  # noqa: ANN001
-        (self.fmu.freeFMUstate if self.fmi == 2 else self.fmu.freeFMUState)(state)
-
-    def serialize(self, state) -> bytes:  # noqa: ANN001
-        return bytes((self.fmu.serializeFMUstate if self.fmi == 2 else self.fmu.serializeFMUState)(state))
-
-    def deserialize(self, data: bytes):  # noqa: ANN201
-        return (self.fmu.deSerializeFMUstate if self.fmi == 2 else self.fmu.deserializeFMUState)(data)
-
-    def free(self) -> None:
-        self.fmu.freeInstance()
+    return Built.load(path, name, registry.get(name).fmi)
 
 
 @pytest.fixture
 def instances():
-    """Make instances; free them at the end, whatever happened."""
-    made: list[Instance] = []
-
-    def make(built: Built, label: str = "a") -> Instance:
-        made.append(Instance(built, label))
-        return made[-1]
-
-    yield make
-    for inst in reversed(made):
-        inst.free()
-
-
-def _differ(a: np.ndarray, b: np.ndarray) -> str:
-    """Where two output histories differ, with both values (for an assertion's message)."""
-    if a.shape != b.shape:
-        return f"shapes {a.shape} vs {b.shape}"
-    bad = np.argwhere(a.view(np.uint64) != b.view(np.uint64))
-    return "; ".join(f"at {tuple(int(i) for i in idx)}: {a[tuple(idx)]!r} vs {b[tuple(idx)]!r}" for idx in bad[:4])
-
-
-def _same_bits(a: np.ndarray, b: np.ndarray) -> bool:
-    return a.shape == b.shape and a.tobytes() == b.tobytes()
-
-
-def _refused(inst: Instance, call, *args) -> list[str]:  # noqa: ANN001
-    """Call an FMU function that must refuse (an FMI failing status: FMPy raises); the messages it logged."""
-    from fmpy.fmi1 import FMICallException
-
-    before = len(inst.messages)
-    with pytest.raises(FMICallException) as exc:
-        call(*args)
-    assert exc.value.status == FATAL, f"{exc.value} (status {exc.value.status}, expected {FATAL}: pythonfmu's fatal)"
-    return inst.messages[before:]
+    """Make instances (``instances(built, label)``) of the interface the build has, logging on (pythonfmu logs only
+    with it); free them at the end, whatever happened."""
+    made = Instances(logging_on=True)
+    yield lambda built, label="a": made(built, INTERFACE[built.fmi], label)
+    made.free()
 
 
 # ----------------------------------------------------------------------------- capability and round trip
@@ -290,38 +85,26 @@ def test_round_trip_is_bit_exact(name, start, instances):
     a = instances(built)
     a.initialize(start)
     a.steps(K)
-    k, t = a.k, a.t
-    state = a.get_state()
-    first = a.steps(N)
-    a.set_state(state, k, t)
-    again = a.steps(N)
-    assert _same_bits(first, again), f"{name} {start}: after set state, {_differ(first, again)}"
+    (state, k, t), first, again = a.twice(N)
+    assert same_bits(first, again), f"{name} {start}: after set state, {differ(first, again)}"
 
     if built.has(PAYLOAD):  # the state restores the parameter; the core objects follow it
         a.set_state(state, k, t)
-        payload = a.get_real([PAYLOAD])[0]
-        if a.fmi == 3:
-            a.fmu.enterEventMode()
-        a.set_real({PAYLOAD: payload + PAYLOAD_CHANGE})
-        if a.fmi == 3:
-            a.fmu.updateDiscreteStates()
-            a.fmu.enterContinuousTimeMode()
+        set_tunable(a, {PAYLOAD: a.get_real([PAYLOAD])[0] + PAYLOAD_CHANGE})
         changed = a.steps(N)
-        assert not _same_bits(first, changed), f"{name} {start}: the payload changed nothing: {first[-1]}"
+        assert not same_bits(first, changed), f"{name} {start}: the payload changed nothing: {first[-1]}"
         a.set_state(state, k, t)
         restored = a.steps(N)
-        assert _same_bits(first, restored), f"{name} {start}: payload changed, state set, {_differ(first, restored)}"
+        assert same_bits(first, restored), f"{name} {start}: payload changed, state set, {differ(first, restored)}"
 
     data = a.serialize(state)
     a.free_state(state)
     fresh = instances(built, "fresh")
     fresh.initialize(start)
-    copy = fresh.deserialize(data)
-    fresh.set_state(copy, k, t)
-    fresh.free_state(copy)
+    fresh.set_serialized(data, k, t)
     elsewhere = fresh.steps(N)
-    assert _same_bits(first, elsewhere), \
-        f"{name} {start}: deserialized into a fresh instance, {_differ(first, elsewhere)}"
+    assert same_bits(first, elsewhere), \
+        f"{name} {start}: deserialized into a fresh instance, {differ(first, elsewhere)}"
     assert not [m for m in a.messages + fresh.messages if "FMU state" in m], a.messages + fresh.messages
 
 
@@ -331,32 +114,10 @@ def test_state_across_initialization(name, instances):
     instance. A state taken after K steps, set into an instance in initialization mode: after
     exitInitializationMode the next N steps are those of the instance it was taken from."""
     built = _built(name)
-    reference = instances(built, "reference")
-    reference.initialize()
-    from_start = reference.steps(N)
-
-    a = instances(built)
-    a.initialize(exit_=False)
-    initial = a.get_state()
-    a.exit_initialization()
-    a.steps(K)
-    k, t = a.k, a.t
-    later = a.get_state()
-    after_k = a.steps(N)
-    a.set_state(initial, 0, 0.0)
-    restarted = a.steps(N)
-    assert _same_bits(from_start, restarted), \
-        f"{name}: initialization state set after initialization, {_differ(from_start, restarted)}"
-
-    b = instances(built, "b")
-    b.initialize(exit_=False)
-    (b.fmu.setFMUstate if b.fmi == 2 else b.fmu.setFMUState)(later)
-    b.exit_initialization()
-    b.k, b.t = k, t
-    continued = b.steps(N)
-    assert _same_bits(after_k, continued), f"{name}: state set in initialization mode, {_differ(after_k, continued)}"
-    a.free_state(initial)
-    a.free_state(later)
+    (from_start, restarted), (after_k, continued) = across_initialization(lambda label: instances(built, label), K, N)
+    assert same_bits(from_start, restarted), \
+        f"{name}: initialization state set after initialization, {differ(from_start, restarted)}"
+    assert same_bits(after_k, continued), f"{name}: state set in initialization mode, {differ(after_k, continued)}"
 
 
 # ----------------------------------------------------------------------------- refusals
@@ -377,38 +138,30 @@ def test_state_of_another_fmu_is_refused(name, instances):
     set_ = this.fmu.setFMUstate if this.fmi == 2 else this.fmu.setFMUState
     guids = (other_built.md.guid, built.md.guid)
     for what, arg in (("in-memory", foreign), ("serialized", this.deserialize(data))):
-        logged = _refused(this, set_, arg)
+        logged = refused(this, set_, arg, status=FATAL)
         assert any(all(g in m for g in guids) for m in logged), \
             f"{name}: {what} state of {other_built.name}: expected a message naming {guids}, got {logged}"
         if what == "serialized":
             this.free_state(arg)
     other.free_state(foreign)
     this.steps(1)
-    k, t = this.k, this.t
-    own = this.get_state()
-    first = this.steps(N)
-    this.set_state(own, k, t)
+    (own, _, _), first, again = this.twice(N)
     this.free_state(own)
-    again = this.steps(N)
-    assert _same_bits(first, again), f"{name}: its own state after the refusals, {_differ(first, again)}"
+    assert same_bits(first, again), f"{name}: its own state after the refusals, {differ(first, again)}"
 
 
 def test_state_of_another_build_is_refused(tmp_path, instances):
     """The same FMU built again (a new guid) refuses a state of the first build, naming both guids."""
-    from fmpy import extract, read_model_description
-
     first = _built("linear_pid")
     path = registry.build("linear_pid", tmp_path, force=True)
-    again = Built("linear_pid", 2, read_model_description(str(path)), extract(str(path)))
+    again = Built.load(path, "linear_pid", 2)
     assert again.md.guid != first.md.guid, f"the rebuild kept the guid {first.md.guid}"
     old, new = instances(first, "old"), instances(again, "new")
     old.initialize()
     new.initialize()
     old.steps(K)
-    state = old.get_state()
-    copy = new.deserialize(old.serialize(state))
-    old.free_state(state)
-    logged = _refused(new, new.fmu.setFMUstate, copy)
+    copy = new.deserialize(old.serialized())
+    logged = refused(new, new.fmu.setFMUstate, copy, status=FATAL)
     new.free_state(copy)
     guids = (first.md.guid, again.md.guid)
     assert any(all(g in m for g in guids) for m in logged), f"expected a message naming {guids}, got {logged}"
@@ -423,10 +176,8 @@ def test_damaged_bytes_are_refused(name, instances):
     a = instances(built)
     a.initialize()
     a.steps(K)
-    state = a.get_state()
-    data = a.serialize(state)
+    data = a.serialized()
     first = a.steps(N)
-    a.free_state(state)
     head = data.index(b"\n", len(b"delta-cosim FMU state\n")) + 1  # the body starts here
 
     def flipped(at: int) -> bytes:
@@ -447,14 +198,12 @@ def test_damaged_bytes_are_refused(name, instances):
     set_ = a.fmu.setFMUstate if a.fmi == 2 else a.fmu.setFMUState
     for what, (damaged, reason) in cases.items():
         copy = a.deserialize(damaged)
-        logged = _refused(a, set_, copy)
+        logged = refused(a, set_, copy, status=FATAL)
         a.free_state(copy)
         assert any(reason in m for m in logged), f"{name}: {what}: expected {reason!r} in {logged}"
-    copy = a.deserialize(data)
-    a.set_state(copy, K, K * H)
-    a.free_state(copy)
+    a.set_serialized(data, K, K * H)
     again = a.steps(N)
-    assert _same_bits(first, again), f"{name}: intact bytes after the refusals, {_differ(first, again)}"
+    assert same_bits(first, again), f"{name}: intact bytes after the refusals, {differ(first, again)}"
 
 
 @pytest.mark.parametrize("name", ["linear_ctc", "rotary_analytic_plant", "linear_exudyn_plant",
@@ -468,40 +217,19 @@ def test_fixed_parameter_after_initialization_is_refused(name, instances):
     inst.steps(2)
     before = inst.get_real(["mass.platform"])
     set_ = inst.fmu.setReal if inst.fmi == 2 else inst.fmu.setFloat64
-    logged = _refused(inst, set_, [built.var("mass.platform").valueReference], [1.0])
+    logged = refused(inst, set_, [built.var("mass.platform").valueReference], [1.0], status=FATAL)
     assert any('"mass.platform"' in m and "fixed" in m for m in logged), \
         f"{name}: expected a message naming the fixed parameter, got {logged}"
     after = inst.get_real(["mass.platform"])
     assert after == before, f"{name}: mass.platform changed by a refused set: {before} -> {after}"
     if built.has("model.fidelity"):
-        logged = _refused(inst, inst.fmu.setString, [built.var("model.fidelity").valueReference], ["lumped"])
+        fidelity = built.var("model.fidelity").valueReference
+        logged = refused(inst, inst.fmu.setString, [fidelity], ["lumped"], status=FATAL)
         assert any('"model.fidelity"' in m and "fixed" in m for m in logged), f"{name}: model.fidelity: {logged}"
     assert np.all(np.isfinite(inst.steps(2))), f"{name}: no step after the refusal"
 
 
 # ----------------------------------------------------------------------------- tunable payload
-
-def _set_tunable(inst: Instance, values: dict[str, float]) -> None:
-    """Set tunable parameters after initialization: in step mode (CS), in event mode (ME, as FMI requires)."""
-    if inst.fmi == 3:
-        inst.fmu.enterEventMode()
-        inst.set_real(values)
-        inst.fmu.updateDiscreteStates()
-        inst.fmu.enterContinuousTimeMode()
-    else:
-        inst.set_real(values)
-
-
-def _probe(inst: Instance) -> np.ndarray:
-    """What the payload must change: CS, the outputs after one step; ME, the derivatives at the current time and
-    states with the inputs of the next step, and the outputs."""
-    if inst.fmi == 2:
-        return inst.step()
-    inst.set_inputs()
-    inst.fmu.setTime(inst.t)
-    inst.fmu.setContinuousStates(inst.x, inst.nx)
-    return np.concatenate([inst.derivatives(), inst.outputs()])
-
 
 DECLARING = [n for n in NAMES if n.rsplit("_", 1)[-1] in ("pdplus", "ctc") or "plant" in n]
 
@@ -523,13 +251,13 @@ def test_payload_is_tunable_and_keeps_the_motion(name, instances):
     motion = [f"{q}.{a}" for q in ("p", "v") for a in "xyz"] if built.has("initial.p.x") and built.fmi == 2 else []
     held = changed.outputs()
     start = {PAYLOAD: new, **(dict(zip((f"initial.{n}" for n in motion), changed.get_real(motion))) if motion else {})}
-    _set_tunable(changed, {PAYLOAD: new})
+    set_tunable(changed, {PAYLOAD: new})
     changed.read_states()
     kept = changed.outputs()
     if "plant" in name:  # a controller's effort follows the payload at once (G(q), M(q)); a plant moves by steps
-        assert _same_bits(held, kept), f"{name}: the payload moved the plant before any step, {_differ(held, kept)}"
-    got, base = _probe(changed), _probe(unchanged)
-    assert not _same_bits(got, base), f"{name}: the payload change had no effect: {got}"
+        assert same_bits(held, kept), f"{name}: the payload moved the plant before any step, {differ(held, kept)}"
+    got, base = probe(changed), probe(unchanged)
+    assert not same_bits(got, base), f"{name}: the payload change had no effect: {got}"
     if name.endswith("exudyn_plant"):
         return
     fresh = instances(built, "fresh")
@@ -537,9 +265,9 @@ def test_payload_is_tunable_and_keeps_the_motion(name, instances):
     fresh.k = k
     if fresh.nx:
         fresh.x[:fresh.nx] = list(held[-fresh.nx:])
-    reference = _probe(fresh)
-    assert _same_bits(got, reference), \
-        f"{name}: payload set after K steps vs a fresh instance, {_differ(got, reference)}"
+    reference = probe(fresh)
+    assert same_bits(got, reference), \
+        f"{name}: payload set after K steps vs a fresh instance, {differ(got, reference)}"
 
 
 SAG_STEPS = 20  # steps after the payload change
@@ -653,12 +381,12 @@ def test_plant_state_continues_exactly_in_place_and_in_another_plant(kind, fidel
     first = _drive(plant, kind, 30, 30)
     plant.set_state(state)
     again = _drive(plant, kind, 30, 30)
-    assert _same_bits(first, again), f"{kind} {fidelity}: set_state in place, {_differ(first, again)}"
+    assert same_bits(first, again), f"{kind} {fidelity}: set_state in place, {differ(first, again)}"
     other = _plant(kind, fidelity)
     _drive(other, kind, 100, 7)
     other.set_state(state)
     elsewhere = _drive(other, kind, 30, 30)
-    assert _same_bits(first, elsewhere), f"{kind} {fidelity}: set_state into another plant, {_differ(first, elsewhere)}"
+    assert same_bits(first, elsewhere), f"{kind} {fidelity}: set_state into another plant, {differ(first, elsewhere)}"
 
 
 @pytest.mark.parametrize("kind,fidelity", PLANT_CASES)
@@ -675,4 +403,4 @@ def test_set_payload_gives_the_system_built_with_it(kind, fidelity):
             assert np.array_equal(got[key], expected[key]), \
                 f"{kind} {fidelity} {what} {key}: {got[key]} vs {expected[key]}"
     m_got, m_built = plant._solver.GetSystemMassMatrix(), built._solver.GetSystemMassMatrix()
-    assert _same_bits(m_got, m_built), f"{kind} {fidelity}: mass matrix, {_differ(m_got, m_built)}"
+    assert same_bits(m_got, m_built), f"{kind} {fidelity}: mass matrix, {differ(m_got, m_built)}"
