@@ -187,3 +187,37 @@ def test_a_multi_rate_component_steps_to_the_cut_and_on_to_the_end_of_its_own_st
     ex.simulate_until()
     steps = [(round(t, 12), round(h, 12)) for t, h in slow.steps()]
     assert steps == [(0.0, 0.0005), (0.0005, 0.0015), (0.002, 0.002)], f"slow component's steps {steps}"
+
+
+@pytest.mark.parametrize("interval", [1, 10, 37])
+def test_saving_the_state_every_few_steps_and_replaying_gives_the_same_run(interval):
+    """The system's state is saved every ``state_save_interval`` macro steps; a crossing restores the last save and
+    takes the steps since again (with the time events in them, on and between grid points) before locating: the run
+    is the one that saves at every step, bit for bit, and the event at the same time."""
+    def run(every: int):
+        slaves = [ball(), echo()]
+        ex, p = execution(slaves, [("ball.y", "sink.u")], 600 * STEP_NS)
+        ex.state_save_interval = every
+        ex.set_events([
+            EventSpec(index=0, changes=set_k(p, slaves, 0.25), shown={}, at=0.445, at_ns=445_000_000),
+            EventSpec(index=1, changes=set_k(p, slaves, 0.5), shown={}, at=0.4485, at_ns=448_500_000),
+            EventSpec(index=2, changes=set_k(p, slaves, 1.0), shown={}, signal=port(p, slaves, "ball.y"), op="<",
+                      value=0.0)])
+        seen = []
+
+        class Watch:
+            def start(self, ex): pass
+            def stepped(self, k, t_ns, active): seen.append((slaves[0].out_values[1], slaves[1].out_values[0]))
+            def finish(self, ex, error): pass
+        ex.add_observer(Watch())
+        ex.initialize()
+        ex.simulate_until()
+        saves = sum(1 for c in slaves[0].calls if c[0] == "save_state")
+        return seen, [(e.t, e.event) for e in ex.events.fired], saves
+
+    every_step, fired_1, saves_1 = run(1)
+    sparse, fired_n, saves_n = run(interval)
+    assert fired_n == fired_1, f"events {fired_n} saving every {interval} steps, {fired_1} every step"
+    assert sparse == every_step, f"the run saving every {interval} steps differs from the one saving every step"
+    if interval > 1:
+        assert saves_n < saves_1 / (interval / 2), f"{saves_n} saves every {interval} steps against {saves_1}"
