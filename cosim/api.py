@@ -158,11 +158,14 @@ def resume(checkpoint: str | Path, sets: Mapping[str, Any] | None = None, *, sto
     sets : {component.variable: value} set at the checkpoint's time, as an event (tunable parameters and inputs
         no connection drives, e.g. ``{"plant.mass.payload": 0.3}``)
     stop_time : the end, s (default: the stop time of the run that wrote the checkpoint)
+    log, out : write the MCAP log, to ``out`` (default: beside the checkpoint, ``<checkpoint>.resumed.mcap``)
 
     Raises :class:`~cosim.errors.CosimError` subclasses (a damaged checkpoint, one of another FMU build, a name
     that cannot be set during a run, ...).
     """
     ck = read_checkpoint(checkpoint)
+    if log and out is None:  # as the CLI: beside the checkpoint, never over the log of the run that wrote it
+        out = Path(ck.path).with_suffix(".resumed.mcap")
     return _run(resumed_scenario(ck, stop_time), log=log, out=out, signals=signals, progress=progress, resume=ck,
                 resume_sets=dict(sets or {}))
 

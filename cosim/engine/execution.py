@@ -359,6 +359,7 @@ class Execution:
                         ev.g_prev = self._g()  # the values the step starts from (time events may change them)
                 if locate and (k_saved is None or k - k_saved >= self.state_save_interval):
                     saved, k_saved = self.save_state(saved), k
+                    self.restart_integrators()  # as a replay from this save will: the same steps, bit for bit
                 cuts = ev.inside(t0_ns, grid.t_ns(k + 1)) if ev is not None else []
                 if cuts:
                     self._advance(k, active, t0, None, cuts)
@@ -430,6 +431,13 @@ class Execution:
     def _crossed(self, g0: dict[int, float], g1: dict[int, float]) -> list[EventSpec]:
         ev = self.events
         return [s for s in ev.state if ev.armed[s.index] and g0[s.index] >= 0.0 > g1[s.index]]
+
+    def restart_integrators(self) -> None:
+        """Model-exchange components re-start their integrators at the next step: a restored state does (their
+        multistep history is not part of the FMU's state), so the run that saved it must too."""
+        for s in self.slaves:
+            if s.model_exchange:
+                s.restart()
 
     def _replay(self, saved: SystemState, k_saved: int, k: int, schedule: list, macro_step: Callable) -> None:
         """Restore ``saved`` (the start of macro step ``k_saved``) and take the macro steps up to ``k``'s start again,

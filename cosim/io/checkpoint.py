@@ -143,9 +143,7 @@ def write_checkpoint(path: str | Path, ex: Execution, scenario: dict, command: s
         blobs = [s.export_state(cs) for s, cs in zip(ex.slaves, state.components)]
     finally:
         ex.free_state(state)
-    for s in ex.slaves:  # a model-exchange integrator re-starts here, as it will in the resumed run
-        if s.model_exchange:
-            s.restart()
+    ex.restart_integrators()  # a model-exchange integrator re-starts here, as it will in the resumed run
     components = []
     for c, (name, info, cs, blob) in enumerate(zip(ex.plan.names, ex.plan.infos, state.components, blobs)):
         components.append({
