@@ -278,7 +278,9 @@ def _cosim_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("scenario", nargs="?", help="scenario file (.yaml) or SSP 1.0 archive (.ssp)")
     p.add_argument("--from-log", metavar="LOG", help="instead of a scenario file: run again the scenario a run's "
                                                      ".mcap log records, as it ran (every override applied)")
-    p.add_argument("--out", help="MCAP output path (default: the scenario's logging.out or runs/<name>.mcap)")
+    p.add_argument("--out", help="MCAP output path (default: the scenario's logging.out or runs/<name>.mcap; with "
+                                 "--from-log LOG, LOG's name with .rerun.mcap; with --resume FILE, FILE's with "
+                                 ".resumed.mcap)")
     p.add_argument("--stop-time", type=NUMBER, help="override time.stop, s")
     p.add_argument("--step", type=NUMBER, help="override time.step (the base communication step), s")
     p.add_argument("--set", action="append", default=[], metavar="NAME=VALUE",
@@ -502,6 +504,9 @@ def _cmd_compare(args: argparse.Namespace) -> int:
         cmp = compare_logs(a, b, tol, args.signals or None)
     else:
         raise CosimError(f"compare takes two .mcap logs or one scenario .yaml, got: {' '.join(ins)}")
+    if args.checked_only and not cmp.checked:
+        raise CosimError("--checked-only: no signal has a tolerance, so nothing was checked; give --tol NAME=VALUE "
+                         "(or compare a run with its scenario's baseline, whose regression.tolerances apply)")
     _emit(args, cmp.as_dict(), cmp.text(args.checked_only))
     return EXIT_OK if cmp.ok else EXIT_CHECK_FAILED
 
@@ -600,6 +605,8 @@ def _cmd_run(args: argparse.Namespace) -> int:
 
         realtime = parse_factor(args.realtime)
     command = " ".join(["python -m cosim", *(shlex.quote(a) for a in sys.argv[1:])])
+    if args.from_log is not None and args.out is None:  # beside the log, never over it (its scenario's default)
+        args.out = str(Path(args.from_log).with_name(Path(args.from_log).stem + ".rerun.mcap"))
     if args.resume is not None:
         with _stdout_kept_for_json(args.json):
             res = _resume_run(args, live, realtime, command)

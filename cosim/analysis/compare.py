@@ -65,6 +65,11 @@ class Comparison:
                 "only_b": self.only_b, "problems": self.problems,
                 "failed": [d.name for d in self.failed]}
 
+    @property
+    def checked(self) -> int:
+        """Signals compared against a tolerance."""
+        return sum(d.tolerance is not None for d in self.diffs)
+
     def text(self, only_checked: bool = False) -> str:
         """A readable table, failures first; ``only_checked`` leaves out signals without a tolerance."""
         rows = sorted(self.diffs, key=lambda d: (d.ok, d.tolerance is None))
@@ -86,9 +91,13 @@ class Comparison:
             lines.append(f"only in B: {', '.join(self.only_b)}")
         lines += [f"FAILED: {p}" for p in self.problems]
         lines += [f"FAILED: {d.message()}" for d in self.failed]
-        checked = sum(d.tolerance is not None for d in self.diffs)
-        lines.append(("ok" if self.ok else "FAILED") + f": {checked} signals checked against a tolerance, "
-                     f"{len(self.failed)} exceeded")
+        checked = self.checked
+        if not checked and self.ok:
+            lines.append("nothing checked: no signal has a tolerance (--tol NAME=VALUE, or the scenario's "
+                         "regression.tolerances); the differences are listed only")
+        else:
+            lines.append(("ok" if self.ok else "FAILED") + f": {checked} signals checked against a tolerance, "
+                         f"{len(self.failed)} exceeded")
         return "\n".join(lines)
 
 

@@ -425,7 +425,8 @@ def open_from_log(path: str | Path, overrides: dict[tuple, Any] | None = None) -
     """The scenario a run log records (:data:`EFFECTIVE_ATTACHMENT`), with ``overrides`` on top, to run it again
     inside the ``with`` block.
 
-    Its log goes where ``--out`` says or to ``runs/<name>.mcap``, never to the recorded ``logging.out`` (the first
+    Its log goes where ``--out`` says (the CLI's default: beside the first, ``<name>.rerun.mcap``), never to the
+    recorded ``logging.out`` (the first
     run's log). A run made from an SSP archive recorded the archive (metadata ``ssp``): its FMUs, unpacked for that
     run only, are unpacked again from it for the block (:func:`cosim.io.ssp.reopen_ssp`). Raises
     :class:`ScenarioError` naming ``path`` when it is missing, not an MCAP log or records no scenario, or when the

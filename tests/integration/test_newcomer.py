@@ -1,0 +1,46 @@
+"""What a newcomer meets first (issue 38): commands whose defaults work, results that say what they checked."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+from cli_helpers import cosim
+
+pytestmark = pytest.mark.integration
+
+ROOT = Path(__file__).resolve().parents[2]
+ANALYTIC = str(ROOT / "scenarios" / "helix_ctc_analytic.yaml")
+
+
+@pytest.fixture(scope="module")
+def first_log(tmp_path_factory) -> Path:
+    """A run whose log is where its scenario's default would put a rerun: runs/<name>.mcap of the folder it ran in."""
+    d = tmp_path_factory.mktemp("newcomer")
+    (d / "runs").mkdir()
+    log = d / "runs" / "helix_ctc_analytic.mcap"
+    r = cosim("run", ANALYTIC, "--set", "fmus=native", "--stop-time", "0.05", "--out", str(log), "--quiet", cwd=d)
+    assert r.returncode == 0, r.stderr
+    return log
+
+
+def test_run_from_log_writes_beside_the_log_by_default(first_log):
+    before = first_log.read_bytes()
+    r = cosim("run", "--from-log", str(first_log), "--quiet", cwd=first_log.parent.parent)
+    assert r.returncode == 0, f"exit {r.returncode}: {r.stderr}"
+    again = first_log.with_name("helix_ctc_analytic.rerun.mcap")
+    assert again.is_file(), f"no {again}: {sorted(p.name for p in first_log.parent.iterdir())}"
+    assert first_log.read_bytes() == before, "the first log was replaced"
+
+
+def test_compare_checked_only_with_nothing_checked_is_an_error(first_log):
+    r = cosim("compare", str(first_log), str(first_log), "--checked-only")
+    assert r.returncode == 2, f"exit {r.returncode}, expected 2: {r.stdout}{r.stderr}"
+    lines = r.stderr.strip().splitlines()
+    assert len(lines) == 1 and "nothing was checked" in lines[0], r.stderr
+    r = cosim("compare", str(first_log), str(first_log))
+    assert r.returncode == 0, r.stderr
+    assert "nothing checked: no signal has a tolerance" in r.stdout, r.stdout
+    assert "ok: 0 signals" not in r.stdout, r.stdout
+    r = cosim("compare", str(first_log), str(first_log), "--checked-only", "--tol", "plant=1e-12")
+    assert r.returncode == 0 and "signals checked against a tolerance" in r.stdout, r.stdout + r.stderr
