@@ -47,7 +47,7 @@ def _emit(args: argparse.Namespace, payload: dict, text: str) -> None:
 
 def _robot_parser(sub: argparse._SubParsersAction) -> None:
     robot = sub.add_parser("robot", help="kinematics, workspace and singularities of a robot preset")
-    rsub = robot.add_subparsers(dest="robot_command", required=True, metavar="{ik,fk,workspace,singularity}")
+    rsub = robot.add_subparsers(dest="robot_command", required=True, metavar="COMMAND")
 
     def common(p: argparse.ArgumentParser) -> None:
         p.add_argument("--robot", required=True, help="preset name (see `python -m cosim robot presets`)")

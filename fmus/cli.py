@@ -16,7 +16,7 @@ __all__ = ["register"]
 def register(subparsers: argparse._SubParsersAction) -> None:
     """Add the ``fmus`` command to the platform CLI."""
     fmus = subparsers.add_parser("fmus", help="build and list the component FMUs")
-    sub = fmus.add_subparsers(dest="fmus_command", required=True, metavar="{build,list}")
+    sub = fmus.add_subparsers(dest="fmus_command", required=True, metavar="COMMAND")
     p = sub.add_parser("build", help="build every FMU (or the named ones), cached by a hash of its sources")
     p.add_argument("names", nargs="*", help="FMU names (default: every buildable FMU; with --native every FMU that "
                                             "has a native build)")

@@ -1091,7 +1091,7 @@ def is_ssp(path: str | Path) -> bool:
 def register(sub) -> None:
     """``python -m cosim ssp export SCENARIO -o SYSTEM.ssp``."""
     p = sub.add_parser("ssp", help="export a scenario as an SSP 1.0 archive (run one with `cosim run X.ssp`)")
-    ssub = p.add_subparsers(dest="ssp_command", required=True, metavar="{export}")
+    ssub = p.add_subparsers(dest="ssp_command", required=True, metavar="COMMAND")
     e = ssub.add_parser("export", help="write SystemStructure.ssd, one .ssv per component and the FMUs",
                         description="Writes the scenario as an SSP 1.0 archive (SystemStructure.ssd, a parameter "
                                     "set per component with every start value the master sets, the FMUs in "

@@ -44,3 +44,15 @@ def test_compare_checked_only_with_nothing_checked_is_an_error(first_log):
     assert "ok: 0 signals" not in r.stdout, r.stdout
     r = cosim("compare", str(first_log), str(first_log), "--checked-only", "--tol", "plant=1e-12")
     assert r.returncode == 0 and "signals checked against a tolerance" in r.stdout, r.stdout + r.stderr
+
+
+@pytest.mark.parametrize("group, commands", [("fmus", ["build", "list", "info"]),
+                                             ("robot", ["presets", "ik", "fk", "workspace", "singularity"]),
+                                             ("ssp", ["export"])])
+def test_a_command_groups_help_lists_every_command(group, commands):
+    r = cosim(group, "--help")
+    assert r.returncode == 0, r.stderr
+    listed = [ln.split()[0] for ln in r.stdout.splitlines() if ln.startswith("    ") and ln.split()]
+    assert all(c in listed for c in commands), f"{group} --help lists {listed}, expected {commands}"
+    r = cosim(group)
+    assert r.returncode == 2 and "COMMAND" in r.stderr, f"exit {r.returncode}: {r.stderr}"
