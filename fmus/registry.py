@@ -9,6 +9,8 @@ one more FMU to build, cache and validate per preset.
 
 from __future__ import annotations
 
+import difflib
+
 import importlib
 import importlib.util
 from dataclasses import dataclass
@@ -119,7 +121,9 @@ def get(name: str) -> FmuEntry:
     except KeyError:
         from delta.errors import ParameterError
 
-        raise ParameterError(f"unknown FMU {name!r}; valid FMUs: {', '.join(REGISTRY)}") from None
+        close = difflib.get_close_matches(name, list(REGISTRY), n=3)
+        hint = f"did you mean {', '.join(close)}? " if close else ""
+        raise ParameterError(f"unknown FMU {name!r}; {hint}our FMUs: {', '.join(REGISTRY)}") from None
 
 
 def adapter(entry: FmuEntry) -> type:

@@ -93,10 +93,8 @@ def build_ours(name: str, native: bool = False, fmi: int = 2) -> Path:
 
     try:
         return Path(registry.build(name, native=native, fmi=fmi))
-    except (KeyError, ValueError, LookupError) as exc:
-        known = getattr(registry, "names", None)
-        hint = f"; known: {', '.join(known())}" if callable(known) else ""
-        raise ComponentSourceError(Issue("", f"unknown FMU {name!r}: {exc}{hint}")) from None
+    except (KeyError, ValueError, LookupError) as exc:  # the registry's message names the FMU and the valid ones
+        raise ComponentSourceError(Issue("", str(exc.args[0]) if exc.args else f"unknown FMU {name!r}")) from None
 
 
 def prepare(scenario: Scenario, log_signals: str | None = None, *,

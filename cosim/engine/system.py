@@ -247,6 +247,14 @@ def _start_values(scenario: Scenario, infos: dict[str, FMUInfo], idx: dict[str, 
                 var = info.variables.get(vname)
                 if var is None:
                     settable = [v.name for v in info.variables.values() if settable_at_start(v)]
+                    count = 0
+                    while f"{vname}[{count + 1}]" in info.variables:
+                        count += 1
+                    if count and not isinstance(value, list):  # a vector named by its scalar elements k[1] .. k[n]
+                        issue(loc, f"{info.path.name} has no variable {vname!r}: {vname}[1] .. {vname}[{count}] are "
+                                   f"its {count} elements; set one ({quote(n)}.{vname}[1]={val}) or all at once "
+                                   f"with a list ({quote(n)}.{vname}=[{','.join([str(val)] * count)}])")
+                        continue
                     issue(loc, f"{info.path.name} has no variable {vname!r}{_close(vname, settable)}")
                 elif not settable_at_start(var):
                     issue(loc, f"{vname} is {var.causality}/{var.variability} (initial {initial_of(var)}): its value "

@@ -56,3 +56,16 @@ def test_a_command_groups_help_lists_every_command(group, commands):
     assert all(c in listed for c in commands), f"{group} --help lists {listed}, expected {commands}"
     r = cosim(group)
     assert r.returncode == 2 and "COMMAND" in r.stderr, f"exit {r.returncode}: {r.stderr}"
+
+
+def test_a_vector_parameter_set_as_one_value_says_how_to_set_it(tmp_path):
+    r = cosim("check", ANALYTIC, "--set", "fmus=native", "--set", "ctl.gain.kp=5e4")
+    assert r.returncode == 2, r.stderr
+    assert "gain.kp[1] .. gain.kp[3] are its 3 elements" in r.stderr and "ctl.gain.kp=[5e4,5e4,5e4]" in r.stderr, r.stderr
+
+
+def test_an_unknown_fmu_name_gets_a_close_match_and_the_list_once():
+    r = cosim("check", ANALYTIC, "--set", "components.ctl.fmu=linear_ctk")
+    assert r.returncode == 2, r.stderr
+    assert "did you mean linear_ctc" in r.stderr, r.stderr
+    assert r.stderr.count("rotary_exudyn_plant") == 1, f"the list is printed {r.stderr.count('rotary_exudyn_plant')} times"
