@@ -55,6 +55,21 @@ def port(p, slaves, ref: str) -> Port:
     return Port(c, slaves[c].info.variables[var])
 
 
+def run_watching(ex: Execution, slaves) -> list[tuple[float, float]]:
+    """Initialize and run ``ex`` to its end; (ball's kk, sink's y) after every macro step, as an observer sees them."""
+    seen: list[tuple[float, float]] = []
+
+    class Watch:
+        def start(self, ex): pass
+        def stepped(self, k, t_ns, active): seen.append((slaves[0].out_values[1], slaves[1].out_values[0]))
+        def finish(self, ex, error): pass
+
+    ex.add_observer(Watch())
+    ex.initialize()
+    ex.simulate_until()
+    return seen
+
+
 def set_k(p, slaves, value: float, ref: str = "ball.k") -> tuple[Change, ...]:
     pt = port(p, slaves, ref)
     return (Change(pt.comp, pt.var, (value,)),)
@@ -93,15 +108,7 @@ def test_the_trial_steps_of_a_located_event_leave_no_trace():
             ex.set_events([EventSpec(**common, signal=port(p, slaves, "ball.y"), op="<", value=0.0)])
         else:
             ex.set_events([EventSpec(**common, at=t_at, at_ns=round(t_at * 1e9))])
-        seen = []
-
-        class Watch:
-            def start(self, ex): pass
-            def stepped(self, k, t_ns, active): seen.append((slaves[0].out_values[1], slaves[1].out_values[0]))
-            def finish(self, ex, error): pass
-        ex.add_observer(Watch())
-        ex.initialize()
-        ex.simulate_until()
+        seen = run_watching(ex, slaves)
         return seen, ex.events.fired[0].t
 
     located, t_e = run("state")
@@ -203,15 +210,7 @@ def test_saving_the_state_every_few_steps_and_replaying_gives_the_same_run(inter
             EventSpec(index=1, changes=set_k(p, slaves, 0.5), shown={}, at=0.4485, at_ns=448_500_000),
             EventSpec(index=2, changes=set_k(p, slaves, 1.0), shown={}, signal=port(p, slaves, "ball.y"), op="<",
                       value=0.0)])
-        seen = []
-
-        class Watch:
-            def start(self, ex): pass
-            def stepped(self, k, t_ns, active): seen.append((slaves[0].out_values[1], slaves[1].out_values[0]))
-            def finish(self, ex, error): pass
-        ex.add_observer(Watch())
-        ex.initialize()
-        ex.simulate_until()
+        seen = run_watching(ex, slaves)
         saves = sum(1 for c in slaves[0].calls if c[0] == "save_state")
         return seen, [(e.t, e.event) for e in ex.events.fired], saves
 
