@@ -205,14 +205,7 @@ class Execution:
 
     def fire(self, spec: EventSpec, t: float) -> None:
         """Set event ``spec``'s values now (at time ``t``, s), and record it (:attr:`EventState.fired`)."""
-        by_comp: dict[int, dict] = {}
-        for ch in spec.changes:
-            by_comp.setdefault(ch.comp, {})[ch.var] = list(ch.values)
-        cur = self.current
-        for c, values in by_comp.items():
-            cur[0] = c
-            self.slaves[c].set_values(values)
-        cur[0] = MASTER
+        self._set_quietly(spec)
         self.events.fired.append(FiredEvent(float(t), spec.index, spec.shown))
 
     def _g(self) -> dict[int, float]:
@@ -421,12 +414,16 @@ class Execution:
             self.algorithm.span(self, active, t, [t_stop] * len(active))
 
     def _set_quietly(self, spec: EventSpec) -> None:
-        """A time event's values set again while a state event is located (it fired already in this step)."""
+        """Set event ``spec``'s values, component by component, without recording it (:meth:`fire` records; a
+        time event set again while a state event is located or steps are replayed fired already)."""
         by_comp: dict[int, dict] = {}
         for ch in spec.changes:
             by_comp.setdefault(ch.comp, {})[ch.var] = list(ch.values)
+        cur = self.current
         for c, values in by_comp.items():
+            cur[0] = c
             self.slaves[c].set_values(values)
+        cur[0] = MASTER
 
     def _crossed(self, g0: dict[int, float], g1: dict[int, float]) -> list[EventSpec]:
         ev = self.events
