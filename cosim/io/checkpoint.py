@@ -32,7 +32,9 @@ __all__ = ["FORMAT", "VERSION", "CheckpointError", "Checkpoint", "write_checkpoi
 
 FORMAT = "delta-cosim checkpoint"
 VERSION = 1
-_MAX_MEMBER = 1 << 30  # bytes: no member of a checkpoint of ours comes near (an Exudyn plant's state is ~30 kB)
+_MAX_MEMBER = 64 << 20
+"""Bytes a checkpoint member may hold, read into memory: zipfile reads no more than a member declares, and a
+member declaring more is refused unread. An Exudyn plant's state is about 30 kB, a header a few kB per component."""
 
 
 class CheckpointError(CosimError, ValueError):

@@ -258,3 +258,14 @@ def test_a_checkpoint_of_a_system_without_serializable_state_is_refused_before_t
     assert r.returncode == 2 and "cannot be serialized" in refusal["error"], (r.returncode, r.stdout)
     assert "ctl, plant" in refusal["error"], refusal["error"]
     assert not out.exists(), "a refused checkpoint was written"
+
+
+def test_a_member_larger_than_any_checkpoint_holds_is_refused_unread(checkpoint, tmp_path):
+    big = tmp_path / "big.ckpt"
+    with zipfile.ZipFile(checkpoint) as src, zipfile.ZipFile(big, "w", compression=zipfile.ZIP_DEFLATED) as dst:
+        for item in src.infolist():
+            blob = src.read(item.filename)
+            if item.filename == "scenario.json":
+                blob = b" " * (65 << 20)  # 65 MiB of blanks, deflated to a few kB: a member past the bound
+            dst.writestr(item.filename, blob)
+    _refused(cosim("run", "--resume", str(big), "--no-log"), "scenario.json claims", "refused")
