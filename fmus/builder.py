@@ -56,7 +56,7 @@ def source_files(entry: FmuEntry) -> dict[str, Path]:
     for package in entry.packages:
         for path in _package_files(package):
             files[path.relative_to(_ROOT).as_posix()] = path
-    layer = "_fmi3.py" if entry.fmi == 3 else "_fmi.py"
+    layer = "export3.py" if entry.fmi == 3 else "export2.py"
     for rel in ("fmus/__init__.py", "fmus/_names.py", "fmus/requirements.py", f"fmus/{layer}",
                 "fmus/adapters/__init__.py", "fmus/adapters/common.py", f"fmus/adapters/{entry.module}.py"):
         files[rel] = _ROOT / rel

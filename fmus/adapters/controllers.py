@@ -15,7 +15,7 @@ from operator import itemgetter
 from delta.control import CTC, DEFAULT_GAINS, PD, PID, PDPlus
 from delta.model import build_model
 
-from .._fmi import Adapter, joint_names, writer
+from ..export2 import Adapter, joint_names, writer
 from .common import declare_masses, declare_robot, home_joints, masses_from, q_units, robot_from
 
 Q, QD = joint_names("q"), joint_names("qd")

@@ -19,7 +19,7 @@ from delta.kinematics import (
 )
 from delta.model import Data, build_model
 
-from .._fmi import Adapter, axis_names, joint_names, writer
+from ..export2 import Adapter, axis_names, joint_names, writer
 from .common import declare_robot, home, home_joints, q_units, robot_from
 
 P_REF, V_REF, A_REF = axis_names("p_ref"), axis_names("v_ref"), axis_names("a_ref")

@@ -8,7 +8,7 @@ from delta.kinematics import END_STOP, joint_limit_reason
 from delta.model import Data, build_model
 
 from .._names import axis_names, joint_names
-from .._fmi3 import AdapterME
+from ..export3 import AdapterME
 from .common import (
     declare_initial_state,
     declare_masses,

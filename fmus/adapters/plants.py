@@ -9,7 +9,7 @@ from delta.errors import CosimError, ParameterError, UnreachableError
 from delta.kinematics import END_STOP, inverse_kinematics, joint_limit_reason
 from delta.model import build_model
 
-from .._fmi import Adapter, axis_names, joint_names, writer
+from ..export2 import Adapter, axis_names, joint_names, writer
 from .common import (
     P0,
     V0,

@@ -25,7 +25,7 @@ from typing import Any, Callable, Mapping
 from delta.errors import ParameterError
 from delta.trajectories import TYPES, Helix, PickAndPlace, PointToPoint, seed004_z_steps
 
-from .._fmi import Adapter, axis_names, writer
+from ..export2 import Adapter, axis_names, writer
 
 P_REF, V_REF, A_REF = axis_names("p_ref"), axis_names("v_ref"), axis_names("a_ref")
 _WRITE_OUTPUTS = writer(P_REF, V_REF, A_REF)  # (values, p, v, a): refresh's store

@@ -1,5 +1,6 @@
-"""Declarative layer shared by every adapter: variables with unit, description,
-causality, variability and initial, stored by name, plus the FMI 2.0 slave base.
+"""The exporter side, FMI 2.0: the pythonfmu slave base our python FMUs stand on (the importer side, how the
+master loads any FMU, is :mod:`cosim.fmi`). A declarative layer shared by every FMI 2.0 adapter: variables with
+unit, description, causality, variability and initial, stored by name, plus the FMI 2.0 slave base.
 
 An adapter declares its interface in ``__init__`` with :meth:`Adapter.input`,
 :meth:`Adapter.output`, :meth:`Adapter.parameter` (or the vector forms) and

@@ -1,14 +1,15 @@
-"""FMI 3.0 model-exchange counterpart of :mod:`fmus._fmi` (pythonfmu3): declared variables
-with unit and description; continuous states are declared with :meth:`AdapterME.state`.
+"""The exporter side, FMI 3.0 model exchange: the counterpart of :mod:`fmus.export2` on pythonfmu3 (the importer
+side is :mod:`cosim.fmi`): declared variables with unit and description; continuous states are declared with
+:meth:`AdapterME.state`.
 
-As in :mod:`fmus._fmi`, outputs, states and derivatives are valid whenever they are read,
+As in :mod:`fmus.export2`, outputs, states and derivatives are valid whenever they are read,
 initialization mode included (the model is built from the parameter values of that moment,
 again if a parameter changes before ``exitInitializationMode``), and ModelStructure is exact:
 each output and state derivative lists the inputs and states it depends on (``depends=``),
 and each InitialUnknown the inputs among those plus the parameters (all of them, an
 over-approximation the standard allows).
 
-FMU state as in :mod:`fmus._fmi` (``canGetAndSetFMUState``, ``canSerializeFMUState``;
+FMU state as in :mod:`fmus.export2` (``canGetAndSetFMUState``, ``canSerializeFMUState``;
 :class:`fmus._names.StateAccess`): the continuous states are variable values, so the state is the
 values, the time and the flags. A tunable parameter set after initialization takes effect at the
 next evaluation (:meth:`~fmus._names.StateAccess.retune`), a fixed one is refused (fmi3Fatal: see
