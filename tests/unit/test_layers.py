@@ -17,7 +17,7 @@ import pytest
 
 ROOT = Path(__file__).resolve().parents[2]
 PACKAGE = ROOT / "cosim"
-LAYERS = ["errors", "cbuild", "fmi", "engine", "observers", "io", "run", "analysis", "api", "cli", "__main__"]
+LAYERS = ["errors", "cbuild", "procs", "fmi", "engine", "observers", "io", "run", "analysis", "api", "cli", "__main__"]
 LAZY_OK = {"cosim.cli"}  # imports inside functions, for start-up time (see its docstring)
 
 
