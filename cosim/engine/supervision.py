@@ -20,7 +20,6 @@ while its own watchdog could not act, is killed and named the same way.
 
 from __future__ import annotations
 
-import ctypes
 import json
 import mmap
 import os
@@ -30,7 +29,8 @@ import signal
 import time
 from typing import Any, Callable
 
-from ..errors import STOP_SIGNALS, exit_now, printable
+from .. import procs
+from ..errors import STOP_SIGNALS, printable
 
 __all__ = ["Record", "supervise", "contained", "record", "finished", "command_pid", "ENABLED", "MASTER", "PHASES"]
 
@@ -122,16 +122,12 @@ def supervise(on_crash: Callable[[Record, str], int]) -> int | None:
         return None
     rec = Record()
     parent = os.getpid()
-    pid = os.fork()
-    if pid == 0:
+    # a group of its own: terminal signals reach the parent only, which forwards each once
+    child = procs.start(None, name="run", group="own", die_with_parent=True)
+    if child is None:
         _RECORD, _SUPERVISOR = rec, parent
-        try:
-            os.setpgid(0, 0)  # terminal signals reach the parent only, which forwards each once
-        except OSError:
-            pass
-        _die_with_parent()
         return None
-    return _wait(pid, rec, on_crash)
+    return _wait(child.pid, rec, on_crash)
 
 
 _RESULT_BYTES = 16 * 1024 * 1024  # a contained call's pickled result (anonymous: only the pages written are used)
@@ -147,35 +143,12 @@ def contained(fn: Callable[[], Any]) -> tuple[Any, str | None, Record]:
     with the child's :func:`record`, which the run's execution writes; what it returns must pickle (an exception it
     raises is returned as its ``why``, ``TypeName: text``). Not for the main thread of ``python -m cosim`` (its
     stop signals are not forwarded: the child leaves with its parent, ``PR_SET_PDEATHSIG``). POSIX only."""
-    global _RECORD
     rec = Record()
     out = mmap.mmap(-1, _RESULT_BYTES)
     ending, ends = os.pipe()
-    pid = os.fork()
-    if pid == 0:
-        os.close(ending)
-        _RECORD = rec
-        status = 0
-        try:
-            try:
-                os.setpgid(0, 0)  # the supervisor kills the whole group (the log writer, the offload worker)
-            except OSError:
-                pass
-            _die_with_parent()
-            try:
-                data = pickle.dumps((True, fn()))
-            except BaseException as exc:  # noqa: BLE001 - said to the parent, as text (an exception may not pickle)
-                data = pickle.dumps((False, f"{type(exc).__name__}: {exc}"))
-            if len(data) > _RESULT_BYTES - 8:
-                data = pickle.dumps((False, f"the result is {len(data):,} bytes, more than {_RESULT_BYTES - 8:,}"))
-            out[8:8 + len(data)] = data
-            out[:8] = len(data).to_bytes(8, "little")
-            rec.current[4] = 1.0
-            os.write(ends, b"\0")
-        except BaseException:  # noqa: BLE001 - nothing may escape a forked child into its parent's code
-            status = 70
-        finally:
-            exit_now(status)
+    # a group of its own: the supervisor kills the whole group (the log writer, the offload worker)
+    pid = procs.start(_contained_child, fn, rec, out, ending, ends, name="contained", group="own",
+                      die_with_parent=True).pid
     os.close(ends)
     try:
         status, reason = _watch(pid, rec, [], ending)
@@ -192,12 +165,23 @@ def contained(fn: Callable[[], Any]) -> tuple[Any, str | None, Record]:
         os.close(ending)
 
 
-def _die_with_parent() -> None:
+def _contained_child(fn: Callable[[], Any], rec: Record, out: mmap.mmap, ending: int, ends: int) -> int:
+    """The child of :func:`contained`: ``fn()``'s result (or its exception, as text) pickled into ``out``, then a byte
+    on ``ends``; its exit status (:func:`cosim.procs.start` leaves with it; a failure here: the status it sets)."""
+    global _RECORD
+    os.close(ending)
+    _RECORD = rec
     try:
-        libc = ctypes.CDLL(None, use_errno=True)
-        libc.prctl(1, signal.SIGKILL, 0, 0, 0)  # PR_SET_PDEATHSIG: a supervisor killed with SIGKILL takes us along
-    except (OSError, AttributeError):
-        pass
+        data = pickle.dumps((True, fn()))
+    except BaseException as exc:  # noqa: BLE001 - said to the parent, as text (an exception may not pickle)
+        data = pickle.dumps((False, f"{type(exc).__name__}: {exc}"))
+    if len(data) > _RESULT_BYTES - 8:
+        data = pickle.dumps((False, f"the result is {len(data):,} bytes, more than {_RESULT_BYTES - 8:,}"))
+    out[8:8 + len(data)] = data
+    out[:8] = len(data).to_bytes(8, "little")
+    rec.current[4] = 1.0
+    os.write(ends, b"\0")
+    return 0
 
 
 def _wait(pid: int, rec: Record, on_crash: Callable[[Record, str], int]) -> int:
