@@ -36,6 +36,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from .. import procs
 from ..errors import STOP_SIGNALS, CosimError
 from ..fmi import PY_KINDS, Terminated, Variable, cleanup_extracted, load_fmu, make_slave
 from ..fmi import extract as _extract
@@ -223,9 +224,12 @@ class Offload:
         self.free = [ctx.Semaphore(RING) for _ in comps]
         self.stop = ctx.Event()
         self._conn, send = ctx.Pipe(duplex=False)
-        self.process = ctx.Process(target=_worker, name="cosim-worker", daemon=True,
-                                   args=(spec, self.raw, self.filled, self.free, self.stop, send))
-        self.process.start()
+        # Ctrl-C and a closed terminal (the whole process group) are the master's, which stops the worker;
+        # SIGTERM ends it (the master's handler is not the worker's); it dies with its master
+        self.process = procs.start(_worker, spec, self.raw, self.filled, self.free, self.stop, send,
+                                   name="cosim-worker", how=_START_METHOD, via_multiprocessing=True,
+                                   ignore=[s for s in STOP_SIGNALS if s != signal.SIGTERM], default=[signal.SIGTERM],
+                                   die_with_parent=True)
         send.close()
         self.proxies = [Proxy(self, j, t) for j, t in enumerate(templates)]  # templates are bound already
 
@@ -241,14 +245,14 @@ class Offload:
             pass
 
     def raise_if_failed(self, proxy: "Proxy") -> None:
-        alive = self.process.is_alive()  # before reading: a worker that reported and died is read in full
+        alive = self.process.alive()  # before reading: a worker that reported and died is read in full
         self._drain()
         for kind, payload in self._messages:
             if kind == "error":
                 raise _unpack(payload, self.names)
         if not alive:
             raise CosimError(f"component {proxy.name!r}: the worker process running {', '.join(self.names)} "
-                             f"exited (code {self.process.exitcode}) at t = {proxy.time:.6g} s")
+                             f"exited (code {self.process.returncode}) at t = {proxy.time:.6g} s")
 
     def termination(self, proxy: "Proxy") -> Terminated:
         """The worker's report that ``proxy``'s component ended the simulation (sent before its end)."""
@@ -289,10 +293,9 @@ class Offload:
             return
         self._closed = True
         self.stop.set()
-        self.process.join(5.0)
-        if self.process.is_alive():
-            self.process.terminate()
-            self.process.join(1.0)
+        if self.process.wait(5.0) is None:
+            self.process.kill(signal.SIGTERM)
+            self.process.wait(1.0)
         self._conn.close()
 
 
@@ -432,34 +435,12 @@ def _free_count(sem: Any) -> int:
         return _BURST
 
 
-def _die_with(parent: int) -> None:
-    """End this process when ``parent`` (the master) ends, however it ends (SIGKILL included).
+def _worker(spec: dict, raw: Any, filled: list, free: list, stop: Any, conn: Any) -> int:
+    """Entry point of the worker process (started by :func:`cosim.procs.start`: its signals, its death with the master,
+    no wakeup pipe of the master's): run the feed-forward group, publishing as it goes; its exit status.
 
-    Linux: the kernel sends SIGKILL at the parent's death (``PR_SET_PDEATHSIG``); checked once
-    against a parent that died before the call. Elsewhere the worker notices it while waiting
-    (:meth:`_Publisher._claim` compares ``os.getppid()``, as its ring fills within a second).
-    """
-    if sys.platform.startswith("linux"):
-        try:
-            libc = ctypes.CDLL(None, use_errno=True)
-            libc.prctl(1, signal.SIGKILL, 0, 0, 0)  # PR_SET_PDEATHSIG = 1
-        except (OSError, AttributeError):
-            pass
-    if os.getppid() != parent:
-        os._exit(0)
-
-
-def _worker(spec: dict, raw: Any, filled: list, free: list, stop: Any, conn: Any) -> None:
-    """Entry point of the worker process: run the feed-forward group, publishing as it goes."""
-    _die_with(spec["parent"])
-    for sig in STOP_SIGNALS:  # Ctrl-C and a closed terminal (the whole process group) are the master's; it stops us
-        signal.signal(sig, signal.SIG_IGN)
-    signal.signal(signal.SIGTERM, signal.SIG_DFL)  # not the master's handler (forked): SIGTERM ends the worker
-    try:
-        signal.set_wakeup_fd(-1)  # a wakeup pipe of the master (the watchdog's) is never ours to write;
-        # none is set when the worker forks today (the watchdog starts after it): a guard against that order
-    except ValueError:
-        pass
+    Off Linux the worker notices its master's death while waiting (:meth:`_Publisher._claim` compares
+    ``os.getppid()``, as its ring fills within a second)."""
     _extract._EXTRACTED.update({(Path(p), tuple(stamp)): Path(d) for p, stamp, d in spec["extracted"]})
     inherited = set(_extract._EXTRACTED)  # the master's extractions (forked: all of them): the master removes them
     slaves: list[Any] = []
@@ -494,15 +475,10 @@ def _worker(spec: dict, raw: Any, filled: list, free: list, stop: Any, conn: Any
                 pass
         cleanup_extracted(keep=inherited)
         conn.close()
-        # Leave without the interpreter's finalisation: the worker has nothing left to finalise, and
-        # it skips the teardown of the loaded pythonfmu libraries, where pythonfmu has known crashes
-        # at exit (PythonFMU issue 228). A forked worker must not run its parent's atexit handlers.
-        for stream in (sys.stdout, sys.stderr):
-            try:
-                stream.flush()
-            except (OSError, ValueError):  # closed or broken: nothing to keep
-                pass
-        os._exit(code)
+    # cosim.procs leaves without the interpreter's finalisation: the worker has nothing left to finalise, and it
+    # skips the teardown of the loaded pythonfmu libraries, where pythonfmu has known crashes at exit (PythonFMU
+    # issue 228). A forked worker must not run its parent's atexit handlers.
+    return code
 
 
 def _execution(spec: dict, raw: Any, filled: list, free: list, stop: Any, slaves: list, pubs: list) -> Execution:
