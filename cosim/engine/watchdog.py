@@ -33,6 +33,7 @@ import threading
 import time
 from typing import Any, Callable
 
+from .. import procs
 from ..errors import Interrupted, StallError, exit_now, exit_status, exit_text
 from . import supervision
 from .offload import Proxy
@@ -81,8 +82,7 @@ class Watchdog:
             self._previous_fd = signal.set_wakeup_fd(self._wfd, warn_on_full_buffer=False)
         except ValueError:
             self._previous_fd = -1
-        self._thread = threading.Thread(target=self._watch, name="cosim-watchdog", daemon=True)
-        self._thread.start()
+        self._thread = procs.thread(self._watch, name="cosim-watchdog")
         return self
 
     def __exit__(self, *exc) -> None:
