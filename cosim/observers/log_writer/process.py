@@ -51,8 +51,8 @@ from typing import Any
 
 import orjson
 
-from ..cbuild import Library
-from ..errors import STOP_SIGNALS
+from ...cbuild import Library
+from ...errors import STOP_SIGNALS
 
 __all__ = ["BlockLayout", "FoxgloveChannels", "encode_block", "encode_messages", "encode_samples", "row_format",
            "samples_helper",
@@ -177,7 +177,7 @@ def encode_samples(layout: BlockLayout, stamps: list[int], data: bytes | list,
         return ctypes.string_at(out, size).split(b"\n")
 
 
-_SAMPLES = Library(Path(__file__).with_name("samples.c"))
+_SAMPLES = Library(Path(__file__).resolve().parents[1] / "samples.c")
 _SAMPLES_HELPER: list = []  # [cosim_samples, or None without a C compiler], looked for once per process
 _OUT: list = [ctypes.create_string_buffer(1 << 16)]  # the join's output, grown as needed, reused
 _OUT_LOCK = threading.Lock()
@@ -480,7 +480,7 @@ def _exec_writer() -> subprocess.Popen:
     """The writer as a new interpreter (``python -m cosim.observers.log_writer``) in a session of its own (Ctrl-C
     is the master's)."""
     env = dict(os.environ)
-    root = str(Path(__file__).resolve().parents[2])  # the folder holding the cosim package
+    root = str(Path(__file__).resolve().parents[3])  # the folder holding the cosim package
     env["PYTHONPATH"] = root + (os.pathsep + env["PYTHONPATH"] if env.get("PYTHONPATH") else "")
     return subprocess.Popen([sys.executable, "-m", "cosim.observers.log_writer"], stdin=subprocess.PIPE,
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, bufsize=0, start_new_session=True, env=env)
