@@ -72,12 +72,13 @@ def test_both_layouts_read_back_to_identical_signals(tmp_path, stop, writer, mon
     the master, by a forked writer and by a new interpreter: the same signals, stamps and values exactly;
     ``blocks`` holds blocks, valid against its schema."""
     from cosim.observers import log_writer
+    from cosim.observers.log_writer import process
 
     steps = round(stop / 0.001)
     if writer == "forked" and not log_writer.writer_forks():
         pytest.skip("the writer cannot be forked here")
     if writer != "forked":  # the other two paths: no fork, then the run's length decides
-        monkeypatch.setattr(log_writer._ForkedWriter, "possible", classmethod(lambda cls: False))
+        monkeypatch.setattr(process._Fork, "possible", classmethod(lambda cls: False))
     assert McapRecorder.writes_in_a_process(steps) == (writer != "in-process"), "each case takes its path"
     scenario = str(ROOT / "scenarios" / "helix_ctc_analytic.yaml")
     logs = {}

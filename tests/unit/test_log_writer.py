@@ -18,7 +18,7 @@ from mcap.reader import make_reader
 from mcap.stream_reader import StreamReader
 
 from cosim.fmi import BOOLEAN, REAL
-from cosim.observers import log_writer
+from cosim.observers.log_writer import encode, mirror, process
 from cosim.observers.log_writer import (BlockLayout, LogSink, WriterFailed, WriterProcess, encode_block, encode_samples,
                               row_format)
 from cosim.observers.publish import block_layout
@@ -78,7 +78,6 @@ def test_sample_messages_joined_in_c_and_in_python_are_the_same_bytes(monkeypatc
     Booleans of both FMI versions, arrays), and the C join refuses arrays that do not hold the samples."""
     import random
 
-    from cosim.observers import log_writer
     from cosim.observers.log_writer import samples_helper
 
     rnd = random.Random(23)
@@ -91,7 +90,7 @@ def test_sample_messages_joined_in_c_and_in_python_are_the_same_bytes(monkeypatc
                 for s, (a, b, c, d, e, f) in zip(stamps, rows)]
     got = encode_samples(LAYOUT, stamps, joint, (3, 5))
     assert got == expected, f"first difference: {next((g, x) for g, x in zip(got, expected) if g != x)}"
-    monkeypatch.setattr(log_writer, "_SAMPLES_HELPER", [None])  # no C compiler: the Python join
+    monkeypatch.setattr(encode, "_SAMPLES_HELPER", [None])  # no C compiler: the Python join
     assert encode_samples(LAYOUT, stamps, joint, (3, 5)) == expected, "the Python join differs"
     join = samples_helper()
     if join is not None:
@@ -167,10 +166,10 @@ def test_file_reads_back_with_its_summary_indexes_and_statistics(tmp_path, per_s
 @pytest.fixture(params=["fork", "exec"])
 def start(request, monkeypatch):
     """Both ways the writer process starts: a fork of this process (where possible) and a new interpreter."""
-    if request.param == "fork" and not log_writer._ForkedWriter.possible():
+    if request.param == "fork" and not process.writer_forks():
         pytest.skip("a forked writer is not possible here (not POSIX, macOS, or threads running)")
     if request.param == "exec":
-        monkeypatch.setattr(log_writer._ForkedWriter, "possible", staticmethod(lambda: False))
+        monkeypatch.setattr(process._Fork, "possible", classmethod(lambda cls: False))
     return request.param
 
 
@@ -245,7 +244,7 @@ def test_log_of_a_killed_writer_process_is_recoverable(tmp_path, layout, start):
     while _messages_on_disk(path) < (4 if layout == "samples" else 2) and time.monotonic() < deadline:
         time.sleep(0.02)
     w._proc.kill()
-    w._proc.wait(timeout=10)
+    w._proc.wait(10)
     signals = _recovered(path, tmp_path, 4 if layout == "samples" else 2)
     assert list(signals["a.n"].y.tolist()) == [[7, -8], [2 ** 62, 0], [-1, 1]], signals["a.n"].y
     assert signals["a.ok"].y.tolist() == [1.0, 0.0, 1.0] and signals["a.n"].t_ns.tolist() == [0, 1, 2]
@@ -271,7 +270,7 @@ def test_forked_writer_keeps_none_of_the_masters_files(tmp_path):
     of its own (the stop signals and the supervisor's kill of the run's group are the master's)."""
     import socket
 
-    if not log_writer._ForkedWriter.possible():
+    if not process.writer_forks():
         pytest.skip("a forked writer is not possible here")
     held = open(tmp_path / "claim.lock", "w")
     server = socket.socket()
@@ -279,7 +278,7 @@ def test_forked_writer_keeps_none_of_the_masters_files(tmp_path):
     server.listen()
     try:
         w = WriterProcess()
-        assert isinstance(w._proc, log_writer._ForkedWriter)
+        assert w.forked
         w.open(tmp_path / "f.mcap", 1024, 1)
         w.flush()
         deadline = time.monotonic() + 30
@@ -307,24 +306,24 @@ def test_row_mirror_gives_each_sections_rows_after_the_last_stamp_received_of_it
     last block received already has; a batch whose rows were sent (``sent``) gives nothing."""
     import mmap
 
-    shared = mmap.mmap(-1, log_writer.RowMirror.BYTES)
+    shared = mmap.mmap(-1, mirror.RowMirror.BYTES)
     joint_width = 3 + ROW_BYTES
     sections = [([(0, 0, 3), (1, 3, ROW_BYTES)], joint_width, 4), ([(2, 0, ROW_BYTES)], ROW_BYTES, 4)]
-    m = log_writer.RowMirror(shared, sections)
+    m = mirror.RowMirror(shared, sections)
     joint, own = m.sections
     for t, s in zip([10, 20, 30], SAMPLES):
         joint.put(t, b"abc" + _rows([s]))
     own.put(20, _rows(SAMPLES[:1]))
     own.put(40, _rows(SAMPLES[1:2]))
-    got = log_writer.RowMirror.unsent(shared, sections, {0: 10, 1: 10, 2: 20})
+    got = mirror.RowMirror.unsent(shared, sections, {0: 10, 1: 10, 2: 20})
     assert got == [(0, [20, 30], b"abc" + _rows([SAMPLES[1]]) + b"abc" + _rows([SAMPLES[2]]), (0, ROW_BYTES)),
                    (1, [20, 30], b"abc" + _rows([SAMPLES[1]]) + b"abc" + _rows([SAMPLES[2]]), (3, 0)),
                    (2, [40], _rows(SAMPLES[1:2]), None)], got
     assert encode_block(LAYOUT, got[1][1], got[1][2], got[1][3]) == encode_block(LAYOUT, [20, 30], _rows(SAMPLES[1:]))
-    assert [b[1] for b in log_writer.RowMirror.unsent(shared, sections, {})] == [[10, 20, 30]] * 2 + [[20, 40]]
-    assert log_writer.RowMirror.unsent(shared, sections, {0: 30, 1: 30, 2: 40}) == []
+    assert [b[1] for b in mirror.RowMirror.unsent(shared, sections, {})] == [[10, 20, 30]] * 2 + [[20, 40]]
+    assert mirror.RowMirror.unsent(shared, sections, {0: 30, 1: 30, 2: 40}) == []
     m.sent()
-    assert log_writer.RowMirror.unsent(shared, sections, {}) == []
+    assert mirror.RowMirror.unsent(shared, sections, {}) == []
 
 
 def test_row_mirror_keeps_a_channels_rows_of_values_as_a_prefix_of_what_fits():
@@ -333,43 +332,43 @@ def test_row_mirror_keeps_a_channels_rows_of_values_as_a_prefix_of_what_fits():
     to a step, never a row with a gap before it)."""
     import mmap
 
-    shared = mmap.mmap(-1, log_writer.RowMirror.BYTES)
+    shared = mmap.mmap(-1, mirror.RowMirror.BYTES)
     sections = [([(0, 0, ROW_BYTES)], ROW_BYTES, 4), ([(5, 0, None)], None, 4)]
-    assert log_writer.RowMirror.size(None, 4) == 8 + 16 * 4 + log_writer.RowMirror.VALUES_BYTES
-    m = log_writer.RowMirror(shared, sections)
+    assert mirror.RowMirror.size(None, 4) == 8 + 16 * 4 + mirror.RowMirror.VALUES_BYTES
+    m = mirror.RowMirror(shared, sections)
     numbers, values = m.sections
     numbers.put(1, _rows(SAMPLES[:1]))
     rows = [["text", 1.5, [1, 2]], ["", -0.0, [3, 4]]]
     values.put(1, rows[0])
     values.put(2, rows[1])
-    got = log_writer.RowMirror.unsent(shared, sections, {0: 1})
+    got = mirror.RowMirror.unsent(shared, sections, {0: 1})
     assert got == [(5, [1, 2], rows, None)], got
-    assert log_writer.RowMirror.unsent(shared, sections, {5: 1}) == [(0, [1], _rows(SAMPLES[:1]), None),
+    assert mirror.RowMirror.unsent(shared, sections, {5: 1}) == [(0, [1], _rows(SAMPLES[:1]), None),
                                                                       (5, [2], rows[1:], None)]
-    values.put(3, ["x" * log_writer.RowMirror.VALUES_BYTES, 0.0, [0, 0]])  # does not fit: nor does any row after it
+    values.put(3, ["x" * mirror.RowMirror.VALUES_BYTES, 0.0, [0, 0]])  # does not fit: nor does any row after it
     values.put(4, rows[0])
-    assert log_writer.RowMirror.unsent(shared, sections, {0: 1, 5: 0}) == [(5, [1, 2], rows, None)]
+    assert mirror.RowMirror.unsent(shared, sections, {0: 1, 5: 0}) == [(5, [1, 2], rows, None)]
     m.sent()
     values.put(5, rows[1])
-    assert log_writer.RowMirror.unsent(shared, sections, {0: 1, 5: 2}) == [(5, [5], rows[1:], None)]
+    assert mirror.RowMirror.unsent(shared, sections, {0: 1, 5: 2}) == [(5, [5], rows[1:], None)]
 
 
 def test_rows_that_do_not_fit_the_shared_memory_have_no_mirror(tmp_path):
     """The shared memory is made with the writer, before the run's rows are known: when every batch's section does
     not fit, there is no mirror at all (the writer keeps the blocks sent alone, see RowMirror)."""
-    if not log_writer._ForkedWriter.possible():
+    if not process.writer_forks():
         pytest.skip("a forked writer is not possible here")
     cap = 256
-    size = log_writer.RowMirror.size(ROW_BYTES, cap)
+    size = mirror.RowMirror.size(ROW_BYTES, cap)
     assert size == 8 + cap * 8 + (cap * ROW_BYTES + 7) // 8 * 8 and size % 8 == 0, size
-    n = log_writer.RowMirror.BYTES // size
+    n = mirror.RowMirror.BYTES // size
     fitting = [([(cid, 0, ROW_BYTES)], ROW_BYTES, cap) for cid in range(n)]
-    assert log_writer.RowMirror.fits(fitting) and not log_writer.RowMirror.fits(fitting + fitting[:1])
+    assert mirror.RowMirror.fits(fitting) and not mirror.RowMirror.fits(fitting + fitting[:1])
     w = WriterProcess()
     w.open(tmp_path / "f.mcap", 1024, 1)
     assert w.mirror(fitting + fitting[:1], 0) is None
     assert w.mirror([], 0) is None
-    assert isinstance(w.mirror(fitting, 0), log_writer.RowMirror)
+    assert isinstance(w.mirror(fitting, 0), mirror.RowMirror)
     w.finish()
 
 
@@ -378,7 +377,7 @@ def test_writer_left_by_its_master_writes_each_channels_mirrored_rows_after_its_
     of values read one by one, as strings are, every third): the master dies after sending a block it had not marked
     sent yet (the mirror holds those rows too) and one more step. The writer writes, per channel, the mirrored rows
     later than its last block received: every row once, none lost."""
-    if not log_writer._ForkedWriter.possible():
+    if not process.writer_forks():
         pytest.skip("a forked writer is not possible here")
     path = tmp_path / "m.mcap"
     w = WriterProcess()

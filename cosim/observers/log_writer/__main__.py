@@ -1,7 +1,8 @@
-"""``python -m cosim.observers.log_writer``: the log's writer process as a new interpreter."""
+"""``python -m cosim.observers.log_writer``: the log's writer process as a new interpreter
+(:func:`cosim.observers.log_writer.process.main`); it leaves as every child does (:func:`cosim.errors.exit_now`)."""
 
-import sys
-
+from ...errors import exit_now
 from .process import main
 
-sys.exit(main())
+if __name__ == "__main__":
+    exit_now(main())
