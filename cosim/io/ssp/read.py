@@ -69,18 +69,18 @@ from typing import TYPE_CHECKING, Any, Iterator
 from urllib.parse import unquote, urlparse
 from xml.etree import ElementTree as ET
 
-from ..engine.grid import MAX_TIME_S
-from ..engine.names import ref, safe_stem
-from ..engine.prepare import input_files, prepare
-from ..engine.scenario import Component, apply_overrides, load_scenario, scenario_from_data
-from ..engine.wiring import index_text
-from ..errors import CosimError, Issue, ScenarioError, file_problem, number_option, written_by_rename
-from ..fmi.description import FMUInfo, load_fmu
-from ..fmi.extract import MAX_FMU_BYTES, SSP_PREFIX, sweep_orphans
-from .output import check_output
+from ...engine.grid import MAX_TIME_S
+from ...engine.names import ref, safe_stem
+from ...engine.prepare import input_files, prepare
+from ...engine.scenario import Component, apply_overrides, load_scenario, scenario_from_data
+from ...engine.wiring import index_text
+from ...errors import CosimError, Issue, ScenarioError, file_problem, number_option, written_by_rename
+from ...fmi.description import FMUInfo, load_fmu
+from ...fmi.extract import MAX_FMU_BYTES, SSP_PREFIX, sweep_orphans
+from ..output import check_output
 
 if TYPE_CHECKING:  # the CLI imports this module to register its command: keep pydantic out of that
-    from ..engine.scenario import Scenario
+    from ...engine.scenario import Scenario
 
 __all__ = ["SspError", "ExportReport", "export_ssp", "read_ssp", "open_ssp", "reopen_ssp", "is_ssp", "NS", "SSD_NAME", "register"]
 
