@@ -20,9 +20,9 @@ import sys
 from pathlib import Path
 from typing import Callable, Sequence
 
-from delta.errors import CosimError, UnreachableError
+from delta.errors import UnreachableError
 
-from .errors import EXIT_BAD_INPUT, STOP_SIGNALS, exit_status, exit_text, number_option
+from .errors import EXIT_BAD_INPUT, STOP_SIGNALS, CosimError, exit_status, exit_text, number_option, user_errors
 
 NUMBER = number_option()
 """A finite number (every numeric option refuses nan and infinities: :func:`cosim.errors.number_option`)."""
@@ -443,7 +443,7 @@ def _cmd_validate_model(args: argparse.Namespace) -> int:
                               "w_rotation": ident.w_rotation},
                "fits": [asdict(f) for f in ident.fits], "reports": [r.as_dict() for r in ident.reports]}
     if args.out is not None:
-        from .engine.model_file import write_model_file
+        from .robot.model_file import write_model_file
 
         command = (f"python -m cosim validate-model --robot {args.robot} --trajectory {' '.join(args.trajectory)}"
                    + (f" --step {args.step:g}" if args.step != 2e-4 else "")
@@ -828,7 +828,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             if code is not None:  # the supervisor: the command went on in its child process
                 return code
         return handler(args)
-    except (CosimError, KeyboardInterrupt) as exc:
+    except (*_user_errors(), KeyboardInterrupt) as exc:
         message, kind, code = exit_status(exc)
         _error_json(args, message, kind)
         print(exit_text(message, kind), file=sys.stderr)
@@ -838,6 +838,15 @@ def main(argv: Sequence[str] | None = None) -> int:
 
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
         return EXIT_OK
+
+
+def _user_errors() -> tuple[type[BaseException], ...]:
+    """The errors a command ends on with one line: the master's and those of the domains plugged in (their
+    plugins loaded now if no command did)."""
+    from .engine import plugins
+
+    plugins.installed()
+    return user_errors()
 
 
 _SUPERVISED = (_cmd_run, _cmd_check, _cmd_compare)

@@ -1,7 +1,9 @@
-"""Errors of the co-simulation master.
+"""Errors of the co-simulation master, and how outside text is shown in a message (:func:`printable`).
 
-Every class derives from :class:`delta.errors.CosimError` (the project's one root)
-and from the builtin that matches its meaning, so callers can catch either.
+:class:`CosimError` is the master's one root: every class here derives from it and from the builtin that
+matches its meaning, so callers can catch either. A domain plugged into the master (the delta robot:
+:mod:`cosim.robot`) keeps its own error root; the master shows those errors as one line too
+(:data:`domain_errors`, which plugins extend through :mod:`cosim.engine.plugins`).
 """
 
 from __future__ import annotations
@@ -9,6 +11,7 @@ from __future__ import annotations
 import argparse
 import math
 import os
+import re
 import signal
 import stat
 import sys
@@ -17,7 +20,33 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable, Iterator
 
-from delta.errors import CosimError, UnreachableError, printable
+
+class CosimError(Exception):
+    """Root of every error the master raises. ``exit_kind``: what :func:`exit_status` calls it (``"error"``;
+    a domain's error class may say ``"unreachable"``, for a pose out of the workspace)."""
+
+    exit_kind = "error"
+
+
+domain_errors: list[type[BaseException]] = []
+"""The error roots of the domains plugged in (:mod:`cosim.engine.plugins` appends them): errors of bad input shown
+as one line, as a :class:`CosimError` is."""
+
+
+def user_errors() -> tuple[type[BaseException], ...]:
+    """The classes of the errors a command ends on with one line: :class:`CosimError` and the domains' roots."""
+    return (CosimError, *domain_errors)
+
+
+_CONTROL = re.compile(r"[\x00-\x1f\x7f-\x9f]")
+
+
+def printable(text: str) -> str:
+    """Text from outside (an FMU's log, a name or description in its modelDescription.xml) as it may reach a
+    terminal or a log: control characters (escape sequences that clear the screen or retitle the window, line
+    breaks that fake a traceback) written as their escapes (``\\x1b``, ``\\n``), tabs as spaces."""
+    return _CONTROL.sub(lambda m: " " if m.group() == "\t" else repr(m.group())[1:-1], text)
+
 
 STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM, *((signal.SIGHUP,) if hasattr(signal, "SIGHUP") else ()))
 """The signals that stop a run cleanly (Ctrl-C, a termination request, a closed terminal): the master finishes the
@@ -25,6 +54,10 @@ log and stops its processes; those processes ignore them (they reach the whole p
 
 __all__ = [
     "CosimError",
+    "domain_errors",
+    "user_errors",
+    "printable",
+    "SettingError",
     "Issue",
     "ScenarioError",
     "WiringError",
@@ -80,6 +113,10 @@ class WiringError(ScenarioError):
 
 class ComponentSourceError(ScenarioError):
     """A component's FMU cannot be found or built."""
+
+
+class SettingError(CosimError, ValueError):
+    """A setting of the master (a solver's name, an option's value) is not one it accepts."""
 
 
 class UnknownSignalError(CosimError, KeyError):
@@ -160,14 +197,12 @@ def exit_status(exc: BaseException) -> tuple[str, str, int]:
     which names its signal and what it stopped). The message is the ``error`` of ``--json``;
     :func:`exit_text` is its line(s) on stderr.
     """
-    if isinstance(exc, UnreachableError):
-        return str(exc), "unreachable", EXIT_BAD_INPUT
     if isinstance(exc, KeyboardInterrupt):
         signum = getattr(exc, "signum", signal.SIGINT)
         detail = getattr(exc, "detail", "")
         return (f"interrupted ({signal.Signals(signum).name})" + (f": {detail}" if detail else ""), "interrupted",
                 128 + signum)
-    return str(exc), "error", EXIT_BAD_INPUT
+    return str(exc), getattr(exc, "exit_kind", "error"), EXIT_BAD_INPUT
 
 
 def exit_text(message: str, kind: str) -> str:

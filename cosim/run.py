@@ -7,9 +7,7 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any, Mapping, Sequence
 
-from delta.robots import get_preset
-
-from .engine import supervision
+from .engine import plugins, supervision
 from .engine.execution import Execution, Observer, StopRequest
 from .engine.names import safe_stem
 from .engine.offload import Offload, choose
@@ -23,7 +21,7 @@ from .io.checkpoint import CheckpointError, default_checkpoint_path, write_check
 from .io.output import OutputError, check_output, claim
 from .observers.live import LiveView
 from .observers.mcap_log import McapRecorder
-from .observers.publish import Publisher, reference_path
+from .observers.publish import Publisher
 from .observers.realtime import RealTime
 from .observers.recorders import ErrorObserver
 from .observers.stats import ErrorStats
@@ -130,14 +128,10 @@ def progress_bar():
 def _publishing(scenario: Scenario, mcap_path: Path | None, options: RunOptions) -> tuple[list[Observer], Observer | None]:
     """The MCAP recorder and/or the live view on one publisher of the run's channels, in start order,
     and the recorder (None without a log)."""
-    robot = None
     scene = scenario.logging.scene
-    if scene is not None and scenario.robot:
-        robot = get_preset(scenario.robot)
-    publisher = Publisher(robot, expand_signal(scene.position) if scene else None, scene.rate_hz if scene else 30.0,
-                          options.stamps, reference_path(scenario) if robot is not None else None,
+    publisher = Publisher(plugins.scene(scenario), options.stamps,
                           expand_signal(scenario.compare.reference) if scenario.compare is not None else None,
-                          scenario.logging.layout)
+                          scenario.logging.layout, scene.rate_hz if scene is not None else 30.0)
     sinks: list[Observer] = []
     recorder = None
     if options.live is not None:  # first: a port in use fails before the log file is opened

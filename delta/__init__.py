@@ -11,12 +11,12 @@ I/O, no FMI, no Exudyn. Importing the package itself loads no numpy (the CLI's e
 
 from importlib import import_module
 
-from .errors import CosimError, ParameterError, RobotError, UnreachableError
+from .errors import DeltaError, ParameterError, RobotError, UnreachableError
 
 _ROBOTS = ("PRESETS", "LinearDelta", "Robot", "RotaryDelta", "get_preset")
 
 __all__ = [
-    "CosimError",
+    "DeltaError",
     "ParameterError",
     "RobotError",
     "UnreachableError",

@@ -1,37 +1,32 @@
-"""Error hierarchy shared by the whole platform, and how outside text is shown in a message (:func:`printable`).
+"""The robot core's errors: one root, :class:`DeltaError`; every subclass also inherits the builtin that matches
+its meaning so callers can catch either.
 
-One root, :class:`CosimError`; every subclass also inherits the builtin that
-matches its meaning so callers can catch either.
+The core knows nothing of the co-simulation master (it runs inside our FMUs too, where the master is not
+installed). The master shows these errors as one line, as its own (:class:`cosim.errors.CosimError`): the robot
+layer (:mod:`cosim.robot`) registers :class:`DeltaError` as a domain error root with it.
 """
 
 from __future__ import annotations
 
-import re
-
-__all__ = ["CosimError", "RobotError", "UnreachableError", "ParameterError", "printable"]
+__all__ = ["DeltaError", "RobotError", "UnreachableError", "ParameterError"]
 
 
-class CosimError(Exception):
-    """Root of every error raised by this project."""
+class DeltaError(Exception):
+    """Root of every error raised by the robot's packages (``delta``, ``fmus``, ``multibody``).
+    ``exit_kind``: what a command calls it when it ends on it (``"error"``)."""
+
+    exit_kind = "error"
 
 
-class RobotError(CosimError, ValueError):
+class RobotError(DeltaError, ValueError):
     """A robot description or a kinematic query is invalid."""
 
 
 class UnreachableError(RobotError):
     """A pose or trajectory leaves the workspace; the message says why."""
 
+    exit_kind = "unreachable"
 
-class ParameterError(CosimError, ValueError):
+
+class ParameterError(DeltaError, ValueError):
     """A model, controller or trajectory parameter is out of its valid range."""
-
-
-_CONTROL = re.compile(r"[\x00-\x1f\x7f-\x9f]")
-
-
-def printable(text: str) -> str:
-    """Text from outside (an FMU's log, a name or description in its modelDescription.xml) as it may reach a
-    terminal or a log: control characters (escape sequences that clear the screen or retitle the window, line
-    breaks that fake a traceback) written as their escapes (``\\x1b``, ``\\n``), tabs as spaces."""
-    return _CONTROL.sub(lambda m: " " if m.group() == "\t" else repr(m.group())[1:-1], text)

@@ -14,7 +14,7 @@ from typing import Any, NoReturn
 from urllib.parse import unquote, urlparse
 from xml.etree.ElementTree import ParseError, iterparse
 
-from delta.errors import CosimError, ParameterError
+from delta.errors import DeltaError, ParameterError
 
 __all__ = ["XYZ", "UNITS", "joint_names", "axis_names", "compensate_exporter_refcount", "ValueAccess", "writer",
            "initial_knowns", "STATE_MAGIC", "STATE_FORMAT", "FmuStateError", "fmu_guid", "encode_state",
@@ -141,7 +141,7 @@ STATE_FORMAT = 1
 """Version of the serialized layout; a state of another version is refused."""
 
 
-class FmuStateError(CosimError, ValueError):
+class FmuStateError(DeltaError, ValueError):
     """An FMU state was refused (another FMU's or build's, damaged bytes) or could not be taken or set; the message
     says which FMU, which guids and why."""
 

@@ -25,7 +25,7 @@ import tempfile
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from delta.errors import CosimError
+from delta.errors import DeltaError
 
 from . import requirements
 
@@ -42,7 +42,7 @@ _IMPORT = re.compile(r"^(\s*)import\s+(delta|multibody|fmus)((?:\.\w+)*)(\s+as\s
 _LEFT = re.compile(r"^\s*(from|import)\s+(delta|multibody|fmus)\b", re.M)
 
 
-class BuildError(CosimError, RuntimeError):
+class BuildError(DeltaError, RuntimeError):
     """An FMU could not be built; the message names the FMU and the cause."""
 
 

@@ -100,15 +100,15 @@ def describe(path) -> dict:
 
     from fmpy import read_model_description
 
-    from delta.errors import CosimError
+    from delta.errors import DeltaError
 
     path = Path(path)
     if not path.is_file():
-        raise CosimError(f"{path}: no such FMU file")
+        raise DeltaError(f"{path}: no such FMU file")
     try:
         md = read_model_description(str(path), validate=False)
     except Exception as exc:  # fmpy raises bare Exception for a bad archive or XML  # noqa: BLE001
-        raise CosimError(f"{path}: not a readable FMU: {exc}") from None
+        raise DeltaError(f"{path}: not a readable FMU: {exc}") from None
     interfaces = {}
     for key, part in (("cs", md.coSimulation), ("me", md.modelExchange)):
         if part is not None:
@@ -161,7 +161,7 @@ def _variable_line(v: dict) -> str:
 
 
 def _cmd_info(args: argparse.Namespace) -> int:
-    from delta.errors import printable
+    from cosim.errors import printable
 
     path, summary = _resolve(args.fmu, args.out, args)
     info = describe(path)
@@ -189,7 +189,7 @@ def _cmd_info(args: argparse.Namespace) -> int:
 
 
 def _cmd_list(args: argparse.Namespace) -> int:
-    from delta.errors import printable
+    from cosim.errors import printable
 
     payload = {}
     for name in _selection(args):

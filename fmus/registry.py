@@ -16,12 +16,12 @@ import importlib.util
 from dataclasses import dataclass
 from pathlib import Path
 
-from delta.errors import CosimError
+from delta.errors import DeltaError
 
 __all__ = ["FmuEntry", "AdapterError", "REGISTRY", "ROLES", "names", "get", "find", "adapter", "build", "available", "native_names"]
 
 
-class AdapterError(CosimError, ImportError):
+class AdapterError(DeltaError, ImportError):
     """An FMU's adapter class, or a module it needs, cannot be imported in this checkout."""
 
 

@@ -23,7 +23,7 @@ from typing import Any, Callable, NamedTuple
 
 import numpy as np
 
-from delta.errors import CosimError, ParameterError
+from delta.errors import DeltaError, ParameterError
 
 __all__ = ["SolverSettings", "PlantOutput", "PlantError", "DeltaPlant", "JointTrajectory"]
 
@@ -39,11 +39,11 @@ PLATFORM_THICKNESS = 0.01
 """Platform disc thickness, m (the full plants' platform inertia)."""
 
 
-class PlantError(CosimError, RuntimeError):
+class PlantError(DeltaError, RuntimeError):
     """A plant could not be stepped (wrong time, solver failure); the message names the time."""
 
 
-class RobotTypeError(CosimError, TypeError):
+class RobotTypeError(DeltaError, TypeError):
     """A plant was asked for a robot of a kind it does not model."""
 
 

@@ -19,10 +19,24 @@ Adding an algorithm: a class with the three members of :class:`Algorithm`, regis
 from __future__ import annotations
 
 import time as _time
-from typing import TYPE_CHECKING, Any, Callable, ClassVar, Protocol, Sequence
+from typing import Any, Callable, ClassVar, Protocol, Sequence
 
-if TYPE_CHECKING:
-    from .execution import Execution
+
+class Execution(Protocol):
+    """What an algorithm uses of the run it steps (:class:`cosim.engine.execution.Execution` is one): declared
+    here so that the algorithms depend on this and not on the execution, which depends on them."""
+
+    slaves: list[Any]  # the components' FMU instances, by index
+    grid: Any  # the time grid (:class:`cosim.engine.grid.Grid`)
+    current: Any  # the macro step being taken
+    comp_time: list[float]  # wall-clock seconds each component spent in its calls
+
+    def turns(self) -> Any:
+        """The hyper-period's turns: which components step at each of its substeps."""
+
+    def pull(self, c: int) -> None:
+        """Set component ``c``'s inputs from the outputs they are connected to."""
+
 
 __all__ = ["Algorithm", "GaussSeidel", "Jacobi", "ALGORITHMS", "DEFAULT"]
 
@@ -40,7 +54,7 @@ class Algorithm(Protocol):
     """A component reads outputs produced in the same macro step: the plan orders the components by
     direct feedthrough and refuses an algebraic loop."""
 
-    def macro_step(self, ex: "Execution") -> MacroStep:
+    def macro_step(self, ex: Execution) -> MacroStep:
         """The function that runs one macro step of ``ex`` (built once per run: the hot loop calls it).
 
         It records the component whose turn it is in ``ex.current`` (for the watchdog) and adds each
@@ -52,14 +66,14 @@ class Algorithm(Protocol):
         whose active components were ``active`` (in order)."""
         ...
 
-    def span(self, ex: "Execution", active: Sequence[int], t: float, ends: Sequence[float]) -> None:
+    def span(self, ex: Execution, active: Sequence[int], t: float, ends: Sequence[float]) -> None:
         """Part of a macro step (an event cuts it): the ``active`` components, each from ``t`` to its own
         ``ends[i]``, in this algorithm's order of exchange. Slower than :meth:`macro_step`'s loop; used only
         around events and while one is located."""
         ...
 
 
-def _loop_state(ex: "Execution") -> tuple[list, int, list[float], Any, Callable[[], float],
+def _loop_state(ex: Execution) -> tuple[list, int, list[float], Any, Callable[[], float],
                                           Callable[[int, int, float], float]]:
     """What a macro step's loop reads, as locals: the turns of the hyper-period (:meth:`Execution.turns`), its
     length, the per-component wall times, the record of the component with the turn, the clock, the step size
@@ -74,7 +88,7 @@ class GaussSeidel:
     name: ClassVar[str] = "gauss_seidel"
     reads_this_step: ClassVar[bool] = True
 
-    def macro_step(self, ex: "Execution") -> MacroStep:
+    def macro_step(self, ex: Execution) -> MacroStep:
         turns, period, ctime, current, clock, step_size = _loop_state(ex)
         turns = [[(c, moves, copies, s.set_step_get, m) for c, moves, copies, s, m in turn] for turn in turns]
 
@@ -96,7 +110,7 @@ class GaussSeidel:
     def read_after_termination(self, active: Sequence[int], c_term: int) -> list[int]:
         return [c_term]  # those before it were read after their turn; those after it did not step
 
-    def span(self, ex: "Execution", active: Sequence[int], t: float, ends: Sequence[float]) -> None:
+    def span(self, ex: Execution, active: Sequence[int], t: float, ends: Sequence[float]) -> None:
         current, ctime, clock = ex.current, ex.comp_time, _time.perf_counter
         t_prev = clock()
         for c, t_end in zip(active, ends):
@@ -115,7 +129,7 @@ class Jacobi:
     name: ClassVar[str] = "jacobi"
     reads_this_step: ClassVar[bool] = False
 
-    def macro_step(self, ex: "Execution") -> MacroStep:
+    def macro_step(self, ex: Execution) -> MacroStep:
         turns, period, ctime, current, clock, step_size = _loop_state(ex)
 
         def step(k: int, t: float, h: float) -> None:
@@ -149,7 +163,7 @@ class Jacobi:
     def read_after_termination(self, active: Sequence[int], c_term: int) -> list[int]:
         return list(active[: active.index(c_term) + 1]) if c_term in active else [c_term]
 
-    def span(self, ex: "Execution", active: Sequence[int], t: float, ends: Sequence[float]) -> None:
+    def span(self, ex: Execution, active: Sequence[int], t: float, ends: Sequence[float]) -> None:
         current, slaves = ex.current, ex.slaves
         for c in active:
             current[0] = c

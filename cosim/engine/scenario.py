@@ -23,15 +23,12 @@ from typing import Annotated, Any, Literal, Union
 import yaml
 from pydantic import AllowInfNan, BaseModel, ConfigDict, Field, PrivateAttr, ValidationError, field_validator, model_validator
 
-from delta.robots import PRESETS
-from delta.trajectories import TYPES
-
 from ..errors import Issue, ScenarioError, file_problem
 from .algorithm import ALGORITHMS, DEFAULT
 from .bounded_yaml import YamlTooLarge, load_yaml
 from .grid import MAX_TIME_S, NS_PER_S, Grid, grid_error
-from .model_file import read_model_file
 from .names import name_problem, quote, split_ref
+from . import plugins
 
 __all__ = [
     "Scenario",
@@ -181,16 +178,24 @@ class TimeGrid(_Model):
 class TrajectorySpec(_Model):
     """The reference trajectory, for the pre-flight and the initial state.
 
-    ``type`` names one of :data:`delta.trajectories.TYPES` (helix, pick_and_place,
-    point_to_point, waypoints); ``params`` are its constructor arguments, typed
-    (:func:`trajectory_params_model`).
+    ``type`` names one of the trajectory types of the domain plugged in (:func:`cosim.engine.plugins.trajectories`;
+    the delta robot's: helix, pick_and_place, point_to_point, waypoints); ``params`` are its constructor
+    arguments, typed (:func:`trajectory_params_model`).
     """
 
-    type: Literal[tuple(TYPES)] = Field(description="trajectory type (delta.trajectories.TYPES)")
+    type: str = Field(description="trajectory type (cosim.engine.plugins.trajectories)")
     params: dict[str, Any] = Field(default_factory=dict)
     check_step: float = Field(0.01, gt=0, description="pre-flight sampling step, s")
     singularity_margin: float | None = Field(
         0.01, ge=0, description="minimum singularity proximity along the path (None: no check)")
+
+    @field_validator("type", mode="after")
+    @classmethod
+    def _known(cls, kind: str) -> str:
+        types = plugins.trajectories()
+        if kind not in types:
+            raise ValueError(f"unknown trajectory type {kind!r}; valid: {', '.join(types) or 'none (no plugin)'}")
+        return kind
 
     @field_validator("params", mode="after")
     @classmethod
@@ -349,7 +354,8 @@ class Scenario(_Model):
     model_config = ConfigDict(extra="forbid", frozen=True, title="cosim scenario")
     name: str = "scenario"
     description: str = ""
-    robot: str | None = Field(None, description="robot preset (delta.robots), for the pre-flight and the scene")
+    robot: str | None = Field(None, description="robot preset (cosim.engine.plugins.robots), for the pre-flight and "
+                                                "the scene")
     components: dict[str, Component]
     connections: list[Connection] = Field(default_factory=list)
     time: TimeGrid
@@ -389,30 +395,23 @@ class Scenario(_Model):
     # where the values came from (set by the loader): :attr:`sources`
     _sources: "SourceMap | None" = PrivateAttr(default=None)
     _trajectory: Any = PrivateAttr(default=None)  # built once: :meth:`trajectory_object`
-    _model_file: Any = PrivateAttr(default=None)  # read once: :meth:`model_file`
+    _domain: dict[str, Any] = PrivateAttr(default_factory=dict)  # :meth:`domain`
     _archive: dict[str, str] | None = PrivateAttr(default=None)  # set by cosim.io.ssp: :attr:`archive`
 
-    def model_file(self) -> Any:
-        """The identified model the ``model:`` key names (:class:`cosim.engine.model_file.ModelFile`), read
-        once, its path relative to the scenario file; None without the key. Raises :class:`ScenarioError`."""
-        if self.model is None:
-            return None
-        if self._model_file is None:
-            path = Path(self.model)
-            if not path.is_absolute() and self.source and self.source != "<string>":
-                path = Path(self.source).parent / path
-            self._model_file = read_model_file(path)
-        return self._model_file
+    def domain(self) -> dict[str, Any]:
+        """What the domain plugged in (:mod:`cosim.engine.plugins`) made of this scenario, kept with it so that it
+        is made once (the robot layer's identified model, read from the ``model:`` file)."""
+        return self._domain
 
     def trajectory_object(self) -> Any:
-        """The trajectory of the ``trajectory:`` section (an instance of its :data:`delta.trajectories.TYPES`
-        class; None without the section), built once per scenario: the pre-flight, the start values of our
+        """The trajectory of the ``trajectory:`` section (an instance of its type's class,
+        :func:`cosim.engine.plugins.trajectories`; None without the section), built once per scenario: the pre-flight, the start values of our
         trajectory FMUs, the initial state and the log's reference path all use this one."""
         spec = self.trajectory
         if spec is None:
             return None
         if self._trajectory is None:
-            cls = TYPES[spec.type]
+            cls = plugins.trajectories()[spec.type]
             try:  # spec.params are typed by the scenario's model (TrajectorySpec._typed)
                 self._trajectory = cls(**spec.params)
             except (TypeError, ValueError) as exc:  # pydantic's ValidationError is a ValueError
@@ -665,30 +664,17 @@ def _semantic_issues(s: Scenario) -> list[tuple[tuple, str]]:
         seen.setdefault(c.dst, i)
     if s.trajectory is not None:
         out += [(("trajectory", "params") + loc, msg) for loc, msg in trajectory_params_issues(s.trajectory)]
-    if s.trajectory is not None and s.robot is None:
-        out.append((("trajectory",), "a trajectory needs 'robot' (the preset to check it against)"))
     if s.robot is not None:
-
-        if s.robot not in PRESETS:
-            close = difflib.get_close_matches(s.robot, list(PRESETS), n=3) or list(PRESETS)
-            out.append((("robot",), f"unknown robot preset {s.robot!r}; valid: {', '.join(close)}"))
+        robots = plugins.robots()
+        if s.robot not in robots:
+            close = difflib.get_close_matches(s.robot, robots, n=3) or robots
+            out.append((("robot",), f"unknown robot preset {s.robot!r}; valid: {', '.join(close) or 'none (no plugin)'}"))
     if s.model is not None and s.robot is None:
         out.append((("model",), "an identified model needs 'robot' (the preset it was identified for)"))
-    elif s.model is not None:
-        try:
-            model = s.model_file()
-        except ScenarioError as exc:
-            out += [(("model",), i.message) for i in exc.issues]
-        else:
-            if model.robot != s.robot:
-                out.append((("model",), f"{s.model} was identified for {model.robot}, the scenario's robot is "
-                                        f"{s.robot}"))
     if s.trajectory is not None and s.initial_state.from_trajectory and s.initial_state.position:
         if s.initial_state.component not in s.components:
             out.append((("initial_state", "component"), f"unknown component {s.initial_state.component!r}"))
     if s.logging.scene is not None:
-        if s.robot is None:
-            out.append((("logging", "scene"), "the 3D scene needs 'robot'"))
         comp_of(s.logging.scene.position, ("logging", "scene", "position"))
     if s.compare is not None:
         act, ref = expand_signal(s.compare.actual), expand_signal(s.compare.reference)
@@ -710,19 +696,19 @@ def _semantic_issues(s: Scenario) -> list[tuple[tuple, str]]:
                 comp_of(parse_condition(e.when)[0], ("events", i, "when"))
         for name in e.set:
             comp_of(name, ("events", i, "set", name))
-    return out
+    return out + plugins.scenario_issues(s)
 
 
 def trajectory_params_model(kind: str) -> type[BaseModel]:
-    """The typed parameters of trajectory type ``kind``: the constructor arguments of its
-    :data:`delta.trajectories.TYPES` class, with their types and defaults (unknown keys refused)."""
+    """The typed parameters of trajectory type ``kind``: the constructor arguments of its class
+    (:func:`cosim.engine.plugins.trajectories`), with their types and defaults (unknown keys refused)."""
 
 
     if kind in _PARAM_MODELS:
         return _PARAM_MODELS[kind]
     from pydantic import create_model  # lazy: --help loads this module without it
 
-    cls = TYPES[kind]
+    cls = plugins.trajectories()[kind]
     hints = typing.get_type_hints(cls)
     fields: dict[str, Any] = {}
     for f in dataclasses.fields(cls):
@@ -731,7 +717,7 @@ def trajectory_params_model(kind: str) -> type[BaseModel]:
         default = ... if f.default is dataclasses.MISSING else f.default
         fields[f.name] = (hints[f.name], Field(default))
     model = create_model(f"{cls.__name__}Params", __config__=ConfigDict(extra="forbid", title=f"{kind} parameters"),
-                         __doc__=f"Parameters of the {kind} trajectory (delta.trajectories.{cls.__name__}), SI units.",
+                         __doc__=f"Parameters of the {kind} trajectory ({cls.__module__}.{cls.__name__}), SI units.",
                          **fields)
     _PARAM_MODELS[kind] = model
     return model
@@ -1056,7 +1042,8 @@ def scenario_json_schema() -> dict:
     schema.get("properties", {}).pop("source", None)
     spec = schema["$defs"]["TrajectorySpec"]
     branches = []
-    for kind in TYPES:  # params typed per trajectory type: editors complete and check them
+    spec["properties"]["type"]["enum"] = list(plugins.trajectories())
+    for kind in plugins.trajectories():  # params typed per trajectory type: editors complete and check them
         model = trajectory_params_model(kind).model_json_schema()
         schema["$defs"].update(model.pop("$defs", {}))
         schema["$defs"][model["title"].replace(" ", "_")] = model

@@ -30,7 +30,8 @@ from typing import Any, Protocol
 
 import numpy as np
 
-from delta.errors import CosimError, ParameterError
+from ..errors import CosimError, SettingError
+
 
 __all__ = ["OdeModel", "Integrator", "make_integrator", "SOLVERS", "IntegratorError"]
 
@@ -74,7 +75,7 @@ def make_integrator(name: str, model: OdeModel, t0: float, rtol: float, max_step
         return CVodeIntegrator(model, t0, rtol, max_step)
     if name == "dop853":
         return DOP853Integrator(model, t0, rtol, max_step)
-    raise ParameterError(f"unknown solver {name!r}; valid: {', '.join(SOLVERS)}")
+    raise SettingError(f"unknown solver {name!r}; valid: {', '.join(SOLVERS)}")
 
 
 def _root_tolerance(t: float, h: float) -> float:

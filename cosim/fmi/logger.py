@@ -7,13 +7,17 @@ import itertools
 import re
 import threading
 import weakref
-from typing import TYPE_CHECKING, Any
-
-if TYPE_CHECKING:
-    from .slave import Base
+from typing import Any, Protocol
 
 
+class Base(Protocol):
+    """What the dispatch uses of an FMU instance (:class:`cosim.fmi.slave.Base` is one; declared here so that
+    this module does not depend on the instances, which depend on it)."""
 
+    name: str  # the instance name
+
+    def _on_log(self, status: int, category: bytes | None, message: bytes | None) -> None:
+        """One message the FMU logged."""
 
 
 # FMI 1.0 and 2.0 loggers are variadic; fmpy formats the message in a native proxy that keeps *one*

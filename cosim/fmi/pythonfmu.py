@@ -3,9 +3,9 @@
 from __future__ import annotations
 
 import atexit
+import ctypes
+import os
 from typing import Any
-
-from fmus.requirements import release_pythonfmu_state
 
 # Callbacks and library handles handed to FMUs live as long as the process: an FMU may call its
 # logger while being freed, and pythonfmu libraries must not be unloaded (GC of their objects crashes).
@@ -25,6 +25,22 @@ KEEP_ALIVE: list[Any] = []
 # Resetting the state ourselves while the library is loaded (pythonfmu makes it again at the
 # next instantiation) leaves both destructors an empty pointer: no write to freed memory.
 PYTHONFMU_LIBRARIES: set[str] = set()  # file names of the PythonFMU libraries this process instantiated
+
+
+def release_pythonfmu_state(library: str) -> None:
+    """Reset the interpreter state of the PythonFMU library ``library`` (a path or the name it was loaded under)
+    if it is loaded in this process, through its exported ``finalizePythonInterpreter`` (see above); found without
+    loading it (an unloaded library ran its hooks in order). Any other library, or one without the function:
+    nothing. Our FMUs register the same reset for the hosts they run in (``fmus/requirements.py``, which runs
+    inside the FMU with the standard library alone, so it cannot import this module)."""
+    if not hasattr(os, "RTLD_NOLOAD"):  # Windows: pythonfmu resets it from DllMain, in order
+        return
+    try:
+        reset = ctypes.CDLL(library, mode=os.RTLD_NOLOAD | os.RTLD_NOW).finalizePythonInterpreter
+    except (OSError, AttributeError):
+        return
+    reset.argtypes, reset.restype = [], None
+    reset()
 
 
 def _release_pythonfmu_libraries() -> None:

@@ -12,13 +12,11 @@ from ctypes import c_double, c_size_t, c_uint32
 from functools import partial
 from typing import Any, Callable, Protocol, Sequence
 
-from fmus.requirements import release_pythonfmu_state
-
 from ..errors import FMIError, printable
 from . import extract
 from .description import BINARY, BOOLEAN, REAL, FMUInfo, Variable
 from .logger import CALLING, log_text
-from .pythonfmu import PYTHONFMU_LIBRARIES
+from .pythonfmu import PYTHONFMU_LIBRARIES, release_pythonfmu_state
 from .turn import GET, SET, STEP, Exchange, Finite, make_turn
 
 isfinite = math.isfinite  # a module global: one lookup less per output buffer in the hot path
@@ -314,7 +312,7 @@ class Base:
 
     def _note_library(self) -> None:
         """Remember a PythonFMU library, whose global state is reset before it is unloaded or the
-        process exits (see :func:`fmus.requirements.release_pythonfmu_state`)."""
+        process exits (see :func:`cosim.fmi.pythonfmu.release_pythonfmu_state`)."""
         if self._pythonfmu:
             PYTHONFMU_LIBRARIES.add(self.fmu.dll._name)
 

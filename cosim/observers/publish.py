@@ -52,17 +52,13 @@ import ctypes
 import time
 from collections import deque
 from collections.abc import Sequence
-from functools import lru_cache, partial
+from functools import partial
 from typing import Any
 
 import numpy as np
 import orjson
 
-from delta.kinematics import inverse_kinematics, leg_axes, platform_offsets
-from delta.model import build_model
-
 from ..engine.execution import Execution, byte_view
-from ..engine.preflight import sampled_positions
 from ..errors import CosimError
 from ..fmi import BINARY, BOOLEAN, INTEGER, REAL, STRING
 from .foxglove_schemas import FRAME_TRANSFORMS, SCENE_UPDATE
@@ -74,17 +70,20 @@ __all__ = [
     "STAMPS",
     "Publisher",
     "frame_transforms",
-    "reference_path",
     "reference_update",
-    "scene_update",
     "time_metadata",
+    "vec",
+    "line",
+    "line_of",
+    "entity",
+    "IDENTITY",
 ]
 
 STAMPS = ("wall", "simulation")
 LAYOUTS = ("samples", "blocks")
 _TRAIL_S = 3.0  # s of platform trail drawn in the scene
 _REFERENCE_PERIOD_NS = 1_000_000_000  # /scene/reference resent every simulated second
-_REFERENCE_POINTS = 600  # the whole reference path is drawn with at most this many points
+REFERENCE_POINTS = 600  # the whole reference path is drawn with at most this many points
 _BLOCK_ROWS = 256  # samples of a component channel handed over at once, at most
 
 _JSON_TYPE = {REAL: {"type": "number"}, INTEGER: {"type": "integer"}, BOOLEAN: {"type": "boolean"},
@@ -273,99 +272,44 @@ def _stamp(t_ns: int) -> dict[str, int]:
     return {"sec": t_ns // 1_000_000_000, "nsec": t_ns % 1_000_000_000}
 
 
-def _vec(p) -> dict[str, float]:
+def vec(p) -> dict[str, float]:
     return {"x": float(p[0]), "y": float(p[1]), "z": float(p[2])}
 
 
 def _point(p) -> orjson.Fragment:
     """:func:`_vec` serialised once, for points that appear in many messages (trail, reference path)."""
-    return orjson.Fragment(orjson.dumps(_vec(p)))
+    return orjson.Fragment(orjson.dumps(vec(p)))
 
 
-_IDENTITY = {"x": 0.0, "y": 0.0, "z": 0.0, "w": 1.0}
-_POSE = {"position": {"x": 0.0, "y": 0.0, "z": 0.0}, "orientation": _IDENTITY}
+IDENTITY = {"x": 0.0, "y": 0.0, "z": 0.0, "w": 1.0}
+_POSE = {"position": {"x": 0.0, "y": 0.0, "z": 0.0}, "orientation": IDENTITY}
 
 
-def _line(kind: int, points, rgba, thickness=0.006) -> dict:
+def line(kind: int, points, rgba, thickness=0.006) -> dict:
     """A ``foxglove.LinePrimitive``: kind 0 LINE_STRIP, 1 LINE_LOOP, 2 LINE_LIST."""
-    return _line_of(kind, [_vec(p) for p in points], rgba, thickness)
+    return line_of(kind, [vec(p) for p in points], rgba, thickness)
 
 
-def _line_of(kind: int, vecs: list, rgba, thickness=0.006) -> dict:
+def line_of(kind: int, vecs: list, rgba, thickness=0.006) -> dict:
     """:func:`_line` of points already in their JSON form (``{"x", "y", "z"}`` or its fragment)."""
     return {"type": kind, "pose": _POSE, "thickness": thickness, "scale_invariant": False,
             "points": vecs, "color": dict(zip("rgba", rgba)), "colors": [], "indices": []}
 
 
-def _entity(entity_id: str, t_ns: int, lines: list, spheres: list = (), frame: str = "base") -> dict:
+def entity(entity_id: str, t_ns: int, lines: list, spheres: list = (), frame: str = "base") -> dict:
     """A ``foxglove.SceneEntity`` that stays until replaced by the next one with the same id."""
     return {"timestamp": _stamp(t_ns), "frame_id": frame, "id": entity_id, "lifetime": {"sec": 0, "nsec": 0},
             "frame_locked": False, "metadata": [], "arrows": [], "cubes": [], "spheres": list(spheres),
             "cylinders": [], "lines": lines, "triangles": [], "texts": [], "models": []}
 
 
-class _Drawing:
-    """A robot's scene: what does not move computed once (the model, the base, the platform offsets),
-    what does per call, through the model's scalar formulas (about 30 us a scene)."""
-
-    _SPHERE = {"x": 0.02, "y": 0.02, "z": 0.02}
-    _RED = {"r": 0.9, "g": 0.1, "b": 0.1, "a": 1.0}
-
-    def __init__(self, robot) -> None:
-
-        self.robot = robot
-        self.model = model = build_model(robot)
-        self.offsets = platform_offsets(model).tolist()  # platform joints relative to the platform, (3, 3)
-        self.base = model.actuator.radius * leg_axes(model)  # rail tops or motor axes, z = 0
-        self.base_line = _line(1, self.base, (0.5, 0.5, 0.5, 1.0))
-
-    def update(self, p, t_ns: int, trail: list | None = None) -> dict | None:
-        """:func:`scene_update` with the trail's points in their JSON form (dicts or fragments)."""
-
-        model, actuator = self.model, self.model.actuator
-        x, y, z = (float(v) for v in p)
-        q, _, _, fault = inverse_kinematics(model, (x, y, z))
-        if fault > 0:  # a leg without solution: nothing sensible to draw (a joint beyond its limit is drawn)
-            return None
-        joints_a = []  # carriage joints or elbows B_i = b_i - l_i(q_i) at p = 0 (as delta.kinematics.actuator_points)
-        for qi, (c, s, ox, oy), (bx, by, bz) in zip(q, model.legs, self.offsets):
-            lx, ly, lz = actuator.leg(qi, c, s, ox, oy, 0.0, 0.0, 0.0, model.xp)[:3]
-            joints_a.append((bx - lx, by - ly, bz - lz))
-        joints_p = [(x + bx, y + by, z + bz) for bx, by, bz in self.offsets]  # platform joints
-        colour, width = actuator.guide_style
-        lines = [_line(2, actuator.guides(self.robot, self.base, np.array(joints_a)), colour, width), self.base_line,
-                 _line(2, [v for pair in zip(joints_a, joints_p) for v in pair], (0.9, 0.6, 0.1, 1.0)),
-                 _line(1, joints_p, (0.1, 0.7, 0.3, 1.0), 0.01)]
-        spheres = [{"pose": {"position": _vec(v), "orientation": _IDENTITY}, "size": self._SPHERE, "color": self._RED}
-                   for v in joints_a + [(x, y, z)]]
-        entities = [_entity("robot", t_ns, lines, spheres)]
-        if trail is not None and len(trail) > 1:
-            entities.append(_entity("trail", t_ns, [_line_of(0, trail, (0.85, 0.1, 0.1, 0.8), 0.003)]))
-        return {"deletions": [], "entities": entities}
-
-
-@lru_cache(maxsize=8)
-def _drawing(robot) -> _Drawing:
-    return _Drawing(robot)
-
-
-def scene_update(robot, p, t_ns: int, trail=None) -> dict | None:
-    """A ``foxglove.SceneUpdate`` (JSON form) drawing ``robot`` with the platform at ``p`` (3,), m.
-
-    Linear delta: rails, carriages, rods, platform. Rotary delta: base, arms, forearms,
-    platform. ``trail`` (n, 3), m: the platform's recent positions, drawn as a line.
-    ``t_ns`` is the message's log time. None when ``p`` is unreachable (nothing sensible to draw).
-    """
-    return _drawing(robot).update(p, t_ns, None if trail is None else [_vec(v) for v in trail])
-
-
 def reference_update(points, t_ns: int) -> dict:
     """A ``foxglove.SceneUpdate`` drawing the reference path ``points`` (n, 3), m, as a line."""
-    return _reference_update([_vec(v) for v in points], t_ns)
+    return _reference_update([vec(v) for v in points], t_ns)
 
 
 def _reference_update(vecs: list, t_ns: int) -> dict:
-    return {"deletions": [], "entities": [_entity("reference", t_ns, [_line_of(0, vecs, (0.1, 0.4, 0.95, 0.6),
+    return {"deletions": [], "entities": [entity("reference", t_ns, [line_of(0, vecs, (0.1, 0.4, 0.95, 0.6),
                                                                                 0.004)])]}
 
 
@@ -374,20 +318,9 @@ def frame_transforms(p, t_ns: int) -> dict:
     stamp = _stamp(t_ns)
     return {"transforms": [
         {"timestamp": stamp, "parent_frame_id": "world", "child_frame_id": "base",
-         "translation": {"x": 0.0, "y": 0.0, "z": 0.0}, "rotation": _IDENTITY},
+         "translation": {"x": 0.0, "y": 0.0, "z": 0.0}, "rotation": IDENTITY},
         {"timestamp": stamp, "parent_frame_id": "base", "child_frame_id": "platform",
-         "translation": _vec(p), "rotation": _IDENTITY}]}
-
-
-def reference_path(scenario) -> np.ndarray | None:
-    """The scenario's whole reference path (n, 3), m, from its ``trajectory:`` section; None without one."""
-    spec = getattr(scenario, "trajectory", None)
-    if spec is None:
-        return None
-
-    t0, t1 = scenario.time.start, scenario.time.stop
-    n = int(min(_REFERENCE_POINTS, max(2, round((t1 - t0) / scenario.time.step) + 1)))
-    return sampled_positions(scenario.trajectory_object(), np.linspace(t0, t1, n))
+         "translation": vec(p), "rotation": IDENTITY}]}
 
 
 # --------------------------------------------------------------------------- publisher
@@ -419,16 +352,15 @@ class Publisher:
 
     Parameters
     ----------
-    scene_robot
-        A robot preset (``delta.robots``) to draw; None: no ``/scene``, ``/scene/reference``, ``/tf``.
-    scene_position
-        The three signals of the platform position (``["plant.p.x", "plant.p.y", "plant.p.z"]``).
-    scene_rate_hz
-        Scene and transform messages, and blocks of samples, per simulated second.
+    scene
+        What ``/scene`` draws (:class:`cosim.engine.plugins.Scene`: the drawing, the three signals it follows,
+        its rate, the whole reference path or None), given by the domain plugged in; None: no ``/scene``,
+        ``/scene/reference``, ``/tf``.
+    rate_hz
+        Without a scene: blocks of samples handed over per simulated second (with one: the scene's rate, at which
+        scene and transform messages are sent too).
     stamps
         ``"wall"`` (log time from the run's wall-clock start) or ``"simulation"``.
-    reference
-        The whole reference path (n, 3), m (:func:`reference_path`); or None.
     reference_signals
         Without ``reference``: three signals whose values so far are drawn as the reference path.
     layout
@@ -439,20 +371,21 @@ class Publisher:
     BLOCK_BYTES = 64 * 1024
     """Bytes of rows a component channel holds at most before they are handed over."""
 
-    def __init__(self, scene_robot=None, scene_position: Sequence[str] | None = None, scene_rate_hz: float = 30.0,
-                 stamps: str = "wall", reference=None, reference_signals: Sequence[str] | None = None,
-                 layout: str = "samples"):
+    def __init__(self, scene=None, stamps: str = "wall", reference_signals: Sequence[str] | None = None,
+                 layout: str = "samples", rate_hz: float = 30.0):
         if stamps not in STAMPS:
             raise CosimError(f"time stamps must be one of {', '.join(STAMPS)}, got {stamps!r}")
         if layout not in LAYOUTS:
             raise CosimError(f"log layout must be one of {', '.join(LAYOUTS)}, got {layout!r}")
-        if not scene_rate_hz > 0:
-            raise CosimError(f"scene rate must be > 0 Hz, got {scene_rate_hz}")
-        self.scene_robot = scene_robot
-        self.scene_position = list(scene_position) if scene_position else None
-        self.scene_period_ns = round(1e9 / scene_rate_hz)
+        rate_hz = scene.rate_hz if scene is not None else rate_hz
+        if not rate_hz > 0:
+            raise CosimError(f"scene rate must be > 0 Hz, got {rate_hz}")
+        self.scene = scene
+        self.scene_position = list(scene.position) if scene is not None and scene.position else None
+        self.scene_period_ns = round(1e9 / rate_hz)
         self.stamps = stamps
         self.layout = layout
+        reference = None if scene is None else scene.reference
         self.reference = None if reference is None else np.asarray(reference, dtype=float)
         self.reference_signals = list(reference_signals) if reference_signals else None
         self.offset_ns: int | None = None
@@ -523,7 +456,7 @@ class Publisher:
         self._grid = rt.grid
         self._rt = rt
         self._scene = None
-        if self.scene_robot is not None and self.scene_position:
+        if self.scene is not None and self.scene_position:
             sources = [rt.where(plan.port(r)) for r in self.scene_position]
             ref_sources = None
             if self.reference is None and self.reference_signals:
@@ -535,7 +468,7 @@ class Publisher:
             self._trail: deque = deque(maxlen=keep)  # points as JSON fragments: each serialised once
             self._ref_points: list = [] if self.reference is None else [_point(v) for v in self.reference]
             self._next_reference = rt.now_ns
-            self._drawing = _drawing(self.scene_robot)
+            self._drawing = self.scene
         # model-exchange components report their events (time, kind) on one /events channel
         self._event_sources = [(c, s) for c, s in enumerate(rt.slaves) if hasattr(s, "event_log")]
         self._fired = rt.events.fired if rt.events is not None else None  # the scenario's events
@@ -603,7 +536,7 @@ class Publisher:
         self._trail.append(_point(p))
         if ref_sources is not None:
             self._ref_points.append(_point([arr[i] for arr, i in ref_sources]))
-            if len(self._ref_points) > 2 * _REFERENCE_POINTS:  # every other point: the resent line stays bounded
+            if len(self._ref_points) > 2 * REFERENCE_POINTS:  # every other point: the resent line stays bounded
                 self._ref_points = self._ref_points[::2]
         msg = self._drawing.update(p, stamp, list(self._trail))
         if msg is not None:

@@ -5,7 +5,7 @@ from __future__ import annotations
 from math import isfinite
 
 from delta.dynamics import integrate
-from delta.errors import CosimError, ParameterError, UnreachableError
+from delta.errors import DeltaError, ParameterError, UnreachableError
 from delta.kinematics import END_STOP, inverse_kinematics, joint_limit_reason
 from delta.model import build_model
 
@@ -84,7 +84,7 @@ class AnalyticPlant(Adapter):
                                        f"{p[2]:.6g}) m: leg {fault} has no solution")
             if fault < 0:  # as the Exudyn plant (multibody.DeltaPlant.step): a joint past its range stops the plant
                 raise UnreachableError(f"{END_STOP}: {joint_limit_reason(self.model, -fault, q[-fault - 1])}")
-        except CosimError as exc:
+        except DeltaError as exc:
             raise type(exc)(f"{self.modelName} at t = {t:.6f} s: {exc}") from None
         self.p, self.v, self.q, self.qd = p, v, q, qd
 

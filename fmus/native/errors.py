@@ -2,12 +2,12 @@
 
 from __future__ import annotations
 
-from delta.errors import CosimError
+from delta.errors import DeltaError
 
 __all__ = ["NativeError", "CompilerMissingError"]
 
 
-class NativeError(CosimError, RuntimeError):
+class NativeError(DeltaError, RuntimeError):
     """A native FMU could not be generated or compiled; the message names the FMU and the cause."""
 
 

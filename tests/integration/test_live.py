@@ -70,14 +70,15 @@ def test_vendored_schemas_equal_the_published_ones(published_schemas):
 def test_scene_of_both_robot_kinds_validates(preset, published_schemas):
     import numpy as np
 
-    from cosim.observers.publish import frame_transforms, reference_update, scene_update
+    from cosim.observers.publish import frame_transforms, reference_update, vec
+    from cosim.robot.scene import drawing
     from delta.robots import get_preset
 
     robot = get_preset(preset)
     p = np.array([0.02, -0.01, -0.45 if robot.kind == "linear" else robot.home_z - 0.1])
     trail = [p + [0.001 * k, 0.0, 0.0] for k in range(5)]
     stamp = 1_795_000_000_123_456_789
-    scene = scene_update(robot, p, stamp, trail)
+    scene = drawing(robot).update(p, stamp, [vec(v) for v in trail])
     assert scene is not None, f"{preset}: no scene at {p}"
     assert [e["id"] for e in scene["entities"]] == ["robot", "trail"], scene["entities"]
     schemas, source = published_schemas

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from delta.dynamics import LinearDeltaMasses, RotaryDeltaMasses, analytic_model
-from delta.errors import CosimError
+from delta.errors import DeltaError
 from delta.kinematics import fk
 from delta.robots import linear_delta_thesis, rotary_delta_prototype
 from delta.trajectories import Helix, PickAndPlace
@@ -74,7 +74,7 @@ def test_step_rejects_wrong_time():
     plant.step(0.0, 1e-3, (0.0, 0.0, 0.0))
     with pytest.raises(PlantError, match="0.005") as info:
         plant.step(0.005, 1e-3, (0.0, 0.0, 0.0))
-    assert isinstance(info.value, CosimError)
+    assert isinstance(info.value, DeltaError)
 
 
 MASSLESS_FORCE_TOL = 0.005  # relative RMS (issue target): with massless rods the models are the same physics

@@ -213,7 +213,7 @@ def test_plant_stepper_splits_long_steps_and_fails_with_the_reason():
     taking them one by one); a non-finite effort and a state driven out of the workspace raise errors
     that say so."""
     from delta.dynamics import integrate, platform_dynamics, rk4_step
-    from delta.errors import CosimError
+    from delta.errors import DeltaError
     from delta.kinematics import inverse_kinematics
     from delta.model import build_model
 
@@ -227,5 +227,5 @@ def test_plant_stepper_splits_long_steps_and_fails_with_the_reason():
     assert integrate(model, p, v, u, 2.5e-3, 1e-3) == (x, xd)
     with pytest.raises(ParameterError, match="non-finite effort"):
         integrate(model, p, v, (float("nan"), 0.0, 0.0), 1e-3, 1e-3)
-    with pytest.raises(CosimError, match="left the workspace|singularity|diverged"):
+    with pytest.raises(DeltaError, match="left the workspace|singularity|diverged"):
         integrate(model, p, v, (1e9, -1e9, 1e9), 1e-3, 1e-3)

@@ -1,5 +1,6 @@
-"""Every error a user can meet derives from the project's root, delta.errors.CosimError, and from the
-builtin that matches its meaning (callers may catch either)."""
+"""Every error a user can meet derives from its room's root and from the builtin that matches its meaning
+(callers may catch either): the master's from cosim.errors.CosimError, the robot's packages' from
+delta.errors.DeltaError, which the robot layer registers with the master as a domain error root."""
 
 from __future__ import annotations
 
@@ -7,20 +8,30 @@ import importlib
 
 import pytest
 
-from delta.errors import CosimError
+from cosim.errors import CosimError
+from delta.errors import DeltaError
 
 
-@pytest.mark.parametrize("module,name,builtin", [
-    ("fmus.builder", "BuildError", RuntimeError),
-    ("fmus.registry", "AdapterError", ImportError),
-    ("cosim.fmi.integrators", "IntegratorError", RuntimeError),
-    ("cosim.errors", "UnknownSignalError", KeyError),
-    ("multibody.plant", "PlantError", RuntimeError),
-    ("multibody.plant", "RobotTypeError", TypeError),
+@pytest.mark.parametrize("module,name,builtin,root", [
+    ("fmus.builder", "BuildError", RuntimeError, DeltaError),
+    ("fmus.registry", "AdapterError", ImportError, DeltaError),
+    ("cosim.fmi.integrators", "IntegratorError", RuntimeError, CosimError),
+    ("cosim.errors", "UnknownSignalError", KeyError, CosimError),
+    ("cosim.errors", "SettingError", ValueError, CosimError),
+    ("multibody.plant", "PlantError", RuntimeError, DeltaError),
+    ("multibody.plant", "RobotTypeError", TypeError, DeltaError),
 ])
-def test_error_classes_derive_from_the_root_and_their_builtin(module, name, builtin):
+def test_error_classes_derive_from_the_root_and_their_builtin(module, name, builtin, root):
     cls = getattr(importlib.import_module(module), name)  # our own modules: a broken one fails, never skips
-    assert issubclass(cls, CosimError) and issubclass(cls, builtin), f"{name}.__mro__ = {cls.__mro__}"
+    assert issubclass(cls, root) and issubclass(cls, builtin), f"{name}.__mro__ = {cls.__mro__}"
+
+
+def test_the_robot_layer_registers_its_error_root_with_the_master():
+    from cosim import errors
+    from cosim.engine import plugins
+
+    plugins.installed()
+    assert DeltaError in errors.user_errors(), errors.user_errors()
 
 
 def test_unknown_signal_message_is_not_quoted():
@@ -39,9 +50,9 @@ def test_solver_settings_raise_a_parameter_error(settings):
         plant.SolverSettings(**settings)
 
 
-def test_unknown_solver_is_a_parameter_error():
+def test_unknown_solver_is_a_setting_error():
+    from cosim.errors import SettingError
     from cosim.fmi.integrators import make_integrator
-    from delta.errors import ParameterError
 
-    with pytest.raises(ParameterError, match="unknown solver 'euler'; valid: cvode, dop853"):
+    with pytest.raises(SettingError, match="unknown solver 'euler'; valid: cvode, dop853"):
         make_integrator("euler", None, 0.0, 1e-6, 1e-3)

@@ -1,7 +1,7 @@
 """The master's rooms: imports point one way, with no cycle and no hidden import.
 
 Layers, lowest first: ``errors``, ``cbuild`` (the C helpers' compiler), ``fmi`` (FMU access), ``engine`` (scenario, plan, algorithms, execution),
-``observers``, ``io``, ``run`` (a scenario's run, composed), ``analysis``, ``api``, the CLI. A module imports
+``observers``, ``io``, ``robot`` (the delta robot plugged in), ``run`` (a scenario's run, composed), ``analysis``, ``api``, the CLI. A module imports
 only from its own layer or below. Inside a layer, module-level imports form no cycle. Our own modules are
 imported at module level, except in the CLI (``cosim/cli.py`` imports each command's modules inside the
 command, so that ``--help`` starts in a fraction of a second; its docstring says so).
@@ -17,7 +17,7 @@ import pytest
 
 ROOT = Path(__file__).resolve().parents[2]
 PACKAGE = ROOT / "cosim"
-LAYERS = ["errors", "cbuild", "procs", "fmi", "engine", "observers", "io", "run", "analysis", "api", "cli", "__main__"]
+LAYERS = ["errors", "cbuild", "procs", "fmi", "engine", "observers", "io", "robot", "run", "analysis", "api", "cli", "__main__"]
 LAZY_OK = {"cosim.cli"}  # imports inside functions, for start-up time (see its docstring)
 
 
@@ -59,15 +59,16 @@ def _resolve(module: str, path: Path, node: ast.ImportFrom | ast.Import) -> list
     return targets
 
 
-def _imports(module: str) -> list[tuple[str, int, bool]]:
-    """(imported cosim module, line, at module level) of ``module``, TYPE_CHECKING blocks left out."""
+def _imports(module: str, typing_too: bool = False) -> list[tuple[str, int, bool]]:
+    """(imported cosim module, line, at module level) of ``module``; TYPE_CHECKING blocks left out unless
+    ``typing_too``."""
     path = MODULES[module]
     tree = ast.parse(path.read_text())
     out = []
 
     def visit(node: ast.AST, top: bool) -> None:
         for child in ast.iter_child_nodes(node):
-            if isinstance(child, ast.If) and "TYPE_CHECKING" in ast.unparse(child.test):
+            if isinstance(child, ast.If) and "TYPE_CHECKING" in ast.unparse(child.test) and not typing_too:
                 continue
             if isinstance(child, (ast.Import, ast.ImportFrom)):
                 out.extend((t, child.lineno, top) for t in _resolve(module, path, child))
@@ -98,9 +99,7 @@ def test_our_modules_are_imported_at_module_level(module):
     assert not hidden, "\n".join(hidden)
 
 
-def test_no_import_cycle():
-    graph = {m: {t for t, _, top in _imports(m) if top and t in MODULES and t != m} for m in MODULES}
-    # a package's __init__ importing its own modules is how a package offers its names: not a cycle edge back
+def _cycles(graph: dict[str, set[str]]) -> list[str]:
     state: dict[str, int] = {}
     cycles = []
 
@@ -116,7 +115,19 @@ def test_no_import_cycle():
     for m in sorted(graph):
         if m not in state:
             walk(m, [m])
+    return cycles
+
+
+def test_no_import_cycle():
+    """No cycle among our modules' imports, wherever they stand: at module level, inside functions, under
+    TYPE_CHECKING, and through a package's ``__init__`` (its re-exports)."""
+    graph = {m: {t for t, _, _ in _imports(m, typing_too=True) if t in MODULES and t != m} for m in MODULES}
+    cycles = _cycles(graph)
     assert not cycles, "\n".join(cycles)
+
+
+def test_the_cycle_check_can_fail():
+    assert _cycles({"a": {"b"}, "b": {"c"}, "c": {"a"}, "d": {"a"}}) == ["a -> b -> c -> a"]
 
 
 @pytest.mark.parametrize("module", sorted(set(MODULES) - LAZY_OK))
@@ -134,3 +145,55 @@ def test_an_import_inside_a_function_says_why(module):
                         r"#\s*(lazy|optional)\b", lines[sub.lineno - 1]):
                     silent.append(f"{module}:{sub.lineno}: {lines[sub.lineno - 1].strip()}")
     assert not silent, "\n".join(silent)
+
+
+GENERIC = ("engine", "fmi", "observers", "io")
+"""The rooms of the master for any FMU: they import nothing of the robot's packages, anywhere in a module (at
+module level, inside a function, under TYPE_CHECKING, or by name through importlib); the robot plugs in through
+cosim.engine.plugins."""
+DOMAIN = ("delta", "fmus", "multibody")
+
+
+def _domain_imports(path: Path) -> list[str]:
+    """Every place in ``path`` that imports a robot package, with its line."""
+    tree = ast.parse(path.read_text())
+    found = []
+    for node in ast.walk(tree):
+        names: list[str] = []
+        if isinstance(node, ast.Import):
+            names = [a.name for a in node.names]
+        elif isinstance(node, ast.ImportFrom) and node.level == 0:
+            names = [node.module or ""]
+        elif isinstance(node, ast.Call) and ast.unparse(node.func).split(".")[-1] in ("import_module", "__import__"):
+            names = [a.value for a in node.args[:1] if isinstance(a, ast.Constant) and isinstance(a.value, str)]
+        found += [f"{path.relative_to(ROOT) if path.is_relative_to(ROOT) else path.name}:{node.lineno} imports {n}"
+                  for n in names if n.split(".")[0] in DOMAIN]
+    return found
+
+
+@pytest.mark.parametrize("module", sorted(m for m in MODULES if m.split(".")[1:2] and m.split(".")[1] in GENERIC))
+def test_the_generic_rooms_import_no_robot(module):
+    wrong = _domain_imports(MODULES[module])
+    assert not wrong, "\n".join(wrong)
+
+
+def test_the_robot_check_finds_every_way_of_importing(tmp_path):
+    """The check above can fail: each way a module may reach the robot is found."""
+    bad = tmp_path / "bad.py"
+    bad.write_text("from __future__ import annotations\nimport importlib\nfrom typing import TYPE_CHECKING\n"
+                   "import delta.robots as r\nif TYPE_CHECKING:\n    from fmus.registry import FmuEntry\n"
+                   "def f():\n    from multibody import plant\n    return importlib.import_module('fmus.registry')\n"
+                   "from ..errors import CosimError\n")
+    found = _domain_imports(bad)
+    assert [line.split(" imports ")[1] for line in found] == ["delta.robots", "fmus.registry", "multibody",
+                                                               "fmus.registry"], found
+
+
+def test_the_robot_plugs_in_through_its_entry_point():
+    from importlib.metadata import entry_points
+
+    from cosim.engine import plugins
+
+    (ep,) = [e for e in entry_points(group=plugins.GROUP) if e.name == "delta"]
+    assert ep.value == "cosim.robot:plugin", ep
+    assert [p.name for p in plugins.installed()] == ["delta"]

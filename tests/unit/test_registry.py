@@ -32,7 +32,7 @@ def test_an_entry_without_its_adapter_is_not_available(monkeypatch, change, reas
 
 
 def test_unknown_fmu_names_the_valid_ones():
-    from delta.errors import CosimError
+    from delta.errors import DeltaError
 
-    with pytest.raises(CosimError, match=r"unknown FMU 'helx'; did you mean helix\? our FMUs: linear_ik, "):
+    with pytest.raises(DeltaError, match=r"unknown FMU 'helx'; did you mean helix\? our FMUs: linear_ik, "):
         registry.get("helx")

@@ -1,5 +1,5 @@
 """Trajectory FMU parameters <-> delta.trajectories dataclasses, and the scenario's trajectory section
-as the one source of the trajectory component's parameters (cosim.engine.preflight.trajectory_start_values)."""
+as the one source of the trajectory component's parameters (cosim.robot.preflight.trajectory_start_values)."""
 
 from __future__ import annotations
 
@@ -10,7 +10,7 @@ import pytest
 pytest.importorskip("pythonfmu")
 
 from cosim.errors import ScenarioError  # noqa: E402
-from cosim.engine.preflight import trajectory_start_values  # noqa: E402
+from cosim.robot.preflight import trajectory_start_values  # noqa: E402
 from cosim.engine.scenario import apply_overrides, parse_scenario  # noqa: E402
 from delta.trajectories import Helix, PickAndPlace, PointToPoint, Waypoints  # noqa: E402
 from fmus.adapters.trajectories import (  # noqa: E402
@@ -159,8 +159,8 @@ def test_every_trajectory_type_has_one_adapter_and_one_fmu():
     from fmus import registry
 
     assert list(ADAPTERS) == list(TYPES), f"{list(ADAPTERS)} vs {list(TYPES)}"
-    fmus = {e.name: e.cls for e in registry.REGISTRY.values() if e.module == "trajectories"}
-    expected = {a.FMU: a.__name__ for a in ADAPTERS.values()}
+    fmus = {e.name: e.adapter for e in registry.REGISTRY.values() if e.role == "trajectory"}
+    expected = {a.FMU: a for a in ADAPTERS.values()}
     assert fmus == expected, f"{fmus} vs {expected}"
     # the published FMU names (scenarios, golden runs) do not move
     assert sorted(fmus) == ["helix", "pick_place", "point_to_point", "waypoints"], sorted(fmus)

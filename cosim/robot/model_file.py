@@ -4,7 +4,7 @@ A YAML file with the robot preset, the motions the parameters were fitted on, th
 (``model.w_inertia``, ``model.w_gravity``, ``model.w_rotation``) and their fit figures (relative RMS and peak effort error per
 motion, at the fitted split and at the default one). A scenario names it with ``model:`` and every
 model-based component of ours (controllers that declare the parameters, the analytic plants) takes its
-start values from it (:func:`model_start_values`, applied by :func:`cosim.engine.prepare.prepare`).
+start values from it (:func:`model_start_values`, applied by the robot layer's pre-flight, :func:`cosim.robot.preflight.prepare`).
 """
 
 from __future__ import annotations
@@ -17,9 +17,10 @@ from typing import Any
 import yaml
 
 from ..errors import Issue, ScenarioError, file_problem, written_by_rename
-from .bounded_yaml import load_yaml
+from ..engine.bounded_yaml import load_yaml
 
-__all__ = ["FORMAT", "PARAMETERS", "ModelFile", "read_model_file", "write_model_file", "model_start_values"]
+__all__ = ["FORMAT", "PARAMETERS", "ModelFile", "read_model_file", "write_model_file", "model_start_values",
+           "scenario_model", "model_based"]
 
 FORMAT = "cosim-identified-model/1"
 PARAMETERS = ("model.w_inertia", "model.w_gravity", "model.w_rotation")
@@ -99,3 +100,18 @@ def model_based(entry: Any) -> bool:
 def model_start_values(model: ModelFile, variables: Any) -> dict[str, float]:
     """The identified parameters that an FMU with ``variables`` (names) declares."""
     return {name: value for name, value in model.parameters.items() if name in variables}
+
+
+def scenario_model(scenario: Any) -> ModelFile | None:
+    """The identified model ``scenario``'s ``model:`` key names, its path relative to the scenario file; read once
+    per scenario (kept in its :meth:`~cosim.engine.scenario.Scenario.domain` slot); None without the key. Raises
+    :class:`ScenarioError`."""
+    if scenario.model is None:
+        return None
+    slot = scenario.domain()
+    if "model_file" not in slot:
+        path = Path(scenario.model)
+        if not path.is_absolute() and scenario.source and scenario.source != "<string>":
+            path = Path(scenario.source).parent / path
+        slot["model_file"] = read_model_file(path)
+    return slot["model_file"]

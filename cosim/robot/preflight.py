@@ -1,12 +1,13 @@
-"""Pre-flight: the reference trajectory against the robot's workspace and singularity margin.
+"""The robot's pre-flight ("before the first step", as a pilot's checks before take-off): what the delta robot
+checks of a scenario before any FMU is instantiated, and the start values it gives the plan.
 
-Runs before any FMU is instantiated. The trajectory comes from
-:mod:`delta.trajectories` (``helix`` -> ``Helix(**params)`` and so on).
-
-The scenario's ``trajectory:`` section is the one source of the reference: it also
-gives the start values of every component that is one of our trajectory FMUs
-(:func:`trajectory_start_values`), so the pre-flight, the plant's initial state and
-the trajectory component cannot disagree.
+The reference trajectory is checked against the robot's workspace and singularity margin; the trajectory comes
+from :mod:`delta.trajectories` (``helix`` -> ``Helix(**params)`` and so on). The scenario's ``trajectory:``
+section is the one source of the reference: it also gives the start values of every component that is one of our
+trajectory FMUs (:func:`trajectory_start_values`) and the plant's initial state (:func:`initial_state_values`),
+so the pre-flight, the plant and the trajectory component cannot disagree. An identified model (``model:``)
+gives the start values of our model-based components. :func:`prepare` is the robot's part of the engine's
+:func:`cosim.engine.prepare.prepare` (:class:`cosim.engine.plugins.Preparation`).
 """
 
 from __future__ import annotations
@@ -20,12 +21,17 @@ from delta.errors import ParameterError
 from delta.model import build_model
 from delta.robots import get_preset
 from delta.workspace import check_trajectory
+from fmus import registry
 from fmus.adapters.trajectories import ADAPTERS
 
+from ..engine.plugins import Preparation
+from ..engine.scenario import Scenario
+from ..engine.system import SystemPlan
 from ..errors import Issue, PreflightError, ScenarioError
-from .scenario import Scenario
+from .model_file import model_based, model_start_values, scenario_model
 
-__all__ = ["check_positions", "sampled_positions", "preflight", "initial_state_values", "trajectory_start_values"]
+__all__ = ["check_positions", "sampled_positions", "preflight", "initial_state_values", "trajectory_start_values",
+           "prepare"]
 
 def check_positions(robot_name: str, times: np.ndarray, positions: np.ndarray,
                     singularity_margin: float | None) -> None:
@@ -64,7 +70,7 @@ def preflight(scenario: Scenario) -> str:
 def _model_report(scenario: Scenario) -> str:
     """``; model FILE (w_inertia = ..)`` for a scenario with an identified model, after building the robot's
     analytic model with its parameters (the mass validation of :mod:`delta.masses`)."""
-    model = scenario.model_file()
+    model = scenario_model(scenario)
     if model is None:
         return ""
 
@@ -164,3 +170,36 @@ def trajectory_start_values(scenario: Scenario) -> dict[str, dict[str, Any]]:
     if issues:
         raise ScenarioError(issues)
     return out
+
+
+def prepare(scenario: Scenario) -> Preparation:
+    """The robot's pre-flight of ``scenario`` (the trajectory's start values checked first, then the reachability
+    and the identified model) and, to apply to its plan, the start values it gives: our trajectory FMUs' from the
+    ``trajectory:`` section, our model-based FMUs' from the identified model, the initial state's from the
+    trajectory. A component's explicit parameters win over each (equal ones for the trajectory: checked)."""
+    trajectory_values = trajectory_start_values(scenario)
+    report = preflight(scenario)
+    return Preparation(report, lambda plan: _apply(scenario, plan, trajectory_values))
+
+
+def _apply(scenario: Scenario, plan: SystemPlan, trajectory_values: dict[str, dict[str, Any]]) -> None:
+    for name, values in trajectory_values.items():
+        c = plan.names.index(name)
+        plan.start_values[c] = {**values, **plan.start_values[c]}  # explicit ones are equal (checked)
+    model = scenario_model(scenario)
+    if model is not None:  # the identified model: start values of our model-based components, explicit ones win
+        for c, name in enumerate(plan.names):
+            comp = scenario.components[name]
+            if comp.fmu is not None and model_based(registry.get(comp.fmu)):
+                values = model_start_values(model, plan.infos[c].variables)
+                plan.start_values[c] = {**values, **plan.start_values[c]}
+    init = initial_state_values(scenario)
+    if init:
+        c = plan.names.index(scenario.initial_state.component)
+        variables = plan.infos[c].variables
+        missing = [n for n in init if n not in variables]
+        if missing:
+            raise ScenarioError(Issue("initial_state", f"{scenario.initial_state.component} has no "
+                                      f"{', '.join(missing)} (set initial_state.position/velocity to its start "
+                                      f"parameters, or from_trajectory: false)", scenario.source))
+        plan.start_values[c] = {**init, **plan.start_values[c]}  # explicit parameters win

@@ -1,0 +1,44 @@
+"""Our FMUs by name: the ``fmu: NAME`` components of a scenario, built by :mod:`fmus.registry` (python or native)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any, Sequence
+
+from delta.errors import DeltaError
+from fmus import registry
+from fmus.native.build import compiler
+from fmus.native.errors import CompilerMissingError
+
+from ..engine.scenario import Scenario
+from ..errors import ComponentSourceError, Issue
+
+__all__ = ["RegistrySource"]
+
+
+class RegistrySource:
+    """:class:`cosim.engine.plugins.FmuSource` of our FMUs: a key is (FMU name, native, FMI version)."""
+
+    def names(self) -> Sequence[str]:
+        return registry.names()
+
+    def key(self, scenario: Scenario, name: str) -> tuple[str, bool, int]:
+        """The native build where the scenario asks for it (``fmus: native``, or ``auto`` with a C compiler on this
+        machine) and the FMU has one, else the python build (FMI 2 co-simulation, or 3 for ``*_me``)."""
+        if scenario.fmus == "python" or name not in registry.native_names():
+            return name, False, 2
+        if scenario.fmus == "auto":
+            try:
+                compiler()
+            except CompilerMissingError:
+                return name, False, 2
+        return name, True, scenario.native_fmi
+
+    def build(self, key: Any) -> Path:
+        """Our FMU of ``key``, built (or taken from the cache). A native build that cannot be made (no C compiler)
+        is one line naming what is missing."""
+        name, native, fmi = key
+        try:
+            return Path(registry.build(name, native=native, fmi=fmi))
+        except DeltaError as exc:  # a build error of ours: the master's error, one line
+            raise ComponentSourceError(Issue("", str(exc))) from None
