@@ -48,7 +48,8 @@ def main() -> int:
                     help="also time the sweep on an already running, warmed-up cluster of the same workers")
     args = ap.parse_args()
     sys.path.insert(0, str(ROOT))
-    from cosim.engine.scenario import dotted_overrides, load_scenario, read_scenario
+    from cosim.engine.overrides import dotted_overrides
+    from cosim.engine.scenario import load_scenario, read_scenario
     from cosim.analysis.sweep import Case, SweepCluster, prebuild, read_results, run_loaded_case, run_sweep
 
     import statistics

@@ -5,7 +5,7 @@
 ...               {"time.stop": 0.2, "trajectory.params.rx": 0.05, "ctl.gain.kp[1]": 2.0e4})  # doctest: +SKIP
 >>> res.metrics["rmse_x"], res["plant.p.x"][-1]  # doctest: +SKIP
 
-Dotted names (:func:`cosim.engine.scenario.resolve_name`) are those of ``--set`` on the command line:
+Dotted names (:func:`cosim.engine.overrides.resolve_name`) are those of ``--set`` on the command line:
 ``COMP.PARAM`` sets a component parameter (``ctl.gain.kp[1]``, ``plant.mass.payload``); other
 names walk the scenario's sections (``time.stop``, ``time.step``, ``trajectory.params.rx``,
 ``algorithm``, ``parallel``). An unknown name raises :class:`~cosim.errors.ScenarioError`
@@ -24,7 +24,9 @@ import numpy as np
 
 from .analysis.metrics import metric_names, metrics
 from .engine.execution import Execution
-from .engine.scenario import Scenario, dotted_overrides, load_scenario
+from .engine.overrides import dotted_overrides
+from .engine.scenario import load_scenario
+from .engine.schema import Scenario
 from .engine.system import Port
 from .engine.wiring import index_text
 from .errors import ScenarioError, UnknownSignalError

@@ -477,7 +477,7 @@ def _cmd_compare(args: argparse.Namespace) -> int:
     from pathlib import Path
 
     from .analysis.compare import compare_logs, compare_plants, logged_tolerances, parse_tolerances
-    from .engine.scenario import apply_overrides
+    from .engine.overrides import apply_overrides
 
     tol = parse_tolerances(args.tol)
     ins = args.inputs
@@ -587,7 +587,7 @@ def _stdout_kept_for_json(on: bool):
 
 
 def _cmd_run(args: argparse.Namespace) -> int:
-    from .engine.scenario import apply_overrides
+    from .engine.overrides import apply_overrides
     from .run import run_scenario
 
     overrides = apply_overrides(args.set, args.stop_time)
@@ -626,7 +626,8 @@ def _cmd_run(args: argparse.Namespace) -> int:
 def _resume_run(args: argparse.Namespace, live, realtime, command: str):
     """``run --resume FILE``: the checkpoint's scenario (``--stop-time`` moves its end; a scenario file given too
     must be the checkpoint's), its state restored, ``--set`` values set at its time."""
-    from .engine.scenario import load_scenario, parse_set_value
+    from .engine.overrides import parse_set_value
+    from .engine.scenario import load_scenario
     from .io.checkpoint import read_checkpoint
     from .run import resumed_scenario, run_scenario
 
@@ -670,7 +671,7 @@ def _crashed(args: argparse.Namespace, record, reason: str) -> int:
 
 def _cmd_check(args: argparse.Namespace) -> int:
     from .engine.offload import choose
-    from .engine.scenario import apply_overrides
+    from .engine.overrides import apply_overrides
     from .run import check_initialization
 
     with _open_scenario(args, apply_overrides(args.set, args.stop_time)) as scenario:
@@ -689,7 +690,7 @@ def _cmd_check(args: argparse.Namespace) -> int:
 
 
 def _cmd_schema(args: argparse.Namespace) -> int:
-    from .engine.scenario import scenario_json_schema
+    from .engine.schema import scenario_json_schema
 
     print(json.dumps(scenario_json_schema(), indent=2))
     return EXIT_OK

@@ -13,7 +13,8 @@ from .engine.names import safe_stem
 from .engine.offload import Offload, choose
 from .engine.prepare import input_files, prepare
 from .engine.events import EventState, event_at, resolve_sets
-from .engine.scenario import Scenario, effective_scenario, expand_signal, load_scenario, scenario_from_data
+from .engine.scenario import effective_scenario, load_scenario, scenario_from_data
+from .engine.schema import Scenario, expand_signal
 from .engine.watchdog import Watchdog, hard_exit
 from .errors import CosimError
 from .fmi import Extractions, cleanup_extracted, make_slave

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import math
 
-from ..engine.scenario import Scenario, expand_signal
+from ..engine.schema import Scenario, expand_signal
 from ..run import RunResult
 
 __all__ = ["metric_names", "metrics"]

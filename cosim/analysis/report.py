@@ -40,7 +40,7 @@ from delta.paper_data import THESIS_TABLE_5_M
 from fmus import registry
 
 from ..engine.bounded_yaml import load_yaml
-from ..engine.scenario import Compare, expand_signal
+from ..engine.schema import Compare, expand_signal
 from ..errors import CosimError, written_by_rename
 from ..io.output import output_dir
 from ..io.runlog import AXES, RunLog, read_run

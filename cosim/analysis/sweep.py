@@ -3,7 +3,7 @@
 ``python -m cosim sweep SCENARIO --grid ctl.gain.kp=1e4,4e4 --random plant.mass.payload=uniform(0,0.5) -n 8``
 
 - Cases are the cartesian product of the ``--grid`` axes, times ``-n`` random draws (seeded)
-  of the ``--random`` ones. Names are those of ``--set`` (:func:`cosim.engine.scenario.resolve_name`).
+  of the ``--random`` ones. Names are those of ``--set`` (:func:`cosim.engine.overrides.resolve_name`).
 - The scenario file is read once; each case is that scenario with its overrides, validated
   (every case before anything runs) and sent to a worker as it is (a frozen Scenario, plain
   data). Our FMUs are built once, before the sweep, and reach the workers as file paths; FMU
@@ -65,7 +65,8 @@ from ..engine import supervision
 from ..engine.events import resolve_sets
 from ..engine.execution import Execution
 from ..engine.prepare import build_key, build_ours, locate_fmus
-from ..engine.scenario import dotted_overrides, load_scenario, parse_set_value, read_scenario
+from ..engine.overrides import dotted_overrides, parse_set_value
+from ..engine.scenario import load_scenario, read_scenario
 from ..engine.system import SystemPlan, build_plan
 from ..errors import CosimError, ScenarioError, exit_now, file_problem, number_option, written_by_rename
 from ..io.output import check_output, output_dir
@@ -78,7 +79,7 @@ from ..run import resumed_scenario, run_scenario
 from .metrics import metric_names, metrics
 
 if TYPE_CHECKING:
-    from ..engine.scenario import Scenario
+    from ..engine.schema import Scenario
 
 __all__ = [
     "RESULTS",

@@ -22,7 +22,7 @@ from typing import Any
 from ..errors import Issue, ScenarioError, UnknownSignalError
 from ..fmi.description import REAL, STRING, Variable
 from ..fmi.slave import as_number
-from .scenario import Scenario, parse_condition
+from .schema import Scenario, parse_condition
 from .system import Port, SystemPlan
 
 __all__ = ["Change", "EventSpec", "resolve_events", "resolve_sets", "event_at", "EventState", "FiredEvent"]
@@ -104,7 +104,7 @@ def resolve_events(scenario: Scenario, plan: SystemPlan) -> list[EventSpec]:
 
 
 def _plain(values: dict) -> dict:
-    """The values as plain JSON data (numbers written as text, :class:`~cosim.engine.scenario.WrittenNumber`, as
+    """The values as plain JSON data (numbers written as text, :class:`~cosim.engine.overrides.WrittenNumber`, as
     floats), for the log."""
     return json.loads(json.dumps(values))
 

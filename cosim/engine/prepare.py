@@ -12,7 +12,7 @@ from ..errors import ComponentSourceError, CosimError, Issue
 from ..fmi import FMUInfo, load_fmu
 from . import plugins
 from .events import resolve_events
-from .scenario import Scenario
+from .schema import Scenario
 from .system import build_plan
 
 __all__ = ["locate_fmus", "input_files", "build_key", "build_ours", "prepare"]

@@ -16,7 +16,7 @@ from ..fmi import FMUInfo, Variable
 from ..fmi.description import initial_of, settable_at_start
 from .algorithm import ALGORITHMS
 from .names import quote, split_ref
-from .scenario import Scenario, expand_signal
+from .schema import Scenario, expand_signal
 from .wiring import expand_connection, find_variable, index_text
 
 __all__ = ["Port", "Link", "SystemPlan", "build_plan", "gauss_seidel_order", "find_variable_loop"]

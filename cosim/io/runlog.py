@@ -39,7 +39,8 @@ from mcap.stream_reader import StreamReader, breakup_chunk
 from mcap.writer import CompressionType, Writer
 
 from ..engine.grid import MAX_TIME_S
-from ..engine.scenario import EFFECTIVE_ATTACHMENT, Scenario, scenario_from_data
+from ..engine.scenario import EFFECTIVE_ATTACHMENT, scenario_from_data
+from ..engine.schema import Scenario
 from ..errors import CosimError, Issue, ScenarioError, file_problem, written_by_rename
 from ..fmi.extract import SSP_PREFIX
 from .output import check_output

@@ -18,7 +18,7 @@ from delta.robots import PRESETS
 from delta.trajectories import TYPES
 
 from ..engine.plugins import Plugin
-from ..engine.scenario import Scenario
+from ..engine.schema import Scenario
 from ..errors import ScenarioError
 from . import preflight, scene, sources
 from .model_file import scenario_model

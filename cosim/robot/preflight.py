@@ -25,7 +25,7 @@ from fmus import registry
 from fmus.adapters.trajectories import ADAPTERS
 
 from ..engine.plugins import Preparation
-from ..engine.scenario import Scenario
+from ..engine.schema import Scenario
 from ..engine.system import SystemPlan
 from ..errors import Issue, PreflightError, ScenarioError
 from .model_file import model_based, model_start_values, scenario_model

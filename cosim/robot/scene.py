@@ -13,7 +13,7 @@ from delta.kinematics import inverse_kinematics, leg_axes, platform_offsets
 from delta.model import build_model
 from delta.robots import get_preset
 
-from ..engine.scenario import Scenario, expand_signal
+from ..engine.schema import Scenario, expand_signal
 from ..observers.publish import IDENTITY, REFERENCE_POINTS, entity, line, line_of, vec
 from .preflight import sampled_positions
 

@@ -10,7 +10,7 @@ from fmus import registry
 from fmus.native.build import compiler
 from fmus.native.errors import CompilerMissingError
 
-from ..engine.scenario import Scenario
+from ..engine.schema import Scenario
 from ..errors import ComponentSourceError, Issue
 
 __all__ = ["RegistrySource"]

@@ -19,7 +19,7 @@ from cosim.errors import CosimError
 from cosim.analysis.report import ReportError, controller_table, make_report, register
 from cosim.run import run_scenario
 from cosim.io.runlog import write_baseline
-from cosim.engine.scenario import apply_overrides
+from cosim.engine.overrides import apply_overrides
 from delta.paper_data import THESIS_TABLE_5_M
 
 pytestmark = pytest.mark.integration

@@ -22,7 +22,8 @@ from cosim.cli import main
 from cosim.observers.recorders import Probe
 from cosim.engine.prepare import prepare
 from cosim.run import run_scenario
-from cosim.engine.scenario import apply_overrides, load_scenario
+from cosim.engine.overrides import apply_overrides
+from cosim.engine.scenario import load_scenario
 from cosim.io.ssp import NS, SspError, export_ssp, open_ssp
 
 pytestmark = pytest.mark.integration

@@ -26,7 +26,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from cosim.engine.scenario import apply_overrides, load_scenario
+from cosim.engine.overrides import apply_overrides
+from cosim.engine.scenario import load_scenario
 from cosim.io.ssp import export_ssp, open_ssp
 from cosim.observers.recorders import Probe
 from cosim.run import run_scenario

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from cosim.cli import main
-from cosim.engine.scenario import apply_overrides
+from cosim.engine.overrides import apply_overrides
 from cosim.io.ssp import SspError, open_ssp
 from cosim.observers.recorders import Probe
 from cosim.run import run_scenario

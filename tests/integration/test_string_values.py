@@ -17,7 +17,8 @@ from cli_helpers import cosim
 
 from cosim.engine.prepare import prepare
 from cosim.io.runlog import read_run
-from cosim.engine.scenario import apply_overrides, dotted_overrides, load_scenario
+from cosim.engine.overrides import apply_overrides, dotted_overrides
+from cosim.engine.scenario import load_scenario
 from cosim.analysis.sweep import Case, parse_grid
 
 pytestmark = pytest.mark.integration

@@ -3,7 +3,8 @@
 import pytest
 
 from cosim.errors import AlgebraicLoopError, ScenarioError
-from cosim.engine.scenario import parse_scenario, scenario_json_schema
+from cosim.engine.scenario import parse_scenario
+from cosim.engine.schema import scenario_json_schema
 from cosim.engine.system import gauss_seidel_order
 
 GOOD = """name: t
@@ -73,7 +74,7 @@ def test_a_yaml_alias_bomb_is_refused_at_once():
 def test_a_set_value_alias_bomb_is_refused_as_a_file_is():
     """Every YAML the platform reads goes through one loader with the same bound: a --set value too."""
     from cosim.errors import ScenarioError
-    from cosim.engine.scenario import parse_set_value
+    from cosim.engine.overrides import parse_set_value
 
     levels = "[&a0 [1, 1, 1, 1, 1, 1, 1, 1, 1]" + "".join(
         f", &a{i} [{', '.join([f'*a{i - 1}'] * 9)}]" for i in range(1, 9)) + "]"

@@ -4,7 +4,8 @@ typed trajectory parameters (pure, no FMUs)."""
 import pytest
 
 from cosim.errors import ScenarioError
-from cosim.engine.scenario import apply_overrides, dotted_overrides, parse_scenario, resolve_name
+from cosim.engine.overrides import apply_overrides, dotted_overrides, resolve_name
+from cosim.engine.scenario import parse_scenario
 
 TEXT = """name: t
 robot: linear_delta_thesis
@@ -72,7 +73,7 @@ def test_trajectory_parameters_are_typed_and_named():
 
 
 def test_schema_types_trajectory_parameters_per_type():
-    from cosim.engine.scenario import scenario_json_schema
+    from cosim.engine.schema import scenario_json_schema
 
     schema = scenario_json_schema()
     helix = schema["$defs"]["helix_parameters"]

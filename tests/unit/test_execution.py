@@ -9,7 +9,7 @@ from fake_components import FakeSlave, plan
 
 from cosim.engine.algorithm import ALGORITHMS, GaussSeidel, Jacobi
 from cosim.engine.execution import Execution, StopRequest
-from cosim.engine.scenario import Scenario
+from cosim.engine.schema import Scenario
 from cosim.engine.supervision import MASTER
 from cosim.engine.watchdog import Watchdog
 from cosim.errors import Interrupted

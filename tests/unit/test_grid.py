@@ -9,7 +9,7 @@ import pytest
 
 from cosim.engine.execution import Execution
 from cosim.engine.grid import NS_PER_S, Grid, grid_error, step_between
-from cosim.engine.scenario import TimeGrid
+from cosim.engine.schema import TimeGrid
 from fake_components import FakeSlave, plan
 
 STOPS = (0.1, 0.3, 0.7, 1.0, 2.0, 2.2, 3.0, 10.0)

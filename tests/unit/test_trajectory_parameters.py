@@ -11,7 +11,8 @@ pytest.importorskip("pythonfmu")
 
 from cosim.errors import ScenarioError  # noqa: E402
 from cosim.robot.preflight import trajectory_start_values  # noqa: E402
-from cosim.engine.scenario import apply_overrides, parse_scenario  # noqa: E402
+from cosim.engine.overrides import apply_overrides  # noqa: E402
+from cosim.engine.scenario import parse_scenario
 from delta.trajectories import Helix, PickAndPlace, PointToPoint, Waypoints  # noqa: E402
 from fmus.adapters.trajectories import (  # noqa: E402
     ADAPTERS,

@@ -72,7 +72,9 @@ from xml.etree import ElementTree as ET
 from ...engine.grid import MAX_TIME_S
 from ...engine.names import ref, safe_stem
 from ...engine.prepare import input_files, prepare
-from ...engine.scenario import Component, apply_overrides, load_scenario, scenario_from_data
+from ...engine.overrides import apply_overrides
+from ...engine.scenario import load_scenario, scenario_from_data
+from ...engine.schema import Component
 from ...engine.wiring import index_text
 from ...errors import CosimError, Issue, ScenarioError, file_problem, number_option, written_by_rename
 from ...fmi.description import FMUInfo, load_fmu
@@ -80,7 +82,7 @@ from ...fmi.extract import MAX_FMU_BYTES, SSP_PREFIX, sweep_orphans
 from ..output import check_output
 
 if TYPE_CHECKING:  # the CLI imports this module to register its command: keep pydantic out of that
-    from ...engine.scenario import Scenario
+    from ...engine.schema import Scenario
 
 __all__ = ["SspError", "ExportReport", "export_ssp", "read_ssp", "open_ssp", "reopen_ssp", "is_ssp", "NS", "SSD_NAME", "register"]
 
