@@ -24,7 +24,9 @@ from cosim.engine.prepare import prepare
 from cosim.run import run_scenario
 from cosim.engine.overrides import apply_overrides
 from cosim.engine.scenario import load_scenario
-from cosim.io.ssp import NS, SspError, export_ssp, open_ssp
+from cosim.io.ssp.scenario import open_ssp
+from cosim.io.ssp.spec import NS, SspError
+from cosim.io.ssp.write import export_ssp
 
 pytestmark = pytest.mark.integration
 
@@ -422,7 +424,7 @@ def test_a_system_name_cannot_move_the_default_log(ssp, tmp_path, capsys, monkey
 
 def test_an_ssd_that_inflates_too_far_is_refused(ssp, tmp_path, capsys, monkeypatch):
     """The .ssd is read no further than the limit, whatever the archive says (issue 25: a zip bomb's 2.5 GiB)."""
-    import cosim.io.ssp.read as ssp_module
+    import cosim.io.ssp.archive as ssp_module
 
     monkeypatch.setattr(ssp_module, "MAX_XML_BYTES", 4096)  # our .ssd is larger than 4 kB: stands in for a bomb
     rc, _, err = _cli(capsys, "run", ssp, "--no-log", "--quiet")
@@ -447,7 +449,7 @@ def test_an_archive_unpacked_by_a_killed_run_is_removed_by_the_next(ssp, private
 
 def test_an_fmu_member_that_unpacks_too_far_is_refused(ssp, tmp_path, capsys, private_tmp, monkeypatch):
     """Each archive member is bounded, the FMUs too, not only the .ssd (issue 25)."""
-    import cosim.io.ssp.read as ssp_module
+    import cosim.io.ssp.components as ssp_module
 
     monkeypatch.setattr(ssp_module, "MAX_FMU_BYTES", 1000)  # our FMUs are larger: stands in for a bomb
     rc, _, err = _cli(capsys, "run", ssp, "--no-log", "--quiet")

@@ -28,7 +28,8 @@ import pytest
 
 from cosim.engine.overrides import apply_overrides
 from cosim.engine.scenario import load_scenario
-from cosim.io.ssp import export_ssp, open_ssp
+from cosim.io.ssp.scenario import open_ssp
+from cosim.io.ssp.write import export_ssp
 from cosim.observers.recorders import Probe
 from cosim.run import run_scenario
 

@@ -12,7 +12,8 @@ import pytest
 
 from cosim.cli import main
 from cosim.engine.overrides import apply_overrides
-from cosim.io.ssp import SspError, open_ssp
+from cosim.io.ssp.scenario import open_ssp
+from cosim.io.ssp.spec import SspError
 from cosim.observers.recorders import Probe
 from cosim.run import run_scenario
 

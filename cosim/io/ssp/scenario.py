@@ -1,0 +1,118 @@
+"""An SSP archive as a scenario: :func:`open_ssp` unpacks it for a ``with`` block (removed when the block ends, also
+on error and Ctrl-C) and names it and its SHA-256 in the scenario, which a run's log records, so that ``run
+--from-log`` unpacks the same archive again (:func:`reopen_ssp`)."""
+
+from __future__ import annotations
+
+import hashlib
+import os
+import shutil
+import tempfile
+from contextlib import contextmanager
+from pathlib import Path
+from typing import TYPE_CHECKING, Any, Iterator
+
+from ...engine.scenario import scenario_from_data
+from ...errors import file_problem
+from ...fmi.extract import SSP_PREFIX, sweep_orphans
+from .read import read_ssp
+from .spec import SspError
+
+if TYPE_CHECKING:
+    from ...engine.schema import Scenario
+
+__all__ = ["is_ssp", "open_ssp", "reopen_ssp"]
+
+
+def _sha256(path: Path) -> str:
+    digest = hashlib.sha256()
+    with open(path, "rb") as f:
+        for block in iter(lambda: f.read(1 << 20), b""):
+            digest.update(block)
+    return digest.hexdigest()
+
+
+@contextmanager
+def _unpacking(ssp: Path) -> Iterator[Path]:
+    """A temporary folder for ``ssp``'s FMUs, removed when the block ends (also on error)."""
+    sweep_orphans()  # archives unpacked by runs that were killed (SIGKILL) go now
+    tmp = Path(tempfile.mkdtemp(prefix=f"{SSP_PREFIX}{os.getpid()}-{ssp.stem}-"))
+    try:
+        yield tmp
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+
+
+def _archive(ssp: Path, tmp: Path, sha256: str) -> dict[str, str]:
+    """:attr:`cosim.engine.scenario.Scenario.archive` of a scenario read from ``ssp`` unpacked into ``tmp``."""
+    return {"file": os.path.normpath(ssp.absolute()), "sha256": sha256, "unpacked": str(tmp)}
+
+
+@contextmanager
+def open_ssp(ssp: str | Path, overrides: dict[tuple, Any] | None = None) -> Iterator[Scenario]:
+    """The scenario of an SSP archive, valid inside the ``with`` block (its FMUs are unpacked into a
+    temporary directory removed when the block ends, also on error).
+
+    ``overrides`` as for :func:`cosim.engine.scenario.load_scenario` (``--set``, ``--stop-time``, and
+    ``("time", "step")`` for ``--step``). The scenario's :attr:`~cosim.engine.scenario.Scenario.archive` names the
+    archive and its SHA-256, which a run's log records for :func:`reopen_ssp`.
+    """
+    ssp = Path(ssp)
+    with _unpacking(ssp) as tmp:
+        data = read_ssp(ssp, tmp)  # reads the file (an archive that is not one is named by it) before it is hashed
+        sha256 = _sha256(ssp)
+        overrides = dict(overrides or {})
+        missing = [(key, flag) for key, flag in (("step", "--step"), ("stop", "--stop-time"))
+                   if key not in data["time"] and ("time", key) not in overrides]
+        if missing:
+            what = " and ".join(f"the {'base step' if k == 'step' else 'stop time'}" for k, _ in missing)
+            raise SspError(ssp, f"{what}: neither the SSD's default experiment nor the FMUs give it; "
+                                f"pass {' and '.join(f for _, f in missing)}")
+        scenario = scenario_from_data(data, str(ssp), overrides)
+        scenario._archive = _archive(ssp, tmp, sha256)
+        yield scenario
+
+
+@contextmanager
+def reopen_ssp(archive: dict[str, str], data: dict[str, Any], source: str,
+               overrides: dict[tuple, Any] | None = None) -> Iterator[Scenario]:
+    """The scenario ``data`` of a run made from an SSP archive (as its log records it: ``archive`` is the run's
+    :attr:`~cosim.engine.scenario.Scenario.archive`), with its FMUs unpacked again from that archive for the
+    ``with`` block; ``source`` names the log in messages.
+
+    Raises :class:`SspError` naming ``source`` and the archive when the archive is gone, or is not the file the
+    run was made from (its SHA-256 differs): the recorded scenario's values would not be the archive's.
+    """
+    try:
+        ssp, sha256, unpacked = Path(archive["file"]), archive["sha256"], archive["unpacked"]
+    except (KeyError, TypeError):
+        raise SspError(source, f"the log's ssp metadata is incomplete ({archive!r}): expected file, sha256 and "
+                               "unpacked") from None
+    head = f"the run was made from the SSP archive {ssp}, which"
+    problem = file_problem(ssp)  # the log names it: a FIFO or a device would be hashed for ever
+    if problem not in (None, "no such file"):
+        raise SspError(source, f"{head} cannot be read: {problem}")
+    try:
+        now = _sha256(ssp)
+    except FileNotFoundError:
+        raise SspError(source, f"{head} is gone: its FMUs were unpacked from it for the run only; put the archive "
+                               "back to run the log again") from None
+    except OSError as exc:
+        raise SspError(source, f"{head} cannot be read: {exc.strerror or exc}") from None
+    if now != sha256:
+        raise SspError(source, f"{head} has changed since (SHA-256 {sha256[:16]}... then, {now[:16]}... now): the "
+                               f"log's FMUs and values may no longer be the archive's; run the archive itself "
+                               f"(`python -m cosim run {ssp}`)")
+    with _unpacking(ssp) as tmp:
+        read_ssp(ssp, tmp)  # the FMUs go where they went for the run, relative to the folder (numbered by place)
+        for comp in (data.get("components") or {}).values():
+            path = comp.get("path") if isinstance(comp, dict) else None
+            if isinstance(path, str) and Path(path).is_relative_to(unpacked):
+                comp["path"] = str(tmp / Path(path).relative_to(unpacked))
+        scenario = scenario_from_data(data, source, overrides)
+        scenario._archive = _archive(ssp, tmp, sha256)
+        yield scenario
+
+
+def is_ssp(path: str | Path) -> bool:
+    return Path(path).suffix.lower() == ".ssp"

@@ -1,0 +1,279 @@
+"""Export: a scenario written as an SSP 1.0 archive that any SSP tool can run (see :mod:`cosim.io.ssp`).
+
+The writer emits prefixed names itself (``ssd:``, ``ssc:``, ``ssv:``, ``osp:``: OSP libcosim matches element names
+by their prefixes literally) instead of relying on ElementTree's namespace registry (a process-wide setting).
+"""
+
+from __future__ import annotations
+
+import json
+import zipfile
+from dataclasses import dataclass
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+from xml.etree import ElementTree as ET
+
+from ...engine.names import safe_stem
+from ...engine.prepare import input_files, prepare
+from ...engine.schema import Component
+from ...engine.wiring import index_text
+from ...errors import written_by_rename
+from ..output import check_output
+from .spec import (COMPONENT_OPTIONS, EXTRAS, FMU_TYPE, IMPLEMENTATION, NS, OMS_ANNOTATION, OSP_ANNOTATION,
+                   OUR_ANNOTATION, PARAMETER_SET_TYPE, SSD_NAME, SSP_TYPE, SspError, num_text)
+from .units import unit_definitions
+
+if TYPE_CHECKING:
+    from ...engine.schema import Scenario
+
+__all__ = ["ExportReport", "export_ssp"]
+
+
+@dataclass(frozen=True)
+class ExportReport:
+    """What :func:`export_ssp` wrote."""
+
+    path: Path
+    components: list[str]
+    connections: int
+    parameters: dict[str, int]  # component -> number of start values in its .ssv
+    step: float
+    stop: float
+    events: int = 0  # the scenario's events, carried in our annotation only
+
+    def as_dict(self) -> dict[str, Any]:
+        return {"ssp": str(self.path), "components": self.components, "connections": self.connections,
+                "parameters": self.parameters, "step_s": self.step, "stop_s": self.stop, "events": self.events}
+
+    def text(self) -> str:
+        n = sum(self.parameters.values())
+        text = (f"{self.path}: {len(self.components)} components ({', '.join(self.components)}), "
+                f"{self.connections} connections, {n} start values, step {self.step:g} s, stop {self.stop:g} s")
+        if self.events:
+            text += (f"\n  {self.events} event(s) kept in the delta-cosim annotation: SSP 1.0 cannot express values "
+                     "set during a run, so other SSP tools run the system without them")
+        return text
+
+
+def export_ssp(scenario: Scenario, out: str | Path) -> ExportReport:
+    """Write ``scenario`` as an SSP 1.0 archive at ``out`` (see :mod:`cosim.io.ssp`).
+
+    Builds our FMUs if needed and runs the pre-flight (:func:`cosim.engine.prepare.prepare`); raises
+    :class:`cosim.errors.CosimError` subclasses for a bad scenario, :class:`SspError` for what SSP
+    1.0 cannot express.
+    """
+
+    out = Path(out)
+    plan, _ = prepare(scenario)
+    names, infos = plan.names, plan.infos
+    t = scenario.time
+    root = _el(None, "ssd:SystemStructureDescription", {
+        "xmlns:ssd": NS["ssd"], "xmlns:ssc": NS["ssc"], "xmlns:ssv": NS["ssv"], "xmlns:osp": NS["osp"],
+        "xmlns:dcs": NS["dcs"], "xmlns:oms": NS["oms"], "name": scenario.name, "version": "1.0",
+        "description": scenario.description or None, "generationTool": "delta-cosim"})
+    system = _el(root, "ssd:System", {"name": scenario.name})
+    elements = _el(system, "ssd:Elements")
+    # OMSimulator 3.0 types a system by its own annotation (SystemWC, its fixed-step master): without
+    # it the import fails ("[NewSystem] internal error"). It reads only the first ssc:Annotation here.
+    # (appended after the connections: the SSD's order)
+    system_annotations = _el(None, "ssd:Annotations")
+    oms = _el(_el(_el(system_annotations, "ssc:Annotation", {"type": OMS_ANNOTATION}), "oms:Annotations"),
+              "oms:SimulationInformation")
+    _el(oms, "oms:FixedStepMaster", {"description": "oms-ma", "stepSize": num_text(t.step)})
+    connected = _connected(plan, out)
+    ssv_files: dict[str, bytes] = {}
+    n_params: dict[str, int] = {}
+    stems = _member_stems(names)
+    for c, name in enumerate(names):
+        ssv = _component(elements, scenario, plan, c, stems[c], connected, out)
+        if ssv is not None:
+            ssv_files[f"resources/{stems[c]}.ssv"] = ssv
+        n_params[name] = len(_start_values(plan, c))
+    _connections(system, plan)
+    system.append(system_annotations)
+    _units(root, infos)
+    exp = _el(root, "ssd:DefaultExperiment", {"startTime": num_text(t.start), "stopTime": num_text(t.stop)})
+    ann = _el(_el(exp, "ssd:Annotations"), "ssc:Annotation", {"type": OSP_ANNOTATION})
+    _el(_el(ann, "osp:Algorithm"), "osp:FixedStepAlgorithm", {"baseStepSize": num_text(t.step)})
+    # ours on the system, after OMSimulator's: OMSimulator 3.0 refuses any ssd:Annotations at the top
+    # ("wrong xml schema detected"), though SSP 1.0 allows them there
+    ours = _el(system_annotations, "ssc:Annotation", {"type": OUR_ANNOTATION})
+    _el(ours, "dcs:Scenario").text = json.dumps(_extras(scenario), indent=1)
+    check_output(out, (*input_files(scenario), *(info.path for info in infos)))
+    with written_by_rename(out) as partial, zipfile.ZipFile(partial, "w", zipfile.ZIP_DEFLATED) as z:
+        z.writestr(SSD_NAME, _xml(root))
+        for arc, data in ssv_files.items():
+            z.writestr(arc, data)
+        for stem, info in zip(stems, infos):
+            z.write(info.path, f"resources/{stem}.fmu", compress_type=zipfile.ZIP_STORED)  # already deflated
+    return ExportReport(out, list(names), len(plan.links), n_params, t.step, t.stop, len(scenario.events))
+
+
+def _connected(plan, out: Path) -> set[tuple[str, str]]:
+    """(component, variable name) of every port a connection uses (prefixes expanded: ``plan.links``); a connection
+    of an FMI 3 array is refused."""
+    names = plan.names
+    connected = {(names[port.comp], port.var.name) for link in plan.links for port in (link.src, link.dst)}
+    for link in plan.links:
+        for port in (link.src, link.dst):
+            if port.var.is_array:
+                raise SspError(out, f"connection of {port.label(names)}: FMI 3 arrays have no SSP 1.0 connector")
+    return connected
+
+
+def _start_values(plan, c: int) -> dict[str, Any]:
+    """The start values of component ``c`` its .ssv holds (a String at the FMU's own start left out)."""
+    info = plan.infos[c]
+    return {k: v for k, v in plan.start_values[c].items() if not _string_at_start(info.variables[k], v)}
+
+
+def _component(elements: ET.Element, scenario: Scenario, plan, c: int, stem: str, connected: set[tuple[str, str]],
+               out: Path) -> bytes | None:
+    """Component ``c``'s ``ssd:Component`` (its connectors, its parameter binding, its step size hint) under
+    ``elements``; its .ssv (None without start values)."""
+    name, info = plan.names[c], plan.infos[c]
+    comp = scenario.components[name]
+    el = _el(elements, "ssd:Component", {"name": name, "type": FMU_TYPE, "source": f"resources/{stem}.fmu",
+                                         "implementation": IMPLEMENTATION.get(comp.interface)})
+    connectors = _el(el, "ssd:Connectors")
+    for var in info.variables.values():
+        if var.causality not in ("input", "output"):
+            continue
+        if var.is_array or var.fmi_type not in SSP_TYPE:
+            if (name, var.name) in connected:
+                raise SspError(out, f"{name}.{var.name} is {var.fmi_type}"
+                                    f"{' array' if var.is_array else ''}: no SSP 1.0 connector type")
+            continue
+        conn = _el(connectors, "ssd:Connector", {"name": var.name, "kind": var.causality,
+                                                 "description": var.description or None})
+        _typed(conn, "ssc", var)
+    if not len(connectors):
+        el.remove(connectors)
+    ssv = _parameter_set(name, info, _start_values(plan, c), out)
+    if ssv is not None:
+        bindings = _el(el, "ssd:ParameterBindings")
+        _el(bindings, "ssd:ParameterBinding", {"type": PARAMETER_SET_TYPE, "source": f"resources/{stem}.ssv"})
+    if comp.step_multiple != 1:
+        ann = _el(_el(el, "ssd:Annotations"), "ssc:Annotation", {"type": OSP_ANNOTATION})
+        _el(ann, "osp:StepSizeHint", {"value": num_text(scenario.time.step * comp.step_multiple)})
+    return ssv
+
+
+def _parameter_set(name: str, info, values: dict[str, Any], out: Path) -> bytes | None:
+    """The .ssv of a component's start values (None without any)."""
+    if not values:
+        return None
+    pset = _el(None, "ssv:ParameterSet", {"xmlns:ssv": NS["ssv"], "version": "1.0", "name": f"{name}_start_values"})
+    params = _el(pset, "ssv:Parameters")
+    for vname, value in values.items():
+        var = info.variables[vname]
+        if isinstance(value, list):
+            raise SspError(out, f"{name}.{vname}: array start values have no SSP 1.0 parameter type")
+        try:
+            _typed(_el(params, "ssv:Parameter", {"name": vname}), "ssv", var, value, f"{name}.")
+        except ValueError as exc:
+            raise SspError(out, str(exc)) from None
+    return _xml(pset)
+
+
+def _connections(system: ET.Element, plan) -> None:
+    """One ``ssd:Connection`` per link of the plan, element-wise as written."""
+    if not plan.links:
+        return
+    names = plan.names
+    conns = _el(system, "ssd:Connections")
+    for link in plan.links:
+        attrs = {"startElement": names[link.src.comp], "startConnector": _connector(link.src),
+                 "endElement": names[link.dst.comp], "endConnector": _connector(link.dst)}
+        if link.src.var.unit and link.dst.var.unit and link.src.var.unit != link.dst.var.unit:
+            attrs["suppressUnitConversion"] = "true"  # a connection with `units: as_is` (else refused)
+        _el(conns, "ssd:Connection", attrs)
+
+
+def _units(root: ET.Element, infos) -> None:
+    """``ssd:Units``: the definitions (from the FMUs) of the units the components' variables use."""
+    units = unit_definitions(infos)
+    used = {v.unit for info in infos for v in info.variables.values() if v.unit}
+    if used & set(units):
+        uel = _el(root, "ssd:Units")
+        for uname in sorted(used & set(units)):
+            _el(_el(uel, "ssc:Unit", {"name": uname}), "ssc:BaseUnit", units[uname])
+
+
+def _el(parent: ET.Element | None, tag: str, attrib: dict[str, str] | None = None) -> ET.Element:
+    attrib = {k: v for k, v in (attrib or {}).items() if v is not None}
+    return ET.Element(tag, attrib) if parent is None else ET.SubElement(parent, tag, attrib)
+
+
+def _xml(root: ET.Element) -> bytes:
+    ET.indent(root)
+    return b'<?xml version="1.0" encoding="UTF-8"?>\n' + ET.tostring(root, encoding="utf-8") + b"\n"
+
+
+def _typed(parent: ET.Element, prefix: str, var, value: Any = None, where: str = "") -> None:
+    """``<prefix:Real unit=.../>`` (connector) or ``<prefix:Real value=.../>`` (parameter) for ``var``."""
+    kind = SSP_TYPE.get(var.fmi_type)
+    if kind is None or var.is_array:
+        raise ValueError(f"{where}{var.name} is {var.fmi_type}{' array' if var.is_array else ''}, which SSP 1.0 "
+                         "connectors and parameter values do not carry")
+    attrib: dict[str, str | None] = {}
+    if value is not None:
+        if kind == "Real":
+            attrib["value"] = num_text(value)
+        elif kind == "Integer":
+            attrib["value"] = str(int(value))
+        elif kind == "Boolean":
+            attrib["value"] = "true" if (value.lower() == "true" if isinstance(value, str) else bool(value)) \
+                else "false"
+        else:
+            attrib["value"] = str(value)
+    if kind == "Real" and var.unit and value is None:  # a connector's unit (defined in ssd:Units)
+        attrib["unit"] = var.unit
+    _el(parent, f"{prefix}:{kind}", attrib)
+
+
+def _string_at_start(var, value: Any) -> bool:
+    """Whether ``value`` is a String variable's own start value, which the export leaves out of the
+    .ssv: the FMU starts from it anyway (SSP 1.0 binds what it changes; an unbound parameter keeps its
+    start), and OMSimulator 3.0 refuses every ``ssv:String`` ("Unknown ParameterBinding-type"), so a
+    scenario that writes a String parameter at its default (``model.fidelity: full``) still runs
+    there. A String that differs from the start is written as ``ssv:String``, as the standard says."""
+    return SSP_TYPE.get(var.fmi_type) == "String" and isinstance(value, str) and value == var.start
+
+
+def _extras(scenario: Scenario) -> dict[str, Any]:
+    """The scenario sections SSP has no place for, as JSON-ready data."""
+    data = scenario.model_dump(mode="json", by_alias=True, include=set(EXTRAS), exclude_defaults=False)
+    data["name"] = scenario.name
+    logging = dict(data.get("logging") or {})
+    logging.pop("out", None)  # relative to the YAML file; the archive's runs log to runs/<name>.mcap
+    data["logging"] = logging
+    if data.get("initial_state"):
+        data["initial_state"] = {**data["initial_state"], "from_trajectory": False}  # values are in the .ssv
+
+    defaults = {k: Component.model_fields[k].default for k in COMPONENT_OPTIONS}
+    options = {}
+    for name, comp in scenario.components.items():
+        changed = {k: getattr(comp, k) for k in COMPONENT_OPTIONS if getattr(comp, k) != defaults[k]}
+        if changed:
+            options[name] = changed
+    data["component_options"] = options
+    return data
+
+
+def _member_stems(names: list[str]) -> list[str]:
+    """File names in ``resources/`` for the components: the name made safe (:func:`cosim.engine.names.safe_stem`;
+    ``DP Controller`` -> ``DP_Controller``), numbered when two would clash."""
+    out: list[str] = []
+    for name in names:
+        stem, n = safe_stem(name, "component"), 2
+        while stem.lower() in {o.lower() for o in out}:
+            stem = f"{safe_stem(name, 'component')}_{n}"
+            n += 1
+        out.append(stem)
+    return out
+
+
+def _connector(port) -> str:
+    """A port's connector name (the variable, with its FMI 3 element index)."""
+    return f"{port.var.name}{index_text(port.var, port.element)}"
