@@ -9,7 +9,8 @@ and :mod:`delta.dynamics` in terms of what an actuator class gives:
 * the path ``B_i(q)`` and its derivatives ``B_i'``, ``B_i''``, folded with the rod to the platform
   (:meth:`Rail.leg`), and ``B_i''`` itself (:meth:`Rail.curve`, for the rods' rotational inertia),
 * the closed-form leg inverse kinematics in the leg's plane (:meth:`Rail.solve`),
-* the actuator-side mass lumps and their weight (:meth:`Rail.inertia`, :meth:`Rail.weight`),
+* the actuator's inertia and weight from the actuator-side mass lump (:meth:`Rail.inertia`, :meth:`Rail.weight`;
+  the lumping itself is :func:`delta.masses.lumps`),
 * units, names and the default preset of its robot kind.
 
 The formulas take floats or numpy arrays alike: ``xp`` is :data:`SCALAR` (the ``math``
@@ -25,7 +26,7 @@ import math
 import numpy as np
 
 from .errors import RobotError
-from .masses import LinearDeltaMasses, RotaryDeltaMasses
+from .masses import LinearDeltaMasses, Lumps, RotaryDeltaMasses, lumps
 from .numbers import ARRAY, SCALAR
 from .robots import LinearDelta, Robot, RotaryDelta
 
@@ -86,13 +87,14 @@ class Rail:
         h2 = self._rod2 - lx * lx - ly * ly
         return -(z + xp.sqrt(h2 * (h2 > 0.0))), h2 >= self._slack  # h2 < 0 by rounding: sqrt(0)
 
-    def inertia(self, masses: LinearDeltaMasses) -> float:
-        """Carriage lump ``m_s + 2 (1 - w) m_l`` moving with ``q`` (thesis eq. (29)), kg."""
-        return masses.carriage + 2.0 * (1.0 - masses.w_inertia) * masses.rod
+    def inertia(self, masses: LinearDeltaMasses, lumped: Lumps | None = None) -> float:
+        """``D``, kg: the carriage lump moving with ``q`` (``actuator_inertial`` of ``lumped``, by default
+        :func:`delta.masses.lumps` of ``masses``)."""
+        return (lumps(masses, self.kind) if lumped is None else lumped).actuator_inertial
 
-    def weight(self, masses: LinearDeltaMasses) -> float:
+    def weight(self, masses: LinearDeltaMasses, lumped: Lumps | None = None) -> float:
         """Weight of the carriage lump, N; ``q`` points down, so ``dV_i/dq_i = -weight``."""
-        return (masses.carriage + 2.0 * (1.0 - masses.w_gravity) * masses.rod) * masses.gravity
+        return (lumps(masses, self.kind) if lumped is None else lumped).actuator_weight_mass * masses.gravity
 
     def gravity(self, q, weight: float, xp):  # noqa: ANN001, ANN201
         """``dV_i/dq_i`` of the actuator-side lump (the same at every ``q``)."""
@@ -194,17 +196,16 @@ class Arm:
         q = -xp.atan2(z, dx) - xp.acos(clipped)
         return q + _TWO_PI * (q < -_PI), xp.both(rho > 0.0, ratio * ratio <= _RATIO_MAX2)  # to [-pi, pi)
 
-    def inertia(self, masses: RotaryDeltaMasses) -> float:
-        """``I = motor_inertia + arm La^2/3 + (elbow + 2 (1 - w) rod) La^2`` about the motor axis, kg m^2."""
-        la = self.arm
-        return masses.motor_inertia + masses.arm * la * la / 3.0 + (
-            masses.elbow + 2.0 * (1.0 - masses.w_inertia) * masses.rod) * la * la
+    def inertia(self, masses: RotaryDeltaMasses, lumped: Lumps | None = None) -> float:
+        """``I = motor_inertia + arm La^2/3 + m_e La^2`` about the motor axis, kg m^2, with ``m_e`` the elbow's lump
+        (``actuator_inertial`` of ``lumped``, by default :func:`delta.masses.lumps` of ``masses``)."""
+        la, elbow = self.arm, (lumps(masses, self.kind) if lumped is None else lumped).actuator_inertial
+        return masses.motor_inertia + masses.arm * la * la / 3.0 + elbow * la * la
 
-    def weight(self, masses: RotaryDeltaMasses) -> float:
-        """Gravity moment of the arm (centre of mass at ``La/2``) and elbow lumps at ``La``, N m."""
-        la = self.arm
-        return (masses.arm * la / 2.0 + (masses.elbow + 2.0 * (1.0 - masses.w_gravity) * masses.rod) * la) \
-            * masses.gravity
+    def weight(self, masses: RotaryDeltaMasses, lumped: Lumps | None = None) -> float:
+        """Gravity moment of the arm (centre of mass at ``La/2``) and the elbow's lump at ``La``, N m."""
+        la, elbow = self.arm, (lumps(masses, self.kind) if lumped is None else lumped).actuator_weight_mass
+        return (masses.arm * la / 2.0 + elbow * la) * masses.gravity
 
     def gravity(self, q, weight: float, xp):  # noqa: ANN001, ANN201
         return -weight * xp.cos(q)

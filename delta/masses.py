@@ -1,17 +1,20 @@
-"""Mass parameters of the delta robots, SI units.
+"""Mass parameters of the delta robots, SI units, and their lumping.
 
-One set per robot kind, shared by the analytic model (:mod:`delta.model`, lumped as in
-thesis eqs. (28)-(29)) and the multibody plants, so that both describe the same machine.
+One set per robot kind, shared by the analytic model (:mod:`delta.model`) and the multibody plants, so that
+both describe the same machine. :func:`lumps` is the one place the rods' masses are split between the platform
+and the actuators (thesis eqs. (28)-(29)); the analytic model, the actuators' inertia and weight
+(:mod:`delta.actuators`) and the Exudyn plants' bodies (:mod:`multibody`) all take their masses from it.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass, fields, replace
+from typing import Any
 
 from .errors import ParameterError
 from .numbers import SCALAR
 
-__all__ = ["GRAVITY", "LinearDeltaMasses", "RotaryDeltaMasses", "Masses"]
+__all__ = ["GRAVITY", "LinearDeltaMasses", "RotaryDeltaMasses", "Masses", "Lumps", "lumps"]
 
 GRAVITY = 9.81
 """Standard gravity used by default, m/s^2 (acts along -z)."""
@@ -111,3 +114,64 @@ class RotaryDeltaMasses(_Masses):
 
 
 Masses = LinearDeltaMasses | RotaryDeltaMasses
+
+
+ACTUATOR_POINT = {"linear": "carriage", "rotary": "elbow"}
+"""Robot kind -> the mass field of the point where its rods meet the actuator (``B_i``): the carriage of a
+linear delta, the elbow hardware at the end of a rotary delta's arm."""
+
+
+@dataclass(frozen=True)
+class Lumps:
+    """The masses of one robot as point masses, kg (made by :func:`lumps`, which gives the formulas).
+
+    Attributes
+    ----------
+    platform_alone : the platform and its payload, without any share of the rods (the full plants' platform
+        body: their rods are bodies of their own).
+    platform_inertial, platform_weight_mass : the platform lump ``m_p`` of the inertial terms and of the weight.
+    actuator_alone : the carriage (linear) or the elbow hardware (rotary) alone, at ``B_i`` (the full plants').
+    actuator_inertial, actuator_weight_mass : the lump at ``B_i`` of the inertial terms and of the weight.
+    rod_inertia : ``mu``, each leg's two rods' rotational inertia as a (negative) point mass moving with the rod
+        vector (:mod:`delta.dynamics`); 0 in the thesis's lumping.
+
+    The fields are numbers, or symbols when the masses are (``fmus.native`` traces the model to C).
+    """
+
+    platform_alone: Any
+    platform_inertial: Any
+    platform_weight_mass: Any
+    actuator_alone: Any
+    actuator_inertial: Any
+    actuator_weight_mass: Any
+    rod_inertia: Any
+
+
+def lumps(masses: Any, kind: str) -> Lumps:
+    """The lumping of ``masses`` for a robot of ``kind`` (``"linear"`` or ``"rotary"``): each rod's mass is split,
+    a share ``w`` to the platform and ``1 - w`` to the actuator point ``B_i`` (the carriage, or the elbow), with
+    ``w = w_inertia`` for the inertial terms and ``w = w_gravity`` for the weight:
+
+    * platform, thesis eq. (28): ``m_p = platform + payload + 6 w rod`` (three legs of two rods);
+    * actuator point, thesis eq. (29) (Codourey's lumping for the rotary delta, at the elbow):
+      ``carriage + 2 (1 - w) rod``, or ``elbow + 2 (1 - w) rod``;
+    * the rods' rotation (``w_rotation``, :mod:`delta.dynamics`): ``mu = -w_rotation rod / 3``.
+
+    ``masses`` is a mass dataclass or any object with its fields (symbols for ``fmus.native``): the formulas only
+    add and multiply, so they serve every number type. The actuators (:meth:`delta.actuators.Rail.inertia`, ...)
+    add the arm of a rotary delta to the elbow's lump."""
+    try:
+        at_actuator = getattr(masses, ACTUATOR_POINT[kind])
+    except KeyError:
+        raise ParameterError(f"unknown robot kind {kind!r}; valid kinds: {', '.join(ACTUATOR_POINT)}") from None
+    platform, rod = masses.platform + masses.payload, masses.rod
+    w_inertia, w_gravity = masses.w_inertia, masses.w_gravity
+    return Lumps(
+        platform_alone=platform,
+        platform_inertial=platform + 6.0 * w_inertia * rod,
+        platform_weight_mass=platform + 6.0 * w_gravity * rod,
+        actuator_alone=at_actuator,
+        actuator_inertial=at_actuator + 2.0 * (1.0 - w_inertia) * rod,
+        actuator_weight_mass=at_actuator + 2.0 * (1.0 - w_gravity) * rod,
+        rod_inertia=-masses.w_rotation * rod / 3.0,
+    )

@@ -11,10 +11,9 @@ asks for several terms at one ``q`` computes the kinematics once.
 The per-pose fields are plain floats (the ``*_arr`` fields of the model serve the batch path): the
 per-step path allocates no arrays.
 
-Mass lumps (thesis section 7, Codourey's lumping for the rotary delta): each actuator
-carries a constant inertia ``D`` (carriage or arm plus the actuator-side share ``1 - w``
-of its two rods); the platform carries ``m_p = platform + payload + 6 w rod`` (thesis
-eq. (28)). The inertial and the gravity lumps use ``w_inertia`` and ``w_gravity``.
+Mass lumps: :func:`delta.masses.lumps` (thesis eqs. (28)-(29), Codourey's lumping for the rotary delta)
+splits the rods between the platform (``m_p`` of the inertial and of the gravity terms) and the actuators,
+whose constant inertia ``D`` and weight the actuator path makes of its lump (:meth:`delta.actuators.Rail.inertia`).
 """
 
 from __future__ import annotations
@@ -27,7 +26,7 @@ import numpy as np
 
 from .actuators import SCALAR, Actuator, actuator_for
 from .errors import ParameterError
-from .masses import Masses
+from .masses import Lumps, Masses, lumps
 from .robots import Robot
 
 __all__ = ["Model", "Data", "build_model", "compile_model", "as_model"]
@@ -51,6 +50,7 @@ class Model:
     platform_weight : ``m_p g`` of the gravity terms, N.  actuator_weight : see the actuator's ``weight``.
     rod_inertia : ``mu = -w_rotation m_l / 3``, kg: each leg's two rods' rotational inertia as a (negative)
         point mass moving with the rod vector ``l_i`` (see :mod:`delta.dynamics`); 0 in the thesis's lumping.
+    lumps : the point masses all of these come from (:func:`delta.masses.lumps`).
     """
 
     robot: Robot
@@ -70,6 +70,7 @@ class Model:
     platform_weight: float
     actuator_weight: float
     rod_inertia: float
+    lumps: Lumps
     xp: Any = SCALAR
     """The number namespace of the per-pose algorithms (:data:`delta.actuators.SCALAR`; symbols when
     ``fmus.native`` traces the formulas to C)."""
@@ -113,17 +114,16 @@ def compile_model(robot: Any, masses: Any, actuator: Actuator, xp: Any = SCALAR)
     ey = tuple(xp.sin(a) for a in angles)
     offset = actuator.offset
     ox, oy = tuple(offset * c for c in ex), tuple(offset * s for s in ey)
-    platform_lump = masses.platform + masses.payload  # + 6 w rod: three legs of two rods (thesis eq. (28))
+    lumped = lumps(masses, actuator.kind)
     arrays = (None,) * 4 if xp.symbolic else (np.array(ex), np.array(ey), np.array(ox), np.array(oy))
     return Model(
         robot=robot, masses=masses, actuator=actuator, kind=actuator.kind,
         legs=tuple(zip(ex, ey, ox, oy)),
         ex_arr=arrays[0], ey_arr=arrays[1], ox_arr=arrays[2], oy_arr=arrays[3],
         rod=actuator.rod, q_min=robot.q_min, q_max=robot.q_max,
-        inertia=actuator.inertia(masses),
-        platform_mass=platform_lump + 6.0 * masses.w_inertia * masses.rod,
-        platform_weight=(platform_lump + 6.0 * masses.w_gravity * masses.rod) * masses.gravity,
-        actuator_weight=actuator.weight(masses), rod_inertia=-masses.w_rotation * masses.rod / 3.0, xp=xp,
+        inertia=actuator.inertia(masses, lumped), platform_mass=lumped.platform_inertial,
+        platform_weight=lumped.platform_weight_mass * masses.gravity,
+        actuator_weight=actuator.weight(masses, lumped), rod_inertia=lumped.rod_inertia, lumps=lumped, xp=xp,
     )
 
 

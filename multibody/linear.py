@@ -14,8 +14,8 @@ Full fidelity
 Lumped fidelity
     The analytic model's assumptions: each rod's mass split ``(1 - w)`` to the carriage
     and ``w`` to the platform (``masses.w_inertia`` for inertia, ``masses.w_gravity`` for
-    the weight), carriages and platform as point masses, each leg a single distance
-    constraint of rod length between carriage joint and platform joint.
+    the weight; :func:`delta.masses.lumps`), carriages and platform as point masses, each
+    leg a single distance constraint of rod length between carriage joint and platform joint.
 
 Carriages: an ideal prismatic rail locks every carriage motion but the travel, so a carriage is
 modelled exactly as a 1-DOF body (``ObjectMass1D``) whose coordinate *is* ``q[i]`` (its rotational
@@ -33,6 +33,7 @@ import numpy as np
 
 from delta.dynamics import LinearDeltaMasses
 from delta.kinematics import actuator_points, joint_state_from_platform, leg_axes, platform_offsets
+from delta.masses import lumps
 from delta.robots import LinearDelta
 
 from .plant import MIN_ROD_MASS, PLATFORM_THICKNESS, DeltaPlant, JointTrajectory, RobotTypeError, SolverSettings
@@ -95,7 +96,7 @@ class LinearDeltaPlant(DeltaPlant):
         length = robot.rod_length
         full = self.fidelity == "full"
         self._ground = mbs.AddObject(ObjectGround())
-        w_i, w_g = m.w_inertia, m.w_gravity
+        lumped = lumps(m, self.kind)  # the rods' shares (lumped fidelity; in the full one the rods are bodies)
         self._add_platform(p0, v0)
 
         self._carriages: list[int] = []
@@ -103,8 +104,8 @@ class LinearDeltaPlant(DeltaPlant):
         ground_node = mbs.AddNode(NodePointGround(referenceCoordinates=[0.0, 0.0, 0.0]))
         ground_coord = mbs.AddMarker(MarkerNodeCoordinate(nodeNumber=ground_node, coordinate=0))
         rail_down = [[0.0, 0.0, 1.0], [0.0, 1.0, 0.0], [-1.0, 0.0, 0.0]]  # local x -> global -z (RAIL)
-        carriage_mass = m.carriage if full else m.carriage + 2.0 * (1.0 - w_i) * m.rod
-        carriage_weight = m.carriage if full else m.carriage + 2.0 * (1.0 - w_g) * m.rod
+        carriage_mass = lumped.actuator_alone if full else lumped.actuator_inertial
+        carriage_weight = lumped.actuator_alone if full else lumped.actuator_weight_mass
         for i in range(3):
             # carriage on its rail: a 1-DOF node whose total coordinate is q_i (rail top at z = 0); the Mass1D is the
             # carriage's geometry (its points for the markers), its mass and weight are point masses of its leg

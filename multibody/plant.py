@@ -24,6 +24,7 @@ from typing import Any, Callable, NamedTuple
 import numpy as np
 
 from delta.errors import DeltaError, ParameterError
+from delta.masses import lumps
 
 __all__ = ["SolverSettings", "PlantOutput", "PlantError", "DeltaPlant", "JointTrajectory"]
 
@@ -543,11 +544,13 @@ class DeltaPlant:
             solver.SetUserFunctionComputeNewtonJacobian(mbs, None)
 
     def _platform_masses(self, masses) -> tuple[float, float]:  # noqa: ANN001
-        """(mass, weight) of the platform body, kg: platform and payload, plus (lumped fidelity) six rods' shares
-        ``w_inertia * rod`` and ``w_gravity * rod`` (thesis eq. (28))."""
-        full = self.fidelity == "full"
-        return (masses.platform + masses.payload + (0.0 if full else 6.0 * masses.w_inertia * masses.rod),
-                masses.platform + masses.payload + (0.0 if full else 6.0 * masses.w_gravity * masses.rod))
+        """(mass, weight) of the platform body, kg (:func:`delta.masses.lumps`): platform and payload (full fidelity,
+        whose rods are bodies of their own), or the lumped platform with the rods' shares of the inertial and of
+        the gravity terms."""
+        lumped = lumps(masses, self.kind)
+        if self.fidelity == "full":
+            return lumped.platform_alone, lumped.platform_alone
+        return lumped.platform_inertial, lumped.platform_weight_mass
 
     def _platform_inertia(self, mass: float) -> np.ndarray:
         """Inertia tensor (3, 3) about its centre of the full plants' platform: a uniform disc of ``mass`` kg, radius

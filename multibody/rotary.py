@@ -15,7 +15,8 @@ Full fidelity
 Lumped fidelity
     The analytic (Codourey) model: the arm body carries ``elbow + 2 (1 - w) rod`` at the elbow,
     the platform is a point mass ``platform + payload + 6 w rod``, each forearm one distance
-    constraint; inertial lumps use ``masses.w_inertia``, weights ``masses.w_gravity``.
+    constraint; inertial lumps use ``masses.w_inertia``, weights ``masses.w_gravity``
+    (:func:`delta.masses.lumps`).
 
 Arms: an ideal revolute joint locks every arm motion but the rotation about ``a_i``, so an arm is modelled
 exactly as a 1-DOF rotational body (``ObjectRotationalMass1D``, its moment of inertia about the motor axis)
@@ -32,6 +33,7 @@ import numpy as np
 
 from delta.dynamics import RotaryDeltaMasses
 from delta.kinematics import actuator_points, actuator_tangents, joint_state_from_platform, leg_axes, platform_offsets
+from delta.masses import lumps
 from delta.robots import RotaryDelta
 
 from .plant import DeltaPlant, JointTrajectory, RobotTypeError, SolverSettings, point_inertia, rod_inertia
@@ -84,13 +86,13 @@ class RotaryDeltaPlant(DeltaPlant):
         elbows = actuator_points(robot, q0)
         d_elbow = actuator_tangents(robot, q0)
         la, length = robot.arm_length, robot.forearm_length
-        w_i, w_g = m.w_inertia, m.w_gravity
+        lumped = lumps(m, self.kind)  # the rods' shares (lumped fidelity; in the full one the rods are bodies)
         self._ground = mbs.AddObject(ObjectGround())
 
         self._add_platform(p0, v0)
 
-        elbow_mass = m.elbow if full else m.elbow + 2.0 * (1.0 - w_i) * m.rod
-        elbow_weight = m.elbow if full else m.elbow + 2.0 * (1.0 - w_g) * m.rod
+        elbow_mass = lumped.actuator_alone if full else lumped.actuator_inertial
+        elbow_weight = lumped.actuator_alone if full else lumped.actuator_weight_mass
         self._arms = []
         ground_node = mbs.AddNode(NodePointGround(referenceCoordinates=[0.0, 0.0, 0.0]))
         ground_coord = mbs.AddMarker(MarkerNodeCoordinate(nodeNumber=ground_node, coordinate=0))
