@@ -85,7 +85,8 @@ for robot in (linear_delta_thesis, rotary_delta_prototype):
         from delta.dynamics import forward_dynamics, integrate
         from delta.kinematics import inverse_kinematics
         from delta.model import Data
-        m, fd = model.model, Data()
+        m = model.model
+        fd = Data(m) if "model" in Data.__slots__ else Data()  # a tree from before Data(model): Data()
         def ik_step():
             for pp, vv, aa in poses:
                 inverse_kinematics(m, pp, vv, aa)

@@ -83,7 +83,7 @@ def simulate(
         raise ParameterError(f"t_end = {t_end} s is shorter than one period h = {h} s")
     plant = model if plant_model is None else plant_model
     plant = as_model(plant)
-    data = Data()
+    data = Data(plant)
     times = np.arange(n) * h
     p_ref, v_ref, a_ref = trajectory.sample(times)
     q_ref, qd_ref, qdd_ref = joint_references(model, p_ref, v_ref, a_ref)

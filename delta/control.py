@@ -194,7 +194,7 @@ class PDPlus(Controller):
 
     def __init__(self, model: AnalyticModel | Model, kp, kd, h: float, u_max=None) -> None:  # noqa: ANN001
         self.model = as_model(model)
-        self.data = Data()
+        self.data = Data(self.model)
         self.kp = _per_joint("PDPlus", "kp", kp, positive=True)
         self.kd = _per_joint("PDPlus", "kd", kd)
         self.h = _period("PDPlus", h)
@@ -223,7 +223,7 @@ class CTC(Controller):
     def __init__(self, model: AnalyticModel | Model, kp, kd, h: float, u_max=None,  # noqa: ANN001
                  feedforward: bool = True) -> None:
         self.model = as_model(model)
-        self.data = Data()
+        self.data = Data(self.model)
         self.kp = _per_joint("CTC", "kp", kp, positive=True)
         self.kd = _per_joint("CTC", "kd", kd)
         self.h = _period("CTC", h)

@@ -332,7 +332,7 @@ class AnalyticModel:
 
     def __init__(self, model: Model) -> None:
         self.model = model
-        self.data = Data()
+        self.data = Data(model)
         self.robot, self.masses, self.kind = model.robot, model.masses, model.kind
 
     def _args(self, *xs):  # noqa: ANN002, ANN202

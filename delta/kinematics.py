@@ -222,14 +222,14 @@ def _legs(model: Model, q, x: float, y: float, z: float) -> list[tuple[float, ..
 def set_pose(model: Model, data: Data, q, p) -> Data:  # noqa: ANN001
     """Fill ``data`` with the legs of the pose ``(q, p)`` (from IK: no forward kinematics)."""
     x, y, z = p
-    data.q, data.p, data.jinv = None, (x, y, z), None  # q unset: the FK cache stays cold
+    data.model, data.q, data.p, data.jinv = model, None, (x, y, z), None  # q unset: the FK cache stays cold
     data.legs = _legs(model, q, x, y, z)
     return data
 
 
 def update(model: Model, data: Data, q) -> Data:  # noqa: ANN001
     """Forward kinematics of ``q`` into ``data``: ``p``, the legs and ``J^-1`` (cached: no work when
-    ``q`` is the pose ``data`` holds).
+    ``q`` is the pose ``data`` holds for ``model``; another model's pose is computed again).
 
     ``p`` is the lower intersection of the three spheres of radius ``L`` about ``B_i(q_i) - b_i``
     (no working-mode check: :func:`fk` does it). Raises :class:`UnreachableError` when the spheres do
@@ -237,13 +237,13 @@ def update(model: Model, data: Data, q) -> Data:  # noqa: ANN001
     """
     q0, q1, q2 = q
     key = (q0, q1, q2)
-    if data.q == key:
+    if data.q == key and data.model is model:
         return data
     p, reason = _trilaterate(model, key)
     if p is None:
         raise UnreachableError(f"forward kinematics at q = {key}: {reason}")
     legs = _legs(model, key, *p)
-    data.q, data.p, data.legs = None, p, legs
+    data.model, data.q, data.p, data.legs = model, None, p, legs
     data.jinv = _jinv(legs, key, model.xp)
     data.q = key
     return data
@@ -467,9 +467,15 @@ def fk(robot: Robot | Model, q: np.ndarray) -> FKResult:
     return FKResult(None, reason) if reason else FKResult(np.array(p), None)
 
 
+def _posed(robot: Robot | Model, q: np.ndarray, p: np.ndarray) -> Data:
+    """A :class:`Data` of the model of ``robot`` at the pose ``(q, p)`` (arrays or sequences)."""
+    model = as_model(robot)
+    return set_pose(model, Data(model), np.asarray(q, dtype=float).tolist(), np.asarray(p, dtype=float).tolist())
+
+
 def rod_vectors(robot: Robot | Model, q: np.ndarray, p: np.ndarray) -> np.ndarray:
     """Rod vectors ``l_i = p + b_i - B_i(q_i)`` (row i), (3, 3), m."""
-    data = set_pose(as_model(robot), Data(), np.asarray(q, dtype=float).tolist(), np.asarray(p, dtype=float).tolist())
+    data = _posed(robot, q, p)
     return np.array([leg[0:3] for leg in data.legs])
 
 
@@ -479,7 +485,7 @@ def jacobian(robot: Robot | Model, q: np.ndarray, p: np.ndarray) -> np.ndarray:
     Row i is ``l_i^T / (l_i . B_i')`` (thesis eq. (15) for the linear delta, where
     ``B_i' = u_i``; for the rotary delta it equals ``J_theta^-1 J_p`` of seed 003 eq. (12)).
     """
-    data = set_pose(as_model(robot), Data(), np.asarray(q, dtype=float).tolist(), np.asarray(p, dtype=float).tolist())
+    data = _posed(robot, q, p)
     legs = np.array(data.legs)
     if np.any(legs[:, 7] == 0.0):
         leg = int(np.argmin(np.abs(legs[:, 7]))) + 1
@@ -493,7 +499,7 @@ def jacobian_and_hessians(robot: Robot | Model, q: np.ndarray, p: np.ndarray) ->
     ``H_i`` is the matrix of the quadratic form in :func:`leg_rates` (recovered by polarisation:
     ``H[j, k] = (Q(e_j + e_k) - Q(e_j) - Q(e_k)) / 2``), so the formula lives in one place.
     """
-    data = set_pose(as_model(robot), Data(), np.asarray(q, dtype=float).tolist(), np.asarray(p, dtype=float).tolist())
+    data = _posed(robot, q, p)
     eye = np.eye(3)
     jac = np.column_stack([rates(data, e)[0] for e in eye])
 
@@ -517,7 +523,7 @@ def hessians(robot: Robot | Model, q: np.ndarray, p: np.ndarray) -> np.ndarray:
 def joint_rates(robot: Robot | Model, q: np.ndarray, p: np.ndarray, v: np.ndarray,
                 a: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """``qd = J v`` and ``qdd = J a + [v^T H_i v]`` (thesis eqs. (16), (22)); ``qdd`` is zero when ``a`` is None."""
-    data = set_pose(as_model(robot), Data(), np.asarray(q, dtype=float).tolist(), np.asarray(p, dtype=float).tolist())
+    data = _posed(robot, q, p)
     qd, qdd = rates(data, np.asarray(v, dtype=float).tolist(), None if a is None else np.asarray(a, dtype=float).tolist())
     return np.array(qd), np.array(qdd)
 

@@ -3,10 +3,10 @@
 :func:`build_model` compiles a geometry preset (:mod:`delta.robots`) and its masses
 (:mod:`delta.masses`) into a :class:`Model`: per-leg directions and platform offsets,
 rod length, joint limits, the actuator path (:mod:`delta.actuators`) and the mass
-lumps of the analytic dynamics. A :class:`Data` holds the quantities of one pose that
-the algorithms of :mod:`delta.kinematics` and :mod:`delta.dynamics` compute and share
-(platform position, rods, Jacobian, its inverse), so a controller or an integrator that
-asks for several terms at one ``q`` computes the kinematics once.
+lumps of the analytic dynamics. A :class:`Data`, made from its model (``Data(model)``), holds the
+quantities of one pose that the algorithms of :mod:`delta.kinematics` and :mod:`delta.dynamics`
+compute and share (platform position, rods, Jacobian, its inverse), so a controller or an integrator
+that asks for several terms at one ``q`` computes the kinematics once.
 
 The per-pose fields are plain floats (the ``*_arr`` fields of the model serve the batch path): the
 per-step path allocates no arrays.
@@ -77,17 +77,24 @@ class Model:
 
 
 class Data:
-    """Scratch quantities of the last pose an algorithm evaluated (see :func:`delta.kinematics.update`).
+    """Scratch quantities of the last pose an algorithm evaluated (see :func:`delta.kinematics.update`), made
+    from its model as Pinocchio's ``Data(model)``.
 
-    ``q`` (3 floats) is the pose key; ``p`` the platform position; ``legs[i]`` holds, for leg i,
-    ``(lx, ly, lz, d1x, d1y, d1z, l.B'', l.B')``: the rod ``l_i = p + b_i - B_i(q_i)``, the actuator
-    tangent ``B_i'``, and the products ``l_i . B_i''`` and ``l_i . B_i'``; ``jinv`` the inverse task
-    Jacobian ``J^-1`` row-major (9 floats) or None when not computed.
+    ``model`` is the :class:`Model` whose pose the data holds, ``q`` (3 floats) the pose: together they key the
+    forward-kinematics cache, so a data used with another model computes that model's pose instead of answering
+    with the first one's (by identity: a model is compiled once, :func:`build_model`). ``p`` is the platform
+    position; ``legs[i]`` holds, for leg i, ``(lx, ly, lz, d1x, d1y, d1z, l.B'', l.B')``: the rod
+    ``l_i = p + b_i - B_i(q_i)``, the actuator tangent ``B_i'``, and the products ``l_i . B_i''`` and
+    ``l_i . B_i'``; ``jinv`` the inverse task Jacobian ``J^-1`` row-major (9 floats) or None when not computed.
     """
 
-    __slots__ = ("q", "p", "legs", "jinv")
+    __slots__ = ("model", "q", "p", "legs", "jinv")
 
-    def __init__(self) -> None:
+    def __init__(self, model: Model) -> None:
+        if not isinstance(model, Model):
+            raise TypeError(f"Data(model) needs the compiled delta.model.Model, got {type(model).__name__} "
+                            "(delta.model.as_model gives the model of a robot preset or an AnalyticModel)")
+        self.model = model
         self.q: tuple[float, float, float] | None = None
         self.p: tuple[float, float, float] = (0.0, 0.0, 0.0)
         self.legs: list[tuple[float, ...]] = []

@@ -76,7 +76,7 @@ def analyse(robot: Robot | Model, q: np.ndarray, p: np.ndarray, tolerance: float
     model = as_model(robot)
     q = np.asarray(q, dtype=float)
     p = np.asarray(p, dtype=float)
-    data = set_pose(model, Data(), q.tolist(), p.tolist())
+    data = set_pose(model, Data(model), q.tolist(), p.tolist())
     legs = np.array(data.legs)  # row i: l_i (3), B_i' (3), l_i . B_i'', l_i . B_i'
     rods, d1, denom = legs[:, 0:3], legs[:, 3:6], legs[:, 7]
     rod_norm = np.linalg.norm(rods, axis=1)

@@ -116,7 +116,7 @@ def hold_effort(kind: str) -> tuple[float, float, float]:
     from delta.dynamics import gravity
     from delta.model import Data, build_model
 
-    return gravity(build_model(get_preset(PRESET[kind])), Data(), home_joints(kind))
+    return gravity(model := build_model(get_preset(PRESET[kind])), Data(model), home_joints(kind))
 
 
 P0, V0 = axis_names("initial.p"), axis_names("initial.v")

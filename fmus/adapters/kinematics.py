@@ -107,7 +107,7 @@ class InverseKinematics(Adapter):
 
     def start(self) -> None:
         self.model = build_model(robot_from(self, self.KIND))
-        self.data = Data()
+        self.data = Data(self.model)
         self._reachable = True
         self._pending_pose = None
 
@@ -187,7 +187,7 @@ class ForwardKinematics(Adapter):
 
     def start(self) -> None:
         self.model = build_model(robot_from(self, self.KIND))
-        self.data = Data()
+        self.data = Data(self.model)
 
     def refresh(self) -> None:
         q, qd = self.vec3(Q), self.vec3(QD)

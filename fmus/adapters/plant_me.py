@@ -52,7 +52,7 @@ class AnalyticPlantME(AdapterME):
 
     def start(self) -> None:
         self.model = build_model(robot_from(self, self.KIND), masses_from(self, self.KIND))
-        self.data = Data()
+        self.data = Data(self.model)
         q, qd = initial_joint_state(self, self.model)
         self.put(Q, q)
         self.put(QD, qd)

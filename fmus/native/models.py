@@ -180,7 +180,7 @@ class InverseKinematics(NativeModel):
         serial = [c for c, r in faults if "singularity" in r]
         margin = sym.v["singularity.margin"]
         fault = ca.logic_not(_all(solvable))
-        value = proximity(set_pose(model, Data(), q, p), SYMBOLIC)
+        value = proximity(set_pose(model, Data(model), q, p), SYMBOLIC)
         near = ca.logic_and(margin > 0.0, value < margin)
         reachable = ca.logic_and(ca.logic_not(fault), ca.logic_not(near))
         new = (*q, *qd, *qdd)
@@ -206,7 +206,7 @@ class ForwardKinematics(NativeModel):
     n_state = 7  # the last valid p, v and proximity
 
     def refresh(self, sym: Symbols, trace: Trace) -> Result:
-        model, data = self.model(sym, trace), Data()
+        data = Data(model := self.model(sym, trace))
         q = sym.vec(Q)
         p, v = platform_state(model, data, q, sym.vec(QD))
         assembled = trace.take()  # the spheres meet, then J^-1 exists (singularities)
@@ -242,7 +242,7 @@ class Controller(NativeModel):
         fields = {g: sym.vec(joint_names(f"gain.{g}")) for g in self.GAINS}
         fields.update(h=h, u_max=(bound, bound, bound), **self.FIXED, **state)
         if self.MODEL_BASED:
-            fields.update(model=self.model(sym, trace), data=Data())
+            fields.update(model=(model := self.model(sym, trace)), data=Data(model))
         before = trace.take()
         law = self.LAW.traced(SYMBOLIC, **fields)
         trace.set_aside(before)
@@ -354,7 +354,7 @@ class AnalyticPlant(NativeModel):
         return Result(state=[*p, *v], checks=checks)
 
     def derivatives(self, sym: Symbols, trace: Trace) -> Result:
-        model, data = self.model(sym, trace), Data()
+        data = Data(model := self.model(sym, trace))
         q, qd = sym.vec(Q), sym.vec(QD)
         qdd = forward_dynamics(model, data, q, qd, sym.vec(U))
         p, v = platform_state(model, data, q, qd)

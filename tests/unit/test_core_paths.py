@@ -75,7 +75,7 @@ def test_float_path_agrees_with_batch_path_and_references(name):
     assert ok.all()
     qd_batch, qdd_batch = rates_batch(model, q_batch, p_all, v_all, a_all)
     prox_batch = proximity_batch(model, q_batch, p_all)
-    data = Data()
+    data = Data(model)
     for k, (q0, p, v, a) in enumerate(poses):
         q, qd, qdd, fault = inverse_kinematics(model, tuple(p), tuple(v), tuple(a))
         assert fault == 0, f"p = {p}: fault {fault}"
@@ -129,6 +129,6 @@ def test_type1_singularity_raises_naming_the_leg():
     p = (0.0, 0.0, -0.5)
     q, leg = solve_ik(model, p)
     assert leg == 0, f"p = {p} must be reachable"
-    data = set_pose(model, Data(), (0.5, q[1], q[2]), p)
+    data = set_pose(model, Data(model), (0.5, q[1], q[2]), p)
     with pytest.raises(RobotError, match="leg 1"):
         rates(data, (0.0, 0.0, 0.01))

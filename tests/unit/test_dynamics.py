@@ -190,7 +190,8 @@ def test_plant_stepper_in_platform_coordinates_matches_joint_coordinates(robot, 
     from delta.trajectories import Helix
 
     masses = (LinearDeltaMasses if robot.kind == "linear" else RotaryDeltaMasses)(w_inertia=0.5, w_rotation=rotation)
-    model, data, h, n = build_model(robot, masses), Data(), 1e-3, 2000
+    model, h, n = build_model(robot, masses), 1e-3, 2000
+    data = Data(model)
     p_ref, v_ref, a_ref = Helix(**helix).sample(np.arange(n) * h)
     q_ref, qd_ref, qdd_ref = joint_references(model, p_ref, v_ref, a_ref)
     ctc_p, ctc_q = default_controller("ctc", robot, model), default_controller("ctc", robot, model)

@@ -1,13 +1,16 @@
-"""The one mass lumping (delta.masses.lumps) and what each of its users takes from it."""
+"""The one mass lumping (delta.masses.lumps) and what each of its users takes from it; Data tied to its Model."""
 
+from dataclasses import replace
 from types import SimpleNamespace
 
 import numpy as np
 import pytest
 
+from delta.dynamics import analytic_model, platform_state
 from delta.errors import ParameterError
+from delta.kinematics import set_pose, update
 from delta.masses import LinearDeltaMasses, RotaryDeltaMasses, lumps
-from delta.model import build_model
+from delta.model import Data, build_model
 from delta.robots import linear_delta_thesis, rotary_delta_prototype
 
 SPLIT = {"w_inertia": 0.6, "w_gravity": 0.45, "w_rotation": 0.5, "payload": 0.2}
@@ -109,3 +112,32 @@ def test_the_exudyn_plants_take_the_lumps(robot, masses, fidelity):
             robot, masses.with_(w_inertia=1.0)).inertia  # w = 1: the elbow alone
         assert axial == pytest.approx([d + masses.arm * ARM_RADIUS**2 / 4] * 3, rel=1e-12)
 
+
+# ----------------------------------------------------------------------------- Data(model)
+
+def test_data_is_made_from_its_model():
+    model = build_model(linear_delta_thesis)
+    assert Data(model).model is model
+    with pytest.raises(TypeError, match="Data"):
+        Data()  # the model is required
+    with pytest.raises(TypeError, match="needs the compiled delta.model.Model, got AnalyticModel"):
+        Data(analytic_model(linear_delta_thesis))
+
+
+def test_a_data_used_with_another_model_computes_that_models_pose():
+    """The forward-kinematics cache is keyed on the model and q: a data that holds one model's pose, asked for
+    another model's at the same q, gives the other model's answer (it used to answer with the first one's p)."""
+    first = build_model(linear_delta_thesis)
+    other = build_model(replace(linear_delta_thesis, rod_length=linear_delta_thesis.rod_length * 1.1))
+    q, qd = (0.30, 0.32, 0.29), (0.1, -0.2, 0.05)
+    data = Data(first)
+    p_first, _ = platform_state(first, data, q, qd)
+    legs = data.legs
+    update(first, data, q)
+    assert data.legs is legs, "the same model at the same q must hit the cache"
+    p_other, v_other = platform_state(other, data, q, qd)
+    assert (p_other, v_other) == platform_state(other, Data(other), q, qd)
+    assert data.model is other and data.legs is not legs
+    assert abs(p_other[2] - p_first[2]) > 1e-3, (p_first, p_other)
+    set_pose(first, data, q, p_first)  # set_pose records the model too
+    assert data.model is first and data.q is None
