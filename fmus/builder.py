@@ -3,10 +3,10 @@
 Shadowing: pythonfmu's binary appends the FMU's ``resources/`` to ``sys.path`` and
 imports the slave module by name, so every FMU loaded into one interpreter shares
 ``sys.modules``. Each FMU therefore bundles its project code under a name that is
-unique to its sources: the packages it needs (``delta``, ``multibody``, the adapter
-layer of ``fmus``) are copied into ``resources/_dcosim_<hash>/`` with their
-absolute imports rewritten to that name, and the slave module is
-``<fmu name>_<hash>``. Two FMUs (or two versions of one FMU) never import each
+unique to its sources: the packages it needs (``delta``, ``multibody``, and of ``fmus``
+the adapter's module with every module of ``fmus`` it imports, directly or not) are copied into
+``resources/_dcosim_<hash>/`` with their absolute imports rewritten to that name, and the slave
+module is ``<fmu name>_<hash>``. Two FMUs (or two versions of one FMU) never import each
 other's code, and neither imports nor replaces the installed ``delta`` package.
 
 Host requirements: ``resources/requirements.json`` records the Python version and the
@@ -16,6 +16,7 @@ generated module checks them before anything else is imported (:mod:`fmus.requir
 
 from __future__ import annotations
 
+import ast
 import hashlib
 import json
 import re
@@ -23,16 +24,13 @@ import shutil
 import sys
 import tempfile
 from pathlib import Path
-from typing import TYPE_CHECKING
 
 from delta.errors import DeltaError
 
 from . import requirements
+from .definition import FmuDefinition
 
-if TYPE_CHECKING:  # the registry calls the builder: its entries' type only, no import cycle
-    from .registry import FmuEntry
-
-__all__ = ["DEFAULT_CACHE", "source_files", "fingerprint", "bundle_name", "is_current", "build_entry", "BuildError"]
+__all__ = ["DEFAULT_CACHE", "source_files", "fingerprint", "bundle_name", "is_current", "build_python", "BuildError"]
 
 DEFAULT_CACHE = ".fmu_cache"
 _ROOT = Path(__file__).resolve().parent.parent
@@ -50,30 +48,65 @@ def _package_files(package: str) -> list[Path]:
     return sorted(p for p in (_ROOT / package).rglob("*.py") if "__pycache__" not in p.parts)
 
 
-def source_files(entry: FmuEntry) -> dict[str, Path]:
-    """Files bundled with ``entry``, by their path inside the bundle package."""
+def source_files(fmu: FmuDefinition) -> dict[str, Path]:
+    """Files bundled with the FMU, by their path inside the bundle package: its ``packages`` whole, and of
+    ``fmus`` the adapter's module, :mod:`fmus.requirements` (the generated module's host check) and every module
+    of ``fmus`` they import (at module level or in a function), with their packages' ``__init__.py``."""
     files: dict[str, Path] = {}
-    for package in entry.packages:
+    for package in fmu.packages:
         for path in _package_files(package):
             files[path.relative_to(_ROOT).as_posix()] = path
-    layer = "export3.py" if entry.fmi == 3 else "export2.py"
-    for rel in ("fmus/__init__.py", "fmus/_names.py", "fmus/requirements.py", f"fmus/{layer}",
-                "fmus/adapters/__init__.py", "fmus/adapters/common.py", f"fmus/adapters/{entry.module}.py"):
-        files[rel] = _ROOT / rel
+    for path in _imported_closure(["fmus.requirements", fmu.adapter.__module__]):
+        files[path.relative_to(_ROOT).as_posix()] = path
     return files
 
 
-def fingerprint(entry: FmuEntry) -> str:
-    """SHA-256 of the entry, the bundled sources, this builder and the exporter version."""
+def _module_file(module: str) -> Path | None:
+    """The file of project module ``module`` (a package: its ``__init__.py``), or None."""
+    base = _ROOT.joinpath(*module.split("."))
+    return next((p for p in (base.with_suffix(".py"), base / "__init__.py") if p.is_file()), None)
+
+
+def _fmus_imports(module: str, path: Path) -> set[str]:
+    """The modules of ``fmus`` that ``module`` (its file ``path``) imports, anywhere in it."""
+    package = module.split(".") if path.name == "__init__.py" else module.split(".")[:-1]
+    named: set[str] = set()
+    for node in ast.walk(ast.parse(path.read_text(), str(path))):
+        if isinstance(node, ast.Import):
+            named.update(a.name for a in node.names)
+        elif isinstance(node, ast.ImportFrom):
+            parts = package[:len(package) - node.level + 1] if node.level else []
+            base = ".".join(parts + ([node.module] if node.module else []))
+            named.update([base, *(f"{base}.{a.name}" for a in node.names)])
+    return {m for m in named if m.split(".")[0] == "fmus" and _module_file(m) is not None}
+
+
+def _imported_closure(modules: list[str]) -> list[Path]:
+    """The files of ``modules``, of every module of ``fmus`` they import, directly or not, and of their packages."""
+    seen: set[str] = set()
+    todo = list(modules)
+    while todo:
+        module = todo.pop()
+        if module in seen:
+            continue
+        seen.add(module)
+        parts = module.split(".")
+        todo += [".".join(parts[:i]) for i in range(1, len(parts))]  # its packages' __init__.py run first
+        todo += sorted(_fmus_imports(module, _module_file(module)))
+    return sorted(_module_file(m) for m in seen)
+
+
+def fingerprint(fmu: FmuDefinition) -> str:
+    """SHA-256 of the FMU's definition, the bundled sources, this builder and the exporter version."""
     import pythonfmu
     import pythonfmu3
 
     h = hashlib.sha256()
-    h.update(repr(entry).encode())
+    h.update(repr(fmu).encode())
     h.update(Path(__file__).read_bytes())
     h.update(f"pythonfmu {pythonfmu.__version__} pythonfmu3 {pythonfmu3.__version__}".encode())
     h.update(repr(requirements.project_requirements(_ROOT)).encode())  # recorded in requirements.json
-    for rel, path in sorted(source_files(entry).items()):
+    for rel, path in sorted(source_files(fmu).items()):
         h.update(rel.encode() + b"\0" + path.read_bytes() + b"\0")
     return h.hexdigest()
 
@@ -100,19 +133,21 @@ def rewrite_imports(text: str, bundle: str, where: str) -> str:
     return text
 
 
-def _stub(entry: FmuEntry, bundle: str) -> str:
-    kind = "None" if entry.kind is None else repr(entry.kind)
+def _stub(fmu: FmuDefinition, bundle: str) -> str:
+    """The FMU's module: the class of :meth:`FmuDefinition.python_class`, on the bundled adapter."""
+    kind = "None" if fmu.kind is None else repr(fmu.kind)
+    adapter = fmu.adapter
     # pythonfmu3 finds the slave class by a regex that needs Fmi3SlaveBase among the written bases.
-    base, extra = ("_Adapter, Fmi3SlaveBase", "from pythonfmu3 import Fmi3SlaveBase\n") if entry.fmi == 3 \
+    base, extra = ("_Adapter, Fmi3SlaveBase", "from pythonfmu3 import Fmi3SlaveBase\n") if fmu.fmi == 3 \
         else ("_Adapter", "")
     # The host check comes first (standard library only): with a requirement unmet, the adapter is
     # not imported and instantiation fails naming what is missing (fmus.requirements).
     return (
-        f'"""FMU {entry.name}: {entry.summary} (generated by fmus.builder)."""\n'
+        f'"""FMU {fmu.name}: {fmu.summary} (generated by fmus.builder)."""\n'
         f"import os as _os\n\n{extra}from {bundle}.fmus.requirements import load_adapter as _load_adapter\n\n"
-        f"_Adapter = _load_adapter(_os.path.dirname(_os.path.abspath(__file__)), {entry.name!r},\n"
-        f"                         {bundle + '.fmus.adapters.' + entry.module!r}, {entry.cls!r}, {entry.fmi})\n\n\n"
-        f"class {entry.name}({base}):\n"
+        f"_Adapter = _load_adapter(_os.path.dirname(_os.path.abspath(__file__)), {fmu.name!r},\n"
+        f"                         {bundle + '.' + adapter.__module__!r}, {adapter.__qualname__!r}, {fmu.fmi})\n\n\n"
+        f"class {fmu.name}({base}):\n"
         f"    KIND = {kind}\n\n\n"
         "# One spare reference to this module's globals for the exporter's class lookup, which\n"
         "# releases one per instantiation; each instance gives it back (fmus._names).\n"
@@ -134,57 +169,57 @@ def is_current(target: Path, stamp: Path, digest: str) -> bool:
         return False
 
 
-def build_entry(entry: FmuEntry, out_dir: str | Path | None = None, *, force: bool = False) -> Path:
-    """Build ``entry`` into ``out_dir`` unless an FMU with the same fingerprint is there."""
+def build_python(fmu: FmuDefinition, out_dir: str | Path | None = None, *, force: bool = False) -> Path:
+    """Build the python FMU that ``fmu`` defines into ``out_dir`` unless one with the same fingerprint is there."""
     out = _cache_dir(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    target = out / f"{entry.name}.fmu"
-    stamp = out / f"{entry.name}.json"
-    digest = fingerprint(entry)
+    target = out / f"{fmu.name}.fmu"
+    stamp = out / f"{fmu.name}.json"
+    digest = fingerprint(fmu)
     if not force and is_current(target, stamp, digest):
         return target
     bundle = bundle_name(digest)
-    module = f"{entry.name}_{digest[:16]}"
+    module = f"{fmu.name}_{digest[:16]}"
     saved_path = list(sys.path)
     before = set(sys.modules)
-    with tempfile.TemporaryDirectory(prefix=f"fmu_{entry.name}_") as tmp:
+    with tempfile.TemporaryDirectory(prefix=f"fmu_{fmu.name}_") as tmp:
         tmp = Path(tmp)
         pkg = tmp / bundle
         pkg.mkdir()
-        (pkg / "__init__.py").write_text(f'"""Project code bundled with FMU {entry.name} ({digest[:16]})."""\n')
-        for rel, path in source_files(entry).items():
+        (pkg / "__init__.py").write_text(f'"""Project code bundled with FMU {fmu.name} ({digest[:16]})."""\n')
+        for rel, path in source_files(fmu).items():
             dest = pkg / rel
             dest.parent.mkdir(parents=True, exist_ok=True)
             dest.write_text(rewrite_imports(path.read_text(), bundle, rel))
-        for package in {rel.split("/", 1)[0] for rel in source_files(entry)}:
+        for package in {rel.split("/", 1)[0] for rel in source_files(fmu)}:
             init = pkg / package / "__init__.py"
             if not init.exists():
                 init.write_text("")
         script = tmp / f"{module}.py"
-        script.write_text(_stub(entry, bundle))
+        script.write_text(_stub(fmu, bundle))
         needs = tmp / requirements.FILE  # copied to resources/ (fmus.requirements)
-        needs.write_text(json.dumps(requirements.collect(source_files(entry).values(), _ROOT, _PROJECT_PACKAGES),
+        needs.write_text(json.dumps(requirements.collect(source_files(fmu).values(), _ROOT, _PROJECT_PACKAGES),
                                     indent=2))
         staging = tmp / "out"
         staging.mkdir()
         try:
-            if entry.fmi == 3:
+            if fmu.fmi == 3:
                 from pythonfmu3.builder import FmuBuilder
             else:
                 from pythonfmu.builder import FmuBuilder
             built = Path(FmuBuilder.build_FMU(script, dest=staging, project_files=[pkg, needs]))
         except Exception as exc:  # the exporter raises bare exceptions; name the FMU
-            raise BuildError(f"building FMU {entry.name!r} failed: {type(exc).__name__}: {exc}") from exc
+            raise BuildError(f"building FMU {fmu.name!r} failed: {type(exc).__name__}: {exc}") from exc
         finally:
             sys.path[:] = saved_path
             for name in set(sys.modules) - before:
                 if name == module or name.startswith(bundle):
                     del sys.modules[name]
-        partial = out / f".{entry.name}.partial.fmu"
+        partial = out / f".{fmu.name}.partial.fmu"
         shutil.move(str(built), partial)
         partial.replace(target)
-    stamp.write_text(json.dumps({"name": entry.name, "fingerprint": digest, "module": module, "bundle": bundle,
-                                 "fmi": entry.fmi}, indent=2))
+    stamp.write_text(json.dumps({"name": fmu.name, "fingerprint": digest, "module": module, "bundle": bundle,
+                                 "fmi": fmu.fmi}, indent=2))
     return target
 
 

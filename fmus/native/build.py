@@ -1,8 +1,8 @@
 """Build native FMUs: trace the model on symbols, generate C with CasADi, compile, zip with the sources.
 
-For FMU ``name`` (a key of :data:`fmus.native.models.MODELS`) and FMI version 2 or 3:
+For an FMU's definition (:class:`fmus.definition.FmuDefinition`) that has a native model, and FMI version 2 or 3:
 
-1. the interface comes from the python adapter (:func:`fmus.native.interface.interface`);
+1. the interface comes from the definition's python adapter (:func:`fmus.native.interface.interface`);
 2. each model function (start, refresh, advance, derivatives) is traced on ``SX`` symbols: time, step,
    the values array (one element per value reference) and the internal state; CasADi's code generator
    writes the four as one self-contained C file (``model_functions.c``);
@@ -14,8 +14,8 @@ For FMU ``name`` (a key of :data:`fmus.native.models.MODELS`) and FMI version 2 
    with the system C compiler (``$CC``, default ``cc``).
 
 Generated code is built into the cache, never committed. The cache key hashes every source that goes
-into a native FMU (the ``delta`` formulas, the adapters that declare the interface, this package, the C
-glue) and the CasADi version.
+into a native FMU (the ``delta`` formulas, the adapters that declare the interface and the layer they declare
+it with, the definitions, this package, the C glue) and the CasADi version.
 """
 
 from __future__ import annotations
@@ -32,9 +32,12 @@ from functools import lru_cache
 from pathlib import Path
 from typing import Any
 
+from ..builder import DEFAULT_CACHE, is_current
+from ..definition import FmuDefinition
 from .errors import CompilerMissingError, NativeError
 from .interface import Interface, interface, model_description
-from .models import MODELS, NativeModel, Result, Symbols, native_model
+from .models import NativeModel, Result, Symbols
+from .symbolic import tracing
 
 __all__ = ["build_native", "compiler", "fingerprint", "generate", "FMI_VERSIONS"]
 
@@ -47,6 +50,8 @@ _HEADERS = {2: ("fmi2Functions.h", "fmi2FunctionTypes.h", "fmi2TypesPlatform.h")
 _FUNCTIONS = ("start", "refresh", "advance", "derivatives", "accept")
 MAX_DETAIL = 4  # values a check may print into its reason (MODEL_MAX_DETAIL of c/model.h)
 CFLAGS = ("-std=c99", "-O2", "-fPIC", "-shared", "-Wall", "-Wextra")
+_FMUS = ("__init__.py", "_names.py", "export2.py", "export3.py", "definition.py", "registry.py")
+"""The modules of :mod:`fmus` a native FMU is made from (besides the adapters and this package)."""
 
 
 def compiler() -> str:
@@ -68,7 +73,7 @@ def fingerprint() -> str:
     """SHA-256 of everything a native FMU is made from (the same for every native FMU of this checkout). The
     files are read again only when one of them changed (size or time), not for every FMU of every run."""
     files = sorted([*(_ROOT / "delta").glob("*.py"), *(_ROOT / "fmus" / "adapters").glob("*.py"),
-                    *(_ROOT / "fmus").glob("_*.py"), _ROOT / "fmus" / "registry.py", *_HERE.glob("*.py"),
+                    *(_ROOT / "fmus" / name for name in _FMUS), *_HERE.glob("*.py"),
                     *(_HERE / "c").glob("*.[ch]")])
     return _digest(tuple((p, p.stat().st_mtime_ns, p.stat().st_size) for p in files))
 
@@ -97,8 +102,6 @@ class _Function:
 
 def _trace(model: NativeModel, itf: Interface, which: str):  # noqa: ANN202
     import casadi as ca
-
-    from .symbolic import tracing
 
     variables = itf.variables
     t, h = ca.SX.sym("t"), ca.SX.sym("h")
@@ -269,13 +272,13 @@ def _model_c(model: NativeModel, itf: Interface, token: str, functions: list[_Fu
     return "\n".join(lines) + "\n"
 
 
-def generate(name: str, out: Path, token: str) -> tuple[Interface, list[str]]:
-    """Write the generated C of FMU ``name`` (``model.c``, ``model_functions.c/.h``) into ``out``; return the
-    interface and the generated file names."""
+def generate(fmu: FmuDefinition, out: Path, token: str) -> tuple[Interface, list[str]]:
+    """Write the generated C of the FMU (``model.c``, ``model_functions.c/.h``) into ``out``; return the interface
+    and the generated file names."""
     import casadi as ca
 
-    model = native_model(name)
-    itf = interface(name, model)
+    model = fmu.native_model()
+    itf = interface(fmu.name, model)
     traced = [_trace(model, itf, which) for which in _FUNCTIONS]
     functions, constants, params = _hoisted(itf, traced)
     gen = ca.CodeGenerator("model_functions.c", {"with_header": True, "casadi_real": "double",
@@ -335,20 +338,19 @@ def _compile(cc: str, src: Path, sources: list[str], target: Path, name: str) ->
         raise NativeError(f"compiling native FMU {name} failed ({cc}): " + " | ".join(text[:6]))
 
 
-def build_native(name: str, fmi: int = 2, out_dir: str | Path | None = None, *, force: bool = False) -> Path:
-    """Build (or reuse from the cache) the native FMU ``name`` for FMI ``fmi`` (2 or 3); return its path.
+def build_native(fmu: FmuDefinition, fmi: int = 2, out_dir: str | Path | None = None, *, force: bool = False) -> Path:
+    """Build (or reuse from the cache) the native build of the FMU ``fmu`` defines, for FMI ``fmi`` (2 or 3); return
+    its path.
 
     The file is ``<out_dir>/native/fmi<fmi>/<name>.fmu`` (default ``out_dir``: ``.fmu_cache`` in the working
     directory). Raises :class:`CompilerMissingError` without a C compiler and :class:`NativeError` when the
     FMU has no native build or does not compile.
     """
+    name = fmu.name
     if fmi not in FMI_VERSIONS:
         raise NativeError(f"native FMU {name}: FMI version must be 2 or 3, got {fmi!r}")
-    if name not in MODELS:
-        native_model(name)  # raises, listing the native FMUs
+    fmu.native_model()  # raises when the FMU has none
     cc = compiler()
-    from ..builder import DEFAULT_CACHE, is_current
-
     out = (Path(out_dir) if out_dir is not None else Path.cwd() / DEFAULT_CACHE) / "native" / f"fmi{fmi}"
     out.mkdir(parents=True, exist_ok=True)
     target, stamp = out / f"{name}.fmu", out / f"{name}.json"
@@ -361,7 +363,7 @@ def build_native(name: str, fmi: int = 2, out_dir: str | Path | None = None, *, 
         root = Path(tmp) / "fmu"
         src = root / "sources"
         src.mkdir(parents=True)
-        itf, generated = generate(name, src, token)
+        itf, generated = generate(fmu, src, token)
         for f in ("model.h", "runtime.h", *_GLUE[fmi]):
             shutil.copy2(_HERE / "c" / f, src / f)
         for f in _HEADERS[fmi]:

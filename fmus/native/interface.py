@@ -2,18 +2,20 @@
 
 Each FMU's variables (names, units, start values, causality, variability, ModelStructure
 dependencies) are declared once, in its adapter's ``__init__`` (:mod:`fmus.adapters`). The native
-build instantiates that adapter (without running it) and reads its declarations, so both builds have
-one interface. Value references: 0 is the time (FMI 3's independent variable; implicit in FMI 2), then
+build instantiates that adapter (without running it: :func:`fmus.definition.declared`) and reads its
+declarations, so both builds have one interface; a model-exchange native model's continuous states are
+those its model-exchange adapter declares (:attr:`~fmus.native.models.NativeModel.me_adapter`).
+Value references: 0 is the time (FMI 3's independent variable; implicit in FMI 2), then
 the adapter's variables in declaration order, then the derivatives of the model-exchange states.
 """
 
 from __future__ import annotations
 
-import importlib
 from dataclasses import dataclass
 from xml.etree.ElementTree import Element, SubElement, indent, tostring
 
 from .._names import UNITS, initial_knowns
+from ..definition import declared
 from .errors import NativeError
 from .models import NativeModel
 
@@ -56,21 +58,16 @@ class Interface:
         return {v.name: v for v in self.variables}
 
 
-def _adapter(path: str, kind: str | None, name: str):  # noqa: ANN202
-    module, cls = path.split(".")
-    base = getattr(importlib.import_module(f"fmus.adapters.{module}"), cls)
-    return type(name, (base,), {"KIND": kind})(instance_name=name, resources="", visible=False)
-
-
 def interface(name: str, model: NativeModel) -> Interface:
     """The interface of FMU ``name``: its adapter's variables, plus the model-exchange states' derivatives."""
-    adapter = _adapter(model.adapter, model.kind, name)
+    adapter = declared(model.adapter, model.kind, name)
     variables = [Variable(0, "time", "real", "independent", "continuous", None, "s", "simulation time")]
     state_deps: dict[str, tuple[str, ...]] = {}
-    me = None
-    if model.continuous:
-        me = _adapter(model.me_adapter, model.kind, name)
+    me, continuous = None, ()
+    if model.me_adapter is not None:
+        me = declared(model.me_adapter, model.kind, name)
         state_deps = dict(me._depends)
+        continuous = tuple(zip(*me._state_order))  # (state, derivative), in ModelStructure order
     for spec in adapter.specs:
         depends = None
         if spec.causality == "output":
@@ -88,15 +85,16 @@ def interface(name: str, model: NativeModel) -> Interface:
                                   None if start is None else float(start), spec.unit, spec.description, depends,
                                   choices=choices))
     units = {v.name: v.unit for v in variables}
-    for state, der in model.continuous:
+    for state, der in continuous:
         der_var = next((v for v in me.vars.values() if v.name == der), None)
         variables.append(Variable(len(variables), der, "real", "local", "continuous", None,
                                   getattr(der_var, "unit", None) or units.get(state),
                                   f"time derivative of {state}", state_deps.get(der, ()), state))
-    missing = [s for s, _ in model.continuous if s not in units]
+    missing = [s for s, _ in continuous if s not in units]
     if missing:
-        raise ValueError(f"FMU {name}: model-exchange states {missing} are not variables of {model.adapter}")
-    return Interface(name, adapter.description, tuple(variables), tuple(adapter.EXPERIMENT), model.continuous,
+        raise ValueError(f"FMU {name}: model-exchange states {missing} are not variables of "
+                         f"{model.adapter.__qualname__}")
+    return Interface(name, adapter.description, tuple(variables), tuple(adapter.EXPERIMENT), continuous,
                      model.me_advances, model.me_accepts)
 
 

@@ -1,9 +1,10 @@
 """What each native FMU computes, written as calls of the ``delta/`` formulas on symbols.
 
 A native model is the behaviour of one python adapter (:mod:`fmus.adapters`) over the same interface:
-its variables are the adapter's, read from the adapter itself (:mod:`fmus.native.interface`), and its
-functions call the same :mod:`delta` algorithms the adapter calls, with a model compiled on symbols
-(:func:`fmus.native.symbolic.symbolic_model`). They return :class:`Result` records:
+an FMU's definition (:class:`fmus.definition.FmuDefinition`) holds both classes, and makes the native model
+with the robot kind and the adapter class itself; its variables are the adapter's, read from the adapter
+(:mod:`fmus.native.interface`), and its functions call the same :mod:`delta` algorithms the adapter calls,
+with a model compiled on symbols (:func:`fmus.native.symbolic.symbolic_model`). They return :class:`Result` records:
 the variables they set, the new internal state, and the checks the formulas recorded, each an error
 (the FMI call fails with the reason logged) or a warning (logged once when it starts failing).
 
@@ -18,8 +19,7 @@ The functions, as the C glue calls them (``fmus/native/c/model.h``):
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from functools import partial
-from typing import Any, Callable
+from typing import Any
 
 import casadi as ca
 
@@ -28,13 +28,15 @@ from delta.dynamics import forward_dynamics, platform_state, platform_step
 from delta.kinematics import (BEYOND_LIMITS, END_STOP, JOINT_LIMIT, inverse_kinematics, proximity, set_pose,
                               working_mode_fault)
 from delta.model import Data
-from delta.trajectories import PROFILES, TYPES
+from delta.trajectories import PROFILES
 
 from .._names import axis_names, joint_names
+from ..adapters import plant_me, plants
 from ..adapters.common import P0, V0, mass_values, robot_values
 from .symbolic import SYMBOLIC, Trace, instance, symbolic_model
 
-__all__ = ["Check", "Result", "Symbols", "NativeModel", "MODELS", "native_model"]
+__all__ = ["Check", "Result", "Symbols", "NativeModel", "Trajectory", "InverseKinematics", "ForwardKinematics",
+           "Controller", "PIDController", "PDPlusController", "CTCController", "AnalyticPlant"]
 
 P, V = tuple(axis_names("p")), tuple(axis_names("v"))
 P_REF, V_REF, A_REF = (tuple(axis_names(n)) for n in ("p_ref", "v_ref", "a_ref"))
@@ -92,9 +94,9 @@ def _all(conditions) -> Any:  # noqa: ANN001
 class NativeModel:
     """Base: a model with no state, no substeps and no continuous states.
 
-    ``adapter`` names the python adapter whose interface the FMU has (``module.Class``, in
-    :mod:`fmus.adapters`); ``me_adapter`` the model-exchange adapter whose continuous states and
-    derivatives it adds (if any); ``kind`` the robot kind (None: robot-independent).
+    ``adapter`` is the python adapter class whose interface the FMU has (:mod:`fmus.adapters`), ``kind`` the
+    robot kind (None: robot-independent); both come from the FMU's definition. ``me_adapter`` (a class
+    attribute) is the model-exchange adapter whose continuous states and derivatives the FMU adds, if any.
     """
 
     n_state = 0
@@ -102,10 +104,10 @@ class NativeModel:
     max_step: str | None = None  # the parameter that bounds one advance, if any
     me_advances = False
     me_accepts = False  # model exchange checks each accepted state (:meth:`accept`)
-    continuous: tuple[tuple[str, str], ...] = ()  # (state, derivative) variable names
+    me_adapter: type | None = None  # its declared states and their derivatives are the FMU's continuous states
 
-    def __init__(self, adapter: str, kind: str | None, me_adapter: str | None = None) -> None:
-        self.adapter, self.kind, self.me_adapter = adapter, kind, me_adapter
+    def __init__(self, kind: str | None, adapter: type) -> None:
+        self.kind, self.adapter = kind, adapter
 
     def initial_state(self) -> list[float]:
         return [0.0] * self.n_state
@@ -142,18 +144,12 @@ class Trajectory(NativeModel):
     """``p_ref, v_ref, a_ref`` at the FMU's time from the trajectory's ``evaluate_scalar`` (no inputs); a
     segmented trajectory's knots from its ``knots`` (:mod:`delta.trajectories`), traced as well."""
 
-    def __init__(self, adapter: str, trajectory: str) -> None:
-        super().__init__(adapter, None)
-        self.trajectory = trajectory
-        self.choices = {p.name: PROFILES for p in self._adapter().PARAMS if p.field == "profile"}
-
-    def _adapter(self):  # noqa: ANN202
-        from ..adapters.trajectories import ADAPTERS
-
-        return ADAPTERS[self.trajectory]
+    def __init__(self, kind: None, adapter: type) -> None:
+        super().__init__(kind, adapter)
+        self.choices = {p.name: PROFILES for p in adapter.PARAMS if p.field == "profile"}
 
     def refresh(self, sym: Symbols, trace: Trace) -> Result:
-        traj = self._adapter().from_parameters(sym.v, make=lambda **f: instance(TYPES[self.trajectory], **f))
+        traj = self.adapter.from_parameters(sym.v, make=lambda **f: instance(self.adapter.CLASS, **f))
         traj.validate(SYMBOLIC)  # the checks the trajectory makes when it is made from numbers
         if hasattr(traj, "knots"):
             traj._set_segments(traj.knots(SYMBOLIC), SYMBOLIC)
@@ -274,9 +270,7 @@ class PIDController(Controller):
     me_advances = True  # in model exchange the integral advances at each completed integrator step
 
     def initial_state(self) -> list[float]:
-        from ..adapters.controllers import PIDController as Adapter
-
-        return [0.0, 0.0, 0.0, Adapter.EXPERIMENT[2]]
+        return [0.0, 0.0, 0.0, self.adapter.EXPERIMENT[2]]  # the default experiment's step, as the python build
 
     def law(self, sym: Symbols, trace: Trace, h: Any, **state: Any):  # noqa: ANN201
         law = super().law(sym, trace, h, **state)
@@ -311,12 +305,17 @@ def _end_stops(model, leg: int, q) -> list[Check]:
 class AnalyticPlant(NativeModel):
     """As :class:`fmus.adapters.plants.AnalyticPlant` (co-simulation: RK4 in platform coordinates, the state
     ``p, v``, substeps of at most ``solver.max_step``) and :class:`fmus.adapters.plant_me.AnalyticPlantME`
-    (model exchange: states ``q, qd``, ``qdd`` from the forward dynamics) in one model."""
+    (model exchange: states ``q, qd``, ``qdd`` from the forward dynamics) in one model: both FMUs of the analytic
+    plant, whichever adapter their definition holds, have the co-simulation adapter's variables and the
+    model-exchange adapter's continuous states."""
 
     n_state = 6
     max_step = "solver.max_step"
-    continuous = tuple(zip(Q + QD, DQ + DQD))
+    me_adapter = plant_me.AnalyticPlantME
     me_accepts = True  # the end stops, on accepted states (derivatives see the integrator's trial states)
+
+    def __init__(self, kind: str | None, adapter: type) -> None:
+        super().__init__(kind, plants.AnalyticPlant)
 
     def start(self, sym: Symbols, trace: Trace) -> Result:
         model = self.model(sym, trace)
@@ -360,42 +359,3 @@ class AnalyticPlant(NativeModel):
         p, v = platform_state(model, data, q, qd)
         values = dict(zip(DQ + DQD + P + V, (*qd, *qdd, *p, *v)))
         return Result(values, checks=_errors(trace))
-
-
-_BY_ADAPTER: dict[str, type[NativeModel]] = {
-    "InverseKinematics": InverseKinematics, "ForwardKinematics": ForwardKinematics, "PDController": Controller,
-    "PIDController": PIDController, "PDPlusController": PDPlusController, "CTCController": CTCController,
-    "AnalyticPlant": AnalyticPlant, "AnalyticPlantME": AnalyticPlant}
-"""Adapter class (:mod:`fmus.registry`'s ``cls``) -> the native model of the same behaviour; every trajectory
-adapter is a :class:`Trajectory`. The Exudyn plant has none."""
-
-
-def _entries() -> dict[str, Callable[[], NativeModel]]:
-    """The native model of every registry entry whose adapter has one (the registry says which adapter and robot
-    kind each FMU has; the analytic plant's two entries share one model with both interfaces)."""
-    from ..adapters.trajectories import ADAPTERS
-    from ..registry import REGISTRY
-
-    trajectories = {a.__name__: a.TYPE for a in ADAPTERS.values()}
-    table: dict[str, Callable[[], NativeModel]] = {}
-    for e in REGISTRY.values():
-        if e.cls in trajectories:
-            table[e.name] = partial(Trajectory, f"{e.module}.{e.cls}", trajectories[e.cls])
-        elif _BY_ADAPTER.get(e.cls) is AnalyticPlant:
-            table[e.name] = partial(AnalyticPlant, "plants.AnalyticPlant", e.kind, "plant_me.AnalyticPlantME")
-        elif e.cls in _BY_ADAPTER:
-            table[e.name] = partial(_BY_ADAPTER[e.cls], f"{e.module}.{e.cls}", e.kind)
-    return table
-
-
-MODELS = _entries()
-"""FMU name (as :mod:`fmus.registry` names it) -> its native model, for every FMU that has a native build."""
-
-
-def native_model(name: str) -> NativeModel:
-    from .errors import NativeError
-
-    try:
-        return MODELS[name]()
-    except KeyError:
-        raise NativeError(f"FMU {name!r} has no native build; native FMUs: {', '.join(MODELS)}") from None

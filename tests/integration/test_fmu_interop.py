@@ -284,7 +284,7 @@ def test_plants_and_trajectories_declare_no_direct_feedthrough():
     from cosim.fmi import load_fmu
 
     for name in NAMES:
-        if "plant" in name or registry.get(name).module == "trajectories":
+        if "plant" in name or registry.get(name).role == "trajectory":
             feed = load_fmu(_path(name)).feedthrough
             assert all(deps == [] for deps in feed.values()), f"{name}: declared dependencies {feed}"
 

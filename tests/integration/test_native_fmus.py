@@ -105,12 +105,11 @@ def test_initial_unknowns_declare_their_dependencies_as_in_the_python_build(cach
     from xml.etree import ElementTree as ET
 
     from fmus.native.interface import interface, model_description
-    from fmus.native.models import native_model
 
     for name in NATIVE:
         with zipfile.ZipFile(registry.build(name, cache)) as zf:
             python = _initial_dependencies(ET.fromstring(zf.read("modelDescription.xml")), 2)
-        itf = interface(name, native_model(name))
+        itf = interface(name, registry.get(name).native_model())
         for fmi in (2, 3):
             native = _initial_dependencies(ET.fromstring(model_description(itf, fmi, "token", [])), fmi)
             bare = sorted(n for n, deps in native.items() if deps is None)

@@ -114,9 +114,7 @@ PYTHON_ADAPTERS = [n for n in registry.available() if not n.endswith("exudyn_pla
 
 
 def _make(name: str):  # noqa: ANN202
-    entry = registry.get(name)
-    cls = registry.adapter(entry)
-    return type(name, (cls,), {"KIND": entry.kind})(instance_name=name, resources=None, visible=False)
+    return registry.get(name).python_class()(instance_name=name, resources=None, visible=False)
 
 
 def _step(fmu, k: int) -> list:  # noqa: ANN001

@@ -19,18 +19,19 @@ import pytest
 
 ca = pytest.importorskip("casadi")
 
+from fmus import registry  # noqa: E402
 from fmus.native.build import _trace  # noqa: E402
-from fmus.native.interface import _adapter, interface  # noqa: E402
-from fmus.native.models import MODELS, native_model  # noqa: E402
+from fmus.native.interface import interface  # noqa: E402
 
 RTOL = 1e-12
+NATIVE = registry.native_names()
 
 
 class Native:
     """One native model's traced functions on a values array, as the C glue calls them."""
 
     def __init__(self, name: str) -> None:
-        self.model = native_model(name)
+        self.model = registry.get(name).native_model()
         self.itf = interface(name, self.model)
         self.vr = {v.name: v.vr for v in self.itf.variables}
         self.values = np.array([v.start or 0.0 for v in self.itf.variables], dtype=float)
@@ -60,9 +61,8 @@ class Native:
 
 
 def python_adapter(name: str):
-    model = native_model(name)
-    adapter = _adapter(model.adapter, model.kind, name)
-    return adapter
+    """The python adapter of FMU ``name``, made in Python from the FMU's definition (as the builder's FMU class)."""
+    return registry.get(name).declared()
 
 
 def close(native: float, python: float, what: str, scale: float = 1e-3) -> None:
@@ -72,7 +72,7 @@ def close(native: float, python: float, what: str, scale: float = 1e-3) -> None:
 
 def test_every_native_model_traces():
     """Each model's five functions trace (no branch on a symbol) to finite expressions."""
-    for name in MODELS:
+    for name in NATIVE:
         native = Native(name)
         assert native.fns["refresh"][0].n_out() == 4, name
 
@@ -186,7 +186,7 @@ def test_fk_matches_python_and_holds_when_invalid(kind):
     assert True in validity and False in validity, f"the poses must test both branches: {validity}"
 
 
-@pytest.mark.parametrize("name", [n for n in MODELS if n.endswith(("_pd", "_pid", "_pdplus", "_ctc"))])
+@pytest.mark.parametrize("name", [n for n in NATIVE if n.endswith(("_pd", "_pid", "_pdplus", "_ctc"))])
 def test_controllers_match_python(name):
     native, python = Native(name), python_adapter(name)
     python.start()
@@ -230,7 +230,7 @@ def test_analytic_plant_matches_python(kind):
 @pytest.mark.parametrize("kind", ["linear", "rotary"])
 def test_analytic_plant_derivatives_match_python_me(kind):
     name = f"{kind}_analytic_plant_me"
-    native, python = Native(name), _adapter("plant_me.AnalyticPlantME", kind, name)
+    native, python = Native(name), python_adapter(name)  # the model-exchange adapter
     python.start()
     assert native.call("start") == []
     for n in ("q[1]", "q[2]", "q[3]", "qd[1]", "qd[2]", "qd[3]"):

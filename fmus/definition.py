@@ -1,0 +1,79 @@
+"""One definition per FMU of ours: what it is, and the code of both its builds, by reference.
+
+A :class:`FmuDefinition` names the FMU and holds, as objects (no class-name strings, nothing looked up by
+``importlib``):
+
+* ``adapter``: the python adapter class (:mod:`fmus.adapters`). Its ``__init__`` declares the FMU's interface
+  once (variables, units, start values, causality, variability and tunability, ModelStructure dependencies,
+  default experiment); its ``start`` / ``refresh`` / ``advance`` (``derivatives`` in model exchange) are the
+  python build's step, calls of the :mod:`delta` formulas on floats;
+* ``native``: the native model class (:mod:`fmus.native.models`, None where there is no native build): the same
+  behaviour as functions of the :mod:`delta` formulas on CasADi symbols, traced to C, over the interface the
+  adapter declares (:func:`fmus.native.interface.interface` reads it from :meth:`FmuDefinition.declared`).
+
+The python FMU's class is made from the definition (:meth:`FmuDefinition.python_class`: the adapter with the
+robot kind; the builder writes the same class into the FMU's generated module), and so is its native model
+(:meth:`FmuDefinition.native_model`). The table of our definitions is :data:`fmus.registry.REGISTRY`.
+
+This module imports nothing of :mod:`fmus` but the native build's errors: the builders take a definition
+without knowing the registry.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+from .native.errors import NativeError
+
+__all__ = ["FmuDefinition", "declared"]
+
+
+@dataclass(frozen=True)
+class FmuDefinition:
+    """One FMU of ours.
+
+    ``adapter`` (the python build, and the interface of both builds) and ``native`` (the native model class, or
+    None) are the classes themselves; ``kind`` is the robot kind given to both (None for robot-independent
+    components); ``packages`` are the project packages bundled (under a unique name) with the python build;
+    ``fmi`` is the python build's FMI version: 2 (co-simulation, pythonfmu) or 3 (model exchange, pythonfmu3);
+    ``requires`` are further modules that must be importable for the adapter to run (those it imports lazily,
+    such as ``multibody.plant``).
+
+    What the FMU is, for the tools that look at scenarios and logs (compare, report, table) instead of
+    matching names: ``role`` (one of :data:`fmus.registry.ROLES`), ``variant`` within the role (the control law,
+    the plant's model, the trajectory type) and ``label`` (how a table prints it: ``PD+``, ``CTC``).
+    """
+
+    name: str
+    adapter: type
+    kind: str | None
+    native: type | None = None
+    packages: tuple[str, ...] = ("delta",)
+    fmi: int = 2
+    requires: tuple[str, ...] = ()
+    summary: str = ""
+    role: str = ""
+    variant: str = ""
+    label: str = ""
+
+    def python_class(self) -> type:
+        """The FMU's own class: its adapter with the robot kind (the class the FMU's generated module declares)."""
+        return type(self.name, (self.adapter,), {"KIND": self.kind})
+
+    def declared(self) -> Any:
+        """An instance of :meth:`python_class` made in Python (not by an FMU's binary): its declarations are the
+        FMU's interface; nothing is computed until it is started."""
+        return declared(self.adapter, self.kind, self.name)
+
+    def native_model(self) -> Any:
+        """The native model of this FMU (:mod:`fmus.native.models`); raises :class:`NativeError` when it has none
+        (:func:`fmus.registry.build` names the FMUs that have one)."""
+        if self.native is None:
+            raise NativeError(f"FMU {self.name!r} has no native build")
+        return self.native(self.kind, self.adapter)
+
+
+def declared(adapter: type, kind: str | None, name: str) -> Any:
+    """An instance of ``adapter`` for robot ``kind`` named ``name``, made in Python for its declarations."""
+    return type(name, (adapter,), {"KIND": kind})(instance_name=name, resources="", visible=False)
