@@ -16,7 +16,7 @@ from xml.etree.ElementTree import ParseError, iterparse
 
 from delta.errors import DeltaError, ParameterError
 
-__all__ = ["XYZ", "UNITS", "joint_names", "axis_names", "compensate_exporter_refcount", "ValueAccess", "writer",
+__all__ = ["XYZ", "UNITS", "joint_names", "axis_names", "component", "compensate_exporter_refcount", "ValueAccess", "writer",
            "initial_knowns", "STATE_MAGIC", "STATE_FORMAT", "FmuStateError", "fmu_guid", "encode_state",
            "decode_state", "is_plain", "identical", "spare_wrapper_references", "StateAccess"]
 
@@ -68,6 +68,12 @@ def joint_names(prefix: str) -> list[str]:
 def axis_names(prefix: str) -> list[str]:
     """``prefix.x prefix.y prefix.z``."""
     return [f"{prefix}.{a}" for a in XYZ]
+
+
+def component(name: str, index: int) -> str:
+    """Which element of a vector variable ``name`` is, for its description: the axis of ``prefix.x`` (``x``), else
+    the leg of element ``index`` (0-based: ``leg 1``)."""
+    return name.rsplit(".", 1)[-1] if name.endswith(XYZ) and "." in name else f"leg {index + 1}"
 
 
 def writer(*groups):

@@ -47,8 +47,8 @@ from pythonfmu.enums import Fmi2Status
 from pythonfmu.default_experiment import DefaultExperiment
 from pythonfmu.variables import Boolean, Integer, Real, String
 
-from ._names import (UNITS, XYZ, StateAccess, ValueAccess, axis_names, compensate_exporter_refcount, initial_knowns,
-                     joint_names, writer)
+from ._names import (UNITS, XYZ, StateAccess, ValueAccess, axis_names, compensate_exporter_refcount, component,
+                     initial_knowns, joint_names, writer)
 
 __all__ = ["Adapter", "Depends", "UNITS", "XYZ", "joint_names", "axis_names", "DefaultExperiment", "writer"]
 
@@ -227,18 +227,18 @@ class Adapter(StateAccess, ValueAccess, Fmi2Slave):
 
     def inputs3(self, names: Iterable[str], unit: str, description: str, start: Iterable[float] = (0.0, 0.0, 0.0)) -> None:
         for i, (n, s) in enumerate(zip(names, start)):
-            self.input(n, unit, f"{description} ({_component(n, i)})", s)
+            self.input(n, unit, f"{description} ({component(n, i)})", s)
 
     def outputs3(self, names: Iterable[str], unit: str, description: str, *, depends: Depends) -> None:
         """Three outputs; ``depends`` is the inputs of each (names), or ``i -> names`` for output ``i`` (0-based)."""
         for i, n in enumerate(names):
-            self.output(n, unit, f"{description} ({_component(n, i)})",
+            self.output(n, unit, f"{description} ({component(n, i)})",
                         depends=depends(i) if callable(depends) else depends)
 
     def parameters3(self, names: Iterable[str], start: Iterable[float], unit: str, description: str,
                     *, tunable: bool = False) -> None:
         for i, (n, s) in enumerate(zip(names, start)):
-            self.parameter(n, float(s), unit, f"{description} ({_component(n, i)})", tunable=tunable)
+            self.parameter(n, float(s), unit, f"{description} ({component(n, i)})", tunable=tunable)
 
     # ------------------------------------------------------------------ behaviour
     def start(self) -> None:
@@ -398,7 +398,3 @@ class Adapter(StateAccess, ValueAccess, Fmi2Slave):
         node = SubElement(structure, "InitialUnknowns")
         for spec in outputs:
             unknown(node, spec, (index[n] for n in initial_knowns(spec.depends, inputs, parameters)))
-
-
-def _component(name: str, index: int) -> str:
-    return name.rsplit(".", 1)[-1] if name.endswith(XYZ) and "." in name else f"leg {index + 1}"

@@ -36,7 +36,7 @@ from pythonfmu3 import (
 
 from delta.errors import ParameterError
 
-from ._names import UNITS, StateAccess, ValueAccess, compensate_exporter_refcount, initial_knowns
+from ._names import UNITS, StateAccess, ValueAccess, compensate_exporter_refcount, component, initial_knowns
 
 __all__ = ["AdapterME"]
 
@@ -69,9 +69,16 @@ class AdapterME(StateAccess, ValueAccess, Fmi3SlaveBase, ModelExchange):
         self._fixed: set[str] = set()  # the fixed ones: refused after initialization
         self.time = 0.0
         self._units: set[str] = set()
-        self.register_variable(Float64("time", causality=Fmi3Causality.independent,
+        self._unit("s")
+        self.register_variable(Float64("time", causality=Fmi3Causality.independent, unit="s",
                                        variability=Fmi3Variability.continuous, description="simulation time",
                                        getter=lambda: self.time, setter=None), nested=False)
+
+    def _unit(self, unit: str | None) -> None:
+        """Declare ``unit`` (its SI base-unit exponents, :data:`fmus._names.UNITS`) once."""
+        if unit is not None and unit not in self._units:
+            self._units.add(unit)
+            self.register_units([Unit(unit, **{k: v for k, v in UNITS[unit].items() if v})])
 
     def _add(self, name: str, start: float | None, unit: str | None, description: str, causality: Fmi3Causality,
              variability: Fmi3Variability, initial: Fmi3Initial | None = None, derivative: int | None = None,
@@ -79,10 +86,7 @@ class AdapterME(StateAccess, ValueAccess, Fmi3SlaveBase, ModelExchange):
         self.values[name] = 0.0 if start is None else float(start)
         self._kinds[name] = kind
         self._stale = True
-        if unit is not None and unit not in self._units:
-            self._units.add(unit)
-            base = {k: v for k, v in UNITS[unit].items() if v}
-            self.register_units([Unit(unit, **base)])
+        self._unit(unit)
         setter = (lambda v, n=name: self._set(n, v)) if settable else None
         if causality is Fmi3Causality.output:
             getter = lambda n=name: self._get_output(n)  # noqa: E731
@@ -107,7 +111,7 @@ class AdapterME(StateAccess, ValueAccess, Fmi3SlaveBase, ModelExchange):
     def parameters3(self, names: Iterable[str], start: Iterable[float], unit: str, description: str, *,
                     tunable: bool = False) -> None:
         for i, (n, s) in enumerate(zip(names, start)):
-            self.parameter(n, float(s), unit, f"{description} (leg {i + 1})", tunable=tunable)
+            self.parameter(n, float(s), unit, f"{description} ({component(n, i)})", tunable=tunable)
 
     def input(self, name: str, unit: str | None, description: str, start: float = 0.0) -> None:
         self._add(name, start, unit, description, Fmi3Causality.input, Fmi3Variability.continuous, settable=True,
