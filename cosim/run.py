@@ -8,6 +8,7 @@ from pathlib import Path
 from typing import Any, Mapping, Sequence
 
 from .engine import plugins, supervision
+from .engine.assembly import assemble_scenario
 from .engine.execution import Execution, Observer, StopRequest
 from .engine.names import safe_stem
 from .engine.offload import Offload, choose
@@ -17,7 +18,7 @@ from .engine.scenario import effective_scenario, load_scenario, scenario_from_da
 from .engine.schema import Scenario, expand_signal
 from .engine.watchdog import Watchdog, hard_exit
 from .errors import CosimError
-from .fmi import Extractions, cleanup_extracted, make_slave
+from .fmi import Extractions, cleanup_extracted
 from .io.checkpoint import CheckpointError, default_checkpoint_path, write_checkpoint
 from .io.output import OutputError, check_output, claim
 from .observers.live import LiveView
@@ -153,15 +154,10 @@ def check_initialization(scenario: Scenario) -> tuple[Any, str]:
         ex, ended = None, False
         try:
             plan, report = prepare(scenario)
-            comps = scenario.components
             supervised = supervision.record()  # python -m cosim check: its supervisor names a crash
-            ex = Execution(plan, scenario.time.start_ns, scenario.time.stop_ns, scenario.time.step_ns,
-                           [comps[n].step_multiple for n in plan.names], scenario.algorithm, supervised)
+            ex = assemble_scenario(plan, scenario, supervised)
             if supervised is not None:
                 supervised.describe(names=plan.names, watchdog_s=scenario.watchdog_s)
-            for i, n in enumerate(plan.names):
-                ex.add_slave(make_slave(n, plan.infos[i], comps[n].interface, comps[n].rtol, comps[n].solver,
-                                        comps[n].max_step))
 
             def abort(err: BaseException) -> None:  # a component that never returns from its initialization
                 held.release()
@@ -363,23 +359,18 @@ def resumed_scenario(checkpoint, stop_time: float | None = None, scenario: Scena
 
 
 def _run_claimed(scenario: Scenario, output, held: Extractions, options: RunOptions) -> RunResult:
+    """A run whose log (``output``) is claimed: prepared, assembled, observed, stepped, summarised."""
     logging_on = output is not None
     published = logging_on or options.live is not None  # the log's and the live view's signals: logging.signals
     plan, _ = prepare(scenario, None if published else ("all" if options.read_all else "none"),
                       fmu_files=options.fmu_files)
-    comps = scenario.components
     supervised = supervision.record()  # python -m cosim run: the record its supervisor process reads
-    ex = Execution(plan, scenario.time.start_ns, scenario.time.stop_ns, scenario.time.step_ns,
-                   [comps[n].step_multiple for n in plan.names], scenario.algorithm, supervised)
+    ex = assemble_scenario(plan, scenario, supervised)
     if supervised is not None:
         supervised.describe(names=plan.names, watchdog_s=scenario.watchdog_s, start_s=ex.grid.time(0),
                             step_s=(ex.grid.time(ex.n_steps) - ex.grid.time(0)) / max(1, ex.n_steps),
                             partial=str(output.partial) if output is not None else None,
                             target=str(output.target) if output is not None else None)
-    slaves = [make_slave(n, plan.infos[i], comps[n].interface, comps[n].rtol, comps[n].solver, comps[n].max_step)
-              for i, n in enumerate(plan.names)]
-    for s in slaves:
-        ex.add_slave(s)
     ex.set_events(plan.events)
     checkpoint_hook, checkpoint_path = _checkpointing(ex, scenario, options, output)
     writer_process = logging_on and McapRecorder.writes_in_a_process(ex.n_steps)  # a writer process takes a CPU
@@ -389,92 +380,124 @@ def _run_claimed(scenario: Scenario, output, held: Extractions, options: RunOpti
         ahead, note = [], (f"parallel: {scenario.parallel}: serial run (a checkpoint saves every component's state "
                            "in this process)")
     resume_event = _resume_event(ex, options)
-    offload: Offload | None = None
-    tracking = None
+    tracking, recorder, pacing = _observe(ex, scenario, output, options, published)
+    loop = _Loop(ex, scenario, options, output, held, recorder)
+    loop.run(ahead, supervised, checkpoint_hook, resume_event)
+    result = RunResult(scenario.name, ex.k_done - loop.k_start, (loop.t_end_ns - ex.t_ns(loop.k_start)) * 1e-9,
+                       loop.wall, dict(zip(plan.names, ex.comp_time)),
+                       mcap=str(output.target) if output is not None else None, notes=[note] if note else [],
+                       worker_time=loop.offload.worker_time if loop.offload else {})
+    _summarise(result, ex, options, checkpoint_path, pacing)
+    if tracking is not None:
+        result.errors = tracking.result()
+        result.checks = acceptance(result.errors, scenario.checks)
+    return result
+
+
+def _observe(ex: Execution, scenario: Scenario, output, options: RunOptions, published: bool):
+    """The run's observers, in order: the tracking error, the log and the live view, the caller's, the real-time
+    pacing (last: every other observer has seen the step before it waits). Returns (tracking, recorder, pacing),
+    each None when absent."""
+    tracking = recorder = pacing = None
     if scenario.compare is not None:
         tracking = ErrorObserver(expand_signal(scenario.compare.actual), expand_signal(scenario.compare.reference))
         ex.add_observer(tracking)
-    mcap_path = output.target if output is not None else None
-    recorder = None
     if published:  # the log and the live view: the same channels (cosim.observers.publish)
         sinks, recorder = _publishing(scenario, output.partial if output is not None else None, options)
         for o in sinks:
             ex.add_observer(o)
     for o in options.observers:
         ex.add_observer(o)
-    pacing = None
-    if options.realtime is not None:  # last: every other observer has seen the step before it waits
+    if options.realtime is not None:
         pacing = RealTime(options.realtime)
         ex.add_observer(pacing)
-    error: BaseException | None = None
-    t_wall = time.perf_counter()
-    t_loop_end: float | None = None
-    bar = None
-    stop = StopRequest()
+    return tracking, recorder, pacing
 
-    def abort(err: BaseException) -> None:
+
+class _Loop:
+    """The stepping of an assembled run: the feed-forward components offloaded, the watchdog, the initialization
+    (or the checkpoint's state), the progress bar, the loop, then every component freed and the observers
+    finished whatever happened. ``wall``: the loop's wall-clock seconds; ``t_end_ns``, ``k_start``: where it
+    ended and started."""
+
+    def __init__(self, ex: Execution, scenario: Scenario, options: RunOptions, output, held: Extractions,
+                 recorder) -> None:
+        self.ex, self.scenario, self.options, self.output, self.held, self.recorder = \
+            ex, scenario, options, output, held, recorder
+        self.offload: Offload | None = None
+        self.wall = 0.0
+        self.k_start = options.resume.k_done if options.resume is not None else 0
+
+    def abort(self, err: BaseException) -> None:
         """The watchdog's hard shutdown, from its thread: the main thread is stuck inside a component's
         call and cannot unwind. The end of the run without it (the stuck component is never freed),
         then say why and leave the process."""
-        _finish_observers(ex, err, recorder, output, hard=True)
+        _finish_observers(self.ex, err, self.recorder, self.output, hard=True)
         lines = []
         try:
-            _conclude(output, err, held, offload)
+            _conclude(self.output, err, self.held, self.offload)
         except CosimError as exc:
             lines.append(f"error: {exc}")
         cleanup_extracted()  # the process leaves without its exit handlers: other runs' extractions too
         hard_exit(err, lines)
 
-    try:
-        if ahead:  # proxies take the feed-forward components' places, on the same buffers
-            offload = Offload(ex, ahead, [slaves[c] for c in ahead])
-            for c, proxy in zip(ahead, offload.proxies):
-                ex.replace_slave(c, proxy)
-        watchdog = Watchdog(ex, scenario.watchdog_s, stop, abort)  # after the worker's fork: a thread of its own
-        with stop, watchdog:
-            try:
-                ex.initialize(start_observers=options.resume is None)
-                if options.resume is not None:  # the checkpoint's state, its --set at its time, then the log starts
-                    _resume(ex, scenario, options.resume, resume_event)
-                    ex.start_observers()
-                if checkpoint_hook is not None:
-                    ex.hooks.setdefault(checkpoint_hook[0], []).append(checkpoint_hook[1])
-                if supervised is not None and recorder is not None:
-                    supervised.describe(writer_pid=recorder.writer_pid)
-                t_wall = time.perf_counter()
-                cb, every = None, 0
-                if options.progress and ex.n_steps >= 1000:
-                    bar = progress_bar()
-                    bar.start()
-                    task = bar.add_task(scenario.name, total=ex.n_steps)
-                    every = max(1, ex.n_steps // 200)
-                    cb = lambda k: bar.update(task, completed=k)  # noqa: E731
-                ex.simulate_until(None, stop, cb, every)
-                t_loop_end = time.perf_counter()  # the loop's wall time, without the shutdown below
-            except BaseException as exc:
-                replaced = watchdog.translate(exc)  # the watchdog's error, when it stopped the run
-                if replaced is not exc:
-                    raise replaced from None
-                raise
-    except BaseException as exc:  # finish the log on every failure, signals included, then re-raise
-        error = exc
-        raise
-    finally:
-        wall = (t_loop_end if t_loop_end is not None else time.perf_counter()) - t_wall
-        if bar is not None:
-            bar.stop()
-        ended = ex.end(terminate=error is None)  # every component freed, whatever happened
-        error = error or ended
-        error = _finish_observers(ex, error, recorder, output)
-    if error is not None:  # a failure at the end (fmi2Terminate, the worker's report) fails the run too
-        raise error
-    t_end_ns = ex.t_end_ns if ex.t_end_ns is not None else ex.t_ns(ex.k_done)
-    k_start = options.resume.k_done if options.resume is not None else 0
-    t_start_ns = ex.t_ns(k_start)
-    result = RunResult(scenario.name, ex.k_done - k_start, (t_end_ns - t_start_ns) * 1e-9, wall,
-                       dict(zip(plan.names, ex.comp_time)), mcap=str(mcap_path) if mcap_path else None,
-                       notes=[note] if note else [], worker_time=offload.worker_time if offload else {})
-    result.events = {n: s.events for n, s in zip(plan.names, ex.slaves) if s.model_exchange}
+    def run(self, ahead: list[int], supervised, checkpoint_hook, resume_event) -> None:
+        ex, options = self.ex, self.options
+        error: BaseException | None = None
+        t_wall = time.perf_counter()
+        t_loop_end: float | None = None
+        bar = None
+        stop = StopRequest()
+        try:
+            if ahead:  # proxies take the feed-forward components' places, on the same buffers
+                self.offload = Offload(ex, ahead, [ex.slaves[c] for c in ahead])
+                for c, proxy in zip(ahead, self.offload.proxies):
+                    ex.replace_slave(c, proxy)
+            watchdog = Watchdog(ex, self.scenario.watchdog_s, stop, self.abort)  # after the worker's fork
+            with stop, watchdog:
+                try:
+                    ex.initialize(start_observers=options.resume is None)
+                    if options.resume is not None:  # the checkpoint's state, its --set at its time, then the log
+                        _resume(ex, self.scenario, options.resume, resume_event)
+                        ex.start_observers()
+                    if checkpoint_hook is not None:
+                        ex.hooks.setdefault(checkpoint_hook[0], []).append(checkpoint_hook[1])
+                    if supervised is not None and self.recorder is not None:
+                        supervised.describe(writer_pid=self.recorder.writer_pid)
+                    t_wall = time.perf_counter()
+                    cb, every = None, 0
+                    if options.progress and ex.n_steps >= 1000:
+                        bar = progress_bar()
+                        bar.start()
+                        task = bar.add_task(self.scenario.name, total=ex.n_steps)
+                        every = max(1, ex.n_steps // 200)
+                        cb = lambda k: bar.update(task, completed=k)  # noqa: E731
+                    ex.simulate_until(None, stop, cb, every)
+                    t_loop_end = time.perf_counter()  # the loop's wall time, without the shutdown below
+                except BaseException as exc:
+                    replaced = watchdog.translate(exc)  # the watchdog's error, when it stopped the run
+                    if replaced is not exc:
+                        raise replaced from None
+                    raise
+        except BaseException as exc:  # finish the log on every failure, signals included, then re-raise
+            error = exc
+            raise
+        finally:
+            self.wall = (t_loop_end if t_loop_end is not None else time.perf_counter()) - t_wall
+            if bar is not None:
+                bar.stop()
+            ended = ex.end(terminate=error is None)  # every component freed, whatever happened
+            error = error or ended
+            error = _finish_observers(ex, error, self.recorder, self.output)
+        if error is not None:  # a failure at the end (fmi2Terminate, the worker's report) fails the run too
+            raise error
+        self.t_end_ns = ex.t_end_ns if ex.t_end_ns is not None else ex.t_ns(ex.k_done)
+
+
+def _summarise(result: RunResult, ex: Execution, options: RunOptions, checkpoint_path: dict | None, pacing) -> None:
+    """What the summary says besides the figures: events fired and located, the resume, the checkpoint, the
+    observers' summaries, the real-time figures, an FMU's end of the simulation."""
+    result.events = {n: s.events for n, s in zip(ex.plan.names, ex.slaves) if s.model_exchange}
     if ex.events is not None:
         result.fired = [{"t": e.t, "event": e.event, "set": e.set} for e in ex.events.fired]
         late = [s.index for s in ex.events.timed[ex.events.next_timed:]]
@@ -499,15 +522,17 @@ def _run_claimed(scenario: Scenario, output, held: Extractions, options: RunOpti
         result.status = "terminated"
         result.message = str(ex.terminated)
         result.terminated_by = ex.terminated.component
-    if tracking is not None:
-        result.errors = tracking.result()
-        if scenario.checks is not None:
-            worst_rmse = max(e.rmse for e in result.errors)
-            worst_max = max(e.max_error for e in result.errors)
-            if scenario.checks.max_rmse is not None:
-                result.checks["max_rmse"] = {"limit": scenario.checks.max_rmse, "value": worst_rmse,
-                                             "ok": worst_rmse <= scenario.checks.max_rmse}
-            if scenario.checks.max_error is not None:
-                result.checks["max_error"] = {"limit": scenario.checks.max_error, "value": worst_max,
-                                              "ok": worst_max <= scenario.checks.max_error}
-    return result
+
+
+def acceptance(errors: list, checks) -> dict[str, dict[str, Any]]:
+    """The scenario's acceptance checks (``checks:``) on the tracking ``errors``: each limit, the worst value, ok."""
+    out: dict[str, dict[str, Any]] = {}
+    if checks is None:
+        return out
+    worst_rmse = max(e.rmse for e in errors)
+    worst_max = max(e.max_error for e in errors)
+    if checks.max_rmse is not None:
+        out["max_rmse"] = {"limit": checks.max_rmse, "value": worst_rmse, "ok": worst_rmse <= checks.max_rmse}
+    if checks.max_error is not None:
+        out["max_error"] = {"limit": checks.max_error, "value": worst_max, "ok": worst_max <= checks.max_error}
+    return out

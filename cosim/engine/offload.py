@@ -38,8 +38,9 @@ from typing import Any
 
 from .. import procs
 from ..errors import STOP_SIGNALS, CosimError
-from ..fmi import PY_KINDS, Terminated, Variable, cleanup_extracted, load_fmu, make_slave
+from ..fmi import PY_KINDS, Terminated, Variable, cleanup_extracted, load_fmu
 from ..fmi import extract as _extract
+from .assembly import assemble
 from .execution import Execution, byte_view
 from .system import Link, Port, SystemPlan
 
@@ -490,11 +491,9 @@ def _execution(spec: dict, raw: Any, filled: list, free: list, stop: Any, slaves
     plan = SystemPlan(spec["names"], infos, links, spec["order"], spec["start_values"],
                       [[variables[j][v] for v in spec["inputs"][j]] for j in range(len(infos))],
                       [[variables[j][v] for v in spec["outputs"][j]] for j in range(len(infos))])
-    ex = Execution(plan, spec["start_ns"], spec["stop_ns"], spec["step_ns"], spec["multiples"], spec["algorithm"])
-    for j, name in enumerate(spec["names"]):
-        interface, rtol, solver, max_step = spec["kinds"][j]
-        slaves.append(make_slave(name, infos[j], interface, rtol, solver, max_step))
-        ex.add_slave(slaves[j])  # bound to the plan's variables: the buffers the ring's layout describes
+    ex = assemble(plan, (spec["start_ns"], spec["stop_ns"], spec["step_ns"]), spec["multiples"], spec["algorithm"],
+                  spec["kinds"])
+    slaves += ex.slaves  # bound to the plan's variables: the buffers the ring's layout describes
     layout = _Layout(spec["sizes"])
     for j, s in enumerate(slaves):
         sizes = [ctypes.sizeof(b.values) for b in s.out_bufs]
