@@ -104,7 +104,7 @@ def model_start_values(model: ModelFile, variables: Any) -> dict[str, float]:
 
 def scenario_model(scenario: Any) -> ModelFile | None:
     """The identified model ``scenario``'s ``model:`` key names, its path relative to the scenario file; read once
-    per scenario (kept in its :meth:`~cosim.engine.scenario.Scenario.domain` slot); None without the key. Raises
+    per scenario (kept in its :meth:`~cosim.engine.schema.Scenario.domain` slot); None without the key. Raises
     :class:`ScenarioError`."""
     if scenario.model is None:
         return None
