@@ -16,7 +16,10 @@ from pathlib import Path
 import pytest
 
 from cosim.errors import CosimError
-from cosim.analysis.report import ReportError, controller_table, make_report, register
+from cosim.analysis.report import make_report
+from cosim.analysis.table import controller_table
+from cosim.analysis.tracking import ReportError
+from cosim.cli.report import register
 from cosim.run import run_scenario
 from cosim.io.runlog import write_baseline
 from cosim.engine.overrides import apply_overrides
@@ -158,7 +161,7 @@ def test_bad_inputs_give_one_line_errors_naming_the_file(run, tmp_path):
 def test_units_read_plainly_from_millimetres_to_femtometres_and_degrees():
     import numpy as np
 
-    from cosim.analysis.report import _scaled_unit
+    from cosim.analysis.figures import _scaled_unit
 
     # the rotary z-steps run: x and y errors at rounding level (1.6e-14 m) read as 15.7 fm, not 1.57e-5 nm
     for peak, unit, want in ((0.3, "m", "mm"), (1.6e-4, "m", "µm"), (7.5e-9, "m", "nm"), (5.5e-10, "m/s", "pm/s"),

@@ -61,7 +61,6 @@ below are offered here for callers outside the package (:mod:`cosim.io.runlog`: 
 from .read import read_ssp
 from .scenario import is_ssp, open_ssp, reopen_ssp
 from .spec import NS, SSD_NAME, SspError
-from .cli import register  # noqa: F401 - the CLI registers the command from here
 from .write import ExportReport, export_ssp
 
 __all__ = ["SspError", "ExportReport", "export_ssp", "read_ssp", "open_ssp", "reopen_ssp", "is_ssp", "NS", "SSD_NAME"]
