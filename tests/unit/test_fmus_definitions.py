@@ -2,6 +2,7 @@
 
 * No import cycle among the modules of ``fmus``, counting every import: at module level, inside functions and
   under ``TYPE_CHECKING`` (an import hidden in a function is a cycle all the same, run later).
+* The python build bundles exactly the modules of ``fmus`` its adapter imports, directly or not.
 * No FMU's code is found by name: no ``importlib.import_module`` in ``fmus`` but in :mod:`fmus.requirements`, the
   loader inside a python FMU, which imports the bundled adapter once the host check passed.
 * Every FMU with a native build declares the same variables in both builds (name, type, causality, variability,
@@ -83,6 +84,24 @@ def test_fmus_has_no_import_cycle():
         if m not in state:
             walk(m, [m])
     assert not cycles, "\n".join(cycles)
+
+
+def test_the_python_build_bundles_every_fmus_module_its_adapter_imports():
+    """The builder reads the imports with a regular expression (fast enough for every run's cache check); the
+    modules it bundles are those this AST-based graph reaches from the adapter's module and the FMU's loader."""
+    from fmus import builder, registry
+
+    for fmu in registry.REGISTRY.values():
+        needed: set[str] = set()
+        todo = [fmu.adapter.__module__, "fmus.requirements"]
+        while todo:
+            module = todo.pop()
+            if module not in needed:
+                needed.add(module)
+                parts = module.split(".")
+                todo += [*sorted(_imports(module)), *(".".join(parts[:i]) for i in range(1, len(parts)))]
+        bundled = {rel for rel in builder.source_files(fmu) if rel.startswith("fmus/")}
+        assert bundled == {MODULES[m].relative_to(ROOT).as_posix() for m in needed}, fmu.name
 
 
 def test_no_fmu_code_is_looked_up_by_name():
