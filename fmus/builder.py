@@ -37,8 +37,8 @@ _PROJECT_PACKAGES = ("delta", "multibody", "fmus")
 _FROM = re.compile(r"^(\s*)from\s+(delta|multibody|fmus)(\.|\s)", re.M)
 _IMPORT = re.compile(r"^(\s*)import\s+(delta|multibody|fmus)((?:\.\w+)*)(\s+as\s+\w+)?\s*$", re.M)
 _LEFT = re.compile(r"^\s*(from|import)\s+(delta|multibody|fmus)\b", re.M)
-_IMPORTS = re.compile(r"^[ \t]*(?:import[ \t]+([\w., \t]+)|from[ \t]+(\.*)([\w.]*)[ \t]+import[ \t]+(\([^)]*\)|[^\n;]*))",
-                      re.M)
+_IMPORTS = re.compile(r"^[ \t]*(?:import[ \t]+([\w., \t]+)"
+                      r"|from[ \t]+(\.*)([\w.]*)[ \t]+import[ \t]+(\([^)]*\)|[^\n;]*))", re.M)
 """An import statement at any indentation (functions included): ``import a.b, c as d`` (group 1) or ``from ..a
 import (b, c)`` (its dots, module and names: groups 2 to 4)."""
 

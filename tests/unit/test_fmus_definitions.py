@@ -62,7 +62,8 @@ def test_fmus_native_is_a_package():
 
 def test_the_import_graph_is_read():
     """The graph below sees imports in functions and under TYPE_CHECKING, relative and absolute."""
-    assert {"fmus.definition", "fmus.builder", "fmus.native.build", "fmus.adapters.kinematics"} <= _imports("fmus.registry")
+    seen = _imports("fmus.registry")
+    assert {"fmus.definition", "fmus.builder", "fmus.native.build", "fmus.adapters.kinematics"} <= seen, seen
     assert "fmus.export2" in _imports("fmus.adapters.kinematics")
 
 
