@@ -20,9 +20,11 @@ from __future__ import annotations
 from delta.dynamics import LinearDeltaMasses, RotaryDeltaMasses
 from delta.robots import Robot
 
+from .errors import PlantError, RobotTypeError
 from .linear import LinearDeltaPlant
-from .plant import DeltaPlant, JointTrajectory, PlantError, PlantOutput, RobotTypeError, SolverSettings
+from .plant import DeltaPlant, JointTrajectory, PlantOutput
 from .rotary import RotaryDeltaPlant
+from .settings import SolverSettings
 
 __all__ = [
     "make_plant",

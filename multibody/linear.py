@@ -5,7 +5,7 @@ Full fidelity
     ``masses.rod`` kg and radius ``masses.rod_radius``) with spherical joints at both ends, ``masses.parallelogram_width``
     apart along the rail tangent, and a rigid free-floating platform (disc of radius ``platform_radius``, 10 mm
     thick) kept level by the parallelograms. A rod is represented by its two ends (its kinetic energy a constant
-    quadratic form of their velocities, :func:`multibody.plant.rod_end_masses`, its weight half at each end) and
+    quadratic form of their velocities, :func:`multibody.inertia.rod_end_masses`, its weight half at each end) and
     its length by one distance constraint: its lower end is a point of its carriage, its upper end a point node
     joined to the platform. The spin of a cylinder about its own axis is never excited between spherical joints
     and is left out; what remains is the rigid cylinder's motion exactly. Only the time discretisation differs
@@ -36,9 +36,11 @@ from delta.kinematics import actuator_points, joint_state_from_platform, leg_axe
 from delta.masses import lumps
 from delta.robots import LinearDelta
 
-from .plant import MIN_ROD_MASS, PLATFORM_THICKNESS, DeltaPlant, JointTrajectory, RobotTypeError, SolverSettings
+from .errors import RobotTypeError
+from .plant import DeltaPlant, JointTrajectory
+from .settings import SolverSettings
 
-__all__ = ["LinearDeltaPlant", "MIN_ROD_MASS", "PLATFORM_THICKNESS"]
+__all__ = ["LinearDeltaPlant"]
 
 RAIL = np.array([0.0, 0.0, -1.0])
 """Direction in which a carriage moves as its coordinate q grows (down its vertical rail)."""
@@ -138,10 +140,11 @@ class LinearDeltaPlant(DeltaPlant):
     def _add_leg(self, carriage: int, node: int, centre: np.ndarray, rods: list[tuple[np.ndarray, np.ndarray]],
                  v0: np.ndarray) -> None:
         """A full leg: the carriage (point mass at ``centre``) and its parallelogram's rods, each ``(lower, upper)``
-        end at the reset pose, as one set of point masses (:meth:`DeltaPlant._add_point_masses`). A rod's lower end
-        is a point of the carriage, moving with ``RAIL * qd``: linear in the carriage's coordinate, it needs no
-        coordinates and no joint of its own, only the rod's distance constraint to its upper end (a point node
-        joined to the platform, :meth:`DeltaPlant._add_rod_end`). Rod masses: :meth:`DeltaPlant._rod_mass`."""
+        end at the reset pose, as one set of point masses (:meth:`DeltaPlant._add_point_masses`).
+        A rod's lower end is a point of the carriage, moving with ``RAIL * qd``: linear in the carriage's coordinate,
+        it needs no coordinates and no joint of its own, only the rod's distance constraint to its upper end (a point
+        node joined to the platform, :meth:`DeltaPlant._add_rod_end`). Rod masses:
+        :meth:`DeltaPlant._rod_mass`."""
         m = self.masses
         ups = [self._add_rod_end(self._body_marker(carriage, low), low, up, v0) for low, up in rods]
         n = 1 + 3 * len(rods)

@@ -18,15 +18,19 @@ frame at ``reset`` time and inertia tensors are given in base-frame axes.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
 from typing import Any, Callable, NamedTuple
 
 import numpy as np
 
-from delta.errors import DeltaError, ParameterError
+from delta.errors import ParameterError
 from delta.masses import lumps
 
-__all__ = ["SolverSettings", "PlantOutput", "PlantError", "DeltaPlant", "JointTrajectory"]
+from .errors import PlantError
+from .inertia import rigid_body_inertia, rod_end_masses
+from .settings import SolverSettings, simulation_settings
+
+__all__ = ["PlantOutput", "DeltaPlant", "JointTrajectory", "MIN_ROD_MASS", "PLATFORM_THICKNESS"]
+
 
 JointTrajectory = Callable[[float], tuple[np.ndarray, np.ndarray]]
 """Prescribed joint motion ``t -> (q(t), qd(t))``, each (3,), used by the prescribed-motion mode."""
@@ -38,82 +42,6 @@ end nodes keep a regular mass matrix."""
 
 PLATFORM_THICKNESS = 0.01
 """Platform disc thickness, m (the full plants' platform inertia)."""
-
-
-class PlantError(DeltaError, RuntimeError):
-    """A plant could not be stepped (wrong time, solver failure); the message names the time."""
-
-
-class RobotTypeError(DeltaError, TypeError):
-    """A plant was asked for a robot of a kind it does not model."""
-
-
-@dataclass(frozen=True)
-class SolverSettings:
-    """Integrator settings of a plant.
-
-    Attributes
-    ----------
-    spectral_radius : float
-        Generalized-alpha spectral radius at infinity (0.8: stable at h = 1 ms for
-        every delta tried; use ~0.5 with small steps for force comparisons).
-    newton_rel_tol : float
-        Relative Newton tolerance (Exudyn's, against the step's initial residual). 1e-10 converges every step:
-        on pick_place_ctc (full linear plant, closed loop, 2 s) the platform closes on its joints
-        (``|p - fk(q)|``) within 1.0e-11 m at every 1 ms sample with the kept Newton matrix, 8.8e-12 m with a
-        fresh one, and the two runs end within 1.2e-11 m of each other. At 1e-6 a fresh matrix stops after one
-        iteration, up to 7.3e-7 m off that closure at the cycle's jerk steps; a kept matrix up to 6.1e-9 m.
-        (Measured with the rods as rigid bodies; with their end-point masses the closure holds to 1.7e-15 m at
-        every 1 ms sample of pick_place_ctc, 4.5e-16 m on the helices: tests/integration/test_golden.py.)
-    newton_abs_tol : float
-        Absolute Newton tolerance (Exudyn's default scale for these small systems).
-    modified_newton : bool
-        Reuse the Jacobian across Newton iterations and steps where possible.
-    substeps : int
-        Integrator steps per macro step ``h`` of :meth:`DeltaPlant.step` (1 = one step of size h).
-    max_step : float or None
-        Longest integrator step, s: a longer macro step is split into the fewest equal steps no
-        longer than this (None: no limit, ``substeps`` steps whatever ``h``).
-    min_step : float
-        Resolution of the plant, s: a macro step that would leave less than this to integrate is
-        absorbed (see :meth:`DeltaPlant.step`). Generalized-alpha's Newton iteration fails below
-        ~1e-12 s on the full linear delta (its matrix scales with 1/h^2); 1e-9 s converged on every
-        model, and is the master's time resolution (integer nanoseconds).
-    sparse : bool or None
-        Use the EigenSparse linear solver (with its analysed sparsity pattern reused from step
-        to step: the pattern never changes); False = Eigen's dense LU; None (default) = the
-        faster per model as measured by ``benchmarks/plant_step.py`` (sparse for the full models,
-        dense for the small lumped ones).
-    reuse_jacobian : bool or None
-        Keep the factorised Newton matrix from one macro step to the next (Exudyn refactorises it on
-        every ``SolveSteps`` entry otherwise). Newton still iterates to the same tolerances, and the
-        matrix is refactorised when modified Newton has not converged within
-        ``REUSE_MAX_MODIFIED_ITERATIONS`` iterations, when the step size changes and after a reset.
-        Its steps take ~4 modified Newton iterations where a fresh matrix takes two; at the default
-        tolerance both converge to the same step (see ``newton_rel_tol``). None (default) = per model
-        (``_default_reuse``): on for the full plants, off for the lumped plants (their factorisation is
-        cheap: the kept matrix costs more than it saves).
-    """
-
-    spectral_radius: float = 0.8
-    newton_rel_tol: float = 1e-10
-    newton_abs_tol: float = 1e-10
-    modified_newton: bool = True
-    substeps: int = 1
-    sparse: bool | None = None
-    max_step: float | None = None
-    min_step: float = 1e-9
-    reuse_jacobian: bool | None = None
-
-    def __post_init__(self) -> None:
-        if not 0.0 <= self.spectral_radius <= 1.0:
-            raise ParameterError(f"SolverSettings.spectral_radius must be in [0, 1], got {self.spectral_radius!r}")
-        if self.substeps < 1:
-            raise ParameterError(f"SolverSettings.substeps must be >= 1, got {self.substeps!r}")
-        if self.max_step is not None and not 0.0 < self.max_step < math.inf:
-            raise ParameterError(f"SolverSettings.max_step must be a finite time > 0 s or None, got {self.max_step!r}")
-        if not 0.0 <= self.min_step < math.inf:
-            raise ParameterError(f"SolverSettings.min_step must be a finite time >= 0 s, got {self.min_step!r}")
 
 
 class PlantOutput(NamedTuple):
@@ -142,18 +70,6 @@ class PlantOutput(NamedTuple):
     p: np.ndarray
     v: np.ndarray
     reaction: np.ndarray
-
-
-REUSE_MAX_MODIFIED_ITERATIONS = 3
-"""With ``SolverSettings.reuse_jacobian``: modified Newton iterations on a kept matrix before it is
-refactorised (Exudyn's ``maxModifiedNewtonIterations``, default 8). A kept matrix contracts Newton's error by
-~1e-4 a step after it was factorised and by ~1e-3 some steps later (the constraint Jacobians turn with the rods),
-so converging to the default 1e-10 takes it 3, then 4 iterations; a fresh one takes 2. With 3 the matrix is
-refactorised as soon as it needs a 4th. Measured with the rods' end-point model (``benchmarks/plant_step.py``
-conditions, full linear plant): 3.8 iterations and 0.02 factorisations per step with 3, 4.3 and 0.007 with 4,
-4.7 with 5, and 3 the fastest (74 against 77 us); while the platform moves (a 2 Hz effort wobble,
-tests/integration/test_multibody_plants.py) 3, 4 and 5 take the same time (0.24 / 0.09 / 0.04 factorisations
-per step)."""
 
 
 def _time_tolerance(t: float) -> float:
@@ -499,7 +415,7 @@ class DeltaPlant:
         inertia = self._platform_inertia(mass) if self.fidelity == "full" else None
         mbs.SetObjectParameter(body, "mass", mass)
         if inertia is not None:
-            mbs.SetObjectParameter(body, "inertia", _inertia(mass, inertia).GetInertia6D())
+            mbs.SetObjectParameter(body, "inertia", rigid_body_inertia(mass, inertia).GetInertia6D())
         mbs.SetLoadParameter(self._platform_weight, "loadVector", [0.0, 0.0, -weight * masses.gravity])
         self.masses = masses
         self._bodies = [(body, mass, inertia) if entry[0] == body else entry for entry in self._bodies]
@@ -590,7 +506,7 @@ class DeltaPlant:
                 referencePosition=position,
                 referenceRotationMatrix=np.eye(3),
                 initialVelocity=velocity,
-                inertia=_inertia(mass, inertia),
+                inertia=rigid_body_inertia(mass, inertia),
                 nodeType=exu.NodeType.RotationRotationVector,
             )
         self._bodies.append((body, mass, inertia))
@@ -708,33 +624,9 @@ class DeltaPlant:
         import exudyn as exu
 
         s = self.settings
-        sim = exu.SimulationSettings()
-        ti = sim.timeIntegration
-        ti.startTime = self._t
-        ti.endTime = self._t + h
-        ti.numberOfSteps = s.substeps
-        ti.verboseMode = 0
-        ti.automaticStepSize = False
-        ti.generalizedAlpha.spectralRadius = s.spectral_radius
-        ti.generalizedAlpha.computeInitialAccelerations = True
-        ti.newton.useModifiedNewton = s.modified_newton
-        ti.newton.relativeTolerance = s.newton_rel_tol
-        ti.newton.absoluteTolerance = s.newton_abs_tol
-        reuse = _default_reuse(self.fidelity) if s.reuse_jacobian is None else s.reuse_jacobian
-        if reuse:
-            ti.newton.maxModifiedNewtonIterations = REUSE_MAX_MODIFIED_ITERATIONS
-        sim.solution.file.write = False
-        sim.solution.sensors.active = False
-        sim.solution.sensors.writePeriod = 1e30
-        sim.show.computationTime = False
-        sim.show.statistics = False
-        sparse = self._sparse = _default_sparse(self.fidelity) if s.sparse is None else s.sparse
-        if sparse:
-            sim.linearSolver.solverType = exu.LinearSolverType.EigenSparse
-            sim.linearSolver.reuseAnalyzedPattern = True  # the sparsity pattern is fixed: analyse it once
-        else:
-            sim.linearSolver.solverType = exu.LinearSolverType.EigenDense
-        self._sim = sim
+        reuse = s.reuse_for(self.fidelity)
+        self._sparse = s.sparse_for(self.fidelity)
+        sim = self._sim = simulation_settings(s, self.fidelity, self._t, h)
         self._solver = exu.MainSolverImplicitSecondOrder()
         self._solver.InitializeSolver(self.mbs, sim)
         # with reuse_jacobian, refactorise on the next step (InitializeSolver's factorisation is of its
@@ -804,52 +696,6 @@ def _keep_jacobian(refactorise: list[bool]):
     return finish_step
 
 
-def _default_sparse(fidelity: str) -> bool:
-    """Linear solver per model, the faster one measured with ``benchmarks/plant_step.py``:
-    sparse LU (pattern analysed once) for the full models (51 unknowns linear, 87 rotary; with the rods as rigid
-    bodies, 95 each, dense LU took 1.15x as long, and at 53 the two took the same time), Eigen's dense LU for the
-    lumped ones (9 unknowns each). Exudyn's own EXUdense inverts the matrix and is slower than both from ~50
-    unknowns on."""
-    return fidelity == "full"
-
-
-def _default_reuse(fidelity: str) -> bool:
-    """``SolverSettings.reuse_jacobian`` per model (see there): the full plants keep their Newton matrix (a fresh
-    one costs a Jacobian and a sparse LU, ~50 us of the linear plant's step against ~25 us for the two iterations
-    it saves); the lumped plants (9 unknowns) do not: their factorisation is cheap."""
-    return fidelity == "full"
-
-
-def rod_end_masses(mass: float, radius: float, length: float) -> tuple[float, float]:
-    """A uniform rigid cylinder's kinetic energy as a quadratic form of its end velocities, kg:
-    ``T = (a |v_A|^2 + 2 b v_A.v_B + a |v_B|^2) / 2``.
-
-    Derivation: the centre moves with ``(v_A + v_B) / 2``, and a rod of constant length turns with
-    ``|w_perp| = |v_B - v_A| / L`` (its ends' relative velocity is perpendicular to it), so with the
-    transverse moment of inertia ``J = m (3 r^2 + L^2) / 12``
-    ``T = m |v_A + v_B|^2 / 8 + J |v_B - v_A|^2 / (2 L^2)``: ``a = m / 4 + J / L^2``, ``b = m / 4 - J / L^2``
-    (a thin rod, r = 0: m / 3 and m / 6). The spin about the rod's own axis is left out: between spherical
-    joints nothing applies a torque about that axis, so a cylinder that starts without spin never spins
-    (Euler's equations of an axisymmetric body). On the constraint |x_B - x_A| = L this is the cylinder's
-    exact kinetic energy, constant in the ends' coordinates."""
-    transverse = mass * (3.0 * radius**2 + length**2) / 12.0 / length**2
-    return mass / 4.0 + transverse, mass / 4.0 - transverse
-
-
-def rod_inertia(mass: float, radius: float, length: float, axis: np.ndarray) -> np.ndarray:
-    """Inertia tensor (3, 3) of a solid cylinder about its centre, axis ``axis`` (unit), kg m^2."""
-    axial = 0.5 * mass * radius**2
-    transverse = mass * (3.0 * radius**2 + length**2) / 12.0
-    aa = np.outer(axis, axis)
-    return transverse * (np.eye(3) - aa) + axial * aa
-
-
-def point_inertia(mass: float, r: np.ndarray) -> np.ndarray:
-    """Parallel-axis term of a point mass at offset ``r`` from the reference point."""
-    r = np.asarray(r, dtype=float)
-    return mass * (float(r @ r) * np.eye(3) - np.outer(r, r))
-
-
 def tilt_angle(rotation: np.ndarray) -> float:
     """Rotation angle of a rotation matrix, accurate for small angles, rad."""
     rot = np.asarray(rotation, dtype=float).reshape(3, 3)
@@ -857,14 +703,3 @@ def tilt_angle(rotation: np.ndarray) -> float:
     s = np.linalg.norm([skew[2, 1], skew[0, 2], skew[1, 0]])
     c = 0.5 * (np.trace(rot) - 1.0)
     return float(np.arctan2(s, c))
-
-
-def _inertia(mass: float, tensor: np.ndarray):
-    """``RigidBodyInertia`` without the triangle-inequality check: an arm carrying a rotor
-    inertia about its axis (rotor lumped into the arm body) legitimately violates it."""
-    import exudyn.utilities as eu
-
-    out = eu.RigidBodyInertia(mass=mass, inertiaTensor=np.eye(3) * max(float(np.trace(tensor)), 1e-12),
-                              com=[0.0, 0.0, 0.0])
-    out.inertiaTensor = np.asarray(tensor, dtype=float)
-    return out

@@ -36,7 +36,10 @@ from delta.kinematics import actuator_points, actuator_tangents, joint_state_fro
 from delta.masses import lumps
 from delta.robots import RotaryDelta
 
-from .plant import DeltaPlant, JointTrajectory, RobotTypeError, SolverSettings, point_inertia, rod_inertia
+from .errors import RobotTypeError
+from .inertia import point_inertia, rod_inertia
+from .plant import DeltaPlant, JointTrajectory
+from .settings import SolverSettings
 
 __all__ = ["RotaryDeltaPlant", "ARM_RADIUS"]
 

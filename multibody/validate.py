@@ -63,7 +63,7 @@ from delta.kinematics import joint_state_from_platform
 from delta.robots import get_preset
 from delta.trajectories import Helix, PickAndPlace
 
-from .plant import SolverSettings
+from .settings import SolverSettings
 
 __all__ = [
     "FORCE_COMPARISON_SETTINGS",

@@ -18,8 +18,8 @@ from delta.errors import DeltaError
     ("cosim.fmi.integrators", "IntegratorError", RuntimeError, CosimError),
     ("cosim.errors", "UnknownSignalError", KeyError, CosimError),
     ("cosim.errors", "SettingError", ValueError, CosimError),
-    ("multibody.plant", "PlantError", RuntimeError, DeltaError),
-    ("multibody.plant", "RobotTypeError", TypeError, DeltaError),
+    ("multibody.errors", "PlantError", RuntimeError, DeltaError),
+    ("multibody.errors", "RobotTypeError", TypeError, DeltaError),
 ])
 def test_error_classes_derive_from_the_root_and_their_builtin(module, name, builtin, root):
     cls = getattr(importlib.import_module(module), name)  # our own modules: a broken one fails, never skips
@@ -43,11 +43,11 @@ def test_unknown_signal_message_is_not_quoted():
 @pytest.mark.parametrize("settings", [{"spectral_radius": 1.5}, {"substeps": 0}, {"max_step": 0.0},
                                       {"min_step": -1.0}])
 def test_solver_settings_raise_a_parameter_error(settings):
-    import multibody.plant as plant
     from delta.errors import ParameterError
+    from multibody.settings import SolverSettings
 
     with pytest.raises(ParameterError, match=f"SolverSettings.{next(iter(settings))} must be"):
-        plant.SolverSettings(**settings)
+        SolverSettings(**settings)
 
 
 def test_unknown_solver_is_a_setting_error():

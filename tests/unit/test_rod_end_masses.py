@@ -1,8 +1,8 @@
-"""The rods of the Exudyn plants as masses at their two ends (multibody.plant.rod_end_masses)."""
+"""The rods of the Exudyn plants as masses at their two ends (multibody.inertia.rod_end_masses)."""
 
 import numpy as np
 
-from multibody.plant import rod_end_masses, rod_inertia
+from multibody.inertia import rod_end_masses, rod_inertia
 
 
 def test_end_masses_give_the_rigid_cylinders_kinetic_energy():
