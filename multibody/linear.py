@@ -140,11 +140,11 @@ class LinearDeltaPlant(DeltaPlant):
     def _add_leg(self, carriage: int, node: int, centre: np.ndarray, rods: list[tuple[np.ndarray, np.ndarray]],
                  v0: np.ndarray) -> None:
         """A full leg: the carriage (point mass at ``centre``) and its parallelogram's rods, each ``(lower, upper)``
-        end at the reset pose, as one set of point masses (:meth:`DeltaPlant._add_point_masses`).
+        end at the reset pose, as one set of point masses (:meth:`multibody.builder.SystemBuilder._add_point_masses`).
         A rod's lower end is a point of the carriage, moving with ``RAIL * qd``: linear in the carriage's coordinate,
         it needs no coordinates and no joint of its own, only the rod's distance constraint to its upper end (a point
-        node joined to the platform, :meth:`DeltaPlant._add_rod_end`). Rod masses:
-        :meth:`DeltaPlant._rod_mass`."""
+        node joined to the platform, :meth:`multibody.builder.SystemBuilder._add_rod_end`). Rod masses:
+        :meth:`multibody.builder.SystemBuilder._rod_mass`."""
         m = self.masses
         ups = [self._add_rod_end(self._body_marker(carriage, low), low, up, v0) for low, up in rods]
         n = 1 + 3 * len(rods)

@@ -11,7 +11,7 @@ Full fidelity
     each forearm a parallelogram of two rigid rods (solid cylinders ``masses.rod`` kg,
     radius ``masses.rod_radius``, ``masses.parallelogram_width`` apart along ``a_i``) with
     spherical joints at both ends, each rod represented by its two end nodes
-    (:meth:`multibody.plant.DeltaPlant._add_rod`); a rigid free-floating platform (disc, 10 mm thick).
+    (:meth:`multibody.builder.SystemBuilder._add_rod`); a rigid free-floating platform (disc, 10 mm thick).
 Lumped fidelity
     The analytic (Codourey) model: the arm body carries ``elbow + 2 (1 - w) rod`` at the elbow,
     the platform is a point mass ``platform + payload + 6 w rod``, each forearm one distance
