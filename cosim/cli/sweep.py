@@ -58,7 +58,9 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def _cmd_sweep(args: argparse.Namespace) -> int:
-    from ..analysis.sweep import RESULTS, Case, SweepError, make_cases, parse_grid, parse_random, run_sweep
+    from ..analysis.cases import Case, SweepError, make_cases, parse_grid, parse_random
+    from ..analysis.results import RESULTS
+    from ..analysis.sweep import run_sweep
     from ..engine.overrides import parse_set_value
 
     problem = file_problem(args.scenario)
@@ -114,7 +116,7 @@ def _cmd_sweep(args: argparse.Namespace) -> int:
 
 
 def _cmd_sweep_report(args: argparse.Namespace) -> int:
-    from ..analysis.sweep import report
+    from ..analysis.sweep_report import report
 
     path = report(args.dir, args.metric, args.out)
     print(f"{args.metric} -> {path}")

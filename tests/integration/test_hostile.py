@@ -195,7 +195,7 @@ def test_a_scheduler_that_answers_http_is_not_dask(server, run, tmp_path):
 
 @pytest.mark.parametrize("server", ["silent"], indirect=True)
 def test_a_silent_scheduler_is_given_up_after_the_timeout(server, run, tmp_path):
-    from cosim.analysis.sweep import SweepCluster
+    from cosim.analysis.cluster import SweepCluster
 
     r, wall = _sweep(run, tmp_path, server.address)
     fails(r, 2, f"--scheduler {server.address}: no answer from {server.address} within "

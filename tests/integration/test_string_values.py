@@ -19,7 +19,7 @@ from cosim.engine.prepare import prepare
 from cosim.io.runlog import read_run
 from cosim.engine.overrides import apply_overrides, dotted_overrides
 from cosim.engine.scenario import load_scenario
-from cosim.analysis.sweep import Case, parse_grid
+from cosim.analysis.cases import Case, parse_grid
 
 pytestmark = pytest.mark.integration
 

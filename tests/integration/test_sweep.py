@@ -149,7 +149,7 @@ def test_a_case_outside_the_workspace_fails_alone(tmp_path):
 
 
 def test_sweep_report_plots_one_and_two_parameters(tmp_path):
-    from cosim.analysis.sweep import report
+    from cosim.analysis.sweep_report import report
 
     out = tmp_path / "sweep"
     out.mkdir()

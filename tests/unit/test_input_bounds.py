@@ -17,7 +17,8 @@ def test_workspace_grid_too_fine_is_refused_with_the_spacing_that_fits():
 
 
 def test_sweep_with_too_many_cases_is_refused_before_they_are_made():
-    from cosim.analysis.sweep import MAX_CASES, SweepError, make_cases
+    from cosim.analysis.cases import SweepError, make_cases
+    from cosim.analysis.limits import MAX_CASES
 
     with pytest.raises(SweepError, match=str(MAX_CASES)):
         make_cases({}, {"ctl.gain.kp[1]": ("uniform", 1e4, 2e4)}, MAX_CASES + 1, 1)

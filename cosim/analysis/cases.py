@@ -1,0 +1,123 @@
+"""A sweep's cases: the cartesian product of ``--grid`` axes, times ``-n`` random draws (seeded) of the ``--random``
+ones (:func:`make_cases`); names and values as ``--set`` reads them."""
+
+from __future__ import annotations
+
+import hashlib
+import itertools
+import json
+import math
+import re
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from ..engine.overrides import parse_set_value
+from ..errors import CosimError
+from .limits import MAX_CASES
+
+__all__ = ["Case", "SweepError", "make_cases", "parse_grid", "parse_random"]
+
+_RANDOM = re.compile(r"^(uniform|normal)\(\s*([^,()]+)\s*,\s*([^,()]+)\s*\)$")
+
+
+class SweepError(CosimError, ValueError):
+    """A bad sweep definition or output directory."""
+
+
+@dataclass(frozen=True)
+class Case:
+    """One run: overrides by dotted name, and its id (a hash of the names and values)."""
+
+    values: dict[str, Any]
+
+    @property
+    def id(self) -> str:
+        text = json.dumps(sorted((k, repr(v)) for k, v in self.values.items()))
+        return hashlib.sha256(text.encode()).hexdigest()[:12]
+
+
+def _value(text: str, where: str) -> Any:
+
+    return parse_set_value(text.strip(), where)
+
+
+def _top_level_split(text: str) -> list[str]:
+    """Split at commas outside brackets: ``1,[2,3],4`` -> ``["1", "[2,3]", "4"]`` (list values)."""
+    parts, depth, cur = [], 0, ""
+    for ch in text:
+        depth += ch in "[(" and 1 or (-1 if ch in "])" else 0)
+        if ch == "," and depth == 0:
+            parts.append(cur)
+            cur = ""
+        else:
+            cur += ch
+    return parts + [cur]
+
+
+def parse_grid(items: Sequence[str]) -> dict[str, list[Any]]:
+    """``["ctl.gain.kp[1]=1e4,4e4"]`` -> ``{"ctl.gain.kp[1]": [1e4, 4e4]}`` (values as ``--set`` reads them;
+    a list value in brackets, ``ctl.gain.kp=[1e4,1e4,1e4],[4e4,4e4,4e4]``, sets every element)."""
+    out: dict[str, list[Any]] = {}
+    for item in items:
+        name, sep, values = item.partition("=")
+        if not sep or not name or not values.strip():
+            raise SweepError(f"--grid {item}: expected NAME=V1,V2,...")
+        if name in out:
+            raise SweepError(f"--grid {item}: {name} is given twice")
+        out[name] = [_value(v, f"--grid {item}") for v in _top_level_split(values)]
+    return out
+
+
+def parse_random(items: Sequence[str]) -> dict[str, tuple[str, float, float]]:
+    """``["plant.mass.payload=uniform(0,0.5)"]`` -> ``{"plant.mass.payload": ("uniform", 0.0, 0.5)}``."""
+    out: dict[str, tuple[str, float, float]] = {}
+    for item in items:
+        name, sep, dist = item.partition("=")
+        m = _RANDOM.match(dist.strip())
+        if not sep or not name or m is None:
+            raise SweepError(f"--random {item}: expected NAME=uniform(A,B) or NAME=normal(MU,SIGMA)")
+        try:
+            a, b = float(m[2]), float(m[3])
+        except ValueError:
+            raise SweepError(f"--random {item}: the bounds must be numbers") from None
+        if not math.isfinite(b - a):  # nan, an infinity, or a span past the largest double (-1e308, 1e308)
+            raise SweepError(f"--random {item}: the bounds must be finite numbers whose difference is finite")
+        if m[1] == "uniform" and not a < b:
+            raise SweepError(f"--random {item}: uniform(A,B) needs A < B")
+        if m[1] == "normal" and not b >= 0:
+            raise SweepError(f"--random {item}: normal(MU,SIGMA) needs SIGMA >= 0")
+        out[name] = (m[1], a, b)
+    return out
+
+
+def make_cases(grid: dict[str, list[Any]], random: dict[str, tuple[str, float, float]], n: int | None,
+               seed: int | None) -> list[Case]:
+    """Cartesian product of ``grid``, each combined with ``n`` draws of ``random`` (numpy, ``seed``)."""
+
+    if random and not n:
+        raise SweepError("--random needs -n N (the number of draws)")
+    if n and not random:
+        raise SweepError("-n needs at least one --random NAME=DIST")
+    if not grid and not random:
+        raise SweepError("nothing to sweep: give --grid NAME=V1,V2,... and/or --random NAME=DIST -n N")
+    both = set(grid) & set(random)
+    if both:
+        raise SweepError(f"{', '.join(sorted(both))}: both --grid and --random")
+    total = math.prod(len(v) for v in grid.values()) * (n or 1)
+    if total > MAX_CASES:
+        raise SweepError(f"the sweep has {total:.3g} cases (at most {MAX_CASES}): fewer grid values or draws")
+    rng = np.random.default_rng(seed)
+    draws = [{name: float(rng.uniform(a, b) if kind == "uniform" else rng.normal(a, b))
+              for name, (kind, a, b) in random.items()} for _ in range(n or 1)]
+    names = list(grid)
+    cases = []
+    for combo in itertools.product(*(grid[k] for k in names)):
+        for draw in draws:
+            cases.append(Case({**dict(zip(names, combo)), **draw}))
+    ids = [c.id for c in cases]
+    if len(set(ids)) != len(ids):
+        raise SweepError("some cases repeat the same values (a grid value given twice?)")
+    return cases

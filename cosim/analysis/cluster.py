@@ -1,0 +1,159 @@
+"""The Dask cluster a sweep runs on: an existing one (``--scheduler``), checked to be a Dask scheduler before anything
+is built, or an embedded ``LocalCluster`` of single-threaded worker processes started in a thread while the FMUs are
+built (:class:`SweepCluster`)."""
+
+from __future__ import annotations
+
+import asyncio
+import logging
+import os
+import re
+import shutil
+import tempfile
+
+from .. import procs
+from .cases import SweepError
+
+__all__ = ["PRELOAD", "SweepCluster", "WORKER_CONFIG"]
+
+PRELOAD = "cosim.analysis.sweep"
+"""The module each embedded worker loads at its start (its ``dask_setup``; ``dask worker --preload`` takes it too)."""
+
+
+
+# Dask settings of the embedded cluster's workers. Each case is one long task in the worker's
+# single thread; the worker's own threads take the GIL from it. Dask's statistical profiler
+# samples the task's stack every 10 ms (with it the workers spent 9-12 % CPU on top of the cases'
+# own, without it 1-2 %; measured with 8 cases on 2 workers), and the event-loop tick (20 ms),
+# memory monitor (100 ms) and system monitor (500 ms) wake it more often than a sweep needs.
+WORKER_CONFIG = {
+    "distributed.worker.profile.enabled": False,
+    "distributed.admin.tick.interval": "1s",
+    "distributed.worker.memory.monitor-interval": "1s",
+    "distributed.admin.system-monitor.interval": "2s",
+}
+
+
+class SweepCluster:
+    """A Dask client: on ``scheduler`` (an existing cluster) or on an embedded LocalCluster.
+
+    :meth:`start` starts the embedded cluster in a thread (the caller builds the FMUs meanwhile);
+    ``with`` waits for it and yields ``(client, label)``; :meth:`close` if ``with`` is never entered.
+    """
+
+    CONNECT_TIMEOUT = 10.0
+    """s, for an existing scheduler to accept a connection, answer Dask's handshake and say it is a scheduler."""
+
+    def __init__(self, workers: int | None, scheduler: str | None):
+        self.workers, self.scheduler = workers, scheduler
+        self.cluster = self.client = self._thread = None
+        self._error: BaseException | None = None
+        self._scratch: str | None = None  # the embedded workers' folder, removed with the cluster
+
+    def start(self) -> "SweepCluster":
+
+        logging.getLogger("distributed").setLevel(logging.ERROR)  # the process's: the cluster's and the client's
+        if self.scheduler is None:
+            self._thread = procs.thread(self._start_local, name="sweep-cluster-start")
+        else:
+            self._probe()
+        return self
+
+    def _probe(self) -> None:
+        """Check that ``scheduler`` is a Dask scheduler, within :attr:`CONNECT_TIMEOUT`, before anything is built:
+        Dask's client waits for ever on a silent listener, and reads an HTTP answer as a frame of 3 EiB."""
+
+        from distributed.comm import connect  # lazy: --help loads this module without it
+
+        address, timeout = self.scheduler, self.CONNECT_TIMEOUT
+
+        async def identity() -> dict:
+            comm = await connect(address, timeout=timeout)
+            try:
+                await comm.write({"op": "identity", "reply": True})
+                return await comm.read()
+            finally:
+                comm.abort()
+
+        try:  # connect() retries a refused connection for ``timeout``, then its handshake waits for ever: bounded
+            answer = asyncio.run(asyncio.wait_for(identity(), timeout + 1.0))
+        except TimeoutError:
+            raise SweepError(f"--scheduler {address}: no answer from {address} within {timeout:g} s (it accepted "
+                             f"the connection: is it a Dask scheduler?)") from None
+        except ValueError as exc:  # parse_address: not an address of a comm Dask knows
+            raise SweepError(f"--scheduler {address}: not a scheduler address ({exc}); expected tcp://HOST:PORT") \
+                from None
+        except OSError as exc:  # distributed's CommClosedError too: refused, or closed during the handshake
+            if str(exc).startswith("Timed out trying to connect"):
+                raise SweepError(f"--scheduler {address}: cannot connect to {address} within {timeout:g} s "
+                                 f"({_comm_reason(exc.__cause__ or exc)})") from None
+            raise SweepError(f"--scheduler {address}: {address} is not a Dask scheduler (it closed the connection "
+                             f"in Dask's handshake: {_comm_reason(exc)})") from None
+        except Exception:  # noqa: BLE001 - an answer in another protocol: a frame of 3 EiB, undecodable, ...
+            raise SweepError(f"--scheduler {address}: {address} is not a Dask scheduler (its answer is not "
+                             f"Dask's protocol)") from None
+        if not isinstance(answer, dict) or answer.get("type") != "Scheduler":
+            kind = answer.get("type") if isinstance(answer, dict) else None
+            raise SweepError(f"--scheduler {address}: {address} is not a Dask scheduler"
+                             + (f" (a Dask {kind})" if kind else ""))
+
+    def _start_local(self) -> None:
+        try:
+
+            import dask  # lazy: --help loads this module without it
+            from distributed import LocalCluster  # lazy: --help loads this module without it
+
+            n = self.workers or os.cpu_count() or 1
+            self._scratch = tempfile.mkdtemp(prefix="cosim-sweep-")  # not dask-scratch-space, left in the temp folder
+            config = {**WORKER_CONFIG, "temporary-directory": self._scratch}  # the scheduler's and workers' folders
+            with dask.config.set(config):  # the nannies hand this configuration to their workers
+                self.cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
+                                            dashboard_address=None, silence_logs=logging.ERROR,
+                                            preload=[PRELOAD],  # its dask_setup
+                                            scheduler_kwargs={"dashboard_address": "127.0.0.1:0"})  # not 8787
+        except BaseException as exc:  # noqa: BLE001 - raised in the caller's thread by __enter__
+            self._error = exc
+
+    def __enter__(self):
+        from distributed import Client  # lazy: --help loads this module without it
+
+        if self._thread is None:  # not started yet (an embedded cluster starts here; an existing one needs nothing)
+            self.start()
+        if self.scheduler is not None:
+            try:
+                self.client = Client(self.scheduler, timeout="10s")
+            except OSError as exc:
+                raise SweepError(f"--scheduler {self.scheduler}: cannot connect: {exc}") from None
+            n = len(self.client.scheduler_info().get("workers", {}))
+            return self.client, f"{self.scheduler} ({n} workers)"
+        try:
+            self._thread.join()
+            if self._error is not None:
+                raise self._error
+            self.client = Client(self.cluster)
+        except BaseException:
+            self.close()
+            raise
+        n = len(self.cluster.workers)
+        return self.client, f"{n} local worker process{'es' if n > 1 else ''}"
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+    def close(self) -> None:
+        if self._thread is not None:
+            self._thread.join()
+        if self.client is not None:
+            self.client.close()
+        if self.cluster is not None:
+            self.cluster.close()
+        if self._scratch is not None:
+
+            shutil.rmtree(self._scratch, ignore_errors=True)
+
+
+def _comm_reason(exc: BaseException) -> str:
+    """distributed's comm error without its ``in <TCP ...>:`` prefix (``ConnectionRefusedError: [Errno 111] ...``);
+    an error without text (a connect attempt that timed out on a loaded machine) by its kind."""
+    text = re.sub(r"^in <[^>]*>: ", "", str(exc)).strip()
+    return text or f"{type(exc).__name__}: the last attempt gave no reason"
