@@ -98,6 +98,7 @@ class _Parser(argparse.ArgumentParser):
         sys.stderr.write(f"{self.prog}: error: {message}\n")
         exc = SystemExit(EXIT_BAD_INPUT)
         exc.message = f"{self.prog}: {message}"  # for --json's error object (main)
+        raise exc
 
 
 def _crashed(args: argparse.Namespace, record, reason: str) -> int:
