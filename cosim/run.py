@@ -8,7 +8,7 @@ from pathlib import Path
 from typing import Any, Mapping, Sequence
 
 from .engine import plugins, supervision
-from .engine.assembly import assemble_scenario
+from .engine.assembly import assemble_structure
 from .engine.execution import Execution, Observer, StopRequest
 from .engine.names import safe_stem
 from .engine.offload import Offload, choose
@@ -155,7 +155,7 @@ def check_initialization(scenario: Scenario) -> tuple[Any, str]:
         try:
             plan, report = prepare(scenario)
             supervised = supervision.record()  # python -m cosim check: its supervisor names a crash
-            ex = assemble_scenario(plan, scenario, supervised)
+            ex = assemble_structure(plan, scenario.structure(), supervised)
             if supervised is not None:
                 supervised.describe(names=plan.names, watchdog_s=scenario.watchdog_s)
 
@@ -365,7 +365,7 @@ def _run_claimed(scenario: Scenario, output, held: Extractions, options: RunOpti
     plan, _ = prepare(scenario, None if published else ("all" if options.read_all else "none"),
                       fmu_files=options.fmu_files)
     supervised = supervision.record()  # python -m cosim run: the record its supervisor process reads
-    ex = assemble_scenario(plan, scenario, supervised)
+    ex = assemble_structure(plan, scenario.structure(), supervised)
     if supervised is not None:
         supervised.describe(names=plan.names, watchdog_s=scenario.watchdog_s, start_s=ex.grid.time(0),
                             step_s=(ex.grid.time(ex.n_steps) - ex.grid.time(0)) / max(1, ex.n_steps),

@@ -52,7 +52,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from ..engine import supervision
-from ..engine.assembly import assemble_scenario
+from ..engine.assembly import assemble_structure
 from ..engine.events import resolve_sets
 from ..engine.overrides import dotted_overrides
 from ..engine.prepare import build_key, build_ours, locate_fmus
@@ -226,7 +226,7 @@ def _warm_system(scenario: Scenario, ck: Checkpoint, fmu_files: dict[tuple[str, 
     instantiated). A checkpoint holds its exchanged values by variable, so a case with or without a log takes it."""
     infos = locate_fmus(scenario, fmu_files)
     plan = build_plan(scenario.structure(), infos, "none")
-    ck.check_system(assemble_scenario(plan, scenario), scenario.name)  # buffers, no instance
+    ck.check_system(assemble_structure(plan, scenario.structure()), scenario.name)  # buffers, no instance
     return plan
 
 

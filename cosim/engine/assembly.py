@@ -10,11 +10,11 @@ from typing import Sequence
 
 from ..fmi import make_slave
 from .execution import Execution
-from .schema import Scenario
+from .structure import SystemStructure
 from .supervision import Record
 from .system import SystemPlan
 
-__all__ = ["Kind", "assemble", "assemble_scenario", "kinds_of"]
+__all__ = ["Kind", "assemble", "assemble_structure"]
 
 Kind = tuple[str | None, float | None, str | None, float | None]
 """How the master drives a component: (interface: co-simulation or model exchange, None for the FMU's choice;
@@ -32,14 +32,9 @@ def assemble(plan: SystemPlan, grid_ns: tuple[int, int, int], multiples: Sequenc
     return ex
 
 
-def kinds_of(scenario: Scenario, names: Sequence[str]) -> list[Kind]:
-    """How ``scenario`` drives its components ``names`` (:data:`Kind` each)."""
-    comps = scenario.components
-    return [(comps[n].interface, comps[n].rtol, comps[n].solver, comps[n].max_step) for n in names]
-
-
-def assemble_scenario(plan: SystemPlan, scenario: Scenario, record: Record | None = None) -> Execution:
-    """:func:`assemble` with ``scenario``'s time grid, step multiples, algorithm and component settings."""
-    t = scenario.time
-    return assemble(plan, (t.start_ns, t.stop_ns, t.step_ns), [scenario.components[n].step_multiple for n in plan.names],
-                    scenario.algorithm, kinds_of(scenario, plan.names), record)
+def assemble_structure(plan: SystemPlan, structure: SystemStructure, record: Record | None = None) -> Execution:
+    """:func:`assemble` with ``structure``'s time grid, step multiples, algorithm and component settings."""
+    comps = [structure.components[n] for n in plan.names]
+    return assemble(plan, (structure.start_ns, structure.stop_ns, structure.step_ns),
+                    [c.step_multiple for c in comps], structure.algorithm,
+                    [(c.interface, c.rtol, c.solver, c.max_step) for c in comps], record)

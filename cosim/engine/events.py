@@ -22,7 +22,8 @@ from typing import Any
 from ..errors import Issue, ScenarioError, UnknownSignalError
 from ..fmi.description import REAL, STRING, Variable
 from ..fmi.slave import as_number
-from .schema import Scenario, parse_condition
+from .schema import parse_condition
+from .structure import SystemStructure
 from .system import Port, SystemPlan
 
 __all__ = ["Change", "EventSpec", "resolve_events", "resolve_sets", "event_at", "EventState", "FiredEvent"]
@@ -59,14 +60,14 @@ class EventSpec:
         return x - self.value if self.op == "<" else self.value - x
 
 
-def resolve_events(scenario: Scenario, plan: SystemPlan) -> list[EventSpec]:
-    """The scenario's ``events:`` resolved against ``plan``; raises :class:`ScenarioError` listing every name that
+def resolve_events(structure: SystemStructure, plan: SystemPlan) -> list[EventSpec]:
+    """The structure's events resolved against ``plan``; raises :class:`ScenarioError` listing every name that
     cannot be set (unknown, an output, a connected input, a fixed parameter) or read, each at its file and line."""
-    src = scenario.sources
+    src = structure.where()
     issues: list[Issue] = []
     driven = {(lk.dst.comp, lk.dst.var.name) for lk in plan.links}
     out: list[EventSpec] = []
-    for i, e in enumerate(scenario.events):
+    for i, e in enumerate(structure.events):
         changes: list[Change] = []
         for name, value in e.set.items():
             loc = ("events", i, "set", name)

@@ -90,10 +90,11 @@ def prepare(scenario: Scenario, log_signals: str | None = None, *,
     ``fmu_files``: our FMUs already built (:func:`locate_fmus`).
     """
 
+    structure = scenario.structure()  # what the engine runs; the scenario's domain sections go to its plugin
     preparations = plugins.prepare(scenario)  # the domain's pre-flight, before any FMU is built
     infos = locate_fmus(scenario, fmu_files)
-    plan = build_plan(scenario, infos, log_signals)
+    plan = build_plan(structure, infos, log_signals)
     for prep in preparations:
         prep.apply(plan)
-    plan.events = resolve_events(scenario, plan)
+    plan.events = resolve_events(structure, plan)
     return plan, "; ".join(p.report for p in preparations if p.report) or "no pre-flight"

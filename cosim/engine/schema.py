@@ -13,6 +13,7 @@ import math
 import dataclasses
 import re
 import typing
+from pathlib import Path
 from typing import Annotated, Any, Literal, Union
 
 from pydantic import AllowInfNan, BaseModel, ConfigDict, Field, PrivateAttr, ValidationError, field_validator, model_validator
@@ -23,6 +24,8 @@ from .grid import MAX_TIME_S, NS_PER_S, Grid, grid_error
 from .names import name_problem, split_ref
 from . import plugins
 from .sources import SourceMap
+from .structure import (ComponentStructure, ConnectionStructure, EventStructure, Observed,
+                        SystemStructure)
 
 __all__ = ["Scenario", "Event", "parse_condition", "condition_issue", "Component", "Connection", "TimeGrid",
            "TrajectorySpec", "InitialState", "Logging", "Compare", "Checks", "Regression", "expand_signal",
@@ -364,7 +367,31 @@ class Scenario(_Model):
     _sources: "SourceMap | None" = PrivateAttr(default=None)
     _trajectory: Any = PrivateAttr(default=None)  # built once: :meth:`trajectory_object`
     _domain: dict[str, Any] = PrivateAttr(default_factory=dict)  # :meth:`domain`
+    _structure: Any = PrivateAttr(default=None)  # made once: :meth:`structure`
     _archive: dict[str, str] | None = PrivateAttr(default=None)  # set by cosim.io.ssp: :attr:`archive`
+
+    def structure(self) -> SystemStructure:
+        """This scenario as the engine runs it (:class:`cosim.engine.structure.SystemStructure`), made once: its
+        components, connections, time grid, algorithm, events, what is logged and what its observers read."""
+        if self._structure is None:
+            comps = {n: ComponentStructure(c.fmu, c.path, dict(c.parameters), c.step_multiple, c.interface,
+                                           c.feedthrough, c.rtol, c.solver, c.max_step)
+                     for n, c in self.components.items()}
+            observed = []
+            if self.compare is not None:
+                observed.append(Observed(tuple(expand_signal(self.compare.actual)
+                                               + expand_signal(self.compare.reference)), ("compare",)))
+            if self.logging.scene is not None:
+                observed.append(Observed(tuple(expand_signal(self.logging.scene.position)), ("logging", "scene")))
+            from_file = self.source is not None and self.source != "<string>"
+            t = self.time
+            self._structure = SystemStructure(
+                self.name, comps, tuple(ConnectionStructure(c.src, c.dst, c.units) for c in self.connections),
+                t.start_ns, t.stop_ns, t.step_ns, self.algorithm,
+                tuple(EventStructure(dict(e.set), e.at, e.when, e.repeat, e.tolerance) for e in self.events),
+                self.logging.signals if self.logging.enabled else "none", tuple(observed), self.sources,
+                Path(self.source).parent if from_file else None, (self.source or "").lower().endswith(".ssp"))
+        return self._structure
 
     def domain(self) -> dict[str, Any]:
         """What the domain plugged in (:mod:`cosim.engine.plugins`) made of this scenario, kept with it so that it

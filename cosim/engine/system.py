@@ -16,7 +16,7 @@ from ..fmi import FMUInfo, Variable
 from ..fmi.description import initial_of, settable_at_start
 from .algorithm import ALGORITHMS
 from .names import quote, split_ref
-from .schema import Scenario, expand_signal
+from .structure import SystemStructure
 from .wiring import expand_connection, find_variable, index_text
 
 __all__ = ["Port", "Link", "SystemPlan", "build_plan", "gauss_seidel_order", "find_variable_loop"]
@@ -181,42 +181,44 @@ def _describe(ref: str, v: Variable) -> str:
     return f"{ref} ({v.fmi_type}{', ' + v.unit if v.unit else ''})"
 
 
-def build_plan(scenario: Scenario, infos: Mapping[str, FMUInfo], log_signals: str | None = None) -> SystemPlan:
-    """Resolve every name in ``scenario`` against the FMUs; raise one error listing every problem.
+def build_plan(structure: SystemStructure, infos: Mapping[str, FMUInfo], log_signals: str | None = None) -> SystemPlan:
+    """Resolve every name in ``structure`` against the FMUs; raise one error listing every problem, each at the
+    file and line (or option) its value came from.
 
     In turn: the parameters typed as start values (:func:`_start_values`), the connections resolved into
     links (:func:`_links`), the signals the run reads besides (:func:`_reads`), what each component exchanges
     and logs (:func:`_exchanged`), and the order the algorithm needs (:func:`_order`).
     """
-    names = list(scenario.components)
+    names = list(structure.components)
     idx = {n: i for i, n in enumerate(names)}
     issues: list[Issue] = []
+    sources = structure.where()
 
     def issue(loc: tuple, msg: str) -> None:
-        issues.append(scenario.sources.issue(loc, msg))
+        issues.append(sources.issue(loc, msg))
 
-    infos, start_values = _start_values(scenario, dict(infos), idx, issue)
-    links = _links(scenario, infos, idx, issue)
-    reads = _reads(scenario, infos, idx, issue)
+    infos, start_values = _start_values(structure, dict(infos), idx, issue)
+    links = _links(structure, infos, idx, issue)
+    reads = _reads(structure, infos, idx, issue)
     if issues:
         raise WiringError(issues)
-    inputs, outputs, logged = _exchanged(scenario, infos, names, links, reads, log_signals)
-    order = _order(scenario, infos, names, links)
+    inputs, outputs, logged = _exchanged(structure, infos, names, links, reads, log_signals)
+    order = _order(structure, infos, names, links)
     return SystemPlan(names, [infos[n] for n in names], links, order, start_values, inputs, outputs, logged)
 
 
 Report = Callable[[tuple, str], None]
 
 
-def _start_values(scenario: Scenario, infos: dict[str, FMUInfo], idx: dict[str, int],
+def _start_values(structure: SystemStructure, infos: dict[str, FMUInfo], idx: dict[str, int],
                   issue: Report) -> tuple[dict[str, FMUInfo], list[dict[str, Any]]]:
     """Each component's parameters typed by the FMU variables they set (arrays sized by the structural
     parameters first); returns the infos with their structure and the start values per component."""
     names = list(idx)
-    written = scenario.sources.written
+    written = structure.where().written
     start_values: list[dict[str, Any]] = [dict() for _ in names]
     infos = dict(infos)
-    for n, comp in scenario.components.items():
+    for n, comp in structure.components.items():
         structural = {p: v for p, v in comp.parameters.items()
                       if p in infos[n].variables and infos[n].variables[p].causality == "structuralParameter"}
         if structural:  # array sizes follow the scenario's structural parameters
@@ -270,7 +272,7 @@ def _start_values(scenario: Scenario, infos: dict[str, FMUInfo], idx: dict[str, 
     return infos, start_values
 
 
-def _links(scenario: Scenario, infos: dict[str, FMUInfo], idx: dict[str, int], issue: Report) -> list[Link]:
+def _links(structure: SystemStructure, infos: dict[str, FMUInfo], idx: dict[str, int], issue: Report) -> list[Link]:
     """The connections as links between resolved ports, each checked (causality, kind, size, unit, one driver)."""
     links: list[Link] = []
 
@@ -292,7 +294,7 @@ def _links(scenario: Scenario, infos: dict[str, FMUInfo], idx: dict[str, int], i
         return Port(idx[comp], var, element)
 
     driven: dict[str, int] = {}
-    for i, c in enumerate(scenario.connections):
+    for i, c in enumerate(structure.connections):
         pairs, problem = expand_connection(c.src, c.dst, infos)  # a prefix wires every matching suffix
         if problem:
             issue(("connections", i), problem)
@@ -309,8 +311,8 @@ def _links(scenario: Scenario, infos: dict[str, FMUInfo], idx: dict[str, int], i
                                           f"{dst.count}")
                 continue
             if c.units == "check" and src.var.unit and dst.var.unit and src.var.unit != dst.var.unit:
-                remedy = ('suppressUnitConversion="true" on the ssd:Connection' if
-                          (scenario.source or "").lower().endswith(".ssp") else "`units: as_is` on the connection")
+                remedy = ('suppressUnitConversion="true" on the ssd:Connection' if structure.archive
+                          else "`units: as_is` on the connection")
                 issue(("connections", i), f"unit mismatch: {_describe(c_src, src.var)} -> {_describe(c_dst, dst.var)} "
                                           f"(the master converts no units; {remedy} passes the numbers as they are)")
                 continue
@@ -323,28 +325,23 @@ def _links(scenario: Scenario, infos: dict[str, FMUInfo], idx: dict[str, int], i
     return links
 
 
-def _reads(scenario: Scenario, infos: dict[str, FMUInfo], idx: dict[str, int], issue: Report) -> list[Port]:
-    """The signals the run reads besides the connections: the compared pair, the scene's position."""
-    extra_reads: list[str] = []
-    if scenario.compare is not None:
-        extra_reads += expand_signal(scenario.compare.actual) + expand_signal(scenario.compare.reference)
-    if scenario.logging.scene is not None:
-        extra_reads += expand_signal(scenario.logging.scene.position)
+def _reads(structure: SystemStructure, infos: dict[str, FMUInfo], idx: dict[str, int], issue: Report) -> list[Port]:
+    """The signals the run reads besides the connections (:attr:`SystemStructure.observed`: the compared pair,
+    the scene's position)."""
     reads: list[Port] = []
-    for ref in extra_reads:
+    for ref, loc in ((ref, o.loc) for o in structure.observed for ref in o.signals):
         comp, vname, _ = split_ref(ref)
         if comp in idx and vname is not None:
             var, element, _ = find_variable(infos[comp], vname)
             if var is None or var.causality not in ("output", "input"):
                 outs = [v.name for v in infos[comp].variables.values() if v.causality == "output"]
-                issue(("compare",) if scenario.compare else ("logging", "scene"),
-                      f"{ref}: no such output{_close(vname, outs)}")
+                issue(loc, f"{ref}: no such output{_close(vname, outs)}")
             else:
                 reads.append(Port(idx[comp], var, element))
     return reads
 
 
-def _exchanged(scenario: Scenario, infos: dict[str, FMUInfo], names: list[str], links: list[Link],
+def _exchanged(structure: SystemStructure, infos: dict[str, FMUInfo], names: list[str], links: list[Link],
                reads: list[Port], log_signals: str | None) -> tuple[list, list, list]:
     """Per component: the inputs set, the outputs read each step and the variables logged."""
     inputs = [[] for _ in names]
@@ -357,8 +354,7 @@ def _exchanged(scenario: Scenario, infos: dict[str, FMUInfo], names: list[str], 
     for p in reads:
         if p.var.causality == "output" and p.var not in outputs[p.comp]:
             outputs[p.comp].append(p.var)
-    signals = log_signals if log_signals is not None else (
-        scenario.logging.signals if scenario.logging.enabled else "none")
+    signals = log_signals if log_signals is not None else structure.log_signals
     logged = [[] for _ in names]
     if signals != "none":
         for k, n in enumerate(names):
@@ -371,20 +367,19 @@ def _exchanged(scenario: Scenario, infos: dict[str, FMUInfo], names: list[str], 
     return inputs, outputs, logged
 
 
-def _order(scenario: Scenario, infos: dict[str, FMUInfo], names: list[str], links: list[Link]) -> list[int]:
+def _order(structure: SystemStructure, infos: dict[str, FMUInfo], names: list[str], links: list[Link]) -> list[int]:
     """The components' order: by direct feedthrough when the algorithm reads outputs of the same step (an
     algebraic loop refused, naming the variables in it), any order otherwise."""
-    sources = scenario.sources
-    feedthrough = [_feedthrough(infos[n], scenario.components[n].feedthrough) for n in names]
-    ordered = ALGORITHMS[scenario.algorithm].reads_this_step  # reads outputs of the same macro step: an order needed
+    sources = structure.where()
+    feedthrough = [_feedthrough(infos[n], structure.components[n].feedthrough) for n in names]
+    ordered = ALGORITHMS[structure.algorithm].reads_this_step  # reads outputs of the same macro step: an order needed
     if ordered:
         loop = find_variable_loop(names, links, feedthrough)
         if loop is not None:
             labels, undeclared = loop
             free = [a.name for a in ALGORITHMS.values() if not a.reads_this_step]
             # an SSP archive has no YAML to edit: the advice is the command-line option that does the same
-            ssp = (scenario.source or "").lower().endswith(".ssp")
-            setting = "--set {}={}" if ssp else "{}: {}"
+            setting = "--set {}={}" if structure.archive else "{}: {}"
             remedy = "use " + " or ".join(setting.format("algorithm", a) for a in free) if free else ""
             err = AlgebraicLoopError(labels, remedy)
             if undeclared:

@@ -1,0 +1,95 @@
+"""The system structure: what a front end parses a system into and what the engine builds its plan from.
+
+Tool-neutral and file-neutral, as libcosim's ``system_structure`` between its parsers and its execution: the
+components with their FMU sources and start values, the connections, the time grid, the algorithm, the events,
+what is logged and what the observers read. A YAML scenario (:meth:`cosim.engine.schema.Scenario.structure`)
+and an SSP archive (read into the same scenario, :mod:`cosim.io.ssp`) both meet here; the plan
+(:func:`cosim.engine.system.build_plan`), the events (:func:`cosim.engine.events.resolve_events`) and the
+execution (:func:`cosim.engine.assembly.assemble_structure`) take it. Where each value came from (file and
+line, or the option that set it) travels with it (:attr:`SystemStructure.sources`), so every problem the engine
+finds is placed there.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Mapping
+
+from .sources import SourceMap
+
+__all__ = ["ComponentStructure", "ConnectionStructure", "EventStructure", "Observed", "SystemStructure"]
+
+
+@dataclass(frozen=True)
+class ComponentStructure:
+    """One FMU instance: its FMU given by ``path`` (a file, relative to :attr:`SystemStructure.base`) or by
+    ``fmu`` (a name the domain's FMU source resolves, :func:`cosim.engine.plugins.fmu_source`); its start values
+    by variable name as written (a list sets ``name[1]``, ``name[2]``, ... or a whole array); how it is driven."""
+
+    fmu: str | None
+    path: str | None
+    parameters: Mapping[str, Any]
+    step_multiple: int = 1
+    interface: str = "auto"  # "cs", "me", or "auto" (the FMU's)
+    feedthrough: str = "auto"  # "none": no output depends directly on an input, whatever the FMU declares
+    rtol: float = 1e-6  # model exchange: the integrator's relative tolerance
+    solver: str = "cvode"  # model exchange: the integrator
+    max_step: float | None = None  # model exchange: the integrator's largest internal step, s
+
+
+@dataclass(frozen=True)
+class ConnectionStructure:
+    """An output (``src``, ``component.variable`` or a prefix of several) driving an input (``dst``); ``units``:
+    ``check`` (refuse differing units) or ``as_is``."""
+
+    src: str
+    dst: str
+    units: str = "check"
+
+
+@dataclass(frozen=True)
+class EventStructure:
+    """Values ``set`` (``component.variable`` -> value) at time ``at`` s, or when the signal of ``when``
+    (``signal < value`` or ``signal > value``) crosses, every time with ``repeat``, located to ``tolerance`` s."""
+
+    set: Mapping[str, Any]
+    at: float | None = None
+    when: str | None = None
+    repeat: bool = False
+    tolerance: float = 1e-6
+
+
+@dataclass(frozen=True)
+class Observed:
+    """Signals an observer reads besides the connections (the compared pair, a scene's position), and where in the
+    source they were named (the location an unknown one is reported at)."""
+
+    signals: tuple[str, ...]
+    loc: tuple
+
+
+@dataclass(frozen=True)
+class SystemStructure:
+    """A system as the engine runs it (see the module's docstring)."""
+
+    name: str
+    components: Mapping[str, ComponentStructure]
+    connections: tuple[ConnectionStructure, ...]
+    start_ns: int
+    stop_ns: int
+    step_ns: int
+    algorithm: str
+    events: tuple[EventStructure, ...] = ()
+    log_signals: str = "outputs"  # what is logged: "outputs", "all" (inputs too) or "none"
+    observed: tuple[Observed, ...] = ()
+    sources: SourceMap | None = None
+    base: Path | None = None  # the folder relative FMU paths are resolved against (None: the working folder)
+    archive: bool = False  # read from an SSP archive: advice names options, not YAML keys
+
+    def where(self) -> SourceMap:
+        """Where each value came from (an empty map when the structure was made in code)."""
+        return self.sources if self.sources is not None else SourceMap(None)
+
+    def folder(self) -> Path:
+        return self.base if self.base is not None else Path.cwd()
