@@ -3,7 +3,7 @@
 Layers, lowest first: ``errors``, ``cbuild`` (the C helpers' compiler), ``fmi`` (FMU access), ``engine`` (scenario, plan, algorithms, execution),
 ``observers``, ``io``, ``robot`` (the delta robot plugged in), ``run`` (a scenario's run, composed), ``analysis``, ``api``, the CLI. A module imports
 only from its own layer or below. Inside a layer, module-level imports form no cycle. Our own modules are
-imported at module level, except in the CLI (``cosim/cli.py`` imports each command's modules inside the
+imported at module level, except in the CLI (``cosim/cli/`` imports each command's modules inside the
 command, so that ``--help`` starts in a fraction of a second; its docstring says so).
 """
 
