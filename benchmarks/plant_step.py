@@ -43,7 +43,7 @@ Whole runs (``python benchmarks/against_commit.py --baseline 8bdb6fc scenarios/X
 the unconverged plant of 8bdb6fc): helix_ctc 0.95x (1.88 s against 1.98 s), pick_place_ctc 1.04-1.11x (its
 7 g cycle takes more iterations to converge).
 
-Since 509e323 the rods are masses at their two ends (``multibody.plant.rod_end_masses``: the cylinder's
+Since 509e323 the rods are masses at their two ends (``multibody.inertia.rod_end_masses``: the cylinder's
 kinetic energy as a constant quadratic form of its end velocities) held at their length by one distance
 constraint, instead of rigid bodies on Euler parameters; a linear delta's lower rod ends are points of their
 carriage, so each leg is one constant mass matrix: 53 unknowns instead of 95 (rotary 89), a residual ~8.5 us
