@@ -93,7 +93,7 @@ def write_model_file(path: str | Path, robot: str, parameters: dict[str, float],
 
 
 def model_based(entry: Any) -> bool:
-    """Whether our FMU ``entry`` (:class:`fmus.registry.FmuEntry`) computes with the analytic model."""
+    """Whether our FMU ``entry`` (:class:`fmus.definition.FmuDefinition`) computes with the analytic model."""
     return any(entry.role == role and (variant is None or entry.variant == variant) for role, variant in _MODEL_BASED)
 
 

@@ -7,7 +7,7 @@ For an FMU's definition (:class:`fmus.definition.FmuDefinition`) that has a nati
    the values array (one element per value reference) and the internal state; CasADi's code generator
    writes the four as one self-contained C file (``model_functions.c``);
 3. ``model.c`` binds them to the contract of ``c/model.h`` (the variable table, which values each
-   function sets, which of its checks are errors) and the FMI glue written once (``c/runtime.c``,
+   function sets, which of its checks are errors) and the FMI glue written once (``c/runtime.c`` and ``c/state.c``,
    ``c/fmi2Functions.c`` or ``c/fmi3Functions.c``) makes the FMU;
 4. the sources go into ``sources/`` (FMI 2 ``SourceFiles``, FMI 3 ``buildDescription.xml``) with the FMI
    headers, so a tool on another platform can compile them; a binary for this platform is compiled
@@ -44,7 +44,7 @@ __all__ = ["build_native", "compiler", "fingerprint", "generate", "FMI_VERSIONS"
 FMI_VERSIONS = (2, 3)
 _HERE = Path(__file__).resolve().parent
 _ROOT = _HERE.parent.parent
-_GLUE = {2: ("runtime.c", "fmi2Functions.c"), 3: ("runtime.c", "fmi3Functions.c")}
+_GLUE = {2: ("runtime.c", "state.c", "fmi2Functions.c"), 3: ("runtime.c", "state.c", "fmi3Functions.c")}
 _HEADERS = {2: ("fmi2Functions.h", "fmi2FunctionTypes.h", "fmi2TypesPlatform.h"),
             3: ("fmi3Functions.h", "fmi3FunctionTypes.h", "fmi3PlatformTypes.h")}
 _FUNCTIONS = ("start", "refresh", "advance", "derivatives", "accept")

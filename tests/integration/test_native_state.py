@@ -46,7 +46,7 @@ K, N = 5, 5  # steps before the state is taken, steps compared after it
 PAYLOAD = "mass.payload"
 PAYLOAD_CHANGE = 0.5  # kg added to the payload: a part picked up
 ERROR = 3  # the FMI status of a refusal
-# Serialized layout offsets (fmus/native/c/runtime.c, format 2): magic, version, token, the first value
+# Serialized layout offsets (fmus/native/c/state.c, format 2): magic, version, token, the first value
 AT_VERSION, AT_TOKEN, AT_DATA = 8, 24, 152
 
 
