@@ -17,6 +17,7 @@ from pathlib import Path
 from xml.etree import ElementTree as ET
 
 import pytest
+from import_graph import cycles
 
 pytest.importorskip("casadi")
 
@@ -69,22 +70,8 @@ def test_the_import_graph_is_read():
 
 def test_fmus_has_no_import_cycle():
     graph = {m: _imports(m) for m in MODULES}
-    state: dict[str, int] = {}
-    cycles = []
-
-    def walk(m: str, stack: list[str]) -> None:
-        state[m] = 1
-        for t in sorted(graph[m]):
-            if state.get(t) == 1:
-                cycles.append(" -> ".join(stack[stack.index(t):] + [t]))
-            elif t not in state:
-                walk(t, stack + [t])
-        state[m] = 2
-
-    for m in sorted(graph):
-        if m not in state:
-            walk(m, [m])
-    assert not cycles, "\n".join(cycles)
+    found = cycles(graph)
+    assert not found, "\n".join(found)
 
 
 def test_the_python_build_bundles_every_fmus_module_its_adapter_imports():

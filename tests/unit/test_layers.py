@@ -14,6 +14,7 @@ import re
 from pathlib import Path
 
 import pytest
+from import_graph import cycles
 
 ROOT = Path(__file__).resolve().parents[2]
 PACKAGE = ROOT / "cosim"
@@ -101,35 +102,16 @@ def test_our_modules_are_imported_at_module_level(module):
     assert not hidden, "\n".join(hidden)
 
 
-def _cycles(graph: dict[str, set[str]]) -> list[str]:
-    state: dict[str, int] = {}
-    cycles = []
-
-    def walk(m: str, stack: list[str]) -> None:
-        state[m] = 1
-        for t in sorted(graph[m]):
-            if state.get(t) == 1:
-                cycles.append(" -> ".join(stack[stack.index(t):] + [t]))
-            elif t not in state:
-                walk(t, stack + [t])
-        state[m] = 2
-
-    for m in sorted(graph):
-        if m not in state:
-            walk(m, [m])
-    return cycles
-
-
 def test_no_import_cycle():
     """No cycle among our modules' imports, wherever they stand: at module level, inside functions, under
     TYPE_CHECKING, and through a package's ``__init__`` (its re-exports)."""
     graph = {m: {t for t, _, _ in _imports(m, typing_too=True) if t in MODULES and t != m} for m in MODULES}
-    cycles = _cycles(graph)
-    assert not cycles, "\n".join(cycles)
+    found = cycles(graph)
+    assert not found, "\n".join(found)
 
 
 def test_the_cycle_check_can_fail():
-    assert _cycles({"a": {"b"}, "b": {"c"}, "c": {"a"}, "d": {"a"}}) == ["a -> b -> c -> a"]
+    assert cycles({"a": {"b"}, "b": {"c"}, "c": {"a"}, "d": {"a"}}) == ["a -> b -> c -> a"]
 
 
 @pytest.mark.parametrize("module", sorted(set(MODULES) - LAZY_OK))
