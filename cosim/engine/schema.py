@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import math
 import dataclasses
+import difflib
 import re
 import typing
 from pathlib import Path
@@ -165,7 +166,9 @@ class TrajectorySpec(_Model):
     def _known(cls, kind: str) -> str:
         types = plugins.trajectories()
         if kind not in types:
-            raise ValueError(f"unknown trajectory type {kind!r}; valid: {', '.join(types) or 'none (no plugin)'}")
+            close = difflib.get_close_matches(kind, list(types), n=2, cutoff=0.6)
+            hint = f"did you mean {' or '.join(close)}? " if close else ""
+            raise ValueError(f"unknown trajectory type {kind!r}; {hint}valid: {', '.join(types) or 'none (no plugin)'}")
         return kind
 
     @field_validator("params", mode="after")

@@ -80,3 +80,13 @@ def test_a_set_value_alias_bomb_is_refused_as_a_file_is():
         f", &a{i} [{', '.join([f'*a{i - 1}'] * 9)}]" for i in range(1, 9)) + "]"
     with pytest.raises(ScenarioError, match="expands to more than"):
         parse_set_value(levels, "--set x")
+
+
+def test_an_unknown_trajectory_type_is_named_with_its_close_match_and_line():
+    """The trajectory types come from the domain plugged in (the delta robot's); a wrong one is repeated, with the
+    closest valid one, at its line."""
+    text = GOOD + "robot: linear_delta_thesis\ntrajectory: {type: helx}\n"
+    with pytest.raises(ScenarioError) as exc:
+        parse_scenario(text, "x.yaml")
+    assert "x.yaml:9: trajectory.type: unknown trajectory type 'helx'; did you mean helix? valid: helix," \
+        in str(exc.value), str(exc.value)
