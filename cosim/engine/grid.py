@@ -22,13 +22,18 @@ import math
 
 import numpy as np
 
-__all__ = ["Grid", "MAX_TIME_S", "NS_PER_S", "grid_error", "step_between"]
+__all__ = ["Grid", "MAX_TIME_S", "MIN_STEP_ULPS", "NS_PER_S", "grid_error", "resolution_error", "seconds", "step_between"]
 
 NS_PER_S = 1_000_000_000
 
 MAX_TIME_S = 9e9
 """The latest time of a grid, s (285 years): its nanoseconds fit a signed 64-bit integer (9.2e18), as the log's
 stamps (the run's wall-clock start, about 1.8e18 ns, added) fit MCAP's unsigned 64-bit ones."""
+
+
+MIN_STEP_ULPS = 2
+"""A step spans at least this many neighbouring doubles at the run's latest time: two grid times round to two
+different doubles and ``fmi2DoStep`` never gets ``h = 0`` (a start of 8e9 s with a 1e-7 s step would)."""
 
 
 def grid_error(start_ns: int, stop_ns: int, step_ns: int) -> str | None:
@@ -45,7 +50,26 @@ def grid_error(start_ns: int, stop_ns: int, step_ns: int) -> str | None:
     if 2 * abs(span - n * step_ns) > n:
         return (f"stop - start = {span} ns is not a whole number of steps of {step_ns} ns "
                 f"(nor {n} steps of a step rounded to the nanosecond)")
+    return resolution_error(start_ns, stop_ns, step_ns)
+
+
+def resolution_error(start_ns: int, stop_ns: int, step_ns: int) -> str | None:
+    """Why steps of ``step_ns`` are too short for the doubles an FMU gets its times in, up to the grid's latest time
+    (None: they are not): a step spans at least :data:`MIN_STEP_ULPS` neighbouring doubles there."""
+    latest = max(abs(start_ns), abs(stop_ns)) / NS_PER_S
+    resolution = math.ulp(latest)
+    if step_ns / NS_PER_S < MIN_STEP_ULPS * resolution:
+        return (f"a step of {step_ns / NS_PER_S:g} s is below what a double tells apart at t = {seconds(max(start_ns, stop_ns))} s "
+                f"({resolution:.3g} s between neighbouring doubles; a step spans at least {MIN_STEP_ULPS} of them): "
+                "an FMU would be asked for steps of 0 s; take a longer step or an earlier start")
     return None
+
+
+def seconds(t_ns: int) -> str:
+    """``t_ns`` in seconds, written exactly (``8000000000.0001``, ``0.5``, ``3``)."""
+    sign, t_ns = ("-" if t_ns < 0 else ""), abs(t_ns)
+    whole, frac = divmod(t_ns, NS_PER_S)
+    return sign + (f"{whole}.{frac:09d}".rstrip("0") if frac else str(whole))
 
 
 def step_between(t: float, t_next: float) -> float:

@@ -21,7 +21,7 @@ from pydantic import AllowInfNan, BaseModel, ConfigDict, Field, PrivateAttr, Val
 
 from ..errors import Issue, ScenarioError
 from .algorithm import ALGORITHMS, DEFAULT
-from .grid import MAX_TIME_S, NS_PER_S, Grid, grid_error
+from .grid import MAX_TIME_S, NS_PER_S, Grid, grid_error, resolution_error, seconds
 from .names import name_problem, split_ref
 from . import plugins
 from .sources import SourceMap
@@ -123,11 +123,15 @@ class TimeGrid(_Model):
         if self.stop_ns <= self.start_ns:
             raise ValueError(f"stop ({self.stop} s) must be after start ({self.start} s)")
         # a step that is no whole number of ns (1/30 s) is rounded to the ns, the last point still the stop time
+        too_short = resolution_error(self.start_ns, self.stop_ns, self.step_ns)
+        if too_short is not None:
+            raise ValueError(too_short)
         if grid_error(self.start_ns, self.stop_ns, self.step_ns) is not None:
             n = (self.stop_ns - self.start_ns) // self.step_ns
             raise ValueError(
-                f"stop - start = {self.stop - self.start} s is not a whole number of steps of {self.step} s; "
-                f"use stop = {self.start + n * self.step:g} or {self.start + (n + 1) * self.step:g}")
+                f"stop - start = {seconds(self.stop_ns - self.start_ns)} s is not a whole number of steps of "
+                f"{seconds(self.step_ns)} s; use stop = {seconds(self.start_ns + n * self.step_ns)} or "
+                f"{seconds(self.start_ns + (n + 1) * self.step_ns)}")
         return self
 
     @property

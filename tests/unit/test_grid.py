@@ -148,3 +148,17 @@ def test_the_hot_loop_chunks_give_the_same_doubles(stop, step, start):
         times, steps = g.chunk(k0, k1)
         assert times == [g.time(k) for k in range(k0, k1)], (k0, k1)
         assert steps == [g.step_size(k) for k in range(k0, k1)], (k0, k1)
+
+
+def test_a_step_below_what_a_double_tells_apart_is_refused():
+    """At 8e9 s neighbouring doubles are 9.5e-7 s apart: a 1e-7 s step would give an FMU steps of 0 s."""
+    from cosim.engine.grid import resolution_error, seconds
+
+    start = 8_000_000_000 * 1_000_000_000
+    why = resolution_error(start, start + 1_000_000, 100)
+    assert why is not None and "below what a double tells apart at t = 8000000000.001 s" in why, why
+    assert resolution_error(start, start + 1_000_000, 2_000) is None  # 2e-6 s: two doubles apart, accepted
+    assert resolution_error(0, 1_000_000_000, 1) is None  # 1 ns at 1 s: far above the resolution
+    with pytest.raises(ValueError, match="below what a double tells apart"):
+        TimeGrid(start=8e9, stop=8e9 + 1e-3 * 1024 / 1000, step=1e-7)
+    assert seconds(8_000_000_000_000_100_000) == "8000000000.0001" and seconds(500_000_000) == "0.5"
