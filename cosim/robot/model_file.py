@@ -23,6 +23,8 @@ __all__ = ["FORMAT", "PARAMETERS", "ModelFile", "read_model_file", "write_model_
            "scenario_model", "model_based"]
 
 FORMAT = "cosim-identified-model/1"
+MAX_MODEL_BYTES = 64 * 2 ** 10
+"""Bytes an identified model file may hold (the ones ``validate-model`` writes hold about 1 kB)."""
 PARAMETERS = ("model.w_inertia", "model.w_gravity", "model.w_rotation")
 """The FMU parameters an identified model may set: the leg mass split of the analytic model and the share of the
 rods' rotational inertia (shares in [0, 1], see :mod:`delta.dynamics`)."""
@@ -54,9 +56,15 @@ def read_model_file(path: str | Path) -> ModelFile:
     if problem is not None:
         raise _fail(path, problem)
     try:
-        data = load_yaml(Path(path).read_text(encoding="utf-8"))[0]  # bounded: a model file is outside input
+        with open(path, "rb") as f:
+            raw = f.read(MAX_MODEL_BYTES + 1)  # bounded: a model file is outside input
     except OSError as exc:
         raise _fail(path, f"cannot read: {exc.strerror}") from None
+    if len(raw) > MAX_MODEL_BYTES:
+        raise _fail(path, f"larger than {MAX_MODEL_BYTES // 2 ** 10} kB, more than any identified model holds "
+                          "(a few hundred bytes): refused unread")
+    try:
+        data = load_yaml(raw.decode("utf-8"))[0]  # bounded in what it expands to, too
     except (UnicodeDecodeError, yaml.YAMLError) as exc:
         raise _fail(path, f"not a YAML file: {str(exc).splitlines()[0]}") from None
     if not isinstance(data, dict) or data.get("format") != FORMAT:

@@ -106,3 +106,18 @@ def test_a_model_file_whose_aliases_expand_past_the_limit_is_refused_before_it_e
     bomb.write_text("\n".join(lines) + "\n")
     with pytest.raises(ScenarioError, match=r"bomb.yaml.*expands to more than 200000 values"):
         read_model_file(bomb)
+
+
+def test_a_model_file_larger_than_any_model_is_refused_unread(tmp_path):
+    from cosim.errors import ScenarioError
+    from cosim.robot.model_file import MAX_MODEL_BYTES
+
+    big = tmp_path / "big.yaml"
+    with open(big, "wb") as f:  # sparse: the size is there, the bytes are not
+        f.truncate(3 * 2 ** 30)
+    try:
+        read_model_file(big)
+    except ScenarioError as exc:
+        assert f"larger than {MAX_MODEL_BYTES // 2 ** 10} kB" in str(exc) and "big.yaml" in str(exc), str(exc)
+    else:
+        raise AssertionError("a 3 GiB model file was accepted")
