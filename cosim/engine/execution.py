@@ -24,7 +24,7 @@ import threading
 import time as _time
 from typing import Any, Callable, Protocol, Sequence
 
-from ..errors import STOP_SIGNALS, CosimError, FMIError, Interrupted
+from ..errors import STOP_SIGNALS, CosimError, Interrupted, Issue, ScenarioError
 from ..fmi import Slave, Terminated
 from ..fmi.slave import ComponentState
 from .algorithm import ALGORITHMS, DEFAULT, Algorithm
@@ -60,6 +60,11 @@ class SystemState:
     def __init__(self, k_done: int, components: list[ComponentState]):
         self.k_done = k_done
         self.components = components
+
+
+MAX_SCHEDULE = 1_000_000
+"""Base steps a run's schedule (which components step at each base step) may hold: the step multiples' common period,
+or the run's steps if fewer."""
 
 
 class Execution:
@@ -98,6 +103,7 @@ class Execution:
         self.record = record if record is not None else Record()
         self.current = self.record.current
         self.current[0], self.current[1], self.current[2], self.current[3] = MASTER, self.grid.time(0), 0, 0
+        self._schedule_length()  # a schedule too long to hold is refused before any FMU is made
 
     # -- building
     def add_slave(self, slave: Slave) -> int:
@@ -128,9 +134,22 @@ class Execution:
         return self.grid.t_ns(self.k_done)
 
     def schedule(self) -> list[list[int]]:
-        """Active components (in order) for each base step of one hyper-period."""
+        """Active components (in order) for each base step of one hyper-period (of the run, when the hyper-period is
+        longer: base step ``k`` of the run is entry ``k % len(schedule)`` either way)."""
+        return [[c for c in self.plan.order if k % self.multiples[c] == 0] for k in range(self._schedule_length())]
+
+    def _schedule_length(self) -> int:
+        """Base steps the schedule holds: the step multiples' least common multiple, or the run's steps if fewer;
+        a :class:`ScenarioError` above :data:`MAX_SCHEDULE` (multiples of 7919 and 7907 repeat only every
+        62 615 533 base steps)."""
         period = math.lcm(*self.multiples) if self.multiples else 1
-        return [[c for c in self.plan.order if k % self.multiples[c] == 0] for k in range(period)]
+        length = min(period, max(1, self.n_steps))
+        if length > MAX_SCHEDULE:
+            rates = ", ".join(f"{n} every {m}" for n, m in zip(self.plan.names, self.multiples) if m > 1)
+            raise ScenarioError(Issue("components", f"the step multiples ({rates} base steps) repeat only every "
+                                      f"{period} base steps, more than the {MAX_SCHEDULE} a run's schedule holds: "
+                                      "choose multiples with a shorter common period (divisors of one another)"))
+        return length
 
     def turns(self) -> list[list[tuple[int, list, list, Slave, int]]]:
         """Per base step of the hyper-period, its active components in order, each with what its turn needs:

@@ -162,3 +162,18 @@ def test_a_step_below_what_a_double_tells_apart_is_refused():
     with pytest.raises(ValueError, match="below what a double tells apart"):
         TimeGrid(start=8e9, stop=8e9 + 1e-3 * 1024 / 1000, step=1e-7)
     assert seconds(8_000_000_000_000_100_000) == "8000000000.0001" and seconds(500_000_000) == "0.5"
+
+
+def test_step_multiples_with_a_long_common_period_are_refused_before_any_fmu():
+    """Multiples of 7919 and 7907 repeat every 62 615 533 base steps: a schedule of that length is refused at once,
+    naming the components; over a run shorter than the period the schedule holds the run's steps only."""
+    from cosim.engine.execution import MAX_SCHEDULE
+    from cosim.errors import ScenarioError
+
+    slaves = [FakeSlave(n, [], ["y"], lambda t, h, u: [0.0]) for n in ("a", "b")]
+    long_run = 10 ** 8
+    with pytest.raises(ScenarioError, match=r"a every 7919, b every 7907 base steps\) repeat only every 62615533"):
+        Execution(plan(slaves, []), 0, long_run * 1000, 1000, [7919, 7907])
+    short = Execution(plan(slaves, []), 0, 1000 * 1000, 1000, [7919, 7907])
+    assert len(short.schedule()) == 1000 <= MAX_SCHEDULE
+    assert len(Execution(plan(slaves, []), 0, 1000 * 1000, 1000, [1, 2]).schedule()) == 2
