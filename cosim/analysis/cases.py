@@ -108,7 +108,9 @@ def make_cases(grid: dict[str, list[Any]], random: dict[str, tuple[str, float, f
         raise SweepError(f"{', '.join(sorted(both))}: both --grid and --random")
     total = math.prod(len(v) for v in grid.values()) * (n or 1)
     if total > MAX_CASES:
-        raise SweepError(f"the sweep has {total:.3g} cases (at most {MAX_CASES}): fewer grid values or draws")
+        count = f"{total:,}" if total < 10 ** 15 else f"more than {10 ** 15:,}"  # exact: 1,001,000 is not 1e+06
+        raise SweepError(f"the sweep has {count} cases, more than the {MAX_CASES:,} it may have: fewer grid values "
+                         "or draws")
     rng = np.random.default_rng(seed)
     draws = [{name: float(rng.uniform(a, b) if kind == "uniform" else rng.normal(a, b))
               for name, (kind, a, b) in random.items()} for _ in range(n or 1)]
