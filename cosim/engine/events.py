@@ -22,6 +22,7 @@ from typing import Any
 from ..errors import Issue, ScenarioError, UnknownSignalError
 from ..fmi.description import REAL, STRING, Variable
 from ..fmi.slave import as_number
+from .overrides import shown
 from .schema import parse_condition
 from .structure import SystemStructure
 from .system import Port, SystemPlan
@@ -162,7 +163,7 @@ def _values(var: Variable, value: Any) -> tuple[tuple, str | None]:
     try:
         return tuple(str(v) if var.kind == STRING else as_number(var.kind, v) for v in flat), None
     except (TypeError, ValueError):
-        return (), f"{value!r} is not a {var.fmi_type} value"
+        return (), f"{shown(repr(value))} is not a {var.fmi_type} value"
 
 
 @dataclass

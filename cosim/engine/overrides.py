@@ -16,7 +16,7 @@ from .bounded_yaml import load_yaml
 from .names import quote, split_ref
 from .schema import Scenario
 
-__all__ = ["Overrides", "parse_set_value", "WrittenNumber", "as_written", "has_written", "DOTTED", "resolve_name",
+__all__ = ["Overrides", "parse_set_value", "shown", "WrittenNumber", "as_written", "has_written", "DOTTED", "resolve_name",
            "dotted_overrides", "apply_overrides"]
 
 class Overrides(dict):
@@ -39,8 +39,18 @@ def parse_set_value(raw: str, origin: str = "--set") -> Any:
     citing ``origin`` (the option as given)."""
     try:
         return _numbers(load_yaml(raw)[0])
-    except yaml.YAMLError as exc:
-        raise ScenarioError(Issue("", f"invalid value: {getattr(exc, 'problem', None) or exc}", origin)) from None
+    except yaml.YAMLError as exc:  # YAML's text runs over lines ("in <unicode string>, position 1"): one line
+        why = " ".join(str(getattr(exc, "problem", None) or exc).split())
+        raise ScenarioError(Issue("", f"invalid value: {why}", origin)) from None
+
+
+SHOWN_CHARS = 120
+"""Characters of a value given on the command line that a message repeats (the rest is counted, not echoed)."""
+
+
+def shown(text: str) -> str:
+    """``text`` as a message repeats it: whole up to :data:`SHOWN_CHARS`, else its start and its length."""
+    return text if len(text) <= SHOWN_CHARS else f"{text[:SHOWN_CHARS]}... ({len(text)} characters)"
 
 
 class WrittenNumber(float):
@@ -224,8 +234,8 @@ def dotted_overrides(values: dict[str, Any], origin: str = "override") -> Overri
     for name, value in values.items():
         if not isinstance(name, str) or not name or name.startswith(".") or name.endswith("."):
             raise ScenarioError(Issue("", f"expected a dotted name (component.parameter, time.stop, "
-                                          f"trajectory.params.NAME), got {name!r}", origin))
-        out.put((DOTTED, name), value, f"{origin} {name}={value!r}")
+                                          f"trajectory.params.NAME), got {shown(repr(name))}", origin))
+        out.put((DOTTED, name), value, f"{origin} {name}={shown(repr(value))}")
     return out
 
 
@@ -233,17 +243,18 @@ def apply_overrides(sets: list[str], stop_time: float | None = None) -> Override
     """Turn ``--set NAME=value`` (dotted names, :func:`resolve_name`) and ``--stop-time`` into loader overrides."""
     out = Overrides()
     for item in sets:
+        origin = f"--set {shown(item)}"
         try:  # a quoted component name may hold '=': the key ends at the first '=' after it
             end = split_ref(item)[2] if item.startswith("'") else 0
         except ValueError as exc:
-            raise ScenarioError(Issue("", str(exc), f"--set {item}")) from None
+            raise ScenarioError(Issue("", str(exc), origin)) from None
         at = item.find("=", end)
         key = item[:at] if at >= 0 else item
         if at < 0 or not key or key.startswith(".") or key.endswith("."):
             raise ScenarioError(Issue("", f"expected NAME=value (component.parameter, time.stop, "
-                                          f"trajectory.params.NAME, ...), got {item!r}", "--set"))
-        value = parse_set_value(item[at + 1:], f"--set {item}")
-        out.put((DOTTED, key), value, f"--set {item}")
+                                          f"trajectory.params.NAME, ...), got {shown(item)!r}", "--set"))
+        value = parse_set_value(item[at + 1:], origin)
+        out.put((DOTTED, key), value, origin)
     if stop_time is not None:
         out.put(("time", "stop"), stop_time, f"--stop-time {stop_time:g}")
     return out

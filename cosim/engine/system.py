@@ -16,6 +16,7 @@ from ..fmi import FMUInfo, Variable
 from ..fmi.description import initial_of, settable_at_start
 from .algorithm import ALGORITHMS
 from .names import quote, split_ref
+from .overrides import shown
 from .structure import SystemStructure
 from .wiring import expand_connection, find_variable, index_text
 
@@ -77,7 +78,7 @@ def typed_value(var: Variable, value: Any) -> tuple[Any, str]:
                 return None, problem
             out.append(x)
         return out, ""
-    bad = f"{var.name} is {want}: expected {{}}, got {value!r}"
+    bad = f"{var.name} is {want}: expected {{}}, got {shown(repr(value))}"
     if var.kind in ("Real", "Integer"):
         x = value
         if isinstance(value, str):

@@ -90,3 +90,17 @@ def test_an_unknown_trajectory_type_is_named_with_its_close_match_and_line():
         parse_scenario(text, "x.yaml")
     assert "x.yaml:9: trajectory.type: unknown trajectory type 'helx'; did you mean helix? valid: helix," \
         in str(exc.value), str(exc.value)
+
+
+def test_a_set_value_is_one_line_and_a_long_one_is_not_echoed_whole():
+    """A control character in a --set value: one line (YAML's own text runs over two); a 20 kB value: its start
+    and its length, not 20 kB in one error line."""
+    from cosim.engine.overrides import SHOWN_CHARS, apply_overrides
+
+    with pytest.raises(ScenarioError) as exc:
+        apply_overrides(["ctl.gain.kp[1]=1\x01"])
+    assert len(str(exc.value).splitlines()) == 1 and "unacceptable character #x0001" in str(exc.value), exc.value
+    with pytest.raises(ScenarioError) as exc:
+        apply_overrides(["x." + "k" * 20_000])
+    text = str(exc.value)
+    assert len(text) < SHOWN_CHARS + 300 and "(20002 characters)" in text, text[:400]
