@@ -18,18 +18,22 @@ from __future__ import annotations
 
 import hashlib
 import json
+import os
 import re
 import shutil
 import sys
 import tempfile
+import zipfile
 from pathlib import Path
+from typing import Any, Callable
 
 from delta.errors import DeltaError
 
 from . import requirements
 from .definition import FmuDefinition
 
-__all__ = ["DEFAULT_CACHE", "source_files", "fingerprint", "bundle_name", "is_current", "build_python", "BuildError"]
+__all__ = ["DEFAULT_CACHE", "source_files", "fingerprint", "bundle_name", "is_current", "install", "build_python",
+           "BuildError"]
 
 DEFAULT_CACHE = ".fmu_cache"
 _ROOT = Path(__file__).resolve().parent.parent
@@ -166,13 +170,34 @@ def _cache_dir(out_dir: str | Path | None) -> Path:
 
 
 def is_current(target: Path, stamp: Path, digest: str) -> bool:
-    """Whether ``target`` exists and its ``stamp`` (the JSON written beside it) records ``digest``."""
-    if not (target.exists() and stamp.exists()):
-        return False
+    """Whether ``target`` is an FMU archive and its ``stamp`` (the JSON written beside it) records ``digest``; a
+    missing, damaged or foreign entry (a stamp that is no JSON object, a folder, a truncated archive) is not, and
+    is built again."""
     try:
-        return json.loads(stamp.read_text()).get("fingerprint") == digest
-    except json.JSONDecodeError:
+        record = json.loads(stamp.read_text(encoding="utf-8"))
+        return (isinstance(record, dict) and record.get("fingerprint") == digest and target.is_file()
+                and zipfile.is_zipfile(target))
+    except (OSError, ValueError):
         return False
+
+
+def install(out: Path, name: str, write: Callable[[Path], None], record: dict[str, Any]) -> Path:
+    """Put a built FMU into the cache ``out`` as ``name.fmu`` with its stamp ``name.json`` (``record``): ``write``
+    fills a partial file of this process's own (concurrent builds never share one), which then replaces the FMU;
+    the stamp is written the same way, last, so a reader sees a complete FMU before a stamp that vouches for it.
+    Nothing is left behind when ``write`` fails."""
+    target, stamp = out / f"{name}.fmu", out / f"{name}.json"
+    own = f".{name}.{os.getpid()}.partial"
+    partial, partial_stamp = out / f"{own}.fmu", out / f"{own}.json"
+    try:
+        write(partial)
+        partial.replace(target)
+        partial_stamp.write_text(json.dumps(record, indent=2), encoding="utf-8")
+        partial_stamp.replace(stamp)
+    finally:
+        partial.unlink(missing_ok=True)
+        partial_stamp.unlink(missing_ok=True)
+    return target
 
 
 def build_python(fmu: FmuDefinition, out_dir: str | Path | None = None, *, force: bool = False) -> Path:
@@ -221,11 +246,7 @@ def build_python(fmu: FmuDefinition, out_dir: str | Path | None = None, *, force
             for name in set(sys.modules) - before:
                 if name == module or name.startswith(bundle):
                     del sys.modules[name]
-        partial = out / f".{fmu.name}.partial.fmu"
-        shutil.move(str(built), partial)
-        partial.replace(target)
-    stamp.write_text(json.dumps({"name": fmu.name, "fingerprint": digest, "module": module, "bundle": bundle,
-                                 "fmi": fmu.fmi}, indent=2))
-    return target
+        return install(out, fmu.name, lambda partial: shutil.move(str(built), partial),
+                       {"name": fmu.name, "fingerprint": digest, "module": module, "bundle": bundle, "fmi": fmu.fmi})
 
 

@@ -32,7 +32,7 @@ from functools import lru_cache
 from pathlib import Path
 from typing import Any
 
-from ..builder import DEFAULT_CACHE, is_current
+from ..builder import DEFAULT_CACHE, install, is_current
 from ..definition import FmuDefinition
 from .errors import CompilerMissingError, NativeError
 from .interface import Interface, interface, model_description
@@ -398,11 +398,24 @@ def build_native(fmu: FmuDefinition, fmi: int = 2, out_dir: str | Path | None = 
             (src / "buildDescription.xml").write_bytes(_build_description(sources).replace(b"{id}", name.encode()))
         binary = root / "binaries" / ("linux64" if fmi == 2 else "x86_64-linux") / f"{name}.so"
         _compile(cc, src, sources, binary, name)
-        partial = out / f".{name}.partial.fmu"
-        with zipfile.ZipFile(partial, "w", zipfile.ZIP_DEFLATED) as zf:
-            for path in sorted(root.rglob("*")):
-                if path.is_file():
-                    zf.write(path, path.relative_to(root).as_posix())
-        partial.replace(target)
-    stamp.write_text(json.dumps({"name": name, "fingerprint": digest, "fmi": fmi, "build": "native"}, indent=2))
-    return target
+        _loads(binary, name, cc)
+
+        def write(partial: Path) -> None:
+            with zipfile.ZipFile(partial, "w", zipfile.ZIP_DEFLATED) as zf:
+                for path in sorted(root.rglob("*")):
+                    if path.is_file():
+                        zf.write(path, path.relative_to(root).as_posix())
+
+        return install(out, name, write, {"name": name, "fingerprint": digest, "fmi": fmi, "build": "native"})
+
+
+def _loads(binary: Path, name: str, cc: str) -> None:
+    """Raise :class:`NativeError` unless the compiled library loads with every symbol resolved (a compiler that
+    exits 0 and writes no loadable library must not leave an FMU in the cache behind a current stamp)."""
+    import ctypes  # lazy: only a build loads its library here
+
+    try:
+        ctypes.CDLL(str(binary), mode=ctypes.RTLD_LOCAL)
+    except OSError as exc:
+        raise NativeError(f"native FMU {name}: {cc} made a library that does not load ({exc}); nothing was "
+                          "cached") from None

@@ -1,0 +1,75 @@
+"""The FMU cache against concurrent builds and failed ones: each build writes a partial file of its own, an entry
+is current only when its stamp is a JSON object with the fingerprint and its FMU is an archive, and a native
+library that does not load is never cached."""
+
+from __future__ import annotations
+
+import json
+import os
+import zipfile
+
+import pytest
+
+from fmus.builder import install, is_current
+
+
+def _zip(path) -> None:
+    with zipfile.ZipFile(path, "w") as zf:
+        zf.writestr("modelDescription.xml", "<fmiModelDescription/>")
+
+
+def test_install_leaves_a_current_entry_and_nothing_else(tmp_path):
+    seen = []
+
+    def write(partial):
+        seen.append(partial.name)
+        _zip(partial)
+
+    target = install(tmp_path, "helix", write, {"fingerprint": "abc"})
+    assert seen == [f".helix.{os.getpid()}.partial.fmu"], seen  # this process's own partial file
+    assert is_current(target, tmp_path / "helix.json", "abc")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["helix.fmu", "helix.json"]
+
+
+def test_a_failed_write_leaves_the_cache_as_it_was(tmp_path):
+    install(tmp_path, "helix", _zip, {"fingerprint": "old"})
+
+    def broken(partial):
+        partial.write_bytes(b"half")
+        raise RuntimeError("the exporter failed")
+
+    with pytest.raises(RuntimeError):
+        install(tmp_path, "helix", broken, {"fingerprint": "new"})
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["helix.fmu", "helix.json"]
+    assert is_current(tmp_path / "helix.fmu", tmp_path / "helix.json", "old")
+
+
+@pytest.mark.parametrize("damage", ["list", "folder", "not json", "truncated fmu", "no fmu", "other fingerprint"])
+def test_a_damaged_or_foreign_entry_is_not_current(tmp_path, damage):
+    target, stamp = tmp_path / "x.fmu", tmp_path / "x.json"
+    _zip(target)
+    stamp.write_text(json.dumps({"fingerprint": "abc"}))
+    if damage == "list":
+        stamp.write_text("[]")
+    elif damage == "folder":
+        stamp.unlink()
+        stamp.mkdir()
+    elif damage == "not json":
+        stamp.write_text("{")
+    elif damage == "truncated fmu":
+        target.write_bytes(target.read_bytes()[:10])
+    elif damage == "no fmu":
+        target.unlink()
+    else:
+        stamp.write_text(json.dumps({"fingerprint": "zzz"}))
+    assert not is_current(target, stamp, "abc")
+
+
+def test_a_native_library_that_does_not_load_is_refused(tmp_path):
+    from fmus.native.build import _loads
+    from fmus.native.errors import NativeError
+
+    lib = tmp_path / "x.so"
+    lib.write_bytes(b"\x7fELF not really a library")
+    with pytest.raises(NativeError, match=r"native FMU x: cc made a library that does not load .*nothing was cached"):
+        _loads(lib, "x", "cc")
