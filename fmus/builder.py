@@ -32,7 +32,7 @@ from delta.errors import DeltaError
 from . import requirements
 from .definition import FmuDefinition
 
-__all__ = ["DEFAULT_CACHE", "source_files", "fingerprint", "bundle_name", "is_current", "install", "build_python",
+__all__ = ["DEFAULT_CACHE", "source_files", "fingerprint", "bundle_name", "is_current", "install", "cache_folder", "build_python",
            "BuildError"]
 
 DEFAULT_CACHE = ".fmu_cache"
@@ -169,6 +169,18 @@ def _cache_dir(out_dir: str | Path | None) -> Path:
     return Path(out_dir) if out_dir is not None else Path.cwd() / DEFAULT_CACHE
 
 
+def cache_folder(folder: Path) -> Path:
+    """``folder`` made (with its parents) to hold built FMUs; a :class:`BuildError` naming it and the remedy when the
+    system refuses (a file in its place, no permission, a full or read-only disk)."""
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise BuildError(f"cannot use {folder} for built FMUs: {exc.strerror or exc} (it must be a folder this user "
+                         "can write: move what is in its place, or run where .fmu_cache can be made; fmus build "
+                         "takes another with --out)") from None
+    return folder
+
+
 def is_current(target: Path, stamp: Path, digest: str) -> bool:
     """Whether ``target`` is an FMU archive and its ``stamp`` (the JSON written beside it) records ``digest``; a
     missing, damaged or foreign entry (a stamp that is no JSON object, a folder, a truncated archive) is not, and
@@ -194,6 +206,8 @@ def install(out: Path, name: str, write: Callable[[Path], None], record: dict[st
         partial.replace(target)
         partial_stamp.write_text(json.dumps(record, indent=2), encoding="utf-8")
         partial_stamp.replace(stamp)
+    except OSError as exc:
+        raise BuildError(f"cannot write FMU {name} into {out}: {exc.strerror or exc}") from None
     finally:
         partial.unlink(missing_ok=True)
         partial_stamp.unlink(missing_ok=True)
@@ -202,8 +216,7 @@ def install(out: Path, name: str, write: Callable[[Path], None], record: dict[st
 
 def build_python(fmu: FmuDefinition, out_dir: str | Path | None = None, *, force: bool = False) -> Path:
     """Build the python FMU that ``fmu`` defines into ``out_dir`` unless one with the same fingerprint is there."""
-    out = _cache_dir(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
+    out = cache_folder(_cache_dir(out_dir))
     target = out / f"{fmu.name}.fmu"
     stamp = out / f"{fmu.name}.json"
     digest = fingerprint(fmu)

@@ -32,7 +32,7 @@ from functools import lru_cache
 from pathlib import Path
 from typing import Any
 
-from ..builder import DEFAULT_CACHE, install, is_current
+from ..builder import DEFAULT_CACHE, cache_folder, install, is_current
 from ..definition import FmuDefinition
 from .errors import CompilerMissingError, NativeError
 from .interface import Interface, interface, model_description
@@ -375,8 +375,7 @@ def build_native(fmu: FmuDefinition, fmi: int = 2, out_dir: str | Path | None = 
         raise NativeError(f"native FMU {name}: FMI version must be 2 or 3, got {fmi!r}")
     fmu.native_model()  # raises when the FMU has none
     cc = compiler()
-    out = (Path(out_dir) if out_dir is not None else Path.cwd() / DEFAULT_CACHE) / "native" / f"fmi{fmi}"
-    out.mkdir(parents=True, exist_ok=True)
+    out = cache_folder((Path(out_dir) if out_dir is not None else Path.cwd() / DEFAULT_CACHE) / "native" / f"fmi{fmi}")
     target, stamp = out / f"{name}.fmu", out / f"{name}.json"
     digest = fingerprint()
     if not force and is_current(target, stamp, digest):

@@ -73,3 +73,23 @@ def test_a_native_library_that_does_not_load_is_refused(tmp_path):
     lib.write_bytes(b"\x7fELF not really a library")
     with pytest.raises(NativeError, match=r"native FMU x: cc made a library that does not load .*nothing was cached"):
         _loads(lib, "x", "cc")
+
+
+def test_a_cache_folder_that_cannot_be_made_is_one_error_naming_it(tmp_path):
+    from fmus.builder import BuildError, cache_folder
+
+    blocker = tmp_path / ".fmu_cache"
+    blocker.write_text("a file where the cache folder goes")
+    with pytest.raises(BuildError, match=r"cannot use .*\.fmu_cache/native/fmi2 for built FMUs: Not a directory"):
+        cache_folder(blocker / "native" / "fmi2")
+
+
+def test_a_write_the_system_refuses_is_one_error_naming_the_folder(tmp_path):
+    from fmus.builder import BuildError
+
+    def write(partial):
+        raise PermissionError(13, "Permission denied")
+
+    with pytest.raises(BuildError, match=f"cannot write FMU helix into {tmp_path}: Permission denied"):
+        install(tmp_path, "helix", write, {"fingerprint": "abc"})
+    assert list(tmp_path.iterdir()) == []
