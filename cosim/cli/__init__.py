@@ -19,6 +19,7 @@ second.
 from __future__ import annotations
 
 import argparse
+import os
 import json
 import sys
 from typing import Sequence
@@ -136,6 +137,12 @@ def main(argv: Sequence[str] | None = None) -> int:
 
     argv = list(sys.argv[1:] if argv is None else argv)
     try:
+        os.getcwd()  # relative paths, the FMU cache and default logs are all under it
+    except FileNotFoundError:
+        print(exit_text("the working folder no longer exists (deleted or moved after this shell entered it): cd to "
+                        "an existing folder and run again", "error"), file=sys.stderr)
+        return EXIT_BAD_INPUT
+    try:
         parser = build_parser()
         args, extra = parser.parse_known_args(argv)
         if extra:
@@ -168,8 +175,6 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(exit_text(message, kind), file=sys.stderr)
         return code
     except BrokenPipeError:  # output piped into a reader that stopped early (e.g. `| head`)
-        import os
-
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
         return EXIT_OK
 

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
 import pytest
@@ -69,3 +70,12 @@ def test_an_unknown_fmu_name_gets_a_close_match_and_the_list_once():
     assert r.returncode == 2, r.stderr
     assert "did you mean linear_ctc" in r.stderr, r.stderr
     assert r.stderr.count("rotary_exudyn_plant") == 1, f"the list is printed {r.stderr.count('rotary_exudyn_plant')} times"
+
+
+def test_a_deleted_working_folder_is_one_line_not_an_internal_error(tmp_path):
+    gone = tmp_path / "gone"
+    gone.mkdir()
+    r = cosim("run", ANALYTIC, "--no-log", "--stop-time", "0.01", cwd=gone, preexec_fn=lambda: os.rmdir(gone))
+    assert r.returncode == 2 and "internal error" not in r.stderr, r.stderr
+    assert r.stderr.strip() == ("error: the working folder no longer exists (deleted or moved after this shell "
+                                "entered it): cd to an existing folder and run again"), r.stderr
