@@ -34,10 +34,37 @@ class YamlTooLarge(yaml.YAMLError):
     """YAML whose aliases expand past :data:`MAX_YAML_NODES` values."""
 
 
+def _duplicate_key(root: yaml.Node) -> yaml.constructor.ConstructorError | None:
+    """The first mapping key ``root`` gives twice (YAML forbids it; PyYAML keeps the last silently, so a value
+    written twice in a scenario would lose the first without a word), as an error marked at the second."""
+    seen_nodes: set[int] = set()
+    stack = [root]
+    while stack:
+        node = stack.pop()
+        if id(node) in seen_nodes:  # an alias: checked once
+            continue
+        seen_nodes.add(id(node))
+        if isinstance(node, yaml.MappingNode):
+            first: dict[tuple[str, str], yaml.Node] = {}
+            for key, value in node.value:
+                if isinstance(key, yaml.ScalarNode) and key.tag != "tag:yaml.org,2002:merge":
+                    if (key.tag, key.value) in first:
+                        line = first[(key.tag, key.value)].start_mark.line + 1
+                        return yaml.constructor.ConstructorError(
+                            None, None, f"duplicate key {key.value!r} (first given at line {line}): a mapping gives "
+                                        "each key once", key.start_mark)
+                    first[(key.tag, key.value)] = key
+                stack.extend((key, value))
+        elif isinstance(node, yaml.SequenceNode):
+            stack.extend(node.value)
+    return None
+
+
 def load_yaml(text: str | bytes) -> tuple[Any, yaml.Node | None]:
     """``yaml.safe_load`` of ``text`` that refuses, before building anything, a document whose aliases expand past
     :data:`MAX_YAML_NODES` values (:class:`YamlTooLarge`, a ``yaml.YAMLError``); also returns the composed node
-    tree (None for an empty document). Every YAML the platform reads from a file, a log or an option goes
+    tree (None for an empty document). A key given twice in a mapping is refused (a ``ConstructorError`` marked at
+    the second), where PyYAML keeps the last. Every YAML the platform reads from a file, a log or an option goes
     through here."""
     root = yaml.compose(text, Loader=yaml.SafeLoader)
     if root is None:
@@ -45,6 +72,9 @@ def load_yaml(text: str | bytes) -> tuple[Any, yaml.Node | None]:
     if _expanded_nodes(root) > MAX_YAML_NODES:
         raise YamlTooLarge(f"the YAML expands to more than {MAX_YAML_NODES} values (aliases of aliases nested too "
                            "deep, a 'billion laughs'): refused")
+    duplicate = _duplicate_key(root)
+    if duplicate is not None:
+        raise duplicate
     loader = yaml.SafeLoader("")
     try:
         return loader.construct_document(root), root

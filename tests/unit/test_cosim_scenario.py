@@ -104,3 +104,15 @@ def test_a_set_value_is_one_line_and_a_long_one_is_not_echoed_whole():
         apply_overrides(["x." + "k" * 20_000])
     text = str(exc.value)
     assert len(text) < SHOWN_CHARS + 300 and "(20002 characters)" in text, text[:400]
+
+
+def test_a_key_given_twice_is_refused_at_its_second_line():
+    """PyYAML keeps the last of two equal keys silently: a scenario, a --set value and a model file refuse it."""
+    from cosim.engine.bounded_yaml import load_yaml
+    from cosim.engine.overrides import parse_set_value
+
+    with pytest.raises(ScenarioError, match=r"x.yaml:8: invalid YAML: duplicate key 'time' \(first given at line 7\)"):
+        parse_scenario(GOOD + "time: {stop: 2.0, step: 0.001}\n", "x.yaml")
+    with pytest.raises(ScenarioError, match="duplicate key 'a'"):
+        parse_set_value("{a: 1, a: 2}", "--set x")
+    assert load_yaml("base: &b {a: 1}\nother: {<<: *b, c: 2}\n")[0] == {"base": {"a": 1}, "other": {"a": 1, "c": 2}}
