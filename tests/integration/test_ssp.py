@@ -628,7 +628,12 @@ def test_parameter_values_with_units_are_converted_to_the_fmus(ssp, tmp_path):
             ("", '<ssv:Real value="-450" unit="mm"/>',
              parameter + "unit 'mm' is defined in neither the parameter set's ssv:Units"),
             (MM.replace('factor="0.001"', 'factor="0"'), '<ssv:Real value="-450" unit="mm"/>',
-             "resources/plant.ssv: unit 'mm': BaseUnit factor 0.0, offset 0.0: a unit needs a finite factor other than 0")):
+             "resources/plant.ssv: unit 'mm': BaseUnit factor 0.0, offset 0.0: a unit needs a finite factor other than 0"),
+            (MM.replace("</ssv:Units>", "") + MM.replace("<ssv:Units>", "").replace('factor="0.001"', 'factor="1"'),
+             '<ssv:Real value="-1500" unit="mm"/>',  # the last definition won: -1500 mm reached the FMU as -1500 m
+             "resources/plant.ssv: unit 'mm' is defined twice, differently (factor 0.001 then 1.0"),
+            (MM.replace('name="mm"', 'name="m"').replace('factor="0.001"', 'factor="2"'),
+             '<ssv:Real value="-0.4" unit="m"/>', "resources/plant.ssv: unit 'm' is defined twice, differently")):
         bad = _with_plant_set(ssp, tmp_path / "bad.ssp", units, z)
         with pytest.raises(SspError) as exc:
             with open_ssp(bad):

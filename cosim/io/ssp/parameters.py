@@ -13,7 +13,7 @@ from xml.etree import ElementTree as ET
 
 from .archive import component_fmu, member_path, parse_xml, read_member
 from .spec import NS, PARAMETER_MAPPING_TYPE, PARAMETER_SET_TYPE, SspError, qname
-from .units import Quantity, unit_table
+from .units import Quantity, merged_units, unit_table
 
 __all__ = ["component_bindings", "system_bindings"]
 
@@ -41,7 +41,7 @@ def _parameter_set(pset: ET.Element, ssp: Path, where: str, prefix: str,
                    ssd_units: dict[str, tuple] | None = None) -> dict[str, Any]:
     if pset.tag != qname("ssv", "ParameterSet"):
         raise SspError(ssp, f"{where}: expected an ssv:ParameterSet, found {pset.tag}")
-    units = {**(ssd_units or {}), **unit_table(pset, "ssv:Units/ssc:Unit", ssp, where)}
+    units = merged_units(ssd_units or {}, unit_table(pset, "ssv:Units/ssc:Unit", ssp, where), ssp, where)
     values: dict[str, Any] = {}
     for p in pset.iterfind("ssv:Parameters/ssv:Parameter", NS):
         pname = p.get("name")

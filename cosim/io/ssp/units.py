@@ -12,7 +12,7 @@ from xml.etree import ElementTree as ET
 from .archive import component_fmu
 from .spec import NS, SspError, num_text
 
-__all__ = ["Quantity", "convert_units", "unit_definitions", "unit_table"]
+__all__ = ["Quantity", "convert_units", "merged_units", "unit_definitions", "unit_table"]
 
 
 BASE_UNITS = ("kg", "m", "s", "A", "K", "mol", "cd", "rad")
@@ -38,14 +38,36 @@ def unit_table(parent: ET.Element | None, path: str, ssp: Path, where: str) -> d
     for u in (parent.iterfind(path, NS) if parent is not None else ()):
         base = u.find("ssc:BaseUnit", NS)
         attrs = base.attrib if base is not None else {}
+        name = u.get("name", "")
         try:
             factor, offset = float(attrs.get("factor", "1")), float(attrs.get("offset", "0"))
-            out[u.get("name", "")] = (tuple(int(attrs.get(k, "0")) for k in BASE_UNITS), factor, offset)
+            unit = (tuple(int(attrs.get(k, "0")) for k in BASE_UNITS), factor, offset)
         except ValueError:
-            raise SspError(ssp, f"{where}: unit {u.get('name')!r}: its BaseUnit attributes are not numbers") from None
+            raise SspError(ssp, f"{where}: unit {name!r}: its BaseUnit attributes are not numbers") from None
         if not conversion_ok(factor, offset):
-            raise SspError(ssp, f"{where}: unit {u.get('name')!r}: BaseUnit factor {factor!r}, offset {offset!r}: a "
+            raise SspError(ssp, f"{where}: unit {name!r}: BaseUnit factor {factor!r}, offset {offset!r}: a "
                                 "unit needs a finite factor other than 0 and a finite offset")
+        _same_unit(out, name, unit, ssp, where)
+        out[name] = unit
+    return out
+
+
+def _same_unit(known: dict[str, tuple], name: str, unit: tuple, ssp: Path, where: str) -> None:
+    """Refuse a second definition of ``name`` that differs from the first (correctness: which one a value is
+    converted with would be a guess; 1500 mm reached an FMU as 1 500 000 when the last one won)."""
+    if name in known and known[name] != unit:
+        (e1, f1, o1), (e2, f2, o2) = known[name], unit
+        raise SspError(ssp, f"{where}: unit {name!r} is defined twice, differently (factor {f1!r} then {f2!r}, offset "
+                            f"{o1!r} then {o2!r}{', other base units' if e1 != e2 else ''}): give it one definition")
+
+
+def merged_units(outer: dict[str, tuple], inner: dict[str, tuple], ssp: Path, where: str) -> dict[str, tuple]:
+    """The unit definitions of a parameter set (``inner``) added to the system's (``outer``); a name both define
+    differently is refused (:func:`_same_unit`)."""
+    out = dict(outer)
+    for name, unit in inner.items():
+        _same_unit(out, name, unit, ssp, where)
+        out[name] = unit
     return out
 
 
