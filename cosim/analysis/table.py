@@ -86,7 +86,7 @@ def _describe(run: RunLog, actual_component: str) -> tuple[str, str, bool]:
     for name, c in comps.items():
         if not isinstance(c, dict):
             continue
-        fmu = str(c.get("fmu") or c.get("path") or "")
+        fmu = str(c.get("fmu") or (Path(c["path"]).name if c.get("path") else ""))  # a path: its file name
         entry = registry.REGISTRY.get(fmu)
         if entry is not None and entry.role == "controller":
             controller = entry.label

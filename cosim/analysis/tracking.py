@@ -13,6 +13,7 @@ import numpy as np
 
 from ..engine.bounded_yaml import load_yaml
 from ..engine.schema import Compare, expand_signal
+from ..engine.scenario import EFFECTIVE_ATTACHMENT
 from ..errors import CosimError
 from ..io.runlog import AXES, RunLog, read_run
 from ..observers.stats import ErrorStats
@@ -82,17 +83,20 @@ class Tracking:
 
 
 def scenario_doc(run: RunLog) -> tuple[str | None, dict]:
-    """The attached scenario file (name, parsed YAML mapping), or (None, {})."""
+    """The scenario the run ran (name of its attachment, mapping), or (None, {}): the scenario as run (its
+    ``effective/scenario.json``: overrides applied, and the only readable one of a run from an SSP archive,
+    whose ``scenario/`` attachment is the archive), else the attached scenario file."""
     import yaml  # lazy: --help loads this module without it
 
-
-    for name, data in run.attachments.items():
-        if name.startswith("scenario/"):
-            try:
-                doc = load_yaml(data)[0]
-            except yaml.YAMLError as exc:
-                raise ReportError(f"{run.path}: attachment {name} is not valid YAML ({exc})") from None
-            return name, doc if isinstance(doc, dict) else {}
+    names = [n for n in run.attachments if n == EFFECTIVE_ATTACHMENT]
+    names += [n for n in run.attachments if n.startswith("scenario/") and not n.lower().endswith(".ssp")]
+    for name in names:
+        try:
+            doc = load_yaml(run.attachments[name])[0]
+        except yaml.YAMLError as exc:
+            why = " ".join(str(exc).split())
+            raise ReportError(f"{run.path}: attachment {name} is not valid YAML ({why})") from None
+        return name, doc if isinstance(doc, dict) else {}
     return None, {}
 
 

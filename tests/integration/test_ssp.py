@@ -682,3 +682,17 @@ def test_events_travel_in_our_annotation_and_the_export_says_other_tools_drop_th
         assert again.events == scenario.events, f"events after the round trip: {again.events}"
         res = run_scenario(again, log=False)
     assert [e["t"] for e in res.fired] == [0.0, 0.25, 0.5], f"fired {res.fired}"
+
+
+def test_table_and_report_read_the_log_of_a_run_from_an_archive(ssp, tmp_path, capsys):
+    """The log of a run from an SSP archive attaches the archive (not YAML) and the scenario as run
+    (effective/scenario.json): table and report read the latter, and name the plant by its FMU file."""
+    from cosim.cli import main
+
+    log = tmp_path / "from_ssp.mcap"
+    assert main(["run", str(ssp), "--stop-time", "0.1", "--out", str(log), "--quiet"]) == 0
+    capsys.readouterr()
+    assert main(["table", str(log)]) == 0
+    out = capsys.readouterr().out
+    assert "| helix_ctc_analytic | " in out and "| plant.fmu |" in out, out
+    assert main(["report", str(log), "--out", str(tmp_path / "report")]) == 0, capsys.readouterr().err
