@@ -98,6 +98,17 @@ def test_compare_scenario_on_two_plants(tmp_path, capsys):
     assert (tmp_path / "helix_ctc.exudyn.mcap").exists() and (tmp_path / "helix_ctc.analytic.mcap").exists()
 
 
+def test_compare_puts_in_the_model_exchange_plant_with_its_integrator(tmp_path, capsys):
+    """``--plants analytic_me`` runs the plant as helix_ctc_me does (DOP853 at rtol 1e-10), not with the default
+    CVode at 1e-6 (1.18 um off the co-simulation plant): it says which, and stays within 1 nm of the RK4 plant."""
+    code = main(["compare", str(ROOT / "scenarios" / "helix_ctc_analytic.yaml"), "--plants", "analytic,analytic_me",
+                 "--stop-time", "0.5", "--out-dir", str(tmp_path), "--json", "--signals", "plant.p"])
+    payload = json.loads(capsys.readouterr().out)
+    assert code == 0, payload
+    assert "linear_analytic_plant_me (dop853, rtol 1e-10)" in payload["b"], payload["b"]
+    assert max(d["max_abs"] for d in payload["signals"]) < 1e-9, payload["signals"]
+
+
 def test_compare_rejects_unknown_plants(capsys):
     assert main(["compare", str(ROOT / "scenarios" / "helix_ctc.yaml"), "--plants", "exudyn,adams"]) == 2
     assert "unknown plant adams; valid: exudyn, exudyn_lumped, analytic, analytic_me" in capsys.readouterr().err
