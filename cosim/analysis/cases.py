@@ -59,7 +59,8 @@ def _top_level_split(text: str) -> list[str]:
 
 def parse_grid(items: Sequence[str]) -> dict[str, list[Any]]:
     """``["ctl.gain.kp[1]=1e4,4e4"]`` -> ``{"ctl.gain.kp[1]": [1e4, 4e4]}`` (values as ``--set`` reads them;
-    a list value in brackets, ``ctl.gain.kp=[1e4,1e4,1e4],[4e4,4e4,4e4]``, sets every element)."""
+    a list value in brackets, ``ctl.gain.kp=[1e4,1e4,1e4],[4e4,4e4,4e4]``, sets every element; names joined by
+    commas, ``plant.mass.payload,ctl.mass.payload=0,0.5``, are one axis: each case sets them all to its value)."""
     out: dict[str, list[Any]] = {}
     for item in items:
         name, sep, values = item.partition("=")
@@ -114,11 +115,17 @@ def make_cases(grid: dict[str, list[Any]], random: dict[str, tuple[str, float, f
     rng = np.random.default_rng(seed)
     draws = [{name: float(rng.uniform(a, b) if kind == "uniform" else rng.normal(a, b))
               for name, (kind, a, b) in random.items()} for _ in range(n or 1)]
-    names = list(grid)
+    axes = list(grid)
+    linked = [name.strip() for axis in axes for name in axis.split(",")]
+    twice = sorted({n for n in linked if linked.count(n) > 1} | (set(linked) & set(random)))
+    if twice:
+        raise SweepError(f"{', '.join(twice)}: set by more than one --grid or --random")
     cases = []
-    for combo in itertools.product(*(grid[k] for k in names)):
+    for combo in itertools.product(*(grid[k] for k in axes)):
+        # an axis "a,b=V1,V2" sets a and b to the same value in each case (a payload on the plant and the controller)
+        values = {name.strip(): v for axis, v in zip(axes, combo) for name in axis.split(",")}
         for draw in draws:
-            cases.append(Case({**dict(zip(names, combo)), **draw}))
+            cases.append(Case({**values, **draw}))
     ids = [c.id for c in cases]
     if len(set(ids)) != len(ids):
         raise SweepError("some cases repeat the same values (a grid value given twice?)")

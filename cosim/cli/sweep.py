@@ -26,7 +26,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                                    "time: only component variables settable during a run (plant.mass.payload).")
     p.add_argument("scenario", help="scenario file (.yaml)")
     p.add_argument("--grid", action="append", default=[], metavar="NAME=V1,V2,...", help="values of NAME "
-                   "(repeatable: the cartesian product)")
+                   "(repeatable: the cartesian product); NAME,NAME2=... sets both to each value (one axis)")
     p.add_argument("--random", action="append", default=[], metavar="NAME=uniform(A,B)|normal(MU,SIGMA)",
                    help="draws of NAME (repeatable; needs -n)")
     p.add_argument("-n", type=number_option(whole=True, ge=1, le=MAX_CASES), default=None, metavar="N", help="number of random draws")

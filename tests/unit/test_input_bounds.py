@@ -40,3 +40,17 @@ def test_a_spacing_too_fine_to_count_is_refused_with_a_finite_spacing():
     assert 1e-4 < fits < 1e-2, info.value  # a spacing that fits 2e7 points in a box of about 0.6 m a side
     with pytest.raises(ParameterError, match="finite length > 0"):
         sample_workspace(get_preset("linear_delta_thesis"), spacing=float("inf"))
+
+
+def test_a_grid_axis_of_several_names_sets_them_all_to_each_value():
+    """``plant.mass.payload,ctl.mass.payload=0,0.5``: one axis (two cases, not four), both names set alike; a
+    name on two axes is refused."""
+    from cosim.analysis.cases import SweepError, make_cases, parse_grid
+
+    cases = make_cases(parse_grid(["plant.mass.payload,ctl.mass.payload=0,0.5", "ctl.gain.kp[1]=1e4,2e4"]), {},
+                       None, None)
+    assert sorted((c.values["plant.mass.payload"], c.values["ctl.mass.payload"], c.values["ctl.gain.kp[1]"])
+                  for c in cases) == [(0, 0, 1e4), (0, 0, 2e4), (0.5, 0.5, 1e4), (0.5, 0.5, 2e4)]
+    with pytest.raises(SweepError, match="plant.mass.payload: set by more than one --grid or --random"):
+        make_cases(parse_grid(["plant.mass.payload,ctl.mass.payload=0,0.5", "plant.mass.payload=1,2"]), {}, None,
+                   None)
