@@ -7,6 +7,8 @@ the cause, no traceback, an empty temporary folder (the ``run`` fixture of ``tes
 
 from __future__ import annotations
 
+import html
+import json
 import os
 import re
 from pathlib import Path
@@ -298,6 +300,13 @@ def _rewrite(ssp: Path, out: Path, ssd=lambda s: s, ssv=lambda s: s, extra=()) -
     return out
 
 
+def _annotated(ssd: str, **changes) -> str:
+    """``ssd`` with our annotation's JSON given ``changes`` (the rest as exported)."""
+    m = re.search(r"<dcs:Scenario>(.*)</dcs:Scenario>", ssd, flags=re.S)
+    data = {**json.loads(html.unescape(m.group(1))), **changes}
+    return ssd[:m.start(1)] + html.escape(json.dumps(data), quote=False) + ssd[m.end(1):]
+
+
 U_INPUT = '<ssd:Connector name="u" kind="input">\n            <ssc:Real />'
 BAD_SSP = {
     # an archive whose members repeat means one thing to one zip reader and another to the next (the last won)
@@ -330,6 +339,15 @@ BAD_SSP = {
     "annotation_not_object": (dict(ssd=lambda s: re.sub(r"<dcs:Scenario>.*</dcs:Scenario>",
                                                         "<dcs:Scenario>[1, 2]</dcs:Scenario>", s, flags=re.S)),
                               "annotation org.delta-cosim.engine.scenario: expected a JSON object, got list"),
+    # JSON of the wrong shape inside the object (an internal error when the reader took it as options)
+    "annotation_options_list": (dict(ssd=lambda s: _annotated(s, component_options=[1, 2])),
+                                "annotation org.delta-cosim.engine.scenario: component_options must map component "
+                                "names to objects of their options, got a list"),
+    "annotation_options_values": (dict(ssd=lambda s: _annotated(s, component_options={"g": [1]})),
+                                  "component_options must map component names to objects of their options, got an "
+                                  "object of list"),
+    "annotation_name_list": (dict(ssd=lambda s: _annotated(s, name=["small"])),
+                             "annotation org.delta-cosim.engine.scenario: name must be a string, got a list"),
     # a stop time past the longest grid overflowed into a traceback
     "stop_past_the_grid": (dict(ssd=lambda s: s.replace('stopTime="0.2"', 'stopTime="1e308"')),
                            "time.stop: Input should be less than or equal to 9000000000"),

@@ -206,7 +206,21 @@ def _annotation(text: str, ssp: Path) -> dict[str, Any]:
     if unknown:
         raise SspError(ssp, f"{where}: unknown key {unknown[0]!r} (an archive's annotation carries "
                             f"{', '.join(EXTRAS)}, name and component_options)")
+    options = data.get("component_options", {})
+    if not isinstance(options, dict) or not all(isinstance(v, dict) for v in options.values()):
+        raise SspError(ssp, f"{where}: component_options must map component names to objects of their options, "
+                            f"got {_shape(options)}")
+    if not isinstance(data.get("name", ""), str):
+        raise SspError(ssp, f"{where}: name must be a string, got {_shape(data['name'])}")
     return data
+
+
+def _shape(value: Any) -> str:
+    """What a JSON value is, for a message (not the value: it may be large)."""
+    if isinstance(value, dict):
+        inner = {type(v).__name__ for v in value.values()}
+        return f"an object of {', '.join(sorted(inner)) or 'nothing'}"
+    return {list: "a list", str: "a string", bool: "a boolean", type(None): "null"}.get(type(value), "a number")
 
 
 def _fmu_defaults(ssp: Path, paths: list[Path]) -> tuple[float | None, float | None]:
