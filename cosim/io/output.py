@@ -13,13 +13,15 @@ a single FMU.
 from __future__ import annotations
 
 import fcntl
+import json
 import os
+import shlex
 import sys
 import time
 from pathlib import Path
 
 from ..engine import supervision
-from ..errors import CosimError
+from ..errors import CosimError, printable
 
 __all__ = ["OutputError", "OutputClaim", "check_output", "claim", "output_dir", "partial_path", "writable_parent"]
 
@@ -98,14 +100,19 @@ class OutputClaim:
 
 
 def _describe_owner(lock: Path) -> str:
+    """Who holds ``lock``, from the one JSON line its owner wrote (a command line with a newline in a file name
+    cannot forge a field of it, as it could the ``key=value`` lines written before)."""
     try:
-        text = lock.read_text(errors="replace").strip()
-    except OSError:
+        fields = json.loads(lock.read_text(encoding="utf-8", errors="replace") or "{}")
+    except (OSError, ValueError):
         return "another run"
-    fields = dict(line.split("=", 1) for line in text.splitlines() if "=" in line)
-    started = fields.get("started", "")
-    when = time.strftime("%H:%M:%S", time.localtime(float(started))) if started.replace(".", "").isdigit() else "?"
-    return f"another run (pid {fields.get('pid', '?')}, started {when}: {fields.get('command', '?')})"
+    if not isinstance(fields, dict):
+        return "another run"
+    pid, started, command = fields.get("pid"), fields.get("started"), fields.get("command")
+    when = time.strftime("%H:%M:%S", time.localtime(started)) if isinstance(started, (int, float)) else "?"
+    shown = printable(shlex.join(command)) if isinstance(command, list) and all(
+        isinstance(a, str) for a in command) else "?"
+    return f"another run (pid {pid if isinstance(pid, int) else '?'}, started {when}: {shown})"
 
 
 def output_dir(target: str | Path, option: str = "--out") -> Path:
@@ -176,7 +183,8 @@ def claim(target: str | Path, inputs: tuple[str | Path | None, ...] = ()) -> Out
     try:
         os.ftruncate(fd, 0)
         argv = ["python -m cosim" if sys.argv[0].endswith("__main__.py") else sys.argv[0], *sys.argv[1:]]
-        os.write(fd, f"pid={supervision.command_pid()}\nstarted={time.time():.3f}\ncommand={' '.join(argv)}\n".encode())
+        owner = {"pid": supervision.command_pid(), "started": round(time.time(), 3), "command": argv}
+        os.write(fd, (json.dumps(owner) + "\n").encode("ascii"))  # one line, any name escaped (and any locale)
         os.close(os.open(partial, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o644))
     except OSError as exc:
         out.release()
