@@ -14,17 +14,18 @@ without it the run goes as fast as it can and the viewer sees it fast-forwarded.
 
 from __future__ import annotations
 
+import logging
 import socket
 import sys
 import threading
 from collections.abc import Sequence
 
 from ..engine.execution import Execution
-from ..errors import CosimError
+from ..errors import CosimError, printable
 from .log_writer import FoxgloveChannels, encode_messages, live_view_serving
 from .publish import Publisher
 
-__all__ = ["DEFAULT_PORT", "LiveView", "parse_address"]
+__all__ = ["DEFAULT_PORT", "LiveView", "ViewerMessages", "parse_address"]
 
 DEFAULT_PORT = 8765
 _TIME_PERIOD_NS = 33_000_000  # viewer clock updates per simulated second: about 30
@@ -89,6 +90,60 @@ class _ContextSink(FoxgloveChannels):
         self._channels.clear()
 
 
+class ViewerMessages(logging.Handler):
+    """What the Foxglove server logs about its viewers while the live view serves (a viewer's bad request, a
+    dropped connection), shown on stderr as the platform shows outside text: each line escaped
+    (:func:`cosim.errors.printable`: a viewer's op string may hold terminal escapes) and cut to
+    :data:`SHOWN_CHARS`, the first :data:`SHOWN_LINES` of them, then one line counting the rest when serving
+    ends (200 vanishing viewers printed 4 697 lines)."""
+
+    LOGGERS = ("foxglove", "foxglove_py")  # the SDK's Rust side logs under both
+    SHOWN_LINES = 5
+    SHOWN_CHARS = 200
+
+    def __init__(self, stream=None) -> None:
+        super().__init__(logging.WARNING)
+        self.stream = stream
+        self.shown = 0
+        self.more = 0
+        self._saved: list[tuple[logging.Logger, bool]] = []
+
+    @classmethod
+    def attach(cls, stream=None) -> "ViewerMessages":
+        handler = cls(stream)
+        for name in cls.LOGGERS:
+            lg = logging.getLogger(name)
+            handler._saved.append((lg, lg.propagate))
+            lg.addHandler(handler)
+            lg.propagate = False
+        return handler
+
+    def detach(self) -> None:
+        for lg, propagate in self._saved:
+            lg.removeHandler(self)
+            lg.propagate = propagate
+        self._saved = []
+        if self.more:
+            self._write(f"warning: live view: {self.more} more message(s) of its server not shown")
+            self.more = 0
+
+    def emit(self, record: logging.LogRecord) -> None:
+        if record.name.startswith("foxglove") and "McapError" in record.getMessage():
+            return  # the log file's own: its sink reports those (cosim.observers.log_writer.sink)
+        if self.shown >= self.SHOWN_LINES:
+            self.more += 1
+            return
+        self.shown += 1
+        text = printable(record.getMessage())
+        if len(text) > self.SHOWN_CHARS:
+            text = text[:self.SHOWN_CHARS] + f"... ({len(text)} characters)"
+        self._write(f"warning: live view: {text}")
+
+    def _write(self, line: str) -> None:
+        stream = self.stream if self.stream is not None else sys.stderr
+        print(line, file=stream, flush=True)
+
+
 class LiveView:
     """Observer serving ``publisher``'s channels on a Foxglove WebSocket server during the run.
 
@@ -116,6 +171,7 @@ class LiveView:
         from foxglove.websocket import Capability  # lazy: --help loads this module without it
 
         context = foxglove.Context()
+        self._messages = ViewerMessages.attach()  # what the server logs of its viewers: escaped, a few lines
         live_view_serving(True)  # no log writer is forked from this process while its threads run
         try:
             self.server = foxglove.start_server(name=self.name, host=self.host, port=self.port,
@@ -123,6 +179,7 @@ class LiveView:
                                                 message_backlog_size=BACKLOG_MESSAGES)
         except RuntimeError as exc:
             live_view_serving(False)
+            self._messages.detach()
             raise CosimError(f"--live: cannot serve on {self.host}:{self.port}: {exc}") from None
         self.port = self.server.port
         self._sink = _ContextSink(context)
@@ -156,6 +213,7 @@ class LiveView:
         stopper.start()
         stopper.join(STOP_TIMEOUT)
         live_view_serving(False)  # its threads idle from now on (a stopper left behind is a thread: no fork either)
+        self._messages.detach()
         if stopper.is_alive():
             print(f"warning: live view on {self.url}: a viewer did not take the end of the run within "
                   f"{STOP_TIMEOUT:g} s (it stopped reading): dropped", file=sys.stderr, flush=True)
