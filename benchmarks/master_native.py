@@ -14,7 +14,12 @@
    time updated in place. What is left is what the master adds: its loop, the link copy, status and
    NaN checks, component timing, method dispatch.
 
-Both parts run twice: as the master runs (each co-simulation component's turn in one C call,
+3. The two algorithms on the run of part 1 (issue 36 item 2): Gauss-Seidel and Jacobi, each
+   component's turn one C call in both (Jacobi copies every link first, then the turns), run after
+   one another in each round; the loop's wall time per step of each (best of the rounds) and their
+   ratio (target: Jacobi <= 1.15 x Gauss-Seidel).
+
+Parts 1 and 2 run twice: as the master runs (each co-simulation component's turn in one C call,
 cosim.fmi.turn) and with that helper made unavailable (``cosim.fmi.turn.helper`` replaced here), so the
 same FMI calls are made from Python one by one, as on a machine without a C compiler. Each figure is
 the best of ``--rounds`` rounds; the runs alternate so machine load drifts affect all alike.
@@ -40,6 +45,7 @@ sys.path.insert(0, str(ROOT / "tests"))  # cfmus, the C test FMUs
 
 TARGET_FMU_US = 2.0  # issue 23: each native FMU at most 2 us per 1 ms step in our master
 TARGET_MASTER_US = 2.0  # issue 23: the master's own cost at most 2 us per step on two C FMUs
+TARGET_JACOBI = 1.15  # issue 36 item 2: the Jacobi loop at most 1.15 x the Gauss-Seidel loop
 STEP = 1e-3
 
 TWO_C = """
@@ -54,11 +60,11 @@ parallel: "off"
 """
 
 
-def helix_native(stop: float):
+def helix_native(stop: float, algorithm: str = "gauss_seidel"):
     from cosim.run import run_scenario
     from cosim.engine.scenario import load_scenario
 
-    overrides = {("time", "stop"): stop, ("fmus",): "native", ("parallel",): "off"}
+    overrides = {("time", "stop"): stop, ("fmus",): "native", ("parallel",): "off", ("algorithm",): algorithm}
     res = run_scenario(load_scenario(ROOT / "scenarios" / "helix_ctc_analytic.yaml", overrides), log=False)
     if res.status != "completed":
         sys.exit(f"helix_ctc_analytic (native) did not complete: {res.status} {res.message}")
@@ -123,8 +129,12 @@ def main() -> None:
     per_comp: dict[str, dict[str, float]] = {m: {} for m in modes}
     best = {m: {"helix_master": inf, "helix_wall": inf, "master": inf, "outside": inf} for m in modes}
     bare = inf
-    for _ in range(args.rounds):
+    loops = {"gauss_seidel": inf, "jacobi": inf}
+    for r in range(args.rounds):
         bare = min(bare, bare_calls(osc, thru, args.steps))
+        for algorithm in list(loops)[:: 1 if r % 2 == 0 else -1]:  # each first in every other round
+            res = helix_native(args.stop_time, algorithm)
+            loops[algorithm] = min(loops[algorithm], res.wall_time / res.steps)
         for mode, helper in modes.items():
             turn.helper = helper  # what cosim.fmi's co-simulation wrappers get when they bind their turn
             b = best[mode]
@@ -159,6 +169,11 @@ def main() -> None:
         verdict = "met" if own * us <= TARGET_MASTER_US else "NOT met"
         print(f"   {mode:<13}: master {b['master'] * us:5.2f} - bare {bare * us:5.2f} = master's own {own * us:5.2f}"
               f"   target {verdict}; outside the component timings {b['outside'] * us:.2f}")
+    ratio = loops["jacobi"] / loops["gauss_seidel"]
+    print(f"3. helix_ctc_analytic, native FMUs, serial, no log, {args.stop_time:g} s, C turns: the loop per step "
+          f"(target Jacobi <= {TARGET_JACOBI:g} x Gauss-Seidel)")
+    print(f"   Gauss-Seidel {loops['gauss_seidel'] * us:6.2f}   Jacobi {loops['jacobi'] * us:6.2f}   "
+          f"ratio {ratio:.3f}   target {'met' if ratio <= TARGET_JACOBI else 'NOT met'}")
 
 
 if __name__ == "__main__":

@@ -9,8 +9,8 @@ the schedule every algorithm gets: a component with step multiple ``m`` is activ
 - :class:`GaussSeidel` (default): components run in the plan's order (sorted by the direct-feedthrough
   graph of their ModelStructure); each reads the latest outputs, those already advanced in this macro
   step included. An algebraic loop through direct feedthrough cannot be ordered: refused when planned.
-- :class:`Jacobi`: every active component reads the outputs of the previous macro step, then all step,
-  then all outputs are read. Any order works; no loop check.
+- :class:`Jacobi`: every active component reads the outputs of the previous macro step (all links copied
+  first, then each component's turn). Any order works; no loop check.
 
 Adding an algorithm: a class with the three members of :class:`Algorithm`, registered in
 :data:`ALGORITHMS`; the scenario schema, the plan's ordering and the error messages follow.
@@ -123,37 +123,33 @@ class GaussSeidel:
 
 
 class Jacobi:
-    """Parallel in principle: every active component's inputs set from the previous step's outputs, then all
-    step, then all outputs read."""
+    """Parallel in principle: every active component reads the outputs of the previous macro step.
+
+    The macro step first copies the previous step's outputs into every active component's input buffers
+    (the links), then gives each its Gauss-Seidel turn (set its inputs, step, get its outputs: one C call,
+    :meth:`~cosim.fmi.slave.CoSimulation.set_step_get`). A component's outputs read in its turn land in its
+    own buffers, which no other component reads before the next macro step's copies: the values every FMU
+    sees are those of "all set, all step, all read", in one call per component instead of three. The link
+    copies are the master's time, not a component's."""
 
     name: ClassVar[str] = "jacobi"
     reads_this_step: ClassVar[bool] = False
 
     def macro_step(self, ex: Execution) -> MacroStep:
         turns, period, ctime, current, clock, step_size = _loop_state(ex)
+        turns = [[(c, moves, copies, s.set_step_get, m) for c, moves, copies, s, m in turn] for turn in turns]
 
         def step(k: int, t: float, h: float) -> None:
             turn = turns[k % period]
-            t_prev = clock()
-            for c, moves, copies, s, _ in turn:
-                current[0] = c
+            for _, moves, copies, _, _ in turn:  # every input from the previous step's outputs, before any turn
                 for d, src in moves:
                     d[:] = src
                 for dv, di, sv, si in copies:
                     dv[di] = sv[si]
-                s.set_inputs()
-                now = clock()
-                ctime[c] += now - t_prev
-                t_prev = now
-            for c, _, _, s, m in turn:
+            t_prev = clock()
+            for c, _, _, set_step_get, m in turn:
                 current[0] = c
-                s.step(t, h if m == 1 else step_size(k, m, t))
-                now = clock()
-                ctime[c] += now - t_prev
-                t_prev = now
-            for c, _, _, s, _ in turn:
-                current[0] = c
-                s.get_outputs()
+                set_step_get(t, h if m == 1 else step_size(k, m, t))
                 now = clock()
                 ctime[c] += now - t_prev
                 t_prev = now
