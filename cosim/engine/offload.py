@@ -82,16 +82,32 @@ def usable_cpus() -> int:
         return os.cpu_count() or 1
 
 
+def busy_cpus(samples: int = 5, gap: float = 0.002) -> int:
+    """CPUs other processes keep busy now: the kernel's count of runnable threads (``/proc/loadavg``'s fourth
+    field, this process's reading thread included) less one, the median of ``samples`` readings ``gap`` s apart
+    (a process that ran for an instant is not a busy CPU); 0 where the kernel does not say (not Linux)."""
+    readings = []
+    for i in range(samples):
+        try:
+            with open("/proc/loadavg", encoding="ascii") as f:
+                readings.append(int(f.read().split()[3].partition("/")[0]))
+        except (OSError, ValueError, IndexError):
+            return 0
+        if i + 1 < samples:
+            _time.sleep(gap)
+    return max(0, sorted(readings)[len(readings) // 2] - 1)
+
+
 def choose(plan: SystemPlan, mode: str, n_steps: int, writer_process: bool = False) -> tuple[list[int], str]:
     """Components to offload under ``mode`` (auto, on, off) and a note saying why or why not.
 
-    ``writer_process``: the run's log is written by a writer process (:class:`cosim.observers.log_writer.WriterProcess`),
-    which takes the other CPU too. With fewer than three CPUs, ``auto`` then runs serially when the
-    feed-forward group holds compiled FMUs only: each step of theirs costs the master about a microsecond,
-    which a worker hardly saves, while its own steps take CPU time from the writer (helix_ctc_analytic, native
-    FMUs, 10 s logged, ``benchmarks/native.py`` line 5: ``blocks`` 0.187 -> 0.150 s loop and 0.300 -> 0.218 s
-    whole run; ``samples`` 0.207 -> 0.217 s loop, 0.362 -> 0.335 s whole). A PythonFMU's step (the GIL, an
-    interpreter) costs tens of microseconds: those still run ahead.
+    ``auto`` runs ahead only what a worker pays for: a feed-forward group with a PythonFMU in it (its step, the GIL
+    and an interpreter, costs tens of microseconds the worker takes off the master) on a CPU no other process keeps
+    busy. Compiled FMUs' steps cost the master about a microsecond each, less than handing their values over
+    through the ring, and a worker sharing its CPU with another process makes the master wait for it
+    (helix_ctc_analytic, native FMUs, 10 s: 0.35 s with the worker against 0.18 s serial, quiet; issue 36 item 5,
+    ``benchmarks/parallel_auto.py``). ``writer_process``: the run's log is written by a writer process
+    (:class:`cosim.observers.log_writer.WriterProcess`), which takes a CPU too.
     """
     if mode == "off":
         return [], ""
@@ -112,19 +128,29 @@ def choose(plan: SystemPlan, mode: str, n_steps: int, writer_process: bool = Fal
             why = f"{', '.join(strings)} are strings or binaries (only fixed-size values are shared)"
         elif restructured:
             why = f"{', '.join(restructured)} have structural parameters (array sizes are set per run)"
-        elif mode == "auto" and n_steps < AUTO_MIN_STEPS:
-            why = f"{n_steps} steps is too short to pay for starting a worker; auto needs {AUTO_MIN_STEPS}"
-        elif mode == "auto" and usable_cpus() < 2:
-            why = "one CPU available"
-        elif mode == "auto" and writer_process and usable_cpus() < 3 and not any(
-                _python_fmu(plan.infos[c]) for c in group):
-            why = (f"{usable_cpus()} CPUs: the log's writer process takes the other one; {names} are compiled FMUs, "
-                   f"whose steps a worker would hardly take off the master")
-        elif not _main_importable():
+        elif mode == "auto":
+            why = _auto_serial(plan, group, names, n_steps, writer_process)
+        if not why and not _main_importable():
             why = f"the main program {sys.modules['__main__'].__file__} is not a file a worker process can import"
     if why:
         return [], f"parallel: {mode}: serial run ({why})"
     return group, f"parallel: {names} run ahead in a worker process"
+
+
+def _auto_serial(plan: SystemPlan, group: list[int], names: str, n_steps: int, writer_process: bool) -> str:
+    """Why ``auto`` runs ``group`` serially ("" : it runs ahead)."""
+    if n_steps < AUTO_MIN_STEPS:
+        return f"{n_steps} steps is too short to pay for starting a worker; auto needs {AUTO_MIN_STEPS}"
+    if not any(_python_fmu(plan.infos[c]) for c in group):
+        return f"{names} are compiled FMUs, whose steps a worker would hardly take off the master"
+    cpus = usable_cpus()
+    if cpus < 2:
+        return "one CPU available"
+    busy = busy_cpus()
+    if cpus - busy - (1 if writer_process else 0) < 2:
+        writer = " and the log's writer process" if writer_process else ""
+        return f"{cpus} CPUs, {busy} kept busy by other processes{writer}: no free CPU for a worker"
+    return ""
 
 
 def _python_fmu(info) -> bool:

@@ -348,8 +348,9 @@ class Scenario(_Model):
                                                      "model exchange)")
     parallel: Union[Literal["auto", "on", "off"], bool] = Field(
         "auto", description="run the feed-forward components (inputs only from each other, e.g. trajectory -> IK) "
-                            "ahead in a worker process on another core; same values as serial. auto: when 2 CPUs "
-                            "are available and the run has at least 2000 steps. YAML's bare on/off (booleans) "
+                            "ahead in a worker process on another core; same values as serial. auto: when they hold a "
+                            "PythonFMU, a CPU no other process keeps busy is free for the worker and the run has at "
+                            "least 2000 steps. YAML's bare on/off (booleans) "
                             "are accepted")
     watchdog_s: float | None = Field(
         60.0, gt=0, description="wall-clock seconds a macro step (or the initialization) may take before the run "

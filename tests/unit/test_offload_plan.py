@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import pytest
 
 from cosim.engine import offload
@@ -45,6 +47,18 @@ def test_self_loop_and_pure_loop_have_no_group():
     assert feedforward(_plan(["a", "b"], [("a", "b"), ("b", "a")])) == []
 
 
+def _tools(plan: SystemPlan, tool: str | None) -> SystemPlan:
+    """Every component's FMU made by ``tool`` (its modelDescription's generationTool)."""
+    from types import SimpleNamespace
+
+    plan.infos[:] = [SimpleNamespace(md=SimpleNamespace(generationTool=tool),
+                                     structural_parameters=lambda: []) for _ in plan.names]
+    return plan
+
+
+PYTHON_FMU = "PythonFMU 0.7.0"
+
+
 @pytest.mark.parametrize("mode,steps,cpus,expect", [
     ("off", 10**6, 2, []),
     ("auto", AUTO_MIN_STEPS, 2, ["traj", "ik"]),
@@ -54,13 +68,59 @@ def test_self_loop_and_pure_loop_have_no_group():
 ])
 def test_choose_follows_mode_length_and_cpus(monkeypatch, mode, steps, cpus, expect):
     monkeypatch.setattr(offload, "usable_cpus", lambda: cpus)
-    plan = _plan(*HELIX)
+    monkeypatch.setattr(offload, "busy_cpus", lambda: 0)
+    plan = _tools(_plan(*HELIX), PYTHON_FMU)
     comps, note = choose(plan, mode, steps)
     assert [plan.names[c] for c in comps] == expect, note
     if expect:
         assert note == "parallel: traj, ik run ahead in a worker process", note
     elif mode != "off":
         assert note.startswith(f"parallel: {mode}: serial run ("), note
+
+
+@pytest.mark.parametrize("tool", [None, "CasADi", "OpenModelica Compiler"])
+def test_auto_runs_compiled_fmus_serially(monkeypatch, tool):
+    """A feed-forward group of compiled FMUs stays in the master under auto (a worker does not pay for steps of
+    about a microsecond: issue 36 item 5); ``on`` still offloads it."""
+    monkeypatch.setattr(offload, "usable_cpus", lambda: 4)
+    monkeypatch.setattr(offload, "busy_cpus", lambda: 0)
+    plan = _tools(_plan(*HELIX), tool)
+    comps, note = choose(plan, "auto", 10**6)
+    assert comps == [] and note == ("parallel: auto: serial run (traj, ik are compiled FMUs, whose steps a worker "
+                                    "would hardly take off the master)"), note
+    assert [plan.names[c] for c in choose(plan, "on", 10**6)[0]] == ["traj", "ik"]
+
+
+@pytest.mark.parametrize("cpus,busy,expect", [(2, 0, ["traj", "ik"]), (2, 1, []), (4, 2, ["traj", "ik"]),
+                                              (4, 3, [])])
+def test_auto_runs_serially_when_other_processes_keep_the_cpus_busy(monkeypatch, cpus, busy, expect):
+    monkeypatch.setattr(offload, "usable_cpus", lambda: cpus)
+    monkeypatch.setattr(offload, "busy_cpus", lambda: busy)
+    plan = _tools(_plan(*HELIX), PYTHON_FMU)
+    comps, note = choose(plan, "auto", 10**6)
+    assert [plan.names[c] for c in comps] == expect, note
+    if not expect:
+        assert note == (f"parallel: auto: serial run ({cpus} CPUs, {busy} kept busy by other processes: no free CPU "
+                        "for a worker)"), note
+
+
+def test_busy_cpus_counts_a_spinning_process(tmp_path):
+    """busy_cpus reads the kernel's runnable count: a process spinning on a CPU is counted (Linux only)."""
+    import subprocess
+    import sys
+    import time
+
+    if not Path("/proc/loadavg").exists():
+        pytest.skip("no /proc/loadavg (not Linux)")
+    spinners = [subprocess.Popen([sys.executable, "-c", "while True: pass"]) for _ in range(2)]
+    try:
+        time.sleep(0.3)
+        busy = offload.busy_cpus()
+    finally:
+        for p in spinners:
+            p.kill()
+            p.wait()
+    assert busy >= 2, f"two spinning processes, busy_cpus() = {busy}"
 
 
 def test_choose_explains_why_not():
@@ -72,23 +132,18 @@ def test_choose_explains_why_not():
     assert "traj.y, ik.y are strings" in note, note
 
 
-@pytest.mark.parametrize("cpus,tool,expect", [(2, None, []), (2, "PythonFMU 0.7.0", ["traj", "ik"]),
-                                              (3, None, ["traj", "ik"])])
-def test_auto_leaves_the_second_cpu_to_the_log_writer_when_the_worker_would_save_little(monkeypatch, cpus, tool,
-                                                                                       expect):
-    """A log written by a writer process on two CPUs: compiled feed-forward FMUs run in the master (their steps
-    cost it about a microsecond), PythonFMU ones still run ahead; ``on`` is obeyed, and without the writer
-    process auto offloads as before."""
-    from types import SimpleNamespace
-
+@pytest.mark.parametrize("cpus,busy,expect", [(2, 0, []), (3, 0, ["traj", "ik"]), (3, 1, [])])
+def test_auto_leaves_a_cpu_to_the_log_writer(monkeypatch, cpus, busy, expect):
+    """A log written by a writer process takes a CPU: PythonFMU feed-forward components run ahead only when
+    another CPU is free besides it; ``on`` is obeyed, and without the writer process auto offloads as before."""
     monkeypatch.setattr(offload, "usable_cpus", lambda: cpus)
-    plan = _plan(*HELIX)
-    plan.infos[:] = [SimpleNamespace(md=SimpleNamespace(generationTool=tool),
-                                     structural_parameters=lambda: []) for _ in plan.names]
+    monkeypatch.setattr(offload, "busy_cpus", lambda: busy)
+    plan = _tools(_plan(*HELIX), PYTHON_FMU)
     comps, note = choose(plan, "auto", 10**6, writer_process=True)
     assert [plan.names[c] for c in comps] == expect, note
     if not expect:
-        assert note == ("parallel: auto: serial run (2 CPUs: the log's writer process takes the other one; traj, ik "
-                        "are compiled FMUs, whose steps a worker would hardly take off the master)"), note
+        assert note == (f"parallel: auto: serial run ({cpus} CPUs, {busy} kept busy by other processes and the log's "
+                        "writer process: no free CPU for a worker)"), note
     assert [plan.names[c] for c in choose(plan, "on", 10**6, writer_process=True)[0]] == ["traj", "ik"]
-    assert [plan.names[c] for c in choose(plan, "auto", 10**6)[0]] == ["traj", "ik"]
+    if busy == 0:
+        assert [plan.names[c] for c in choose(plan, "auto", 10**6)[0]] == ["traj", "ik"]

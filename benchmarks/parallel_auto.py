@@ -1,0 +1,76 @@
+"""``parallel: auto`` against serial (issue 36 item 5): never slower by more than 3 %.
+
+helix_ctc_analytic, no log, with each build of our FMUs (``fmus=native``: 10 s simulated; ``fmus=python``: 3 s,
+PythonFMU steps are slower), on a quiet machine and with the other CPU kept busy by a spinning process started
+here (``python -c "while True: pass"``). Each case runs ``parallel: auto`` and ``parallel: off`` alternately
+``--repeat`` times in this process (after one untimed short run: the FMUs built and cached) (:func:`cosim.run.run_scenario`, timed from the call to its return: the FMUs'
+loading, the worker's start when auto takes one, the run), and prints the medians, their ratio and what auto chose.
+"Quiet" is whatever else the machine runs at the time (printed: the load average).
+
+    python benchmarks/parallel_auto.py [--repeat 5] [--native-stop 10] [--python-stop 3]
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import statistics
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def _case(scenario: str, build: str, stop: float, repeat: int) -> tuple[float, float, str]:
+    from cosim.engine.scenario import load_scenario
+    from cosim.run import run_scenario
+
+    times: dict[str, list[float]] = {"auto": [], "off": []}
+    note = ""
+    run_scenario(load_scenario(scenario, {("fmus",): build, ("time", "stop"): 0.01}), log=False, progress=False)
+    for i in range(repeat):
+        for mode in (("auto", "off") if i % 2 == 0 else ("off", "auto")):
+            sc = load_scenario(scenario, {("fmus",): build, ("time", "stop"): stop, ("parallel",): mode})
+            t0 = time.perf_counter()
+            res = run_scenario(sc, log=False, progress=False)
+            times[mode].append(time.perf_counter() - t0)
+            if mode == "auto":
+                note = "; ".join(n for n in res.notes if n.startswith("parallel")) or "parallel: (no note)"
+    return statistics.median(times["auto"]), statistics.median(times["off"]), note
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--scenario", default=str(ROOT / "scenarios" / "helix_ctc_analytic.yaml"))
+    ap.add_argument("--repeat", type=int, default=5, help="alternations of auto and off per case (median)")
+    ap.add_argument("--native-stop", type=float, default=10.0, help="simulated time with native FMUs, s")
+    ap.add_argument("--python-stop", type=float, default=3.0, help="simulated time with python FMUs, s")
+    args = ap.parse_args()
+    sys.path.insert(0, str(ROOT))
+    print(f"{Path(args.scenario).name}, no log; {os.cpu_count()} CPUs; {args.repeat} alternations each (median)")
+    print(f"{'build':8}{'other CPU':>11}{'auto, s':>10}{'off, s':>10}{'auto/off':>10}   auto chose")
+    worst = 0.0
+    for load in ("quiet", "busy"):
+        spinner = None
+        if load == "busy":
+            spinner = subprocess.Popen([sys.executable, "-c", "while True: pass"])
+            time.sleep(0.5)
+        try:
+            for build, stop in (("native", args.native_stop), ("python", args.python_stop)):
+                before = os.getloadavg()[0]
+                auto, off, note = _case(args.scenario, build, stop, args.repeat)
+                worst = max(worst, auto / off)
+                print(f"{build:8}{load:>11}{auto:10.3f}{off:10.3f}{auto / off:10.3f}   {note} "
+                      f"(load average {before:.2f})")
+        finally:
+            if spinner is not None:
+                spinner.kill()
+                spinner.wait()
+    print(f"largest auto/off {worst:.3f} (target at most 1.03)")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
