@@ -91,15 +91,17 @@ def joint_states_bag(path: Path, kind: str, t_s: np.ndarray, q: np.ndarray, name
     return write_bag(path, kind, topics)
 
 
-def synthetic_plant_bag(path: Path, log: str | Path, *, rate_hz: float = 250.0, offset_s: float = 0.0137,
+def synthetic_plant_bag(path: Path, log: str | Path, *, rate_hz: float = 250.0, offset_s: float = 0.2137,
                         noise: float = 1e-6, seed: int = 1, component: str = "plant",
                         names: Sequence[str] = ("delta_joint_1", "delta_joint_2", "delta_joint_3"),
-                        kind: str = "mcap") -> Path:
-    """SYNTHETIC ROS 2 bag of a delta robot (not a measurement): ``component``'s q[1..3] from the run log ``log``
-    resampled (cubic) at ``rate_hz``, Gaussian noise of std ``noise`` (in q's unit) added, published as
-    sensor_msgs/msg/JointState under ``names``. A sample of run time t is stamped ``EPOCH + t + offset_s``, so
-    the recording's time minus the run's is ``offset_s`` (read with time_origin absolute) and, counted from the
-    first message, the recording starts at run time ``offset_s``... its first stamp is the first grid time."""
+                        kind: str = "mcap", latency_s: float = 0.0015) -> Path:
+    """SYNTHETIC ROS 2 bag of a delta robot, not a measurement: ``component``'s q[1..3] from the run log ``log``
+    (cubic spline through its samples) at ``rate_hz``, Gaussian noise of std ``noise`` (q's unit) added, published
+    as sensor_msgs/msg/JointState under the joint ``names`` (header stamps; received ``latency_s`` later).
+
+    The recording starts ``offset_s`` before the run (the robot at rest in its first pose until the run starts),
+    so the recording's time counted from its first message minus the run's time is ``offset_s``: what
+    ``compare --align`` must find. Stamps are ``EPOCH_NS`` + that time."""
     from scipy.interpolate import CubicSpline
 
     from cosim.io.runlog import read_run
@@ -107,14 +109,15 @@ def synthetic_plant_bag(path: Path, log: str | Path, *, rate_hz: float = 250.0, 
     run = read_run(log)
     sigs = [run.signal(f"{component}.q[{i}]") for i in (1, 2, 3)]
     t_run = sigs[0].t
-    t_grid = np.arange(t_run[0], t_run[-1], 1.0 / rate_hz)
+    tau = np.arange(0.0, t_run[-1] + offset_s, 1.0 / rate_hz)  # recording time, from its first message
+    t = np.clip(tau - offset_s, t_run[0], t_run[-1])  # the run time of each sample (held before the start)
     rng = np.random.default_rng(seed)
-    q = np.column_stack([CubicSpline(s.t, s.y)(t_grid) for s in sigs]) + rng.normal(0.0, noise, (len(t_grid), 3))
+    q = np.column_stack([CubicSpline(s.t, s.y)(t) for s in sigs]) + rng.normal(0.0, noise, (len(t), 3))
     store = typestore("ros2")
     msgs = []
-    for t, row in zip(t_grid, q):
-        stamp = EPOCH_NS + round((t + offset_s) * 1e9)
-        msgs.append((stamp + 1_500_000, joint_state(store, stamp, names, row)))
+    for tk, row in zip(tau, q):
+        stamp = EPOCH_NS + round(tk * 1e9)
+        msgs.append((stamp + round(latency_s * 1e9), joint_state(store, stamp, names, row)))
     return write_bag(path, kind, {"/joint_states": ("sensor_msgs/msg/JointState", msgs)})
 
 

@@ -50,6 +50,10 @@ class Comparison:
     only_a: list[str] = field(default_factory=list)
     only_b: list[str] = field(default_factory=list)
     problems: list[str] = field(default_factory=list)  # failures that are not a signal's tolerance
+    # against a recording (cosim.analysis.recording_compare): its time minus the run's, s, and how it was found
+    offset: float | None = None
+    offset_how: str = ""
+    notes: list[str] = field(default_factory=list)
 
     @property
     def failed(self) -> list[ErrorStats]:
@@ -60,6 +64,12 @@ class Comparison:
         return not self.failed and not self.problems
 
     def as_dict(self) -> dict:
+        if self.offset is not None:  # a run against a recording: each signal names its recorded one and the offset
+            return {"run": self.a, "recording": self.b, "ok": self.ok, "t_start": self.t_start,
+                    "t_stop": self.t_stop, "offset_s": self.offset, "offset_how": self.offset_how,
+                    "signals": [{**d.as_dict(*_SIGNAL_KEYS[:1], "reference", *_SIGNAL_KEYS[1:], max_error="max_abs"),
+                                 "offset_s": self.offset} for d in self.diffs],
+                    "notes": self.notes, "failed": [d.name for d in self.failed]}
         return {"a": self.a, "b": self.b, "ok": self.ok, "t_start": self.t_start, "t_stop": self.t_stop,
                 "signals": [d.as_dict(*_SIGNAL_KEYS, max_error="max_abs") for d in self.diffs], "only_a": self.only_a,
                 "only_b": self.only_b, "problems": self.problems,
@@ -78,6 +88,10 @@ class Comparison:
         width = max([len(d.name) for d in rows] + [6])
         head = (f"A = {self.a}\nB = {self.b}\n{len(self.diffs)} common signals over "
                 f"t = {self.t_start:.3f} .. {self.t_stop:.3f} s")
+        if self.offset is not None:
+            head = (f"A = {self.a} (run)\nB = {self.b} (recording)\n{len(self.diffs)} signals over run time "
+                    f"t = {self.t_start:.3f} .. {self.t_stop:.3f} s\noffset (recording - run): {self.offset:.9g} s "
+                    f"({self.offset_how})" + "".join(f"\n{n}" for n in self.notes))
         lines = [head, f"{'signal':<{width}}  {'unit':<5} {'RMSE':>10} {'max|A-B|':>10} {'at t/s':>8} "
                        f"{'tolerance':>10}  verdict"]
         for d in rows:

@@ -36,6 +36,23 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--checked-only", action="store_true", help="list only signals that have a tolerance")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.add_argument("--json", action="store_true", help="the comparison as JSON on stdout")
+    g = p.add_argument_group("against a recording (`compare RUN.mcap RECORDING --map ...`, docs/recordings.md)")
+    g.add_argument("--map", action="append", default=[], metavar="RUN_SIGNAL=RECORDING_SIGNAL",
+                   help="compare the run's signal with the recorded one (plant.q[1]=/joint_states.position[joint1], "
+                        "ctl.q[1]=q1 for a CSV column); repeatable")
+    g.add_argument("--align", action="store_true",
+                   help="estimate the time offset (recording - run): cross-correlation, refined below the step")
+    g.add_argument("--offset", type=NUMBER, default=0.0, metavar="S",
+                   help="the recording's time minus the run's, s (default 0; --align estimates it)")
+    g.add_argument("--max-offset", type=POSITIVE, metavar="S",
+                   help="with --align: largest |offset| tried, s (default half the shorter span)")
+    g.add_argument("--time", choices=("header", "log"), default="header",
+                   help="a bag's header stamps or log (receive) times (default header)")
+    g.add_argument("--time-origin", choices=("first", "absolute"), default="first",
+                   help="recording times from its first message, or absolute (default first)")
+    g.add_argument("--unit", action="append", default=[], metavar="RUN_SIGNAL=UNIT",
+                   help="the unit of the recorded signal mapped to RUN_SIGNAL (bags carry none; default: the run "
+                        "signal's); repeatable")
     p.set_defaults(handler=_cmd_compare, supervised=True)
 
     p = sub.add_parser("baseline", help="decimate a run log into a small baseline for regression tests")
@@ -171,6 +188,8 @@ def _cmd_compare(args: argparse.Namespace) -> int:
         cmp, _ = compare_plants(ins[0], plants, args.out_dir, tol, args.signals or None,
                                 apply_overrides(args.set, args.stop_time), args.component,
                                 progress=not (args.quiet or args.json), on_run=said)
+    elif len(ins) == 2 and (args.map or _is_recording(ins[1])):
+        cmp = _against_recording(args, tol)
     elif len(ins) == 2 and all(Path(x).suffix == ".mcap" for x in ins):
         if args.set or args.stop_time is not None:
             raise CosimError("--set and --stop-time apply to a scenario, not to two logs")
@@ -183,12 +202,45 @@ def _cmd_compare(args: argparse.Namespace) -> int:
                 print(f"tolerances: regression.tolerances of the scenario attached to {ins[0]}", file=sys.stderr)
         cmp = compare_logs(a, b, tol, args.signals or None)
     else:
-        raise CosimError(f"compare takes two .mcap logs or one scenario .yaml, got: {' '.join(ins)}")
+        raise CosimError(f"compare takes two .mcap logs, a log and a recording (bag folder, .mcap, .db3, .bag, "
+                         f".csv) with --map, or one scenario .yaml, got: {' '.join(ins)}")
     if args.checked_only and not cmp.checked:
         raise CosimError("--checked-only: no signal has a tolerance, so nothing was checked; give --tol NAME=VALUE "
                          "(or compare a run with its scenario's baseline, whose regression.tolerances apply)")
     emit(args, cmp.as_dict(), cmp.text(args.checked_only))
     return EXIT_OK if cmp.ok else EXIT_CHECK_FAILED
+
+
+def _is_recording(path: str) -> bool:
+    from ..io.recordings import recording_kind
+
+    return recording_kind(path) in ("ros1", "ros2", "csv")
+
+
+def _against_recording(args: argparse.Namespace, tol: dict):
+    """``compare RUN.mcap RECORDING --map ...``: the run's signals against the recorded ones."""
+    from pathlib import Path
+
+    from ..analysis.recording_compare import compare_recording, parse_maps
+
+    run, recording = args.inputs
+    if Path(run).suffix != ".mcap":
+        raise CosimError(f"compare with a recording: the first input is the run's .mcap log, got {run}")
+    if args.set or args.stop_time is not None or args.signals:
+        raise CosimError("--set, --stop-time and --signals do not apply to a recording; --map names the signals")
+    units = {}
+    for item in args.unit:
+        name, sep, unit = item.partition("=")
+        if not sep or not name.strip():
+            raise CosimError(f"--unit {item!r}: expected RUN_SIGNAL=UNIT, e.g. plant.q[1]=deg")
+        units[name.strip()] = unit.strip()
+    maps = parse_maps(args.map)
+    unmapped = sorted(set(units) - set(maps))
+    if unmapped:
+        raise CosimError(f"--unit {', '.join(unmapped)}: not mapped by any --map")
+    return compare_recording(run, recording, maps, tolerances=tol, units=units, time=args.time,
+                             time_origin=args.time_origin, align=args.align, offset=args.offset,
+                             max_offset=args.max_offset)
 
 
 def _cmd_baseline(args: argparse.Namespace) -> int:
