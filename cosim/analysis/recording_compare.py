@@ -84,13 +84,13 @@ def estimate_offset(run: Sequence[tuple[np.ndarray, np.ndarray]], rec: Sequence[
     ``max_offset`` (s) bounds |offset| (default: half the shorter signal's span)."""
     from scipy.signal import correlate  # lazy: 0.6 s of imports that a comparison without --align never needs
 
-    steps = [float(np.median(np.diff(t))) for t, _ in (*run, *rec)]
     ta0, ta1 = max(t[0] for t, _ in run), min(t[-1] for t, _ in run)
     tb0, tb1 = max(t[0] for t, _ in rec), min(t[-1] for t, _ in rec)
     span_run, span_rec = ta1 - ta0, tb1 - tb0
     if span_run <= 0 or span_rec <= 0:
         raise CosimError("--align: the signals share no time span to correlate (run "
                          f"{ta0:.3f} .. {ta1:.3f} s, recording {tb0:.3f} .. {tb1:.3f} s)")
+    steps = [float(np.median(np.diff(t))) for t, _ in (*run, *rec)]
     step = max(min(steps), max(span_run, span_rec) / MAX_GRID)
     limit = 0.5 * min(span_run, span_rec) if max_offset is None else max_offset
     na, nb = int(span_run / step) + 1, int(span_rec / step) + 1
