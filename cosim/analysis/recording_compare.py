@@ -27,6 +27,8 @@ from .compare import Comparison, logged_tolerances, tolerance_for
 
 __all__ = ["compare_recording", "estimate_offset", "Alignment", "parse_maps", "MAX_GRID"]
 
+_SLACK_S = 1e-9  # stamps are whole ns: a run stamp within 1 ns of the recording's span is inside it
+
 MAX_GRID = 200_000
 """Most points of the common grid the cross-correlation runs on (its step grows to keep within it)."""
 
@@ -124,7 +126,7 @@ def estimate_offset(run: Sequence[tuple[np.ndarray, np.ndarray]], rec: Sequence[
     best = minimize_scalar(lambda x: _residual(pairs, x), bounds=(coarse - step, coarse + step), method="bounded",
                            options={"xatol": step * 1e-6})
     offset = float(best.x) if best.success and best.fun <= _residual(pairs, coarse) else coarse
-    return Alignment(offset, float(lags[m]), step, float(score[m]))
+    return Alignment(round(offset, 12), float(lags[m]), step, float(score[m]))  # below 1 ps: rounding noise
 
 
 def _read(recording: str | Path, maps: Mapping[str, str], run: RunLog, units: Mapping[str, str], time: str,
@@ -171,7 +173,7 @@ def compare_recording(run: RunLog | str | Path, recording: str | Path, maps: Map
     diffs, lo, hi = [], math.inf, -math.inf
     for (name, spec), (t_run, y_run) in zip(maps.items(), pairs_run):
         t_rec = rec.times[name]
-        keep = (t_run + offset >= t_rec[0]) & (t_run + offset <= t_rec[-1])
+        keep = (t_run + offset >= t_rec[0] - _SLACK_S) & (t_run + offset <= t_rec[-1] + _SLACK_S)
         if not keep.any():
             raise CosimError(f"{name}: the run covers t = {t_run[0]:.3f} .. {t_run[-1]:.3f} s and {recording}'s "
                              f"{spec} {t_rec[0]:.3f} .. {t_rec[-1]:.3f} s (offset {offset:.6g} s): no overlap; "
