@@ -8,6 +8,7 @@ import hashlib
 import json
 import math
 import sys
+import threading
 from functools import cached_property
 from pathlib import Path
 from typing import Any, NoReturn
@@ -309,6 +310,28 @@ def spare_wrapper_references(instance) -> None:  # noqa: ANN001
         ctypes.pythonapi.Py_IncRef(ctypes.py_object(obj))
 
 
+_THREAD = threading.local()
+
+
+def hold_thread_state() -> None:
+    """Keep this OS thread's Python thread state for good, the first time one of our FMUs is entered on it.
+
+    FMI lets a host call an instance from any thread, one call at a time (libcosim steps every FMU in its worker
+    threads, not the thread that loaded it). On a thread Python did not start, pythonfmu's binary takes a Python
+    thread state for each FMI call (``PyGILState_Ensure``) and deletes it when the call returns. Exudyn calls our
+    solver callbacks (the plant's ``FinishStep``, the restored Newton matrix) through pybind11, which on such a
+    thread then took the GIL under a thread state other than the one the thread already held it with, and waited
+    for itself for ever (gdb: ``PyEval_AcquireThread`` in ``pybind11::gil_scoped_acquire`` inside
+    ``SolveSteps``; libcosim's main thread waiting in ``fixed_step_algorithm``). One more ``PyGILState_Ensure``,
+    never released, keeps the thread's state alive across calls, as a thread Python started has it: every call
+    and every callback on the thread then runs under the one state. A thread-local marker lives in that state, so
+    a new thread that reuses an old thread's id is held again. Costs one attribute read per call once held."""
+    if getattr(_THREAD, "held", False):
+        return
+    ctypes.pythonapi.PyGILState_Ensure()
+    _THREAD.held = True
+
+
 class StateAccess:
     """FMU state (get, set, free, serialize, deserialize) for the FMI 2 and FMI 3 layers, through pythonfmu's hooks:
     the binary calls ``_get_fmu_state`` and ``_set_fmu_state`` on the instance, frees a state by releasing the
@@ -355,6 +378,7 @@ class StateAccess:
         return fmu_guid(getattr(self, "resources", None), f"unbuilt:{type(self).__module__}.{type(self).__qualname__}")
 
     def _get_fmu_state(self) -> dict:
+        hold_thread_state()
         try:
             snapshot = {"time": self.time, "values": dict(self.values), "flags": self._flags(),
                         "internal": self.internal_state() if self._built else None}
@@ -364,6 +388,7 @@ class StateAccess:
         return {"format": STATE_FORMAT, "fmu": self.modelName, "guid": self.fmu_guid, "state": snapshot}
 
     def _set_fmu_state(self, state) -> None:  # noqa: ANN001
+        hold_thread_state()
         reason = self._refusal(state)
         if reason is not None:
             self._raise(FmuStateError(f"{self.modelName} at t = {self.time!r} s: FMU state refused: {reason}"))

@@ -48,7 +48,7 @@ from pythonfmu.default_experiment import DefaultExperiment
 from pythonfmu.variables import Boolean, Integer, Real, String
 
 from ._names import (UNITS, XYZ, StateAccess, ValueAccess, axis_names, compensate_exporter_refcount, component,
-                     initial_knowns, joint_names, writer)
+                     hold_thread_state, initial_knowns, joint_names, writer)
 
 __all__ = ["Adapter", "Depends", "UNITS", "XYZ", "joint_names", "axis_names", "DefaultExperiment", "writer"]
 
@@ -168,6 +168,7 @@ class Adapter(StateAccess, ValueAccess, Fmi2Slave):
 
     def _update(self) -> None:
         """Bring the outputs up to date: build from the parameters if needed, then refresh."""
+        hold_thread_state()
         if not self._built:
             self.start()
             self._built = True
@@ -311,6 +312,7 @@ class Adapter(StateAccess, ValueAccess, Fmi2Slave):
         self.time = float(start_time)
 
     def exit_initialization_mode(self) -> None:
+        hold_thread_state()
         if not self._built:  # no output was read in initialization mode
             self.start()
             self._built = True
@@ -319,6 +321,7 @@ class Adapter(StateAccess, ValueAccess, Fmi2Slave):
 
     def do_step(self, current_time: float, step_size: float) -> bool:
         """One communication step; False (fmi2Discard) with the reason logged when it cannot be taken."""
+        hold_thread_state()
         if self._failed is not None:
             self.log(f"doStep at t = {current_time!r} s refused: an earlier step failed ({self._failed}); "
                      "this instance cannot continue", Fmi2Status.error)

@@ -36,7 +36,8 @@ from pythonfmu3 import (
 
 from delta.errors import ParameterError
 
-from ._names import UNITS, StateAccess, ValueAccess, compensate_exporter_refcount, component, initial_knowns
+from ._names import (UNITS, StateAccess, ValueAccess, compensate_exporter_refcount, component, hold_thread_state,
+                     initial_knowns)
 
 __all__ = ["AdapterME"]
 
@@ -158,6 +159,7 @@ class AdapterME(StateAccess, ValueAccess, Fmi3SlaveBase, ModelExchange):
     def _build(self) -> None:
         """Build the model and the initial states from the current parameters if not done yet."""
         if not self._built:
+            hold_thread_state()
             self.start()
             self._built = True
             self._stale = True
@@ -186,6 +188,7 @@ class AdapterME(StateAccess, ValueAccess, Fmi3SlaveBase, ModelExchange):
         """Fill the output variables (other than the states) from the states and inputs."""
 
     def exit_initialization_mode(self) -> None:
+        hold_thread_state()
         self._build()
         self._initialized = True
 
