@@ -213,6 +213,19 @@ def test_a_cut_bag_reads_what_is_readable_and_says_where_it_ends(tmp_path):
     _one_line(exc)
 
 
+def test_a_bag_folder_whose_recorder_was_killed(tmp_path):
+    """No metadata.yaml (the recorder writes it last) and its MCAP file cut: read from the file, said so."""
+    bag = joint_states_bag(tmp_path / "b", "mcap", T, Q, noise_bytes=40_000)
+    (bag / "metadata.yaml").unlink()
+    mcap = next(bag.glob("*.mcap"))
+    mcap.write_bytes(mcap.read_bytes()[:3_000_000])
+    assert recording_kind(bag) == "ros2"
+    rec = read_recording(bag, {"a": SPECS["q1"]})
+    n = len(rec.values["a"])
+    assert 0 < n < len(T) and np.array_equal(rec.values["a"], Q[:n, 0]), n
+    assert "metadata.yaml" in rec.end_note and "ends early at byte 3,000,000" in rec.end_note, rec.end_note
+
+
 def test_not_a_recording(tmp_path):
     path = tmp_path / "x.txt"
     path.write_text("hello")

@@ -38,8 +38,9 @@ class BagSamples:
 
 def bag_kind(path: Path) -> str | None:
     """'ros2' (a bag folder, a ``.db3`` or an MCAP file of profile ros2), 'ros1' (``.bag``), or None."""
-    if path.is_dir():
-        return "ros2" if (path / "metadata.yaml").is_file() else None
+    if path.is_dir():  # a bag folder; one without metadata.yaml (its recorder killed before writing it) too
+        found = (path / "metadata.yaml").is_file() or any(path.glob("*.mcap")) or any(path.glob("*.db3"))
+        return "ros2" if found else None
     if path.suffix == ".bag":
         return "ros1"
     if path.suffix == ".db3":
@@ -71,6 +72,12 @@ def read_bag(path: Path, specs: Mapping[str, BagSpec], time: str) -> BagSamples:
     message's ``header.stamp``, or that of the innermost element on the spec's path that has one) or 'log'
     (the time the recorder received it)."""
     kind = bag_kind(path) or "ros2"
+    if path.is_dir() and not (path / "metadata.yaml").is_file():
+        db3 = sorted(path.glob("*.db3"))
+        if len(db3) == 1 and not any(path.glob("*.mcap")):  # rosbags reads a SQLite file by itself
+            return read_bag(db3[0], specs, time)
+        return _read_cut(path, _cut_mcap(path) or [], specs, time, "no metadata.yaml: its recorder stopped before "
+                                                                     "writing it")
     try:
         with AnyReader([path], default_typestore=_typestore(kind)) as reader:
             topics = {c.topic: c.msgtype for c in reader.connections}
