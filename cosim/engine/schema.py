@@ -64,10 +64,11 @@ class Component(_Model):
                             "(ours declare them)")
     rtol: float = Field(1e-6, gt=0, description="model exchange: the integrator's relative tolerance (absolute "
                                                 "tolerance: rtol times each state's nominal value)")
-    solver: Literal["cvode", "dop853"] = Field(
-        "cvode", description="model exchange: 'cvode' (SUNDIALS BDF, as FMPy; for stiff models) or 'dop853' "
-                             "(SciPy's explicit Runge-Kutta 8(5,3); restarts for free, for non-stiff models whose "
-                             "inputs change at every communication step)")
+    solver: Literal["cvode", "dopri5", "dop853"] = Field(
+        "cvode", description="model exchange: 'cvode' (SUNDIALS BDF, as FMPy; for stiff models), 'dopri5' "
+                             "(Dormand-Prince 5(4); restarts for free, for non-stiff models whose inputs change at "
+                             "every communication step; in C, as cvode, where a C compiler is) or 'dop853' "
+                             "(SciPy's explicit Runge-Kutta 8(5,3), Python)")
     max_step: float | None = Field(
         None, gt=0, description="model exchange: largest internal step, s (default: bounded only by the "
                                 "communication step; the integrator never steps past a communication point)")

@@ -7,19 +7,28 @@ stop time it must not pass, locates state events (a sign change of an event indi
 its own tolerance, and leaves the FMU at the time and states it reached. It is re-started
 (:meth:`reset`) only after an event or when an input changed, as FMPy and OMSimulator do.
 
-Two integrators behind one protocol, chosen per component in the scenario (``solver:``):
+Three integrators behind one protocol, chosen per component in the scenario (``solver:``):
 
 - ``cvode`` (the default): SUNDIALS CVode from fmpy's bundled libraries, BDF with a dense
   direct linear solver: the solver FMPy's ``simulate_fmu`` uses, robust for the stiff models
   third-party tools export. Its root finding locates state events to about
   ``100 * eps * (|t| + |h|)``. A multistep method restarts at order one: when an input changes
   at every communication step (a plant fed by a controller), every step restarts it.
+- ``dopri5``: the explicit Dormand-Prince 5(4) pair with its dense output, state events located
+  on the dense output by bisection to ``100 * eps * (|t| + |h|)``, as CVode does. A one-step
+  method restarts for free: the choice for non-stiff models whose inputs change at every
+  communication step.
 - ``dop853``: SciPy's explicit Runge-Kutta of order 8(5,3) stepped one step at a time
-  (``scipy.integrate.DOP853``), with state events located on its dense output by bisection to
-  ``100 * eps * (|t| + |h|)``, as CVode does. A one-step method restarts for free, so it is the
-  better choice for non-stiff models whose inputs change at every communication step.
+  (``scipy.integrate.DOP853``), events located the same way (Python only).
 
-Both keep any exception raised by the model inside a solver callback (an FMI status check)
+``cvode`` and ``dopri5`` run in C where the helper ``me_loop.c`` can be built (:mod:`cosim.fmi.me_c`: one
+call from Python per advance, every FMU call of the integration made from C; the master asks there first).
+Without a C compiler they fall back to the Python integrators here (:func:`make_integrator`): CVode through fmpy's ctypes bindings with Python callbacks
+(:class:`CVodeIntegrator`), and SciPy's ``RK45``, the same Dormand-Prince pair, stepped like ``dop853``
+(:class:`SciPyIntegrator`). The results of the two paths agree to the integrator's tolerance (CVode: the
+same library, bit for bit; DOPRI5: two implementations of one method).
+
+All keep any exception raised by the model inside a solver callback (an FMI status check)
 and re-raise it from :meth:`advance`, so a failing FMU call is reported as itself.
 """
 
@@ -35,7 +44,7 @@ from ..errors import CosimError, SettingError
 
 __all__ = ["OdeModel", "Integrator", "make_integrator", "SOLVERS", "IntegratorError"]
 
-SOLVERS = ("cvode", "dop853")
+SOLVERS = ("cvode", "dop853", "dopri5")
 
 
 class IntegratorError(CosimError, RuntimeError):
@@ -59,6 +68,10 @@ class OdeModel(Protocol):
 
 
 class Integrator(Protocol):
+    completes: bool  # optional (absent: False): advance() itself makes the completedIntegratorStep call
+    step_event: bool  # when it does: the call's enterEventMode, of the last advance
+    terminate: bool  # and its terminateSimulation
+
     def reset(self, t: float) -> None:
         """Restart at time ``t`` from the model's current continuous states."""
 
@@ -70,12 +83,13 @@ class Integrator(Protocol):
 
 
 def make_integrator(name: str, model: OdeModel, t0: float, rtol: float, max_step: float) -> Integrator:
-    """The integrator ``name`` (one of :data:`SOLVERS`) for ``model`` starting at ``t0``."""
+    """The Python integrator ``name`` (one of :data:`SOLVERS`) for ``model`` starting at ``t0`` (the C ones:
+    :func:`cosim.fmi.me_c.make_c_integrator`, tried first by the master)."""
+    if name not in SOLVERS:
+        raise SettingError(f"unknown solver {name!r}; valid: {', '.join(SOLVERS)}")
     if name == "cvode":
         return CVodeIntegrator(model, t0, rtol, max_step)
-    if name == "dop853":
-        return DOP853Integrator(model, t0, rtol, max_step)
-    raise SettingError(f"unknown solver {name!r}; valid: {', '.join(SOLVERS)}")
+    return SciPyIntegrator(model, t0, rtol, max_step, "RK45" if name == "dopri5" else "DOP853")
 
 
 def _root_tolerance(t: float, h: float) -> float:
@@ -96,7 +110,10 @@ class CVodeIntegrator:
 
     MAX_NUM_STEPS = 100_000  # internal steps allowed per call (one call never passes a communication point)
 
-    def __init__(self, model: OdeModel, t0: float, rtol: float, max_step: float) -> None:
+    def __init__(self, model: OdeModel, t0: float, rtol: float, max_step: float, rhs: Any = None,
+                 roots: Any = None) -> None:
+        """``rhs`` and ``roots``: a CVRhsFn and a CVRootFn to use instead of this class's Python callbacks (the C
+        ones of :class:`cosim.fmi.me_c.CVode`, which then also sets the user data and drives the solver)."""
         from fmpy.sundials import (  # lazy: --help loads this module without it
             CV_BDF,
             NV_DATA_S,
@@ -140,8 +157,8 @@ class CVodeIntegrator:
         self.px = NV_DATA_S(self.x)
         self.pabstol = NV_DATA_S(self.abstol)
         self.mem = CVodeCreate(CV_BDF, self.ctx)
-        self._f = CVRhsFn(self._rhs)
-        self._g = CVRootFn(self._roots)
+        self._f = CVRhsFn(self._rhs) if rhs is None else rhs
+        self._g = CVRootFn(self._roots) if roots is None else roots
         self._eh = SUNErrHandlerFn(self._on_error)
         self._read_state()
         self._ok(CVodeInit(self.mem, self._f, t0, self.x), "CVodeInit")
@@ -222,15 +239,18 @@ class CVodeIntegrator:
         return t, flag == 2  # CV_ROOT_RETURN
 
 
-# --------------------------------------------------------------------------- DOP853
+# --------------------------------------------------------------------------- SciPy's DOP853 and RK45
 
 
-class DOP853Integrator:
-    """SciPy's DOP853, one step at a time, with state events located on its dense output."""
+class SciPyIntegrator:
+    """SciPy's ``DOP853`` or ``RK45`` (``method``), one step at a time, with state events located on its dense
+    output."""
 
     MAX_NUM_STEPS = 10_000  # steps per call (one call never passes a communication point; a healthy one takes 1-2)
 
-    def __init__(self, model: OdeModel, t0: float, rtol: float, max_step: float) -> None:
+    def __init__(self, model: OdeModel, t0: float, rtol: float, max_step: float, method: str = "DOP853") -> None:
+        self.method = method
+        self.label = "DOPRI5 (SciPy's RK45)" if method == "RK45" else method  # in its messages
         self.model = model
         self.rtol = rtol
         self.max_step = max_step
@@ -273,10 +293,10 @@ class DOP853Integrator:
         self._z_prev = self._indicators(t, self._x) if self.model.nz else None
 
     def _start(self, t_stop: float) -> None:
-        from scipy.integrate import DOP853  # lazy: --help loads this module without it
+        import scipy.integrate  # lazy: --help loads this module without it
 
         first = None if self._h_last is None else min(self._h_last, t_stop - self.t)
-        self._solver = DOP853(self._fun, self.t, self._x, t_stop, rtol=self.rtol, atol=self._atol,
+        self._solver = getattr(scipy.integrate, self.method)(self._fun, self.t, self._x, t_stop, rtol=self.rtol, atol=self._atol,
                               max_step=self.max_step, first_step=first)
 
     def advance(self, t_stop: float) -> tuple[float, bool]:
@@ -293,11 +313,11 @@ class DOP853Integrator:
             t_old = s.t
             msg = s.step()
             if s.status == "failed":
-                raise IntegratorError(f"DOP853 failed at t = {t_old:.9g} s: {msg}")
+                raise IntegratorError(f"{self.label} failed at t = {t_old:.9g} s: {msg}")
             steps += 1
             if steps > self.MAX_NUM_STEPS:
                 raise IntegratorError(
-                    f"DOP853 took {self.MAX_NUM_STEPS} steps without reaching t = {t_stop:.9g} s (at t = {s.t:.9g} s, "
+                    f"{self.label} took {self.MAX_NUM_STEPS} steps without reaching t = {t_stop:.9g} s (at t = {s.t:.9g} s, "
                     f"step {s.step_size:.3g} s): the model is stiff or diverging (solver: cvode handles stiff models)")
             self._h_last = s.h_abs  # the step size it proposes next: where the next start begins
             if self.model.nz:
