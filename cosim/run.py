@@ -21,6 +21,7 @@ from .errors import CosimError
 from .fmi import Extractions, cleanup_extracted
 from .io.checkpoint import CheckpointError, default_checkpoint_path, write_checkpoint
 from .io.output import OutputError, check_output, claim
+from .observers.live import LiveView
 from .observers.mcap_log import McapRecorder
 from .observers.publish import Publisher
 from .observers.realtime import RealTime
@@ -136,8 +137,6 @@ def _publishing(scenario: Scenario, mcap_path: Path | None, options: RunOptions)
     sinks: list[Observer] = []
     recorder = None
     if options.live is not None:  # first: a port in use fails before the log file is opened
-        from .observers.live import LiveView  # lazy: foxglove's server, for --live only
-
         host, port = options.live
         sinks.append(LiveView(publisher, port, host))
     if mcap_path is not None:
