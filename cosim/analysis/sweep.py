@@ -1,4 +1,4 @@
-"""Parameter sweeps on Dask: a grid or random samples of dotted-name overrides, one run per case.
+"""Parameter sweeps: a grid or random samples of dotted-name overrides, one run per case.
 
 ``python -m cosim sweep SCENARIO --grid ctl.gain.kp=1e4,4e4 --random plant.mass.payload=uniform(0,0.5) -n 8``
 
@@ -7,12 +7,16 @@
 - The scenario file is read once; each case is that scenario with its overrides, validated
   (every case before anything runs) and sent to a worker as it is (a frozen Scenario, plain
   data). Our FMUs are built once, before the sweep, and reach the workers as file paths; FMU
-  handles never leave the process that ran the case. Each case extracts its FMUs and removes
-  them at its end, as every run does (:func:`cosim.run.run_scenario`; tens of ms a case): a
-  worker ended between cases leaves nothing in the temporary directory, and a worker of a
-  long-lived cluster never runs an FMU rebuilt since from an older extraction.
-- Cases run on Dask: an embedded ``LocalCluster`` of single-threaded worker processes, or an
-  existing cluster (``--scheduler tcp://host:8786``). A dead worker's cases are rescheduled. Each case runs
+  handles never leave the process that ran the case. On the embedded pool the first case's FMUs are extracted
+  once, before the workers fork, and removed when the sweep ends (a case of other FMUs extracts its own); on a
+  Dask cluster each case extracts its FMUs and removes them at its end, as every run does
+  (:func:`cosim.run.run_scenario`; tens of ms a case): a worker ended between cases leaves nothing in the
+  temporary directory, and a worker of a long-lived cluster never runs an FMU rebuilt since from an older
+  extraction.
+- Cases run on an embedded pool of worker processes forked from this process once it is prepared (the cases
+  validated, the FMUs built, checked and extracted once: :func:`extract_for_cases`), or on an existing Dask cluster
+  (``--scheduler tcp://host:8786``), where a dead worker's cases are rescheduled (:mod:`cosim.analysis.cluster`
+  says why the embedded one is not Dask's). Each case runs
   in a child process of its worker, supervised as ``python -m cosim run`` is (:func:`run_loaded_case`): an FMU
   that segfaults, aborts or calls ``exit()`` fails its case, with the component, the time and the signal in
   its message, and the worker goes on (it died instead, and Dask retried the case on 3 more workers, each
@@ -59,7 +63,7 @@ from ..engine.prepare import build_key, build_ours, locate_fmus
 from ..engine.scenario import load_scenario, read_scenario
 from ..engine.system import SystemPlan, build_plan
 from ..errors import CosimError, ScenarioError, exit_now, written_by_rename
-from ..fmi import cleanup_extracted
+from ..fmi import Extractions, cleanup_extracted
 from ..fmi.extract import sweep_orphans
 from ..io.checkpoint import Checkpoint, file_sha256, read_checkpoint
 from ..io.output import output_dir
@@ -67,14 +71,15 @@ from ..io.recover import recover_crashed
 from ..observers.recorders import PeakEffort
 from ..run import resumed_scenario, run_scenario
 from .cases import Case, SweepError
-from .cluster import SweepCluster
+from .cluster import ForkPool, SweepCluster
 from .metrics import metric_names, metrics
 from .results import RESULTS, cell, read_meta, read_results, started, table_columns
 
 if TYPE_CHECKING:
     from ..engine.schema import Scenario
 
-__all__ = ["SweepSummary", "WarmStart", "dask_setup", "dask_teardown", "prebuild", "run_loaded_case", "run_sweep"]
+__all__ = ["SweepSummary", "WarmStart", "dask_setup", "dask_teardown", "extract_for_cases", "prebuild", "run_loaded_case",
+           "run_sweep"]
 
 
 @dataclass(frozen=True)
@@ -247,10 +252,10 @@ def run_sweep(scenario: str | Path, cases: list[Case], out: str | Path, *, worke
               scheduler: str | None = None, logs: bool = False,
               on_progress: Callable[[int, int, int], None] | None = None,
               checkpoint: str | Path | None = None, stop_time: float | None = None) -> SweepSummary:
-    """Run ``cases`` of ``scenario`` on Dask, appending each result to ``out/results.csv``.
+    """Run ``cases`` of ``scenario`` on worker processes, appending each result to ``out/results.csv``.
 
-    Cases already in the table are skipped. ``workers``: size of the embedded ``LocalCluster``
-    (default: the CPU count); ``scheduler``: address of an existing cluster instead.
+    Cases already in the table are skipped. ``workers``: size of the embedded pool of forked workers
+    (default: the CPU count); ``scheduler``: address of an existing Dask cluster instead.
     ``on_progress(done, failed, total)`` after each case. Raises :class:`ScenarioError` for a bad
     override name or value (checked for every case before anything runs).
 
@@ -296,13 +301,29 @@ def run_sweep(scenario: str | Path, cases: list[Case], out: str | Path, *, worke
         raise
     if logs:
         (out / "logs").mkdir(exist_ok=True)
-    with cluster as (client, label):
-        _run_cases(client, todo, fmu_files, out, columns, params, warm, logs,
-                   lambda n_done: on_progress(n_done, len(failed), len(cases)) if on_progress else None,
-                   len(finished), failed)
-        summary.workers = label
+    held = Extractions()
+    try:
+        if cluster.forks:  # the workers fork from here: every case's child finds the FMUs extracted
+            extract_for_cases(held, todo[0][1], fmu_files)
+        with cluster as (client, label):
+            _run_cases(client, todo, fmu_files, out, columns, params, warm, logs,
+                       lambda n_done: on_progress(n_done, len(failed), len(cases)) if on_progress else None,
+                       len(finished), failed)
+            summary.workers = label
+    finally:
+        cluster.close()
+        held.release()
     summary.wall_time = time.perf_counter() - t_start
     return summary
+
+
+def extract_for_cases(held: Extractions, scenario: Scenario, fmu_files: dict[tuple[str, bool, int], str]) -> None:
+    """Extract ``scenario``'s FMUs here, held by ``held`` until ``held.release()`` (the sweep's end): the forked
+    workers and their cases' children share these directories (a case holds them too, so its end removes nothing; a case of other FMUs
+    extracts its own, as any run). Extracting and removing each FMU for every case cost 30 ms a case or more."""
+    with held:
+        for info in locate_fmus(scenario, fmu_files).values():
+            info.unzipdir  # noqa: B018 - extracted on first use
 
 
 def _loaded(scenario: str, cases: list[Case], params: list[str], checkpoint: str | Path | None,
@@ -345,7 +366,10 @@ def _run_cases(client: Any, todo: list[tuple[Case, Scenario]], fmu_files: dict[t
                progress: Callable[[int], None], n_done: int, failed: dict[str, str]) -> None:
     """Submit ``todo`` to the cluster and append each row to ``out``'s table as it arrives (flushed); a case that
     did not pass goes into ``failed``; ``progress(cases done)`` after each."""
-    from distributed import as_completed  # lazy: --help loads this module without it
+    if isinstance(client, ForkPool):
+        as_completed = client.as_completed
+    else:
+        from distributed import as_completed  # lazy: --help loads this module without it
 
     table = out / RESULTS
     new = not table.exists() or table.stat().st_size == 0

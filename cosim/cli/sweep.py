@@ -41,7 +41,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                         "time")
     g = p.add_mutually_exclusive_group()
     g.add_argument("--workers", type=number_option(whole=True, ge=1, le=MAX_WORKERS), default=None, metavar="W",
-                   help="embedded Dask LocalCluster of W single-threaded worker processes (default: CPU count)")
+                   help="embedded pool of W worker processes forked from this one, each running one case at a time "
+                        "(default: CPU count)")
     g.add_argument("--scheduler", metavar="ADDRESS", help="run on an existing Dask cluster (tcp://host:8786)")
     p.add_argument("--out", required=True, metavar="DIR", help="directory of results.csv (and logs/)")
     p.add_argument("--logs", action="store_true", help="write each case's MCAP log to DIR/logs/<case>.mcap")

@@ -1,0 +1,71 @@
+"""The embedded sweep's pool of forked workers (cosim.analysis.cluster.ForkPool, issue 36): its FMUs extracted once
+and removed at the end, a worker killed mid-sweep fails only what it had not returned (the same call again runs
+it), each case's values those of a run in this process. Short runs keep it fast."""
+
+from __future__ import annotations
+
+import multiprocessing
+import os
+import signal
+import tempfile
+from pathlib import Path
+
+import pytest
+
+from cosim.analysis.cases import Case
+from cosim.analysis.cluster import can_fork
+from cosim.analysis.sweep import _run_case, prebuild, read_results, run_sweep
+from cosim.engine.overrides import dotted_overrides
+from cosim.engine.scenario import read_scenario
+
+pytestmark = [pytest.mark.integration,
+              pytest.mark.skipif(not can_fork(), reason="the embedded pool forks (POSIX); elsewhere it is Dask's")]
+ROOT = Path(__file__).parents[2]
+SCENARIO = str(ROOT / "scenarios" / "helix_ctc_analytic.yaml")
+
+
+def _extractions() -> set[str]:
+    """This process's FMU extraction directories in the temporary folder."""
+    return {p.name for p in Path(tempfile.gettempdir()).glob(f"cosim-fmu-{os.getpid()}-*")}
+
+
+def test_pool_cases_equal_runs_here_and_leave_no_extraction(tmp_path):
+    cases = [Case({"time.stop": 0.05, "ctl.gain.kp[1]": kp}) for kp in (1e4, 2e4, 3e4)]
+    before = _extractions()
+    summary = run_sweep(SCENARIO, cases, tmp_path / "out", workers=2)
+    assert summary.ok and summary.workers == "2 local worker processes", summary.text()
+    assert _extractions() == before, f"left behind: {sorted(_extractions() - before)}"
+    rows = {r["case"]: r for r in read_results(tmp_path / "out")}
+    source = read_scenario(SCENARIO)
+    fmu_files = prebuild([source.load(dotted_overrides(cases[0].values))])
+    for c in cases:  # the same case run in this process, unsupervised: every metric digit for digit
+        here = _run_case(source.load(dotted_overrides(c.values, "sweep case")), fmu_files, None)
+        for k in ("rmse_x", "rmse_y", "rmse_z", "max_error_x", "peak_effort", "steps"):
+            assert float(rows[c.id][k]) == float(here[k]), (c.values, k, rows[c.id][k], here[k])
+    assert _extractions() == before, f"left behind: {sorted(_extractions() - before)}"
+
+
+def test_a_pool_worker_killed_mid_sweep_fails_what_it_had_not_returned(tmp_path):
+    """SIGKILL to a worker after the first row: the sweep returns (no hang), the cases not returned are ``lost`` (a
+    dead pool runs nothing more), and the same call again runs exactly those."""
+    cases = [Case({"time.stop": 0.3, "ctl.gain.kp[1]": 1e4 + 1e3 * k}) for k in range(8)]
+    killed: list[int] = []
+
+    def kill_one(done: int, failed: int, total: int) -> None:  # noqa: ARG001
+        workers = [p for p in multiprocessing.active_children() if p.pid is not None]
+        if done >= 1 and not killed and workers:
+            killed.append(workers[0].pid)
+            os.kill(workers[0].pid, signal.SIGKILL)
+
+    out = tmp_path / "out"
+    first = run_sweep(SCENARIO, cases, out, workers=2, on_progress=kill_one)
+    assert killed, "no worker to kill"
+    rows = read_results(out)
+    assert len(rows) == len(cases), f"{len(rows)} rows for {len(cases)} cases"
+    lost = [r for r in rows if r["status"] == "lost"]
+    assert lost and all("BrokenProcessPool" in r["message"] for r in lost), [(r["status"], r["message"]) for r in rows]
+    assert not first.ok and len(first.failed) == len(lost), first.text()
+    again = run_sweep(SCENARIO, cases, out, workers=2)
+    assert (again.ran, again.skipped) == (len(lost), len(cases) - len(lost)), again.text()
+    done = {r["case"]: r["status"] for r in read_results(out)}
+    assert all(done[c.id] == "ok" for c in cases), done
