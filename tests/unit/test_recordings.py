@@ -213,6 +213,21 @@ def test_a_cut_bag_reads_what_is_readable_and_says_where_it_ends(tmp_path):
     _one_line(exc)
 
 
+@pytest.mark.parametrize("kind, name, said", [
+    ("ros1", "b.bag", r"cannot read the ROS1 bag: .*`rosbag reindex` rebuilds it"),
+    ("sqlite", "b", r"cannot read the ROS2 bag: .*malformed.*`sqlite3 FILE .recover`"),
+])
+def test_a_cut_ros1_or_sqlite_bag_is_one_line_with_the_remedy(tmp_path, kind, name, said):
+    """Neither format can be streamed past a cut (ROS 1's index is at its end, SQLite's pages): one line."""
+    bag = joint_states_bag(tmp_path / name, kind, T, Q, noise_bytes=20_000)
+    whole = bag if kind == "ros1" else next(bag.glob("*.db3"))
+    cut = tmp_path / f"cut{whole.suffix}"
+    cut.write_bytes(whole.read_bytes()[:whole.stat().st_size // 2])
+    with pytest.raises(RecordingError, match=said) as exc:
+        read_recording(cut, {"a": SPECS["q1"]})
+    _one_line(exc)
+
+
 def test_a_bag_folder_whose_recorder_was_killed(tmp_path):
     """No metadata.yaml (the recorder writes it last) and its MCAP file cut: read from the file, said so."""
     bag = joint_states_bag(tmp_path / "b", "mcap", T, Q, noise_bytes=40_000)

@@ -91,8 +91,14 @@ def read_bag(path: Path, specs: Mapping[str, BagSpec], time: str) -> BagSamples:
             raise
         cut = _cut_mcap(path)
         if cut is None:
-            raise RecordingError(f"{path}: cannot read the {kind.upper()} bag: {_said(exc)}") from None
+            hint = _HINTS.get("ros1" if kind == "ros1" else path.suffix, "")
+            raise RecordingError(f"{path}: cannot read the {kind.upper()} bag: {_said(exc)}{hint}") from None
         return _read_cut(path, cut, specs, time, _said(exc))
+
+
+# what to do with a cut bag the reader cannot stream: a ROS 1 bag's index is at its end, SQLite's pages are whole
+_HINTS = {"ros1": " (a ROS 1 bag cut short has lost its index: `rosbag reindex` rebuilds it)",
+          ".db3": " (a SQLite bag cut short: `sqlite3 FILE .recover` saves what is readable into a new database)"}
 
 
 def _said(exc: BaseException) -> str:
