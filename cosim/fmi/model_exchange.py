@@ -15,6 +15,8 @@ from .me_c import FAILED, STEP_ADVANCE, STEP_EVENT, STEP_GET, STEP_SET, MacroSte
 from .slave import Terminated
 from .turn import DERIVATIVES, STATES, TIME, Exchange, Finite, make_rhs
 
+QUIET_COMPLETERS = ("delta-cosim fmus.native",)  # generationTool prefixes: completedIntegratorStep never asks for
+# event mode (ModelExchange.c_turn); a string of the FMU's model description, no import of the FMU builder
 isfinite = math.isfinite  # a module global: one lookup less per output buffer in the hot path
 
 
@@ -325,13 +327,21 @@ class ModelExchange:
 
     def c_turn(self) -> tuple[Any, bool] | None:
         """For a loop in C (``cosim.engine.cloop``): the C macro step as a turn, and whether its calls run Python
-        (a PythonFMU: called with the Python lock held); None where a state or time event could arise (event
-        indicators, a pending time event): those take the Python loop. A loop in C cannot stop inside a macro step
-        for an event iteration: a completedIntegratorStep asking for event mode there is an error saying so (no
-        FMU of ours asks; terminateSimulation ends the run as in the Python loop)."""
-        if self._c_step is None or not self._continuous or self.nz or self.next_event is not None:
+        (a PythonFMU: called with the Python lock held); None where an event could arise in the step (event
+        indicators, a pending time event, a completedIntegratorStep that may ask for event mode): a loop in C
+        cannot stop inside a macro step for an event iteration, so those take the Python loop.
+        terminateSimulation from completedIntegratorStep ends the run as in the Python loop."""
+        if self._c_step is None or not self._continuous or self.nz or self.next_event is not None or \
+                self._needs_completed and not self._completes_quietly:
             return None
         return self._c_step.turn(), self._pythonfmu
+
+    @property
+    def _completes_quietly(self) -> bool:
+        """Whether the FMU's completedIntegratorStep is known never to ask for event mode: the native build of
+        this project (its generationTool; its completedIntegratorStep only checks the accepted state). Any other
+        FMU that needs the call may ask (a step event) and takes the Python loop, which handles it."""
+        return (self.info.md.generationTool or "").startswith(QUIET_COMPLETERS)
 
     def turn_failed(self, ended: int, t: float, h: float) -> None:
         """Raise for a C turn (:meth:`c_turn`) from ``t`` over ``h`` that a loop in C ran and that ended early, as
@@ -339,10 +349,10 @@ class ModelExchange:
         t_end = t + h
         how = self._c_step.state.ended
         fmu = self.integrator.fmu
-        if how == STEP_EVENT and not fmu.terminate:  # c_turn offers no turn where a state or time event could arise
-            raise CosimError(f"{self.name}: {self._completed_name} asked for event mode at t = {t_end} s "
-                             "in the master's loop in C, which cannot stop inside a macro step for it (a step event; "
-                             "a run with an observer other than the error sums, e.g. a log, takes the Python loop)")
+        if how == STEP_EVENT and not fmu.terminate:  # c_turn offers no turn where an event could arise
+            raise CosimError(f"{self.name}: {self._completed_name} asked for event mode at t = {t_end} s in the "
+                             "master's loop in C, which cannot stop inside a macro step: its generationTool promised "
+                             "it never would")
         self._step_ended(how, t, t_end, 100.0 * 2.220446049250313e-16 * max(1.0, abs(t_end)))
 
     def _step_ended(self, ended: int, t: float, t_end: float, tol: float) -> None:
