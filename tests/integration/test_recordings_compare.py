@@ -16,6 +16,10 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from cli_helpers import cosim  # noqa: E402
 from recording_helpers import synthetic_plant_bag, write_csv  # noqa: E402
 
+from cosim.analysis.recording_compare import compare_recording  # noqa: E402
+from cosim.errors import CosimError  # noqa: E402
+from cosim.io.runlog import read_run  # noqa: E402
+
 pytestmark = pytest.mark.integration
 
 RUN = Path(__file__).resolve().parents[1] / "golden" / "helix_ctc.mcap"  # linear delta, q in m, every 20 ms
@@ -47,34 +51,30 @@ def test_align_recovers_a_fractional_offset_and_reports_each_signal(bag):
 
 
 def test_without_align_the_given_offset_is_used_and_a_wrong_one_fails_the_tolerance(bag):
-    good = json.loads(cosim("compare", RUN, bag, *MAPS, "--offset", str(OFFSET_S), "--json", "--tol",
-                            "plant.q=5e-4").stdout)
-    bad = cosim("compare", RUN, bag, *MAPS, "--json", "--tol", "plant.q=5e-4")
-    assert good["ok"] and good["offset_s"] == OFFSET_S and good["offset_how"] == "given", good
-    assert bad.returncode == 1, bad.stdout
-    worst = max(s["max_abs"] for s in json.loads(bad.stdout)["signals"])
-    assert worst > 5e-4, f"0.21 s off, the joints differ by more than the tolerance: {worst}"
+    maps = {f"plant.q[{i}]": f"/joint_states.position[delta_joint_{i}]" for i in (1, 2, 3)}
+    good = compare_recording(RUN, bag, maps, offset=OFFSET_S, tolerances={"plant.q": 5e-4})
+    bad = compare_recording(RUN, bag, maps, tolerances={"plant.q": 5e-4})
+    assert good.ok and good.offset == OFFSET_S and good.offset_how == "given", good.text()
+    worst = max(d.max_error for d in bad.diffs)
+    assert not bad.ok and worst > 5e-4, f"0.21 s off, the joints differ by more than the tolerance: {worst}"
 
 
 def test_the_runs_own_regression_tolerances_apply(bag):
     """helix_ctc's regression.tolerances (1e-9 m on plant.q, for its baseline) travel in its log: a
-    measurement is held to them when no --tol is given, and fails them (noise 1e-6 m)."""
-    res = cosim("compare", RUN, bag, *MAPS, "--align")
-    assert res.returncode == 1 and "FAILED: plant.q[1]" in res.stdout and "tolerance 1e-09 m" in res.stdout, \
-        res.stdout
+    measurement is held to them when no tolerance is given, and fails them (noise 1e-6 m)."""
+    cmp = compare_recording(RUN, bag, {"plant.q[1]": "/joint_states.position[delta_joint_1]"}, align=True)
+    assert not cmp.ok and cmp.diffs[0].tolerance == 1e-9, cmp.text()
+    assert "FAILED: plant.q[1]" in cmp.text()
 
 
-def test_a_csv_in_degrees_against_the_run(tmp_path):
+def test_a_csv_in_millimetres_against_the_run(tmp_path):
     """A CSV in mm is converted to the run's m; exact samples of the run at its own stamps compare to 0."""
-    from cosim.io.runlog import read_run
-
     sig = read_run(RUN).signal("plant.q[2]")
     path = write_csv(tmp_path / "meas.csv", "time [s],q2 [mm]", np.column_stack([sig.t, sig.y * 1e3]),
                      comments=["synthetic: plant.q[2] of tests/golden/helix_ctc.mcap in mm"])
-    out = json.loads(cosim("compare", RUN, path, "--map", "plant.q[2]=q2", "--json", "--tol",
-                           "plant.q=1e-12").stdout)
+    cmp = compare_recording(RUN, path, {"plant.q[2]": "q2"}, tolerances={"plant.q": 1e-12})
     # mm -> m is one multiplication by 1e-3 of a number printed with 17 digits: a few ulp of 0.5 m
-    assert out["ok"] and out["signals"][0]["max_abs"] < 1e-15, out
+    assert cmp.ok and cmp.diffs[0].max_error < 1e-15 and cmp.diffs[0].unit == "m", cmp.text()
 
 
 @pytest.mark.parametrize("maps, extra, said", [
@@ -87,9 +87,6 @@ def test_a_csv_in_degrees_against_the_run(tmp_path):
     ({}, {}, "needs --map"),
 ])
 def test_bad_input_is_one_line(bag, maps, extra, said):
-    from cosim.analysis.recording_compare import compare_recording
-    from cosim.errors import CosimError
-
     with pytest.raises(CosimError) as exc:
         compare_recording(RUN, bag, maps, **extra)
     assert said in str(exc.value) and "\n" not in str(exc.value), str(exc.value)
