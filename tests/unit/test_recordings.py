@@ -228,6 +228,21 @@ def test_a_cut_ros1_or_sqlite_bag_is_one_line_with_the_remedy(tmp_path, kind, na
     _one_line(exc)
 
 
+def test_a_message_that_does_not_deserialise_is_named(tmp_path):
+    from rosbags.rosbag2 import StoragePlugin, Writer
+
+    store = typestore("ros2")
+    with Writer(tmp_path / "b", version=9, storage_plugin=StoragePlugin.MCAP) as w:
+        c = w.add_connection("/js", "sensor_msgs/msg/JointState", typestore=store)
+        w.write(c, EPOCH_NS, store.serialize_cdr(joint_state(store, EPOCH_NS, ["j"], [1.0]),
+                                                 "sensor_msgs/msg/JointState"))
+        w.write(c, EPOCH_NS + 10**7, b"\x00\x01\x00\x00garbage")
+    with pytest.raises(RecordingError, match=r"/js: message 1 \(log time 1700000000.010000 s\) is no "
+                                             r"sensor_msgs/msg/JointState") as exc:
+        read_recording(tmp_path / "b", {"a": "/js.position[j]"})
+    _one_line(exc)
+
+
 def test_a_bag_folder_whose_recorder_was_killed(tmp_path):
     """No metadata.yaml (the recorder writes it last) and its MCAP file cut: read from the file, said so."""
     bag = joint_states_bag(tmp_path / "b", "mcap", T, Q, noise_bytes=40_000)

@@ -128,8 +128,14 @@ def _collect(path: Path, specs: Mapping[str, BagSpec], stream: Iterator, time: s
         wanted = resolvers.get(topic)
         if wanted is None:
             wanted = resolvers[topic] = [(n, Resolver(s, msgtype, str(path))) for n, s in by_topic[topic]]
-        msg = load()
         i = counts[topic]
+        try:
+            msg = load()
+        except CosimError:
+            raise
+        except Exception as exc:  # noqa: BLE001 - rosbags' deserialisers raise their own and struct's errors
+            raise RecordingError(f"{path}: {topic}: message {i} (log time {log_ns * 1e-9:.6f} s) is no "
+                                 f"{msgtype}: {_said(exc)}") from None
         counts[topic] = i + 1
         for name, res in wanted:
             value, stamped = res.value(msg, i, log_ns * 1e-9)
