@@ -36,6 +36,7 @@ from __future__ import annotations
 import difflib
 import math
 import time
+import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable, Mapping, Sequence
@@ -44,7 +45,7 @@ import numpy as np
 
 from ..engine.overrides import DOTTED, Overrides, apply_overrides, resolve_name
 from ..engine.prepare import locate_fmus
-from ..engine.scenario import effective_scenario, read_scenario
+from ..engine.scenario import read_scenario
 from ..engine.system import build_plan
 from ..engine.wiring import find_variable
 from ..errors import CosimError, UnknownSignalError, written_by_rename
@@ -245,8 +246,12 @@ def _start_values(runner: _Runner, fits: list[Fit]) -> tuple[list[float], dict[s
         try:
             units[name] = plan.port(name).var.unit or ""
         except UnknownSignalError as exc:
-            raise CalibrationError(f"--map {name}=...: not a signal of the run: {exc.args[0] if exc.args else exc}") \
-                from None
+            comp = name.split(".", 1)[0]
+            known = [f"{comp}.{v}" for v in infos[comp].variables] if comp in infos else []
+            close = difflib.get_close_matches(name, known, n=3, cutoff=0.5)
+            hint = f"; did you mean {', '.join(close)}?" if close else ""
+            raise CalibrationError(f"--map {name}=...: not a signal of the run: {exc.args[0] if exc.args else exc}"
+                                   f"{hint}") from None
     data = runner.base.model_dump(mode="json", by_alias=True)
     starts = []
     for fit in fits:
@@ -401,6 +406,29 @@ def _uncertainty(jac: np.ndarray | None, r: np.ndarray, n: int) -> tuple[list[fl
     return [float(v) for v in se], [[float(v) for v in row] for row in np.nan_to_num(corr)], note
 
 
+def _start_offset(t: np.ndarray, ys: Mapping[str, np.ndarray], rec, fit: Fit) -> float:
+    """The offset to start from: :func:`estimate_offset` at the start values. Unbounded, it searches the offsets
+    at which the shorter of the run and the recording lies within the longer (a recording holds the robot before
+    and after the run, as robots are recorded), and a quarter of the shorter span and two samples beyond: centred
+    there (the recording's times shifted for the search), as the correlation of a sliver of overlap at an edge
+    is meaningless; bounded, within the bounds."""
+    names = list(rec.times)
+    if math.isfinite(fit.low) and math.isfinite(fit.high):
+        centre, limit = 0.0, max(abs(fit.low), abs(fit.high))
+    else:
+        rec0 = max(float(rec.times[n][0]) for n in names)
+        rec1 = min(float(rec.times[n][-1]) for n in names)
+        a, b = rec0 - float(t[0]), rec1 - float(t[-1])
+        step = max(float(np.median(np.diff(rec.times[n]))) for n in names)
+        centre = 0.5 * (a + b)
+        limit = max(0.5 * abs(a - b), 0.25 * min(rec1 - rec0, float(t[-1] - t[0]))) + 2 * step
+    with warnings.catch_warnings():  # Brent's parabola through an infinite residual (no overlap there): no use
+        warnings.simplefilter("ignore", RuntimeWarning)
+        found = estimate_offset([(t, ys[n]) for n in names], [(rec.times[n] - centre, rec.values[n]) for n in names],
+                                limit)
+    return min(max(found.offset + centre, fit.low), fit.high)
+
+
 def _fit(runner: _Runner, rec, scen: list[Fit], off_fit: Fit | None, starts: list[float], offset: float,
          units: Mapping[str, str], scenario: str, recording: str, maps: Mapping[str, str],
          t_start: float) -> Calibration:
@@ -410,10 +438,7 @@ def _fit(runner: _Runner, rec, scen: list[Fit], off_fit: Fit | None, starts: lis
     t, ys = runner(starts)
     n_s = len(scen)
     if off_fit is not None:
-        bounded = math.isfinite(off_fit.low) and math.isfinite(off_fit.high)
-        found = estimate_offset([(t, ys[n]) for n in maps], [(rec.times[n], rec.values[n]) for n in maps],
-                                max(abs(off_fit.low), abs(off_fit.high)) if bounded else None)
-        offset = min(max(found.offset, off_fit.low), off_fit.high)
+        offset = _start_offset(t, ys, rec, off_fit)
         runner.notes.append(f"offset started from {offset:.9g} s (cross-correlation at the start values)")
     problem = _problem(rec, t, offset, recording, maps)
     weighting = _weigh(problem, units)
@@ -460,10 +485,27 @@ def _fit(runner: _Runner, rec, scen: list[Fit], off_fit: Fit | None, starts: lis
                        evaluations, time.perf_counter() - t_start, bool(converged), message, weighting, runner.notes)
 
 
+def _as_written(sc) -> dict[str, Any]:
+    """``sc`` as its file and the overrides give it (the keys they set, no defaults), its paths absolute (the
+    calibrated file lives elsewhere), a parameter written as text (``1e3``) as that text."""
+    import os
+
+    data = sc.model_dump(mode="json", by_alias=True, exclude_unset=True)
+    base = Path(sc.source).parent if sc.source and sc.source != "<string>" else Path.cwd()
+    for comp in data["components"].values():
+        if comp.get("path") is not None:
+            comp["path"] = os.path.normpath((base / comp["path"]).absolute())
+    if data.get("model") is not None:
+        data["model"] = os.path.normpath((base / data["model"]).absolute())
+    for path, text in sc.sources.written.items():  # ("components", name, "parameters", variable)
+        data["components"][path[1]]["parameters"][path[3]] = text
+    return data
+
+
 def write_calibrated(cal: Calibration, out: str | Path, sets: Sequence[str], command: str) -> Path:
     """The scenario with its fitted values (and ``sets``) as a scenario file of its own, written atomically (a
     temporary file renamed over ``out``), ``command`` in its header comment: ``python -m cosim run OUT`` runs the
-    calibrated twin. Every value is written out (the scenario as it runs: :func:`effective_scenario`, paths
+    calibrated twin. The values are those the scenario file and ``sets`` give, the fitted ones set (paths made
     absolute); the log goes to ``runs/<name>_calibrated.mcap``. The offset is the recording's clock, not the
     scenario's: it is in the header only."""
     import yaml  # lazy: --help loads this module without it
@@ -474,9 +516,9 @@ def write_calibrated(cal: Calibration, out: str | Path, sets: Sequence[str], com
     for name, value in values.items():
         overrides.put((DOTTED, name), value, f"--fit {name}")
     sc = read_scenario(cal.scenario).load(overrides)
-    data = effective_scenario(sc)
+    data = _as_written(sc)
     data["name"] = f"{sc.name}_calibrated"
-    data["logging"]["out"] = None
+    data.get("logging", {}).pop("out", None)
     head = [f"# {sc.name} calibrated against the recording {cal.recording}",
             f"# Written by: {command}",
             "# Fitted (standard error; " + ("converged" if cal.converged else "DID NOT CONVERGE") + "):"]
@@ -485,7 +527,8 @@ def write_calibrated(cal: Calibration, out: str | Path, sets: Sequence[str], com
     head.append("# Residual RMS before -> after: " + ", ".join(
         f"{n} {cal.rms_before[n]:.4g} -> {cal.rms_after[n]:.4g} {cal.units[n]}" for n in cal.rms_before))
     if values:
-        head.append("# The same values for another scenario: " + " ".join(f"--set {n}={v!r}" for n, v in values.items()))
+        head.append("# The same values for another scenario: "
+                    + " ".join(f"--set {n}={v!r}" for n, v in values.items()))
     text = "\n".join(head) + "\n" + yaml.safe_dump(data, sort_keys=False, default_flow_style=False)
     with written_by_rename(out) as tmp:
         tmp.write_text(text, encoding="utf-8")
