@@ -166,6 +166,11 @@ class DOPRI5(_CIntegrator):
         self._state.t = t
         self._state.restart = 1
 
+    def forget(self) -> None:
+        """Start the next advance as a new integrator does: no step size proposed, the controller's memory cleared
+        (a checkpoint: the resumed run's integrator is new)."""
+        self._state.h, self._state.facold = 0.0, 1e-4
+
     def _why(self, call: int, t: float) -> str:
         if call == TOO_MANY_STEPS:
             return (f"DOPRI5 took {self.MAX_NUM_STEPS} steps without reaching the stop time (at t = {t:.9g} s, step "

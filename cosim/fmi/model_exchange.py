@@ -253,10 +253,14 @@ class ModelExchange:
     def restart(self) -> None:
         """Re-start the integrator at the next step: a run that writes a checkpoint does, as the run resumed from it
         must (an integrator's multistep history is not part of the FMU's state), so the two continue alike. (A C
-        integrator is told at once: a loop in C steps it without this class's Python.)"""
+        integrator is told at once, a loop in C steps it without this class's Python; it forgets its step size,
+        as a resumed run's new one has none.)"""
         self._restart = True
         if self._c_step is not None:
             self.integrator.reset(self.time)
+        forget = getattr(getattr(self, "integrator", None), "forget", None)
+        if forget is not None:
+            forget()
 
     def set_values(self, values) -> None:
         """An event's changes between steps, in event mode (FMI: tunable parameters and discrete inputs change
