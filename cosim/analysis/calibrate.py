@@ -35,6 +35,7 @@ from __future__ import annotations
 
 import difflib
 import math
+import os
 import time
 import warnings
 from dataclasses import dataclass, field
@@ -488,8 +489,6 @@ def _fit(runner: _Runner, rec, scen: list[Fit], off_fit: Fit | None, starts: lis
 def _as_written(sc) -> dict[str, Any]:
     """``sc`` as its file and the overrides give it (the keys they set, no defaults), its paths absolute (the
     calibrated file lives elsewhere), a parameter written as text (``1e3``) as that text."""
-    import os
-
     data = sc.model_dump(mode="json", by_alias=True, exclude_unset=True)
     base = Path(sc.source).parent if sc.source and sc.source != "<string>" else Path.cwd()
     for comp in data["components"].values():
