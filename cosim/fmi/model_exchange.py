@@ -1,6 +1,15 @@
 """Model exchange: the master integrates the FMU (one continuous integration across communication points,
 re-started only after an event or an input change; time, state and step events; event iteration; termination),
-as FMPy's and OMSimulator's loops do it; the numerics live in :mod:`cosim.fmi.integrators`."""
+as FMPy's and OMSimulator's loops do it; the numerics live in :mod:`cosim.fmi.integrators` and, in C,
+:mod:`cosim.fmi.me_c`.
+
+This module owns the protocol. With a C integrator (``cvode``, ``dopri5`` where a compiler is) each advance is one
+C call that makes every FMU call of the integration (derivatives, event indicators, completedIntegratorStep) and
+returns the time reached and whether a state event or a step event stopped it; the events are handled here, in
+Python. Where the inputs are all continuous reals and no time event falls in the step, the whole macro step is
+one C call (:class:`~cosim.fmi.me_c.MacroStep`: inputs that changed, advance, outputs), and where no event can
+arise in it at all, it is a turn of the master's loop in C (:meth:`ModelExchange.c_turn`). Python is then entered
+once per macro step, or not at all, plus once per event."""
 
 from __future__ import annotations
 
