@@ -1,5 +1,6 @@
 """The one place an execution is put together: a plan's components on its time grid, run by its algorithm, each
-component's FMU access made (:func:`cosim.fmi.make_slave`: bound to the plan's buffers, not instantiated yet).
+component's FMU access made (:func:`cosim.fmi.make_slave`: bound to the plan's buffers, not instantiated yet), or a
+recording component's replay (its description's ``slave(name)``).
 
 The run and ``check`` (:mod:`cosim.run`), the parallel offload's worker (:mod:`cosim.engine.offload`) and a warm
 sweep's check of a checkpoint (:mod:`cosim.analysis.sweep`) all assemble theirs here."""
@@ -28,7 +29,9 @@ def assemble(plan: SystemPlan, grid_ns: tuple[int, int, int], multiples: Sequenc
     what a supervisor reads of the run (None: unsupervised). Its components are not instantiated yet."""
     ex = Execution(plan, *grid_ns, multiples, algorithm, record)
     for name, info, (interface, rtol, solver, max_step) in zip(plan.names, plan.infos, kinds):
-        ex.add_slave(make_slave(name, info, interface, rtol, solver, max_step))
+        replayed = getattr(info, "slave", None)  # no FMU: a recording's replay (cosim.engine.plugins.recording_source)
+        ex.add_slave(replayed(name) if replayed is not None else make_slave(name, info, interface, rtol, solver,
+                                                                            max_step))
     return ex
 
 

@@ -122,9 +122,12 @@ def choose(plan: SystemPlan, mode: str, n_steps: int, writer_process: bool = Fal
         why = "every component is feed-forward: nothing would be left to overlap with"
     else:
         strings = [f"{plan.names[c]}.{v.name}" for c in group for v in plan.outputs[c] if v.kind in PY_KINDS]
+        replayed = [plan.names[c] for c in group if getattr(plan.infos[c], "slave", None) is not None]
         restructured = [plan.names[c] for c in group
                         if plan.infos[c] is not None and plan.infos[c].structural_parameters()]
-        if strings:
+        if replayed:  # a worker loads its components' FMUs again, from their files
+            why = f"{', '.join(replayed)} replay recordings, not FMUs a worker process could load"
+        elif strings:
             why = f"{', '.join(strings)} are strings or binaries (only fixed-size values are shared)"
         elif restructured:
             why = f"{', '.join(restructured)} have structural parameters (array sizes are set per run)"

@@ -12,6 +12,12 @@ as one :class:`Plugin`, found through the ``cosim.plugins`` entry point group of
 * ``scenario_issues(scenario)``: the domain's checks of a scenario, as ``(location, message)``, reported with the
   master's, each at its file and line.
 * ``fmu_source``: how a component given as ``fmu: NAME`` gets its FMU (:class:`FmuSource`: a build key, a build).
+* ``recording_source``: how a component given as ``recording: FILE`` (:class:`~cosim.engine.structure.Replay`) is
+  made: ``(name, replay, base folder, (start_s, stop_s)) -> info``, an object the plan reads as an FMU's
+  description (``variables``, ``feedthrough``, ``path``) whose ``slave(name)`` the execution steps. Without a
+  plugin that gives one, the ``cosim.recordings`` entry point group's (this project publishes
+  :func:`cosim.io.recordings.component.recording_info`: the engine cannot import the file formats), loaded only
+  when a scenario has such a component (the reader's imports cost a run's start 0.1-0.2 s).
 * ``prepare(scenario)``: before the plan is made: the domain's pre-flight; returns a :class:`Preparation`, whose
   ``report`` is the pre-flight's line and whose ``apply(plan)`` gives the plan the domain's start values.
 * ``scene(scenario)``: what the ``/scene`` channels draw (:class:`Scene`), or None.
@@ -29,9 +35,11 @@ from typing import Any, Callable, Hashable, Mapping, Protocol, Sequence
 
 from ..errors import CosimError, domain_errors
 
-__all__ = ["Plugin", "FmuSource", "Preparation", "Scene", "GROUP", "installed", "register", "fmu_source",
-           "robots", "trajectories", "scenario_issues", "prepare", "scene"]
+__all__ = ["Plugin", "FmuSource", "Preparation", "Scene", "GROUP", "RECORDINGS_GROUP", "installed", "register", "fmu_source",
+           "recording_source", "robots", "trajectories", "scenario_issues", "prepare", "scene"]
 
+RECORDINGS_GROUP = "cosim.recordings"
+"""The entry point group of the maker of ``recording:`` components (see ``recording_source`` above)."""
 GROUP = "cosim.plugins"
 """The entry point group a domain's plugin is published in: each entry names a :class:`Plugin` or a function
 without arguments that returns one."""
@@ -80,6 +88,7 @@ class Plugin:
     trajectories: Callable[[], Mapping[str, type]] | None = None
     scenario_issues: Callable[[Any], list[tuple[tuple, str]]] | None = None
     fmu_source: FmuSource | None = None
+    recording_source: Callable[[str, Any, Path, tuple[float, float]], Any] | None = None
     prepare: Callable[[Any], Preparation] | None = None
     scene: Callable[[Any], Scene | None] | None = None
 
@@ -136,6 +145,21 @@ def fmu_source() -> FmuSource:
     if source is None:
         raise CosimError("no plugin gives FMUs by name (fmu:); give each component's FMU file with path:")
     return source
+
+
+def recording_source() -> Callable[[str, Any, Path, tuple[float, float]], Any]:
+    """The maker of ``recording: FILE`` components; a :class:`~cosim.errors.CosimError` without one."""
+    _, source = _first("recording_source")
+    if source is not None:
+        return source
+    for ep in sorted(entry_points(group=RECORDINGS_GROUP), key=lambda e: e.name):
+        try:
+            return ep.load()
+        except Exception as exc:  # noqa: BLE001 - a broken plugin is named, not a traceback
+            raise CosimError(f"recordings plugin {ep.name} ({ep.value}) cannot be loaded: "
+                             f"{type(exc).__name__}: {exc}") from exc
+    raise CosimError(f"nothing replays recordings (recording:): no plugin gives one, and the {RECORDINGS_GROUP} "
+                     "entry point group is empty (install cosim)")
 
 
 def robots() -> list[str]:

@@ -19,7 +19,8 @@ __all__ = ["locate_fmus", "input_files", "build_key", "build_ours", "prepare"]
 
 
 def locate_fmus(scenario: Scenario, fmu_files: Mapping[str, str | Path] | None = None) -> dict[str, FMUInfo]:
-    """Each component's FMU: ``path`` relative to the scenario file, or ``fmu`` given by the domain's FMU source.
+    """Each component's FMU: ``path`` relative to the scenario file, or ``fmu`` given by the domain's FMU source; a
+    ``recording`` component's description made by the recordings plugin (:func:`cosim.engine.plugins.recording_source`).
 
     ``fmu_files``: our FMUs already built, by :func:`build_key` (a sweep builds them once for every case);
     the others are built here.
@@ -28,9 +29,18 @@ def locate_fmus(scenario: Scenario, fmu_files: Mapping[str, str | Path] | None =
     infos: dict[str, FMUInfo] = {}
     issues: list[Issue] = []
     built = {k: Path(p) for k, p in (fmu_files or {}).items()}
+    structure = scenario.structure()
     for name, comp in scenario.components.items():
-        loc = ("components", name, "fmu" if comp.fmu else "path")
+        loc = ("components", name, "fmu" if comp.fmu else "path" if comp.path else "recording")
         where = dict(file=scenario.source, line=scenario.sources.line(loc))
+        replay = structure.components[name].replay
+        if replay is not None:  # no FMU: the recordings plugin reads the file and checks its time range
+            try:
+                span = (structure.start_ns * 1e-9, structure.stop_ns * 1e-9)
+                infos[name] = plugins.recording_source()(name, replay, base, span)
+            except CosimError as exc:  # a recording the reader refuses: its message, placed at the component
+                issues.append(Issue(f"components.{name}", str(exc), **where))
+            continue
         try:
             if comp.path is not None:
                 path = Path(comp.path)
@@ -52,11 +62,11 @@ def locate_fmus(scenario: Scenario, fmu_files: Mapping[str, str | Path] | None =
 
 
 def input_files(scenario: Scenario) -> tuple[Path, ...]:
-    """The files a run of ``scenario`` reads: its file (or archive, or log and archive) and the FMUs its components give by ``path``;
-    no output may be written over one of them."""
+    """The files a run of ``scenario`` reads: its file (or archive, or log and archive), the FMUs its components give by
+    ``path`` and the recordings they replay; no output may be written over one of them."""
     base = _scenario_dir(scenario)
-    paths = [Path(c.path) if Path(c.path).is_absolute() else base / c.path
-             for c in scenario.components.values() if c.path is not None]
+    given = [c.path or c.recording for c in scenario.components.values() if c.path or c.recording]
+    paths = [Path(p) if Path(p).is_absolute() else base / p for p in given]
     archive = scenario.archive["file"] if scenario.archive else None  # a run from a log of an SSP archive's run
     return tuple(Path(p) for p in (scenario.source, archive, *paths) if p is not None and p != "<string>")
 

@@ -25,7 +25,7 @@ from .grid import MAX_TIME_S, NS_PER_S, Grid, grid_error, resolution_error, seco
 from .names import name_problem, split_ref
 from . import plugins
 from .sources import SourceMap
-from .structure import (ComponentStructure, ConnectionStructure, EventStructure, Observed,
+from .structure import (ComponentStructure, ConnectionStructure, EventStructure, Observed, Replay,
                         SystemStructure)
 
 __all__ = ["Scenario", "Event", "parse_condition", "condition_issue", "Component", "Connection", "TimeGrid",
@@ -48,10 +48,26 @@ class _Model(BaseModel):
 
 
 class Component(_Model):
-    """One FMU instance: ``fmu`` (one of our FMUs, by name) or ``path`` (any FMI 2.0/3.0 FMU)."""
+    """One FMU instance: ``fmu`` (one of our FMUs, by name) or ``path`` (any FMI 2.0/3.0 FMU); or a recording
+    replayed as outputs: ``recording`` (a robot's bag, a CSV, a run log) with its ``signals``."""
 
     fmu: str | None = Field(None, description="name of one of our FMUs (fmus.registry)")
     path: str | None = Field(None, description="path to an .fmu file, relative to the scenario file")
+    recording: str | None = Field(
+        None, description="a recording replayed as outputs (a ROS 2 bag folder or .mcap/.db3, a ROS 1 .bag, a .csv, "
+                          "a run log .mcap; docs/recordings.md), relative to the scenario file")
+    signals: dict[str, str] = Field(
+        default_factory=dict, description="recording: output name -> signal spec (q[1]: "
+                                          "/joint_states.position[joint1], a CSV column, a run log's ctl.q[1])")
+    interpolation: Literal["linear", "hold"] = Field(
+        "linear", description="recording: between samples, 'linear' or 'hold' (the last sample at or before t)")
+    offset: float = Field(0.0, description="recording: its time minus the run's, s (the output at run time t is the "
+                                           "recording at t + offset; times count from its first message)")
+    time: Literal["header", "log"] = Field(
+        "header", description="recording: a bag's header stamps or its log (receive) times")
+    units: dict[str, str] = Field(
+        default_factory=dict, description="recording: output name -> unit (a recorded unit converts to it; a bag's "
+                                          "signal, which has none, is taken to be in it)")
     parameters: dict[str, ParamValue] = Field(
         default_factory=dict,
         description="start values by variable name; a list sets name[1], name[2], ...")
@@ -75,8 +91,22 @@ class Component(_Model):
 
     @model_validator(mode="after")
     def _one_source(self) -> "Component":
-        if (self.fmu is None) == (self.path is None):
-            raise ValueError("give exactly one of 'fmu' (our FMU by name) or 'path' (an .fmu file)")
+        if sum(x is not None for x in (self.fmu, self.path, self.recording)) != 1:
+            raise ValueError("give exactly one of 'fmu' (our FMU by name), 'path' (an .fmu file) or 'recording' "
+                             "(a recording replayed as outputs)")
+        replay = {"signals", "interpolation", "offset", "time", "units"} & self.model_fields_set
+        if self.recording is None and replay:
+            raise ValueError(f"{', '.join(sorted(replay))}: only for a component given by 'recording'")
+        if self.recording is not None:
+            if not self.signals:
+                raise ValueError("a recording component needs 'signals': output name -> signal spec")
+            fmu_only = {"parameters", "step_multiple", "interface", "feedthrough", "rtol", "solver",
+                        "max_step"} & self.model_fields_set
+            if fmu_only:
+                raise ValueError(f"{', '.join(sorted(fmu_only))}: not for a recording (it has outputs only)")
+            unknown = sorted(set(self.units) - set(self.signals))
+            if unknown:
+                raise ValueError(f"units: {', '.join(unknown)} not among the signals ({', '.join(self.signals)})")
         return self
 
 
@@ -384,7 +414,7 @@ class Scenario(_Model):
         components, connections, time grid, algorithm, events, what is logged and what its observers read."""
         if self._structure is None:
             comps = {n: ComponentStructure(c.fmu, c.path, dict(c.parameters), c.step_multiple, c.interface,
-                                           c.feedthrough, c.rtol, c.solver, c.max_step)
+                                           c.feedthrough, c.rtol, c.solver, c.max_step, _replay(c))
                      for n, c in self.components.items()}
             observed = []
             if self.compare is not None:
@@ -449,6 +479,13 @@ class Scenario(_Model):
             if problem:
                 raise ValueError(problem)
         return self
+
+
+def _replay(c: Component) -> Replay | None:
+    """A recording component's source, as the structure holds it (None: an FMU)."""
+    if c.recording is None:
+        return None
+    return Replay(c.recording, tuple(c.signals.items()), c.interpolation, c.offset, c.time, tuple(c.units.items()))
 
 
 def expand_signal(spec: str | list[str]) -> list[str]:

@@ -18,14 +18,31 @@ from typing import Any, Mapping
 
 from .sources import SourceMap
 
-__all__ = ["ComponentStructure", "ConnectionStructure", "EventStructure", "Observed", "SystemStructure"]
+__all__ = ["ComponentStructure", "ConnectionStructure", "EventStructure", "Observed", "Replay", "SystemStructure"]
+
+
+@dataclass(frozen=True)
+class Replay:
+    """A component that replays a recording as outputs (``recording: FILE``): ``file`` (relative to
+    :attr:`SystemStructure.base`), ``signals`` ((output name, signal spec) pairs, in order), ``interpolation``
+    ('linear' or 'hold'), ``offset_s`` (the recording's time minus the run's), ``time`` (a bag's 'header' stamps or
+    'log' times), ``units`` ((output name, unit) pairs). The domain that reads recordings makes it a component
+    (:func:`cosim.engine.plugins.recording_source`)."""
+
+    file: str
+    signals: tuple[tuple[str, str], ...]
+    interpolation: str = "linear"
+    offset_s: float = 0.0
+    time: str = "header"
+    units: tuple[tuple[str, str], ...] = ()
 
 
 @dataclass(frozen=True)
 class ComponentStructure:
     """One FMU instance: its FMU given by ``path`` (a file, relative to :attr:`SystemStructure.base`) or by
     ``fmu`` (a name the domain's FMU source resolves, :func:`cosim.engine.plugins.fmu_source`); its start values
-    by variable name as written (a list sets ``name[1]``, ``name[2]``, ... or a whole array); how it is driven."""
+    by variable name as written (a list sets ``name[1]``, ``name[2]``, ... or a whole array); how it is driven.
+    Or no FMU: a recording replayed as outputs (``replay``; ``fmu`` and ``path`` None)."""
 
     fmu: str | None
     path: str | None
@@ -36,6 +53,7 @@ class ComponentStructure:
     rtol: float = 1e-6  # model exchange: the integrator's relative tolerance
     solver: str = "cvode"  # model exchange: the integrator
     max_step: float | None = None  # model exchange: the integrator's largest internal step, s
+    replay: Replay | None = None  # a recording replayed as outputs, instead of an FMU
 
 
 @dataclass(frozen=True)

@@ -64,6 +64,12 @@ def export_ssp(scenario: Scenario, out: str | Path) -> ExportReport:
     """
 
     out = Path(out)
+    replayed = [n for n, c in scenario.components.items() if c.recording is not None]
+    if replayed:  # SSP 1.0 components are FMUs (or SSPs): a recording has no component to become
+        line = scenario.sources.line(("components", replayed[0], "recording"))
+        raise SspError(f"{scenario.source}:{line}" if line else scenario.source or "<scenario>",
+                       f"components.{replayed[0]}: replays a recording ({scenario.components[replayed[0]].recording}"
+                       "); SSP 1.0 has no such component: export a scenario whose components are all FMUs")
     plan, _ = prepare(scenario)
     names, infos = plan.names, plan.infos
     t = scenario.time
