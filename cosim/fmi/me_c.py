@@ -55,7 +55,8 @@ class Fmu(ctypes.Structure):
                 ("get_z", c_void_p), ("get_nominals", c_void_p), ("completed", c_void_p),
                 ("needs_completed", c_int), ("nx", c_size_t), ("nz", c_size_t), ("bad", POINTER(c_double)),
                 ("call", c_int), ("status", c_int), ("t_fail", c_double),
-                ("step_event", c_int), ("terminate", c_int), ("evaluations", c_long), ("t_set", c_double)]
+                ("step_event", c_int), ("terminate", c_int), ("evaluations", c_long), ("t_set", c_double),
+                ("t_now", c_double)]
 
 
 class _Dopri(ctypes.Structure):

@@ -49,7 +49,15 @@ typedef struct {
     int step_event, terminate;  /* completedIntegratorStep's enterEventMode, terminateSimulation */
     long evaluations;        /* right-hand sides evaluated (statistics) */
     double t_set;            /* the time rhs last set (NAN: set it again) */
+    double t_now;            /* the time last set, whoever set it here */
 } Fmu;
+
+/* fmiXSetTime, the time kept where the FMU's log messages are stamped from (t_now) */
+static int set_time(Fmu *m, double t)
+{
+    m->t_now = t;
+    return ((SetTime)m->set_time)(m->instance, t);
+}
 
 static int fail(Fmu *m, int call, int status, double t)
 {
@@ -75,7 +83,7 @@ static int derivatives(Fmu *m, double t, double *dx)
  * (m->t_set: NAN after any other call that sets it) */
 static int rhs(Fmu *m, double t, const double *x, double *dx)
 {
-    int s = t == m->t_set ? 0 : ((SetTime)m->set_time)(m->instance, t);
+    int s = t == m->t_set ? 0 : set_time(m, t);
     if (s > 1) return fail(m, CALL_SET_TIME, s, t);
     m->t_set = t;
     if (m->nx == 0) return 0;
@@ -88,7 +96,7 @@ static int rhs(Fmu *m, double t, const double *x, double *dx)
 static int indicators(Fmu *m, double t, const double *x, double *z)
 {
     m->t_set = NAN;
-    int s = ((SetTime)m->set_time)(m->instance, t);
+    int s = set_time(m, t);
     if (s > 1) return fail(m, CALL_SET_TIME, s, t);
     if (m->nx) {
         s = ((SetStates)m->set_x)(m->instance, x, m->nx);
@@ -104,7 +112,7 @@ static int indicators(Fmu *m, double t, const double *x, double *z)
 static int finish(Fmu *m, double t, const double *x, bool there)
 {
     m->t_set = NAN;
-    int s = there ? 0 : ((SetTime)m->set_time)(m->instance, t);
+    int s = there ? 0 : set_time(m, t);
     if (s > 1) return fail(m, CALL_SET_TIME, s, t);
     if (m->nx && !there) {
         s = ((SetStates)m->set_x)(m->instance, x, m->nx);

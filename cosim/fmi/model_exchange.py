@@ -347,6 +347,9 @@ class ModelExchange:
         if self._c_step is None or not self._continuous or self.nz or self.next_event is not None or \
                 self._needs_completed and not self._completes_quietly:
             return None
+        fmu = self.integrator.fmu  # the time the FMU's log messages are stamped with in a loop in C (Base._on_log)
+        self._t = c_double.from_address(ctypes.addressof(fmu) + type(fmu).t_now.offset)
+        self._t.value = self.time
         return self._c_step.turn(), self._pythonfmu
 
     @property
