@@ -146,6 +146,7 @@ class Calibration:
     message: str
     weighting: str
     notes: list[str] = field(default_factory=list)
+    run_time: float = 0.0  # s of the wall time in the runs
 
     @property
     def values(self) -> dict[str, float]:
@@ -158,7 +159,7 @@ class Calibration:
                 "rms_before": self.rms_before, "rms_after": self.rms_after, "units": self.units,
                 "weighted_rms_before": self.cost_before, "weighted_rms_after": self.cost_after,
                 "samples": self.samples, "runs": self.runs, "evaluations": self.evaluations,
-                "wall_time_s": self.wall_time, "weighting": self.weighting, "notes": self.notes}
+                "wall_time_s": self.wall_time, "run_time_s": self.run_time, "weighting": self.weighting, "notes": self.notes}
 
     def text(self) -> str:
         width = max(len(p["label"]) for p in self.parameters)
@@ -180,7 +181,7 @@ class Calibration:
                          f"{self.rms_after[name]:>11.4g}")
         lines.append(f"weighted RMS {self.cost_before:.4g} -> {self.cost_after:.4g} over {self.samples} samples "
                      f"({self.weighting}); {self.runs} runs of the scenario, {self.evaluations} evaluations, "
-                     f"{self.wall_time:.1f} s")
+                     f"{self.wall_time:.1f} s ({self.run_time:.1f} s in the runs)")
         lines += self.notes
         return "\n".join(lines)
 
@@ -389,21 +390,25 @@ def _rms(parts: Mapping[str, np.ndarray]) -> dict[str, float]:
 
 
 def _uncertainty(jac: np.ndarray | None, r: np.ndarray, n: int) -> tuple[list[float | None], list[list[float]], str]:
-    """Standard errors and correlations from the weighted Jacobian at the solution: (J^T J)^-1 s^2."""
+    """Standard errors and correlations from the weighted Jacobian at the solution: cov = (J^T J)^-1 s^2, through
+    J's singular values (J = U S V^T, cov = V S^-2 V^T s^2: forming J^T J squares J's condition, and a value the
+    signals barely show, next to the offset, lost all its digits there)."""
     if jac is None:
         return [None] * n, [], ""
     m = len(r)
     s2 = float(r @ r) / max(1, m - n)
-    rank = int(np.linalg.matrix_rank(jac))
-    cov = np.linalg.pinv(jac.T @ jac) * s2
+    _, sv, vt = np.linalg.svd(jac, full_matrices=False)
+    tol = sv.max(initial=0.0) * max(jac.shape) * np.finfo(float).eps
+    rank = int((sv > tol).sum())
+    note = ""
+    if rank < n:
+        note = (f"the Jacobian has rank {rank} for {n} fitted values: some are not identifiable from these signals "
+                "(they change the run alike, or not at all); their errors are unbounded")
+        return [math.inf] * n, [], note
+    cov = (vt.T / sv ** 2) @ vt * s2
     se = np.sqrt(np.clip(np.diag(cov), 0.0, None))
     with np.errstate(invalid="ignore", divide="ignore"):
         corr = cov / np.outer(se, se)
-    note = ""
-    if rank < n:
-        se = np.full(n, math.inf)
-        note = (f"the Jacobian has rank {rank} for {n} fitted values: some are not identifiable from these signals "
-                "(they change the run alike, or not at all); their errors are unbounded")
     return [float(v) for v in se], [[float(v) for v in row] for row in np.nan_to_num(corr)], note
 
 
@@ -479,11 +484,16 @@ def _fit(runner: _Runner, rec, scen: list[Fit], off_fit: Fit | None, starts: lis
     se, corr, note = _uncertainty(jac, r, len(fits))
     if note:
         runner.notes.append(note)
+    for f, v in zip(fits, x):
+        if v in (f.low, f.high):
+            runner.notes.append(f"{f.label} ended on its bound {v:g}: the fit would go beyond it (a value the "
+                                "signals do not show, or bounds too narrow)")
     params = [{"label": f.label, "names": list(f.names), "start": float(s), "value": float(v), "stderr": e,
                "low": f.low, "high": f.high} for f, s, v, e in zip(fits, x0, x, se)]
     return Calibration(scenario, recording, params, corr, before, after, dict(units),
                        float(np.sqrt(np.mean(r0 * r0))), float(np.sqrt(np.mean(r * r))), len(r0), runner.runs,
-                       evaluations, time.perf_counter() - t_start, bool(converged), message, weighting, runner.notes)
+                       evaluations, time.perf_counter() - t_start, bool(converged), message, weighting, runner.notes,
+                       runner.run_time)
 
 
 def _as_written(sc) -> dict[str, Any]:
