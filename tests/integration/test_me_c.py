@@ -224,3 +224,18 @@ def test_without_a_compiler_the_python_integrators_run(tmp_path, monkeypatch):
     assert "no C compiler" in (me_c.unavailable() or ""), me_c.unavailable()
     assert not list((tmp_path / "cache").rglob("*.so")), "a failed build left a library in the cache"
     assert res.status == "completed" and probe.values["m.bounces"][-1] >= 10, (res.status, probe.values["m.bounces"][-1])
+
+
+def test_only_a_step_where_no_event_can_arise_is_offered_to_the_loop_in_c():
+    """c_turn: the native plant (no indicators, a completedIntegratorStep that never asks for event mode) gets a
+    turn; the bouncing ball (event indicators) and Halving (step events from completedIntegratorStep) do not."""
+    plant = _me_slave(registry.build("linear_analytic_plant_me", native=True, fmi=3))
+    ball, halving = _me_slave(build("BouncingBall", 3)), _me_slave(build("Halving", 2))
+    try:
+        assert plant.c_turn() is not None and plant._c_step is not None
+        assert ball._c_step is not None and ball.c_turn() is None, "event indicators: the Python loop's"
+        assert halving._needs_completed and halving._c_step is not None and halving.c_turn() is None, \
+            "a completedIntegratorStep that may ask for event mode: the Python loop's"
+    finally:
+        for s in (plant, ball, halving):
+            s.free()
