@@ -9,7 +9,7 @@ recorded signals of its unit (the largest among them, so signals of one unit kee
 and radians then weigh by how far the robot moved in them. Reported RMS values are per signal, in its unit.
 
 The fit is SciPy's ``least_squares`` (trust region reflective, bounds), ``x_scale="jac"`` (each parameter scaled
-by its Jacobian column: a payload in kg, a friction in N*s/m and an offset in s have no common magnitude), and a
+by its Jacobian column: a payload in kg, a gain in N/m and an offset in s have no common magnitude), and a
 forward-difference Jacobian with ``diff_step`` 1e-3 relative for the scenario's values (a step far above a run's
 rounding, its effect on the run still linear) and a tenth of the recording's sampling step for the offset.
 
