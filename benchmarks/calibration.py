@@ -8,10 +8,14 @@ the recording starting 0.2137 s (53.425 samples: no whole number of steps) befor
 the benchmark prints the recovered values against the truth and the targets (payload within 2 %, offset within
 1 ms), the standard errors, the runs of the scenario the fit made, and the wall time (the runs' share of it).
 
+With ``--pool`` it measures what the sweep's pool would do for a Jacobian of two scenario values: two runs of the
+scenario one after the other in this process (as the fit runs them) against the same two on the sweep's embedded
+pool of two workers (``SweepCluster``, ``run_loaded_case``), the pool started for the pair and kept open.
+
 With ``--linked`` it also fits the payload set on the plant and the controller as one value (``--fit
 plant.mass.payload,ctl.mass.payload``): what the joints cannot show, the Jacobian says (its standard error).
 
-    python benchmarks/calibration.py [--stop 2.0] [--rounds 3] [--linked] [--json]
+    python benchmarks/calibration.py [--stop 2.0] [--rounds 3] [--linked] [--pool] [--json]
 """
 
 from __future__ import annotations
@@ -52,13 +56,54 @@ def one(bag: Path, stop: float, fits: list[str], start: float) -> dict:
             "correlation": cal.correlation[0][1] if cal.correlation else None, "notes": cal.notes}
 
 
+def pool_against_serial(stop: float, rounds: int) -> list[dict]:
+    """Two runs here, one after the other, against the same two on the sweep's pool (started / kept open), s."""
+    from cosim.analysis.cluster import SweepCluster
+    from cosim.analysis.sweep import prebuild, run_loaded_case
+    from cosim.engine.overrides import dotted_overrides
+    from cosim.engine.scenario import read_scenario
+    from cosim.observers.recorders import Probe
+    from cosim.run import run_scenario
+
+    src = read_scenario(SCENARIO)
+    pair = [src.load(dotted_overrides({"time.stop": stop, "plant.mass.payload": p, "parallel": "off"}))
+            for p in (START, START * 1.001)]
+    files = prebuild(pair)
+
+    def serial() -> float:
+        t0 = time.perf_counter()
+        for sc in pair:
+            run_scenario(sc, log=False, observers=[Probe(list(MAPS))], read_all=True, fmu_files=files)
+        return time.perf_counter() - t0
+
+    def pooled(client) -> float:
+        t0 = time.perf_counter()
+        for fut in [client.submit(run_loaded_case, sc, files, None) for sc in pair]:
+            fut.result()
+        return time.perf_counter() - t0
+
+    serial()  # warm: the FMUs extracted, the code loaded
+    out = []
+    with SweepCluster(2, None) as (client, _):
+        pooled(client)
+        for _ in range(rounds):
+            t0 = time.perf_counter()
+            with SweepCluster(2, None) as (fresh, _):
+                pooled(fresh)
+            out.append({"serial_s": serial(), "pool_started_s": time.perf_counter() - t0,
+                        "pool_open_s": pooled(client)})
+    return out
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--stop", type=float, default=2.0, help="simulated seconds of the run and of each fit run")
     ap.add_argument("--rounds", type=int, default=3, help="calibrations, each from the same bag")
     ap.add_argument("--linked", action="store_true", help="also fit the payload linked on plant and controller")
+    ap.add_argument("--pool", action="store_true", help="also time two runs here against the sweep's pool")
     ap.add_argument("--json", action="store_true")
     args = ap.parse_args()
+    pool = pool_against_serial(args.stop, args.rounds) if args.pool else None
     with tempfile.TemporaryDirectory(prefix="cosim-calibration-") as tmp:
         log = Path(tmp) / "truth.mcap"
         t0 = time.perf_counter()
@@ -71,7 +116,7 @@ def main() -> None:
             if args.linked else None
     out = {"stop_s": args.stop, "truth": {"payload_kg": PAYLOAD, "offset_s": OFFSET_S, "noise_m": NOISE_M,
                                           "rate_hz": RATE_HZ}, "start_kg": START, "bag_made_s": made,
-           "rounds": rounds, "linked": linked}
+           "rounds": rounds, "linked": linked, "pool": pool}
     if args.json:
         print(json.dumps(out, indent=2))
         return
@@ -92,6 +137,10 @@ def main() -> None:
         print(f"linked plant,ctl payload: {linked['payload_kg']:.4f} kg (std error {linked['payload_stderr']:.2g}); "
               f"{linked['runs']} runs; RMS {linked['rms_before_m']:.3g} -> {linked['rms_after_m']:.3g} m"
               + "".join(f"\n  {n}" for n in linked["notes"] if "identifiable" in n))
+    for p in pool or []:
+        print(f"two runs of {args.stop:g} s: here {p['serial_s']:.3f} s; on the sweep's pool of 2 started for them "
+              f"{p['pool_started_s']:.3f} s ({p['serial_s'] / p['pool_started_s']:.2f}x), kept open "
+              f"{p['pool_open_s']:.3f} s ({p['serial_s'] / p['pool_open_s']:.2f}x)")
 
 
 if __name__ == "__main__":
