@@ -19,13 +19,14 @@ Runs: each is the scenario with the values set at their addresses (``--set`` nam
 signals; the FMUs are built once and stay extracted for the whole fit. A run is made only for values of the
 scenario's parameters not run before: the offset's Jacobian column, and every evaluation that changes only the
 offset, reuse the last run (``runs`` counts the runs made). Why not the sweep's pool for the Jacobian's runs: a
-forward-difference Jacobian costs one run per parameter of the scenario, which could run side by side, but a fit
-of one parameter and the offset (the payload of docs/recordings.md) has one such run per iteration, nothing to run
-beside it; and on this 2-core machine a case handed to a forked worker costs the fork and the FMUs' instantiation
-again, where a short run here costs 0.2-0.4 s in all (benchmarks/calibration.py prints the runs and their time).
+forward-difference Jacobian costs one run per scenario value, which could run side by side, but a fit of one value
+and the offset (the payload of docs/recordings.md) has one such run per iteration, nothing to run beside it; and
+for two values, two runs of 2 s of helix_ctc_analytic took 0.28-0.59 s here against 0.39-0.44 s on the sweep's
+pool of two kept open (0.73-1.47x) and 0.86-1.57 s on one started for them (0.32-0.42x), with other work on the
+2-core machine (``python benchmarks/calibration.py --pool``): no gain worth a second way to run a fit's runs.
 
-Standard errors and correlations come from the Jacobian at the solution: cov = (J^T J)^-1 s^2, s^2 the weighted
-residual's sum of squares over (samples - parameters). They describe the noise's effect only, with the model
+Standard errors and correlations come from the Jacobian at the solution: cov = (J^T J)^-1 s^2 (through J's singular
+values), s^2 the weighted residual's sum of squares over (samples - parameters). They describe the noise's effect only, with the model
 taken as right.
 
 Generic: it imports nothing of ``delta``, ``fmus`` or ``multibody``; parameters are scenario values by address.
