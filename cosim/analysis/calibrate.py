@@ -26,8 +26,8 @@ pool of two kept open (0.73-1.47x) and 0.86-1.57 s on one started for them (0.32
 2-core machine (``python benchmarks/calibration.py --pool``): no gain worth a second way to run a fit's runs.
 
 Standard errors and correlations come from the Jacobian at the solution: cov = (J^T J)^-1 s^2 (through J's singular
-values), s^2 the weighted residual's sum of squares over (samples - parameters). They describe the noise's effect only, with the model
-taken as right.
+values), s^2 the weighted residual's sum of squares over (samples - parameters). They describe the noise's effect
+only, with the model taken as right.
 
 Generic: it imports nothing of ``delta``, ``fmus`` or ``multibody``; parameters are scenario values by address.
 """
@@ -160,7 +160,8 @@ class Calibration:
                 "rms_before": self.rms_before, "rms_after": self.rms_after, "units": self.units,
                 "weighted_rms_before": self.cost_before, "weighted_rms_after": self.cost_after,
                 "samples": self.samples, "runs": self.runs, "evaluations": self.evaluations,
-                "wall_time_s": self.wall_time, "run_time_s": self.run_time, "weighting": self.weighting, "notes": self.notes}
+                "wall_time_s": self.wall_time, "run_time_s": self.run_time, "weighting": self.weighting,
+                "notes": self.notes}
 
     def text(self) -> str:
         width = max(len(p["label"]) for p in self.parameters)
