@@ -35,8 +35,8 @@ from typing import Any, Callable, Hashable, Mapping, Protocol, Sequence
 
 from ..errors import CosimError, domain_errors
 
-__all__ = ["Plugin", "FmuSource", "Preparation", "Scene", "GROUP", "RECORDINGS_GROUP", "installed", "register", "fmu_source",
-           "recording_source", "robots", "trajectories", "scenario_issues", "prepare", "scene"]
+__all__ = ["Plugin", "FmuSource", "Preparation", "Scene", "GROUP", "RECORDINGS_GROUP", "installed", "register",
+           "fmu_source", "recording_source", "robots", "trajectories", "scenario_issues", "prepare", "scene"]
 
 RECORDINGS_GROUP = "cosim.recordings"
 """The entry point group of the maker of ``recording:`` components (see ``recording_source`` above)."""

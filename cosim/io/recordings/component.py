@@ -46,7 +46,8 @@ HOLD_SLACK_S = 0.5e-9  # a sample stamped within half a nanosecond after t is th
 class RecordingInfo:
     """What the plan and the log read of a recording component, as of an FMU's description: ``variables`` (its
     outputs, Real), ``feedthrough`` (none: no inputs), ``path`` (the recording), ``md`` (what is read of an FMU's
-    model description: ``modelName`` 'recording', ``generationTool``, an empty ``guid``); and ``slave(name)``, the object the execution steps."""
+    model description: ``modelName`` 'recording', ``generationTool``, an empty ``guid``); and ``slave(name)``, the
+    object the execution steps."""
 
     path: Path
     recording: Recording
@@ -65,8 +66,8 @@ class RecordingInfo:
         """The run log's description of this component (attached as an FMU's modelDescription.xml would be): the
         file, how it is replayed and each output's spec and unit. Not an FMI model description."""
         r = self.replay
-        rows = "".join(f"  <Signal name={quoteattr(n)} spec={quoteattr(s)} unit={quoteattr(self.variables[n].unit or '')}"
-                       f"/>\n" for n, s in r.signals)
+        rows = "".join(f"  <Signal name={quoteattr(n)} spec={quoteattr(s)} "
+                       f"unit={quoteattr(self.variables[n].unit or '')}/>\n" for n, s in r.signals)
         return (f'<?xml version="1.0" encoding="UTF-8"?>\n<cosimRecording file={quoteattr(str(self.path))} '
                 f'kind={quoteattr(self.recording.kind)} interpolation={quoteattr(r.interpolation)} '
                 f'offset_s="{r.offset_s!r}" time={quoteattr(r.time)}>\n{rows}</cosimRecording>\n').encode()
