@@ -116,3 +116,16 @@ def test_bad_input_exits_2_with_one_line(truth):
     res = cosim("calibrate", SCENARIO, "--measured", bag, *MAP_ARGS, "--fit=plant.mass.payload=1:0", *BASE)
     assert res.returncode == 2 and res.stderr.strip().count("\n") == 0, res.stderr
     assert "the lower bound 1 is not below the upper 0" in res.stderr, res.stderr
+
+
+def test_a_payload_the_controller_knows_too_is_reported_unidentifiable_from_the_joints(truth):
+    """CTC cancels a payload its model carries: set on plant and controller alike, it barely moves the joints (a
+    few 1e-11 m per gram), so its standard error is far above any payload, where the plant's alone is below 1 %."""
+    _, bag = truth
+    cal = calibrate(SCENARIO, bag, MAPS, parse_fits(["plant.mass.payload,ctl.mass.payload=0:1"]),
+                    sets=SETS + [f"ctl.mass.payload={START}"], offset=OFFSET_S)
+    (linked,) = cal.parameters
+    assert linked["names"] == ["plant.mass.payload", "ctl.mass.payload"], linked
+    assert linked["stderr"] > 10.0, f"a linked payload's standard error {linked['stderr']} kg: the joints told it"
+    # the residual stays the plant-only payload's effect (tens of um), which no linked value can make
+    assert min(cal.rms_after.values()) > 10e-6, cal.rms_after
