@@ -94,14 +94,16 @@ class Component(_Model):
         if sum(x is not None for x in (self.fmu, self.path, self.recording)) != 1:
             raise ValueError("give exactly one of 'fmu' (our FMU by name), 'path' (an .fmu file) or 'recording' "
                              "(a recording replayed as outputs)")
-        replay = {"signals", "interpolation", "offset", "time", "units"} & self.model_fields_set
+        given = {f for f in self.model_fields_set  # a key written with its default (a log's scenario as run) is not
+                 if getattr(self, f) != type(self).model_fields[f].get_default(call_default_factory=True)}
+        replay = {"signals", "interpolation", "offset", "time", "units"} & given
         if self.recording is None and replay:
             raise ValueError(f"{', '.join(sorted(replay))}: only for a component given by 'recording'")
         if self.recording is not None:
             if not self.signals:
                 raise ValueError("a recording component needs 'signals': output name -> signal spec")
             fmu_only = {"parameters", "step_multiple", "interface", "feedthrough", "rtol", "solver",
-                        "max_step"} & self.model_fields_set
+                        "max_step"} & given
             if fmu_only:
                 raise ValueError(f"{', '.join(sorted(fmu_only))}: not for a recording (it has outputs only)")
             unknown = sorted(set(self.units) - set(self.signals))

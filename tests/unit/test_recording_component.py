@@ -139,3 +139,22 @@ def test_ssp_export_refuses_a_recording_component(tmp_path):
                                          r"no such component") as exc:
         export_ssp(load_scenario(_scenario(tmp_path, "recording: r.csv\nsignals: {q: q1}")), tmp_path / "x.ssp")
     assert not (tmp_path / "x.ssp").exists(), exc.value
+
+
+def test_a_run_with_a_recording_runs_again_from_its_log(tmp_path):
+    """The log's scenario as run writes every key, defaults too: read back, they are not taken as FMU keys given to
+    a recording."""
+    import subprocess
+    import sys
+
+    _csv(tmp_path)
+    path = _scenario(tmp_path, 'recording: r.csv\nsignals: {"q[1]": q1}\ninterpolation: hold')
+    path.write_text(path.read_text().replace("logging: {enabled: false}", "logging: {out: s.mcap}"))
+    for args in (["s.yaml"], ["--from-log", "s.mcap"]):
+        done = subprocess.run([sys.executable, "-m", "cosim", "run", *args, "--quiet"], cwd=tmp_path,
+                              capture_output=True, text=True, timeout=120)
+        assert done.returncode == 0, (args, done.stderr)
+    from cosim.io.runlog import read_run
+
+    first, again = read_run(tmp_path / "s.mcap"), read_run(tmp_path / "s.rerun.mcap")
+    assert np.array_equal(first.signal("meas.q[1]").y, again.signal("meas.q[1]").y), again.signal("meas.q[1]").y
