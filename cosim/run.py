@@ -216,8 +216,22 @@ def _log_path(scenario: Scenario, out: str | Path | None) -> Path:
         return Path(out)
     if scenario.logging.out is not None:
         base = Path(scenario.source).parent if scenario.source and scenario.source != "<string>" else Path(".")
-        return base / scenario.logging.out
+        return _tidy(base / scenario.logging.out)
     return Path("runs") / f"{safe_stem(scenario.name)}.mcap"
+
+
+def _tidy(path: Path) -> Path:
+    """``path`` without ``..`` steps (``scenarios/../runs/x.mcap`` is ``runs/x.mcap``): relative to the working
+    directory when it lies below it, else absolute; resolved through the file system, so symbolic links keep
+    their meaning."""
+    try:
+        full = path.resolve()
+    except (OSError, RuntimeError):  # no working directory left, a link loop: as written
+        return path
+    try:
+        return full.relative_to(Path.cwd().resolve())
+    except (OSError, ValueError):  # outside the working directory
+        return full
 
 
 def _conclude(output, error: BaseException | None, held: Extractions, offload: Offload | None = None) -> None:

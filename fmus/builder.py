@@ -32,10 +32,13 @@ from delta.errors import DeltaError
 from . import requirements
 from .definition import FmuDefinition
 
-__all__ = ["DEFAULT_CACHE", "source_files", "fingerprint", "bundle_name", "is_current", "install", "cache_folder", "build_python",
-           "BuildError"]
+__all__ = ["CACHE_ENV", "user_cache", "source_files", "fingerprint", "bundle_name", "is_current", "install",
+           "cache_folder", "cached", "deliver", "prune", "on_build", "build_python", "BuildError"]
 
-DEFAULT_CACHE = ".fmu_cache"
+CACHE_ENV = "DELTA_COSIM_CACHE"
+"""Environment variable naming the FMU cache folder (default: :func:`user_cache`)."""
+KEEP = 4
+"""Builds of one FMU kept in the cache (the newest): checkouts at different commits share it without rebuilding."""
 _ROOT = Path(__file__).resolve().parent.parent
 _PROJECT_PACKAGES = ("delta", "multibody", "fmus")
 _FROM = re.compile(r"^(\s*)from\s+(delta|multibody|fmus)(\.|\s)", re.M)
@@ -165,8 +168,72 @@ def _stub(fmu: FmuDefinition, bundle: str) -> str:
     )
 
 
-def _cache_dir(out_dir: str | Path | None) -> Path:
-    return Path(out_dir) if out_dir is not None else Path.cwd() / DEFAULT_CACHE
+def user_cache() -> Path:
+    """The one FMU cache of this user, wherever a command runs: ``$DELTA_COSIM_CACHE``, else the platform's cache
+    folder (``$XDG_CACHE_HOME``, else ``~/.cache``, as the XDG base directory convention says) ``/delta-cosim/fmus``.
+    Entries are keyed by content (:func:`cached`), so one cache serves every checkout and working directory."""
+    named = os.environ.get(CACHE_ENV)
+    if named:
+        return Path(named)
+    base = os.environ.get("XDG_CACHE_HOME")
+    return (Path(base) if base and Path(base).is_absolute() else Path.home() / ".cache") / "delta-cosim" / "fmus"
+
+
+def cached(folder: Path, name: str, digest: str) -> tuple[Path, Path]:
+    """(FMU, stamp) of the build of ``name`` whose fingerprint is ``digest`` in the cache ``folder``."""
+    key = f"{name}-{digest[:16]}"
+    return folder / f"{key}.fmu", folder / f"{key}.json"
+
+
+_ANNOUNCE: list[Callable[[str], None]] = []
+
+
+def on_build(callback: Callable[[str], None] | None) -> None:
+    """Have ``callback(message)`` told of every FMU that is built (not taken from the cache); None: nobody."""
+    _ANNOUNCE[:] = [callback] if callback is not None else []
+
+
+def announce(message: str) -> None:
+    for callback in _ANNOUNCE:
+        callback(message)
+
+
+def prune(folder: Path, name: str) -> None:
+    """Keep the :data:`KEEP` newest builds of ``name`` in ``folder``; a file another process removes first is fine."""
+    pattern = re.compile(re.escape(name) + r"-[0-9a-f]{16}\.fmu")
+    builds = []
+    for path in folder.glob(f"{name}-*.fmu"):
+        try:
+            if pattern.fullmatch(path.name):
+                builds.append((path.stat().st_mtime, path))
+        except OSError:
+            continue
+    for _, path in sorted(builds, reverse=True)[KEEP:]:
+        path.with_suffix(".json").unlink(missing_ok=True)
+        path.unlink(missing_ok=True)
+
+
+def deliver(entry: Path, out_dir: str | Path | None, name: str) -> Path:
+    """The cached FMU ``entry`` where the caller wants it: itself without ``out_dir``; else copied to
+    ``out_dir/name.fmu`` (only the FMU: the cache's stamps stay in the cache), atomically, unless the same bytes
+    are there already."""
+    if out_dir is None:
+        return entry
+    out = cache_folder(Path(out_dir))
+    target = out / f"{name}.fmu"
+    try:
+        if target.is_file() and target.stat().st_size == entry.stat().st_size \
+                and target.read_bytes() == entry.read_bytes():
+            return target
+        partial = out / f".{name}.{os.getpid()}.partial.fmu"
+        try:
+            shutil.copyfile(entry, partial)
+            partial.replace(target)
+        finally:
+            partial.unlink(missing_ok=True)
+    except OSError as exc:
+        raise BuildError(f"cannot write FMU {name} into {out}: {exc.strerror or exc}") from None
+    return target
 
 
 def cache_folder(folder: Path) -> Path:
@@ -176,8 +243,8 @@ def cache_folder(folder: Path) -> Path:
         folder.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
         raise BuildError(f"cannot use {folder} for built FMUs: {exc.strerror or exc} (it must be a folder this user "
-                         "can write: move what is in its place, or run where .fmu_cache can be made; fmus build "
-                         "takes another with --out)") from None
+                         f"can write: move what is in its place, or name another cache with {CACHE_ENV}=FOLDER; "
+                         "fmus build writes elsewhere with --out)") from None
     return folder
 
 
@@ -215,13 +282,20 @@ def install(out: Path, name: str, write: Callable[[Path], None], record: dict[st
 
 
 def build_python(fmu: FmuDefinition, out_dir: str | Path | None = None, *, force: bool = False) -> Path:
-    """Build the python FMU that ``fmu`` defines into ``out_dir`` unless one with the same fingerprint is there."""
-    out = cache_folder(_cache_dir(out_dir))
-    target = out / f"{fmu.name}.fmu"
-    stamp = out / f"{fmu.name}.json"
+    """The python FMU that ``fmu`` defines, built into the user's cache (:func:`user_cache`) unless a build with the
+    same fingerprint is there, then :func:`deliver`\ ed to ``out_dir`` if one is given."""
+    cache = cache_folder(user_cache())
     digest = fingerprint(fmu)
-    if not force and is_current(target, stamp, digest):
-        return target
+    target, stamp = cached(cache, fmu.name, digest)
+    if force or not is_current(target, stamp, digest):
+        announce(f"building FMU {fmu.name} (python, FMI {fmu.fmi}) into {cache}")
+        _build_python(fmu, cache, digest)
+        prune(cache, fmu.name)
+    return deliver(target, out_dir, fmu.name)
+
+
+def _build_python(fmu: FmuDefinition, out: Path, digest: str) -> Path:
+    """Build it into the cache folder ``out`` as :func:`cached` names it, with its stamp."""
     bundle = bundle_name(digest)
     module = f"{fmu.name}_{digest[:16]}"
     saved_path = list(sys.path)
@@ -259,7 +333,7 @@ def build_python(fmu: FmuDefinition, out_dir: str | Path | None = None, *, force
             for name in set(sys.modules) - before:
                 if name == module or name.startswith(bundle):
                     del sys.modules[name]
-        return install(out, fmu.name, lambda partial: shutil.move(str(built), partial),
+        return install(out, cached(out, fmu.name, digest)[0].stem, lambda partial: shutil.move(str(built), partial),
                        {"name": fmu.name, "fingerprint": digest, "module": module, "bundle": bundle, "fmi": fmu.fmi})
 
 

@@ -20,21 +20,23 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p = sub.add_parser("build", help="build every FMU (or the named ones), cached by a hash of its sources")
     p.add_argument("names", nargs="*", help="FMU names (default: every buildable FMU; with --native every FMU that "
                                             "has a native build)")
-    p.add_argument("--out", default=None, help="cache directory (default .fmu_cache; native FMUs go to "
-                                               "OUT/native/fmi2 and OUT/native/fmi3)")
+    p.add_argument("--out", default=None,
+                   help="also copy the FMUs into this folder, FMUs only (they are built into the user's cache, "
+                        "$DELTA_COSIM_CACHE or ~/.cache/delta-cosim/fmus; native FMUs go to OUT/native/fmi2 and "
+                        "OUT/native/fmi3)")
     p.add_argument("--force", action="store_true", help="rebuild even when the cache is current")
     _build_options(p)
     p.add_argument("--json", action="store_true")
     p.set_defaults(handler=_cmd_build)
     p = sub.add_parser("list", help="list FMUs (ours by name, or any .fmu by path) with inputs, outputs and parameters")
     p.add_argument("names", nargs="*", help="FMU names or .fmu paths (default: all of ours)")
-    p.add_argument("--out", default=None, help="cache directory used to build and read them (default .fmu_cache)")
+    p.add_argument("--out", default=None, help="also copy our FMUs into this folder (default: read them in the user's cache)")
     p.add_argument("--json", action="store_true")
     p.set_defaults(handler=_cmd_list)
     p = sub.add_parser("info", help="everything about one FMU (ours by name, or any .fmu by path): interfaces, "
                                     "default experiment, every variable with type, unit and start value")
     p.add_argument("fmu", help="an .fmu path or one of our FMU names")
-    p.add_argument("--out", default=None, help="cache directory for our FMUs (default .fmu_cache)")
+    p.add_argument("--out", default=None, help="also copy our FMU into this folder (default: read it in the user's cache)")
     p.add_argument("--json", action="store_true")
     _build_options(p)
     p.set_defaults(handler=_cmd_info)

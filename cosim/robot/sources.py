@@ -2,11 +2,13 @@
 
 from __future__ import annotations
 
+import sys
 from pathlib import Path
 from typing import Any, Sequence
 
 from delta.errors import DeltaError
 from fmus import registry
+from fmus.builder import on_build
 from fmus.native.build import compiler
 from fmus.native.errors import CompilerMissingError
 
@@ -38,7 +40,16 @@ class RegistrySource:
         """Our FMU of ``key``, built (or taken from the cache). A native build that cannot be made (no C compiler)
         is one line naming what is missing."""
         name, native, fmi = key
+        on_build(_tell)
         try:
             return Path(registry.build(name, native=native, fmi=fmi))
         except DeltaError as exc:  # a build error of ours: the master's error, one line
             raise ComponentSourceError(Issue("", str(exc))) from None
+
+
+def _tell(message: str) -> None:
+    """A build (not a cache hit) said on the terminal: the first run, or one after a change of sources, waits for
+    it (a native pick_place trajectory takes seconds). Only to a terminal: logs and captured output stay as they
+    were."""
+    if sys.stderr is not None and sys.stderr.isatty():
+        print(f"{message} ...", file=sys.stderr, flush=True)

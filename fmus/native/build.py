@@ -32,7 +32,7 @@ from functools import lru_cache
 from pathlib import Path
 from typing import Any
 
-from ..builder import DEFAULT_CACHE, cache_folder, install, is_current
+from ..builder import announce, cache_folder, cached, deliver, install, is_current, prune, user_cache
 from ..definition import FmuDefinition
 from .errors import CompilerMissingError, NativeError
 from .interface import Interface, interface, model_description
@@ -366,20 +366,29 @@ def build_native(fmu: FmuDefinition, fmi: int = 2, out_dir: str | Path | None = 
     """Build (or reuse from the cache) the native build of the FMU ``fmu`` defines, for FMI ``fmi`` (2 or 3); return
     its path.
 
-    The file is ``<out_dir>/native/fmi<fmi>/<name>.fmu`` (default ``out_dir``: ``.fmu_cache`` in the working
-    directory). Raises :class:`CompilerMissingError` without a C compiler and :class:`NativeError` when the
-    FMU has no native build or does not compile.
+    It is built into the user's cache (:func:`fmus.builder.user_cache`) ``/native/fmi<fmi>``, keyed by its
+    fingerprint, unless there already; given ``out_dir``, copied to ``<out_dir>/native/fmi<fmi>/<name>.fmu``.
+    Raises :class:`CompilerMissingError` without a C compiler and :class:`NativeError` when the FMU has no native
+    build or does not compile.
     """
     name = fmu.name
     if fmi not in FMI_VERSIONS:
         raise NativeError(f"native FMU {name}: FMI version must be 2 or 3, got {fmi!r}")
     fmu.native_model()  # raises when the FMU has none
     cc = compiler()
-    out = cache_folder((Path(out_dir) if out_dir is not None else Path.cwd() / DEFAULT_CACHE) / "native" / f"fmi{fmi}")
-    target, stamp = out / f"{name}.fmu", out / f"{name}.json"
+    out = cache_folder(user_cache() / "native" / f"fmi{fmi}")
     digest = fingerprint()
-    if not force and is_current(target, stamp, digest):
-        return target
+    target, stamp = cached(out, name, digest)
+    if force or not is_current(target, stamp, digest):
+        announce(f"building FMU {name} (native, FMI {fmi}) into {out}")
+        _build(fmu, fmi, cc, out, digest)
+        prune(out, name)
+    return deliver(target, None if out_dir is None else Path(out_dir) / "native" / f"fmi{fmi}", name)
+
+
+def _build(fmu: FmuDefinition, fmi: int, cc: str, out: Path, digest: str) -> Path:
+    """Generate, compile, load once and cache the native FMU as :func:`fmus.builder.cached` names it."""
+    name = fmu.name
     own = hashlib.sha256((digest + name).encode()).hexdigest()
     token = "{" + f"{own[:8]}-{own[8:12]}-{own[12:16]}-{own[16:20]}-{own[20:32]}" + "}"
     with tempfile.TemporaryDirectory(prefix=f"native_{name}_") as tmp:
@@ -405,7 +414,8 @@ def build_native(fmu: FmuDefinition, fmi: int = 2, out_dir: str | Path | None = 
                     if path.is_file():
                         zf.write(path, path.relative_to(root).as_posix())
 
-        return install(out, name, write, {"name": name, "fingerprint": digest, "fmi": fmi, "build": "native"})
+        return install(out, cached(out, name, digest)[0].stem, write,
+                       {"name": name, "fingerprint": digest, "fmi": fmi, "build": "native"})
 
 
 def _loads(binary: Path, name: str, cc: str) -> None:

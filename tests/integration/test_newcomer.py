@@ -79,3 +79,24 @@ def test_a_deleted_working_folder_is_one_line_not_an_internal_error(tmp_path):
     assert r.returncode == 2 and "internal error" not in r.stderr, r.stderr
     assert r.stderr.strip() == ("error: the working folder no longer exists (deleted or moved after this shell "
                                 "entered it): cd to an existing folder and run again"), r.stderr
+
+
+def test_runs_from_any_folder_share_the_users_cache_and_print_tidy_paths(first_log, tmp_path):
+    """The first log's run (in another folder) built or found the FMUs in the user's cache: a run from here builds
+    nothing into this folder, and a scenario's ``../runs`` log path is printed without the ``..``."""
+    here = tmp_path / "elsewhere"
+    here.mkdir()
+    r = cosim("run", ANALYTIC, "--set", "fmus=native", "--stop-time", "0.02", "--no-log", cwd=here)
+    assert r.returncode == 0, r.stderr
+    assert list(here.iterdir()) == [], f"written into the working folder: {sorted(p.name for p in here.iterdir())}"
+    r = cosim("run", "helix_ctc_analytic.yaml", "--set", "fmus=native", "--stop-time", "0.02", "--quiet",
+              "--json", cwd=ROOT / "scenarios")
+    assert r.returncode == 0, r.stderr
+    assert "/../" not in r.stdout and '"log": "../runs/' not in r.stdout, r.stdout
+
+
+def test_fmus_build_out_leaves_only_fmus(tmp_path):
+    out = tmp_path / "fmus"
+    r = cosim("fmus", "build", "helix", "linear_ik", "--out", str(out))
+    assert r.returncode == 0, r.stderr
+    assert sorted(p.name for p in out.iterdir()) == ["helix.fmu", "linear_ik.fmu"]

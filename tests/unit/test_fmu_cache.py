@@ -93,3 +93,64 @@ def test_a_write_the_system_refuses_is_one_error_naming_the_folder(tmp_path):
     with pytest.raises(BuildError, match=f"cannot write FMU helix into {tmp_path}: Permission denied"):
         install(tmp_path, "helix", write, {"fingerprint": "abc"})
     assert list(tmp_path.iterdir()) == []
+
+
+# --------------------------------------------------------------------------- one cache per user, keyed by content
+
+
+def test_the_cache_is_the_users_wherever_a_command_runs(tmp_path, monkeypatch):
+    from fmus.builder import CACHE_ENV, user_cache
+
+    monkeypatch.delenv(CACHE_ENV, raising=False)
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "xdg"))
+    assert user_cache() == tmp_path / "xdg" / "delta-cosim" / "fmus"
+    monkeypatch.setenv("XDG_CACHE_HOME", "relative/ignored")  # the XDG spec: a relative path is invalid
+    monkeypatch.setenv("HOME", str(tmp_path / "home"))
+    assert user_cache() == tmp_path / "home" / ".cache" / "delta-cosim" / "fmus"
+    monkeypatch.setenv(CACHE_ENV, str(tmp_path / "mine"))
+    assert user_cache() == tmp_path / "mine"
+
+
+def test_entries_are_keyed_by_content_and_only_the_newest_builds_are_kept(tmp_path):
+    from fmus.builder import KEEP, cached, prune
+
+    digests = [f"{i:x}" * 64 for i in range(KEEP + 2)]
+    for age, digest in enumerate(digests):
+        target, stamp = cached(tmp_path, "helix", digest)
+        _zip(target)
+        stamp.write_text(json.dumps({"fingerprint": digest}))
+        os.utime(target, (1000 + age, 1000 + age))
+    other, _ = cached(tmp_path, "helix_me", digests[0])  # a name that begins like it is not its build
+    _zip(other)
+    prune(tmp_path, "helix")
+    kept = sorted(p.name for p in tmp_path.glob("helix-*.fmu"))
+    assert kept == sorted(cached(tmp_path, "helix", d)[0].name for d in digests[-KEEP:])
+    assert not cached(tmp_path, "helix", digests[0])[1].exists()  # its stamp went with it
+    assert other.exists()
+
+
+def test_a_delivery_leaves_only_the_fmu_and_replaces_a_different_one(tmp_path):
+    from fmus.builder import deliver
+
+    entry = tmp_path / "cache" / "helix-0123456789abcdef.fmu"
+    entry.parent.mkdir()
+    _zip(entry)
+    out = tmp_path / "out"
+    assert deliver(entry, None, "helix") == entry
+    first = deliver(entry, out, "helix")
+    assert first == out / "helix.fmu" and first.read_bytes() == entry.read_bytes()
+    assert [p.name for p in out.iterdir()] == ["helix.fmu"]  # no stamp, no partial file
+    entry.write_bytes(entry.read_bytes() + b"\0")  # a newer build
+    assert deliver(entry, out, "helix").read_bytes() == entry.read_bytes()
+    assert [p.name for p in out.iterdir()] == ["helix.fmu"]
+
+
+def test_a_cache_folder_that_is_a_file_names_the_variable_to_choose_another(tmp_path, monkeypatch):
+    from fmus import registry
+    from fmus.builder import CACHE_ENV, BuildError
+
+    blocker = tmp_path / "cache"
+    blocker.write_text("a file")
+    monkeypatch.setenv(CACHE_ENV, str(blocker))
+    with pytest.raises(BuildError, match=rf"cannot use {blocker} for built FMUs: .*{CACHE_ENV}=FOLDER"):
+        registry.build("helix")
