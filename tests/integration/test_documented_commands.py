@@ -3,7 +3,8 @@ order (a page's later commands read what its earlier ones wrote), from a folder 
 and the golden logs, and each must end with exit 0.
 
 A command is left out only when it cannot run unattended, with the reason below: it names a file of the reader's
-own (``A.mcap``, ``ANY.fmu``), or it serves the live view until stopped (tests/integration/test_live.py runs that).
+own (``A.mcap``, ``ANY.fmu``, another tool's ``system.ssp``), or it serves the live view until stopped
+(tests/integration/test_live.py runs that).
 """
 
 from __future__ import annotations
@@ -21,7 +22,7 @@ pytestmark = pytest.mark.integration
 
 ROOT = Path(__file__).resolve().parents[2]
 PAGES = [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md"))]
-PLACEHOLDERS = ("A.mcap", "B.mcap", "ANY.fmu")
+PLACEHOLDERS = ("A.mcap", "B.mcap", "ANY.fmu", "system.ssp")
 TIMEOUT_S = 600
 
 
@@ -30,7 +31,7 @@ def documented(page: Path) -> list[tuple[str, str | None]]:
     dropped, each with the error line the page shows right below it in a console block (``error: ...``: the
     command must end with exit 2 and print that line), or None (it must succeed)."""
     out: list[tuple[str, str | None]] = []
-    for block in re.findall(r"```(?:bash|sh|shell|console)?\n(.*?)```", page.read_text(encoding="utf-8"), re.S):
+    for block in shell_blocks(page.read_text(encoding="utf-8")):
         lines = re.sub(r"\\\n\s*", " ", block).splitlines()
         for i, line in enumerate(lines):
             command = line.strip().removeprefix("$ ").strip()
@@ -38,6 +39,23 @@ def documented(page: Path) -> list[tuple[str, str | None]]:
                 shown = lines[i + 1].strip() if i + 1 < len(lines) else ""
                 out.append((re.sub(r"\s+#.*$", "", command), shown if shown.startswith("error: ") else None))
     return out
+
+
+def shell_blocks(text: str) -> list[str]:
+    """The bodies of the fenced blocks that are shell (no language, bash, sh, shell, console), fences paired line
+    by line: a closing fence is never taken for the opening of the next block."""
+    blocks, lang, body = [], "", None
+    for line in text.splitlines():
+        if line.lstrip().startswith("```"):
+            if body is None:
+                lang, body = line.lstrip()[3:].strip(), []
+            else:
+                if lang in ("", "bash", "sh", "shell", "console"):
+                    blocks.append("\n".join(body) + "\n")
+                body = None
+        elif body is not None:
+            body.append(line)
+    return blocks
 
 
 def commands(page: Path) -> list[str]:
@@ -62,6 +80,7 @@ def test_the_pages_hold_the_commands_this_test_runs():
     assert any(e is not None for _, _, e in RUNNABLE), "the pages' documented errors are found (docs/core.md)"
     assert len(RUNNABLE) >= 25, len(RUNNABLE)
     assert commands(ROOT / "docs" / "sweeps.md"), "the sweep page's commands span several lines: joined"
+    assert shell_blocks("```text\nA\n```\nprose\n```bash\nB\n```\n") == ["B\n"], "fences paired wrongly"
 
 
 @pytest.fixture(scope="module")
