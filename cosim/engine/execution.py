@@ -27,6 +27,7 @@ from typing import Any, Callable, Protocol, Sequence
 from ..errors import STOP_SIGNALS, CosimError, Interrupted, Issue, ScenarioError
 from ..fmi import Slave, Terminated
 from ..fmi.slave import ComponentState
+from . import cloop
 from .algorithm import ALGORITHMS, DEFAULT, Algorithm
 from .events import EventSpec, EventState, FiredEvent
 from .grid import Grid
@@ -101,6 +102,8 @@ class Execution:
         # done: written by the main thread, read by the watchdog's thread and by a supervisor process (``record``:
         # the one it reads, cosim.engine.supervision)
         self.record = record if record is not None else Record()
+        self.in_c = False  # a loop in C runs (cosim.engine.cloop): the record's time is the macro step's
+        self._c_loop: tuple[tuple, Any] | None = None  # (what it was made for, the loop or None)
         self.current = self.record.current
         self.current[0], self.current[1], self.current[2], self.current[3] = MASTER, self.grid.time(0), 0, 0
         self._schedule_length()  # a schedule too long to hold is refused before any FMU is made
@@ -316,7 +319,14 @@ class Execution:
 
     def _simulate_fast(self, k_end: int, stop: "StopRequest | None", progress: Callable[[int], None] | None,
                        progress_every: int) -> None:
-        """The macro steps up to ``k_end``, without events: the hot loop."""
+        """The macro steps up to ``k_end``, without events: the hot loop (in C where it can be, :mod:`.cloop`)."""
+        key = (tuple(map(id, self.slaves)), tuple(map(id, self.observers)))
+        if self._c_loop is None or self._c_loop[0] != key:
+            self._c_loop = (key, cloop.make(self))
+        if self._c_loop[1] is not None:
+            report = progress if progress is not None and progress_every else None
+            cloop.simulate(self, self._c_loop[1], k_end, stop, report, progress_every)
+            return
         schedule, period, macro_step, cur, stepped, report = self._loop(progress, progress_every)
         chunk, t_ns = self.grid.chunk, self.grid.t_ns
         k = self.k_done

@@ -149,7 +149,8 @@ class Watchdog:
             return ("(initialization)" if PHASES[int(phase)] == "initialization" else "(master)"), \
                 self.ex.grid.time(min(int(steps), self.ex.n_steps)), ""
         slave = self.ex.slaves[c]
-        return slave.name, float(slave.time), " (in the worker process)" if isinstance(slave, Proxy) else ""
+        t = self.ex.current[1] if getattr(self.ex, "in_c", False) else slave.time  # a loop in C records its time
+        return slave.name, float(t), " (in the worker process)" if isinstance(slave, Proxy) else ""
 
     def _fire(self, error: BaseException) -> None:
         self.error = error

@@ -151,6 +151,7 @@ class Base:
     fmi: int = 2
     model_exchange = False
     events = 0
+    in_c_loop = False  # a loop in C (cosim.engine.cloop) runs this component's turns: self.time is not kept
 
     def __init__(self, name: str, info: FMUInfo):
         self.name = name
@@ -207,7 +208,8 @@ class Base:
         if text:
             self.log.append(text)
             if status is not None and status >= 3:  # error, fatal
-                self._error_log = (self.time, text)
+                # in a loop in C (in_c_loop) only its turns call the FMU, each from the time in self._t
+                self._error_log = (self._t.value if self.in_c_loop else self.time, text)
 
     def _error_logged_at(self, t: float) -> bool:
         """Whether the FMU logged an error-status message while at time ``t`` (e.g. during a step from t)."""
@@ -612,6 +614,17 @@ class CoSimulation:
         else:
             self._turn_in_python(t, h)
         self.time = t + h
+
+    def c_turn(self) -> tuple[Any, bool] | None:
+        """For a loop in C (:mod:`cosim.engine.cloop`): this component's :class:`~cosim.fmi.turn.Turn` and whether
+        its calls run Python (a PythonFMU: called with the Python lock held, as its turn is); None without one."""
+        return None if self._c_turn is None else (self._turn_state, self._pythonfmu)
+
+    def turn_failed(self, ended: int, t: float, h: float) -> None:
+        """Raise for a C turn from ``t`` over ``h`` that a loop in C ran and that ``ended`` early (SET, STEP, GET
+        or NONFINITE of :mod:`cosim.fmi.turn`), as :meth:`set_step_get` raises."""
+        self.time = t
+        self._turn_ended(ended, t, h)
 
     def _turn_in_python(self, t: float, h: float) -> None:
         """The C turn's calls made from Python one by one (no C turn for this FMU); raises where it ends."""

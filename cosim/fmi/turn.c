@@ -1,6 +1,9 @@
 /* The master's per-step FMI calls in one call from Python each (see cosim/fmi/turn.py):
  * - cosim_turn: one co-simulation component's turn of a Gauss-Seidel macro step: set its inputs,
  *   doStep, get its outputs, check its real outputs for NaN and infinity;
+ * - cosim_steps: macro steps of a whole system of such components (cosim/engine/cloop.py): per step the
+ *   link copies and every component's turn in the algorithm's order, the record the watchdog and the
+ *   supervisor read, each component's wall time, the tracked errors' sums;
  * - cosim_rhs: one right-hand side of a model-exchange FMU for the master's integrator: set the time,
  *   set the continuous states, get their derivatives, check the derivatives for NaN and infinity;
  *
@@ -9,7 +12,10 @@
  * three saves over a microsecond per call. The first call returning a status worse than fmiWarning
  * ends the sequence; the caller reads which call it was and raises from Python.
  */
+#define _POSIX_C_SOURCE 199309L  /* clock_gettime */
 #include <math.h>
+#include <stdint.h>
+#include <time.h>
 #include <stdbool.h>
 #include <stddef.h>
 #include <string.h>
@@ -136,4 +142,100 @@ int cosim_rhs(Rhs *r, const double *x, double *dx)
     for (size_t j = 0; j < r->nx; j++)
         if (!isfinite(dx[j])) { r->status = 0; return RHS_NONFINITE; }
     return RHS_OK;
+}
+
+/* a link's values: an output's bytes into an input's (the same C type on both ends) */
+typedef struct {
+    void *dst;
+    const void *src;
+    size_t bytes;
+} Move;
+
+typedef struct {
+    size_t n;              /* turns per macro step, in the algorithm's order */
+    Turn *const *turns;
+    const size_t *comp;    /* each turn's component index (the record, the wall times) */
+    const size_t *first;   /* turn i's link copies: moves[first[i]] .. moves[first[i + 1] - 1] */
+    const Move *moves;
+    int jacobi;            /* 1: every turn's links copied before the first turn; 0: each before its turn */
+    double *wall;          /* per component index: wall seconds in its turns (its link copies included) */
+    double *record;        /* the shared record: [0] component with the turn, [1] the macro step's time, s,
+                              [3] macro steps done */
+    double master;         /* the record's value for "no component has the turn" */
+    const double *times;   /* per macro step of the call: its time and step size, s; its end, ns */
+    const double *steps;
+    const int64_t *ends;
+    size_t n_pairs;        /* tracked errors: actual - reference, their sum of squares, the largest |e| */
+    const double *const *actual;
+    const double *const *reference;
+    double *sq;
+    double *mx;
+    int64_t *t_mx;         /* when the largest |e| was seen (the macro step's end, ns) */
+    double budget;         /* wall s after which the call returns at the end of a macro step */
+    size_t failed;         /* out: the turn that ended a macro step */
+    int ended;             /* out: its cosim_turn result */
+} Steps;
+
+static double wall_now(void)
+{
+    struct timespec ts;
+    clock_gettime(CLOCK_MONOTONIC, &ts);
+    return (double)ts.tv_sec + 1e-9 * (double)ts.tv_nsec;
+}
+
+static void copy_links(const Steps *s, size_t i)
+{
+    for (size_t j = s->first[i]; j < s->first[i + 1]; j++)
+        memcpy(s->moves[j].dst, s->moves[j].src, s->moves[j].bytes);
+}
+
+/* Macro steps k0 .. k0 + n - 1 (times[j], steps[j], ends[j] of step k0 + j): the macro steps completed. Fewer than
+ * n: a turn ended step k0 + returned early (failed and ended say which and how; the turns before it in that step
+ * completed), or the wall budget was spent (ended is 0). The same arithmetic as the master's Python loop. */
+size_t cosim_steps(Steps *s, size_t k0, size_t n)
+{
+    double start = wall_now(), prev = start;
+    for (size_t j = 0; j < n; j++) {
+        const double t = s->times[j], h = s->steps[j];
+        s->record[1] = t;
+        if (s->jacobi)
+            for (size_t i = 0; i < s->n; i++)
+                copy_links(s, i);
+        if (j > 0 || s->jacobi)  /* the step's first reading: before its first copy (Jacobi: after them all) */
+            prev = wall_now();
+        for (size_t i = 0; i < s->n; i++) {
+            Turn *u = s->turns[i];
+            s->record[0] = (double)s->comp[i];
+            if (!s->jacobi)
+                copy_links(s, i);
+            *(double *)u->t = t;
+            *(double *)u->h = h;
+            int ended = cosim_turn(u);
+            if (ended) {
+                s->failed = i;
+                s->ended = ended;
+                s->record[0] = s->master;
+                return j;
+            }
+            double now = wall_now();
+            s->wall[s->comp[i]] += now - prev;
+            prev = now;
+        }
+        s->record[0] = s->master;
+        s->record[3] = (double)(k0 + j + 1);
+        for (size_t p = 0; p < s->n_pairs; p++) {
+            double e = *s->actual[p] - *s->reference[p];
+            s->sq[p] += e * e;
+            if (fabs(e) > s->mx[p]) {
+                s->mx[p] = fabs(e);
+                s->t_mx[p] = s->ends[j];
+            }
+        }
+        if (prev - start > s->budget) {
+            s->ended = 0;
+            return j + 1;
+        }
+    }
+    s->ended = 0;
+    return n;
 }

@@ -10,6 +10,10 @@ module) makes the same calls in the same order from C, checks the outputs there,
 failed, if one did: one crossing per component and step. On helix_ctc_analytic with native FMUs that
 takes a component from 2.1-3.4 us to 0.9-1.6 us per step (``benchmarks/master_native.py``).
 
+A whole system whose components all have C turns can go further: ``cosim_steps`` runs a run of macro
+steps in one call, the link copies, every turn in the algorithm's order, the record the watchdog reads and
+the tracked errors' sums included (:mod:`cosim.engine.cloop`); Python is entered once per block of steps.
+
 A model-exchange FMU's right-hand side, which the master's integrator evaluates many times per step
 (fmiXSetTime, fmiXSetContinuousStates, fmiXGetDerivatives or fmi3GetContinuousStateDerivatives, then the
 derivatives checked for NaN), is one crossing the same way: ``cosim_rhs``, through :func:`make_rhs`
@@ -25,15 +29,15 @@ master makes the same calls from Python one by one (:meth:`cosim.fmi.slave.CoSim
 from __future__ import annotations
 
 import ctypes
-from ctypes import POINTER, c_bool, c_double, c_int, c_size_t, c_void_p
+from ctypes import POINTER, c_bool, c_double, c_int, c_int64, c_size_t, c_void_p
 from functools import partial
 from pathlib import Path
 from typing import Any, Callable, Sequence
 
 from ..cbuild import Library
 
-__all__ = ["Exchange", "Finite", "Turn", "Rhs", "helper", "rhs_helper", "unavailable", "make_turn",
-           "make_rhs", "SET", "STEP", "GET", "NONFINITE", "TIME", "STATES", "DERIVATIVES"]
+__all__ = ["Exchange", "Finite", "Turn", "Rhs", "Move", "Steps", "helper", "rhs_helper", "steps_helper",
+           "unavailable", "make_turn", "make_rhs", "SET", "STEP", "GET", "NONFINITE", "TIME", "STATES", "DERIVATIVES"]
 
 SET, STEP, GET, NONFINITE = 1, 2, 3, 4  # what ended a turn (cosim_turn's return value; 0: completed)
 TIME, STATES, DERIVATIVES = 1, 2, 3  # what ended a right-hand side (cosim_rhs's return value, or NONFINITE; 0: done)
@@ -71,6 +75,24 @@ class Rhs(ctypes.Structure):
                 ("get_derivatives", c_void_p), ("nx", c_size_t), ("t", POINTER(c_double)), ("status", c_int)]
 
 
+class Move(ctypes.Structure):
+    """A link's values copied as bytes from an output buffer into an input buffer (``Move`` in turn.c)."""
+
+    _fields_ = [("dst", c_void_p), ("src", c_void_p), ("bytes", c_size_t)]
+
+
+class Steps(ctypes.Structure):
+    """Macro steps of a whole system of C turns (``Steps`` in turn.c; built by :mod:`cosim.engine.cloop`)."""
+
+    _fields_ = [("n", c_size_t), ("turns", POINTER(POINTER(Turn))), ("comp", POINTER(c_size_t)),
+                ("first", POINTER(c_size_t)), ("moves", POINTER(Move)), ("jacobi", c_int),
+                ("wall", POINTER(c_double)), ("record", c_void_p), ("master", c_double),
+                ("times", POINTER(c_double)), ("steps", POINTER(c_double)), ("ends", POINTER(c_int64)),
+                ("n_pairs", c_size_t), ("actual", POINTER(c_void_p)), ("reference", POINTER(c_void_p)),
+                ("sq", POINTER(c_double)), ("mx", POINTER(c_double)), ("t_mx", POINTER(c_int64)),
+                ("budget", c_double), ("failed", c_size_t), ("ended", c_int)]
+
+
 _LIBRARY = Library(Path(__file__).with_name("turn.c"))
 
 
@@ -94,6 +116,12 @@ def rhs_helper() -> Any:
     """The compiled ``cosim_rhs`` (a ctypes function), or None when it cannot be built here."""
     lib = _library()
     return None if lib is None else lib.cosim_rhs
+
+
+def steps_helper() -> Any:
+    """The compiled ``cosim_steps`` (a ctypes function), or None when it cannot be built here."""
+    lib = _library()
+    return None if lib is None else lib.cosim_steps
 
 
 def unavailable() -> str | None:

@@ -18,18 +18,20 @@ class ErrorObserver:
     """Accumulates actual - reference at every macro step (after it) and at the start;
     :meth:`result` gives one :class:`~cosim.observers.stats.ErrorStats` per pair."""
 
+    error_sums = True  # its stepped is cosim.engine.cloop.ErrorSums: a loop in C sums for it
+
     def __init__(self, actual: list[str], reference: list[str]):
         self.actual = actual
         self.reference = reference
 
     def start(self, rt: Execution) -> None:
-        self._pairs = []
+        self.pairs = []
         self.units = []
         for a, r in zip(self.actual, self.reference):
             pa, pr = rt.plan.port(a), rt.plan.port(r)
-            self._pairs.append((rt.where(pa), rt.where(pr)))
+            self.pairs.append((rt.where(pa), rt.where(pr)))
             self.units.append(pa.var.unit or pr.var.unit or "")
-        n = len(self._pairs)
+        n = len(self.pairs)
         self.sq = [0.0] * n
         self.mx = [0.0] * n
         self.t_mx = [rt.now_ns] * n
@@ -38,7 +40,7 @@ class ErrorObserver:
 
     def stepped(self, k: int, t_ns: int, active: Sequence[int]) -> None:
         sq, mx = self.sq, self.mx
-        for j, ((av, ai), (rv, ri)) in enumerate(self._pairs):
+        for j, ((av, ai), (rv, ri)) in enumerate(self.pairs):
             e = av[ai] - rv[ri]
             sq[j] += e * e
             if abs(e) > mx[j]:

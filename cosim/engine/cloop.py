@@ -1,0 +1,207 @@
+"""The hot loop in C: blocks of macro steps of a system whose components all have C turns, one call per block.
+
+The Python loop (:meth:`~cosim.engine.execution.Execution.simulate_until` with the algorithm's macro step) pays
+the interpreter per component and step: the turn's closure, a clock reading after each turn, the boxing of the
+times, the observers' Python. Where nothing in a run needs Python between two macro steps, ``cosim_steps``
+(``cosim/fmi/turn.c``) does the same work from C, as the fastest masters do: per macro step the link copies
+(as bytes, from output buffers into input buffers), every component's turn (:func:`cosim.fmi.turn.make_turn`:
+set, doStep, get, NaN check) in the algorithm's order (Gauss-Seidel: each component's links copied before its
+turn; Jacobi: every link first), each component's wall time, the record the watchdog and the supervisor read
+(the component with the turn, the macro step's time, the steps done) and the tracked errors' sums of an
+:class:`ErrorSums` observer; the same values in the same order and the same double arithmetic as the Python
+loop, so a run's results are the same bit for bit.
+
+Python is entered once per block: at most :data:`BLOCK` macro steps or :data:`BUDGET_S` of wall time (a stop
+request is answered at the block's end, within that time), a block also ending where progress is reported.
+A run takes this loop when (:func:`make`) the helper is built, every component has a C turn (co-simulation,
+numbers only, not a worker's proxy or publisher), every step multiple is 1, every link joins buffers of the same
+C type, and every observer is an :class:`ErrorSums`; otherwise, and around events, the Python loop runs.
+"""
+
+from __future__ import annotations
+
+import ctypes
+from ctypes import POINTER, c_double, c_int64, c_size_t, c_void_p
+from typing import Any, Protocol
+
+from ..fmi import Terminated
+from ..fmi.turn import Move, Steps, Turn, steps_helper
+from .supervision import MASTER
+
+__all__ = ["BLOCK", "BUDGET_S", "ErrorSums", "CLoop", "make", "simulate"]
+
+BLOCK = 4096
+"""Macro steps a call runs at most (the grid's doubles are computed a block at a time)."""
+BUDGET_S = 0.01
+"""Wall seconds after which a call returns at the end of a macro step: how late a stop request is answered."""
+
+_BYTES = set("bBhHiIlLqQfd?")  # ctypes simple types copied as their bytes (numbers, FMI booleans)
+
+
+class ErrorSums(Protocol):
+    """An observer whose every ``stepped`` only sums the errors of ``pairs`` (``error_sums`` True marks one):
+    for pair ``j``, ``((actual array, index), (reference array, index))`` of ``c_double`` values,
+    ``e = actual - reference``, ``sq[j] += e * e``, the largest ``|e|`` in ``mx[j]`` and the macro step's end (ns)
+    when it was seen in ``t_mx[j]``; ``n`` counts the steps (:class:`cosim.observers.recorders.ErrorObserver`)."""
+
+    error_sums: bool
+    pairs: list
+    sq: list[float]
+    mx: list[float]
+    t_mx: list[int]
+    n: int
+
+
+def _moves(ex: Any, c: int) -> list[Move] | None:
+    """The links into component ``c`` as byte copies (adjacent elements merged), None when one converts."""
+    out: list[Move] = []
+    for lk in ex.plan.links:
+        if lk.dst.comp != c:
+            continue
+        dv, di = ex.slaves[c].locate(lk.dst.var, output=False)
+        sv, si = ex.slaves[lk.src.comp].locate(lk.src.var, output=True)
+        kind = getattr(dv, "_type_", None)
+        if kind is None or kind is not getattr(sv, "_type_", None) or getattr(kind, "_type_", None) not in _BYTES:
+            return None
+        size = ctypes.sizeof(kind)
+        dst = ctypes.addressof(dv) + (di + lk.dst.offset) * size
+        src = ctypes.addressof(sv) + (si + lk.src.offset) * size
+        n = lk.count * size
+        if out and out[-1].dst + out[-1].bytes == dst and out[-1].src + out[-1].bytes == src:
+            out[-1].bytes += n
+        else:
+            out.append(Move(dst, src, n))
+    return out
+
+
+class CLoop:
+    """``cosim_steps`` bound to an execution's components, links, record and error observers (:func:`make`)."""
+
+    def __init__(self, ex: Any, turns: list[tuple[Turn, bool]], moves: list[list[Move]], sums: list[ErrorSums],
+                 jacobi: bool):
+        self.ex, self.sums = ex, sums
+        order = list(ex.plan.order)
+        self.order = order
+        self.slaves = [ex.slaves[c] for c in order]
+        flat = [m for c in order for m in moves[c]]
+        first = [0]
+        for c in order:
+            first.append(first[-1] + len(moves[c]))
+        pairs = [p for o in sums for p in o.pairs]
+        n_pairs = len(pairs)
+        self.times, self.steps, self.ends = (c_double * BLOCK)(), (c_double * BLOCK)(), (c_int64 * BLOCK)()
+        self.wall = (c_double * len(ex.slaves))()
+        self.sq, self.mx, self.t_mx = (c_double * max(1, n_pairs))(), (c_double * max(1, n_pairs))(), \
+            (c_int64 * max(1, n_pairs))()
+        address = ctypes.addressof
+        self.s = Steps(n=len(order), turns=(POINTER(Turn) * len(order))(*[ctypes.pointer(turns[c][0]) for c in order]),
+                       comp=(c_size_t * len(order))(*order), first=(c_size_t * len(first))(*first),
+                       moves=(Move * max(1, len(flat)))(*flat), jacobi=int(jacobi), wall=self.wall,
+                       record=_address(ex.current), master=float(MASTER), times=self.times, steps=self.steps,
+                       ends=self.ends, n_pairs=n_pairs,
+                       actual=(c_void_p * max(1, n_pairs))(*[address(a) + i * 8 for (a, i), _ in pairs]),
+                       reference=(c_void_p * max(1, n_pairs))(*[address(r) + i * 8 for _, (r, i) in pairs]),
+                       sq=self.sq, mx=self.mx, t_mx=self.t_mx, budget=BUDGET_S)
+        proto = ctypes.PYFUNCTYPE if any(python for _, python in turns) else ctypes.CFUNCTYPE
+        f = steps_helper()
+        self.call = proto(c_size_t, c_void_p, c_size_t, c_size_t)(ctypes.cast(f, c_void_p).value)
+        self.ref = ctypes.byref(self.s)
+
+    def _block(self, k: int, n: int) -> None:
+        """The grid's doubles of macro steps ``k .. k + n - 1`` (as the Python loop gets them) into the arrays."""
+        grid = self.ex.grid
+        times, steps = grid.chunk(k, k + n)
+        self.times[:n], self.steps[:n] = times, steps
+        if grid.stop_ns - grid.start_ns == grid.n_steps * grid.step_ns:  # uniform: t_ns(k) = start + k step
+            self.ends[:n] = range(grid.start_ns + (k + 1) * grid.step_ns, grid.start_ns + (k + n + 1) * grid.step_ns,
+                                  grid.step_ns)
+        else:
+            self.ends[:n] = [grid.t_ns(j) for j in range(k + 1, k + n + 1)]
+
+    def run(self, k: int, n: int) -> int:
+        """Macro steps ``k .. k + n - 1`` (fewer when the wall budget ran out): the steps done. Raises where the
+        Python loop raises (:meth:`cosim.fmi.slave.CoSimulation.turn_failed`), after the steps before."""
+        ex, s, sums = self.ex, self.s, self.sums
+        self._block(k, n)
+        j = 0
+        for o in sums:
+            for p in range(len(o.pairs)):
+                self.sq[j], self.mx[j], self.t_mx[j] = o.sq[p], o.mx[p], o.t_mx[p]
+                j += 1
+        wall, ctime = self.wall, ex.comp_time
+        wall[:] = ctime
+        ex.in_c = True
+        for slave in self.slaves:
+            slave.in_c_loop = True
+        try:
+            done = self.call(self.ref, k, n)
+        finally:
+            ex.in_c = False
+            for slave in self.slaves:
+                slave.in_c_loop = False
+        ctime[:] = wall
+        j = 0
+        for o in sums:
+            for p in range(len(o.pairs)):
+                o.sq[p], o.mx[p], o.t_mx[p] = self.sq[j], self.mx[j], self.t_mx[j]
+                j += 1
+            o.n += done
+        ex.k_done = k + done
+        t_next = self.times[done] if done < n else ex.grid.time(k + n)
+        for slave in self.slaves:
+            slave.time = t_next
+        if s.ended:
+            t, h = self.times[done], self.steps[done]
+            for slave in self.slaves[: s.failed]:  # their turns in that step completed
+                slave.time = t + h
+            self.slaves[s.failed].turn_failed(s.ended, t, h)
+        return done
+
+
+def _address(view: memoryview) -> int:
+    """The address of a writable memoryview's first byte (the execution's shared record)."""
+    return ctypes.addressof(ctypes.c_char.from_buffer(view))
+
+
+def make(ex: Any) -> CLoop | None:
+    """The loop in C for execution ``ex`` as it stands (components initialized, links made, observers added), or
+    None where the Python loop must run (see the module docstring)."""
+    if steps_helper() is None or any(m != 1 for m in ex.multiples):
+        return None
+    turns = []
+    for s in ex.slaves:
+        get = getattr(type(s), "c_turn", None)  # the class's: a wrapper that delegates attributes has none
+        turn = get(s) if callable(get) else None
+        if turn is None:
+            return None
+        turns.append(turn)
+    sums = []
+    for o in ex.observers:
+        if getattr(o, "error_sums", False) is not True:
+            return None
+        if any(getattr(a, "_type_", None) is not c_double or getattr(r, "_type_", None) is not c_double
+               for (a, _), (r, _) in o.pairs):
+            return None
+        sums.append(o)
+    moves = [_moves(ex, c) for c in range(len(ex.slaves))]
+    if any(m is None for m in moves):
+        return None
+    return CLoop(ex, turns, moves, sums, ex.algorithm.name == "jacobi")
+
+
+def simulate(ex: Any, loop: CLoop, k_end: int, stop: Any, report: Any, every: int) -> None:
+    """Macro steps from ``ex.k_done`` up to ``k_end`` through ``loop``: progress reported every ``every`` steps, a stop
+    request answered between blocks, an FMU's end of the simulation handled as the Python loop handles it."""
+    k = ex.k_done
+    try:
+        while k < k_end:
+            n = min(k_end - k, BLOCK)
+            if report is not None:
+                n = min(n, every - k % every)
+            k += loop.run(k, n)
+            if report is not None and k % every == 0:
+                report(k)
+            if stop is not None and stop.requested:
+                raise stop.interrupted()
+    except Terminated as term:
+        ex._end_at(term, ex.k_done, loop.order, [o.stepped for o in ex.observers])

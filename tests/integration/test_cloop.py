@@ -1,0 +1,171 @@
+"""The master's loop in C (cosim.engine.cloop) against its loop in Python, on the C models of ``tests/cfmus``.
+
+The loop in C makes the same FMI calls in the same order, copies the same bytes and sums the tracking errors in the
+same double arithmetic: every value of a run must be the same bit for bit (no tolerance), every early end the same
+error or termination, and the stop request, the progress and the record the watchdog reads must work as in the
+Python loop.
+"""
+
+from __future__ import annotations
+
+import signal
+
+import pytest
+import yaml
+from cfmus import build
+
+from cosim.engine import cloop
+from cosim.engine.scenario import parse_scenario
+from cosim.errors import FMIError, Interrupted
+from cosim.run import RunOptions, run_scenario
+
+pytestmark = pytest.mark.integration
+
+EVERY = 7  # macro steps between two snapshots: the loop in C runs blocks of 7
+
+
+class Snapshots:
+    """Every component's input and output bytes every :data:`EVERY` macro steps, taken by the execution's hooks.
+    An error-sums observer without pairs (``error_sums``): the loop in C may run with it."""
+
+    error_sums = True
+
+    def __init__(self) -> None:
+        self.pairs, self.sq, self.mx, self.t_mx, self.n = [], [], [], [], 0
+        self.taken: list[tuple[int, list[bytes]]] = []
+
+    def start(self, ex) -> None:
+        self.ex = ex
+        for k in range(EVERY, ex.n_steps + 1, EVERY):
+            ex.hooks.setdefault(k, []).append(self.take)
+        self.take(0)
+
+    def take(self, k: int) -> None:
+        self.taken.append((k, [bytes(b.values) for s in self.ex.slaves for b in (*s.in_bufs, *s.out_bufs)]))
+
+    def stepped(self, k, t_ns, active) -> None:
+        self.n += 1
+
+    def finish(self, ex, error) -> None:
+        return None
+
+
+def _scenario(tmp_path, components: dict, connections: list[tuple[str, str]], stop: float, step: float,
+              algorithm: str = "gauss_seidel", compare: tuple[str, str] | None = None):
+    doc = {"name": "loops", "components": components, "connections": [{"from": a, "to": b} for a, b in connections],
+           "time": {"stop": stop, "step": step}, "parallel": "off", "algorithm": algorithm}
+    if compare is not None:
+        doc["compare"] = {"actual": [compare[0]], "reference": [compare[1]]}
+    return parse_scenario(yaml.safe_dump(doc, sort_keys=False), str(tmp_path / "loops.yaml"))
+
+
+def _run(scenario, monkeypatch, *, in_c: bool, **options):
+    """(snapshots, result, blocks the loop in C ran) of a run with its loop in C or in Python."""
+    blocks: list[int] = []
+    with monkeypatch.context() as m:
+        if in_c:
+            run = cloop.CLoop.run
+
+            def spy(self, k, n):
+                blocks.append(n)
+                return run(self, k, n)
+
+            m.setattr(cloop.CLoop, "run", spy)
+        else:
+            m.setattr(cloop, "make", lambda ex: None)
+        snaps = Snapshots()
+        result = run_scenario(scenario, RunOptions(log=False, observers=[snaps], **options))
+    return snaps, result, blocks
+
+
+FMI2 = ({"osc": "VanDerPol", "a": "Feedthrough", "b": "Feedthrough"},
+        [("osc.x0", "a.Real_input"), ("a.Real_output", "b.Real_input"), ("a.Integer_output", "b.Integer_input"),
+         ("a.Boolean_output", "b.Boolean_input"), ("a.Enumeration_output", "b.Enumeration_input")])
+FMI3 = ({"osc": "VanDerPol", "a": "Feedthrough", "b": "Feedthrough"},
+        [("osc.x0", "a.Float64_input"), ("a.Float64_output", "b.Float64_input"),
+         ("a.Float32_output", "b.Float32_input"), ("a.Int8_output", "b.Int8_input"),
+         ("a.UInt64_output", "b.UInt64_input"), ("a.Boolean_output", "b.Boolean_input"),
+         ("a.Float64_array_output", "b.Float64_array_input")])
+
+
+@pytest.mark.parametrize("algorithm", ["gauss_seidel", "jacobi"])
+@pytest.mark.parametrize("fmi, case", [(2, FMI2), (3, FMI3)], ids=["fmi2", "fmi3"])
+def test_the_loop_in_c_gives_the_python_loops_run(tmp_path, monkeypatch, fmi, case, algorithm):
+    models, connections = case
+    components = {name: {"path": str(build(model, fmi))} for name, model in models.items()}
+    scenario = _scenario(tmp_path, components, connections, 0.5, 1e-3, algorithm, compare=("osc.x0", "osc.x1"))
+    c_snaps, c_res, blocks = _run(scenario, monkeypatch, in_c=True)
+    assert blocks and sum(blocks) == 500 and max(blocks) == EVERY, f"blocks of the loop in C: {blocks[:5]}..."
+    py_snaps, py_res, _ = _run(scenario, monkeypatch, in_c=False)
+    assert c_res.steps == py_res.steps == 500, f"steps {c_res.steps} vs {py_res.steps}"
+    assert len(c_snaps.taken) == len(py_snaps.taken) == 1 + 500 // EVERY, (len(c_snaps.taken), len(py_snaps.taken))
+    for (k, c_bytes), (k_py, py_bytes) in zip(c_snaps.taken, py_snaps.taken):
+        assert k == k_py and c_bytes == py_bytes, f"after macro step {k}: the buffers differ"
+    assert c_snaps.taken[1][1] != c_snaps.taken[-1][1], "nothing moved: the test compares constants"
+    c_err, py_err = c_res.errors[0], py_res.errors[0]
+    assert (c_err.rmse, c_err.max_error, c_err.t_max, c_err.samples) == \
+        (py_err.rmse, py_err.max_error, py_err.t_max, py_err.samples), f"tracking: C {c_err} vs Python {py_err}"
+    assert c_err.max_error > 0, f"the tracked error is zero: the test compares nothing ({c_err})"
+    assert c_snaps.n == py_snaps.n == 500, f"observer steps: C {c_snaps.n}, Python {py_snaps.n}"
+    assert set(c_res.component_time) == set(models) and all(v > 0 for v in c_res.component_time.values()), \
+        c_res.component_time
+
+
+def test_a_link_that_converts_keeps_the_python_loop(tmp_path, monkeypatch):
+    """A Float64 output into a Float32 input converts through Python: the run takes the Python loop, unchanged."""
+    components = {name: {"path": str(build(model, 3))} for name, model in FMI3[0].items()}
+    scenario = _scenario(tmp_path, components, [*FMI3[1], ("osc.x1", "a.Float32_input")], 0.1, 1e-3)
+    c_snaps, _, blocks = _run(scenario, monkeypatch, in_c=True)
+    assert blocks == [], f"the loop in C ran blocks {blocks[:5]}... over a converting link"
+    py_snaps, _, _ = _run(scenario, monkeypatch, in_c=False)
+    assert c_snaps.taken == py_snaps.taken, "the same loop gave different values"
+
+
+def _ending(tmp_path, monkeypatch, components, connections, stop, step, in_c: bool):
+    scenario = _scenario(tmp_path, components, connections, stop, step)
+    try:
+        _, result, _ = _run(scenario, monkeypatch, in_c=in_c)
+    except FMIError as exc:
+        return (type(exc).__name__, exc.component, exc.function, str(exc)), None
+    return None, (result.steps, result.sim_time, result.terminated_by, result.message)
+
+
+@pytest.mark.parametrize("what, components, connections, stop, step", [
+    ("rejected step, FMI 2", {"st": ("Stair", 2, {"t_reject": 0.55})}, [], 1.0, 0.1),
+    ("rejected step, FMI 3", {"st": ("Stair", 3, {"t_reject": 0.55})}, [], 1.0, 0.1),
+    ("termination, FMI 2", {"st": ("Stair", 2, {"t_terminate": 0.35})}, [], 1.0, 0.1),
+    ("termination, FMI 3", {"st": ("Stair", 3, {"t_terminate": 0.35})}, [], 1.0, 0.1),
+    ("non-finite output", {"osc": ("VanDerPol", 2, {"mu": 1e6}), "a": ("Feedthrough", 2, {})},
+     [("osc.x0", "a.Real_input")], 1.0, 1e-3),
+])
+def test_the_loop_in_c_ends_as_the_python_loop_ends(tmp_path, monkeypatch, what, components, connections, stop, step):
+    comps = {name: {"path": str(build(model, fmi)), "parameters": params}
+             for name, (model, fmi, params) in components.items()}
+    c_end = _ending(tmp_path, monkeypatch, comps, connections, stop, step, in_c=True)
+    py_end = _ending(tmp_path, monkeypatch, comps, connections, stop, step, in_c=False)
+    assert c_end == py_end, f"{what}: loop in C {c_end} vs loop in Python {py_end}"
+    expected = {"rejected": "FMIError", "termination": None, "non-finite": "FMIError"}[what.split()[0].split(",")[0]]
+    assert (c_end[0][0] if c_end[0] else None) == expected, f"{what}: ended as {c_end}"
+
+
+def test_a_stop_request_is_answered_at_the_end_of_a_block(tmp_path, monkeypatch):
+    """Progress every 100 steps ends the blocks there; a stop requested in the report of step 300 ends the run
+    there, with the steps done recorded where the watchdog and the supervisor read them."""
+    from cosim.engine.execution import Execution
+
+    scenario = _scenario(tmp_path, {"osc": {"path": str(build("VanDerPol", 2))}}, [], 2.0, 1e-3)
+    simulate_until, seen = Execution.simulate_until, {}
+
+    def with_progress(self, t_ns=None, stop=None, progress=None, progress_every=0):
+        def report(k):
+            seen.setdefault("reports", []).append(k)
+            seen["record"] = self.current[3]
+            if k == 300:
+                stop.request(signal.SIGTERM)
+        return simulate_until(self, t_ns, stop, report, 100)
+
+    monkeypatch.setattr(Execution, "simulate_until", with_progress)
+    with pytest.raises(Interrupted):
+        _run(scenario, monkeypatch, in_c=True)
+    assert seen["reports"] == [100, 200, 300], seen
+    assert seen["record"] == 300.0, f"steps done in the record: {seen['record']}"
