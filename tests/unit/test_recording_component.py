@@ -53,9 +53,9 @@ def test_hold_and_linear_are_the_readers_samples_at_the_communication_points(tmp
                 offset: {offset}""")
             t = res.time
             want = rec.sample("q1", t + offset + (0.5e-9 if how == "hold" else 0.0), how)
-            # the same formula; the component's clock is t + h, the log's time the grid's k * step: they may differ
-            # by an ulp of t (2e-19 s here), which moves a linear sample by far less than 1e-12 deg
-            assert np.allclose(res["meas.q[1]"], want, rtol=0, atol=1e-12), (how, offset, res["meas.q[1]"], want)
+            # the same formula; the Result's time axis may differ from the grid's double of a point by an ulp
+            # (2e-19 s here), which moves a linear sample by far less than 1e-12 deg
+            assert np.allclose(res["meas.q[1]"], want, rtol=0, atol=1e-12), (how, offset, res["meas.q[1]"] - want)
     # hold at the recorded stamps (4 ms) takes the sample stamped there, not the one before
     res = _run(tmp_path, 'recording: r.csv\nsignals: {"q[1]": q1}\ninterpolation: hold')
     assert res["meas.q[1]"][4] == Q_DEG[1] and res["meas.q[1]"][3] == Q_DEG[0], res["meas.q[1]"]
