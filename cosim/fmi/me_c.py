@@ -28,7 +28,7 @@ Without a compiler (or when the build fails) :func:`make_c_integrator` returns N
 from __future__ import annotations
 
 import ctypes
-from ctypes import POINTER, byref, c_char, c_double, c_int, c_long, c_size_t, c_void_p
+from ctypes import POINTER, c_char, c_double, c_int, c_long, c_size_t, c_void_p
 from pathlib import Path
 from typing import Any
 
@@ -117,8 +117,7 @@ class _CIntegrator:
     def _bind(self, f: Any, state: Any) -> None:
         call = self._prototype(f)
         call.argtypes, call.restype = [c_void_p, c_double], c_int
-        self._call, self._state_ref = call, byref(state)
-        self._address = ctypes.addressof(state)
+        self._call, self._address = call, ctypes.addressof(state)
 
     @property
     def evaluations(self) -> int:
