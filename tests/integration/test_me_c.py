@@ -239,3 +239,17 @@ def test_only_a_step_where_no_event_can_arise_is_offered_to_the_loop_in_c():
     finally:
         for s in (plant, ball, halving):
             s.free()
+
+
+@pytest.mark.parametrize("model, fmi, stop, exact", [("Stair", 3, 8.0, ["m.counter", "m.ramp"]),
+                                                     ("Halving", 2, 5.0, ["m.count"])])
+def test_time_and_step_events_in_c_as_in_python(tmp_path, monkeypatch, model, fmi, stop, exact):
+    """Time events (nextEventTime) and step events (completedIntegratorStep) on the C dopri5: the same events and the
+    same discrete outputs as on SciPy's RK45 from Python."""
+    scenario = _scenario(tmp_path, model, fmi, "dopri5", stop, 0.01)
+    c_probe, c_res, c_made = _run(scenario, exact, python=False, monkeypatch=monkeypatch)
+    py_probe, py_res, py_made = _run(scenario, exact, python=True, monkeypatch=monkeypatch)
+    assert (c_made, py_made) == ([me_c.DOPRI5], [SciPyIntegrator]), f"integrators: C {c_made}, Python {py_made}"
+    assert c_res.events == py_res.events and c_res.events["m"] >= 5, f"events: C {c_res.events}, Python {py_res.events}"
+    for s in exact:
+        assert c_probe.values[s] == py_probe.values[s], f"{s}: C and Python differ"
