@@ -5,7 +5,8 @@ PythonFMU steps are slower), on a quiet machine and with the other CPU kept busy
 here (``python -c "while True: pass"``). Each case runs ``parallel: auto`` and ``parallel: off`` alternately
 ``--repeat`` times in this process (after one untimed short run: the FMUs built and cached) (:func:`cosim.run.run_scenario`, timed from the call to its return: the FMUs'
 loading, the worker's start when auto takes one, the run), and prints the medians, their ratio and what auto chose.
-"Quiet" is whatever else the machine runs at the time (printed: the load average).
+Without the spinner the machine runs whatever else it runs at the time (printed: the load average). Where auto
+chose the serial run, auto and off ran the same code: their ratio is then the machine's noise.
 
     python benchmarks/parallel_auto.py [--repeat 5] [--native-stop 10] [--python-stop 3]
 """
@@ -50,11 +51,11 @@ def main() -> int:
     args = ap.parse_args()
     sys.path.insert(0, str(ROOT))
     print(f"{Path(args.scenario).name}, no log; {os.cpu_count()} CPUs; {args.repeat} alternations each (median)")
-    print(f"{'build':8}{'other CPU':>11}{'auto, s':>10}{'off, s':>10}{'auto/off':>10}   auto chose")
+    print(f"{'build':8}{'spinner':>9}{'auto, s':>10}{'off, s':>10}{'auto/off':>10}   auto chose")
     worst = 0.0
-    for load in ("quiet", "busy"):
+    for load in ("no", "yes"):
         spinner = None
-        if load == "busy":
+        if load == "yes":
             spinner = subprocess.Popen([sys.executable, "-c", "while True: pass"])
             time.sleep(0.5)
         try:
@@ -62,7 +63,7 @@ def main() -> int:
                 before = os.getloadavg()[0]
                 auto, off, note = _case(args.scenario, build, stop, args.repeat)
                 worst = max(worst, auto / off)
-                print(f"{build:8}{load:>11}{auto:10.3f}{off:10.3f}{auto / off:10.3f}   {note} "
+                print(f"{build:8}{load:>9}{auto:10.3f}{off:10.3f}{auto / off:10.3f}   {note} "
                       f"(load average {before:.2f})")
         finally:
             if spinner is not None:

@@ -5,19 +5,19 @@ The scenario is ``scenarios/helix_ctc_analytic.yaml`` (the thesis helix, 10 s, n
 written once by a run to T (default 5 s, ``run --checkpoint-at T``, no log; its wall time is printed as the one-time
 cost). The cold sweep is :func:`cosim.analysis.sweep.run_sweep` with each case's payload set before t = 0, run to the
 stop time; the warm sweep is the same call with ``checkpoint=`` (``sweep --from-checkpoint``): each case restores the
-checkpoint's state in its worker, sets its payload at T and runs from T to the stop time. Both on an embedded
-``LocalCluster`` of the same ``--workers`` single-threaded worker processes, each timed from the call until
+checkpoint's state in its worker, sets its payload at T and runs from T to the stop time. Both on the embedded
+pool of the same ``--workers`` worker processes, each timed from the call until
 :func:`run_sweep` returns (cluster start-up and shutdown included), alternated ``--repeat`` times in one run (median
 reported, the best too), so the machine's load drifts affect both alike. "One case stepping" is the mean of the
 cases' own ``wall_time_s`` (the run's stepping loop in its worker); "one case whole" is one case (payload 0.1 kg) run
 by :func:`cosim.analysis.sweep.run_loaded_case` in this process between the sweeps, timed from the call to its
 return (the supervised child's fork, FMU extraction and instantiation, the checkpoint's read and restore, the run);
-the rest of a sweep's wall time is the cluster's start-up, scheduling and shutdown.
+the rest of a sweep's wall time is the workers' start, the cases' hand-over and the shutdown.
 
     python benchmarks/warm_sweep.py [--at 5] [--stop 10] [--cases 8] [--workers 2] [--repeat 1]
 
-Expected: the cases' stepping halves (half the simulated time); the sweep's fixed costs (starting the workers,
-each case's FMU extraction and instantiation, the checkpoint's restore) do not, so the whole sweep gains less.
+Expected: the cases' stepping halves (half the simulated time); the sweep's fixed costs (forking the workers,
+each case's FMU instantiation, the checkpoint's restore) do not, so the whole sweep gains a little less.
 """
 
 from __future__ import annotations
