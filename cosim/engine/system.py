@@ -13,6 +13,7 @@ from typing import Any, Callable, Mapping
 
 from ..errors import AlgebraicLoopError, Issue, UnknownSignalError, WiringError
 from ..fmi import FMUInfo, Variable
+from ..fmi.description import warn_ambiguous
 from ..fmi.description import initial_of, settable_at_start
 from .algorithm import ALGORITHMS
 from .names import quote, split_ref
@@ -169,6 +170,19 @@ class SystemPlan:
         return Port(i, var, element)
 
 
+def _missing(info: FMUInfo, vname: str, candidates: list[str], comp: str = "") -> str:
+    """Why ``vname`` names no variable of ``info``: declared more than once (ambiguous: refused where named, see
+    :func:`cosim.fmi.description._ambiguous`), or not at all (with the closest names)."""
+    where = f"{info.path.name}{f' ({comp})' if comp else ''}"
+    base = vname.split("[", 1)[0]
+    for name in (vname, base):
+        if name in info.ambiguous:
+            vrs = ", ".join(map(str, info.ambiguous[name]))
+            return (f"{where} declares {len(info.ambiguous[name])} variables named {name!r} (value references "
+                    f"{vrs}): the name is ambiguous, so it cannot be set or connected")
+    return f"{where} has no variable {vname!r}{_close(vname, candidates)}"
+
+
 def _close(name: str, candidates: list[str]) -> str:
     close = difflib.get_close_matches(name, candidates, n=3, cutoff=0.5)
     if close:
@@ -203,6 +217,8 @@ def build_plan(structure: SystemStructure, infos: Mapping[str, FMUInfo], log_sig
     reads = _reads(structure, infos, idx, issue)
     if issues:
         raise WiringError(issues)
+    for info in infos.values():
+        warn_ambiguous(info)  # names declared twice that nothing named: left out, said once
     inputs, outputs, logged = _exchanged(structure, infos, names, links, reads, log_signals)
     order = _order(structure, infos, names, links)
     return SystemPlan(names, [infos[n] for n in names], links, order, start_values, inputs, outputs, logged)
@@ -258,7 +274,7 @@ def _start_values(structure: SystemStructure, infos: dict[str, FMUInfo], idx: di
                                    f"its {count} elements; set one ({quote(n)}.{vname}[1]={val}) or all at once "
                                    f"with a list ({quote(n)}.{vname}=[{','.join([str(val)] * count)}])")
                         continue
-                    issue(loc, f"{info.path.name} has no variable {vname!r}{_close(vname, settable)}")
+                    issue(loc, _missing(info, vname, settable))
                 elif not settable_at_start(var):
                     issue(loc, f"{vname} is {var.causality}/{var.variability} (initial {initial_of(var)}): its value "
                                "cannot be set before initialization (FMI: inputs and non-constant variables with "
@@ -286,7 +302,7 @@ def _links(structure: SystemStructure, infos: dict[str, FMUInfo], idx: dict[str,
         var, element, problem = find_variable(info, vname)
         candidates = [v.name for v in info.variables.values() if v.causality in want]
         if var is None:
-            issue(loc, problem or f"{info.path.name} ({comp}) has no variable {vname!r}{_close(vname, candidates)}")
+            issue(loc, problem if problem and vname not in info.ambiguous else _missing(info, vname, candidates, comp))
             return None
         if var.causality not in want:
             issue(loc, f"{ref} is a{'n' if var.causality[0] in 'aeiou' else ''} {var.causality}, expected an "

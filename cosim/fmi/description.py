@@ -4,14 +4,15 @@ from __future__ import annotations
 
 import math
 import re
+import sys
 import zipfile
 from xml.etree import ElementTree
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from functools import cached_property
 from pathlib import Path
 from typing import Any
 
-from ..errors import ComponentSourceError, Issue, file_problem
+from ..errors import ComponentSourceError, Issue, file_problem, printable
 from .extract import check_archive, extraction, file_stamp, forget_extractions
 
 REAL, INTEGER, BOOLEAN, STRING, BINARY, CLOCK = "Real", "Integer", "Boolean", "String", "Binary", "Clock"
@@ -87,6 +88,7 @@ class FMUInfo:
     md: Any  # fmpy.model_description.ModelDescription
     variables: dict[str, Variable]
     stamp: tuple[int, ...] = ()  # the file as read (:func:`file_stamp`): a rebuilt file is another extraction
+    ambiguous: dict[str, tuple[int, ...]] = field(default_factory=dict)  # names declared twice (:func:`_ambiguous`)
 
     @property
     def unzipdir(self) -> Path:
@@ -212,12 +214,8 @@ def _check_description(path: Path, md: Any) -> None:
                        "FMU's library: letters, digits and _)")
     if not str(md.fmiVersion or "").startswith("3") and not md.guid:
         raise fail("no guid (fmi2Instantiate checks it)")
-    seen: dict[str, Any] = {}
     aliases: dict[tuple, list[Any]] = {}
     for v in md.modelVariables:
-        if v.name in seen:
-            raise fail(f"two variables named {v.name!r}")
-        seen[v.name] = v
         vr = v.valueReference
         if not isinstance(vr, int) or not 0 <= vr < 2 ** 32:
             raise fail(f"variable {v.name}: valueReference {vr!r} is not an unsigned 32-bit integer")
@@ -242,6 +240,34 @@ def _check_description(path: Path, md: Any) -> None:
             names = ", ".join(f"{v.name} ({v.causality})" for v in settable[:4])
             raise fail(f"{names} share the {kind} valueReference {vr}: setting one would change the other (a set "
                        "of aliases holds at most one parameter or input)")
+
+
+def _ambiguous(md: Any) -> dict[str, tuple[int, ...]]:
+    """The names more than one variable of ``md`` declares, with their value references. FMI requires unique names,
+    but tools that do not check run such FMUs (libcosim and Vico run dp-ship's DPController.fmu, which declares
+    ``iepsi`` twice): the name is left out of the FMU's variables (not logged, not set), which is safe where
+    nothing names it; where the system or the user names it, :mod:`cosim.engine.system` refuses it as ambiguous
+    (a correctness need: either variable could be meant)."""
+    by_name: dict[str, list[int]] = {}
+    for v in md.modelVariables:
+        by_name.setdefault(v.name, []).append(v.valueReference)
+    return {name: tuple(vrs) for name, vrs in by_name.items() if len(vrs) > 1}
+
+
+_WARNED: set[Path] = set()
+
+
+def warn_ambiguous(info: FMUInfo) -> None:
+    """Say once per FMU file and process, on stderr, which names ``info`` left out as declared more than once."""
+    if not info.ambiguous or info.path in _WARNED:
+        return
+    _WARNED.add(info.path)
+    named = ", ".join(f"{n!r} (value references {', '.join(map(str, vrs))})"
+                      for n, vrs in list(info.ambiguous.items())[:5])
+    more = " and more" if len(info.ambiguous) > 5 else ""
+    print(printable(f"warning: {info.path.name}: modelDescription.xml declares more than one variable named "
+                    f"{named}{more}: left out (not logged, not settable); the run goes on while nothing names "
+                    "them"), file=sys.stderr)
 
 
 def load_fmu(path: str | Path) -> FMUInfo:
@@ -274,14 +300,17 @@ def load_fmu(path: str | Path) -> FMUInfo:
         raise ComponentSourceError(Issue("", f"{path.name} declares Clock variables ({names}): clocks (FMI 3.0 "
                                              "scheduled execution and synchronous clocks) are not supported"))
     _check_description(path, md)
+    ambiguous = _ambiguous(md)
     variables = {}
     for i, v in enumerate(md.modelVariables, start=1):
+        if v.name in ambiguous:
+            continue
         dims = tuple((int(d.start) if d.start is not None else None, d.valueReference) for d in v.dimensions)
         variables[v.name] = Variable(
             name=v.name, vr=v.valueReference, kind=_KIND.get(v.type, v.type), fmi_type=v.type,
             causality=v.causality, variability=v.variability, unit=_unit(v), description=v.description,
             start=v.start, index=i, shape=tuple(v.shape or ()) if dims else (), dims=dims, initial=v.initial,
             min=_attr(v, "min"), max=_attr(v, "max"))
-    info = FMUInfo(path, md, variables, stamp)
+    info = FMUInfo(path, md, variables, stamp, ambiguous)
     _CACHE[path] = info
     return info

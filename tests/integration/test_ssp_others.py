@@ -179,6 +179,23 @@ UNSUPPORTED = {
 }
 
 
+def test_an_empty_mapping_entry_maps_nothing_with_one_warning(tmp_path, test_fmus, capsys):
+    """OMSimulator's published example writes ``<ssm:MappingEntry source="" target="..."/>``; OMSimulator reads it
+    as no mapping for that target, and so do we (one warning), while the file's other entries apply."""
+    ssm = _ssm('<ssm:MappingEntry source="" target="DP Controller.k"/>'
+               '<ssm:MappingEntry source="gain_value" target="DP Controller.k">'
+               '<ssc:LinearTransformation factor="1.5" offset="0"/></ssm:MappingEntry>')
+    ssp = _archive(tmp_path, test_fmus, system_extra=SYSTEM_BINDING,
+                   files={"resources/system.ssv": SSV, "resources/system.ssm": ssm})
+    rc, _, err = _cli(capsys, "run", ssp, "--no-log", "--quiet")
+    assert rc == 0, err
+    assert err.strip().splitlines() == [
+        "warning: others.ssp: resources/system.ssm: 1 MappingEntry with an empty source or target ('' -> "
+        "'DP Controller.k') map nothing, as OMSimulator reads them"], err
+    with open_ssp(ssp) as sc:
+        assert sc.components["DP Controller"].parameters["k"] == 3.0  # the other entry: 1.5 * gain_value
+
+
 @pytest.mark.parametrize("case", list(BINDING_ERRORS))
 def test_a_system_binding_that_cannot_be_applied_is_one_line(tmp_path, test_fmus, capsys, case):
     ssv, ssm, expected = BINDING_ERRORS[case]

@@ -5,12 +5,14 @@ enumeration transformation; an unmapped name stays as it is), for a component an
 
 from __future__ import annotations
 
+import sys
 import zipfile
 from dataclasses import replace
 from pathlib import Path
 from typing import Any
 from xml.etree import ElementTree as ET
 
+from ...errors import printable
 from .archive import component_fmu, member_path, parse_xml, read_member
 from .spec import NS, PARAMETER_MAPPING_TYPE, PARAMETER_SET_TYPE, SspError, qname
 from .units import Quantity, merged_units, unit_table
@@ -88,10 +90,14 @@ def _mapping(b: ET.Element, zf: zipfile.ZipFile, ssp: Path, where: str) -> tuple
     if root.tag != qname("ssm", "ParameterMapping"):
         raise SspError(ssp, f"{what}: expected an ssm:ParameterMapping, found {root.tag}")
     entries: dict[str, list] = {}
+    skipped: list[str] = []
     for e in root.iterfind("ssm:MappingEntry", NS):
         src, dst = e.get("source"), e.get("target")
-        if not src or not dst:
+        if src is None or dst is None:  # required attributes missing: no tool could say what is meant (correctness)
             raise SspError(ssp, f"{what}: a MappingEntry without source or target")
+        if not src or not dst:  # OMSimulator's example writes source="": it maps nothing, as OMSimulator reads it
+            skipped.append(f"{src!r} -> {dst!r}")
+            continue
         transforms = [c for c in e if c.tag.startswith(f"{{{NS['ssc']}}}")]
         known = [c for c in transforms if c.tag.rsplit("}", 1)[1] in _TRANSFORMATIONS]
         if len(known) != len(transforms) or len(known) > 1:
@@ -99,6 +105,10 @@ def _mapping(b: ET.Element, zf: zipfile.ZipFile, ssp: Path, where: str) -> tuple
             raise SspError(ssp, f"{what}: mapping {src} -> {dst}: transformation {found} is not supported (one of "
                                 f"{', '.join(_TRANSFORMATIONS)})")
         entries.setdefault(src, []).append((dst, known[0] if known else None))
+    if skipped:
+        print(printable(f"warning: {ssp.name}: {what}: {len(skipped)} MappingEntry with an empty source or target "
+                        f"({', '.join(skipped[:3])}{', ...' if len(skipped) > 3 else ''}) map nothing, as "
+                        "OMSimulator reads them"), file=sys.stderr)
     return what, entries
 
 
