@@ -60,6 +60,7 @@ class RecordingInfo:
         modelName="recording", generationTool=GENERATOR, guid="", fmiVersion="", unitDefinitions=[],
         defaultExperiment=None, coSimulation=None, modelExchange=None))
     feedthrough: dict[str, list[str] | None] = field(default_factory=dict)
+    ambiguous: dict[str, tuple[int, ...]] = field(default_factory=dict)  # none: the outputs are a mapping's keys
     interfaces: tuple[str, ...] = ("cs",)
 
     def structural_parameters(self) -> dict:
