@@ -53,3 +53,17 @@ def test_the_desired_angles_are_the_three_poses_in_the_tables_order():
     expected = [0] + [-40, 38, 0] * 4 + [-40, 38] + [0]
     assert list(tab["q_ref"][:, 0]) == expected, tab["q_ref"][:, 0]
     assert np.all(tab["q_ref"] == tab["q_ref"][:, :1]), "all three motors have the same desired angle"
+
+
+def test_every_row_is_the_papers_text():
+    """The second check of the transcription: Table 8's rows parsed from the paper's text (../shared/seeds/, which
+    every checkout and CI run has) are the CSV's, number for number."""
+    import re
+
+    seed = ROOT.parent / "shared" / "seeds" / "004_b2d7625910f3065b.txt"
+    rows = [[int(x) for x in m.group(1).split("|")]
+            for m in re.finditer(r"^\| (?:Home Position|Step \d+) \|(.*)\|\s*$", seed.read_text(encoding="utf-8"),
+                                 re.M)]
+    tab = _example().read_table8()
+    ours = np.column_stack([tab["q_ref"], tab["q"], tab["error"]]).astype(int).tolist()
+    assert rows == ours, (rows, ours)
