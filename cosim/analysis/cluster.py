@@ -21,6 +21,7 @@ import os
 import re
 import shutil
 import signal
+import sys
 import tempfile
 from collections.abc import Callable, Iterable, Iterator
 from typing import Any
@@ -58,8 +59,7 @@ class ForkPool:
     def __init__(self, workers: int):
         self.n = workers
         self.pool = concurrent.futures.ProcessPoolExecutor(
-            workers, mp_context=multiprocessing.get_context("fork"),
-            initializer=signal.signal, initargs=(signal.SIGINT, signal.SIG_IGN))
+            workers, mp_context=multiprocessing.get_context("fork"), initializer=_worker_start)
 
     def submit(self, fn: Callable[..., Any], *args: Any, **_dask: Any) -> Any:
         """``fn(*args)`` on a worker: a :class:`concurrent.futures.Future` (Dask's ``key=`` / ``pure=`` ignored)."""
@@ -71,6 +71,19 @@ class ForkPool:
 
     def close(self) -> None:
         self.pool.shutdown(wait=True, cancel_futures=True)
+
+
+def _worker_start() -> None:
+    """In each forked worker: Ctrl-C left to the sweep's process, and standard streams of its own on the same file
+    descriptors. The sweep's progress bar writes from a thread of the sweep's process: a stream's lock that thread
+    held at the fork would stay held in the worker, and the first flush here (a case's child ending, the worker's
+    own exit) would wait for ever. What the sweep's process had buffered is not written twice either."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    for name, errors in (("stdout", "strict"), ("stderr", "backslashreplace")):
+        old = getattr(sys, name)
+        fd = 1 if name == "stdout" else 2
+        setattr(sys, name, open(fd, "w", encoding=getattr(old, "encoding", None) or "utf-8", errors=errors,
+                                closefd=False, buffering=1))
 
 
 def can_fork() -> bool:
