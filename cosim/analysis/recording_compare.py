@@ -25,7 +25,8 @@ from ..io.runlog import RunLog, read_run
 from ..observers.stats import ErrorStats
 from .compare import Comparison, logged_tolerances, tolerance_for
 
-__all__ = ["compare_recording", "estimate_offset", "Alignment", "parse_maps", "MAX_GRID"]
+__all__ = ["compare_recording", "compared_traces", "estimate_offset", "Alignment", "Trace", "parse_maps",
+           "MAX_GRID"]
 
 _SLACK_S = 1e-9  # stamps are whole ns: a run stamp within 1 ns of the recording's span is inside it
 
@@ -42,6 +43,23 @@ class Alignment:
     coarse: float
     step: float
     correlation: float
+
+
+@dataclass(frozen=True)
+class Trace:
+    """One mapped signal as compared, for drawing it: the run's ``t_run``, ``y_run`` (s, ``unit``); the recording's
+    ``t_rec``, ``y_rec`` (its own clock, s; converted to ``unit``); the residual ``e`` = run - recording at the run
+    stamps ``t`` (s, run time) that the comparison used."""
+
+    name: str
+    spec: str
+    unit: str
+    t_run: np.ndarray
+    y_run: np.ndarray
+    t_rec: np.ndarray
+    y_rec: np.ndarray
+    t: np.ndarray
+    e: np.ndarray
 
 
 def parse_maps(items: Sequence[str]) -> dict[str, str]:
@@ -154,6 +172,15 @@ def compare_recording(run: RunLog | str | Path, recording: str | Path, maps: Map
     ``maps``: run signal -> recording spec; ``units``: run signal -> the recording's unit where the recording
     has none (or to override it); ``offset``: the recording's time minus the run's, s, used as given unless
     ``align`` estimates it (``max_offset`` bounds the search). The result's ``offset`` and ``notes`` say which."""
+    return compared_traces(run, recording, maps, tolerances=tolerances, units=units, time=time,
+                           time_origin=time_origin, align=align, offset=offset, max_offset=max_offset)[0]
+
+
+def compared_traces(run: RunLog | str | Path, recording: str | Path, maps: Mapping[str, str], *,
+                    tolerances: Mapping[str, float] | None = None, units: Mapping[str, str] | None = None,
+                    time: str = "header", time_origin: str = "first", align: bool = False,
+                    offset: float = 0.0, max_offset: float | None = None) -> tuple[Comparison, list[Trace]]:
+    """:func:`compare_recording`'s comparison, and each mapped signal's :class:`Trace` (what a figure draws)."""
     run = run if isinstance(run, RunLog) else read_run(run)
     if not maps:
         raise CosimError("compare with a recording needs --map RUN_SIGNAL=RECORDING_SIGNAL (one per signal)")
@@ -170,7 +197,7 @@ def compare_recording(run: RunLog | str | Path, recording: str | Path, maps: Map
         found = estimate_offset(pairs_run, pairs_rec, max_offset)
         offset, how = found.offset, (f"estimated: correlation peak {found.coarse:.6g} s on a {found.step:.3g} s "
                                      f"grid (r = {found.correlation:.4f}), refined below the step")
-    diffs, lo, hi = [], math.inf, -math.inf
+    diffs, traces, lo, hi = [], [], math.inf, -math.inf
     for (name, spec), (t_run, y_run) in zip(maps.items(), pairs_run):
         t_rec = rec.times[name]
         keep = (t_run + offset >= t_rec[0] - _SLACK_S) & (t_run + offset <= t_rec[-1] + _SLACK_S)
@@ -183,6 +210,7 @@ def compare_recording(run: RunLog | str | Path, recording: str | Path, maps: Map
         lo, hi = min(lo, float(t[0])), max(hi, float(t[-1]))
         diffs.append(ErrorStats.of(e, t, name=name, actual=name, reference=spec, unit=rec.units[name],
                                    tolerance=tolerance_for(name, tol)))
+        traces.append(Trace(name, spec, rec.units[name], t_run, y_run, t_rec, rec.values[name], t, e))
     cmp = Comparison(str(run.path), str(recording), diffs, lo, hi)
     cmp.offset, cmp.offset_how, cmp.notes = offset, how, notes
-    return cmp
+    return cmp, traces

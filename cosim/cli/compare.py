@@ -9,7 +9,7 @@ import sys
 from ..errors import CosimError
 from .common import EXIT_CHECK_FAILED, EXIT_OK, MARGIN, NUMBER, POSITIVE, emit
 
-__all__ = ["register"]
+__all__ = ["register", "add_recording_options", "recording_options"]
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -36,23 +36,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--checked-only", action="store_true", help="list only signals that have a tolerance")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.add_argument("--json", action="store_true", help="the comparison as JSON on stdout")
-    g = p.add_argument_group("against a recording (`compare RUN.mcap RECORDING --map ...`, docs/recordings.md)")
-    g.add_argument("--map", action="append", default=[], metavar="RUN_SIGNAL=RECORDING_SIGNAL",
-                   help="compare the run's signal with the recorded one (plant.q[1]=/joint_states.position[joint1], "
-                        "ctl.q[1]=q1 for a CSV column); repeatable")
-    g.add_argument("--align", action="store_true",
-                   help="estimate the time offset (recording - run): cross-correlation, refined below the step")
-    g.add_argument("--offset", type=NUMBER, default=0.0, metavar="S",
-                   help="the recording's time minus the run's, s (default 0; --align estimates it)")
-    g.add_argument("--max-offset", type=POSITIVE, metavar="S",
-                   help="with --align: largest |offset| tried, s (default half the shorter span)")
-    g.add_argument("--time", choices=("header", "log"), default="header",
-                   help="a bag's header stamps or log (receive) times (default header)")
-    g.add_argument("--time-origin", choices=("first", "absolute"), default="first",
-                   help="recording times from its first message, or absolute (default first)")
-    g.add_argument("--unit", action="append", default=[], metavar="RUN_SIGNAL=UNIT",
-                   help="the unit of the recorded signal mapped to RUN_SIGNAL (bags carry none; default: the run "
-                        "signal's); repeatable")
+    add_recording_options(p.add_argument_group("against a recording (`compare RUN.mcap RECORDING --map ...`, "
+                                                "docs/recordings.md)"))
     p.set_defaults(handler=_cmd_compare, supervised=True)
 
     p = sub.add_parser("baseline", help="decimate a run log into a small baseline for regression tests")
@@ -89,6 +74,48 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.add_argument("--json", action="store_true")
     p.set_defaults(handler=_cmd_validate_model)
+
+
+def add_recording_options(g) -> None:
+    """The options of a run against a recording (``--map``, ``--align``, ``--offset``, ``--max-offset``, ``--time``,
+    ``--time-origin``, ``--unit``), added to the parser or group ``g``: ``compare`` and ``report`` share them;
+    :func:`recording_options` reads them."""
+    g.add_argument("--map", action="append", default=[], metavar="RUN_SIGNAL=RECORDING_SIGNAL",
+                   help="compare the run's signal with the recorded one (plant.q[1]=/joint_states.position[joint1], "
+                        "ctl.q[1]=q1 for a CSV column); repeatable")
+    g.add_argument("--align", action="store_true",
+                   help="estimate the time offset (recording - run): cross-correlation, refined below the step")
+    g.add_argument("--offset", type=NUMBER, default=0.0, metavar="S",
+                   help="the recording's time minus the run's, s (default 0; --align estimates it)")
+    g.add_argument("--max-offset", type=POSITIVE, metavar="S",
+                   help="with --align: largest |offset| tried, s (default half the shorter span)")
+    g.add_argument("--time", choices=("header", "log"), default="header",
+                   help="a bag's header stamps or log (receive) times (default header)")
+    g.add_argument("--time-origin", choices=("first", "absolute"), default="first",
+                   help="recording times from its first message, or absolute (default first)")
+    g.add_argument("--unit", action="append", default=[], metavar="RUN_SIGNAL=UNIT",
+                   help="the unit of the recorded signal mapped to RUN_SIGNAL (bags carry none; default: the run "
+                        "signal's); repeatable")
+
+
+def recording_options(args: argparse.Namespace) -> dict:
+    """The keyword arguments of :func:`cosim.analysis.recording_compare.compare_recording` (``maps``, ``units``,
+    ``time``, ``time_origin``, ``align``, ``offset``, ``max_offset``) from :func:`add_recording_options`' options;
+    CosimError (one line) for a malformed ``--map`` or ``--unit``, or a ``--unit`` of a signal not mapped."""
+    from ..analysis.recording_compare import parse_maps
+
+    units = {}
+    for item in args.unit:
+        name, sep, unit = item.partition("=")
+        if not sep or not name.strip():
+            raise CosimError(f"--unit {item!r}: expected RUN_SIGNAL=UNIT, e.g. plant.q[1]=deg")
+        units[name.strip()] = unit.strip()
+    maps = parse_maps(args.map)
+    unmapped = sorted(set(units) - set(maps))
+    if unmapped:
+        raise CosimError(f"--unit {', '.join(unmapped)}: not mapped by any --map")
+    return {"maps": maps, "units": units, "time": args.time, "time_origin": args.time_origin, "align": args.align,
+            "offset": args.offset, "max_offset": args.max_offset}
 
 
 def _cmd_validate_model(args: argparse.Namespace) -> int:
@@ -221,26 +248,14 @@ def _against_recording(args: argparse.Namespace, tol: dict):
     """``compare RUN.mcap RECORDING --map ...``: the run's signals against the recorded ones."""
     from pathlib import Path
 
-    from ..analysis.recording_compare import compare_recording, parse_maps
+    from ..analysis.recording_compare import compare_recording
 
     run, recording = args.inputs
     if Path(run).suffix != ".mcap":
         raise CosimError(f"compare with a recording: the first input is the run's .mcap log, got {run}")
     if args.set or args.stop_time is not None or args.signals:
         raise CosimError("--set, --stop-time and --signals do not apply to a recording; --map names the signals")
-    units = {}
-    for item in args.unit:
-        name, sep, unit = item.partition("=")
-        if not sep or not name.strip():
-            raise CosimError(f"--unit {item!r}: expected RUN_SIGNAL=UNIT, e.g. plant.q[1]=deg")
-        units[name.strip()] = unit.strip()
-    maps = parse_maps(args.map)
-    unmapped = sorted(set(units) - set(maps))
-    if unmapped:
-        raise CosimError(f"--unit {', '.join(unmapped)}: not mapped by any --map")
-    return compare_recording(run, recording, maps, tolerances=tol, units=units, time=args.time,
-                             time_origin=args.time_origin, align=args.align, offset=args.offset,
-                             max_offset=args.max_offset)
+    return compare_recording(run, recording, tolerances=tol, **recording_options(args))
 
 
 def _cmd_baseline(args: argparse.Namespace) -> int:
