@@ -196,6 +196,45 @@ def test_an_empty_mapping_entry_maps_nothing_with_one_warning(tmp_path, test_fmu
         assert sc.components["DP Controller"].parameters["k"] == 3.0  # the other entry: 1.5 * gain_value
 
 
+UNITS = ('<ssd:Units><ssc:Unit name="m"><ssc:BaseUnit m="1"/></ssc:Unit>'
+         '<ssc:Unit name="mm"><ssc:BaseUnit m="1" factor="0.001"/></ssc:Unit>'
+         '<ssc:Unit name="s"><ssc:BaseUnit s="1"/></ssc:Unit></ssd:Units>')
+UNIT_CASES = {
+    "different_dimensions": ("m", "s", "", "the connectors' units 'm' and 's' are of different dimensions"),
+    "conversion_needed": ("mm", "m", "", "the connectors' units differ ('mm' -> 'm') and unit conversion on "
+                                         "connections is not supported"),
+    "suppressed": ("m", "s", ' suppressUnitConversion="true"', None),
+    "same": ("m", "m", "", None),
+}
+
+
+@pytest.mark.parametrize("case", list(UNIT_CASES))
+def test_connector_units_that_differ_are_refused_unless_conversion_is_suppressed(tmp_path, test_fmus, capsys, case):
+    """A connection from a connector in m to one in s was accepted silently; SSP converts between the units of
+    two connectors, which this reader does not, so differing units are one line naming the connection (unless the
+    connection suppresses the conversion: the numbers pass as they are)."""
+    start, end, attr, expected = UNIT_CASES[case]
+    ssd = HEAD.format(version="1.0", system_extra="", elements_extra="", connections_extra="", experiment=OSP_STEP)
+    ssd = ssd.replace('<ssd:Connector name="y" kind="output"><ssc:Real/></ssd:Connector></ssd:Connectors>',
+                      f'<ssd:Connector name="y" kind="output"><ssc:Real unit="{start}"/></ssd:Connector>'
+                      '</ssd:Connectors>', 1)
+    ssd = ssd.replace('<ssd:Connector name="u" kind="input"><ssc:Real/></ssd:Connector>',
+                      f'<ssd:Connector name="u" kind="input"><ssc:Real unit="{end}"/></ssd:Connector>', 1)
+    ssd = ssd.replace('endConnector="u"/>', f'endConnector="u"{attr}/>', 1)
+    ssd = ssd.replace("</ssd:System>", "</ssd:System>" + UNITS, 1)
+    path = tmp_path / "units.ssp"
+    with zipfile.ZipFile(path, "w") as z:
+        z.writestr("SystemStructure.ssd", ssd)
+        z.write(test_fmus["CosimTSource"], "resources/source.fmu")
+        z.write(test_fmus["CosimTGain"], "resources/gain.fmu")
+    rc, _, err = _cli(capsys, "run", path, "--no-log", "--quiet")
+    if expected is None:
+        assert rc == 0, err
+    else:
+        assert rc == 2 and len(err.strip().splitlines()) == 1, err
+        assert "connection 'Ship.Engine'.y -> DP Controller.u: " + expected in err, err
+
+
 @pytest.mark.parametrize("case", list(BINDING_ERRORS))
 def test_a_system_binding_that_cannot_be_applied_is_one_line(tmp_path, test_fmus, capsys, case):
     ssv, ssm, expected = BINDING_ERRORS[case]

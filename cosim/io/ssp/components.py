@@ -22,10 +22,11 @@ __all__ = ["read_components"]
 def read_components(elements: list[ET.Element], zf: zipfile.ZipFile, ssp: Path, workdir: Path, members: set[str],
                     options: dict[str, dict[str, Any]], units: dict[str, tuple]) -> tuple[dict, dict, dict]:
     """The system's components as scenario data (name -> its FMU unpacked into ``workdir``, its interface, its options
-    from our annotation, the parameters of its own bindings), their connectors (name -> connector -> kind), checked
-    against their FMUs, and their step size hints (``osp:StepSizeHint``, s). ``units``: the SSD's unit definitions."""
+    from our annotation, the parameters of its own bindings), their connectors (name -> connector -> (kind, unit)),
+    checked against their FMUs, and their step size hints (``osp:StepSizeHint``, s). ``units``: the SSD's unit
+    definitions."""
     components: dict[str, dict[str, Any]] = {}
-    connectors: dict[str, dict[str, str]] = {}  # component -> connector name -> kind
+    connectors: dict[str, dict[str, tuple]] = {}  # component -> connector name -> (kind, unit or None)
     hints: dict[str, float] = {}
     for el in elements:
         name, comp = _component(el, zf, ssp, workdir, members, components)
@@ -36,7 +37,7 @@ def read_components(elements: list[ET.Element], zf: zipfile.ZipFile, ssp: Path, 
         hint = step_hint(el, ssp, name)
         if hint is not None:
             hints[name] = hint
-        connectors[name] = {c.get("name", ""): c.get("kind", "")
+        connectors[name] = {c.get("name", ""): (c.get("kind", ""), _connector_unit(c))
                             for c in el.iterfind("ssd:Connectors/ssd:Connector", NS)}
         components[name] = comp
     if not components:
@@ -44,6 +45,12 @@ def read_components(elements: list[ET.Element], zf: zipfile.ZipFile, ssp: Path, 
     for el in elements:
         check_connectors(el, components, ssp)
     return components, connectors, hints
+
+
+def _connector_unit(connector: ET.Element) -> str | None:
+    """The unit an ``ssd:Connector`` declares for its Real (``ssc:Real unit``), None if none."""
+    real = connector.find("ssc:Real", NS)
+    return (real.get("unit") or None) if real is not None else None
 
 
 def _component(el: ET.Element, zf: zipfile.ZipFile, ssp: Path, workdir: Path, members: set[str],

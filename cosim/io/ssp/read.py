@@ -43,7 +43,7 @@ def read_ssp(ssp: str | Path, workdir: str | Path) -> dict[str, Any]:
         components, connectors, hints = read_components(elements, zf, ssp, workdir, members, options, ssd_units)
         system_bindings(system, zf, ssp, components, ssd_units)
         convert_units(components, ssp)
-        connections = _connections(system, components, connectors, ssp)
+        connections = _connections(system, components, connectors, ssd_units, ssp)
         exp = root.find("ssd:DefaultExperiment", NS)
         time = _time_grid(exp, system, components, hints, ssp)
     data: dict[str, Any] = {"name": extras.pop("name", None) or root.get("name") or ssp.stem,
@@ -117,9 +117,28 @@ def _our_annotation(root: ET.Element, system: ET.Element, ssp: Path) -> dict[str
     return extras
 
 
-def _connections(system: ET.Element, components: dict[str, dict[str, Any]], connectors: dict[str, dict[str, str]],
-                 ssp: Path) -> list[dict[str, str]]:
-    """The system's connections as scenario data, each end a component's connector (no transformation)."""
+def _same_units(cn: ET.Element, connectors: dict[str, dict[str, tuple]], units: dict[str, tuple], ssp: Path,
+                label: str) -> None:
+    """Refuse a connection whose connectors declare different units (correctness: SSP converts between them, which
+    this reader does not; m to s cannot be converted at all, and was passed on silently). The same unit, or a side
+    without one, passes; ``suppressUnitConversion`` passes the numbers as they are (not checked here)."""
+    a = connectors[cn.get("startElement")][cn.get("startConnector")][1]
+    b = connectors[cn.get("endElement")][cn.get("endConnector")][1]
+    if a is None or b is None or a == b:
+        return
+    da, db = units.get(a), units.get(b)
+    if da is not None and db is not None and da[0] != db[0]:
+        raise SspError(ssp, f"{label}: the connectors' units {a!r} and {b!r} are of different dimensions: no "
+                            "conversion connects them (suppressUnitConversion=\"true\" passes the numbers as they are)")
+    raise SspError(ssp, f"{label}: the connectors' units differ ({a!r} -> {b!r}) and unit conversion on "
+                        "connections is not supported: declare one unit, or set suppressUnitConversion=\"true\" "
+                        "to pass the numbers as they are")
+
+
+def _connections(system: ET.Element, components: dict[str, dict[str, Any]], connectors: dict[str, dict[str, tuple]],
+                 units: dict[str, tuple], ssp: Path) -> list[dict[str, str]]:
+    """The system's connections as scenario data, each end a component's connector (no transformation; connector
+    units checked by :func:`_same_units` against the SSD's ``units``)."""
     connections = []
     for cn in system.iterfind("ssd:Connections/ssd:Connection", NS):
         ends = []
@@ -142,6 +161,8 @@ def _connections(system: ET.Element, components: dict[str, dict[str, Any]], conn
         connection = {"from": ends[0], "to": ends[1]}
         if cn.get("suppressUnitConversion", "false").strip() in ("true", "1"):
             connection["units"] = "as_is"  # the numbers pass as they are, whatever the connectors' units
+        else:
+            _same_units(cn, connectors, units, ssp, f"connection {ends[0]} -> {ends[1]}")
         connections.append(connection)
     return connections
 
