@@ -28,7 +28,7 @@ from ..fmi import Terminated
 from ..fmi.turn import Move, Steps, Turn, steps_helper
 from .supervision import MASTER
 
-__all__ = ["BLOCK", "BUDGET_S", "ErrorSums", "CLoop", "make", "simulate"]
+__all__ = ["BLOCK", "BUDGET_S", "ErrorSums", "CLoop", "key", "make", "simulate"]
 
 BLOCK = 4096
 """Macro steps a call runs at most (the grid's doubles are computed a block at a time)."""
@@ -163,6 +163,19 @@ def _address(view: memoryview) -> int:
     return ctypes.addressof(ctypes.c_char.from_buffer(view))
 
 
+def _turn(slave: Any) -> tuple[Turn, bool] | None:
+    get = getattr(type(slave), "c_turn", None)  # the class's: a wrapper that delegates attributes has none
+    return get(slave) if callable(get) else None
+
+
+def key(ex: Any) -> tuple:
+    """What a loop made for ``ex`` (:func:`make`) depends on: its components, their C turns and its observers (the
+    execution keeps its loop while this stays the same)."""
+    turns = [_turn(s) for s in ex.slaves]
+    return (tuple(map(id, ex.slaves)), tuple(id(t[0]) if t is not None else None for t in turns),
+            tuple(map(id, ex.observers)))
+
+
 def make(ex: Any) -> CLoop | None:
     """The loop in C for execution ``ex`` as it stands (components initialized, links made, observers added), or
     None where the Python loop must run (see the module docstring)."""
@@ -170,8 +183,7 @@ def make(ex: Any) -> CLoop | None:
         return None
     turns = []
     for s in ex.slaves:
-        get = getattr(type(s), "c_turn", None)  # the class's: a wrapper that delegates attributes has none
-        turn = get(s) if callable(get) else None
+        turn = _turn(s)
         if turn is None:
             return None
         turns.append(turn)

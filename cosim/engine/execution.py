@@ -320,7 +320,7 @@ class Execution:
     def _simulate_fast(self, k_end: int, stop: "StopRequest | None", progress: Callable[[int], None] | None,
                        progress_every: int) -> None:
         """The macro steps up to ``k_end``, without events: the hot loop (in C where it can be, :mod:`.cloop`)."""
-        key = (tuple(map(id, self.slaves)), tuple(map(id, self.observers)))
+        key = cloop.key(self)
         if self._c_loop is None or self._c_loop[0] != key:
             self._c_loop = (key, cloop.make(self))
         if self._c_loop[1] is not None:
