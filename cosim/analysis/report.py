@@ -14,6 +14,12 @@
 - ``report.md``: scenario, robot, status, duration, per-axis RMSE and max error (with
   its time) and the figures.
 
+With a robot recording (``recording``, ``maps`` and ``compare``'s options), also one
+``recording_<signal>.png`` per mapped signal: the run's signal over the recording's (shifted by the
+offset given or estimated) and the residual run - recording, the comparison ``compare`` makes
+(:func:`cosim.analysis.recording_compare.compared_traces`; the figures:
+:mod:`cosim.analysis.recording_figures`), and a section of ``report.md`` with its numbers.
+
 (the signals: :mod:`cosim.analysis.tracking`; the figures: :mod:`cosim.analysis.figures`)
 
 ``controller_table(runs)`` (:mod:`cosim.analysis.table`) gives RMSE per axis per run, in m and um, as markdown,
@@ -31,13 +37,16 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, Mapping
 
-from ..errors import written_by_rename
+from ..errors import CosimError, written_by_rename
 from ..io.output import output_dir
 from ..io.runlog import RunLog
 from ..observers.stats import ErrorStats
+from .compare import Comparison
 from .figures import figures
+from .recording_compare import compared_traces
+from .recording_figures import figure_key, recording_figures
 from .tracking import Tracking, scenario_doc, tracking
 
 __all__ = ["Report", "make_report"]
@@ -59,15 +68,19 @@ class Report:
     velocity: list[ErrorStats] = field(default_factory=list)
     source: str = ""
     joints: list[ErrorStats] = field(default_factory=list)
+    recording: Comparison | None = None  # against a robot recording (report --recording)
 
     def as_dict(self) -> dict[str, Any]:
         def axes(stats: list[ErrorStats]) -> list[dict[str, Any]]:
             return [s.as_dict(*_AXIS_KEYS, name="axis") for s in stats]
 
-        return {"run": self.run, "name": self.name, "robot": self.robot, "status": self.status,
-                "duration_s": self.duration, "out_dir": str(self.out_dir), "markdown": str(self.markdown),
-                "figures": {k: str(v) for k, v in self.figures.items()}, "compared": self.source,
-                "position": axes(self.position), "velocity": axes(self.velocity), "joints": axes(self.joints)}
+        out = {"run": self.run, "name": self.name, "robot": self.robot, "status": self.status,
+               "duration_s": self.duration, "out_dir": str(self.out_dir), "markdown": str(self.markdown),
+               "figures": {k: str(v) for k, v in self.figures.items()}, "compared": self.source,
+               "position": axes(self.position), "velocity": axes(self.velocity), "joints": axes(self.joints)}
+        if self.recording is not None:  # only then: a report without a recording reads as it always has
+            out["recording"] = self.recording.as_dict()
+        return out
 
 
 # one axis in ``report --json`` (its keys since the first release: name as axis; no tolerance)
@@ -119,10 +132,14 @@ def _markdown(tr: Tracking, rep: Report) -> str:
         lines += ["## Velocity error", ""] + _stats_table(rep.velocity, tr.velocity.unit) + [""]
     if rep.joints:
         lines += ["## Joint error", ""] + _stats_table(rep.joints, tr.joints.unit) + [""]
+    if rep.recording is not None:
+        lines += _recording_section(rep.recording)
     lines += ["## Figures", ""]
     captions = {"path_3d": "Platform path, desired vs actual", "position": "Position, desired vs actual",
                 "errors": "Position and velocity errors", "joints": "Joint-space tracking, desired vs actual",
                 "efforts": "Actuator efforts"}
+    for d in rep.recording.diffs if rep.recording is not None else ():
+        captions[figure_key(d.name)] = f"{d.name} against the recording's {d.reference}, and the residual"
     for key, path in rep.figures.items():
         lines += [f"### {captions.get(key, key)}", "", f"![{captions.get(key, key)}]({path.name})", ""]
     if tr.efforts is None:
@@ -130,7 +147,25 @@ def _markdown(tr: Tracking, rep: Report) -> str:
     return "\n".join(lines)
 
 
-def make_report(run: RunLog | str | Path, out_dir: str | Path | None = None) -> Report:
+def _recording_section(cmp: Comparison) -> list[str]:
+    """report.md's rows of the run against a recording: the offset, the notes, and per signal the residual."""
+    lines = ["## Against a recording", "",
+             f"Recording `{cmp.b}`; offset (recording - run) {cmp.offset + 0.0:.9g} s, {cmp.offset_how}. Residual = run - "
+             "recording at the run's time stamps inside the recording (shifted by the offset; linear interpolation "
+             f"between its samples), over run time {cmp.t_start:.6g} .. {cmp.t_stop:.6g} s, as `compare` computes it.",
+             ""]
+    lines += [f"- {n}" for n in cmp.notes] + ([""] if cmp.notes else [])
+    lines += ["| run signal | recorded | unit | RMSE | max abs residual | at t (s) | samples | tolerance |",
+              "|---|---|---|---|---|---|---|---|"]
+    for d in cmp.diffs:
+        tol = "-" if d.tolerance is None else f"{d.tolerance:.4g}" + ("" if d.ok else " (exceeded)")
+        lines.append(f"| {d.name} | {d.reference} | {d.unit or '-'} | {d.rmse:.6e} | {d.max_error:.6e} | "
+                     f"{d.t_max:.4g} | {d.samples} | {tol} |")
+    return lines + [""]
+
+
+def make_report(run: RunLog | str | Path, out_dir: str | Path | None = None, recording: str | Path | None = None,
+                maps: Mapping[str, str] | None = None, **options: Any) -> Report:
     """Write the figures and ``report.md`` of one run; return what was written.
 
     Parameters
@@ -139,19 +174,31 @@ def make_report(run: RunLog | str | Path, out_dir: str | Path | None = None) -> 
         A run log path (MCAP written by :mod:`cosim.observers.mcap_log`) or a :class:`RunLog`.
     out_dir
         Where to write (created); default ``<log stem>_report/`` next to the log.
+    recording, maps, options
+        A robot recording, run signal -> recorded signal, and the keyword arguments of
+        :func:`cosim.analysis.recording_compare.compare_recording` (``units``, ``time``, ``time_origin``,
+        ``align``, ``offset``, ``max_offset``, ``tolerances``): the run against it, drawn per mapped signal.
 
     Raises
     ------
     CosimError
-        The log cannot be read; ReportError when a compared signal is missing (named).
+        The log cannot be read; ReportError when a compared signal is missing (named); RecordingError for the
+        recording; a map without a recording. Every check is made before the first file is written.
     """
+    if recording is None and (maps or options):
+        raise CosimError(f"{', '.join(['maps'] * bool(maps) + sorted(options))}: need a recording to compare with")
     tr = tracking(run)
     log = tr.run
+    against = compared_traces(log, recording, maps or {}, **options) if recording is not None else None
     out = output_dir(Path(out_dir) if out_dir is not None else log.path.with_name(f"{log.path.stem}_report"))
     title = log.name
     p = tr.position
+    drawn = figures(tr, title, out)
+    if against is not None:
+        drawn.update(recording_figures(tr, *against, title, out))
     rep = Report(str(log.path), title, log.robot, log.status, float(p.t[-1] - p.t[0]), out, out / "report.md",
-                 figures(tr, title, out), tr.position_stats(), tr.velocity_stats(), tr.source, tr.joint_stats())
+                 drawn, tr.position_stats(), tr.velocity_stats(), tr.source, tr.joint_stats(),
+                 against[0] if against is not None else None)
     with written_by_rename(rep.markdown) as tmp:
         tmp.write_text(_markdown(tr, rep))
     return rep
