@@ -8,8 +8,8 @@ figures by 10-50 %), all giving the same metrics (checked here, digit for digit)
 - the serial loop: :func:`cosim.analysis.sweep.run_loaded_case` runs the cases one after another in this process
   (the file read once and the FMUs built beforehand, as the sweep does; each case extracts its FMUs, as every run);
 - the serial loop prepared as the sweep prepares the process its workers fork from (the FMUs also extracted
-  once beforehand, :func:`cosim.analysis.sweep.extract_for_cases`): against it, the sweep's ratio is what the
-  second worker alone gives;
+  and our native FMUs' libraries loaded once beforehand, :func:`cosim.analysis.sweep.extract_for_cases`):
+  against it, the sweep's ratio is what the second worker alone gives;
 - the sweep: :func:`cosim.analysis.sweep.run_sweep` on its embedded cluster of 2 worker processes (its
   preparation, the workers' fork and shutdown included).
 
@@ -55,7 +55,8 @@ def main() -> int:
     sys.path.insert(0, str(ROOT))
     from cosim.engine.overrides import dotted_overrides
     from cosim.engine.scenario import load_scenario, read_scenario
-    from cosim.analysis.sweep import Case, extract_for_cases, prebuild, read_results, run_loaded_case, run_sweep
+    from cosim.analysis.sweep import (Case, drop_preloaded, extract_for_cases, prebuild, read_results, run_loaded_case,
+                                      run_sweep)
     from cosim.fmi import Extractions
 
     import statistics
@@ -97,6 +98,7 @@ def main() -> int:
             extract_for_cases(held, loaded[0], fmu_files)  # as run_sweep before its workers fork
         rows = [run_loaded_case(sc, fmu_files) for sc in loaded]
         held.release()
+        drop_preloaded()
         assert all(r["status"] == "ok" for r in rows), [r["message"] for r in rows]
         return time.perf_counter() - t0, rows
 

@@ -69,3 +69,30 @@ def test_a_pool_worker_killed_mid_sweep_fails_what_it_had_not_returned(tmp_path)
     assert (again.ran, again.skipped) == (len(lost), len(cases) - len(lost)), again.text()
     done = {r["case"]: r["status"] for r in read_results(out)}
     assert all(done[c.id] == "ok" for c in cases), done
+
+
+def test_a_case_takes_the_libraries_loaded_ahead_and_gives_the_same_values():
+    """extract_for_cases loads each of our native FMUs' libraries once (cosim.fmi.slave.preload); a run takes them
+    instead of loading its own, with the values of a run that loads its own, and drop_preloaded lets go of the rest."""
+    from cosim.analysis.sweep import drop_preloaded, extract_for_cases
+    from cosim.fmi import Extractions
+    from cosim.fmi import slave
+
+    source = read_scenario(SCENARIO)
+    sc = source.load(dotted_overrides({"time.stop": 0.05, "fmus": "native"}, "sweep case"))
+    fmu_files = prebuild([sc])
+    fresh = _run_case(sc, fmu_files, None)
+    assert fresh["status"] == "ok", fresh["message"]
+    held = Extractions()
+    try:
+        extract_for_cases(held, sc, fmu_files)
+        loaded = {key[1].rsplit("/", 1)[-1]: len(objs) for key, objs in slave._PRELOADED.items()}
+        assert sorted(loaded.values()) == [1] * len(sc.components), f"one loaded library per component: {loaded}"
+        taken = _run_case(sc, fmu_files, None)
+        assert all(not objs for objs in slave._PRELOADED.values()), "the run did not take every loaded library"
+    finally:
+        held.release()
+        drop_preloaded()
+    assert not slave._PRELOADED, "drop_preloaded kept some"
+    for k in ("rmse_x", "rmse_y", "rmse_z", "max_error_x", "peak_effort", "steps"):
+        assert taken[k] == fresh[k], (k, taken[k], fresh[k])
