@@ -169,3 +169,35 @@ def test_a_stop_request_is_answered_at_the_end_of_a_block(tmp_path, monkeypatch)
         _run(scenario, monkeypatch, in_c=True)
     assert seen["reports"] == [100, 200, 300], seen
     assert seen["record"] == 300.0, f"steps done in the record: {seen['record']}"
+
+
+CRASH = """
+name: held
+components:
+  src: {path: "{CosimTCrash}", parameters: {mode: 4, at: 0.5, hold: 60}}
+  g: {path: "{CosimTGain}"}
+connections:
+  - {from: src.y, to: g.u}
+time: {stop: 3.0, step: 0.001}
+parallel: off
+watchdog_s: 1.0
+"""
+
+
+def test_a_component_stuck_in_the_loop_in_c_is_named_at_its_step(write_scenario, tmp_path):
+    """Without a log the run takes the loop in C (two PythonFMU components, called with the Python lock held); the
+    FMU holding that lock in C at t = 0.5 s is named, with its step's time, from the record the loop in C writes."""
+    import os
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[2]
+    path = write_scenario(CRASH)
+    env = {**os.environ, "PYTHONPATH": str(root)}
+    r = subprocess.run([sys.executable, "-m", "cosim", "run", str(path), "--no-log", "--quiet"], capture_output=True,
+                       text=True, env=env, cwd=root, timeout=60)
+    assert r.returncode == 2 and "Traceback" not in r.stderr, (r.returncode, r.stderr)
+    first = r.stderr.strip().splitlines()[0]
+    assert first.startswith("error: ") and "component 'src' in its step at t = 0.499 s made no progress" in first, \
+        r.stderr
