@@ -185,11 +185,16 @@ def _contained_child(fn: Callable[[], Any], rec: Record, out: mmap.mmap, ending:
 
 
 def _wait(pid: int, rec: Record, on_crash: Callable[[Record, str], int]) -> int:
+    """The command's exit code once the child ``pid`` ended: its own, or ``on_crash``'s when it died or was killed;
+    after a stop signal the code of that signal (128 + its number, 143 for SIGTERM) whatever it took to stop the
+    child (one that ignored the signal and busy-looped was killed and ended with 2)."""
     stopped_at: list[float] = []
+    first: list[int] = []
 
     def forward(signum: int, frame: Any) -> None:
         if not stopped_at:
             stopped_at.append(time.monotonic())
+            first.append(signum)
         try:
             os.kill(pid, signum)
         except ProcessLookupError:
@@ -203,7 +208,8 @@ def _wait(pid: int, rec: Record, on_crash: Callable[[Record, str], int]) -> int:
             signal.signal(s, h)
     if reason is None and rec.current[4] == 1.0:  # ended through our exit: its code is the command's
         return os.waitstatus_to_exitcode(status)
-    return on_crash(rec, reason or _death(pid, status, rec))
+    code = on_crash(rec, reason or _death(pid, status, rec))
+    return 128 + first[0] if first else code
 
 
 def _watch(pid: int, rec: Record, stopped_at: list[float], wake: int | None = None) -> tuple[int, str | None]:

@@ -3,10 +3,12 @@
 ``mode``: 0 behaves; 1 segfaults (reads address 0); 2 aborts; 3 calls the C library's ``exit(3)``; 4 blocks the
 stop signals in its thread and sleeps in C for ``hold`` s with the Python lock held (a call through
 ``ctypes.PyDLL``): no other thread of the process can run Python, so neither the watchdog nor a signal handler
-can act. ``mode`` 5 and 6 do what 1 and 4 do, in ``exitInitializationMode`` instead of a step."""
+can act. ``mode`` 5 and 6 do what 1 and 4 do, in ``exitInitializationMode`` instead of a step. ``mode`` 7 ignores the
+stop signals and busy-loops in Python for ``hold`` s (the lock taken and given back, but the signals never acted on)."""
 import signal
 import ctypes
 import os
+import time
 
 from pythonfmu import Fmi2Causality, Fmi2Slave, Fmi2Variability, Integer, Real
 
@@ -44,5 +46,11 @@ class CosimTCrash(Fmi2Slave):
             elif self.mode == 4:
                 signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT, signal.SIGTERM, signal.SIGHUP})
                 ctypes.PyDLL(None).sleep(int(self.hold))
+            elif self.mode == 7:
+                for s in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP):
+                    signal.signal(s, signal.SIG_IGN)
+                end = time.monotonic() + self.hold
+                while time.monotonic() < end:
+                    pass
         self.y = current_time + step_size
         return True

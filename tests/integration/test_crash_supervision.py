@@ -1,6 +1,6 @@
 """A component that crashes or will not stop, under `python -m cosim run`'s supervisor (cosim.engine.supervision).
 
-Each case: exit code 2, one line naming the component, the phase, the simulation time and how the process
+Each case: exit code 2 (143 when SIGTERM stopped it), one line naming the component, the phase, the simulation time and how the process
 died, no traceback, the log recovered up to the crash (readable, its samples ending there), no partial file,
 lock or extracted FMU left behind.
 """
@@ -42,9 +42,9 @@ def _start(path: Path, out: Path, tmp: Path) -> subprocess.Popen:
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env, cwd=ROOT)
 
 
-def _check_after(proc: subprocess.Popen, out: Path, tmp: Path, line: str, t_end: float) -> None:
+def _check_after(proc: subprocess.Popen, out: Path, tmp: Path, line: str, t_end: float, code: int = 2) -> None:
     stdout, stderr = proc.communicate(timeout=60)
-    assert proc.returncode == 2, (proc.returncode, stderr)
+    assert proc.returncode == code, (proc.returncode, stderr)
     assert "Traceback" not in stderr, stderr
     lines = stderr.strip().splitlines()
     assert lines[0].startswith("error: ") and line in lines[0], stderr
@@ -68,17 +68,20 @@ def test_a_crash_inside_a_component_is_named_and_its_log_recovered(mode, how, wr
     assert read_run(out).signal("g.y").t_ns.tolist() == [k * 1_000_000 for k in range(2500)], "up to the last step"
 
 
-def test_a_component_holding_the_python_lock_is_killed_after_a_stop_signal(write_scenario, tmp_path):
-    """The FMU blocks in C with the Python lock held: neither the child's signal handler nor its watchdog thread
-    can run. The supervisor forwards SIGTERM, waits the child's grace, then kills it and names the component."""
+@pytest.mark.parametrize("mode", [4, 7], ids=["lock held in C", "signals ignored, busy in Python"])
+def test_a_component_that_will_not_stop_is_killed_after_a_stop_signal(write_scenario, tmp_path, mode):
+    """The FMU blocks in C with the Python lock held (neither the child's signal handler nor its watchdog thread
+    can run), or ignores the stop signals and busy-loops in Python. The supervisor forwards SIGTERM, waits the
+    child's grace, then kills it and names the component; the command ends with SIGTERM's code, 143, as any run
+    stopped by SIGTERM (it ended with 2)."""
     tmp = Path(tempfile.mkdtemp(dir=tmp_path))
-    path = write_scenario(SCENARIO.format(mode=4, at=0.5, stop=3.0, extra=""))
+    path = write_scenario(SCENARIO.format(mode=mode, at=0.5, stop=3.0, extra=""))
     out = tmp_path / "logs" / "held.mcap"
     proc = _start(path, out, tmp)
     time.sleep(3.0)  # well inside the held call (starts at t = 0.5 s of simulated time, a fraction of a second in)
     t0 = time.monotonic()
     proc.send_signal(signal.SIGTERM)
-    _check_after(proc, out, tmp, "component 'src' in its step at t = 0.499 s did not stop within", 0.5)
+    _check_after(proc, out, tmp, "component 'src' in its step at t = 0.499 s did not stop within", 0.5, code=143)
     assert time.monotonic() - t0 < 20
 
 
