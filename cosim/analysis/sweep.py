@@ -279,7 +279,7 @@ def run_sweep(scenario: str | Path, cases: list[Case], out: str | Path, *, worke
     if warm is not None:
         meta["warm_start"] = warm.record()
     with written_by_rename(out / "sweep.json") as tmp:
-        tmp.write_text(json.dumps(meta, indent=2))
+        tmp.write_text(json.dumps(meta, indent=2), encoding="utf-8")
     summary = SweepSummary(out, len(cases), len(todo), len(cases) - len(todo), failed, warm=warm)
     if on_progress is not None:
         on_progress(len(finished), len(failed), len(cases))
@@ -329,10 +329,13 @@ def extract_for_cases(held: Extractions, scenario: Scenario, fmu_files: dict[tup
         for name, info in locate_fmus(scenario, fmu_files).items():
             if not isinstance(info, FMUInfo):  # a recording replayed as a component: nothing to extract
                 continue
-            info.unzipdir  # noqa: B018 - extracted on first use
             comp = scenario.components[name]
-            if comp.fmu is not None and not (info.md.generationTool or "").startswith("PythonFMU"):
-                preload(make_slave(name, info, comp.interface))  # ours, C: its library runs nothing at load
+            try:
+                info.unzipdir  # noqa: B018 - extracted on first use
+                if comp.fmu is not None and not (info.md.generationTool or "").startswith("PythonFMU"):
+                    preload(make_slave(name, info, comp.interface))  # ours, C: its library runs nothing at load
+            except (CosimError, OSError):  # an archive that does not extract, a library that does not load: each
+                continue  # case says so itself
 
 
 def _loaded(scenario: str, cases: list[Case], params: list[str], checkpoint: str | Path | None,
