@@ -71,8 +71,8 @@ def _against(args: argparse.Namespace) -> dict:
                                 ("--time", args.time != "header"), ("--time-origin", args.time_origin != "first"))
                  if v]
         if given:
-            raise CosimError(f"{', '.join(given)}: compare the run with a recording; give it with --recording "
-                             "RECORDING")
+            raise CosimError(f"{', '.join(given)}: only with --recording RECORDING (the recording the run is drawn "
+                             "against)")
         return {}
     return {"recording": args.recording, **recording_options(args)}
 
