@@ -48,6 +48,20 @@ def printable(text: str) -> str:
     return _CONTROL.sub(lambda m: " " if m.group() == "\t" else repr(m.group())[1:-1], text)
 
 
+def utf8(value):  # noqa: ANN001, ANN201 - str, or containers of them
+    """``value`` (a str, or a list, tuple or dict of them) as text any UTF-8 writer takes: under a locale that is not
+    UTF-8 (``LC_ALL=C`` with Python's UTF-8 mode off) a non-ASCII file name or argument reaches Python as surrogate
+    escapes of its bytes, which JSON, MCAP and the terminal refuse; its UTF-8 bytes are read as UTF-8 again (``ü``
+    stays ``ü``), any other byte is replaced. Paths kept for the file system stay as they came."""
+    if isinstance(value, str):
+        return value.encode("utf-8", "surrogateescape").decode("utf-8", "replace")
+    if isinstance(value, dict):
+        return {utf8(k): utf8(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return type(value)(utf8(v) for v in value)
+    return value
+
+
 STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM, *((signal.SIGHUP,) if hasattr(signal, "SIGHUP") else ()))
 """The signals that stop a run cleanly (Ctrl-C, a termination request, a closed terminal): the master finishes the
 log and stops its processes; those processes ignore them (they reach the whole process group)."""
@@ -57,6 +71,7 @@ __all__ = [
     "domain_errors",
     "user_errors",
     "printable",
+    "utf8",
     "SettingError",
     "Issue",
     "ScenarioError",

@@ -39,7 +39,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Mapping
 
-from ..errors import CosimError, written_by_rename
+from ..errors import CosimError, utf8, written_by_rename
 from ..io.output import output_dir
 from ..io.runlog import RunLog
 from ..observers.stats import ErrorStats
@@ -200,5 +200,5 @@ def make_report(run: RunLog | str | Path, out_dir: str | Path | None = None, rec
                  drawn, tr.position_stats(), tr.velocity_stats(), tr.source, tr.joint_stats(),
                  against[0] if against is not None else None)
     with written_by_rename(rep.markdown) as tmp:
-        tmp.write_text(_markdown(tr, rep))
+        tmp.write_text(utf8(_markdown(tr, rep)), encoding="utf-8")
     return rep

@@ -145,10 +145,24 @@ def _error_json(args: argparse.Namespace | None, text: str, kind: str) -> None:
         print(json.dumps({"ok": False, "error": text, "kind": kind}, indent=2))
 
 
+def _lenient_output() -> None:
+    """Text a stream's encoding cannot carry (a non-ASCII path or name on an ASCII stdout, ``PYTHONIOENCODING=ascii``)
+    written as escapes instead of failing the command after its work is done (a completed run ended with exit 2
+    printing its summary). A stream that already has a lenient error handler (surrogateescape under the C locale)
+    keeps it."""
+    for stream in (sys.stdout, sys.stderr):
+        if getattr(stream, "errors", None) == "strict" and hasattr(stream, "reconfigure"):
+            try:
+                stream.reconfigure(errors="backslashreplace")
+            except (ValueError, OSError):  # a stream that cannot change now: as it is
+                pass
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     import signal
 
     argv = list(sys.argv[1:] if argv is None else argv)
+    _lenient_output()
     try:
         os.getcwd()  # relative paths, the FMU cache and default logs are all under it
     except FileNotFoundError:

@@ -45,7 +45,7 @@ import orjson
 
 from ..engine.execution import Execution
 from ..engine.scenario import EFFECTIVE_ATTACHMENT, effective_scenario
-from ..errors import CosimError
+from ..errors import CosimError, utf8
 from .log_writer import LogSink, WriterFailed, WriterProcess, os_reason, writer_forks
 from .publish import Publisher, time_metadata
 
@@ -166,17 +166,19 @@ class McapRecorder:
             w.metadata("scenario", {
                 "name": s.name, "algorithm": s.algorithm, "step_s": repr(s.time.step), "stop_s": repr(s.time.stop),
                 "start_s": repr(s.time.start), "robot": str(s.robot), "components": ",".join(s.components),
-                "file": str(self.scenario_file or s.source or "")})
+                "file": utf8(str(self.scenario_file or s.source or ""))})
             if s.archive is not None:  # before the scenario as run: `run --from-log` unpacks the archive again
-                w.metadata("ssp", dict(s.archive))
-        w.metadata("command", {"argv": orjson.dumps(getattr(sys, "orig_argv", sys.argv)).decode(), "cwd": os.getcwd()})
+                w.metadata("ssp", utf8(dict(s.archive)))
+        w.metadata("command", {"argv": orjson.dumps(utf8(getattr(sys, "orig_argv", sys.argv))).decode(),
+                               "cwd": utf8(os.getcwd())})
         pub = self.publisher
         w.metadata("time", time_metadata(pub.stamps, pub.origin(rt), rt.start_ns))
         now = time.time_ns()
         if self.scenario is not None:  # the scenario as run, every override applied: `run --from-log` runs it again
             log = self.path.with_name(self.path.name.removesuffix(".partial"))  # renamed so once finished
             w.attachment(EFFECTIVE_ATTACHMENT, "application/json",
-                         orjson.dumps(effective_scenario(self.scenario, log), option=orjson.OPT_INDENT_2), now, now)
+                         orjson.dumps(utf8(effective_scenario(self.scenario, log)), option=orjson.OPT_INDENT_2), now,
+                         now)
         if self.scenario_file is not None and self.scenario_file.exists() and not _is_log(self.scenario_file):
             ssp = self.scenario_file.suffix.lower() == ".ssp"  # an SSP archive (SSP 1.0 names its MIME type)
             w.attachment(f"scenario/{self.scenario_file.name}", "application/x-ssp-package" if ssp else "application/yaml",
