@@ -10,7 +10,7 @@ from ..errors import CosimError, file_problem, written_by_rename
 from .output import check_output
 from .runlog import log_records
 
-__all__ = ["recover", "recover_crashed", "RecoveryReport"]
+__all__ = ["recover", "recover_crashed", "RecoveryReport", "NothingLogged"]
 
 
 @dataclass(frozen=True)
@@ -24,6 +24,10 @@ class RecoveryReport:
 
     def as_dict(self) -> dict:
         return asdict(self)
+
+
+class NothingLogged(CosimError):
+    """The file holds no complete record: there is nothing to recover (a run that died before its log began)."""
 
 
 def recover(path: str | Path, out: str | Path | None = None) -> RecoveryReport:
@@ -58,6 +62,9 @@ def recover_crashed(info: dict) -> tuple[str | None, str | None]:
         return None, None
     try:
         report = recover(partial, target)
+    except NothingLogged:  # died before its log's first record (a crash in initialization): nothing is lost
+        Path(partial).unlink(missing_ok=True)  # kept, it blocked the next run on that output and recover refused it
+        return None, "no log: the run ended before its first record was written"
     except CosimError as exc:
         return None, f"the log written so far stays in {partial} ({exc}): `python -m cosim recover {partial}`"
     finally:
@@ -124,7 +131,7 @@ def _copy(path: Path, tmp: Path, out: Path) -> RecoveryReport:
         except (McapError, EOFError, ValueError, Exception):  # noqa: B014 - any damage ends the usable input
             truncated = True
         if truncated and not (schemas or channels or any(counts.values())):
-            raise CosimError(f"{path}: not an MCAP log (no complete record in it); nothing was written")
+            raise NothingLogged(f"{path}: not an MCAP log (no complete record in it); nothing was written")
         if truncated:
             w.add_metadata("recovery", {"source": str(path), "note": "input ended inside a record; "
                                                                      "complete records kept"})

@@ -187,3 +187,19 @@ def test_a_crashed_multi_rate_run_keeps_every_components_samples_up_to_its_last_
     for name, stamps in expected.items():
         got = run.signal(name).t_ns.tolist()
         assert got == stamps, (name, got[-3:], stamps[-3:], len(got), len(stamps))
+
+
+def test_a_crash_before_the_log_began_leaves_nothing_that_blocks_the_next_run(write_scenario, tmp_path):
+    """A crash in exitInitializationMode, before the log's first record: no log to recover, so no empty ``.partial``
+    is left (it blocked the next run on that output, and recover refused it), and the same output then runs."""
+    tmp = Path(tempfile.mkdtemp(dir=tmp_path))
+    out = tmp_path / "logs" / "early.mcap"
+    proc = _start(write_scenario(SCENARIO.format(mode=5, at=0.5, stop=0.2, extra="")), out, tmp)
+    _, stderr = proc.communicate(timeout=60)
+    assert proc.returncode == 2 and stderr.strip().splitlines() == [
+        "error: component 'src' in its initialization at t = 0 s crashed (SIGSEGV)",
+        "no log: the run ended before its first record was written"], stderr
+    assert list(out.parent.iterdir()) == [] and not list(tmp.glob("cosim-*")), list(out.parent.iterdir())
+    proc = _start(write_scenario(SCENARIO.format(mode=0, at=0.5, stop=0.2, extra=""), "fine.yaml"), out, tmp)
+    _, stderr = proc.communicate(timeout=60)
+    assert proc.returncode == 0 and read_run(out).status == "completed", stderr
