@@ -17,7 +17,6 @@ from pathlib import Path
 from typing import Mapping, Sequence
 
 import numpy as np
-from scipy.optimize import minimize_scalar
 
 from ..errors import CosimError
 from ..io.recordings import Recording, read_recording, unit_factor
@@ -103,6 +102,7 @@ def estimate_offset(run: Sequence[tuple[np.ndarray, np.ndarray]], rec: Sequence[
     bounded scalar minimisation (Brent) of the residual within a step either side, place it below the step.
     ``max_offset`` (s) bounds |offset| (default: half the shorter signal's span)."""
     from scipy.signal import correlate  # lazy: 0.6 s of imports that a comparison without --align never needs
+    from scipy.optimize import minimize_scalar  # lazy: 1 s of imports that a report without a recording never needs
 
     ta0, ta1 = max(t[0] for t, _ in run), min(t[-1] for t, _ in run)
     tb0, tb1 = max(t[0] for t, _ in rec), min(t[-1] for t, _ in rec)
