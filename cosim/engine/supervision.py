@@ -153,6 +153,8 @@ def contained(fn: Callable[[], Any]) -> tuple[Any, str | None, Record]:
     try:
         status, reason = _watch(pid, rec, [], ending)
         n = int.from_bytes(out[:8], "little")
+        if reason is None:
+            _leftovers(pid)
         if reason is None and n:
             ok, value = pickle.loads(out[8:8 + n])
             return (value, None, rec) if ok else (None, value, rec)
@@ -207,6 +209,7 @@ def _wait(pid: int, rec: Record, on_crash: Callable[[Record, str], int]) -> int:
         for s, h in previous.items():
             signal.signal(s, h)
     if reason is None and rec.current[4] == 1.0:  # ended through our exit: its code is the command's
+        _leftovers(pid)
         return os.waitstatus_to_exitcode(status)
     code = on_crash(rec, reason or _death(pid, status, rec))
     return 128 + first[0] if first else code
@@ -250,6 +253,16 @@ def _watch(pid: int, rec: Record, stopped_at: list[float], wake: int | None = No
         elif select.select([wake], [], [], _POLL_S)[0]:
             os.read(wake, 1)
             wake, pause = None, 0.001  # it is ending: see its end soon
+
+
+def _leftovers(pid: int) -> None:
+    """Kill what is left of the process group of the child ``pid`` after it ended well: processes an FMU started
+    and left running (they held the command's output pipe open, so ``cosim run | cat`` never ended). The log
+    writer runs in a session of its own and has finished by then."""
+    try:
+        os.killpg(pid, signal.SIGKILL)
+    except (ProcessLookupError, PermissionError):  # nothing left (the usual case)
+        pass
 
 
 def _death(pid: int, status: int, rec: Record) -> str:

@@ -4,10 +4,12 @@
 stop signals in its thread and sleeps in C for ``hold`` s with the Python lock held (a call through
 ``ctypes.PyDLL``): no other thread of the process can run Python, so neither the watchdog nor a signal handler
 can act. ``mode`` 5 and 6 do what 1 and 4 do, in ``exitInitializationMode`` instead of a step. ``mode`` 7 ignores the
-stop signals and busy-loops in Python for ``hold`` s (the lock taken and given back, but the signals never acted on)."""
+stop signals and busy-loops in Python for ``hold`` s (the lock taken and given back, but the signals never acted on);
+``mode`` 8 starts a process that sleeps ``hold`` s holding the run's stdout and stderr, and goes on normally."""
 import signal
 import ctypes
 import os
+import subprocess
 import time
 
 from pythonfmu import Fmi2Causality, Fmi2Slave, Fmi2Variability, Integer, Real
@@ -46,6 +48,9 @@ class CosimTCrash(Fmi2Slave):
             elif self.mode == 4:
                 signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT, signal.SIGTERM, signal.SIGHUP})
                 ctypes.PyDLL(None).sleep(int(self.hold))
+            elif self.mode == 8 and not getattr(self, "_started", False):
+                self._started = True
+                subprocess.Popen(["sleep", str(int(self.hold))])  # inherits stdout and stderr
             elif self.mode == 7:
                 for s in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP):
                     signal.signal(s, signal.SIG_IGN)

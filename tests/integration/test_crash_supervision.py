@@ -203,3 +203,13 @@ def test_a_crash_before_the_log_began_leaves_nothing_that_blocks_the_next_run(wr
     proc = _start(write_scenario(SCENARIO.format(mode=0, at=0.5, stop=0.2, extra=""), "fine.yaml"), out, tmp)
     _, stderr = proc.communicate(timeout=60)
     assert proc.returncode == 0 and read_run(out).status == "completed", stderr
+
+
+def test_a_process_an_fmu_leaves_running_does_not_keep_the_output_pipe_open(write_scenario, tmp_path):
+    """An FMU starts a process that sleeps 60 s holding the run's stdout and stderr (``cosim run | cat`` did not
+    end until it did): after the run ends well, what is left of its process group is killed, the pipes close."""
+    tmp = Path(tempfile.mkdtemp(dir=tmp_path))
+    out = tmp_path / "logs" / "left.mcap"
+    proc = _start(write_scenario(SCENARIO.format(mode=8, at=0.05, stop=0.2, extra="")), out, tmp)
+    _, stderr = proc.communicate(timeout=30)  # reads to the end of both pipes: the sleeper must be gone
+    assert proc.returncode == 0 and read_run(out).status == "completed", stderr
