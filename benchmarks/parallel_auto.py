@@ -1,12 +1,13 @@
 """``parallel: auto`` against serial (issue 36 item 5): never slower by more than 3 %.
 
 helix_ctc_analytic, no log, with each build of our FMUs (``fmus=native``: 10 s simulated; ``fmus=python``: 3 s,
-PythonFMU steps are slower), on a quiet machine and with the other CPU kept busy by a spinning process started
-here (``python -c "while True: pass"``). Each case runs ``parallel: auto`` and ``parallel: off`` alternately
-``--repeat`` times in this process (after one untimed short run: the FMUs built and cached) (:func:`cosim.run.run_scenario`, timed from the call to its return: the FMUs'
-loading, the worker's start when auto takes one, the run), and prints the medians, their ratio and what auto chose.
-Without the spinner the machine runs whatever else it runs at the time (printed: the load average). Where auto
-chose the serial run, auto and off ran the same code: their ratio is then the machine's noise.
+PythonFMU steps are slower), without and with the other CPU kept busy by a spinning process started here
+(``python -c "while True: pass"``). Each case runs ``parallel: auto`` and ``parallel: off`` alternately
+``--repeat`` times in this process, after one untimed short run (the FMUs built and cached), each timed from the
+call of :func:`cosim.run.run_scenario` to its return (the FMUs' loading, the worker's start when auto takes one,
+the run), and prints the medians, their ratio and what auto chose. Without the spinner the machine runs whatever
+else it runs at the time (printed: the load average). Where auto chose the serial run, auto and off ran the same
+code: their ratio is then the machine's noise.
 
     python benchmarks/parallel_auto.py [--repeat 5] [--native-stop 10] [--python-stop 3]
 """

@@ -79,8 +79,8 @@ from .results import RESULTS, cell, read_meta, read_results, started, table_colu
 if TYPE_CHECKING:
     from ..engine.schema import Scenario
 
-__all__ = ["SweepSummary", "WarmStart", "dask_setup", "dask_teardown", "drop_preloaded", "extract_for_cases", "prebuild",
-           "run_loaded_case", "run_sweep"]
+__all__ = ["SweepSummary", "WarmStart", "dask_setup", "dask_teardown", "drop_preloaded", "extract_for_cases",
+           "prebuild", "run_loaded_case", "run_sweep"]
 
 
 @dataclass(frozen=True)

@@ -1,5 +1,5 @@
-"""``python -m cosim sweep|sweep-report``: a scenario run over a grid or random samples of parameters on Dask
-(:mod:`cosim.analysis.sweep`), and a figure of a sweep's metric against its parameters
+"""``python -m cosim sweep|sweep-report``: a scenario run over a grid or random samples of parameters on worker
+processes (:mod:`cosim.analysis.sweep`), and a figure of a sweep's metric against its parameters
 (:mod:`cosim.analysis.sweep_report`)."""
 
 from __future__ import annotations
@@ -16,7 +16,7 @@ __all__ = ["register"]
 
 def register(sub: argparse._SubParsersAction) -> None:
     """The ``sweep`` and ``sweep-report`` commands."""
-    p = sub.add_parser("sweep", help="run a scenario over a grid or random samples of parameters, on Dask",
+    p = sub.add_parser("sweep", help="run a scenario over a grid or random samples of parameters, on worker processes",
                        description="Cases: the cartesian product of --grid, each with -n draws of --random. "
                                    "Names as for --set (ctl.gain.kp[1], plant.mass.payload, "
                                    "trajectory.params.rx, time.stop). Results go to DIR/results.csv as they "
