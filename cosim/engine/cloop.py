@@ -11,11 +11,13 @@ turn; Jacobi: every link first), each component's wall time, the record the watc
 :class:`ErrorSums` observer; the same values in the same order and the same double arithmetic as the Python
 loop, so a run's results are the same bit for bit.
 
-Python is entered once per block: at most :data:`BLOCK` macro steps or :data:`BUDGET_S` of wall time (a stop
-request is answered at the block's end, within that time), a block also ending where progress is reported.
+Where every observer is an :class:`ErrorSums`, Python is entered once per block: at most :data:`BLOCK` macro steps
+or :data:`BUDGET_S` of wall time (a stop request is answered at the block's end, within that time), a block also
+ending where progress is reported. With other observers (a log, a live view) each macro step is one call, and the
+observers, the progress and the stop request come after each as in the Python loop.
 A run takes this loop when (:func:`make`) the helper is built, every component has a C turn (co-simulation,
-numbers only, not a worker's proxy or publisher), every step multiple is 1, every link joins buffers of the same
-C type, and every observer is an :class:`ErrorSums`; otherwise, and around events, the Python loop runs.
+numbers only, not a worker's proxy or publisher), every step multiple is 1 and every link joins buffers of the
+same C type; otherwise, and around events, the Python loop runs.
 """
 
 from __future__ import annotations
@@ -78,8 +80,8 @@ class CLoop:
     """``cosim_steps`` bound to an execution's components, links, record and error observers (:func:`make`)."""
 
     def __init__(self, ex: Any, turns: list[tuple[Turn, bool]], moves: list[list[Move]], sums: list[ErrorSums],
-                 jacobi: bool):
-        self.ex, self.sums = ex, sums
+                 jacobi: bool, blocks: bool = True):
+        self.ex, self.sums, self.blocks = ex, sums, blocks
         order = list(ex.plan.order)
         self.order = order
         self.slaves = [ex.slaves[c] for c in order]
@@ -104,7 +106,7 @@ class CLoop:
                        sq=self.sq, mx=self.mx, t_mx=self.t_mx, budget=BUDGET_S)
         proto = ctypes.PYFUNCTYPE if any(python for _, python in turns) else ctypes.CFUNCTYPE
         f = steps_helper()
-        self.call = proto(c_size_t, c_void_p, c_size_t, c_size_t)(ctypes.cast(f, c_void_p).value)
+        self.call = proto(c_size_t, c_void_p, c_size_t, c_size_t, c_size_t)(ctypes.cast(f, c_void_p).value)
         self.ref = ctypes.byref(self.s)
 
     def _block(self, k: int, n: int) -> None:
@@ -121,7 +123,7 @@ class CLoop:
     def run(self, k: int, n: int) -> int:
         """Macro steps ``k .. k + n - 1`` (fewer when the wall budget ran out): the steps done. Raises where the
         Python loop raises (:meth:`cosim.fmi.slave.CoSimulation.turn_failed`), after the steps before."""
-        ex, s, sums = self.ex, self.s, self.sums
+        ex, sums = self.ex, self.sums
         self._block(k, n)
         j = 0
         for o in sums:
@@ -130,15 +132,11 @@ class CLoop:
                 j += 1
         wall, ctime = self.wall, ex.comp_time
         wall[:] = ctime
-        ex.in_c = True
-        for slave in self.slaves:
-            slave.in_c_loop = True
+        self.inside(True)
         try:
-            done = self.call(self.ref, k, n)
+            done = self.call(self.ref, k, 0, n)
         finally:
-            ex.in_c = False
-            for slave in self.slaves:
-                slave.in_c_loop = False
+            self.inside(False)
         ctime[:] = wall
         j = 0
         for o in sums:
@@ -147,15 +145,28 @@ class CLoop:
                 j += 1
             o.n += done
         ex.k_done = k + done
-        t_next = self.times[done] if done < n else ex.grid.time(k + n)
+        self.ended(k + done, done if done < n else None)
+        return done
+
+    def inside(self, yes: bool) -> None:
+        """Say that the loop in C runs (or no longer): the watchdog reads the step's time from the record, and a
+        component's log messages are of its turn's time."""
+        self.ex.in_c = yes
+        for slave in self.slaves:
+            slave.in_c_loop = yes
+
+    def ended(self, k: int, j: int | None) -> None:
+        """After the calls, at macro step ``k`` (the steps before it done): the components' times; ``j``: the step's
+        index in the arrays when one of its turns ended it early, raised here as the Python loop raises."""
+        s = self.s
+        t_next = self.times[j] if j is not None else self.ex.grid.time(k)
         for slave in self.slaves:
             slave.time = t_next
-        if s.ended:
-            t, h = self.times[done], self.steps[done]
+        if j is not None and s.ended:
+            t, h = self.times[j], self.steps[j]
             for slave in self.slaves[: s.failed]:  # their turns in that step completed
                 slave.time = t + h
             self.slaves[s.failed].turn_failed(s.ended, t, h)
-        return done
 
 
 def _address(view: memoryview) -> int:
@@ -187,18 +198,14 @@ def make(ex: Any) -> CLoop | None:
         if turn is None:
             return None
         turns.append(turn)
-    sums = []
-    for o in ex.observers:
-        if getattr(o, "error_sums", False) is not True:
-            return None
-        if any(getattr(a, "_type_", None) is not c_double or getattr(r, "_type_", None) is not c_double
-               for (a, _), (r, _) in o.pairs):
-            return None
-        sums.append(o)
+    sums = [o for o in ex.observers if getattr(o, "error_sums", False) is True and
+            all(getattr(a, "_type_", None) is c_double and getattr(r, "_type_", None) is c_double
+                for (a, _), (r, _) in o.pairs)]
+    blocks = len(sums) == len(ex.observers)
     moves = [_moves(ex, c) for c in range(len(ex.slaves))]
     if any(m is None for m in moves):
         return None
-    return CLoop(ex, turns, moves, sums, ex.algorithm.name == "jacobi")
+    return CLoop(ex, turns, moves, sums if blocks else [], ex.algorithm.name == "jacobi", blocks)
 
 
 def simulate(ex: Any, loop: CLoop, k_end: int, stop: Any, report: Any, every: int) -> None:
@@ -206,6 +213,9 @@ def simulate(ex: Any, loop: CLoop, k_end: int, stop: Any, report: Any, every: in
     request answered between blocks, an FMU's end of the simulation handled as the Python loop handles it."""
     k = ex.k_done
     try:
+        if not loop.blocks:
+            _each(ex, loop, k_end, stop, report, every)
+            return
         while k < k_end:
             n = min(k_end - k, BLOCK)
             if report is not None:
@@ -217,3 +227,35 @@ def simulate(ex: Any, loop: CLoop, k_end: int, stop: Any, report: Any, every: in
                 raise stop.interrupted()
     except Terminated as term:
         ex._end_at(term, ex.k_done, loop.order, [o.stepped for o in ex.observers])
+
+
+def _each(ex: Any, loop: CLoop, k_end: int, stop: Any, report: Any, every: int) -> None:
+    """:func:`simulate` with observers that need Python after every macro step (a log, a live view): one call in C per
+    macro step (every turn and link copy of it), then the observers, as the Python loop calls them."""
+    stepped, active, call, ref, ends = [o.stepped for o in ex.observers], loop.order, loop.call, loop.ref, loop.ends
+    wall, ctime = loop.wall, ex.comp_time
+    k = ex.k_done
+    wall[:] = ctime
+    failed: int | None = None
+    loop.inside(True)
+    try:
+        while k < k_end:
+            n = min(k_end - k, BLOCK)
+            loop._block(k, n)
+            for j in range(n):
+                if not call(ref, k, j, 1):
+                    failed = j
+                    return
+                k += 1
+                ex.k_done = k
+                for f in stepped:
+                    f(k - 1, ends[j], active)
+                if report is not None and k % every == 0:
+                    report(k)
+                if stop is not None and stop.requested:
+                    raise stop.interrupted()
+    finally:
+        loop.inside(False)
+        ctime[:] = wall
+        ex.k_done = k
+        loop.ended(k, failed)

@@ -189,14 +189,15 @@ static void copy_links(const Steps *s, size_t i)
         memcpy(s->moves[j].dst, s->moves[j].src, s->moves[j].bytes);
 }
 
-/* Macro steps k0 .. k0 + n - 1 (times[j], steps[j], ends[j] of step k0 + j): the macro steps completed. Fewer than
- * n: a turn ended step k0 + returned early (failed and ended say which and how; the turns before it in that step
- * completed), or the wall budget was spent (ended is 0). The same arithmetic as the master's Python loop. */
-size_t cosim_steps(Steps *s, size_t k0, size_t n)
+/* Macro steps k0 .. k0 + n - 1 (times[j0 + j], steps[j0 + j], ends[j0 + j] of step k0 + j): the macro steps
+ * completed. Fewer than n: a turn ended step k0 + returned early (failed and ended say which and how; the turns
+ * before it in that step completed), or the wall budget was spent (ended is 0). The same arithmetic as the master's
+ * Python loop. */
+size_t cosim_steps(Steps *s, size_t k0, size_t j0, size_t n)
 {
     double start = wall_now(), prev = start;
     for (size_t j = 0; j < n; j++) {
-        const double t = s->times[j], h = s->steps[j];
+        const double t = s->times[j0 + j], h = s->steps[j0 + j];
         s->record[1] = t;
         if (s->jacobi)
             for (size_t i = 0; i < s->n; i++)
@@ -228,7 +229,7 @@ size_t cosim_steps(Steps *s, size_t k0, size_t n)
             s->sq[p] += e * e;
             if (fabs(e) > s->mx[p]) {
                 s->mx[p] = fabs(e);
-                s->t_mx[p] = s->ends[j];
+                s->t_mx[p] = s->ends[j0 + j];
             }
         }
         if (prev - start > s->budget) {

@@ -59,22 +59,46 @@ def _scenario(tmp_path, components: dict, connections: list[tuple[str, str]], st
     return parse_scenario(yaml.safe_dump(doc, sort_keys=False), str(tmp_path / "loops.yaml"))
 
 
-def _run(scenario, monkeypatch, *, in_c: bool, **options):
-    """(snapshots, result, blocks the loop in C ran) of a run with its loop in C or in Python."""
+class Steps:
+    """An observer in Python (not error sums): the loop in C makes one call per macro step and calls it after each."""
+
+    def __init__(self) -> None:
+        self.seen: list[tuple[int, int, list[int]]] = []
+
+    def start(self, ex) -> None:
+        return None
+
+    def stepped(self, k, t_ns, active) -> None:
+        self.seen.append((k, t_ns, list(active)))
+
+    def finish(self, ex, error) -> None:
+        return None
+
+
+def _run(scenario, monkeypatch, *, in_c: bool, each: bool = False):
+    """(snapshots, result, blocks the loop in C ran) of a run with its loop in C or in Python; ``each``: with an
+    observer in Python too (then ``blocks`` counts the blocks of single macro steps)."""
     blocks: list[int] = []
     with monkeypatch.context() as m:
         if in_c:
-            run = cloop.CLoop.run
+            run, block = cloop.CLoop.run, cloop.CLoop._block
 
             def spy(self, k, n):
                 blocks.append(n)
                 return run(self, k, n)
 
-            m.setattr(cloop.CLoop, "run", spy)
+            def spy_each(self, k, n):
+                blocks.append(n)
+                return block(self, k, n)
+
+            m.setattr(cloop.CLoop, "_block" if each else "run", spy_each if each else spy)
         else:
             m.setattr(cloop, "make", lambda ex: None)
         snaps = Snapshots()
-        result = run_scenario(scenario, RunOptions(log=False, observers=[snaps], **options))
+        observers = [snaps, Steps()] if each else [snaps]
+        result = run_scenario(scenario, RunOptions(log=False, observers=observers))
+    if each:
+        snaps.steps = observers[1].seen
     return snaps, result, blocks
 
 
@@ -88,15 +112,18 @@ FMI3 = ({"osc": "VanDerPol", "a": "Feedthrough", "b": "Feedthrough"},
          ("a.Float64_array_output", "b.Float64_array_input")])
 
 
+@pytest.mark.parametrize("each", [False, True], ids=["blocks", "each step"])
 @pytest.mark.parametrize("algorithm", ["gauss_seidel", "jacobi"])
 @pytest.mark.parametrize("fmi, case", [(2, FMI2), (3, FMI3)], ids=["fmi2", "fmi3"])
-def test_the_loop_in_c_gives_the_python_loops_run(tmp_path, monkeypatch, fmi, case, algorithm):
+def test_the_loop_in_c_gives_the_python_loops_run(tmp_path, monkeypatch, fmi, case, algorithm, each):
     models, connections = case
     components = {name: {"path": str(build(model, fmi))} for name, model in models.items()}
     scenario = _scenario(tmp_path, components, connections, 0.5, 1e-3, algorithm, compare=("osc.x0", "osc.x1"))
-    c_snaps, c_res, blocks = _run(scenario, monkeypatch, in_c=True)
+    c_snaps, c_res, blocks = _run(scenario, monkeypatch, in_c=True, each=each)
     assert blocks and sum(blocks) == 500 and max(blocks) == EVERY, f"blocks of the loop in C: {blocks[:5]}..."
-    py_snaps, py_res, _ = _run(scenario, monkeypatch, in_c=False)
+    py_snaps, py_res, _ = _run(scenario, monkeypatch, in_c=False, each=each)
+    if each:
+        assert c_snaps.steps == py_snaps.steps and len(c_snaps.steps) == 500, "the observer saw other steps"
     assert c_res.steps == py_res.steps == 500, f"steps {c_res.steps} vs {py_res.steps}"
     assert len(c_snaps.taken) == len(py_snaps.taken) == 1 + 500 // EVERY, (len(c_snaps.taken), len(py_snaps.taken))
     for (k, c_bytes), (k_py, py_bytes) in zip(c_snaps.taken, py_snaps.taken):
@@ -121,10 +148,10 @@ def test_a_link_that_converts_keeps_the_python_loop(tmp_path, monkeypatch):
     assert c_snaps.taken == py_snaps.taken, "the same loop gave different values"
 
 
-def _ending(tmp_path, monkeypatch, components, connections, stop, step, in_c: bool):
+def _ending(tmp_path, monkeypatch, components, connections, stop, step, in_c: bool, each: bool):
     scenario = _scenario(tmp_path, components, connections, stop, step)
     try:
-        _, result, _ = _run(scenario, monkeypatch, in_c=in_c)
+        _, result, _ = _run(scenario, monkeypatch, in_c=in_c, each=each)
     except FMIError as exc:
         return (type(exc).__name__, exc.component, exc.function, str(exc)), None
     return None, (result.steps, result.sim_time, result.terminated_by, result.message)
@@ -138,11 +165,13 @@ def _ending(tmp_path, monkeypatch, components, connections, stop, step, in_c: bo
     ("non-finite output", {"osc": ("VanDerPol", 2, {"mu": 1e6}), "a": ("Feedthrough", 2, {})},
      [("osc.x0", "a.Real_input")], 1.0, 1e-3),
 ])
-def test_the_loop_in_c_ends_as_the_python_loop_ends(tmp_path, monkeypatch, what, components, connections, stop, step):
+@pytest.mark.parametrize("each", [False, True], ids=["blocks", "each step"])
+def test_the_loop_in_c_ends_as_the_python_loop_ends(tmp_path, monkeypatch, what, components, connections, stop, step,
+                                                    each):
     comps = {name: {"path": str(build(model, fmi)), "parameters": params}
              for name, (model, fmi, params) in components.items()}
-    c_end = _ending(tmp_path, monkeypatch, comps, connections, stop, step, in_c=True)
-    py_end = _ending(tmp_path, monkeypatch, comps, connections, stop, step, in_c=False)
+    c_end = _ending(tmp_path, monkeypatch, comps, connections, stop, step, in_c=True, each=each)
+    py_end = _ending(tmp_path, monkeypatch, comps, connections, stop, step, in_c=False, each=each)
     assert c_end == py_end, f"{what}: loop in C {c_end} vs loop in Python {py_end}"
     expected = {"rejected": "FMIError", "termination": None, "non-finite": "FMIError"}[what.split()[0].split(",")[0]]
     assert (c_end[0][0] if c_end[0] else None) == expected, f"{what}: ended as {c_end}"
