@@ -47,6 +47,8 @@ _INFO = 32 * 1024  # JSON of the run's description after the fields (names, log 
 _POLL_S = 0.05
 _GRACE_S = 2.0  # the engine watchdog's grace (cosim.engine.watchdog.GRACE_S) is 2 s: ours comes after it
 _STOP_WAIT_S = 3 * _GRACE_S + 1.0  # after a forwarded stop signal: the child's own grace, its hard abort, a margin
+_HURRY = [False]  # a stop signal came: a log writer left by a dead run is waited for _WRITER_STOP_WAIT_S only
+_WRITER_STOP_WAIT_S = 1.0
 _WRITER_WAIT_S = 10.0  # a log writer process finishing what it received before its master died
 
 
@@ -194,6 +196,7 @@ def _wait(pid: int, rec: Record, on_crash: Callable[[Record, str], int]) -> int:
     first: list[int] = []
 
     def forward(signum: int, frame: Any) -> None:
+        _HURRY[0] = True  # once the child ended, its log writer gets a short grace only
         if not stopped_at:
             stopped_at.append(time.monotonic())
             first.append(signum)
@@ -202,16 +205,24 @@ def _wait(pid: int, rec: Record, on_crash: Callable[[Record, str], int]) -> int:
         except ProcessLookupError:
             pass
 
+    def remember(signum: int, frame: Any) -> None:  # the child is gone: the crash's report, then this signal's code
+        if not first:
+            first.append(signum)
+        _HURRY[0] = True  # a log writer still finishing gets a short grace only; what it wrote is recovered
+
     previous = {s: signal.signal(s, forward) for s in STOP_SIGNALS}
     try:
         status, reason = _watch(pid, rec, stopped_at)
+        if reason is None and rec.current[4] == 1.0:  # ended through our exit: its code is the command's
+            _leftovers(pid)
+            return os.waitstatus_to_exitcode(status)
+        for s in STOP_SIGNALS:  # a stop now must not cut the crash's handling short (report, writer, recovery)
+            signal.signal(s, remember)
+        code = on_crash(rec, reason or _death(pid, status, rec))
     finally:
         for s, h in previous.items():
             signal.signal(s, h)
-    if reason is None and rec.current[4] == 1.0:  # ended through our exit: its code is the command's
-        _leftovers(pid)
-        return os.waitstatus_to_exitcode(status)
-    code = on_crash(rec, reason or _death(pid, status, rec))
+        _HURRY[0] = False
     return 128 + first[0] if first else code
 
 
@@ -282,15 +293,18 @@ def _death(pid: int, status: int, rec: Record) -> str:
 
 def _wait_for_writer(rec: Record) -> None:
     """Wait (bounded) for the log writer process, which writes what it received and ends by itself once its
-    master's pipe is closed; killed after :data:`_WRITER_WAIT_S`."""
+    master's pipe is closed; killed after :data:`_WRITER_WAIT_S`, or :data:`_WRITER_STOP_WAIT_S` once a stop signal
+    came (SIGTERM in this wait cut the crash's handling short: no report, the writer left running, nothing
+    recovered)."""
     pid = rec.info().get("writer_pid")
-    deadline = time.monotonic() + _WRITER_WAIT_S
+    start = time.monotonic()
     while pid:
         try:
             os.kill(pid, 0)
         except ProcessLookupError:
             return
-        if time.monotonic() > deadline:
+        waited = time.monotonic() - start
+        if waited > _WRITER_WAIT_S or (_HURRY[0] and waited > _WRITER_STOP_WAIT_S):  # kill it, keep what it wrote
             os.kill(pid, signal.SIGKILL)
             return
         time.sleep(_POLL_S)
