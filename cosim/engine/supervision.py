@@ -249,8 +249,13 @@ def _watch(pid: int, rec: Record, stopped_at: list[float], wake: int | None = No
         if stopped_at and now - stopped_at[0] > _STOP_WAIT_S:
             reason = f"did not stop within {_STOP_WAIT_S:g} s of the stop signal: killed"
         elif budget and now - since > budget + 2 * _GRACE_S:
-            reason = f"made no progress for {now - since:.3g} s (watchdog {budget:g} s) and could not be " \
-                     f"stopped from inside: killed"
+            writer = rec.info().get("writer_pid")
+            if writer and _stopped(writer):  # the run blocked on its log's pipe: name what stopped it
+                reason = f"waited {now - since:.3g} s on the log writer (pid {writer}), which is stopped (SIGSTOP, " \
+                         "a debugger or job control): the run was killed and the writer resumed to write what it had"
+            else:
+                reason = f"made no progress for {now - since:.3g} s (watchdog {budget:g} s) and could not be " \
+                         f"stopped from inside: killed"
         if reason is not None:
             try:
                 os.killpg(pid, signal.SIGKILL)
@@ -291,6 +296,15 @@ def _death(pid: int, status: int, rec: Record) -> str:
     return reason
 
 
+def _stopped(pid: int) -> bool:
+    """Whether process ``pid`` is stopped (its state T or t in ``/proc``; False where there is no ``/proc``)."""
+    try:
+        with open(f"/proc/{pid}/stat", encoding="ascii", errors="replace") as f:
+            return f.read().rsplit(")", 1)[1].split()[0] in ("T", "t")
+    except (OSError, IndexError):
+        return False
+
+
 def _wait_for_writer(rec: Record) -> None:
     """Wait (bounded) for the log writer process, which writes what it received and ends by itself once its
     master's pipe is closed; killed after :data:`_WRITER_WAIT_S`, or :data:`_WRITER_STOP_WAIT_S` once a stop signal
@@ -298,6 +312,11 @@ def _wait_for_writer(rec: Record) -> None:
     recovered)."""
     pid = rec.info().get("writer_pid")
     start = time.monotonic()
+    if pid:
+        try:
+            os.kill(pid, signal.SIGCONT)  # a stopped writer writes what it received, then ends (its pipe closed)
+        except ProcessLookupError:
+            return
     while pid:
         try:
             os.kill(pid, 0)

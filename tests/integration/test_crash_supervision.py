@@ -257,3 +257,19 @@ def _has_stopped_child(pid: int) -> bool:
         if state == "T" and ours:
             return True
     return False
+
+
+def test_a_stopped_log_writer_is_named_and_what_it_received_is_kept(write_scenario, tmp_path):
+    """The component stops the log writer and the run goes on until the log's pipe is full: the supervisor named the
+    master ("made no progress") and the log kept nothing; now it names the stopped writer, resumes it to write what
+    it received, and recovers that."""
+    tmp = Path(tempfile.mkdtemp(dir=tmp_path))
+    out = tmp_path / "logs" / "stopped_writer.mcap"
+    proc = _start(write_scenario(SCENARIO.format(mode=10, at=0.01, stop=600.0, extra="watchdog_s: 1.0")), out, tmp)
+    _, stderr = proc.communicate(timeout=120)
+    lines = stderr.strip().splitlines()
+    assert proc.returncode == 2 and "Traceback" not in stderr, (proc.returncode, stderr)
+    assert "on the log writer (pid " in lines[0] and "which is stopped" in lines[0], stderr
+    assert len(lines) == 2 and str(out) in lines[1], stderr
+    assert len(read_run(out).signal("g.y").t) > 1000, "what the writer had received was lost"
+    assert sorted(p.name for p in out.parent.iterdir()) == [out.name]
