@@ -33,13 +33,14 @@ import lz4.frame
 import numpy as np
 import orjson
 import zstandard
-from mcap.exceptions import McapError, UnsupportedCompressionError
+from mcap.exceptions import McapError, RecordLengthLimitExceeded, UnsupportedCompressionError
 from mcap.records import Attachment, Channel, Chunk, Footer, Message, Metadata, Schema
 from mcap.stream_reader import StreamReader, breakup_chunk
 from mcap.writer import CompressionType, Writer
 
 from ..engine.grid import MAX_TIME_S
-from ..engine.scenario import EFFECTIVE_ATTACHMENT, scenario_from_data
+from ..engine.bounded_yaml import MAX_YAML_NODES
+from ..engine.scenario import EFFECTIVE_ATTACHMENT, MAX_SCENARIO_BYTES, scenario_from_data
 from ..engine.schema import Scenario
 from ..errors import CosimError, Issue, ScenarioError, file_problem, written_by_rename
 from ..fmi.extract import SSP_PREFIX
@@ -191,9 +192,10 @@ def _inflate(chunk, path: Path, offset: int) -> bytes:
     return data
 
 
-def log_records(f, path: str | Path, chunks: bool = True) -> Iterator:
+def log_records(f, path: str | Path, chunks: bool = True, limit: int | None = None) -> Iterator:
     """Every record of the MCAP file ``f`` (binary, at its start) in file order, the records of a chunk in its place
     (``chunks=False``: chunks skipped, not inflated; the records outside them only: attachments, metadata, summary).
+    ``limit``: no record longer (the mcap reader's ``RecordLengthLimitExceeded`` before it is read).
 
     Bounded whatever the file says: a chunk is inflated to no more than it declares and :data:`MAX_CHUNK_BYTES`
     (CosimError naming ``path``, the chunk's byte offset and the limit), no record is longer than the file and no
@@ -203,7 +205,8 @@ def log_records(f, path: str | Path, chunks: bool = True) -> Iterator:
     src = _Clamped(f)
     start = 8  # the first record follows the magic
     try:
-        for rec in StreamReader(src, emit_chunks=True, record_size_limit=src.size).records:
+        size = src.size if limit is None else min(src.size, limit)
+        for rec in StreamReader(src, emit_chunks=True, record_size_limit=size).records:
             if isinstance(rec, Chunk):
                 if chunks:
                     yield from breakup_chunk(replace(rec, compression="", data=_inflate(rec, Path(path), start)))
@@ -421,6 +424,11 @@ def write_baseline(source: str | Path, out: str | Path, period: float = 0.01,
     return out, written
 
 
+_BEFORE_SCENARIO_BYTES = MAX_SCENARIO_BYTES + 2 ** 20
+"""The longest record :func:`open_from_log` reads before the scenario as run: a run writes only its header, metadata
+and that attachment (a scenario's bytes at most) first; a forged attachment of gigabytes there was read whole."""
+
+
 @contextmanager
 def open_from_log(path: str | Path, overrides: dict[tuple, Any] | None = None) -> Iterator[Scenario]:
     """The scenario a run log records (:data:`EFFECTIVE_ATTACHMENT`), with ``overrides`` on top, to run it again
@@ -441,12 +449,16 @@ def open_from_log(path: str | Path, overrides: dict[tuple, Any] | None = None) -
     found = archive = None
     try:
         with open(path, "rb") as f:
-            for rec in log_records(f, path, chunks=False):
+            for rec in log_records(f, path, chunks=False, limit=_BEFORE_SCENARIO_BYTES):
                 if isinstance(rec, Metadata) and rec.name == "ssp":  # written before the scenario as run
                     archive = dict(rec.metadata)
                 if isinstance(rec, Attachment) and rec.name == EFFECTIVE_ATTACHMENT:
                     found = bytes(rec.data)
                     break
+    except RecordLengthLimitExceeded as exc:  # what a run writes before it is small: a forged or foreign log
+        raise ScenarioError(Issue("", f"a record before the scenario as run is larger than "
+                                      f"{_BEFORE_SCENARIO_BYTES:,} bytes ({exc}): not a run's log as written here, "
+                                      "refused", str(path))) from None
     except (McapError, OSError, ValueError) as exc:  # before the attachment: read up to it otherwise
         raise ScenarioError(Issue("", f"not a readable MCAP log ({type(exc).__name__}: {exc}); give a run's log",
                                   str(path))) from None
@@ -454,6 +466,11 @@ def open_from_log(path: str | Path, overrides: dict[tuple, Any] | None = None) -
         raise ScenarioError(Issue("", f"the log records no scenario as run ({EFFECTIVE_ATTACHMENT}): written by an "
                                       "older version or not by `python -m cosim run`; run its scenario file instead",
                                   str(path)))
+    values = found.count(b",") + found.count(b"[") + found.count(b"{")
+    if len(found) > MAX_SCENARIO_BYTES or values > MAX_YAML_NODES:  # as a scenario file is bounded
+        raise ScenarioError(Issue("", f"{EFFECTIVE_ATTACHMENT} holds {len(found):,} bytes, about {values:,} values: "
+                                      f"more than a scenario may ({MAX_SCENARIO_BYTES:,} bytes, {MAX_YAML_NODES:,} "
+                                      "values, as for a scenario file): refused", str(path)))
     try:
         data = json.loads(found)
     except (ValueError, RecursionError) as exc:  # RecursionError: nested past the parser's depth

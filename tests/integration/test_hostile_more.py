@@ -536,6 +536,50 @@ def test_a_log_whose_recorded_scenario_is_forged_is_one_line(run, small, tmp_pat
     assert not list(tmp_path.glob("again.mcap*"))
 
 
+def _log_with(path: Path, effective: bytes, before: bytes = b"", ssp: dict | None = None) -> Path:
+    """A log holding, in this order, an attachment of ``before`` (if any), the ``ssp`` metadata (if any) and the
+    recorded scenario ``effective``: what ``run --from-log`` reads before it stops."""
+    from mcap.writer import Writer
+
+    from cosim.engine.scenario import EFFECTIVE_ATTACHMENT
+
+    with open(path, "wb") as o:
+        w = Writer(o)
+        w.start(profile="", library="forged")
+        if before:
+            w.add_attachment(0, 0, "big.bin", "application/octet-stream", before)
+        if ssp is not None:
+            w.add_metadata("ssp", ssp)
+        w.add_attachment(0, 0, EFFECTIVE_ATTACHMENT, "application/json", effective)
+        w.finish()
+    return path
+
+
+def test_what_run_from_log_reads_of_a_log_is_bounded(run, small, tmp_path):
+    """A log's attachment of gigabytes before the recorded scenario was read whole; a recorded scenario of millions
+    of values took gigabytes where a scenario file is refused; a log naming a huge (sparse) SSP archive had it
+    hashed for minutes. Each is one line, at once."""
+    log = tmp_path / "log.mcap"
+    assert run("run", small, "--out", log, "--quiet").returncode == 0
+    from cosim.io.runlog import read_run
+
+    effective = read_run(log).attachments["effective/scenario.json"]
+    big = _log_with(tmp_path / "big.mcap", effective, before=b"\0" * (20 * 2 ** 20))
+    fails(run("run", "--from-log", big, "--out", tmp_path / "a.mcap"), 2,
+          "big.mcap: a record before the scenario as run is larger than 17,825,792 bytes")
+    many = _log_with(tmp_path / "many.mcap", b'{"x": [' + b"0," * 300_000 + b"0]}")
+    fails(run("run", "--from-log", many, "--out", tmp_path / "b.mcap"), 2,
+          "many.mcap: effective/scenario.json holds 600,010 bytes, about 300,002 values: more than a scenario may")
+    sparse = tmp_path / "huge.ssp"
+    with open(sparse, "wb") as f:
+        f.truncate(17 * 1024 ** 3)  # a hole: no disk used, 17 GiB to read
+    named = _log_with(tmp_path / "named.mcap", effective,
+                      ssp={"file": str(sparse), "sha256": "0" * 64, "unpacked": str(tmp_path / "gone")})
+    fails(run("run", "--from-log", named, "--out", tmp_path / "c.mcap"), 2,
+          f"the run was made from the SSP archive {sparse}, which is 18,253,611,008 bytes, more than any archive")
+    assert not list(tmp_path.glob("[abc].mcap*"))
+
+
 # --------------------------------------------------------------------------- logs cut anywhere
 
 @pytest.mark.parametrize("keep", [1000, -10, -1])

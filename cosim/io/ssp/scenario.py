@@ -24,6 +24,11 @@ if TYPE_CHECKING:
 __all__ = ["is_ssp", "open_ssp", "reopen_ssp"]
 
 
+MAX_ARCHIVE_BYTES = 16 * 1024 ** 3
+"""The largest SSP archive a log may name for ``run --from-log`` (it is hashed whole before it is unpacked): four
+FMUs of :data:`cosim.fmi.extract.MAX_FMU_BYTES` each."""
+
+
 def _sha256(path: Path) -> str:
     digest = hashlib.sha256()
     with open(path, "rb") as f:
@@ -92,6 +97,13 @@ def reopen_ssp(archive: dict[str, str], data: dict[str, Any], source: str,
     problem = file_problem(ssp)  # the log names it: a FIFO or a device would be hashed for ever
     if problem not in (None, "no such file"):
         raise SspError(source, f"{head} cannot be read: {problem}")
+    try:
+        size = ssp.stat().st_size
+    except OSError:
+        size = 0  # gone or unreadable: said below
+    if size > MAX_ARCHIVE_BYTES:  # the log names it: a huge (or sparse) file would be hashed for minutes
+        raise SspError(source, f"{head} is {size:,} bytes, more than any archive is read "
+                               f"(cosim.io.ssp.scenario.MAX_ARCHIVE_BYTES, {MAX_ARCHIVE_BYTES:,}): refused")
     try:
         now = _sha256(ssp)
     except FileNotFoundError:
