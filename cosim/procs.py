@@ -54,7 +54,7 @@ from typing import Any, Callable, Iterable
 
 from .errors import exit_now
 
-__all__ = ["Child", "EX_SOFTWARE", "Rules", "entered", "start", "thread"]
+__all__ = ["Child", "EX_SOFTWARE", "Rules", "die_with_parent", "entered", "start", "thread"]
 
 EX_SOFTWARE = 70
 """Exit status of a child whose function raised (sysexits' ``EX_SOFTWARE``)."""
@@ -100,6 +100,12 @@ def _die_with(parent: int) -> None:
             pass
     if os.getppid() != parent:
         exit_now(0)
+
+
+def die_with_parent() -> None:
+    """For a process another library forked (a process pool's worker): end it when its parent ends, SIGKILL
+    included, as :func:`start`'s ``die_with_parent`` does for ours."""
+    _die_with(os.getppid())
 
 
 def entered() -> None:

@@ -74,11 +74,12 @@ class ForkPool:
 
 
 def _worker_start() -> None:
-    """In each forked worker: Ctrl-C left to the sweep's process, and standard streams of its own on the same file
-    descriptors. The sweep's progress bar writes from a thread of the sweep's process: a stream's lock that thread
+    """In each forked worker: Ctrl-C left to the sweep's process, its end when that process ends, and standard
+    streams of its own on the same file descriptors. The sweep's progress bar writes from a thread of the sweep's process: a stream's lock that thread
     held at the fork would stay held in the worker, and the first flush here (a case's child ending, the worker's
     own exit) would wait for ever. What the sweep's process had buffered is not written twice either."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+    procs.die_with_parent()  # a sweep killed (SIGKILL) left its workers waiting for ever, holding its output pipes
     for name, errors in (("stdout", "strict"), ("stderr", "backslashreplace")):
         old = getattr(sys, name)
         fd = 1 if name == "stdout" else 2

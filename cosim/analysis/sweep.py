@@ -67,7 +67,7 @@ from ..fmi import Extractions, FMUInfo, cleanup_extracted, make_slave
 from ..fmi.extract import sweep_orphans
 from ..fmi.slave import drop_preloaded, preload
 from ..io.checkpoint import Checkpoint, file_sha256, read_checkpoint
-from ..io.output import output_dir
+from ..io.output import exclusive, output_dir
 from ..io.recover import recover_crashed
 from ..observers.recorders import PeakEffort
 from ..run import resumed_scenario, run_scenario
@@ -133,6 +133,9 @@ def run_loaded_case(scenario: Scenario, fmu_files: dict[tuple[str, bool, int], s
         return row
     sweep_orphans()  # the FMUs the dead child extracted
     log, _ = recover_crashed(rec.info())
+    partial = rec.info().get("partial")
+    if log is None and partial and Path(partial).exists():  # not recoverable here: the row names what is left
+        log = partial
     return {**_failed(CosimError(why), t0), "mcap": log or ""}
 
 
@@ -161,6 +164,8 @@ def _run_case(scenario: Scenario, fmu_files: dict[tuple[str, bool, int], str], m
         row["mcap"] = res.mcap or ""
     except Exception as exc:  # a failing case is a result, never the end of the sweep
         row.update(_failed(exc, t0))
+        if mcap is not None and Path(mcap).exists():  # a stalled or failed run finished its log: the row names it
+            row["mcap"] = mcap
     return row
 
 
@@ -268,12 +273,20 @@ def run_sweep(scenario: str | Path, cases: list[Case], out: str | Path, *, worke
     """
 
     t_start = time.perf_counter()
-    scenario = str(Path(scenario).resolve())
-    out = Path(out)
+    out = output_dir(out)
+    with exclusive(out, "a sweep"):  # two sweeps appending to one table at once corrupted it
+        return _run_sweep(str(Path(scenario).resolve()), cases, out, t_start, workers=workers, scheduler=scheduler,
+                          logs=logs, on_progress=on_progress, checkpoint=checkpoint, stop_time=stop_time)
+
+
+def _run_sweep(scenario: str, cases: list[Case], out: Path, t_start: float, *, workers: int | None,
+               scheduler: str | None, logs: bool, on_progress: Callable[[int, int, int], None] | None,
+               checkpoint: str | Path | None, stop_time: float | None) -> SweepSummary:
+    """:func:`run_sweep` in its folder ``out``, held."""
     params = list(dict.fromkeys(k for c in cases for k in c.values))
     ck, warm, loaded = _loaded(scenario, cases, params, checkpoint, stop_time)
     columns = table_columns(params, metric_names(loaded[0]), warm is not None)
-    finished, failed = _finished(out, columns, params, warm)
+    finished, failed = _finished(out, columns, params, warm, scenario)
     todo = [(c, sc) for c, sc in zip(cases, loaded) if c.id not in finished]
     meta: dict[str, Any] = {"scenario": scenario, "parameters": params, "cases": len(cases)}
     if warm is not None:
@@ -301,7 +314,7 @@ def run_sweep(scenario: str | Path, cases: list[Case], out: str | Path, *, worke
         cluster.close()
         raise
     if logs:
-        (out / "logs").mkdir(exist_ok=True)
+        output_dir(out / "logs")  # a file in its place: one line, not a FileExistsError
     held = Extractions()
     try:
         if cluster.forks:  # the workers fork from here: every case's child finds the FMUs extracted
@@ -353,15 +366,18 @@ def _loaded(scenario: str, cases: list[Case], params: list[str], checkpoint: str
     return ck, warm, [warm_scenario] * len(cases)
 
 
-def _finished(out: Path, columns: list[str], params: list[str],
-              warm: WarmStart | None) -> tuple[dict[str, dict[str, str]], dict[str, str]]:
+def _finished(out: Path, columns: list[str], params: list[str], warm: WarmStart | None,
+              scenario: str) -> tuple[dict[str, dict[str, str]], dict[str, str]]:
     """The cases ``out``'s table holds already (case -> row) and those of them that failed ("case (values)" ->
-    message); a table of another sweep is refused."""
-    output_dir(out)
+    message); a table of another sweep (other columns, or the same columns of another scenario, whose rows were
+    appended under its header) is refused."""
     table = out / RESULTS
     done_rows = read_results(out)
     if done_rows and list(done_rows[0]) != columns:
         raise SweepError(f"{table} holds another sweep (columns {', '.join(done_rows[0])}); use another --out")
+    before = read_meta(out).get("scenario") if done_rows else None
+    if before is not None and before != scenario:
+        raise SweepError(f"{table} holds another sweep (of {before}); use another --out")
     if done_rows and warm is not None:
         before = read_meta(out).get("warm_start")
         if before != warm.record():

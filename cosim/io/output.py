@@ -18,12 +18,15 @@ import os
 import shlex
 import sys
 import time
+from contextlib import contextmanager
 from pathlib import Path
+from typing import Iterator
 
 from ..engine import supervision
 from ..errors import CosimError, printable
 
-__all__ = ["OutputError", "OutputClaim", "check_output", "claim", "output_dir", "partial_path", "writable_parent"]
+__all__ = ["OutputError", "OutputClaim", "check_output", "claim", "exclusive", "output_dir", "partial_path",
+           "writable_parent"]
 
 
 class OutputError(CosimError, OSError):
@@ -113,6 +116,43 @@ def _describe_owner(lock: Path) -> str:
     shown = printable(shlex.join(command)) if isinstance(command, list) and all(
         isinstance(a, str) for a in command) else "?"
     return f"another run (pid {pid if isinstance(pid, int) else '?'}, started {when}: {shown})"
+
+
+@contextmanager
+def exclusive(folder: Path, what: str) -> Iterator[None]:
+    """Hold ``folder``'s ``.lock`` for the block: a second command writing into the same folder at once (two sweeps
+    appending to one ``results.csv`` corrupted it) is refused with one line naming the first (:func:`_describe_owner`);
+    the lock goes with the block, or with the process."""
+    lock = folder / ".lock"
+    while True:
+        try:
+            fd = os.open(lock, os.O_RDWR | os.O_CREAT, 0o644)
+        except OSError as exc:
+            raise OutputError(f"{folder}: cannot write in it: {exc.strerror}") from None
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            os.close(fd)
+            raise OutputError(f"{folder}: {_describe_owner(lock).replace('another run', 'another command', 1)} is "
+                              f"writing {what} there; wait for it to end or choose another folder") from None
+        try:
+            if os.stat(lock).st_ino == os.fstat(fd).st_ino:
+                break
+        except FileNotFoundError:  # its owner finished and removed it between our open and lock
+            pass
+        os.close(fd)
+    try:
+        os.ftruncate(fd, 0)
+        argv = ["python -m cosim" if sys.argv[0].endswith("__main__.py") else sys.argv[0], *sys.argv[1:]]
+        owner = {"pid": supervision.command_pid(), "started": round(time.time(), 3), "command": argv}
+        os.write(fd, (json.dumps(owner) + "\n").encode("ascii"))
+        yield
+    finally:
+        try:
+            lock.unlink(missing_ok=True)  # while still holding it
+        except OSError:
+            pass
+        os.close(fd)
 
 
 def output_dir(target: str | Path, option: str = "--out") -> Path:
