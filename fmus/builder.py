@@ -180,9 +180,10 @@ def user_cache() -> Path:
 
 
 def cached(folder: Path, name: str, digest: str) -> tuple[Path, Path]:
-    """(FMU, stamp) of the build of ``name`` whose fingerprint is ``digest`` in the cache ``folder``."""
-    key = f"{name}-{digest[:16]}"
-    return folder / f"{key}.fmu", folder / f"{key}.json"
+    """(FMU, stamp) of the build of ``name`` whose fingerprint is ``digest`` in the cache ``folder``: the file keeps
+    its name, ``name.fmu`` (a log names the FMU file its schemas came from), in a folder named by the hash."""
+    key = folder / digest[:16]
+    return key / f"{name}.fmu", key / f"{name}.json"
 
 
 _ANNOUNCE: list[Callable[[str], None]] = []
@@ -200,17 +201,23 @@ def announce(message: str) -> None:
 
 def prune(folder: Path, name: str) -> None:
     """Keep the :data:`KEEP` newest builds of ``name`` in ``folder``; a file another process removes first is fine."""
-    pattern = re.compile(re.escape(name) + r"-[0-9a-f]{16}\.fmu")
     builds = []
-    for path in folder.glob(f"{name}-*.fmu"):
+    for path in folder.glob(f"*/{name}.fmu"):
         try:
-            if pattern.fullmatch(path.name):
+            if _HASH.fullmatch(path.parent.name):
                 builds.append((path.stat().st_mtime, path))
         except OSError:
             continue
     for _, path in sorted(builds, reverse=True)[KEEP:]:
         path.with_suffix(".json").unlink(missing_ok=True)
         path.unlink(missing_ok=True)
+        try:
+            path.parent.rmdir()  # the hash's folder, once it holds no other FMU's build
+        except OSError:
+            pass
+
+
+_HASH = re.compile(r"[0-9a-f]{16}")
 
 
 def deliver(entry: Path, out_dir: str | Path | None, name: str) -> Path:
@@ -333,7 +340,8 @@ def _build_python(fmu: FmuDefinition, out: Path, digest: str) -> Path:
             for name in set(sys.modules) - before:
                 if name == module or name.startswith(bundle):
                     del sys.modules[name]
-        return install(out, cached(out, fmu.name, digest)[0].stem, lambda partial: shutil.move(str(built), partial),
+        return install(cache_folder(cached(out, fmu.name, digest)[0].parent), fmu.name,
+                       lambda partial: shutil.move(str(built), partial),
                        {"name": fmu.name, "fingerprint": digest, "module": module, "bundle": bundle, "fmi": fmu.fmi})
 
 

@@ -414,7 +414,7 @@ def _build(fmu: FmuDefinition, fmi: int, cc: str, out: Path, digest: str) -> Pat
                     if path.is_file():
                         zf.write(path, path.relative_to(root).as_posix())
 
-        return install(out, cached(out, name, digest)[0].stem, write,
+        return install(cache_folder(cached(out, name, digest)[0].parent), name, write,
                        {"name": name, "fingerprint": digest, "fmi": fmi, "build": "native"})
 
 

@@ -117,16 +117,18 @@ def test_entries_are_keyed_by_content_and_only_the_newest_builds_are_kept(tmp_pa
     digests = [f"{i:x}" * 64 for i in range(KEEP + 2)]
     for age, digest in enumerate(digests):
         target, stamp = cached(tmp_path, "helix", digest)
+        target.parent.mkdir(exist_ok=True)
+        assert target.name == "helix.fmu" and target.parent.name == digest[:16]
         _zip(target)
         stamp.write_text(json.dumps({"fingerprint": digest}))
         os.utime(target, (1000 + age, 1000 + age))
-    other, _ = cached(tmp_path, "helix_me", digests[0])  # a name that begins like it is not its build
+    other, _ = cached(tmp_path, "helix_me", digests[0])  # another FMU's build in an old hash's folder
     _zip(other)
     prune(tmp_path, "helix")
-    kept = sorted(p.name for p in tmp_path.glob("helix-*.fmu"))
-    assert kept == sorted(cached(tmp_path, "helix", d)[0].name for d in digests[-KEEP:])
+    kept = sorted(str(p) for p in tmp_path.glob("*/helix.fmu"))
+    assert kept == sorted(str(cached(tmp_path, "helix", d)[0]) for d in digests[-KEEP:])
     assert not cached(tmp_path, "helix", digests[0])[1].exists()  # its stamp went with it
-    assert other.exists()
+    assert other.exists() and not cached(tmp_path, "helix", digests[1])[0].parent.exists()  # an emptied folder goes
 
 
 def test_a_delivery_leaves_only_the_fmu_and_replaces_a_different_one(tmp_path):
