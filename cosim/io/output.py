@@ -20,7 +20,7 @@ import sys
 import time
 from contextlib import contextmanager
 from pathlib import Path
-from typing import Iterator
+from typing import Callable, Iterator
 
 from ..engine import supervision
 from ..errors import CosimError, printable
@@ -118,34 +118,47 @@ def _describe_owner(lock: Path) -> str:
     return f"another run (pid {pid if isinstance(pid, int) else '?'}, started {when}: {shown})"
 
 
+def _take_lock(lock: Path, cannot: str, held: Callable[[str], str]) -> int:
+    """The descriptor of ``lock``, created if need be and held (``flock``, not waiting); OutputError with ``cannot``
+    and the system's reason when it cannot be opened, with ``held(who holds it)`` when another process holds it. A
+    lock its owner removed between our open and our hold is taken again (the owner unlinks it while holding it)."""
+    while True:
+        try:
+            fd = os.open(lock, os.O_RDWR | os.O_CREAT, 0o644)
+        except OSError as exc:
+            raise OutputError(f"{cannot}: {exc.strerror}") from None
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            os.close(fd)
+            raise OutputError(held(_describe_owner(lock))) from None
+        try:
+            if os.stat(lock).st_ino == os.fstat(fd).st_ino:
+                return fd
+        except FileNotFoundError:  # its owner finished and removed it between our open and lock
+            pass
+        os.close(fd)
+
+
+def _write_owner(fd: int) -> None:
+    """This command as the lock's owner: one JSON line, any name escaped (and any locale)."""
+    os.ftruncate(fd, 0)
+    argv = ["python -m cosim" if sys.argv[0].endswith("__main__.py") else sys.argv[0], *sys.argv[1:]]
+    owner = {"pid": supervision.command_pid(), "started": round(time.time(), 3), "command": argv}
+    os.write(fd, (json.dumps(owner) + "\n").encode("ascii"))
+
+
 @contextmanager
 def exclusive(folder: Path, what: str) -> Iterator[None]:
     """Hold ``folder``'s ``.lock`` for the block: a second command writing into the same folder at once (two sweeps
     appending to one ``results.csv`` corrupted it) is refused with one line naming the first (:func:`_describe_owner`);
     the lock goes with the block, or with the process."""
     lock = folder / ".lock"
-    while True:
-        try:
-            fd = os.open(lock, os.O_RDWR | os.O_CREAT, 0o644)
-        except OSError as exc:
-            raise OutputError(f"{folder}: cannot write in it: {exc.strerror}") from None
-        try:
-            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-        except BlockingIOError:
-            os.close(fd)
-            raise OutputError(f"{folder}: {_describe_owner(lock).replace('another run', 'another command', 1)} is "
-                              f"writing {what} there; wait for it to end or choose another folder") from None
-        try:
-            if os.stat(lock).st_ino == os.fstat(fd).st_ino:
-                break
-        except FileNotFoundError:  # its owner finished and removed it between our open and lock
-            pass
-        os.close(fd)
+    fd = _take_lock(lock, f"{folder}: cannot write in it", lambda who: f"{folder}: "
+                    f"{who.replace('another run', 'another command', 1)} is writing {what} there; wait for it to "
+                    "end or choose another folder")
     try:
-        os.ftruncate(fd, 0)
-        argv = ["python -m cosim" if sys.argv[0].endswith("__main__.py") else sys.argv[0], *sys.argv[1:]]
-        owner = {"pid": supervision.command_pid(), "started": round(time.time(), 3), "command": argv}
-        os.write(fd, (json.dumps(owner) + "\n").encode("ascii"))
+        _write_owner(fd)
         yield
     finally:
         try:
@@ -196,24 +209,8 @@ def claim(target: str | Path, inputs: tuple[str | Path | None, ...] = ()) -> Out
     target = Path(target).absolute()
     check_output(target, inputs)
     lock = target.with_name(target.name + ".lock")
-    while True:
-        try:
-            fd = os.open(lock, os.O_RDWR | os.O_CREAT, 0o644)
-        except OSError as exc:
-            raise OutputError(f"{target}: cannot write in {target.parent}: {exc.strerror}") from None
-        try:
-            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-        except BlockingIOError:
-            os.close(fd)
-            raise OutputError(f"{target}: {_describe_owner(lock)} is writing it; wait for it to end or "
-                              f"choose another --out") from None
-        try:
-            same = os.stat(lock).st_ino == os.fstat(fd).st_ino
-        except FileNotFoundError:  # its owner finished and removed it between our open and lock
-            same = False
-        if same:
-            break
-        os.close(fd)
+    fd = _take_lock(lock, f"{target}: cannot write in {target.parent}",
+                    lambda who: f"{target}: {who} is writing it; wait for it to end or choose another --out")
     out = OutputClaim(target, fd, lock)
     partial = out.partial
     if partial.exists():
@@ -221,10 +218,7 @@ def claim(target: str | Path, inputs: tuple[str | Path | None, ...] = ()) -> Out
         raise OutputError(f"{partial}: left by a run that did not finish; recover it "
                           f"(python -m cosim recover {partial}) or delete it, then run again")
     try:
-        os.ftruncate(fd, 0)
-        argv = ["python -m cosim" if sys.argv[0].endswith("__main__.py") else sys.argv[0], *sys.argv[1:]]
-        owner = {"pid": supervision.command_pid(), "started": round(time.time(), 3), "command": argv}
-        os.write(fd, (json.dumps(owner) + "\n").encode("ascii"))  # one line, any name escaped (and any locale)
+        _write_owner(fd)
         os.close(os.open(partial, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o644))
     except OSError as exc:
         out.release()
