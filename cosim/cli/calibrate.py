@@ -8,6 +8,7 @@ import shlex
 
 from ..errors import number_option
 from .common import EXIT_CHECK_FAILED, EXIT_OK, NUMBER, emit
+from .compare import add_recording_reading_options, recording_units
 
 __all__ = ["register"]
 
@@ -34,13 +35,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="override by dotted name, as for run (a fitted name: its start value)")
     p.add_argument("--offset", type=NUMBER, default=0.0, metavar="S",
                    help="the recording's time minus the run's, s, when offset is not fitted (default 0)")
-    p.add_argument("--time", choices=("header", "log"), default="header",
-                   help="a bag's header stamps or log (receive) times (default header)")
-    p.add_argument("--time-origin", choices=("first", "absolute"), default="first",
-                   help="recording times from its first message, or absolute (default first)")
-    p.add_argument("--unit", action="append", default=[], metavar="RUN_SIGNAL=UNIT",
-                   help="the unit of the recorded signal mapped to RUN_SIGNAL (bags carry none; default: the run "
-                        "signal's); repeatable")
+    add_recording_reading_options(p)
     p.add_argument("--max-runs", type=number_option(whole=True, ge=2, le=10_000), default=60, metavar="N",
                    help="most runs of the scenario the fit may make (default 60)")
     p.add_argument("--out", metavar="FILE",
@@ -61,12 +56,7 @@ def _cmd_calibrate(args: argparse.Namespace) -> int:
     if problem is not None:
         raise CalibrationError(f"{args.scenario}: {problem}")
     maps, fits = parse_maps(args.map), parse_fits(args.fit)
-    units = {}
-    for item in args.unit:
-        name, sep, unit = item.partition("=")
-        if not sep or name.strip() not in maps:
-            raise CalibrationError(f"--unit {item!r}: expected RUN_SIGNAL=UNIT for a --map'ped run signal")
-        units[name.strip()] = unit.strip()
+    units = recording_units(args, maps)
     if args.out is not None:
         from ..io.output import check_output
 

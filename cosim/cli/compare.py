@@ -9,7 +9,8 @@ import sys
 from ..errors import CosimError
 from .common import EXIT_CHECK_FAILED, EXIT_OK, MARGIN, NUMBER, POSITIVE, emit
 
-__all__ = ["register", "add_recording_options", "recording_options"]
+__all__ = ["register", "add_recording_options", "add_recording_reading_options", "recording_options",
+           "recording_units"]
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -89,6 +90,12 @@ def add_recording_options(g) -> None:
                    help="the recording's time minus the run's, s (default 0; --align estimates it)")
     g.add_argument("--max-offset", type=POSITIVE, metavar="S",
                    help="with --align: largest |offset| tried, s (default half the shorter span)")
+    add_recording_reading_options(g)
+
+
+def add_recording_reading_options(g) -> None:
+    """How a recording is read (``--time``, ``--time-origin``, ``--unit``): :func:`add_recording_options`' and
+    ``calibrate``'s; :func:`recording_units` reads ``--unit``."""
     g.add_argument("--time", choices=("header", "log"), default="header",
                    help="a bag's header stamps or log (receive) times (default header)")
     g.add_argument("--time-origin", choices=("first", "absolute"), default="first",
@@ -98,22 +105,28 @@ def add_recording_options(g) -> None:
                         "signal's); repeatable")
 
 
-def recording_options(args: argparse.Namespace) -> dict:
-    """The keyword arguments of :func:`cosim.analysis.recording_compare.compare_recording` (``maps``, ``units``,
-    ``time``, ``time_origin``, ``align``, ``offset``, ``max_offset``) from :func:`add_recording_options`' options;
-    CosimError (one line) for a malformed ``--map`` or ``--unit``, or a ``--unit`` of a signal not mapped."""
-    from ..analysis.recording_compare import parse_maps
-
+def recording_units(args: argparse.Namespace, maps: dict) -> dict[str, str]:
+    """``--unit`` by run signal; CosimError (one line) for a malformed one or one of a signal no ``--map`` maps."""
     units = {}
     for item in args.unit:
         name, sep, unit = item.partition("=")
         if not sep or not name.strip():
             raise CosimError(f"--unit {item!r}: expected RUN_SIGNAL=UNIT, e.g. plant.q[1]=deg")
         units[name.strip()] = unit.strip()
-    maps = parse_maps(args.map)
     unmapped = sorted(set(units) - set(maps))
     if unmapped:
         raise CosimError(f"--unit {', '.join(unmapped)}: not mapped by any --map")
+    return units
+
+
+def recording_options(args: argparse.Namespace) -> dict:
+    """The keyword arguments of :func:`cosim.analysis.recording_compare.compare_recording` (``maps``, ``units``,
+    ``time``, ``time_origin``, ``align``, ``offset``, ``max_offset``) from :func:`add_recording_options`' options;
+    CosimError (one line) for a malformed ``--map`` or ``--unit``, or a ``--unit`` of a signal not mapped."""
+    from ..analysis.recording_compare import parse_maps
+
+    maps = parse_maps(args.map)
+    units = recording_units(args, maps)
     return {"maps": maps, "units": units, "time": args.time, "time_origin": args.time_origin, "align": args.align,
             "offset": args.offset, "max_offset": args.max_offset}
 
