@@ -257,14 +257,18 @@ def test_model_exchange_plant_matches_cosimulation_plant_under_ctc(fmu_dir):
 
 def test_bundled_code_does_not_shadow(fmu_dir):
     """Two FMUs plus the installed package in one interpreter: each FMU runs its own bundle."""
-    import json
+    import zipfile
 
     import delta.kinematics
 
     installed = delta.kinematics.__file__
     slaves = [_Slave(_path(fmu_dir, n), n) for n in ("linear_ik", "rotary_fk")]
     try:
-        bundles = [json.loads((fmu_dir / f"{n}.json").read_text())["bundle"] for n in ("linear_ik", "rotary_fk")]
+        bundles = []
+        for n in ("linear_ik", "rotary_fk"):  # the bundle package its resources hold: resources/_dcosim_<hash>/
+            with zipfile.ZipFile(_path(fmu_dir, n)) as z:
+                (bundle,) = {m.split("/")[1] for m in z.namelist() if m.startswith("resources/_dcosim_")}
+            bundles.append(bundle)
         assert bundles[0] != bundles[1], f"both FMUs use bundle {bundles[0]}"
         for b in bundles:
             mod = sys.modules.get(f"{b}.delta.kinematics")
