@@ -290,7 +290,7 @@ def install(out: Path, name: str, write: Callable[[Path], None], record: dict[st
 
 def build_python(fmu: FmuDefinition, out_dir: str | Path | None = None, *, force: bool = False) -> Path:
     """The python FMU that ``fmu`` defines, built into the user's cache (:func:`user_cache`) unless a build with the
-    same fingerprint is there, then :func:`deliver`\ ed to ``out_dir`` if one is given."""
+    same fingerprint is there, then copied to ``out_dir`` if one is given (:func:`deliver`)."""
     cache = cache_folder(user_cache())
     digest = fingerprint(fmu)
     target, stamp = cached(cache, fmu.name, digest)
