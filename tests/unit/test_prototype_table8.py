@@ -10,6 +10,7 @@ import sys
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 ROOT = Path(__file__).resolve().parents[2]
 SCRIPT = ROOT / "examples" / "prototype_table8" / "table8.py"
@@ -56,11 +57,13 @@ def test_the_desired_angles_are_the_three_poses_in_the_tables_order():
 
 
 def test_every_row_is_the_papers_text():
-    """The second check of the transcription: Table 8's rows parsed from the paper's text (../shared/seeds/, which
-    every checkout and CI run has) are the CSV's, number for number."""
+    """The second check of the transcription: Table 8's rows parsed from the paper's text (../shared/seeds/, beside
+    the project's own checkout) are the CSV's, number for number."""
     import re
 
     seed = ROOT.parent / "shared" / "seeds" / "004_b2d7625910f3065b.txt"
+    if not seed.is_file():  # the papers sit beside the project's checkout, not in it: a clone elsewhere lacks them
+        pytest.skip(f"the paper's text is not beside this checkout ({seed})")
     rows = [[int(x) for x in m.group(1).split("|")]
             for m in re.finditer(r"^\| (?:Home Position|Step \d+) \|(.*)\|\s*$", seed.read_text(encoding="utf-8"),
                                  re.M)]

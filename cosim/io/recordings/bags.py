@@ -51,7 +51,10 @@ def bag_kind(path: Path) -> str | None:
 
 
 def _mcap_profile(path: Path) -> str:
-    """The profile of an MCAP file's header record ('' for our run logs, 'ros2' for a ROS 2 bag)."""
+    """The profile of an MCAP file's header record ('' for our run logs, 'ros2' for a ROS 2 bag); '' for what is not
+    a regular file (a FIFO would block the open: its readers name it)."""
+    if not path.is_file():
+        return ""
     try:
         with open(path, "rb") as f:
             head = f.read(8 + 1 + 8 + 4 + 64)
