@@ -6,8 +6,7 @@ stop signals in its thread and sleeps in C for ``hold`` s with the Python lock h
 can act. ``mode`` 5 and 6 do what 1 and 4 do, in ``exitInitializationMode`` instead of a step. ``mode`` 7 ignores the
 stop signals and busy-loops in Python for ``hold`` s (the lock taken and given back, but the signals never acted on);
 ``mode`` 8 starts a process that sleeps ``hold`` s holding the run's stdout and stderr, and goes on normally;
-``mode`` 9 stops (SIGSTOP) the processes its own process started (the log writer among them), then segfaults;
-``mode`` 10 stops them once and goes on."""
+``mode`` 10 stops (SIGSTOP) the processes its own process started (the log writer among them) once and goes on."""
 import signal
 import ctypes
 import os
@@ -53,14 +52,12 @@ class CosimTCrash(Fmi2Slave):
             elif self.mode == 8 and not getattr(self, "_started", False):
                 self._started = True
                 subprocess.Popen(["sleep", str(int(self.hold))])  # inherits stdout and stderr
-            elif self.mode in (9, 10) and not getattr(self, "_started", False):
+            elif self.mode == 10 and not getattr(self, "_started", False):
                 self._started = True
                 for task in os.listdir("/proc/self/task"):
                     with open(f"/proc/self/task/{task}/children") as f:
                         for child in f.read().split():
                             os.kill(int(child), signal.SIGSTOP)
-                if self.mode == 9:
-                    ctypes.string_at(0)
             elif self.mode == 7:
                 for s in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP):
                     signal.signal(s, signal.SIG_IGN)

@@ -215,50 +215,6 @@ def test_a_process_an_fmu_leaves_running_does_not_keep_the_output_pipe_open(writ
     assert proc.returncode == 0 and read_run(out).status == "completed", stderr
 
 
-def test_a_stop_signal_while_a_stalled_writer_is_waited_for_keeps_the_crash_report(write_scenario, tmp_path):
-    """The component stops the log writer, then crashes: the supervisor waits (up to 10 s) for the writer to finish.
-    SIGTERM in that wait dropped the crash's report, left the writer running and the log unrecovered; now the writer
-    is killed at once, the report printed, the log recovered as far as it was written, and the exit code is 143."""
-    tmp = Path(tempfile.mkdtemp(dir=tmp_path))
-    out = tmp_path / "logs" / "stalled_writer.mcap"
-    proc = _start(write_scenario(SCENARIO.format(mode=9, at=2.5, stop=3.0, extra="")), out, tmp)  # a writer process
-    deadline = time.monotonic() + 60
-    while time.monotonic() < deadline and not _has_stopped_child(proc.pid):
-        time.sleep(0.05)
-    assert _has_stopped_child(proc.pid), "the writer was never stopped"
-    t0 = time.monotonic()
-    proc.send_signal(signal.SIGTERM)
-    _, stderr = proc.communicate(timeout=60)
-    assert time.monotonic() - t0 < 8, "the stalled writer was waited for after the stop signal"
-    assert proc.returncode == 143 and "Traceback" not in stderr, (proc.returncode, stderr)
-    lines = stderr.strip().splitlines()
-    assert lines[0] == "error: component 'src' in its step at t = 2.499 s crashed (SIGSEGV)", stderr
-    assert len(lines) == 2 and f"is in {out}" in lines[1], stderr  # recovered as far as the writer wrote
-    read_run(out)  # a complete, indexed log
-    assert sorted(p.name for p in out.parent.iterdir()) == [out.name]  # no .partial, no .lock
-    assert not list(tmp.glob("cosim-*")), list(tmp.glob("cosim-*"))
-    time.sleep(0.5)
-    assert not _has_stopped_child(proc.pid), "the stopped writer was left behind"
-
-
-def _has_stopped_child(pid: int) -> bool:
-    """Whether a process of ours started after the command ``pid`` is stopped (state T): the run's log writer, stopped
-    by the FMU (a session of its own; once the run's process died, not a descendant of the command any more)."""
-    for entry in os.listdir("/proc"):
-        if not entry.isdigit() or int(entry) <= pid:
-            continue
-        try:
-            with open(f"/proc/{entry}/stat") as f:
-                state = f.read().rsplit(")", 1)[1].split()[0]
-            with open(f"/proc/{entry}/cmdline", "rb") as f:
-                ours = b"cosim" in f.read()
-        except OSError:
-            continue
-        if state == "T" and ours:
-            return True
-    return False
-
-
 def test_a_stopped_log_writer_is_named_and_what_it_received_is_kept(write_scenario, tmp_path):
     """The component stops the log writer and the run goes on until the log's pipe is full: the supervisor named the
     master ("made no progress") and the log kept nothing; now it names the stopped writer, resumes it to write what
