@@ -13,10 +13,11 @@ import signal
 import pytest
 import yaml
 from cfmus import build
+from endings import ENDING_CASES, ending, expected_error
 
 from cosim.engine import cloop
 from cosim.engine.scenario import parse_scenario
-from cosim.errors import FMIError, Interrupted
+from cosim.errors import Interrupted
 from cosim.run import RunOptions, run_scenario
 
 pytestmark = pytest.mark.integration
@@ -150,21 +151,10 @@ def test_a_link_that_converts_keeps_the_python_loop(tmp_path, monkeypatch):
 
 def _ending(tmp_path, monkeypatch, components, connections, stop, step, in_c: bool, each: bool):
     scenario = _scenario(tmp_path, components, connections, stop, step)
-    try:
-        _, result, _ = _run(scenario, monkeypatch, in_c=in_c, each=each)
-    except FMIError as exc:
-        return (type(exc).__name__, exc.component, exc.function, str(exc)), None
-    return None, (result.steps, result.sim_time, result.terminated_by, result.message)
+    return ending(lambda: _run(scenario, monkeypatch, in_c=in_c, each=each)[1])
 
 
-@pytest.mark.parametrize("what, components, connections, stop, step", [
-    ("rejected step, FMI 2", {"st": ("Stair", 2, {"t_reject": 0.55})}, [], 1.0, 0.1),
-    ("rejected step, FMI 3", {"st": ("Stair", 3, {"t_reject": 0.55})}, [], 1.0, 0.1),
-    ("termination, FMI 2", {"st": ("Stair", 2, {"t_terminate": 0.35})}, [], 1.0, 0.1),
-    ("termination, FMI 3", {"st": ("Stair", 3, {"t_terminate": 0.35})}, [], 1.0, 0.1),
-    ("non-finite output", {"osc": ("VanDerPol", 2, {"mu": 1e6}), "a": ("Feedthrough", 2, {})},
-     [("osc.x0", "a.Real_input")], 1.0, 1e-3),
-])
+@pytest.mark.parametrize("what, components, connections, stop, step", ENDING_CASES)
 @pytest.mark.parametrize("each", [False, True], ids=["blocks", "each step"])
 def test_the_loop_in_c_ends_as_the_python_loop_ends(tmp_path, monkeypatch, what, components, connections, stop, step,
                                                     each):
@@ -173,8 +163,7 @@ def test_the_loop_in_c_ends_as_the_python_loop_ends(tmp_path, monkeypatch, what,
     c_end = _ending(tmp_path, monkeypatch, comps, connections, stop, step, in_c=True, each=each)
     py_end = _ending(tmp_path, monkeypatch, comps, connections, stop, step, in_c=False, each=each)
     assert c_end == py_end, f"{what}: loop in C {c_end} vs loop in Python {py_end}"
-    expected = {"rejected": "FMIError", "termination": None, "non-finite": "FMIError"}[what.split()[0].split(",")[0]]
-    assert (c_end[0][0] if c_end[0] else None) == expected, f"{what}: ended as {c_end}"
+    assert (c_end[0][0] if c_end[0] else None) == expected_error(what), f"{what}: ended as {c_end}"
 
 
 def test_a_stop_request_is_answered_at_the_end_of_a_block(tmp_path, monkeypatch):

@@ -13,9 +13,9 @@ import ctypes
 import pytest
 import yaml
 from cfmus import build
+from endings import ENDING_CASES, ending, expected_error
 
 from cosim.fmi import turn
-from cosim.errors import FMIError
 from cosim.fmi import load_fmu, make_slave
 from cosim.fmi.slave import CoSimulation
 from cosim.observers.recorders import Probe
@@ -100,21 +100,10 @@ def test_a_component_exchanging_strings_keeps_the_python_calls(tmp_path, monkeyp
 def _ending(tmp_path, monkeypatch, components, connections, stop, step, python: bool):
     """(error text, None) or (None, result summary) of a run that ends early."""
     scenario = _scenario(tmp_path, components, connections, stop, step)
-    try:
-        _, result = _run(scenario, [], python=python, monkeypatch=monkeypatch)
-    except FMIError as exc:
-        return (type(exc).__name__, exc.component, exc.function, str(exc)), None
-    return None, (result.steps, result.sim_time, result.terminated_by, result.message)
+    return ending(lambda: _run(scenario, [], python=python, monkeypatch=monkeypatch)[1])
 
 
-@pytest.mark.parametrize("what, components, connections, stop, step", [
-    ("rejected step, FMI 2", {"st": ("Stair", 2, {"t_reject": 0.55})}, [], 1.0, 0.1),
-    ("rejected step, FMI 3", {"st": ("Stair", 3, {"t_reject": 0.55})}, [], 1.0, 0.1),
-    ("termination, FMI 2", {"st": ("Stair", 2, {"t_terminate": 0.35})}, [], 1.0, 0.1),
-    ("termination, FMI 3", {"st": ("Stair", 3, {"t_terminate": 0.35})}, [], 1.0, 0.1),
-    ("non-finite output", {"osc": ("VanDerPol", 2, {"mu": 1e6}), "a": ("Feedthrough", 2, {})},
-     [("osc.x0", "a.Real_input")], 1.0, 1e-3),
-])
+@pytest.mark.parametrize("what, components, connections, stop, step", ENDING_CASES)
 def test_a_turn_ends_as_the_python_calls_end(tmp_path, monkeypatch, what, components, connections, stop, step):
     comps = {name: {"path": str(build(model, fmi)), "parameters": params}
              for name, (model, fmi, params) in components.items()}
@@ -122,8 +111,7 @@ def test_a_turn_ends_as_the_python_calls_end(tmp_path, monkeypatch, what, compon
     py_end = _ending(tmp_path, monkeypatch, comps, connections, stop, step, python=True)
     assert c_end == py_end, f"{what}: C turn {c_end} vs Python calls {py_end}"
     error, result = c_end
-    expected = {"rejected": "FMIError", "termination": None, "non-finite": "FMIError"}[what.split()[0].split(",")[0]]
-    assert (error[0] if error else None) == expected, f"{what}: ended as {c_end}"
+    assert (error[0] if error else None) == expected_error(what), f"{what}: ended as {c_end}"
     if what == "non-finite output":
         assert error[1] == "osc" and "non-finite output x0" in error[3], error
 
