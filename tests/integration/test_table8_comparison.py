@@ -4,7 +4,6 @@ what the script prints now, digit for digit (so every figure matches within its 
 
 from __future__ import annotations
 
-import importlib.util
 import re
 import subprocess
 import sys
@@ -12,20 +11,12 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from example_scripts import table8
 
 pytestmark = pytest.mark.integration
 
 ROOT = Path(__file__).resolve().parents[2]
-SCRIPT = ROOT / "examples" / "prototype_table8" / "table8.py"
 PAGE = ROOT / "docs" / "prototype_table8.md"
-
-
-def _example():
-    spec = importlib.util.spec_from_file_location("prototype_table8", SCRIPT)
-    mod = importlib.util.module_from_spec(spec)
-    sys.modules[spec.name] = mod  # its dataclass looks its module up
-    spec.loader.exec_module(mod)
-    return mod
 
 
 @pytest.fixture(scope="module")
@@ -37,7 +28,7 @@ def log(tmp_path_factory) -> Path:
 
 
 def test_the_pages_figures_are_what_the_comparison_computes(log):
-    mod = _example()
+    mod = table8()
     printed = mod.report(mod.compare(log))
     block = re.search(r"```text\n(.*?)```", PAGE.read_text(encoding="utf-8"), re.S).group(1).rstrip("\n")
     assert printed == block, f"docs/prototype_table8.md shows\n{block}\nthe comparison computes\n{printed}"
@@ -47,7 +38,7 @@ def test_the_fits_reduce_the_residual_and_stay_above_the_scatter(log):
     """Checks of the figures that cannot be tuned: a least-squares fit with the uncorrected model inside its
     family (offset 0, gain 1; compliance 0) never ends above it, and no model of the pose goes below the scatter
     within the poses."""
-    result = _example().compare(log)
+    result = table8().compare(log)
     for j, jr in enumerate(result["joints"], start=1):
         for name in ("sensor", "compliance"):
             fit = jr[name]

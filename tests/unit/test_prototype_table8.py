@@ -5,27 +5,17 @@ robot workspace analysis"), and its printed errors consistent with its angles.""
 
 from __future__ import annotations
 
-import importlib.util
-import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
+from example_scripts import table8
 
 ROOT = Path(__file__).resolve().parents[2]
-SCRIPT = ROOT / "examples" / "prototype_table8" / "table8.py"
-
-
-def _example():
-    spec = importlib.util.spec_from_file_location("prototype_table8", SCRIPT)
-    mod = importlib.util.module_from_spec(spec)
-    sys.modules[spec.name] = mod  # its dataclass looks its module up
-    spec.loader.exec_module(mod)
-    return mod
 
 
 def test_the_csv_gives_the_papers_rows():
-    tab = _example().read_table8()
+    tab = table8().read_table8()
     assert tab["q"].shape == (16, 3), tab["q"].shape
     # the reader counts time in integer ns then seconds: a whole step number comes back within 1e-12
     assert np.allclose(tab["step"], np.arange(16), rtol=0, atol=1e-12), tab["step"]
@@ -43,14 +33,14 @@ def test_the_csv_gives_the_papers_rows():
 
 def test_every_printed_error_is_detected_minus_desired():
     """A typing slip in one column shows here: the table's Error column is |detected - desired| on every row."""
-    tab = _example().read_table8()
+    tab = table8().read_table8()
     assert np.array_equal(tab["error"], np.abs(tab["q"] - tab["q_ref"])), np.argwhere(
         tab["error"] != np.abs(tab["q"] - tab["q_ref"]))
 
 
 def test_the_desired_angles_are_the_three_poses_in_the_tables_order():
     """Home, then -40 (z = -311 mm), 38 (z = -561 mm), home, repeated: steps 1, 4, 7, 10, 13 at -40 deg."""
-    tab = _example().read_table8()
+    tab = table8().read_table8()
     expected = [0] + [-40, 38, 0] * 4 + [-40, 38] + [0]
     assert list(tab["q_ref"][:, 0]) == expected, tab["q_ref"][:, 0]
     assert np.all(tab["q_ref"] == tab["q_ref"][:, :1]), "all three motors have the same desired angle"
@@ -67,6 +57,6 @@ def test_every_row_is_the_papers_text():
     rows = [[int(x) for x in m.group(1).split("|")]
             for m in re.finditer(r"^\| (?:Home Position|Step \d+) \|(.*)\|\s*$", seed.read_text(encoding="utf-8"),
                                  re.M)]
-    tab = _example().read_table8()
+    tab = table8().read_table8()
     ours = np.column_stack([tab["q_ref"], tab["q"], tab["error"]]).astype(int).tolist()
     assert rows == ours, (rows, ours)
