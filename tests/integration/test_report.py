@@ -14,6 +14,7 @@ import re
 from pathlib import Path
 
 import pytest
+from figure_checks import check_png
 
 from cosim.errors import CosimError
 from cosim.analysis.report import make_report
@@ -38,7 +39,6 @@ MARKDOWN_RTOL = 5e-7
 FIGURES = {"path_3d", "position", "errors", "joints", "efforts"}
 # Figures are drawn at 120 dpi on 7.5 x 6 in and larger canvases: anything smaller is a
 # broken save, anything far larger a wrong dpi.
-MIN_PIXELS, MAX_PIXELS = (600, 400), (3000, 3000)
 
 
 @pytest.fixture(scope="module")
@@ -58,26 +58,13 @@ def _cli(*argv: str) -> int:
     return args.handler(args)
 
 
-def _check_png(path: Path) -> None:
-    from PIL import Image
-
-    assert path.is_file(), f"{path} was not written"
-    with Image.open(path) as im:
-        assert im.format == "PNG", f"{path}: format {im.format}, expected PNG"
-        w, h = im.size
-        assert MIN_PIXELS[0] <= w <= MAX_PIXELS[0] and MIN_PIXELS[1] <= h <= MAX_PIXELS[1], \
-            f"{path}: {w} x {h} px, expected between {MIN_PIXELS} and {MAX_PIXELS}"
-        lo, hi = im.convert("L").getextrema()
-        assert hi - lo > 100, f"{path}: grey levels {lo}..{hi}: a blank image"
-
-
 def test_report_writes_figures_and_markdown_with_the_run_summary_rmse(run, tmp_path):
     log, result = run
     rep = make_report(log, tmp_path / "rep")
     assert set(rep.figures) == FIGURES, f"figures {sorted(rep.figures)}, expected {sorted(FIGURES)}"
     for path in rep.figures.values():
         assert path.parent == tmp_path / "rep", f"{path} not in the requested directory"
-        _check_png(path)
+        check_png(path)
     assert rep.status == "completed" and rep.robot == "linear_delta_thesis", (rep.status, rep.robot)
     assert rep.duration == pytest.approx(STOP_S, abs=1e-12), f"duration {rep.duration} s vs {STOP_S} s"
     assert len(rep.velocity) == 3, "plant.v vs traj.v_ref are logged: velocity errors expected"

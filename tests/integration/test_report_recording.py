@@ -15,6 +15,7 @@ from pathlib import Path
 import pytest
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+from figure_checks import check_png  # noqa: E402
 from recording_helpers import synthetic_plant_bag  # noqa: E402
 
 from cosim.analysis.recording_compare import compare_recording  # noqa: E402
@@ -30,7 +31,6 @@ SIGNALS = [f"plant.q[{i}]" for i in (1, 2, 3)]
 BAG_MAPS = {s: f"/joint_states.position[delta_joint_{i}]" for i, s in enumerate(SIGNALS, 1)}
 STANDARD = {"path_3d", "position", "errors", "joints", "efforts"}  # the report's figures without a recording
 # Figures are drawn at 120 dpi on 9 x 5.8 in: anything smaller is a broken save, anything far larger a wrong dpi.
-MIN_PIXELS, MAX_PIXELS = (600, 400), (3000, 3000)
 # The text output prints RMSE and max |e| as %.4e: rounding is at most 5e-5 relative.
 PRINTED_RTOL = 5e-5
 # report.md prints them as %.6e: at most 5e-7 relative.
@@ -60,19 +60,6 @@ def _cosim(capsys, *argv) -> tuple[int, str, str]:
     return code, got.out, got.err
 
 
-def _check_png(path: Path) -> None:
-    from PIL import Image
-
-    assert path.is_file(), f"{path} was not written"
-    with Image.open(path) as im:
-        assert im.format == "PNG", f"{path}: format {im.format}, expected PNG"
-        w, h = im.size
-        assert MIN_PIXELS[0] <= w <= MAX_PIXELS[0] and MIN_PIXELS[1] <= h <= MAX_PIXELS[1], \
-            f"{path}: {w} x {h} px, expected between {MIN_PIXELS} and {MAX_PIXELS}"
-        lo, hi = im.convert("L").getextrema()
-        assert hi - lo > 100, f"{path}: grey levels {lo}..{hi}: a blank image"
-
-
 def _no_leftovers(folder: Path) -> None:
     left = [p.name for p in folder.rglob("*") if p.name.endswith(".tmp")]
     assert not left, f"temporary files left in {folder}: {left}"
@@ -89,7 +76,7 @@ def test_aligned_report_draws_each_signal_with_the_residual_compare_computes(bag
     for key in want:
         path = Path(rep["figures"][key])
         assert path.parent == out, f"{path} not in {out}"
-        _check_png(path)
+        check_png(path)
     cmp = compare_recording(RUN, bag, BAG_MAPS, align=True)
     assert rep["recording"] == json.loads(json.dumps(cmp.as_dict())), \
         f"report's comparison {rep['recording']}\ncompare's {cmp.as_dict()}"
@@ -120,7 +107,7 @@ def test_a_given_offset_shifts_the_recording_and_the_printed_numbers_are_compare
         assert m, f"no line for {d.name} in:\n{stdout}"
         assert float(m[1]) == pytest.approx(d.rmse, rel=PRINTED_RTOL), f"printed RMSE {m[1]} vs compare's {d.rmse}"
         assert float(m[2]) == pytest.approx(d.max_error, rel=PRINTED_RTOL), f"printed {m[2]} vs {d.max_error}"
-        _check_png(out / f"recording_{d.name.replace('[', '_').rstrip(']')}.png")
+        check_png(out / f"recording_{d.name.replace('[', '_').rstrip(']')}.png")
     unshifted = compare_recording(RUN, bag, BAG_MAPS)
     worst = max(d.rmse for d in unshifted.diffs)
     assert worst > 100 * max(d.rmse for d in cmp.diffs), \
