@@ -17,7 +17,7 @@ from pathlib import Path
 from xml.etree import ElementTree as ET
 
 import pytest
-from import_graph import cycles
+from import_graph import imports_anywhere, package_cycles, package_modules
 
 pytest.importorskip("casadi")
 
@@ -25,35 +25,11 @@ ROOT = Path(__file__).resolve().parents[2]
 PACKAGE = ROOT / "fmus"
 
 
-def _modules() -> dict[str, Path]:
-    out = {}
-    for path in PACKAGE.rglob("*.py"):
-        parts = path.relative_to(ROOT).with_suffix("").parts
-        out[".".join(parts[:-1] if parts[-1] == "__init__" else parts)] = path
-    return out
-
-
-MODULES = _modules()
+MODULES = package_modules(ROOT, "fmus")
 
 
 def _imports(module: str) -> set[str]:
-    """The fmus modules ``module`` imports anywhere in it (functions and TYPE_CHECKING blocks included), with the
-    packages each import runs first."""
-    path = MODULES[module]
-    package = module.split(".") if path.name == "__init__.py" else module.split(".")[:-1]
-    named: set[str] = set()
-    for node in ast.walk(ast.parse(path.read_text())):
-        if isinstance(node, ast.Import):
-            named.update(a.name for a in node.names)
-        elif isinstance(node, ast.ImportFrom):
-            parts = package[:len(package) - node.level + 1] if node.level else []
-            base = ".".join(parts + ([node.module] if node.module else []))
-            named.update(f"{base}.{a.name}" if f"{base}.{a.name}" in MODULES else base for a in node.names)
-    out = set()
-    for name in named:
-        parts = name.split(".")
-        out.update(m for m in (".".join(parts[:i]) for i in range(1, len(parts) + 1)) if m in MODULES)
-    return out - {module}
+    return imports_anywhere(MODULES, module)
 
 
 def test_fmus_native_is_a_package():
@@ -69,8 +45,7 @@ def test_the_import_graph_is_read():
 
 
 def test_fmus_has_no_import_cycle():
-    graph = {m: _imports(m) for m in MODULES}
-    found = cycles(graph)
+    found = package_cycles(ROOT, "fmus")
     assert not found, "\n".join(found)
 
 
