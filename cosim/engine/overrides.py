@@ -1,23 +1,25 @@
 """Overrides of a scenario's values: ``--set NAME=VALUE`` parsed and resolved against the scenario's format
-(components' parameters, list items, dotted paths), ``--stop-time``, and the numbers kept as written."""
+(components' parameters, list items, dotted paths), ``--stop-time``, the files of values a scenario's
+``parameters:`` key names (:func:`parameter_file_overrides`), and the numbers kept as written."""
 
 from __future__ import annotations
 
 import difflib
 import re
 import typing
+from pathlib import Path
 from typing import Any
 
 import yaml
 from pydantic import BaseModel
 
-from ..errors import Issue, ScenarioError
+from ..errors import Issue, ScenarioError, file_problem
 from .bounded_yaml import load_yaml
 from .names import quote, split_ref
 from .schema import Scenario
 
 __all__ = ["Overrides", "parse_set_value", "shown", "WrittenNumber", "as_written", "has_written", "DOTTED", "resolve_name",
-           "dotted_overrides", "apply_overrides"]
+           "dotted_overrides", "apply_overrides", "parameter_file_overrides", "MAX_PARAMETER_FILE_BYTES"]
 
 class Overrides(dict):
     """Loader overrides (key path -> value) that remember the option each came from, so an
@@ -258,3 +260,78 @@ def apply_overrides(sets: list[str], stop_time: float | None = None) -> Override
     if stop_time is not None:
         out.put(("time", "stop"), stop_time, f"--stop-time {stop_time:g}")
     return out
+
+
+MAX_PARAMETER_FILE_BYTES = 64 * 2 ** 10
+"""Bytes a file of values (``parameters:``) may hold (``calibrate --out`` writes a few hundred)."""
+
+
+def parameter_file_overrides(files: Any, base: Path, named_at: str, loc: tuple = ("parameters",)) -> Overrides:
+    """The values of the files a scenario's ``parameters:`` key names (one path or a list; relative to ``base``, the
+    scenario's folder), as overrides by dotted name (``plant.mass.payload: 0.3``, ``components.meas.offset: 0.21``,
+    the names ``--set`` takes), in the files' order (a later file's value wins). ``named_at``: where the key was
+    given (``scenario.yaml:7``, or the option), cited by every error. Each value's origin is its file and line, so a
+    problem found with it later (an FMU without that parameter, a value of the wrong type) is placed there. Raises
+    :class:`ScenarioError`, one line: a file missing or unreadable, not YAML, not a mapping of names to values."""
+    out = Overrides()
+    if files is None:
+        return out
+    if isinstance(files, str):
+        files = [files]
+    for i, name in enumerate(files):
+        where = f"{named_at}" + (f" (parameters[{i}])" if len(files) > 1 else "")
+        path = Path(name)
+        path = path if path.is_absolute() else base / path
+        problem = file_problem(path)
+        raw = b""
+        if problem is None:
+            try:
+                with open(path, "rb") as f:
+                    raw = f.read(MAX_PARAMETER_FILE_BYTES + 1)  # bounded: outside input
+            except OSError as exc:
+                problem = exc.strerror or str(exc)
+        if problem is not None:
+            raise ScenarioError(Issue("", f"parameters file {path}: {problem}", where))
+        _file_values(raw, str(path), where, out)
+    return out
+
+
+def _file_values(raw: bytes, path: str, named_at: str, out: Overrides) -> None:
+    """One file of values into ``out``: a mapping of dotted names to scalars or lists, each placed at its line."""
+    def at(line: int | None) -> str:  # where a value of the file came from: every message about it starts so
+        return f"{path}" + (f":{line}" if line else "") + f" (a parameters file, named at {named_at})"
+
+    def fail(message: str, line: int | None = None) -> ScenarioError:
+        return ScenarioError(Issue("", message, at(line)))
+
+    if len(raw) > MAX_PARAMETER_FILE_BYTES:
+        raise fail(f"larger than {MAX_PARAMETER_FILE_BYTES // 2 ** 10} kB, more than a file of values holds: "
+                   "refused unread")
+    try:
+        data, root = load_yaml(raw.decode("utf-8"))
+    except UnicodeDecodeError as exc:
+        raise fail(f"not UTF-8 text (byte 0x{raw[exc.start]:02x} at offset {exc.start})",
+                   raw[:exc.start].count(b"\n") + 1) from None
+    except yaml.YAMLError as exc:
+        mark = getattr(exc, "problem_mark", None)
+        why = " ".join(str(getattr(exc, "problem", None) or exc).split())
+        raise fail(f"invalid YAML: {why}", mark.line + 1 if mark else None) from None
+    if data is None:
+        return  # only comments: no values
+    if not isinstance(data, dict):
+        raise fail("expected a mapping of names to values (plant.mass.payload: 0.3)", 1)
+    lines = {k.value: k.start_mark.line + 1 for k, _ in root.value if isinstance(k, yaml.ScalarNode)}
+    for name, value in data.items():
+        line = lines.get(name)
+        if not isinstance(name, str) or not name or name.startswith(".") or name.endswith("."):
+            raise fail(f"expected a dotted name (component.parameter, time.stop, components.NAME.offset), got "
+                       f"{shown(repr(name))}", line)
+        if name == "parameters":
+            raise fail("a parameters file cannot name other parameters files", line)
+        scalar = (bool, int, float, str)
+        if not (isinstance(value, scalar) or isinstance(value, list) and all(
+                isinstance(v, scalar) or isinstance(v, list) and all(isinstance(w, scalar) for w in v)
+                for v in value)):
+            raise fail(f"{name}: expected a number, a boolean, a string or a list of them, got "
+                       f"{shown(repr(value))}", line)
+        out.put((DOTTED, name), _numbers(value), at(line))

@@ -21,7 +21,7 @@ from ..errors import Issue, ScenarioError, file_problem
 from .bounded_yaml import YamlTooLarge, load_yaml
 from .names import split_ref
 from . import plugins
-from .overrides import DOTTED, as_written, has_written, resolve_name
+from .overrides import DOTTED, Overrides, as_written, has_written, parameter_file_overrides, resolve_name
 from .schema import Scenario, TrajectorySpec, condition_issue, expand_signal, parse_condition, trajectory_params_model
 from .sources import SourceMap, collect_lines, issue_at
 
@@ -91,9 +91,8 @@ def scenario_from_data(data: dict[str, Any], file: str = "<string>", overrides: 
     origins = dict(getattr(overrides, "origins", {}))
     written: dict[tuple, Any] = {}
     data = copy.deepcopy(data)  # the overrides must not change the caller's mapping
-    for path, value in (overrides or {}).items():
-        if path[0] == DOTTED:  # a dotted name (--set NAME=VALUE, the Python API): resolved against this data
-            origin = origins.get(path, f"--set {path[1]}")
+    for path, value, origin in _in_order(data, file, overrides, origins, lines):
+        if path[0] == DOTTED:  # a dotted name (--set NAME=VALUE, the Python API, a file of values): resolved here
             path = resolve_name(path[1], data, origin)
             origins[path] = origin
         components = data.get("components") or {}
@@ -135,6 +134,21 @@ def scenario_from_data(data: dict[str, Any], file: str = "<string>", overrides: 
         raise ScenarioError(issues)
     scenario._sources = SourceMap(file, lines, origins, written)
     return scenario
+
+
+def _in_order(data: dict[str, Any], file: str, overrides: dict[tuple, Any] | None, origins: dict[tuple, str],
+              lines: dict[tuple, int]) -> list[tuple[tuple, Any, str]]:
+    """(key path, value, origin) of every value set over the file's: first those of the files its ``parameters:``
+    key names (or ``--set parameters=...``; relative to the scenario's folder), then ``overrides``, which win."""
+    files, named_at = data.get("parameters"), f"{file}:{lines.get(('parameters',), 1)}"
+    for path, value in (overrides or {}).items():
+        if path in (("parameters",), (DOTTED, "parameters")):
+            files, named_at = value, origins.get(path, "--set parameters")
+    base = Path(file).parent if file and file != "<string>" else Path.cwd()
+    readable = isinstance(files, str) or isinstance(files, list) and all(isinstance(f, str) for f in files)
+    from_files = parameter_file_overrides(files, base, named_at) if readable else Overrides()  # else: pydantic says
+    return [(p, v, from_files.origins[p]) for p, v in from_files.items()] + [
+        (p, v, origins.get(p, f"--set {p[1]}" if p[0] == DOTTED else "--set")) for p, v in (overrides or {}).items()]
 
 
 def _semantic_issues(s: Scenario) -> list[tuple[tuple, str]]:
@@ -262,7 +276,8 @@ EFFECTIVE_ATTACHMENT = "effective/scenario.json"
 
 def effective_scenario(scenario: Scenario, log: str | Path | None = None) -> dict[str, Any]:
     """``scenario`` as it runs, every override applied, as a scenario mapping (JSON, valid YAML): every key with its
-    value, defaults included; the paths of FMU files and of the identified model absolute, ``logging.out`` the run's ``log`` (absolute) when
+    value, defaults included; the values of its ``parameters:`` files applied (the key itself emptied, so that the
+    mapping runs the same without them); the paths of FMU files and of the identified model absolute, ``logging.out`` the run's ``log`` (absolute) when
     given; a component parameter overridden by a number written as text (``1e3``) as that text, as a file gives it."""
 
     data = Scenario.model_dump(scenario, mode="json", by_alias=True)
@@ -272,6 +287,7 @@ def effective_scenario(scenario: Scenario, log: str | Path | None = None) -> dic
             comp["path"] = os.path.normpath((base / comp["path"]).absolute())
     if data.get("model") is not None:  # relative to the scenario file, as an FMU's path: absolute in the log
         data["model"] = os.path.normpath((base / data["model"]).absolute())
+    data["parameters"] = None  # the files' values are applied above: the log runs again without the files
     if log is not None:
         data["logging"]["out"] = os.path.normpath(Path(log).absolute())
     for path, text in scenario.sources.written.items():  # ("components", name, "parameters", variable)

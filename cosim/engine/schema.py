@@ -62,9 +62,13 @@ class Component(_Model):
     interpolation: Literal["linear", "hold"] = Field(
         "linear", description="recording: between samples, 'linear' or 'hold' (the last sample at or before t)")
     offset: float = Field(0.0, description="recording: its time minus the run's, s (the output at run time t is the "
-                                           "recording at t + offset; times count from its first message)")
+                                           "recording at t + offset; its time as time_origin says)")
     time: Literal["header", "log"] = Field(
         "header", description="recording: a bag's header stamps or its log (receive) times")
+    time_origin: Literal["first", "absolute"] = Field(
+        "first", description="recording: its time counts from its first message ('first': the offset is when, in "
+                             "the recording, the run starts) or is its absolute stamps ('absolute': s since the "
+                             "epoch in a bag; the run's t is the stamp minus the offset), as compare --time-origin")
     units: dict[str, str] = Field(
         default_factory=dict, description="recording: output name -> unit (a recorded unit converts to it; a bag's "
                                           "signal, which has none, is taken to be in it)")
@@ -96,7 +100,7 @@ class Component(_Model):
                              "(a recording replayed as outputs)")
         given = {f for f in self.model_fields_set  # a key written with its default (a log's scenario as run) is not
                  if getattr(self, f) != type(self).model_fields[f].get_default(call_default_factory=True)}
-        replay = {"signals", "interpolation", "offset", "time", "units"} & given
+        replay = {"signals", "interpolation", "offset", "time", "time_origin", "units"} & given
         if self.recording is None and replay:
             raise ValueError(f"{', '.join(sorted(replay))}: only for a component given by 'recording'")
         if self.recording is not None:
@@ -395,6 +399,11 @@ class Scenario(_Model):
                           "relative to the scenario file: its parameters (model.w_inertia, model.w_gravity, model.w_rotation) are "
                           "the start values of every model-based component of ours (controllers, analytic "
                           "plants); a component's own parameters win")
+    parameters: Union[str, list[str], None] = Field(
+        None, description="files of values (YAML, `name: value` by the names --set takes: plant.mass.payload, "
+                          "trajectory.params.rx, components.meas.offset; written by `python -m cosim calibrate "
+                          "--out`), relative to the scenario file: set over the scenario's own values and under "
+                          "--set; of several, a later file's value wins")
     initial_state: InitialState = Field(default_factory=InitialState)
     logging: Logging = Field(default_factory=Logging)
     compare: Compare | None = None
@@ -483,11 +492,20 @@ class Scenario(_Model):
         return self
 
 
+@dataclasses.dataclass(frozen=True)
+class _Replay(Replay):
+    """:class:`~cosim.engine.structure.Replay` with ``time_origin`` ('first' or 'absolute', as ``compare
+    --time-origin``), which the reader of the recording takes (``getattr(replay, "time_origin", "first")``)."""
+
+    time_origin: str = "first"
+
+
 def _replay(c: Component) -> Replay | None:
     """A recording component's source, as the structure holds it (None: an FMU)."""
     if c.recording is None:
         return None
-    return Replay(c.recording, tuple(c.signals.items()), c.interpolation, c.offset, c.time, tuple(c.units.items()))
+    return _Replay(c.recording, tuple(c.signals.items()), c.interpolation, c.offset, c.time, tuple(c.units.items()),
+                   c.time_origin)
 
 
 def expand_signal(spec: str | list[str]) -> list[str]:

@@ -17,6 +17,7 @@ component.
 from __future__ import annotations
 
 import ctypes
+from fractions import Fraction
 from dataclasses import dataclass, field
 from html import escape
 from pathlib import Path
@@ -56,6 +57,8 @@ class RecordingInfo:
     recording: Recording
     replay: Replay
     variables: dict[str, Variable]
+    offset_s: float  # the offset on the recording's times as read (from its first message): the replay's, or with
+    # time_origin 'absolute' the replay's less the first message's stamp
     md: Any = field(default_factory=lambda: SimpleNamespace(
         modelName="recording", generationTool=GENERATOR, guid="", fmiVersion="", unitDefinitions=[],
         defaultExperiment=None, coSimulation=None, modelExchange=None))
@@ -74,7 +77,8 @@ class RecordingInfo:
                        f"unit={quoteattr(self.variables[n].unit or '')}/>\n" for n, s in r.signals)
         return (f'<?xml version="1.0" encoding="UTF-8"?>\n<cosimRecording file={quoteattr(str(self.path))} '
                 f'kind={quoteattr(self.recording.kind)} interpolation={quoteattr(r.interpolation)} '
-                f'offset_s="{r.offset_s!r}" time={quoteattr(r.time)}>\n{rows}</cosimRecording>\n').encode()
+                f'offset_s="{r.offset_s!r}" time={quoteattr(r.time)} time_origin={quoteattr(time_origin(r))}>\n'
+                f'{rows}</cosimRecording>\n').encode()
 
     def slave(self, name: str) -> "RecordingSlave":
         return RecordingSlave(name, self)
@@ -89,21 +93,37 @@ def recording_info(name: str, replay: Replay, base: Path, span: tuple[float, flo
     if not path.exists():
         raise CosimError(f"recording file not found: {path}")
     specs = dict(replay.signals)
-    rec = read_recording(path, specs, time=replay.time, units=dict(replay.units))
+    rec = read_recording(path, specs, time=replay.time, units=dict(replay.units))  # from its first message: its
+    # times keep their nanoseconds, which absolute stamps (1.7e9 s, a double's step 0.24 us) would round
+    absolute = time_origin(replay) == "absolute"
+    offset = float(Fraction(replay.offset_s) - Fraction(rec.origin_ns, 10 ** 9)) if absolute else \
+        replay.offset_s  # exact, then rounded once
     lo = max(rec.times[n][0] for n in specs)
     hi = min(rec.times[n][-1] for n in specs)
-    start, stop = (t + replay.offset_s for t in span)
+    start, stop = (t + offset for t in span)
     if start < lo - SPAN_SLACK_S or stop > hi + SPAN_SLACK_S:
-        raise CosimError(f"recording {path} covers t = {lo:.9g} .. {hi:.9g} s (its time, from its first message), "
-                         f"the run t = {span[0]:.9g} .. {span[1]:.9g} s needs {start:.9g} .. {stop:.9g} s with offset "
-                         f"{replay.offset_s:g} s" + (f" ({rec.end_note})" if rec.end_note else ""))
+        if absolute:  # the ranges in the recording's stamps, s since the epoch: to the microsecond
+            shift = rec.origin_ns * 1e-9
+            covers = f"stamps {lo + shift:.6f} .. {hi + shift:.6f} s (time_origin absolute)"
+            needs = f"{start + shift:.6f} .. {stop + shift:.6f} s"
+        else:
+            covers, needs = f"t = {lo:.9g} .. {hi:.9g} s (its time, from its first message)", \
+                f"{start:.9g} .. {stop:.9g} s"
+        raise CosimError(f"recording {path} covers {covers}, the run t = {span[0]:.9g} .. {span[1]:.9g} s needs "
+                         f"{needs} with offset {replay.offset_s:.9g} s" + (f" ({rec.end_note})" if rec.end_note else ""))
     variables = {}
     for k, (out, spec) in enumerate(replay.signals):
         variables[out] = Variable(name=out, vr=k, kind=REAL, fmi_type="Real", causality="output",
                                   variability="continuous" if replay.interpolation == "linear" else "discrete",
                                   unit=rec.units[out] or None, description=f"recorded {spec} ({path.name})",
                                   start=None, index=k + 1)
-    return RecordingInfo(path, rec, replay, variables)
+    return RecordingInfo(path, rec, replay, variables, offset)
+
+
+def time_origin(replay: Replay) -> str:
+    """'first' or 'absolute': how the replay's offset counts the recording's time (the scenario's ``time_origin``;
+    a structure made in code without it: 'first')."""
+    return getattr(replay, "time_origin", "first")
 
 
 class RecordingSlave:
@@ -119,7 +139,7 @@ class RecordingSlave:
         self.name = name
         self.info = info
         self.time = 0.0
-        self._offset = info.replay.offset_s
+        self._offset = info.offset_s
         self._hold = info.replay.interpolation == "hold"
         self._out: list[str] = []
         self.out_values: Any = (ctypes.c_double * 1)()

@@ -29,7 +29,8 @@ class Recording:
     ``times[name]`` (n,) s, strictly increasing (from the time origin); ``values[name]`` (n,) in
     ``units[name]`` ('' when neither the file nor the caller said); ``source``: the file; ``kind``: 'ros2',
     'ros1', 'csv' or 'log'; ``end_note``: where a cut bag ended ('' when it was read whole); ``origin_s``: the
-    absolute time (s) subtracted from every stamp (0 with ``time_origin='absolute'``)."""
+    absolute time (s) subtracted from every stamp (0 with ``time_origin='absolute'``), ``origin_ns`` the same in
+    whole nanoseconds (exact)."""
 
     source: Path
     kind: str
@@ -38,6 +39,7 @@ class Recording:
     units: dict[str, str] = field(default_factory=dict)
     end_note: str = ""
     origin_s: float = 0.0
+    origin_ns: int = 0
 
     @property
     def names(self) -> list[str]:
@@ -136,7 +138,7 @@ def _finish(path: Path, kind: str, specs: Mapping[str, str], t_ns: dict, vals: d
     origin_ns = min(int(t[0]) for t in t_ns.values()) if time_origin == "first" else 0
     if end_note:
         end_note += f"; read up to t = {(max(int(t[-1]) for t in t_ns.values()) - origin_ns) * 1e-9:.6g} s"
-    rec = Recording(path, kind, end_note=end_note, origin_s=origin_ns * 1e-9)
+    rec = Recording(path, kind, end_note=end_note, origin_s=origin_ns * 1e-9, origin_ns=origin_ns)
     for n, s in specs.items():
         t = (t_ns[n] - origin_ns) * 1e-9
         bad = np.flatnonzero(np.diff(t_ns[n]) <= 0)
