@@ -22,6 +22,8 @@ import tempfile
 import time
 from pathlib import Path
 
+import record
+
 ROOT = Path(__file__).resolve().parents[1]
 
 
@@ -44,7 +46,17 @@ def main() -> int:
     ap.add_argument("--baseline", required=True, help="commit to compare against (any git revision)")
     ap.add_argument("--rounds", type=int, default=5, help="alternated timed rounds per side (default 5)")
     ap.add_argument("--set", action="append", default=[], metavar="NAME=VALUE", help="passed to both runs")
+    record.add_options(ap)
     args = ap.parse_args()
+    with record.Recording(args, "against_commit") as rec:
+        code = _measure(args, rec)
+        if code:
+            rec.discard()
+    return code
+
+
+def _measure(args, rec: record.Recording) -> int:
+    """The benchmark proper (see the module docstring); its figures also go to ``rec``."""
     if args.rounds < 1:
         raise SystemExit("error: --rounds must be at least 1")
     if not (ROOT / args.scenario).is_file():

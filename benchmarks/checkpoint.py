@@ -25,6 +25,8 @@ import tempfile
 import time
 from pathlib import Path
 
+import record
+
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
@@ -50,7 +52,17 @@ def main(argv=None) -> int:
     ap.add_argument("--when", default="plant.p.x < 0.0003",
                     help="the state event's condition (default: the helix's x crossing 0.3 mm, a little before 0.5 s, "
                          "inside a macro step that is not a save's)")
+    record.add_options(ap)
     args = ap.parse_args(argv)
+    with record.Recording(args, "checkpoint") as rec:
+        code = _measure(args, rec)
+        if code:
+            rec.discard()
+    return code
+
+
+def _measure(args, rec: record.Recording) -> int:
+    """The benchmark proper (see the module docstring); its figures also go to ``rec``."""
     # serial everywhere: events and checkpoints run serial, and a worker process would confound the ratios
     serial = {("parallel",): "off"}
     overrides = {**serial, ("time", "stop"): args.stop} if args.stop else serial

@@ -40,6 +40,8 @@ import sys
 import tempfile
 from pathlib import Path
 
+import record
+
 ROOT = Path(__file__).resolve().parents[1]
 SPEEDUP_TARGET = 4.0  # issue 16: helix_ctc_analytic at least 4x faster than helix_ctc
 RMSE_TARGET = 1e-7  # m per axis, CTC on the analytic plant
@@ -165,7 +167,17 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--baseline", default=None, help="git revision to compare with (default: before the core)")
     ap.add_argument("--plant-baseline", action="store_true",
                     help="also time helix_ctc_analytic in the baseline tree (builds its FMUs)")
+    record.add_options(ap)
     args = ap.parse_args(argv)
+    with record.Recording(args, "core") as rec:
+        code = _measure(args, rec)
+        if code:
+            rec.discard()
+    return code
+
+
+def _measure(args, rec: record.Recording) -> int:
+    """The benchmark proper (see the module docstring); its figures also go to ``rec``."""
     rev = args.baseline or default_baseline()
     sha = _git("rev-parse", "--short", rev)
     print(f"baseline {rev} = {sha}; {os.cpu_count()} CPUs, load average {os.getloadavg()[0]:.2f}", flush=True)

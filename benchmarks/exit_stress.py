@@ -24,6 +24,8 @@ import time
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
+import record
+
 ROOT = Path(__file__).resolve().parents[1]
 ABSURD = ["--set", "ctl.gain.kp[1]=1e12", "--set", "ctl.limit.u_max=1e300"]  # Newton fails in the first steps
 CASES = [
@@ -66,7 +68,17 @@ def main() -> int:
     ap.add_argument("--jobs", type=int, default=2, help="runs at the same time (default 2: the machine's cores)")
     ap.add_argument("--log", action="store_true", help="write each run's MCAP log")
     ap.add_argument("--plain-exit", action="store_true", help="exit through sys.exit(main()) (no containment)")
+    record.add_options(ap)
     args = ap.parse_args()
+    with record.Recording(args, "exit_stress") as rec:
+        code = _measure(args, rec)
+        if code:
+            rec.discard()
+    return code
+
+
+def _measure(args, rec: record.Recording) -> int:
+    """The benchmark proper (see the module docstring); its figures also go to ``rec``."""
     t0 = time.perf_counter()
     with tempfile.TemporaryDirectory() as tmp, ThreadPoolExecutor(args.jobs) as pool:
         out_dir = Path(tmp) if args.log else None

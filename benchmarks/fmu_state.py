@@ -33,6 +33,8 @@ from functools import partial
 from pathlib import Path
 from typing import Any, Callable
 
+import record
+
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
@@ -160,7 +162,14 @@ def main() -> None:
     ap.add_argument("--python-fmu", default="linear_ctc", help="python FMU whose get + set is measured too "
                     "(default linear_ctc; '' for none)")
     ap.add_argument("--only", nargs="*", default=None, help="native FMUs to measure (default: every one)")
+    record.add_options(ap)
     args = ap.parse_args()
+    with record.Recording(args, "fmu_state") as rec:
+        _measure(args, rec)
+
+
+def _measure(args, rec: record.Recording) -> None:
+    """The benchmark proper (see the module docstring); its figures also go to ``rec``."""
     from fmus import registry
 
     names = args.only or registry.native_names()

@@ -27,6 +27,8 @@ import tempfile
 import time
 from pathlib import Path
 
+import record
+
 ROOT = Path(__file__).resolve().parents[1]
 SCENARIO = ROOT / "scenarios" / "helix_ctc.yaml"
 STEP_NS = 1_000_000  # the scenario's 1 ms step
@@ -101,7 +103,14 @@ def main() -> None:
     ap.add_argument("--stop-time", type=float, default=10.0, help="simulated seconds (default 10)")
     ap.add_argument("--rounds", type=int, default=3, help="alternated rounds, best kept (default 3)")
     ap.add_argument("--log", action="store_true", help="also time the co-simulation with every signal logged")
+    record.add_options(ap)
     args = ap.parse_args()
+    with record.Recording(args, "helix_ctc") as rec:
+        _measure(args, rec)
+
+
+def _measure(args, rec: record.Recording) -> None:
+    """The benchmark proper (see the module docstring); its figures also go to ``rec``."""
     tmp = Path(tempfile.mkdtemp(prefix="helix_ctc_bench_"))
     cosim(0.01, False, tmp / "warm.mcap")  # build/cache the FMUs outside the measurement
     runs = [("serial", "off", False, "co-simulation, serial"), ("parallel", "on", False, "co-simulation, parallel")]

@@ -20,6 +20,8 @@ import tempfile
 import time
 from pathlib import Path
 
+import record
+
 ROOT = Path(__file__).resolve().parents[1]
 START_AFTER_S = 5.0  # wall s: the FMUs are loaded and stepping by then (load ~1-2 s)
 
@@ -59,7 +61,17 @@ def main() -> int:
     ap.add_argument("--linear", type=float, default=600.0, help="simulated s on the full linear plant")
     ap.add_argument("--rotary", type=float, default=300.0, help="simulated s on the full rotary plant")
     ap.add_argument("--log", action="store_true", help="write the MCAP logs too")
+    record.add_options(ap)
     args = ap.parse_args()
+    with record.Recording(args, "long_run") as rec:
+        code = _measure(args, rec)
+        if code:
+            rec.discard()
+    return code
+
+
+def _measure(args, rec: record.Recording) -> int:
+    """The benchmark proper (see the module docstring); its figures also go to ``rec``."""
     cases = [("helix_ctc_level.yaml", args.linear), ("rotary_helix_ctc_level.yaml", args.rotary)]
     ok = True
     print(f"{'scenario':30s} {'simulated':>10s} {'exit':>5s} {'wall':>8s} {'RT factor':>10s} "

@@ -41,6 +41,8 @@ from ctypes import c_double, c_int, c_size_t, c_uint32, c_void_p
 from functools import partial
 from pathlib import Path
 
+import record
+
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "tests"))  # cfmus, the C test FMUs
@@ -114,7 +116,14 @@ def main() -> None:
     ap.add_argument("--stop-time", type=float, default=10.0, help="simulated s of helix_ctc_analytic (default 10)")
     ap.add_argument("--steps", type=int, default=20000, help="steps of the two-FMU runs (default 20000)")
     ap.add_argument("--rounds", type=int, default=5, help="rounds, the best of each figure kept (default 5)")
+    record.add_options(ap)
     args = ap.parse_args()
+    with record.Recording(args, "master_native") as rec:
+        _measure(args, rec)
+
+
+def _measure(args, rec: record.Recording) -> None:
+    """The benchmark proper (see the module docstring); its figures also go to ``rec``."""
     from cfmus import build
 
     from cosim.engine import cloop

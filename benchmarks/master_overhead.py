@@ -14,7 +14,7 @@ FMUs, against issue 36's target.
    runs (its loop in C, :mod:`cosim.engine.cloop`) and with its loop in Python (``cosim.engine.cloop.make``
    replaced here), the runs alternating, the best of ``--rounds`` each.
 
-    python benchmarks/master_overhead.py [--steps N] [--stop-time S] [--rounds R]
+    python benchmarks/master_overhead.py [--steps N] [--stop-time S] [--rounds R] [--only-helix] [--json FILE | --record]
 """
 
 from __future__ import annotations
@@ -26,6 +26,8 @@ import tempfile
 import time
 from ctypes import c_double, c_size_t, c_uint32, c_void_p
 from pathlib import Path
+
+import record
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
@@ -124,7 +126,7 @@ def _bare_simulate(bare: ctypes.CDLL, spent: list[float]):
     return simulate
 
 
-def helix(args) -> None:
+def helix(args, rec: record.Recording) -> None:
     """Part 2 (see the module docstring)."""
     from cosim.cbuild import Library
     from cosim.engine import cloop
@@ -162,7 +164,11 @@ def helix(args) -> None:
     us = 1e6
     print(f"helix_ctc_analytic, 4 native C FMUs, serial, no log, {args.stop_time:g} s at 1 ms, best of {args.rounds}")
     print(f"  bare FMI calls from a C loop:          {bare * us:8.2f} us/step")
+    rec.put("helix_bare_us", bare * us)
     for mode, per_step in best.items():
+        key = "c" if mode == "loop in C" else "python"
+        rec.put(f"helix_loop_{key}_us", per_step * us)
+        rec.put(f"helix_own_{key}_us", (per_step - bare) * us)
         own = (per_step - bare) * us
         verdict = "met" if own <= TARGET_HELIX_US else "NOT met"
         print(f"  master, {mode:<15}: {per_step * us:8.2f} us/step  -> master's own {own:6.2f} us/step"
@@ -175,13 +181,15 @@ def main() -> None:
     ap.add_argument("--stop-time", type=float, default=10.0, help="simulated s of helix_ctc_analytic (default 10)")
     ap.add_argument("--rounds", type=int, default=5, help="rounds of part 2, the best of each kept (default 5)")
     ap.add_argument("--only-helix", action="store_true", help="part 2 only")
+    record.add_options(ap)
     args = ap.parse_args()
-    if not args.only_helix:
-        trivial(args)
-    helix(args)
+    with record.Recording(args, "master_overhead") as rec:
+        if not args.only_helix:
+            trivial(args, rec)
+        helix(args, rec)
 
 
-def trivial(args) -> None:
+def trivial(args, rec: record.Recording) -> None:
     """Part 1 (see the module docstring)."""
     from fmu_helpers import build_test_fmus
 
@@ -204,6 +212,11 @@ def trivial(args) -> None:
     rows = [("no logging", best[False]), ("all signals logged", best[True])]
     print(f"4 trivial pythonfmu FMUs (source -> gain -> gain -> integrator), {args.steps} steps, best of 5")
     print(f"  bare FMI calls (bound as the master binds them):{bare * 1e6:8.2f} us/step")
+    rec.put("trivial_bare_us", bare * 1e6)
+    rec.put("trivial_master_us", best[False] * 1e6)
+    rec.put("trivial_master_logged_us", best[True] * 1e6)
+    rec.put("trivial_overhead_us", (best[False] - bare) * 1e6)
+    rec.put("trivial_overhead_logged_us", (best[True] - bare) * 1e6)
     for label, per_step in rows:
         below = "  (below the bare loop: the master's loop in C makes these calls from C)" if per_step < bare else ""
         print(f"  master, {label:<20}: {per_step * 1e6:8.2f} us/step  -> overhead {(per_step - bare) * 1e6:7.2f} us/step"

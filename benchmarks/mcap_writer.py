@@ -35,6 +35,8 @@ import tempfile
 import time
 from pathlib import Path
 
+import record
+
 ROOT = Path(__file__).resolve().parents[1]
 CHUNK = 256 * 1024
 
@@ -167,7 +169,14 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("run", nargs="?", help="a helix_ctc run log (default: run helix_ctc now)")
     ap.add_argument("--repeat", type=int, default=7)
+    record.add_options(ap)
     args = ap.parse_args()
+    with record.Recording(args, "mcap_writer") as rec:
+        _measure(args, rec)
+
+
+def _measure(args, rec: record.Recording) -> None:
+    """The benchmark proper (see the module docstring); its figures also go to ``rec``."""
     tmp = Path(tempfile.mkdtemp(prefix="mcap_writer_"))
     run = Path(args.run) if args.run else None
     if run is None:

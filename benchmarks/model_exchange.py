@@ -17,6 +17,7 @@ between their plants' end-effector positions (``plant.p``) over the run, which m
 then the others), so the choice written in the scenario is measured, not assumed.
 
     python benchmarks/model_exchange.py [--stop-time 10] [--rounds 3] [--solvers dopri5,cvode,dop853]
+                                        [--json FILE | --record]
 """
 
 from __future__ import annotations
@@ -25,6 +26,8 @@ import argparse
 import math
 import sys
 from pathlib import Path
+
+import record
 
 ROOT = Path(__file__).resolve().parents[1]
 CS = ROOT / "scenarios" / "helix_ctc_analytic.yaml"
@@ -72,7 +75,14 @@ def main(argv: list[str] | None = None) -> int:
                     help="comma-separated ME solvers to time (default: the scenario's, then the others)")
     ap.add_argument("--fmus", default="native", choices=["native", "python"],
                     help="the build of every FMU (default native)")
+    record.add_options(ap)
     args = ap.parse_args(argv)
+    with record.Recording(args, "model_exchange") as rec:
+        _measure(args, rec)
+    return 0
+
+
+def _measure(args, rec: record.Recording) -> None:
     sys.path.insert(0, str(ROOT))
     from cosim.engine.scenario import load_scenario
     from cosim.fmi import me_c
@@ -96,9 +106,13 @@ def main(argv: list[str] | None = None) -> int:
     for label, solver in zip(labels, [None] + solvers):
         if solver is None:
             print(f"  {label:<44} {best[label]:7.3f} s")
+            rec.put("cs_s", best[label])
             continue
         ratio = best[label] / base
         dist = largest_distance(plant_positions(ME, args.stop_time, solver, args.fmus), reference)
+        rec.put(f"me_{solver}_s", best[label])
+        rec.put(f"ratio_{solver}", ratio)
+        rec.put(f"distance_{solver}_m", dist)
         speed = "meets" if ratio <= TARGET_RATIO else "misses"
         accuracy = "meets" if dist <= PLANT_ATOL else "misses"
         print(f"  {label:<44} {best[label]:7.3f} s  ratio {ratio:.2f} ({speed} {TARGET_RATIO}x)  plant vs CS plant "
@@ -106,7 +120,6 @@ def main(argv: list[str] | None = None) -> int:
         if solver == own:
             worst_ratio = ratio
     print(f"the scenario's solver ({own}): ratio {worst_ratio:.2f}")
-    return 0
 
 
 if __name__ == "__main__":

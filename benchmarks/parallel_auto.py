@@ -22,6 +22,8 @@ import sys
 import time
 from pathlib import Path
 
+import record
+
 ROOT = Path(__file__).resolve().parents[1]
 
 
@@ -49,7 +51,17 @@ def main() -> int:
     ap.add_argument("--repeat", type=int, default=5, help="alternations of auto and off per case (median)")
     ap.add_argument("--native-stop", type=float, default=10.0, help="simulated time with native FMUs, s")
     ap.add_argument("--python-stop", type=float, default=3.0, help="simulated time with python FMUs, s")
+    record.add_options(ap)
     args = ap.parse_args()
+    with record.Recording(args, "parallel_auto") as rec:
+        code = _measure(args, rec)
+        if code:
+            rec.discard()
+    return code
+
+
+def _measure(args, rec: record.Recording) -> int:
+    """The benchmark proper (see the module docstring); its figures also go to ``rec``."""
     sys.path.insert(0, str(ROOT))
     print(f"{Path(args.scenario).name}, no log; {os.cpu_count()} CPUs; {args.repeat} alternations each (median)")
     print(f"{'build':8}{'spinner':>9}{'auto, s':>10}{'off, s':>10}{'auto/off':>10}   auto chose")

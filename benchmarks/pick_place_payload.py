@@ -7,7 +7,8 @@ with ``events: []``), and prints, for the half cycle after each event (carrying 
 after a place), the largest tracking error |p - p_ref| and the largest effort |u|, and over the whole run the
 tracking RMSE per axis. These are results of the model, not timings: one run each is enough.
 
-Run from the repository root: ``python benchmarks/pick_place_payload.py [--fmus auto|python|native]``.
+Run from the repository root: ``python benchmarks/pick_place_payload.py [--fmus auto|python|native] [--json FILE |
+--record]``.
 """
 
 from __future__ import annotations
@@ -18,6 +19,8 @@ import tempfile
 from pathlib import Path
 
 import numpy as np
+
+import record
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
@@ -51,7 +54,14 @@ def _windows(log, events: list[float]) -> list[tuple[float, float, float]]:
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--fmus", choices=("auto", "python", "native"), default="auto")
+    record.add_options(ap)
     args = ap.parse_args(argv)
+    with record.Recording(args, "pick_place_payload") as rec:
+        _measure(args, rec)
+    return 0
+
+
+def _measure(args, rec: record.Recording) -> None:
     tmp = Path(tempfile.mkdtemp(prefix="pick-place-"))
     base = {("fmus",): args.fmus}
     runs = {
@@ -71,7 +81,18 @@ def main(argv=None) -> int:
         kind = "pick " if i % 2 == 0 else "place"
         cells = "".join(f"{table[n][i][1] * 1e6:14.1f} um {table[n][i][2]:10.2f} N" for n in runs)
         print(f"  {kind}  {te:5.2f}  {cells}")
-    return 0
+    for key, name in zip(("empty", "told", "untold"), runs):
+        picks, places = table[name][0::2], table[name][1::2]
+        rec.put(key, {"rmse_um": [e.rmse * 1e6 for e in runs[name][0].errors],
+                      "carrying_error_um": _range(w[1] * 1e6 for w in picks),
+                      "placed_error_um": _range(w[1] * 1e6 for w in places),
+                      "carrying_effort_N": _range(w[2] for w in picks)})
+
+
+def _range(values) -> list[float]:
+    """[smallest, largest]."""
+    values = list(values)
+    return [min(values), max(values)]
 
 
 if __name__ == "__main__":

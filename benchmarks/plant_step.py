@@ -120,6 +120,8 @@ import numpy as np
 from delta.dynamics import analytic_model
 from delta.robots import linear_delta_thesis, rotary_delta_prototype
 
+import record
+
 ROOT = Path(__file__).resolve().parents[1]
 DEFAULT_BASELINE = "288e832"
 P0 = (0.03, -0.02, -0.45)
@@ -171,7 +173,14 @@ def main(argv: list[str] | None = None) -> None:
                          "(default: the per-model default)")
     ap.add_argument("--in-run", type=float, default=None, metavar="S",
                     help="compare the linear full plant's step with helix_ctc's plant component over S simulated s")
+    record.add_options(ap)
     args = ap.parse_args(argv)
+    with record.Recording(args, "plant_step") as rec:
+        _measure(args, rec)
+
+
+def _measure(args, rec: record.Recording) -> None:
+    """The benchmark proper (see the module docstring); its figures also go to ``rec``."""
     if args.in_run is not None:
         in_run(args.in_run, args.steps, args.rounds)
         return
@@ -182,7 +191,7 @@ def main(argv: list[str] | None = None) -> None:
         try:
             baseline = load_baseline(args.baseline, Path(tmp))
         except ValueError as exc:
-            ap.error(str(exc))
+            sys.exit(f"plant_step.py: --baseline {args.baseline}: {exc}")
         versions = {"baseline": baseline, "this": multibody}
         plants = {}
         for name, robot, fidelity in CASES:

@@ -11,6 +11,7 @@ turn (the order rotated each round); medians and the best of each are printed, a
 at most 1.5x).
 
     python benchmarks/startup.py [--repeat 15] [--scenario scenarios/helix_ctc_analytic.yaml] [--stop 0.01]
+                                 [--json FILE | --record]
 
 Every process runs with its bytecode cached, as an installed package's does: ``PYTHONDONTWRITEBYTECODE`` is removed
 from their environment (set, as in this project's sessions, no ``__pycache__`` is written for our own modules and
@@ -30,6 +31,8 @@ import sys
 import tempfile
 import time
 from pathlib import Path
+
+import record
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -55,8 +58,8 @@ def _timed(cmd: list[str]) -> float:
     return elapsed
 
 
-def _import_budget(scenario: str, stop: float, top: int) -> None:
-    """The largest top-level imports of one run (``-X importtime``, cumulative us)."""
+def _import_budget(scenario: str, stop: float, top: int) -> dict[str, float]:
+    """The largest top-level imports of one run (``-X importtime``, cumulative), ms by module."""
     proc = subprocess.run([sys.executable, "-X", "importtime", "-m", "cosim", "run", scenario, "--no-log",
                            "--stop-time", repr(stop)], cwd=ROOT, capture_output=True, text=True, env=ENV)
     rows = []
@@ -65,8 +68,10 @@ def _import_budget(scenario: str, stop: float, top: int) -> None:
         if len(parts) == 3 and parts[1].strip().isdigit() and not parts[2].startswith("  "):
             rows.append((int(parts[1]), parts[2].strip()))
     print(f"import budget (top-level modules, cumulative; {sum(r[0] for r in rows) / 1e3:.0f} ms in all):")
-    for us, name in sorted(rows, reverse=True)[:top]:
+    largest = sorted(rows, reverse=True)[:top]
+    for us, name in largest:
         print(f"  {us / 1e3:7.1f} ms  {name}")
+    return {name: round(us / 1e3, 1) for us, name in largest}
 
 
 def main() -> int:
@@ -78,7 +83,14 @@ def main() -> int:
     ap.add_argument("--repeat", type=int, default=15, help="rounds (default 15)")
     ap.add_argument("--importtime", type=int, default=12, metavar="N",
                     help="print the N largest top-level imports of one run (0: none; default 12)")
+    record.add_options(ap)
     args = ap.parse_args()
+    with record.Recording(args, "startup") as rec:
+        _measure(args, rec)
+    return 0
+
+
+def _measure(args, rec: record.Recording) -> None:
     py = sys.executable
     with tempfile.TemporaryDirectory(prefix="cosim-startup-") as tmp:
         ssp = str(Path(tmp) / "system.ssp")
@@ -105,14 +117,18 @@ def main() -> int:
               "--help": "python -m cosim --help", "python": "python -c pass (the interpreter)"}
     for name, label in labels.items():
         print(f"{label:44}{statistics.median(times[name]):10.3f}{min(times[name]):10.3f}")
+        rec.put(f"{name.lstrip('-')}_median_s", statistics.median(times[name]))
+        rec.put(f"{name.lstrip('-')}_best_s", min(times[name]))
     med = statistics.median(times["ours"]) / statistics.median(times["libcosim"])
     best = min(times["ours"]) / min(times["libcosim"])
     per_round = statistics.median(a / b for a, b in zip(times["ours"], times["libcosim"]))
     print(f"ours / libcosim: {med:.2f}x of the medians, {best:.2f}x of the best, {per_round:.2f}x median of the "
           f"rounds' ratios (target at most 1.5x)")
+    rec.put("ratio_of_medians", med)
+    rec.put("ratio_of_best", best)
+    rec.put("ratio_median_of_rounds", per_round)
     if args.importtime:
-        _import_budget(args.scenario, args.stop, args.importtime)
-    return 0
+        rec.put("imports_ms", _import_budget(args.scenario, args.stop, args.importtime))
 
 
 if __name__ == "__main__":

@@ -36,6 +36,8 @@ import tempfile
 import time
 from pathlib import Path
 
+import record
+
 ROOT = Path(__file__).resolve().parents[1]
 
 
@@ -51,7 +53,17 @@ def main() -> int:
     ap.add_argument("--repeat", type=int, default=1, help="alternate serial and sweep N times (median)")
     ap.add_argument("--warm", action="store_true",
                     help="also time the sweep on an already running, warmed-up cluster of the same workers")
+    record.add_options(ap)
     args = ap.parse_args()
+    with record.Recording(args, "sweep") as rec:
+        code = _measure(args, rec)
+        if code:
+            rec.discard()
+    return code
+
+
+def _measure(args, rec: record.Recording) -> int:
+    """The benchmark proper (see the module docstring); its figures also go to ``rec``."""
     sys.path.insert(0, str(ROOT))
     from cosim.engine.overrides import dotted_overrides
     from cosim.engine.scenario import load_scenario, read_scenario

@@ -30,6 +30,8 @@ import tempfile
 import time
 from pathlib import Path
 
+import record
+
 ROOT = Path(__file__).resolve().parents[1]
 
 
@@ -44,7 +46,17 @@ def main() -> int:
     ap.add_argument("--cases", type=int, default=8, help="payloads 0, 0.05, ... kg (default 8 cases)")
     ap.add_argument("--workers", type=int, default=2, help="worker processes of both sweeps (default 2)")
     ap.add_argument("--repeat", type=int, default=1, help="alternate cold and warm N times (median)")
+    record.add_options(ap)
     args = ap.parse_args()
+    with record.Recording(args, "warm_sweep") as rec:
+        code = _measure(args, rec)
+        if code:
+            rec.discard()
+    return code
+
+
+def _measure(args, rec: record.Recording) -> int:
+    """The benchmark proper (see the module docstring); its figures also go to ``rec``."""
     sys.path.insert(0, str(ROOT))
     from cosim.analysis.sweep import Case, WarmStart, prebuild, read_results, run_loaded_case, run_sweep
     from cosim.engine.scenario import load_scenario

@@ -1,0 +1,341 @@
+"""The rendering spec of docs/figures.md's generated tables (rendered by ``python benchmarks/figures.py``).
+
+Each table names its columns; each row its key, the benchmark run whose JSON holds its figures
+(``benchmarks/results/RESULT.json``; a table with ``result`` set takes all its rows from that one run and says its
+command and date below it, otherwise each row gets "how" and "when" columns), the cells that are not measured (what
+is measured, the target: targets live here, never in a benchmark's output) and, for a measured JSON, a
+``str.format`` template per measured column over its ``figures``. A transcribed JSON gives the measured cells'
+text itself, dated.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+
+@dataclass(frozen=True)
+class Row:
+    key: str
+    result: str | None
+    cells: dict[str, str]
+    templates: dict[str, str] = field(default_factory=dict)
+    how_note: str = ""
+    # (figure, limit): a measured row's first template cell starts "met: " when the figure is at most the limit,
+    # else "**not met**: " (the target column says the same limit in words)
+    met_if: tuple[str, float] | None = None
+
+
+@dataclass(frozen=True)
+class Table:
+    name: str
+    columns: tuple[str, ...]
+    rows: tuple[Row, ...]
+    result: str | None = None
+
+
+TABLES = (
+    Table("calibration", ("what", "target", "measured",), result=None, rows=(
+        Row("payload", "calibration",
+            {"what": "payload recovered",
+             "target": "within 2 %"}),
+        Row("offset", "calibration",
+            {"what": "offset recovered",
+             "target": "within 1 ms"}),
+        Row("runs", "calibration",
+            {"what": "runs of the scenario the fit took",
+             "target": "- (reported)"}),
+        Row("residual", "calibration",
+            {"what": "joints' RMS residual, start -> fitted",
+             "target": "the noise"}),
+        Row("linked", "calibration",
+            {"what": "the payload linked on plant and controller (`--fit plant.mass.payload,ctl.mass.payload`)",
+             "target": "not identifiable from the joints"}),
+        Row("pool", "calibration",
+            {"what": "two runs of a two-value Jacobian on the sweep's pool of 2 against in the process",
+             "target": "-"}),
+    )),
+    Table("speed", ("what", "target", "measured",), result=None, rows=(
+        Row("native-vs-python", "native",
+            {"what": "10 s of helix_ctc_analytic on native FMUs against helix_ctc on python FMUs (full Exudyn plant), "
+                     "no log, each scenario's own parallel setting, loop wall time",
+             "target": "10x faster"}),
+        Row("native-fmus-per-step", "native",
+            {"what": "each native FMU in helix_ctc_analytic, serial, `component_time_s` per 1 ms step: traj / ik / "
+                     "ctl / plant",
+             "target": "2 us each"}),
+        Row("master-two-c-fmus", "master_native",
+            {"what": "the master's own cost per step on two C FMUs (VanDerPol -> Feedthrough), over a bare Python "
+                     "loop of the same FMI calls",
+             "target": "2 us"}),
+        Row("master-own-helix", "master_overhead",
+            {"what": "the master's own cost per step on helix_ctc_analytic's four native FMUs (everything outside "
+                     "their FMU calls: loop, link copies, status and NaN checks, component timings, the watchdog's "
+                     "record, the tracking error), serial, no log: the loop's wall time per step over a bare C loop "
+                     "of the same FMI calls on the same FMUs",
+             "target": "1 us"},
+            templates={"measured": "{helix_own_c_us:.2f} us with the loop in C ({helix_loop_c_us:.2f} against "
+                                   "{helix_bare_us:.2f} us a step, best of the rounds); the same loop in Python: "
+                                   "{helix_own_python_us:.1f} us (per component a closure, five clock readings, the "
+                                   "tracking observer in Python). On 2026-11-28 at load 0.3-4.5: 0.56-0.71 us, met "
+                                   "(best of 5 to 15 rounds; once 1.49 us, best of 7 at load 2.7: take 15 rounds on a "
+                                   "busy machine)"},
+            met_if=("helix_own_c_us", 1.0)),
+        Row("jacobi-vs-gauss-seidel", "master_native-15",
+            {"what": "the Jacobi loop against the Gauss-Seidel loop, helix_ctc_analytic native, serial, no log, wall "
+                     "time per step, alternated",
+             "target": "1.15x"}),
+        Row("plant-in-run", "plant_step-in_run",
+            {"what": "helix_ctc's plant component per step (serial, no log) against the linear full plant's step of "
+                     "`benchmarks/plant_step.py`, alternated in one process",
+             "target": "1.15x"}),
+        Row("me-derivative", "native",
+            {"what": "one derivative evaluation of the native ME plant through the master (set time, set states, get "
+                     "derivatives, finite check)",
+             "target": "2 us"}),
+        Row("helix-ctc-me-native", "native",
+            {"what": "helix_ctc_me on native FMUs against helix_ctc_analytic on native FMUs, both serial",
+             "target": "- (reported)"}),
+        Row("helix-ctc-native-vs-monolithic", "native",
+            {"what": "helix_ctc with native trajectory, IK and CTC and the Exudyn plant, serial, against the "
+                     "monolithic loop of `benchmarks/helix_ctc.py`",
+             "target": "1.10x"}),
+        Row("logged-vs-unlogged", "logged_run",
+            {"what": "helix_ctc_analytic on native FMUs, every signal logged to MCAP against unlogged",
+             "target": "2x"}),
+        Row("numbers-routing", "core-numbers",
+            {"what": "the python float path of the core (IK step, CTC law, forward dynamics, plant step) with "
+                     "branches routed through the number namespace (`where`, `check`) so that the formulas trace to "
+                     "C, against the same formulas without that routing (the commit before the one `git log -S "
+                     "_where_scalar delta/numbers.py` shows)",
+             "target": "not slower"}),
+        Row("plant-step-linear", "plant_step",
+            {"what": "Exudyn plant, 1 ms step, linear full / lumped",
+             "target": "300 / 30 us"}),
+        Row("plant-step-rotary", "plant_step",
+            {"what": "Exudyn plant, 1 ms step, rotary full / lumped",
+             "target": "600 / - us"}),
+        Row("plant-step-before", "plant_step",
+            {"what": "full plants' 1 ms step against the plants before the rods became end-point masses and Newton's "
+                     "tolerance was tightened (in the same process, interleaved), linear / rotary",
+             "target": "0.5x each"}),
+        Row("master-overhead-trivial", "master_overhead",
+            {"what": "master overhead per step, 4 trivial FMUs, no logging",
+             "target": "15 us"},
+            templates={"measured": "{trivial_overhead_us:.1f} us ({trivial_master_us:.1f} against "
+                                   "{trivial_bare_us:.1f} us per step): the master's loop in C makes from C the calls "
+                                   "the bare loop makes from Python, so it runs below the bare calls (2026-11-28 at "
+                                   "load 2.3: -8.1 us, 13.6 against 21.7 us; before the loop in C: 2.76 us over, 12.3 "
+                                   "against 9.5 us)"},
+            met_if=("trivial_overhead_us", 15.0)),
+        Row("master-overhead-trivial-logged", "master_overhead",
+            {"what": "the same, every signal logged to MCAP",
+             "target": "30 us"},
+            templates={"measured": "{trivial_overhead_logged_us:.1f} us ({trivial_master_logged_us:.1f} us per step; "
+                                   "one C call per step, the log's observers in Python after it; 2026-11-28: -3.7 us, "
+                                   "18.0 us per step; before the loop in C: 10.2 us, 19.8 us per step)"},
+            met_if=("trivial_overhead_logged_us", 30.0)),
+        Row("mcap-writer", "mcap_writer",
+            {"what": "MCAP writer, helix_ctc's 40 604 messages replayed: foxglove-sdk (zstd 1, the recorder's) / "
+                     "foxglove-sdk (zstd 3) / a hand-packed mcap 1.x writer (zstd 3, kept in the benchmark to measure "
+                     "against) / mcap's public `add_message`",
+             "target": "at least as fast as the hand-packed writer"}),
+        Row("helix-ctc-parallel", "helix_ctc",
+            {"what": "10 s of helix_ctc, no logging, parallel (the default)",
+             "target": "5 s wall"}),
+        Row("helix-ctc-logged", "helix_ctc-log",
+            {"what": "10 s of helix_ctc, every signal logged (what `cosim run` does), parallel",
+             "target": "-"}),
+        Row("helix-ctc-vs-monolithic", "helix_ctc",
+            {"what": "helix_ctc against a monolithic in-process loop (same plant, kinematics and CTC law, no FMI), "
+                     "parallel",
+             "target": "ratio 1.3"}),
+        Row("helix-ctc-vs-monolithic-serial", "helix_ctc",
+            {"what": "the same, serial (`parallel: off`)",
+             "target": "ratio 1.3"}),
+        Row("long-run", "long_run",
+            {"what": "level helix under CTC, full plants, no logging: linear 600 s / rotary 300 s simulated "
+                     "(`helix_ctc_level`, `rotary_helix_ctc_level`)",
+             "target": "complete"}),
+        Row("exit-stress", "exit_stress",
+            {"what": "consecutive short runs, solver failures and end stops included",
+             "target": "no abnormal exit"}),
+        Row("model-exchange", "model_exchange",
+            {"what": "10 s of helix_ctc_me (analytic plant as FMI 3 model exchange, integrated by the master with "
+                     "`dopri5` in C) against helix_ctc_analytic (the same dynamics as a CS FMU integrating itself "
+                     "with RK4), native FMUs, serial, no log; the ME plant within 1e-6 m of the CS plant",
+             "target": "ratio 1.5"},
+            templates={"measured": "{ratio_dopri5:.2f} ({me_dopri5_s:.3f} s against {cs_s:.3f} s, best of the "
+                                   "rounds); the ME plant within {distance_dopri5_m:.2g} m of the CS plant. The CS "
+                                   "plant takes one RK4 step of 4 evaluations per 1 ms inside the FMU, the ME plant a "
+                                   "DOPRI5 step of 6 evaluations plus one after the input changed, each through the "
+                                   "FMI exchange, so about 1.5x is the floor. `cvode` in C {ratio_cvode:.1f} "
+                                   "({me_cvode_s:.2f} s: BDF restarts at order one every step; {distance_cvode_m:.2g} "
+                                   "m). On 2026-11-28 (the other core busy, load 4-6): 1.22, 1.64 and 1.85 in three "
+                                   "runs of 10 rounds, per step the best of 12 runs each 4.41 us against 2.88 us "
+                                   "(1.53); `cvode` 6.9-9.9; `dop853` (SciPy, Python) 106. Before the integration in "
+                                   "C: 5.19 with `dop853` (3.38 s against 0.651 s)"},
+            met_if=("ratio_dopri5", 1.5)),
+        Row("core-ik-step", "core",
+            {"what": "the kinematics and dynamics core per call against the plain-float code it replaced (parent of "
+                     "the commit that removed `delta/scalar_kinematics.py`), linear / rotary: IK step (IK, joint "
+                     "limits, qd, qdd)",
+             "target": "not slower"}),
+        Row("core-ctc-fd", "core",
+            {"what": "the same: CTC law / forward dynamics (joint coordinates)",
+             "target": "not slower"}),
+        Row("core-cs-plant", "core",
+            {"what": "the same: the analytic CS plant's 1 ms step (RK4 in platform coordinates, against SciPy's "
+                     "DOP853 at rtol 1e-10 over the joint dynamics)",
+             "target": "not slower"}),
+        Row("analytic-vs-exudyn-python", "core",
+            {"what": "10 s of helix_ctc_analytic (analytic CS plant) against helix_ctc (full Exudyn plant), python "
+                     "FMUs, no logging, each scenario's own parallel setting",
+             "target": "4x faster"}),
+        Row("ceiling", "core",
+            {"what": "the ceiling: the rest of that run plus a plant of FMI exchange only (its component time when "
+                     "its `advance` and `refresh` are no-ops)",
+             "target": "-"}),
+        Row("recording-read", "recording_read",
+            {"what": "reading the JointState topic (3 joints, 1 kHz, 60 s: 60 000 messages) of a 1.01 GB ROS 2 MCAP "
+                     "bag that also holds 6 000 messages of 168 kB on another topic, header stamps, each read in a "
+                     "fresh process, against a 12 MB bag of the JointState messages alone, alternated",
+             "target": "memory flat"}),
+    )),
+    Table("state-and-events", ("what", "figure",), result=None, rows=(
+        Row("fmu-state-native", "fmu_state",
+            {"what": "get + set FMU state, native FMUs"}),
+        Row("fmu-state-python", "fmu_state",
+            {"what": "get + set FMU state, python FMUs"}),
+        Row("checkpoint-exudyn", "checkpoint",
+            {"what": "checkpoint of helix_ctc at T = 5 s (Exudyn plant)"}),
+        Row("checkpoint-native", "checkpoint",
+            {"what": "checkpoint of helix_ctc_analytic at T = 5 s (native)"}),
+        Row("state-event", "checkpoint",
+            {"what": "locating a state event (`plant.p.x < 0.0003`, the helix a little before 0.5 s, 9 steps after "
+                     "the last save)"}),
+        Row("warm-sweep", "warm_sweep",
+            {"what": "warm sweep, 8 cases of helix_ctc_analytic from a checkpoint at 5 s against the same cold"}),
+    )),
+    Table("sweeps",
+          ("sweep, native FMUs",
+          "target",
+          "serial loop",
+          "serial, prepared",
+          "sweep (2 workers)",
+          "speed-up over the loop / over the prepared loop",),
+          result=None, rows=(
+        Row("cases-32-short", "sweep",
+            {"sweep, native FMUs": "32 cases of 0.1 s",
+             "target": "1.5x"}),
+        Row("cases-100-short", "sweep",
+            {"sweep, native FMUs": "100 cases of 0.1 s",
+             "target": "1.7x"}),
+        Row("cases-100-long", "sweep",
+            {"sweep, native FMUs": "100 cases of 10 s",
+             "target": "1.7x"}),
+    )),
+    Table("startup", ("whole process", "median", "best",), result="startup", rows=(
+        Row("ours", None,
+            {"whole process": "`python -m cosim run ... --stop-time 0.01`"},
+            templates={"median": "{ours_median_s:.3f} s",
+                       "best": "{ours_best_s:.3f} s"}),
+        Row("libcosim", None,
+            {"whole process": "libcosimpy `from_ssp_file` + `simulate_until`"},
+            templates={"median": "{libcosim_median_s:.3f} s",
+                       "best": "{libcosim_best_s:.3f} s"}),
+        Row("help", None,
+            {"whole process": "`python -m cosim --help`"},
+            templates={"median": "{help_median_s:.3f} s",
+                       "best": "{help_best_s:.3f} s"}),
+        Row("python", None,
+            {"whole process": "`python -c pass`"},
+            templates={"median": "{python_median_s:.3f} s",
+                       "best": "{python_best_s:.3f} s"}),
+        Row("ratio", None,
+            {"whole process": "ours / libcosim (target at most 1.5x)"},
+            templates={"median": "{ratio_of_medians:.1f}x",
+                       "best": "{ratio_of_best:.1f}x"}),
+    )),
+    Table("startup-imports", ("top-level import", "ms", "what it is",), result="startup", rows=(
+        Row("cosim.engine.overrides", None,
+            {"top-level import": "`cosim.engine.overrides`",
+             "what it is": "the scenario schema: pydantic and its models, numpy (through the time grid), yaml, the "
+                           "plugins' discovery (`importlib.metadata` entry points)"},
+            templates={"ms": "{imports_ms[cosim.engine.overrides]:.0f}"}),
+        Row("cosim.robot.preflight", None,
+            {"top-level import": "`cosim.robot.preflight`",
+             "what it is": "the delta plugin, loaded when the schema checks the trajectory's type: `fmus.registry` "
+                           "(every FMU's adapter and native model, CasADi among them), the workspace check"},
+            templates={"ms": "{imports_ms[cosim.robot.preflight]:.0f}"}),
+        Row("fmpy", None,
+            {"top-level import": "`fmpy`",
+             "what it is": "reading the model descriptions (lxml, attrs)"},
+            templates={"ms": "{imports_ms[fmpy]:.0f}"}),
+        Row("cosim.run", None,
+            {"top-level import": "`cosim.run`",
+             "what it is": "the engine, the FMU access layer, the observers"},
+            templates={"ms": "{imports_ms[cosim.run]:.0f}"}),
+        Row("cosim.cli", None,
+            {"top-level import": "`cosim.cli`",
+             "what it is": "argparse and every command's parser"},
+            templates={"ms": "{imports_ms[cosim.cli]:.0f}"}),
+        Row("delta.trajectories", None,
+            {"top-level import": "`delta.trajectories`",
+             "what it is": "the trajectory and its workspace check"},
+            templates={"ms": "{imports_ms[delta.trajectories]:.0f}"}),
+        Row("cosim.engine.supervision", None,
+            {"top-level import": "`cosim.engine.supervision`",
+             "what it is": "the supervisor (multiprocessing, subprocess)"},
+            templates={"ms": "{imports_ms[cosim.engine.supervision]:.0f}"}),
+    )),
+    Table("parallel-auto",
+          ("build",
+          "spinner",
+          "auto",
+          "off",
+          "auto / off",
+          "auto chose",),
+          result="parallel_auto", rows=(
+        Row("native", None,
+            {"build": "native",
+             "spinner": "no"}),
+        Row("python", None,
+            {"build": "python",
+             "spinner": "no"}),
+        Row("native-spinner", None,
+            {"build": "native",
+             "spinner": "yes"}),
+        Row("python-spinner", None,
+            {"build": "python",
+             "spinner": "yes"}),
+    )),
+    Table("pick-place-payload",
+          ("run",
+          "RMSE x / y / z (um)",
+          "max \\|p - p_ref\\| carrying (after each pick)",
+          "after each place",
+          "max \\|u\\| carrying",),
+          result="pick_place_payload", rows=(
+        Row("empty", None,
+            {"run": "empty gripper"},
+            templates={"RMSE x / y / z (um)": "{empty[rmse_um][0]:.1f} / {empty[rmse_um][1]:.1f} / "
+                                              "{empty[rmse_um][2]:.1f}",
+                       "max \\|p - p_ref\\| carrying (after each pick)": "{empty[carrying_error_um]:.0f} um",
+                       "after each place": "{empty[placed_error_um]:.0f} um",
+                       "max \\|u\\| carrying": "{empty[carrying_effort_N]:.1f} N"}),
+        Row("told", None,
+            {"run": "part, controller told"},
+            templates={"RMSE x / y / z (um)": "{told[rmse_um][0]:.1f} / {told[rmse_um][1]:.1f} / "
+                                              "{told[rmse_um][2]:.1f}",
+                       "max \\|p - p_ref\\| carrying (after each pick)": "{told[carrying_error_um]:.0f} um",
+                       "after each place": "{told[placed_error_um]:.0f} um",
+                       "max \\|u\\| carrying": "{told[carrying_effort_N]:.1f} N"}),
+        Row("untold", None,
+            {"run": "part, controller not told"},
+            templates={"RMSE x / y / z (um)": "{untold[rmse_um][0]:.1f} / {untold[rmse_um][1]:.1f} / "
+                                              "{untold[rmse_um][2]:.1f}",
+                       "max \\|p - p_ref\\| carrying (after each pick)": "{untold[carrying_error_um]:.0f} um",
+                       "after each place": "{untold[placed_error_um]:.0f} um",
+                       "max \\|u\\| carrying": "{untold[carrying_effort_N]:.1f} N"}),
+    )),
+)
