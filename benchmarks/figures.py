@@ -19,14 +19,19 @@ A row is stale when its figures are older than ``--stale-days`` or were recorded
 (``cosim``, ``delta``, ``fmus``, ``multibody``, ``benchmarks``) other than the checked-out one, or when the
 revision is unknown (transcribed); the script lists them and leaves them in the page, dated.
 
-Plugging in a benchmark that records its own JSON (e.g. ``benchmarks/logged_run.py``, row ``logged-vs-unlogged``
-of the ``speed`` table, transcribed for now in ``benchmarks/results/logged_run.json``):
+Plugging in a benchmark that records its own JSON: ``benchmarks/logged_run.py`` (row ``logged-vs-unlogged`` of
+the ``speed`` table, transcribed for now in ``benchmarks/results/logged_run.json``) writes a flat JSON of its own
+(its figures by name beside ``command``, ``date`` and ``load``), which is read as measured, its numbers as figures;
+the row's template in ``benchmarks/figures_spec.py`` already names them. So:
 
-1. run it with ``--json benchmarks/results/logged_run.json`` (its ``figures`` replace the transcription);
-2. give the row a template in ``benchmarks/figures_spec.py``: ``templates={"measured": "... {loop_logged_s:.3f}
-   s against {loop_unlogged_s:.3f} s: {ratio:.1f}x"}`` naming the keys of its ``figures`` (a measured JSON
-   without a template for a row, or a template naming a key the JSON lacks, is an error naming both);
-3. ``python benchmarks/figures.py`` and commit the page with the JSON.
+1. ``python benchmarks/logged_run.py --rounds 5 --json benchmarks/results/logged_run.json`` (it replaces the
+   transcription);
+2. ``python benchmarks/figures.py``, and commit the page with the JSON.
+
+If the benchmark renames a figure, the rendering stops with a one-line error naming the JSON, the row and the
+missing key: rename it in the row's template. Another benchmark is plugged in the same way: a row names the
+JSON's stem as its result, with a ``templates`` entry per measured column (``str.format`` over the figures; a list
+of numbers prints as a range) and, for a target, ``met_if=(figure, limit)``.
 
 Any benchmark's JSON with ``format``, ``source``, ``command``, ``date`` (UTC, ``YYYY-MM-DD...``), ``machine``
 (``cores``, ``load_start``, ``load_end``: the three load averages) and ``figures`` fits; ``revision.commit`` makes
@@ -106,6 +111,8 @@ class Result:
         if self.transcribed:
             return f"{self.date(row_key)}, transcribed"
         m = self.doc["machine"]
+        if "load_start" not in m:
+            return f"{self.date()}, {m.get('load')}"
         loads = [m["load_start"][0], m["load_end"][0]]
         return f"{self.date()}, load {min(loads):.1f}-{max(loads):.1f} on {m['cores']} cores"
 
@@ -118,6 +125,8 @@ def load_results(folder: Path) -> dict[str, Result]:
             doc = json.loads(path.read_text(encoding="utf-8"))
         except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
             raise FiguresError(f"{path}: not readable JSON: {exc}") from None
+        if isinstance(doc, dict) and "source" not in doc:
+            doc = _flat(doc)
         need = ["source", "command", "date"] + (["machine", "figures"] if doc.get("source") == "measured" else
                                                 ["rows"])
         missing = [k for k in need if k not in doc] if isinstance(doc, dict) else need
@@ -127,6 +136,14 @@ def load_results(folder: Path) -> dict[str, Result]:
             raise FiguresError(f"{path}: date {doc['date']!r} is no YYYY-MM-DD date")
         results[path.stem] = Result(path.stem, path, doc)
     return results
+
+
+def _flat(doc: dict) -> dict:
+    """A benchmark's own flat JSON (figures, ``command``, ``date`` and ``load`` side by side, as
+    ``benchmarks/logged_run.py --json`` writes) read as a measured one: its numbers are its figures."""
+    figures = {k: v for k, v in doc.items() if isinstance(v, (int, float)) and not isinstance(v, bool)}
+    return {"format": 1, "source": "measured", "command": doc.get("command"), "date": doc.get("date"),
+            "machine": {"load": doc.get("load", "load not recorded")}, "revision": None, "figures": figures}
 
 
 def _cell(table: Table, row, column: str, res: Result) -> str:

@@ -118,3 +118,20 @@ def test_a_failed_benchmark_writes_nothing(tmp_path):
         rec.put("loop_s", 0.25)
         raise RuntimeError("the benchmark failed")
     assert not out.exists() and list(tmp_path.iterdir()) == [], list(tmp_path.iterdir())
+
+
+def test_logged_run_json_plugs_into_its_row(copy):
+    """benchmarks/logged_run.py --json writes a flat JSON of its own: it renders into the row it will replace."""
+    figures = {"loop logged s (median)": 0.25, "loop unlogged s (median)": 0.025, "ratio min": 9.5, "ratio max": 10.5,
+               "ratio median": 10.0, "whole call logged s (median)": 0.5, "whole call unlogged s (median)": 0.3,
+               "master logging work us/step (median)": 4.0, "blocked on writer pipe us/step (median)": 12.0,
+               "writer process us/step": 14.5, "command": "python benchmarks/logged_run.py --json x.json",
+               "date": "2026-11-30T01:00:00+00:00", "load": "before (1.0, 1.0, 1.0); after (1.2, 1.0, 1.0)"}
+    (copy / "results" / "logged_run.json").write_text(json.dumps(figures), encoding="utf-8")
+    page = copy / "figures.md"
+    proc = _figures("--page", str(page), "--results", str(copy / "results"))
+    assert proc.returncode == 0, proc.stderr
+    row = next(line for line in page.read_text(encoding="utf-8").splitlines()
+               if line.startswith("| helix_ctc_analytic on native FMUs, every signal logged"))
+    assert "**not met**: 10.0x (rounds 9.5-10.5x): the loop 0.250 s logged against 0.025 s" in row, row
+    assert "`python benchmarks/logged_run.py --json x.json` | 2026-11-30, before (1.0, 1.0, 1.0)" in row, row
