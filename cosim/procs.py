@@ -39,6 +39,7 @@ This module imports the standard library and :mod:`cosim.errors` only: the log's
 from __future__ import annotations
 
 import ctypes
+import errno
 import json
 import multiprocessing
 import os
@@ -54,7 +55,7 @@ from typing import Any, Callable, Iterable
 
 from .errors import exit_now
 
-__all__ = ["Child", "EX_SOFTWARE", "Rules", "die_with_parent", "entered", "start", "thread"]
+__all__ = ["Child", "EX_SOFTWARE", "Rules", "close_fd", "die_with_parent", "entered", "open_fd", "start", "thread"]
 
 EX_SOFTWARE = 70
 """Exit status of a child whose function raised (sysexits' ``EX_SOFTWARE``)."""
@@ -280,3 +281,27 @@ def thread(target: Callable[..., Any], *args: Any, name: str) -> threading.Threa
     t = threading.Thread(target=target, args=args, name=name, daemon=True)
     t.start()
     return t
+
+
+def open_fd(fd: int) -> bool:
+    """Whether descriptor ``fd`` is open: False once something closed it behind its owner's back (a component that
+    closes every descriptor it did not open, as a careless daemonising library does)."""
+    try:
+        os.fstat(fd)
+    except OSError as exc:
+        if exc.errno == errno.EBADF:
+            return False
+        raise
+    return True
+
+
+def close_fd(fd: int) -> bool:
+    """Close descriptor ``fd`` at the end of its use: True, or False when it was already closed behind our back
+    (EBADF; the owner says so where it matters, see :func:`open_fd`)."""
+    try:
+        os.close(fd)
+    except OSError as exc:
+        if exc.errno == errno.EBADF:
+            return False
+        raise
+    return True

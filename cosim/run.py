@@ -204,10 +204,19 @@ def run_scenario(scenario: Scenario | str | Path, options: RunOptions | None = N
             output = claim(_log_path(scenario, options.out), input_files(scenario)) if logging_on else None
             result = _run_claimed(scenario, output, held, options)
         except BaseException as exc:
+            _name_lost_descriptors(output)
             _conclude(output, exc, held)
             raise
         _conclude(output, None, held)
     return result
+
+
+def _name_lost_descriptors(output) -> None:
+    """A log that could not be finished because a component closed the run's own descriptors (its lock's, the log
+    writer's pipe) is said to be so, rather than as the write that failed (``Bad file descriptor``)."""
+    if output is not None and output.state not in ("none", "finished") and not output.intact():
+        output.state = (f"{output.target}: a component closed the run's own file descriptors (the log's lock and the "
+                        "log writer's pipe among them): an FMU must close only the descriptors it opened")
 
 
 def _log_path(scenario: Scenario, out: str | Path | None) -> Path:
@@ -399,7 +408,8 @@ def _run_claimed(scenario: Scenario, output, held: Extractions, options: RunOpti
     loop.run(ahead, supervised, checkpoint_hook, resume_event)
     result = RunResult(scenario.name, ex.k_done - loop.k_start, (loop.t_end_ns - ex.t_ns(loop.k_start)) * 1e-9,
                        loop.wall, dict(zip(plan.names, ex.comp_time)),
-                       mcap=str(output.target) if output is not None else None, notes=[note] if note else [],
+                       mcap=str(output.target) if output is not None else None,
+                       notes=([note] if note else []) + loop.notes,
                        worker_time=loop.offload.worker_time if loop.offload else {})
     _summarise(result, ex, options, checkpoint_path, pacing)
     if tracking is not None:
@@ -439,6 +449,7 @@ class _Loop:
         self.ex, self.scenario, self.options, self.output, self.held, self.recorder = \
             ex, scenario, options, output, held, recorder
         self.offload: Offload | None = None
+        self.notes: list[str] = []  # what the run's summary says of the loop
         self.wall = 0.0
         self.k_start = options.resume.k_done if options.resume is not None else 0
 
@@ -505,6 +516,10 @@ class _Loop:
             error = _finish_observers(ex, error, self.recorder, self.output)
         if error is not None:  # a failure at the end (fmi2Terminate, the worker's report) fails the run too
             raise error
+        if watchdog.lost:  # the results stand; the run was not guarded from then on
+            self.notes.append("a component closed the master's own file descriptors during the run (the watchdog's "
+                              "pipe): stop signals and the stall check were not watched from then on; an FMU must "
+                              "close only the descriptors it opened")
         self.t_end_ns = ex.t_end_ns if ex.t_end_ns is not None else ex.t_ns(ex.k_done)
 
 

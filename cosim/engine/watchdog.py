@@ -71,6 +71,7 @@ class Watchdog:
         self._main = threading.main_thread().ident
         self._rfd = self._wfd = -1
         self._previous_fd = -1
+        self.lost = False  # its pipe was closed behind its back (by a component): the run says so at its end
 
     # -- main thread
     def __enter__(self) -> "Watchdog":
@@ -96,8 +97,8 @@ class Watchdog:
                     pass
                 self._thread.join(1.0)
             signal.set_wakeup_fd(self._previous_fd)
-            for fd in (self._rfd, self._wfd):
-                os.close(fd)
+            closed = [fd for fd in (self._rfd, self._wfd) if not procs.close_fd(fd)]
+            self.lost = self.lost or bool(closed)
             self._thread = None
 
     def translate(self, exc: BaseException) -> BaseException:
@@ -114,7 +115,11 @@ class Watchdog:
         signum: int | None = None
         signalled_at = 0.0
         while not self._done.is_set():
-            ready, _, _ = select.select([self._rfd], [], [], tick)
+            try:
+                ready, _, _ = select.select([self._rfd], [], [], tick)
+            except (OSError, ValueError):  # its pipe closed behind its back by a component: said at the run's end
+                self.lost = True
+                return
             now = time.monotonic()
             if ready:
                 try:

@@ -22,6 +22,7 @@ from contextlib import contextmanager
 from pathlib import Path
 from typing import Callable, Iterator
 
+from .. import procs
 from ..engine import supervision
 from ..errors import CosimError, printable
 
@@ -98,8 +99,13 @@ class OutputClaim:
             self._lock.unlink(missing_ok=True)  # while still holding it: a waiting run re-checks the inode
         except OSError:
             pass
-        os.close(self._fd)
+        procs.close_fd(self._fd)  # one a component closed behind our back: said by the run (intact)
         self._fd = None
+
+    def intact(self) -> bool:
+        """Whether the lock is still held: False when a component of the run closed its descriptor (and with it
+        most likely the log writer's pipe)."""
+        return self._fd is None or procs.open_fd(self._fd)
 
 
 def _describe_owner(lock: Path) -> str:

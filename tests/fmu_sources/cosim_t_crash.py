@@ -6,7 +6,9 @@ stop signals in its thread and sleeps in C for ``hold`` s with the Python lock h
 can act. ``mode`` 5 and 6 do what 1 and 4 do, in ``exitInitializationMode`` instead of a step. ``mode`` 7 ignores the
 stop signals and busy-loops in Python for ``hold`` s (the lock taken and given back, but the signals never acted on);
 ``mode`` 8 starts a process that sleeps ``hold`` s holding the run's stdout and stderr, and goes on normally;
-``mode`` 10 stops (SIGSTOP) the processes its own process started (the log writer among them) once and goes on."""
+``mode`` 10 stops (SIGSTOP) the processes its own process started (the log writer among them) once and goes on;
+``mode`` 11 closes every file descriptor above 2 of its process once (the master's pipes, files and shared memory
+among them) and goes on, as a careless daemonising library can."""
 import signal
 import ctypes
 import os
@@ -58,6 +60,9 @@ class CosimTCrash(Fmi2Slave):
                     with open(f"/proc/self/task/{task}/children") as f:
                         for child in f.read().split():
                             os.kill(int(child), signal.SIGSTOP)
+            elif self.mode == 11 and not getattr(self, "_started", False):
+                self._started = True
+                os.closerange(3, os.sysconf("SC_OPEN_MAX"))
             elif self.mode == 7:
                 for s in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP):
                     signal.signal(s, signal.SIG_IGN)
