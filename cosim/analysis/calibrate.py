@@ -34,9 +34,9 @@ Generic: it imports nothing of ``delta``, ``fmus`` or ``multibody``; parameters 
 
 from __future__ import annotations
 
+import datetime
 import difflib
 import math
-import os
 import time
 import warnings
 from dataclasses import dataclass, field
@@ -58,7 +58,8 @@ from ..run import run_scenario
 from .recording_compare import estimate_offset
 from .sweep import prebuild
 
-__all__ = ["Calibration", "CalibrationError", "Fit", "OFFSET", "calibrate", "parse_fits", "write_calibrated"]
+__all__ = ["Calibration", "CalibrationError", "Fit", "OFFSET", "calibrate", "parse_fits", "write_fitted",
+           "offset_component"]
 
 OFFSET = "offset"
 """The fit name of the time offset between the run and the recording (the recording's time minus the run's, s)."""
@@ -374,7 +375,7 @@ def calibrate(scenario: str | Path, recording: str | Path, maps: Mapping[str, st
     try:
         with held:  # extracted once, for every run of the fit
             for info in locate_fmus(runner.base, runner.fmu_files).values():
-                info.unzipdir  # noqa: B018 - extracted on first use
+                getattr(info, "unzipdir", None)  # an FMU's: extracted on first use (a recording component has none)
         starts, run_units = _start_values(runner, scen)
         for f, s in zip(scen, starts):
             if not f.low <= s <= f.high:
@@ -498,49 +499,50 @@ def _fit(runner: _Runner, rec, scen: list[Fit], off_fit: Fit | None, starts: lis
                        runner.run_time)
 
 
-def _as_written(sc) -> dict[str, Any]:
-    """``sc`` as its file and the overrides give it (the keys they set, no defaults), its paths absolute (the
-    calibrated file lives elsewhere), a parameter written as text (``1e3``) as that text."""
-    data = sc.model_dump(mode="json", by_alias=True, exclude_unset=True)
-    base = Path(sc.source).parent if sc.source and sc.source != "<string>" else Path.cwd()
-    for comp in data["components"].values():
-        if comp.get("path") is not None:
-            comp["path"] = os.path.normpath((base / comp["path"]).absolute())
-    if data.get("model") is not None:
-        data["model"] = os.path.normpath((base / data["model"]).absolute())
-    for path, text in sc.sources.written.items():  # ("components", name, "parameters", variable)
-        data["components"][path[1]]["parameters"][path[3]] = text
-    return data
+def offset_component(scenario: str | Path, sets: Sequence[str], recording: str | Path, time_stamps: str,
+                     time_origin: str) -> str | None:
+    """The component of the scenario (after ``sets``) that replays ``recording`` read as the calibration read it
+    (the same file, ``time`` and ``time_origin``), whose ``offset`` is then the fitted offset; None without one."""
+    sc = read_scenario(scenario).load(apply_overrides(list(sets)))
+    base = Path(scenario).parent
+    for name, comp in sc.components.items():
+        if comp.recording is not None and (base / comp.recording).resolve() == Path(recording).resolve() and \
+                (comp.time, comp.time_origin) == (time_stamps, time_origin):
+            return name
+    return None
 
 
-def write_calibrated(cal: Calibration, out: str | Path, sets: Sequence[str], command: str) -> Path:
-    """The scenario with its fitted values (and ``sets``) as a scenario file of its own, written atomically (a
-    temporary file renamed over ``out``), ``command`` in its header comment: ``python -m cosim run OUT`` runs the
-    calibrated twin. The values are those the scenario file and ``sets`` give, the fitted ones set (paths made
-    absolute); the log goes to ``runs/<name>_calibrated.mcap``. The offset is the recording's clock, not the
-    scenario's: it is in the header only."""
+def write_fitted(cal: Calibration, out: str | Path, command: str, offset_at: str | None = None) -> Path:
+    """The fitted values as a file of values that a scenario names with ``parameters: FILE`` (``name: value`` by the
+    addresses ``--fit`` took; a linked fit's value at each of its names; the offset as ``components.<offset_at>.offset``
+    when ``offset_at`` names the scenario's component that replays the recording, else in the header only: it is
+    the recording's clock), written atomically (a temporary file renamed over ``out``). Its header comments say what
+    made it: ``command``, the date, the scenario and the recording, the fit's verdict, each value with its standard
+    error, the residual RMS before and after."""
     import yaml  # lazy: --help loads this module without it
 
     out = Path(out)
-    values = {n: v for n, v in cal.values.items() if n != OFFSET}
-    overrides = apply_overrides(list(sets))
-    for name, value in values.items():
-        overrides.put((DOTTED, name), value, f"--fit {name}")
-    sc = read_scenario(cal.scenario).load(overrides)
-    data = _as_written(sc)
-    data["name"] = f"{sc.name}_calibrated"
-    data.get("logging", {}).pop("out", None)
-    head = [f"# {sc.name} calibrated against the recording {cal.recording}",
-            f"# Written by: {command}",
-            "# Fitted (standard error; " + ("converged" if cal.converged else "DID NOT CONVERGE") + "):"]
-    head += [f"#   {p['label']} = {p['value']!r}" + (f" (+- {p['stderr']:.3g})" if p["stderr"] is not None else "")
-             + (" s, the recording's time minus the run's" if p["label"] == OFFSET else "") for p in cal.parameters]
+    values = {n: float(v) for n, v in cal.values.items() if n != OFFSET}
+    if OFFSET in cal.values and offset_at is not None:
+        values[f"components.{offset_at}.offset"] = float(cal.values[OFFSET])
+    now = datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d %H:%M:%S UTC")
+    head = [f"# Values of the scenario {cal.scenario} fitted to the recording {cal.recording}",
+            f"# Written by: {command}", f"# On: {now}",
+            f"# Fit: {'converged' if cal.converged else 'DID NOT CONVERGE'} ({cal.message}); {cal.runs} runs of the "
+            f"scenario, {cal.samples} recorded samples", "# Fitted (start -> value, standard error):"]
+    for p in cal.parameters:
+        se = "" if p["stderr"] is None else f", +- {p['stderr']:.3g}"
+        where = ""
+        if p["label"] == OFFSET:
+            where = (f" s, the recording's time minus the run's: components.{offset_at}.offset below" if offset_at
+                     else " s, the recording's time minus the run's (the scenario replays no such recording: "
+                          "not a value of it)")
+        head.append(f"#   {p['label']}: {p['start']!r} -> {p['value']!r}{se}{where}")
     head.append("# Residual RMS before -> after: " + ", ".join(
         f"{n} {cal.rms_before[n]:.4g} -> {cal.rms_after[n]:.4g} {cal.units[n]}" for n in cal.rms_before))
-    if values:
-        head.append("# The same values for another scenario: "
-                    + " ".join(f"--set {n}={v!r}" for n, v in values.items()))
-    text = "\n".join(head) + "\n" + yaml.safe_dump(data, sort_keys=False, default_flow_style=False)
+    head.append("# A scenario takes these values with the key  parameters: <this file, relative to the scenario's "
+                "folder>  (over its own values, under --set)")
+    body = yaml.safe_dump(values, sort_keys=False, default_flow_style=False) if values else ""
     with written_by_rename(out) as tmp:
-        tmp.write_text(text, encoding="utf-8")
+        tmp.write_text("\n".join(head) + "\n" + body, encoding="utf-8")
     return out

@@ -39,7 +39,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--max-runs", type=number_option(whole=True, ge=2, le=10_000), default=60, metavar="N",
                    help="most runs of the scenario the fit may make (default 60)")
     p.add_argument("--out", metavar="FILE",
-                   help="write the calibrated scenario (every value, the fitted ones set) to this YAML file")
+                   help="write the fitted values to this YAML file, which a scenario uses with the key "
+                        "'parameters: FILE' (the command, date, RMS and standard errors in its header)")
     p.add_argument("--quiet", action="store_true", help="no progress")
     p.add_argument("--json", action="store_true", help="the calibration as JSON on stdout")
     p.set_defaults(handler=_cmd_calibrate, supervised=True)
@@ -48,7 +49,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 def _cmd_calibrate(args: argparse.Namespace) -> int:
     from pathlib import Path
 
-    from ..analysis.calibrate import CalibrationError, calibrate, parse_fits, write_calibrated
+    from ..analysis.calibrate import CalibrationError, calibrate, offset_component, parse_fits, write_fitted
     from ..analysis.recording_compare import parse_maps
     from ..errors import file_problem
 
@@ -82,7 +83,8 @@ def _cmd_calibrate(args: argparse.Namespace) -> int:
     payload, text = cal.as_dict(), cal.text()
     if args.out is not None:
         try:
-            write_calibrated(cal, args.out, args.set, _command(args))
+            offset_at = offset_component(args.scenario, args.set, args.measured, args.time, args.time_origin)
+            write_fitted(cal, args.out, _command(args), offset_at)
         except OSError as exc:
             raise CalibrationError(f"--out: cannot write {args.out}: {exc.strerror or exc}") from None
         text += f"\nwrote {args.out}"

@@ -1,6 +1,7 @@
 """``python -m cosim calibrate``: the payload and the time offset recovered from a SYNTHETIC ROS 2 bag made from a
 run of this project's plant with a known payload (tests/recording_helpers.py: 250 Hz, noise 1e-6 m, an offset that
-is no whole number of samples), the calibrated scenario written and run, the JSON, and every bad input one line."""
+is no whole number of samples), the fitted values written and a scenario run with them, the JSON, and every bad
+input one line."""
 
 from __future__ import annotations
 
@@ -10,6 +11,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import yaml
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from cli_helpers import ROOT, cosim  # noqa: E402
@@ -63,9 +65,9 @@ def test_payload_and_offset_are_recovered_from_a_wrong_start(truth):
     assert -1 <= cal.correlation[0][1] <= 1 and cal.correlation[0][0] == pytest.approx(1.0), cal.correlation
 
 
-def test_the_cli_writes_json_and_a_calibrated_scenario_that_runs_as_the_robot(truth, tmp_path):
+def test_the_cli_writes_json_and_a_file_of_values_that_makes_the_scenario_run_as_the_robot(truth, tmp_path):
     log, bag = truth
-    out = tmp_path / "calibrated.yaml"
+    out = tmp_path / "fitted.yaml"
     res = cosim("calibrate", SCENARIO, "--measured", bag, *MAP_ARGS, "--fit=plant.mass.payload=0:1", "--fit=offset",
                 *BASE, "--out", out, "--json")
     assert res.returncode == 0, res.stderr
@@ -75,10 +77,13 @@ def test_the_cli_writes_json_and_a_calibrated_scenario_that_runs_as_the_robot(tr
     assert abs(fitted - PAYLOAD) <= PAYLOAD_RTOL * PAYLOAD, data["parameters"]
     text = out.read_text()
     assert "# Written by: python -m cosim calibrate" in text and "--fit plant.mass.payload=0:1" in text, text[:800]
+    assert "\n# On: " in text and "# Residual RMS before -> after: plant.q[1]" in text, text[:800]
+    # the values only: the offset is the recording's clock, which this scenario does not replay (header only)
+    assert yaml.safe_load(text) == {"plant.mass.payload": fitted}, text
     assert not list(tmp_path.glob(".*.tmp")), "the temporary file was renamed"
-    # the calibrated scenario runs, and its joints are the robot's: within the payload's small error (about
+    # the scenario with the file runs, and its joints are the robot's: within the payload's small error (about
     # 1e-3 kg x 1.7e-4 m/kg), where the start's 0.1 kg was tens of um off
-    run = api.run(str(out))
+    run = api.run(str(SCENARIO), {"parameters": str(out), "time.stop": STOP_S})
     q_truth = read_run(log)
     for i in (1, 2, 3):
         want = np.interp(run.time, q_truth.signal(f"plant.q[{i}]").t, q_truth.signal(f"plant.q[{i}]").y)
