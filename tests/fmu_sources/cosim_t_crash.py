@@ -18,6 +18,21 @@ import time
 from pythonfmu import Fmi2Causality, Fmi2Slave, Fmi2Variability, Integer, Real
 
 
+def _holding():
+    """Say that the stop signals can no longer act: create the file ``$COSIM_T_CRASH_HOLDING`` names, if any."""
+    path = os.environ.get("COSIM_T_CRASH_HOLDING")
+    if path:
+        open(path, "w").close()
+
+
+def _hold_in_c(seconds):
+    """Sleep ``seconds`` in C with the Python lock held; the file says so just before (the call is looked up first,
+    so nothing but the call itself comes after it)."""
+    sleep = ctypes.PyDLL(None).sleep
+    _holding()
+    sleep(seconds)
+
+
 class CosimTCrash(Fmi2Slave):
     author = "cosim tests"
     description = "a source that crashes on purpose"
@@ -38,7 +53,7 @@ class CosimTCrash(Fmi2Slave):
             ctypes.string_at(0)
         elif self.mode == 6:
             signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT, signal.SIGTERM, signal.SIGHUP})
-            ctypes.PyDLL(None).sleep(int(self.hold))
+            _hold_in_c(int(self.hold))
 
     def do_step(self, current_time, step_size):
         if current_time + step_size >= self.at - 1e-12:
@@ -50,7 +65,7 @@ class CosimTCrash(Fmi2Slave):
                 ctypes.CDLL(None).exit(3)
             elif self.mode == 4:
                 signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT, signal.SIGTERM, signal.SIGHUP})
-                ctypes.PyDLL(None).sleep(int(self.hold))
+                _hold_in_c(int(self.hold))
             elif self.mode == 8 and not getattr(self, "_started", False):
                 self._started = True
                 subprocess.Popen(["sleep", str(int(self.hold))])  # inherits stdout and stderr
@@ -66,6 +81,7 @@ class CosimTCrash(Fmi2Slave):
             elif self.mode == 7:
                 for s in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP):
                     signal.signal(s, signal.SIG_IGN)
+                _holding()
                 end = time.monotonic() + self.hold
                 while time.monotonic() < end:
                     pass

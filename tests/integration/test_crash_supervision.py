@@ -16,6 +16,7 @@ import time
 from pathlib import Path
 
 import pytest
+from cli_helpers import wait_for
 
 from cosim.io.runlog import read_run
 
@@ -35,9 +36,9 @@ parallel: off
 """
 
 
-def _start(path: Path, out: Path, tmp: Path) -> subprocess.Popen:
+def _start(path: Path, out: Path, tmp: Path, **env_extra: str) -> subprocess.Popen:
     out.parent.mkdir(exist_ok=True)
-    env = {**os.environ, "TMPDIR": str(tmp), "PYTHONPATH": str(ROOT)}
+    env = {**os.environ, "TMPDIR": str(tmp), "PYTHONPATH": str(ROOT), **env_extra}
     return subprocess.Popen([sys.executable, "-m", "cosim", "run", str(path), "--out", str(out), "--quiet"],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env, cwd=ROOT)
 
@@ -77,8 +78,10 @@ def test_a_component_that_will_not_stop_is_killed_after_a_stop_signal(write_scen
     tmp = Path(tempfile.mkdtemp(dir=tmp_path))
     path = write_scenario(SCENARIO.format(mode=mode, at=0.5, stop=3.0, extra=""))
     out = tmp_path / "logs" / "held.mcap"
-    proc = _start(path, out, tmp)
-    time.sleep(3.0)  # well inside the held call (starts at t = 0.5 s of simulated time, a fraction of a second in)
+    holding = tmp_path / "holding"  # the FMU creates it once the stop signals can no longer act, then holds
+    proc = _start(path, out, tmp, COSIM_T_CRASH_HOLDING=str(holding))
+    wait_for(lambda: holding.exists() or proc.poll() is not None, timeout=60, what="the FMU to hold")
+    assert proc.poll() is None, ("the run ended before the FMU held", proc.returncode, proc.communicate())
     t0 = time.monotonic()
     proc.send_signal(signal.SIGTERM)
     _check_after(proc, out, tmp, "component 'src' in its step at t = 0.499 s did not stop within", 0.5, code=143)
