@@ -159,7 +159,8 @@ def main() -> None:
           f"{writer_s:.3f} s for the run")
     if args.json is not None:
         figures = {
-            "loop logged s (median)": statistics.median(logged), "loop unlogged s (median)": statistics.median(unlogged),
+            "loop logged s (median)": statistics.median(logged),
+            "loop unlogged s (median)": statistics.median(unlogged),
             "ratio min": min(ratios), "ratio max": max(ratios), "ratio median": statistics.median(ratios),
             "whole call logged s (median)": statistics.median(whole_l),
             "whole call unlogged s (median)": statistics.median(whole_u),

@@ -11,10 +11,14 @@ turn; Jacobi: every link first), each component's wall time, the record the watc
 :class:`ErrorSums` observer; the same values in the same order and the same double arithmetic as the Python
 loop, so a run's results are the same bit for bit.
 
-Where every observer is an :class:`ErrorSums`, Python is entered once per block: at most :data:`BLOCK` macro steps
-or :data:`BUDGET_S` of wall time (a stop request is answered at the block's end, within that time), a block also
-ending where progress is reported. With other observers (a log, a live view) each macro step is one call, and the
-observers, the progress and the stop request come after each as in the Python loop.
+Where every observer is an :class:`ErrorSums` or offers :class:`Blocks` (the run's log: its recorder and publisher),
+Python is entered once per block: at most :data:`BLOCK` macro steps or :data:`BUDGET_S` of wall time (a stop request
+is answered at the block's end, within that time), a block also ending where progress is reported and where an
+observer needs Python (:attr:`Blocks.free`: the publisher's next scene, its rows full); the log's row of each macro
+step (every logged value, one row) is copied in C too, into the publisher's rows (:attr:`Blocks.rows`: the memory
+its writer process shares, so that a crash keeps every completed step). With other observers (a live view, the
+real-time pacing, an observer of the caller's) each macro step is one call, and the observers, the progress and the
+stop request come after each as in the Python loop.
 A run takes this loop when (:func:`make`) the helper is built, every component has a C turn (co-simulation,
 numbers only, not a worker's proxy or publisher), every step multiple is 1 and every link joins buffers of the
 same C type; otherwise, and around events, the Python loop runs.
@@ -24,13 +28,13 @@ from __future__ import annotations
 
 import ctypes
 from ctypes import POINTER, c_double, c_int64, c_size_t, c_void_p
-from typing import Any, Protocol
+from typing import Any, Callable, Protocol
 
 from ..fmi import Terminated
 from ..fmi.turn import Move, Steps, Turn, steps_helper
 from .supervision import MASTER
 
-__all__ = ["BLOCK", "BUDGET_S", "ErrorSums", "CLoop", "key", "make", "simulate"]
+__all__ = ["BLOCK", "BUDGET_S", "Blocks", "ErrorSums", "CLoop", "key", "make", "simulate", "steps_to"]
 
 BLOCK = 4096
 """Macro steps a call runs at most (the grid's doubles are computed a block at a time)."""
@@ -52,6 +56,30 @@ class ErrorSums(Protocol):
     mx: list[float]
     t_mx: list[int]
     n: int
+
+
+class Blocks:
+    """What an observer that offers it (``loop_blocks()``: a :class:`Blocks`, or None when it needs Python after
+    every macro step) is to the loop in C: ``free(k)``, the macro steps from ``k`` the loop may run before the observer
+    needs Python (at least 1); ``stepped(k, n)``, after macro steps ``k .. k + n - 1``, in place of their
+    ``stepped`` calls; ``rows``, optionally, where the loop copies each macro step's row: ``(section, copies)``, the
+    section as :class:`cosim.observers.log_writer.mirror._Section` (``addresses`` of its count, stamps and rows,
+    ``width``, ``cap``, ``count``) and per stretch of the row ``(byte offset in the row, address, bytes)``. A call
+    returns when the section is full."""
+
+    __slots__ = ("free", "rows", "stepped")
+
+    def __init__(self, free: Callable[[int], int], stepped: Callable[[int, int], None], rows: Any = None) -> None:
+        self.free, self.stepped, self.rows = free, stepped, rows
+
+
+def steps_to(grid: Any, k: int, t_ns: int) -> int:
+    """Macro steps from ``k`` up to and with the first that ends at or after ``t_ns`` (at least 1; all that remain
+    when none does): where an observer that acts once a step's end reaches ``t_ns`` needs Python."""
+    end = grid.index(t_ns)  # the last point at or before t_ns
+    if grid.t_ns(end) < t_ns:
+        end += 1
+    return max(1, min(end, grid.n_steps) - k)
 
 
 def _moves(ex: Any, c: int) -> list[Move] | None:
@@ -80,8 +108,8 @@ class CLoop:
     """``cosim_steps`` bound to an execution's components, links, record and error observers (:func:`make`)."""
 
     def __init__(self, ex: Any, turns: list[tuple[Turn, bool]], moves: list[list[Move]], sums: list[ErrorSums],
-                 jacobi: bool, blocks: bool = True):
-        self.ex, self.sums, self.blocks = ex, sums, blocks
+                 jacobi: bool, blocks: bool = True, observers: tuple[Blocks, ...] = ()):
+        self.ex, self.sums, self.blocks, self.observers = ex, sums, blocks, observers
         order = list(ex.plan.order)
         self.order = order
         self.slaves = [ex.slaves[c] for c in order]
@@ -104,6 +132,15 @@ class CLoop:
                        actual=(c_void_p * max(1, n_pairs))(*[address(a) + i * 8 for (a, i), _ in pairs]),
                        reference=(c_void_p * max(1, n_pairs))(*[address(r) + i * 8 for _, (r, i) in pairs]),
                        sq=self.sq, mx=self.mx, t_mx=self.t_mx, budget=BUDGET_S)
+        self.section = None
+        for o in observers:
+            if o.rows is not None:
+                self.section, copies = o.rows
+                count, stamps, rows = self.section.addresses
+                self.copies = (Move * len(copies))(*[Move(at, address, n) for at, address, n in copies])
+                self.s.n_copies, self.s.copies, self.s.row_count = len(copies), self.copies, count
+                self.s.row_stamps, self.s.rows = stamps, rows
+                self.s.row_width, self.s.row_cap = self.section.width, self.section.cap
         proto = ctypes.PYFUNCTYPE if any(python for _, python in turns) else ctypes.CFUNCTYPE
         f = steps_helper()
         self.call = proto(c_size_t, c_void_p, c_size_t, c_size_t, c_size_t)(ctypes.cast(f, c_void_p).value)
@@ -124,6 +161,8 @@ class CLoop:
         """Macro steps ``k .. k + n - 1`` (fewer when the wall budget ran out): the steps done. Raises where the
         Python loop raises (:meth:`cosim.fmi.slave.CoSimulation.turn_failed`), after the steps before."""
         ex, sums = self.ex, self.sums
+        if self.section is not None and self.section.count >= self.section.cap:
+            raise RuntimeError("the log's rows are full: their observer did not hand them over")
         self._block(k, n)
         j = 0
         for o in sums:
@@ -145,7 +184,13 @@ class CLoop:
                 j += 1
             o.n += done
         ex.k_done = k + done
-        self.ended(k + done, done if done < n else None)
+        failed = done < n and self.s.ended != 0
+        if not failed:
+            self.ended(k + done, None)
+        for o in self.observers:  # the completed steps, also before a failed one (as the Python loop)
+            o.stepped(k, done)
+        if failed:
+            self.ended(k + done, done)
         return done
 
     def inside(self, yes: bool) -> None:
@@ -201,11 +246,14 @@ def make(ex: Any) -> CLoop | None:
     sums = [o for o in ex.observers if getattr(o, "error_sums", False) is True and
             all(getattr(a, "_type_", None) is c_double and getattr(r, "_type_", None) is c_double
                 for (a, _), (r, _) in o.pairs)]
-    blocks = len(sums) == len(ex.observers)
+    offers = [o.loop_blocks() if callable(getattr(o, "loop_blocks", None)) else None
+              for o in ex.observers if o not in sums]
+    blocks = all(b is not None for b in offers) and sum(b.rows is not None for b in offers) <= 1
     moves = [_moves(ex, c) for c in range(len(ex.slaves))]
     if any(m is None for m in moves):
         return None
-    return CLoop(ex, turns, moves, sums if blocks else [], ex.algorithm.name == "jacobi", blocks)
+    return CLoop(ex, turns, moves, sums if blocks else [], ex.algorithm.name == "jacobi", blocks,
+                 tuple(offers) if blocks else ())
 
 
 def simulate(ex: Any, loop: CLoop, k_end: int, stop: Any, report: Any, every: int) -> None:
@@ -220,6 +268,8 @@ def simulate(ex: Any, loop: CLoop, k_end: int, stop: Any, report: Any, every: in
             n = min(k_end - k, BLOCK)
             if report is not None:
                 n = min(n, every - k % every)
+            for o in loop.observers:
+                n = min(n, o.free(k))
             k += loop.run(k, n)
             if report is not None and k % every == 0:
                 report(k)

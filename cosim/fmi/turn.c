@@ -3,7 +3,7 @@
  *   doStep, get its outputs, check its real outputs for NaN and infinity;
  * - cosim_steps: macro steps of a whole system of such components (cosim/engine/cloop.py): per step the
  *   link copies and every component's turn in the algorithm's order, the record the watchdog and the
- *   supervisor read, each component's wall time, the tracked errors' sums;
+ *   supervisor read, each component's wall time, the tracked errors' sums, the log's row of each step;
  * - cosim_rhs: one right-hand side of a model-exchange FMU for the master's integrator: set the time,
  *   set the continuous states, get their derivatives, check the derivatives for NaN and infinity;
  *
@@ -174,6 +174,13 @@ typedef struct {
     double budget;         /* wall s after which the call returns at the end of a macro step */
     size_t failed;         /* out: the turn that ended a macro step */
     int ended;             /* out: its cosim_turn result */
+    size_t n_copies;       /* the log's row of a macro step (0: none): copies[c].dst is the byte offset in the row */
+    const Move *copies;
+    int64_t *row_count;    /* rows held, written after the row (a counted row is complete) */
+    int64_t *row_stamps;   /* per row the macro step's end, ns */
+    char *rows;            /* row_cap rows of row_width bytes; the call returns when they are full */
+    size_t row_width;
+    size_t row_cap;
 } Steps;
 
 static double wall_now(void)
@@ -181,6 +188,19 @@ static double wall_now(void)
     struct timespec ts;
     clock_gettime(CLOCK_MONOTONIC, &ts);
     return (double)ts.tv_sec + 1e-9 * (double)ts.tv_nsec;
+}
+
+/* After a completed macro step: its row of the log's values (each copy from an FMU buffer into the row) and its end
+ * as the row's stamp, then the count; true when the rows are full. */
+static bool copy_row(Steps *s, size_t j)
+{
+    int64_t i = *s->row_count;
+    char *row = s->rows + (size_t)i * s->row_width;
+    for (size_t c = 0; c < s->n_copies; c++)
+        memcpy(row + (size_t)s->copies[c].dst, s->copies[c].src, s->copies[c].bytes);
+    s->row_stamps[i] = s->ends[j];
+    __atomic_store_n(s->row_count, i + 1, __ATOMIC_RELEASE);
+    return (size_t)(i + 1) >= s->row_cap;
 }
 
 static void copy_links(const Steps *s, size_t i)
@@ -191,8 +211,8 @@ static void copy_links(const Steps *s, size_t i)
 
 /* Macro steps k0 .. k0 + n - 1 (times[j0 + j], steps[j0 + j], ends[j0 + j] of step k0 + j): the macro steps
  * completed. Fewer than n: a turn ended step k0 + returned early (failed and ended say which and how; the turns
- * before it in that step completed), or the wall budget was spent (ended is 0). The same arithmetic as the master's
- * Python loop. */
+ * before it in that step completed), or the wall budget was spent or the log's rows are full (ended is 0). The same
+ * arithmetic as the master's Python loop. The caller starts a call with room for a row (row_count < row_cap). */
 size_t cosim_steps(Steps *s, size_t k0, size_t j0, size_t n)
 {
     double start = wall_now(), prev = start;
@@ -231,6 +251,10 @@ size_t cosim_steps(Steps *s, size_t k0, size_t j0, size_t n)
                 s->mx[p] = fabs(e);
                 s->t_mx[p] = s->ends[j0 + j];
             }
+        }
+        if (s->n_copies && copy_row(s, j0 + j)) {
+            s->ended = 0;
+            return j + 1;
         }
         if (prev - start > s->budget) {
             s->ended = 0;

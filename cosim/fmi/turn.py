@@ -90,7 +90,9 @@ class Steps(ctypes.Structure):
                 ("times", POINTER(c_double)), ("steps", POINTER(c_double)), ("ends", POINTER(c_int64)),
                 ("n_pairs", c_size_t), ("actual", POINTER(c_void_p)), ("reference", POINTER(c_void_p)),
                 ("sq", POINTER(c_double)), ("mx", POINTER(c_double)), ("t_mx", POINTER(c_int64)),
-                ("budget", c_double), ("failed", c_size_t), ("ended", c_int)]
+                ("budget", c_double), ("failed", c_size_t), ("ended", c_int),
+                ("n_copies", c_size_t), ("copies", POINTER(Move)), ("row_count", c_void_p), ("row_stamps", c_void_p),
+                ("rows", c_void_p), ("row_width", c_size_t), ("row_cap", c_size_t)]
 
 
 _LIBRARY = Library(Path(__file__).with_name("turn.c"))

@@ -43,6 +43,7 @@ from typing import Sequence
 
 import orjson
 
+from ..engine.cloop import BLOCK, Blocks
 from ..engine.execution import Execution
 from ..engine.scenario import EFFECTIVE_ATTACHMENT, effective_scenario
 from ..errors import CosimError, utf8
@@ -185,6 +186,12 @@ class McapRecorder:
                          self.scenario_file.read_bytes(), now, now)
         for name, info in zip(rt.plan.names, rt.plan.infos):
             w.attachment(f"fmu/{name}/modelDescription.xml", "application/xml", info.model_description_xml(), now, now)
+
+    def loop_blocks(self) -> Blocks:
+        """The master's loop in C may run blocks of macro steps with this recorder (:class:`cosim.engine.cloop.Blocks`):
+        it needs nothing of a step but a look at the clock, taken after each block (a block lasts at most
+        :data:`cosim.engine.cloop.BUDGET_S`)."""
+        return Blocks(lambda k: BLOCK, lambda k, n: self.stepped(k + n - 1, 0, ()))
 
     def stepped(self, k: int, t_ns: int, active: Sequence[int]) -> None:
         if time.monotonic() - self._last_flush > self.flush_interval:  # the blocks so far: the publisher's own

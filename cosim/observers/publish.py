@@ -58,11 +58,12 @@ from typing import Any
 import numpy as np
 import orjson
 
+from ..engine.cloop import Blocks, steps_to
 from ..engine.execution import Execution, byte_view
 from ..errors import CosimError
 from ..fmi import BINARY, BOOLEAN, INTEGER, REAL, STRING
 from .foxglove_schemas import FRAME_TRANSFORMS, SCENE_UPDATE
-from .log_writer import BlockLayout, row_format
+from .log_writer import BlockLayout, row_format, row_section
 
 __all__ = [
     "EVENTS_SCHEMA",
@@ -178,7 +179,7 @@ class _Rows:
     rows of bytes copied from the FMU buffers (``runs``, see :func:`block_layout`) or, without runs,
     as lists (``readers``, see :func:`_values_any`)."""
 
-    __slots__ = ("cid", "cap", "capture", "stamps", "data", "raw", "sources", "width", "puts")
+    __slots__ = ("cid", "cap", "capture", "stamps", "data", "raw", "runs", "sources", "width", "puts")
 
     def __init__(self, cid: int, runs, readers, block_bytes: int):
 
@@ -186,6 +187,7 @@ class _Rows:
         self.stamps: list[int] = []
         self.data: list = []
         self.raw = runs is not None
+        self.runs = runs
         self.sources = None
         self.width: int | None = None  # bytes of a row; None: rows of values (not raw)
         self.puts: tuple = ()  # each mirror's put of a row, when its rows are a batch mirrored (Publisher.start)
@@ -214,28 +216,45 @@ class _Rows:
 class _Joint:
     """The samples of every logged component at once, when all of them step at every macro step and log
     numbers only (the common case): one join per step for all their rows, handed over as one block
-    of bytes that each channel reads between the others' values (``skip``)."""
+    of bytes that each channel reads between the others' values (``skip``).
+
+    The rows and their stamps are held in :attr:`area` (a section of the writer's
+    :class:`~cosim.observers.log_writer.RowMirror`, else memory of its own,
+    :func:`~cosim.observers.log_writer.row_section`), written by :meth:`put` or by the master's loop in C
+    (:attr:`copies`: per stretch of the row, its byte offset in the row, the FMU buffer's address and bytes)."""
 
     def __init__(self, channels: list[_Rows], block_bytes: int):
         self.parts = []  # (channel, byte offset in the joint row, bytes)
+        self.copies = []
         sources, at = [], 0
         for rows in channels:
             self.parts.append((rows.cid, at, rows.width))
             sources += rows.sources
-            at += rows.width
+            for (arr, i, n), view in zip(rows.runs, rows.sources):
+                size = ctypes.sizeof(arr._type_)
+                self.copies.append((at, ctypes.addressof(arr) + i * size, n * size))
+                at += len(view)
         self.width = at
         self.capture = partial(b"".join, sources)
         self.cap = max(1, min(_BLOCK_ROWS, block_bytes // max(1, at)))
-        self.stamps: list[int] = []
-        self.data: list[bytes] = []
-        self.puts: tuple = ()  # each mirror's put of a row (see Publisher.start)
+        self.area: Any = None  # the rows held (Publisher.start)
+        self.puts: tuple = ()  # every other mirror's put of a row (see Publisher.start)
+
+    @property
+    def stamps(self) -> bool:
+        """Whether rows are held."""
+        return self.area.count > 0
+
+    def put(self, stamp: int, row: bytes) -> None:
+        self.area.put(stamp, row)
+        for put in self.puts:
+            put(stamp, row)
 
     def take(self) -> list[tuple[int, list[int], bytes, tuple[int, int]]]:
-        rows, stamps = b"".join(self.data), self.stamps[:]  # one object: pickled once for every channel
-        blocks = [(cid, stamps, rows, (at, self.width - at - size)) for cid, at, size in self.parts]
-        self.stamps.clear()
-        self.data.clear()
-        return blocks
+        """The rows held, as each channel's block (one bytes object: pickled once for every channel); they stay held
+        until :meth:`Publisher.flush` has handed them over."""
+        stamps, rows = self.area.read()
+        return [(cid, stamps, rows, (at, self.width - at - size)) for cid, at, size in self.parts]
 
 
 def block_schema(schema: dict) -> dict:
@@ -430,6 +449,8 @@ class Publisher:
             sink.blocks(self.offset_ns, blocks)
         for m in self._mirrors:  # sent: down the pipe
             m.sent()
+        if self._joint is not None:
+            self._joint.area.sent()
 
     # -- observer protocol
     def start(self, rt: Execution) -> None:
@@ -496,16 +517,16 @@ class Publisher:
                 self._mirrors.append(made)
         for i, batch in enumerate(batches):
             batch.puts = tuple(m.sections[i].put for m in self._mirrors)
+        if self._joint is not None:  # its rows held in the first mirror's section, else in memory of its own
+            self._joint.area = self._mirrors[0].sections[0] if self._mirrors else row_section(self._joint.width,
+                                                                                              self._cap)
+            self._joint.puts = self._joint.puts[1:]
         # per component: None (not logged) or (add a row, read a row, add a stamp, step multiple, mirror the row)
         self._by_comp: list[tuple[Any, Any, Any, int, tuple] | None] = [None] * len(plan.names)
         for c, rows in self._rows_of.items():
             self._by_comp[c] = (rows.data.append, rows.capture, rows.stamps.append, rt.multiples[c], rows.puts)
         if self._joint is not None:
-            row = self._joint.capture()
-            self._joint.data.append(row)
-            self._joint.stamps.append(rt.now_ns)
-            for put in self._joint.puts:
-                put(rt.now_ns, row)
+            self._joint.put(rt.now_ns, self._joint.capture())
             self._n = 1
         else:
             for c, entry in enumerate(self._by_comp):
@@ -567,11 +588,7 @@ class Publisher:
     def stepped(self, k: int, t_ns: int, active: Sequence[int]) -> None:
         joint = self._joint
         if joint is not None and self._rt.t_end_ns is None:  # every logged component stepped, to t_ns
-            row = joint.capture()
-            joint.data.append(row)
-            joint.stamps.append(t_ns)
-            for put in joint.puts:
-                put(t_ns, row)
+            joint.put(t_ns, joint.capture())
         else:
             if joint is not None:  # the last step of a run an FMU ended: some components only
                 self.flush()
@@ -596,6 +613,31 @@ class Publisher:
             self.flush()
         if self._events_cid is not None:
             self._log_events()
+        if t_ns >= self._next_tick:
+            self._tick(t_ns)
+
+    def loop_blocks(self) -> Blocks | None:
+        """What the master's loop in C needs to run blocks of macro steps with this publisher (see
+        :class:`cosim.engine.cloop.Blocks`): each step's joint row copied in C into :attr:`_Joint.area`, Python entered
+        where a scene is due or the rows are full; None (Python after every step) without joint rows, with events to
+        log, or with more than one mirror."""
+        joint = self._joint
+        if joint is None or self._events_cid is not None or joint.puts or self._rt.t_end_ns is not None:
+            return None
+        return Blocks(self._free, self._block_stepped, (joint.area, joint.copies))
+
+    def _free(self, k: int) -> int:
+        return min(self._cap - self._n, steps_to(self._grid, k, self._next_tick))
+
+    def _block_stepped(self, k: int, n: int) -> None:
+        """Macro steps ``k .. k + n - 1`` done, their rows copied (:meth:`loop_blocks`): what :meth:`stepped` does after
+        the last of them (none of the others fills the rows or reaches the scene's time)."""
+        if n == 0:
+            return
+        self._n += n
+        if self._n >= self._cap:
+            self.flush()
+        t_ns = self._grid.t_ns(k + n)
         if t_ns >= self._next_tick:
             self._tick(t_ns)
 

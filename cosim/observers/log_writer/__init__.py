@@ -21,11 +21,11 @@ child starts in about 0.1 s, a forked one at once.
 """
 
 from .encode import BlockLayout, encode_block, encode_messages, encode_samples, row_format, samples_helper
-from .mirror import RowMirror
+from .mirror import RowMirror, row_section
 from .process import WriterFailed, WriterProcess, _serve, live_view_serving, writer_forks  # noqa: F401 - _serve:
 # the writer's loop, which benchmarks/log_writer_process.py times as cosim.observers.log_writer._serve
 from .sink import FoxgloveChannels, LogSink, os_reason
 
 __all__ = ["BlockLayout", "FoxgloveChannels", "encode_block", "encode_messages", "encode_samples", "row_format",
-           "samples_helper", "LogSink", "RowMirror", "WriterProcess", "WriterFailed", "live_view_serving",
-           "writer_forks", "os_reason"]
+           "samples_helper", "LogSink", "RowMirror", "row_section", "WriterProcess", "WriterFailed",
+           "live_view_serving", "writer_forks", "os_reason"]

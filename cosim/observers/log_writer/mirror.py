@@ -4,11 +4,12 @@
 
 from __future__ import annotations
 
+import ctypes
 import mmap
 import pickle
 import struct
 
-__all__ = ["RowMirror"]
+__all__ = ["RowMirror", "row_section"]
 
 
 class RowMirror:
@@ -91,29 +92,48 @@ class RowMirror:
 
 class _Section:
     """One batch's rows in a :class:`RowMirror` (at byte ``at`` of the shared memory), written through memoryviews of
-    it (a stamp, a row and the count: about 0.25 us a row, where ``struct.pack_into`` and an mmap slice took 0.5)."""
+    it (a stamp, a row and the count: about 0.25 us a row, where ``struct.pack_into`` and an mmap slice took 0.5), or
+    by the master's loop in C (:attr:`addresses`), which writes the same layout: the count is the memory's, not a copy.
+    The publisher's batch of joint rows is held here alone (:meth:`read` gives them back), in the mirror's memory or,
+    without a mirror, in memory of its own (:func:`row_section`)."""
 
-    __slots__ = ("_count", "_counter", "_row_views", "_stamps")
+    __slots__ = ("_counter", "_row_views", "_rows", "_stamps", "addresses", "cap", "width")
 
-    def __init__(self, shared: mmap.mmap, at: int, width: int, cap: int) -> None:
+    def __init__(self, shared, at: int, width: int, cap: int) -> None:
         view = memoryview(shared)
         self._counter = view[at:at + 8].cast("q")
         self._stamps = view[at + 8:at + 8 + 8 * cap].cast("q")
         rows = at + 8 + 8 * cap
+        self._rows = view[rows:rows + cap * width]
         self._row_views = [view[rows + i * width:rows + (i + 1) * width] for i in range(cap)]
-        self._count = 0
         self._counter[0] = 0
+        self.width, self.cap = width, cap
+        base = ctypes.addressof(ctypes.c_char.from_buffer(shared))
+        self.addresses = (base + at, base + at + 8, base + rows)
+        """The count's, the stamps' and the rows' addresses, for a loop in C (``cosim_steps``)."""
 
     def put(self, stamp: int, row: bytes) -> None:
-        i = self._count
+        i = self._counter[0]
         self._stamps[i] = stamp
         self._row_views[i][:] = row
-        self._count = i + 1
         self._counter[0] = i + 1
 
+    @property
+    def count(self) -> int:
+        return self._counter[0]
+
+    def read(self) -> tuple[list[int], bytes]:
+        """The stamps and the rows (their bytes back to back) counted so far."""
+        n = self._counter[0]
+        return self._stamps[:n].tolist(), self._rows[:n * self.width].tobytes()
+
     def sent(self) -> None:
-        self._count = 0
         self._counter[0] = 0
+
+
+def row_section(width: int, cap: int) -> _Section:
+    """A :class:`_Section` of ``cap`` rows of ``width`` bytes in memory of its own (a batch no mirror holds)."""
+    return _Section(bytearray(RowMirror.size(width, cap)), 0, width, cap)
 
 
 class _ValuesSection:
