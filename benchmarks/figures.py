@@ -15,9 +15,10 @@ that measured them, its date and the machine's load come from one JSON file per 
 A JSON is either *measured* (``"source": "measured"``, written by ``benchmarks/record.py``: its ``figures`` are
 formatted into the row's template in the spec) or *transcribed* (``"source": "transcribed from docs/figures.md"``:
 the cells' text as the page gave it, with the date it was measured), shown as such in the page's "when" column.
-A row is stale when its figures are older than ``--stale-days`` or were recorded on a revision of the measured code
-(``cosim``, ``delta``, ``fmus``, ``multibody``, ``benchmarks``) other than the checked-out one, or when the
-revision is unknown (transcribed); the script lists them and leaves them in the page, dated.
+A row is stale when its figures are older than ``--stale-days``, or were recorded on a revision of the measured code
+(``cosim``, ``delta``, ``fmus``, ``multibody``, ``benchmarks``) other than the checked-out one or with uncommitted
+changes to it (other work in a shared checkout), or when the revision is unknown (transcribed); the script lists
+them and leaves them in the page, dated.
 
 Plugging in a benchmark that records its own JSON: ``benchmarks/logged_run.py`` (row ``logged-vs-unlogged`` of
 the ``speed`` table, transcribed for now in ``benchmarks/results/logged_run.json``) writes a flat JSON of its own

@@ -171,6 +171,10 @@ def _measure(args, rec: record.Recording) -> None:
     print(f"1. helix_ctc_analytic, native FMUs, serial, no log, {args.stop_time:g} s: component_time_s / steps "
           f"(target <= {TARGET_FMU_US:g} each)")
     print(f"   {'':<6} " + "".join(f"{m:>14}" for m in modes))
+    rec.put("component_c_us", {name: t * us for name, t in per_comp["C turns"].items()})
+    rec.put("component_python_us", {name: t * us for name, t in per_comp["Python calls"].items()})
+    rec.put("helix_step_c_us", best["C turns"]["helix_wall"] * us)
+    rec.put("helix_master_c_us", best["C turns"]["helix_master"] * us)
     for name in per_comp["C turns"]:
         row = [per_comp[m][name] * us for m in modes]
         verdict = "met" if row[0] <= TARGET_FMU_US else "NOT met"
@@ -181,18 +185,26 @@ def _measure(args, rec: record.Recording) -> None:
     print(f"2. two C FMUs (VanDerPol.x0 -> Feedthrough.Real_input, FMI 2 CS), serial, no log, {args.steps} steps "
           f"(target <= {TARGET_MASTER_US:g} for the master's own)")
     print(f"   bare FMI calls from a Python loop: {bare * us:.2f}")
+    rec.put("two_bare_us", bare * us)
     for mode in modes:
         b = best[mode]
         own = b["master"] - bare
         verdict = "met" if own * us <= TARGET_MASTER_US else "NOT met"
         if own < 0:
             verdict += " (the master's loop in C is faster than a Python loop making the same calls)"
+        key = "c" if mode == "C turns" else "python"
+        rec.put(f"two_master_{key}_us", b["master"] * us)
+        rec.put(f"two_own_{key}_us", own * us)
         print(f"   {mode:<13}: master {b['master'] * us:5.2f} - bare {bare * us:5.2f} = master's own {own * us:5.2f}"
               f"   target {verdict}; outside the component timings {b['outside'] * us:.2f}")
     print(f"3. helix_ctc_analytic, native FMUs, serial, no log, {args.stop_time:g} s, C turns: the loop per step "
           f"(target Jacobi <= {TARGET_JACOBI:g} x Gauss-Seidel)")
     for where in ("C", "Python"):
         gs, jac = loops["gauss_seidel", where], loops["jacobi", where]
+        key = where.lower()
+        rec.put(f"gauss_seidel_{key}_us", gs * us)
+        rec.put(f"jacobi_{key}_us", jac * us)
+        rec.put(f"jacobi_ratio_{key}", jac / gs)
         print(f"   loop in {where:<6}: Gauss-Seidel {gs * us:6.2f}   Jacobi {jac * us:6.2f}   ratio {jac / gs:.3f}   "
               f"target {'met' if jac / gs <= TARGET_JACOBI else 'NOT met'}")
 
