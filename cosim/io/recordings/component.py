@@ -105,12 +105,12 @@ def recording_info(name: str, replay: Replay, base: Path, span: tuple[float, flo
         if absolute:  # the ranges in the recording's stamps, s since the epoch: to the microsecond
             shift = rec.origin_ns * 1e-9
             covers = f"stamps {lo + shift:.6f} .. {hi + shift:.6f} s (time_origin absolute)"
-            needs = f"{start + shift:.6f} .. {stop + shift:.6f} s"
+            needs = f"{start + shift:.6f} .. {stop + shift:.6f} s with offset {replay.offset_s:.6f} s"
         else:
             covers, needs = f"t = {lo:.9g} .. {hi:.9g} s (its time, from its first message)", \
-                f"{start:.9g} .. {stop:.9g} s"
+                f"{start:.9g} .. {stop:.9g} s with offset {replay.offset_s:g} s"
         raise CosimError(f"recording {path} covers {covers}, the run t = {span[0]:.9g} .. {span[1]:.9g} s needs "
-                         f"{needs} with offset {replay.offset_s:.9g} s" + (f" ({rec.end_note})" if rec.end_note else ""))
+                         f"{needs}" + (f" ({rec.end_note})" if rec.end_note else ""))
     variables = {}
     for k, (out, spec) in enumerate(replay.signals):
         variables[out] = Variable(name=out, vr=k, kind=REAL, fmi_type="Real", causality="output",
