@@ -16,6 +16,7 @@ generated module checks them before anything else is imported (:mod:`fmus.requir
 
 from __future__ import annotations
 
+import errno
 import hashlib
 import json
 import os
@@ -24,8 +25,9 @@ import shutil
 import sys
 import tempfile
 import zipfile
+from contextlib import contextmanager
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any, Callable, Iterator
 
 from delta.errors import DeltaError
 
@@ -33,7 +35,7 @@ from . import requirements
 from .definition import FmuDefinition
 
 __all__ = ["CACHE_ENV", "user_cache", "source_files", "fingerprint", "bundle_name", "is_current", "install",
-           "cache_folder", "cached", "deliver", "prune", "on_build", "build_python", "BuildError"]
+           "cache_folder", "cached", "deliver", "prune", "on_build", "build_python", "scratch", "BuildError"]
 
 CACHE_ENV = "DELTA_COSIM_CACHE"
 """Environment variable naming the FMU cache folder (default: :func:`user_cache`)."""
@@ -288,6 +290,29 @@ def install(out: Path, name: str, write: Callable[[Path], None], record: dict[st
     return target
 
 
+@contextmanager
+def scratch(name: str, kind: str) -> Iterator[Path]:
+    """A temporary folder (in ``$TMPDIR``, else the system's) to build FMU ``name`` in, removed afterwards. A folder
+    the system refuses to make or to fill (full, read-only, over quota) ends in one BuildError naming it and
+    ``TMPDIR``, where it was an internal error."""
+    try:
+        tmp = tempfile.mkdtemp(prefix=f"{kind}_{name}_")
+    except OSError as exc:
+        raise BuildError(f"cannot make a temporary folder to build FMU {name} in {tempfile.gettempdir()}: "
+                         f"{exc.strerror or exc} (set TMPDIR to a writable folder with room)") from None
+    try:
+        yield Path(tmp)
+    except OSError as exc:
+        named = [str(f) for f in (exc.filename, exc.filename2) if f is not None]
+        if any(f.startswith(tmp) for f in named) or (
+                not named and exc.errno in (errno.ENOSPC, errno.EROFS, errno.EDQUOT)):
+            raise BuildError(f"cannot build FMU {name} in the temporary folder {tmp}: {exc.strerror or exc} "
+                             "(set TMPDIR to a writable folder with room)") from None
+        raise
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+
+
 def build_python(fmu: FmuDefinition, out_dir: str | Path | None = None, *, force: bool = False) -> Path:
     """The python FMU that ``fmu`` defines, built into the user's cache (:func:`user_cache`) unless a build with the
     same fingerprint is there, then copied to ``out_dir`` if one is given (:func:`deliver`)."""
@@ -307,8 +332,7 @@ def _build_python(fmu: FmuDefinition, out: Path, digest: str) -> Path:
     module = f"{fmu.name}_{digest[:16]}"
     saved_path = list(sys.path)
     before = set(sys.modules)
-    with tempfile.TemporaryDirectory(prefix=f"fmu_{fmu.name}_") as tmp:
-        tmp = Path(tmp)
+    with scratch(fmu.name, "fmu") as tmp:
         pkg = tmp / bundle
         pkg.mkdir()
         (pkg / "__init__.py").write_text(f'"""Project code bundled with FMU {fmu.name} ({digest[:16]})."""\n')
@@ -333,6 +357,8 @@ def _build_python(fmu: FmuDefinition, out: Path, digest: str) -> Path:
             else:
                 from pythonfmu.builder import FmuBuilder
             built = Path(FmuBuilder.build_FMU(script, dest=staging, project_files=[pkg, needs]))
+        except OSError:  # the system's refusal: named with the folder by scratch when it is there
+            raise
         except Exception as exc:  # the exporter raises bare exceptions; name the FMU
             raise BuildError(f"building FMU {fmu.name!r} failed: {type(exc).__name__}: {exc}") from exc
         finally:

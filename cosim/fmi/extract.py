@@ -4,6 +4,7 @@ process, removal at the end of each run and of the process (orphans of killed pr
 from __future__ import annotations
 
 import atexit
+import errno
 import os
 import shutil
 import tempfile
@@ -126,6 +127,12 @@ class Extractions:
 _RUN: ContextVar[Extractions | None] = ContextVar("cosim_run_extractions", default=None)
 
 
+def _refused_by(exc: OSError, folder: Path) -> bool:
+    """Whether ``exc`` is the system refusing to write into ``folder`` (full, read-only, over quota)."""
+    named = [str(f) for f in (exc.filename, exc.filename2) if f is not None]
+    return any(f.startswith(str(folder)) for f in named) or exc.errno in (errno.ENOSPC, errno.EROFS, errno.EDQUOT)
+
+
 def extraction(key: Key) -> Path:
     """The extraction directory of the FMU file ``key`` = (path, stamp), held by the current run."""
     import fmpy  # lazy: --help loads this module without it
@@ -137,9 +144,22 @@ def extraction(key: Key) -> Path:
         if unzipdir is None:
             if not _EXTRACTED:
                 sweep_orphans()
-            unzipdir = Path(tempfile.mkdtemp(prefix=f"{_PREFIX}{os.getpid()}-{path.stem}-"))
+            try:
+                unzipdir = Path(tempfile.mkdtemp(prefix=f"{_PREFIX}{os.getpid()}-{path.stem}-"))
+            except OSError as exc:
+                raise ComponentSourceError(Issue("", f"{path}: cannot make a folder to extract it into in "
+                                                     f"{tempfile.gettempdir()}: {exc.strerror or exc} (set TMPDIR "
+                                                     "to a writable folder with room)")) from None
             try:
                 fmpy.extract(str(path), str(unzipdir), include=_used)
+            except OSError as exc:
+                shutil.rmtree(unzipdir, ignore_errors=True)
+                if not _refused_by(exc, unzipdir):
+                    raise ComponentSourceError(Issue("", f"{path}: cannot extract: {exc}")) from None
+                # the system's refusal (a full or read-only temporary folder), not the archive's
+                raise ComponentSourceError(Issue("", f"{path}: cannot extract it into {unzipdir}: "
+                                                     f"{exc.strerror or exc} (set TMPDIR to a writable folder with "
+                                                     "room)")) from None
             except Exception as exc:  # a corrupt archive  # noqa: BLE001
                 shutil.rmtree(unzipdir, ignore_errors=True)
                 raise ComponentSourceError(Issue("", f"{path}: cannot extract: {exc}")) from None

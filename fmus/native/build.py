@@ -25,14 +25,13 @@ import json
 import os
 import shutil
 import subprocess
-import tempfile
 import zipfile
 from dataclasses import dataclass, replace
 from functools import lru_cache
 from pathlib import Path
 from typing import Any
 
-from ..builder import announce, cache_folder, cached, deliver, install, is_current, prune, user_cache
+from ..builder import announce, cache_folder, cached, deliver, install, is_current, prune, scratch, user_cache
 from ..definition import FmuDefinition
 from .errors import CompilerMissingError, NativeError
 from .interface import Interface, interface, model_description
@@ -391,8 +390,8 @@ def _build(fmu: FmuDefinition, fmi: int, cc: str, out: Path, digest: str) -> Pat
     name = fmu.name
     own = hashlib.sha256((digest + name).encode()).hexdigest()
     token = "{" + f"{own[:8]}-{own[8:12]}-{own[12:16]}-{own[16:20]}-{own[20:32]}" + "}"
-    with tempfile.TemporaryDirectory(prefix=f"native_{name}_") as tmp:
-        root = Path(tmp) / "fmu"
+    with scratch(name, "native") as tmp:
+        root = tmp / "fmu"
         src = root / "sources"
         src.mkdir(parents=True)
         itf, generated = generate(fmu, src, token)
