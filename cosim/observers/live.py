@@ -10,6 +10,12 @@ the channels, schemas and 3D scene of the MCAP log, message for message, while t
 written. The server also broadcasts the run's current log time (the *Time* capability), so the
 viewer's clock follows the simulation. Combine it with ``--realtime`` to watch at wall-clock pace;
 without it the run goes as fast as it can and the viewer sees it fast-forwarded.
+
+``--live-wait [SECONDS]`` holds the run before it sends anything (every channel advertised, nothing logged yet) until
+a viewer subscribes to a channel, at most SECONDS (:data:`cosim.cli.run.LIVE_WAIT_S` by default), so a viewer started
+after the run misses nothing: the first message it gets is the first of the log. Meanwhile the run's phase is ``waiting``
+(:data:`cosim.engine.supervision.WAITING`), which the watchdog and the supervisor take for progress; a stop signal ends
+the wait as it ends a step.
 """
 
 from __future__ import annotations
@@ -18,9 +24,12 @@ import logging
 import socket
 import sys
 import threading
+import time
 from collections.abc import Sequence
 
-from ..engine.execution import Execution
+from ..engine.cloop import Blocks, steps_to
+from ..engine.execution import Execution, StopRequest
+from ..engine.supervision import WAITING
 from ..errors import CosimError, printable
 from .log_writer import FoxgloveChannels, encode_messages, live_view_serving
 from .publish import Publisher
@@ -36,6 +45,11 @@ STOP_TIMEOUT = 2.0
 """s the server may take to close its connections at the end of the run; a viewer that does not take its close by
 then (it stopped reading) is dropped with one warning line, and the run ends (issue 25: a stalled viewer held a
 10 s run 51 s, through SIGINT, and SIGTERM then lost the finished log)."""
+SETTLE_S = 0.2
+"""s the wait goes on after a viewer's last subscription: the server announces the channels of one subscribe request
+one by one, so the first announced is not yet all of them (a measured 1 in 3 got the first sample on one channel of
+five without this)."""
+_POLL_S = 0.02  # s between two looks at the stop request while waiting
 
 
 def parse_address(text: str | int | None) -> tuple[str, int]:
@@ -68,20 +82,28 @@ def _check_free(host: str, port: int) -> None:
 class _ContextSink(FoxgloveChannels):
     """A publisher's sink logging into a ``foxglove.Context`` (see :class:`cosim.observers.publish.Publisher`)."""
 
-    def __init__(self, context) -> None:
+    def __init__(self, context, first=None) -> None:
         self._context = context
         self._channels: list = []
         self._log: dict[int, object] = {}
         self._layouts: dict = {}
+        self._first = first  # called once before the first message is sent: every channel is declared by then
+
+    def _sending(self) -> None:
+        first, self._first = self._first, None
+        first()
 
     def blocks(self, offset_ns: int, blocks) -> None:
-
+        if self._first is not None:
+            self._sending()
         for cid, stamps, data, skip in blocks:
             log = self._log[cid]
             for t, message in zip(*encode_messages(self._layouts[cid], stamps, data, skip, offset_ns)):
                 log(message, t)
 
     def message(self, cid: int, log_time: int, data: bytes) -> None:
+        if self._first is not None:
+            self._sending()
         self._log[cid](data, log_time)
 
     def close(self) -> None:
@@ -153,14 +175,21 @@ class LiveView:
     """
 
     def __init__(self, publisher: Publisher, port: int = DEFAULT_PORT, host: str = "127.0.0.1",
-                 name: str = "delta-cosim"):
+                 name: str = "delta-cosim", wait: float | None = None):
         _check_free(host, port)
+        if wait is not None and not wait > 0:
+            raise CosimError(f"--live-wait: expected a number of seconds > 0, got {wait!r}")
         self.publisher = publisher
         self.host = host
         self.port = port
         self.name = name
+        self.wait = wait
+        self.stop_request: StopRequest | None = None  # the run's: a stop signal ends the wait for a viewer
+        self.waited: float | None = None  # s waited for a viewer (None: no wait); ``viewed``: whether one came
+        self.viewed = False
         self.server = None
         self._sink: _ContextSink | None = None
+        self._subscribed: float | None = None  # monotonic time of the last subscription seen while waiting
 
     @property
     def url(self) -> str:
@@ -176,17 +205,63 @@ class LiveView:
         try:
             self.server = foxglove.start_server(name=self.name, host=self.host, port=self.port,
                                                 capabilities=[Capability.Time], context=context,
-                                                message_backlog_size=BACKLOG_MESSAGES)
+                                                message_backlog_size=BACKLOG_MESSAGES,
+                                                server_listener=None if self.wait is None else self._listener())
         except RuntimeError as exc:
             live_view_serving(False)
             self._messages.detach()
             raise CosimError(f"--live: cannot serve on {self.host}:{self.port}: {exc}") from None
         self.port = self.server.port
-        self._sink = _ContextSink(context)
+        self._sink = _ContextSink(context, None if self.wait is None else lambda: self._wait_for_viewer(rt))
         self.publisher.attach(self._sink)
         self._offset = self.publisher.origin(rt)
         self._next_time = rt.now_ns
+        self._grid = rt.grid
         self.server.broadcast_time(rt.now_ns + self._offset)
+
+    def _listener(self):
+        """The server's listener while ``--live-wait`` waits: notes each viewer's subscription."""
+        from foxglove.websocket import ServerListener  # lazy: --help loads this module without it
+
+        view = self
+
+        class Subscriptions(ServerListener):
+            def on_subscribe(self, client, channel) -> None:
+                view._subscribed = time.monotonic()
+
+        return Subscriptions()
+
+    def _wait_for_viewer(self, rt: Execution) -> None:
+        """Hold the run until a viewer has subscribed (and :data:`SETTLE_S` passed since its last subscription), at
+        most :attr:`wait` s; the run's phase meanwhile ``waiting``. Called by the sink before the first message."""
+        phase = rt.current[2]
+        rt.current[2] = WAITING
+        start = time.monotonic()
+        try:
+            while True:
+                now = time.monotonic()
+                seen = self._subscribed
+                if seen is not None and now - seen >= SETTLE_S:
+                    self.viewed = True
+                    break
+                if seen is None and now - start >= self.wait:
+                    break
+                if self.stop_request is not None and self.stop_request.requested:
+                    raise self.stop_request.interrupted()
+                time.sleep(_POLL_S)
+        finally:
+            rt.current[2] = phase
+            self.waited = time.monotonic() - start
+        self.server.broadcast_time(rt.now_ns + self._offset)  # the viewer's clock from the start
+
+    def loop_blocks(self) -> Blocks:
+        """The master's loop in C may run blocks of macro steps with this view (:class:`cosim.engine.cloop.Blocks`):
+        each ends at the step where the viewers' clock is due."""
+        return Blocks(lambda k: steps_to(self._grid, k, self._next_time), self._block_stepped)
+
+    def _block_stepped(self, k: int, n: int) -> None:
+        if n:
+            self.stepped(k + n - 1, self._grid.t_ns(k + n), ())
 
     def stepped(self, k: int, t_ns: int, active: Sequence[int]) -> None:
         if t_ns >= self._next_time:
@@ -219,4 +294,8 @@ class LiveView:
                   f"{STOP_TIMEOUT:g} s (it stopped reading): dropped", file=sys.stderr, flush=True)
 
     def summary(self) -> str:
-        return f"live view served on {self.url} (Foxglove WebSocket, subprotocol foxglove.sdk.v1)"
+        text = f"live view served on {self.url} (Foxglove WebSocket, subprotocol foxglove.sdk.v1)"
+        if self.waited is not None:
+            text += (f"; the run waited {self.waited:.3g} s for its first viewer" if self.viewed else
+                     f"; no viewer subscribed within {self.wait:g} s (--live-wait): the run went on without one")
+        return text

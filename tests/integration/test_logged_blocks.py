@@ -41,9 +41,10 @@ def _messages(path: Path) -> tuple[dict, list]:
     return channels, messages
 
 
-def _logged(scenario, out: Path, monkeypatch, *, in_c: bool) -> list[int]:
-    """Run ``scenario`` logged to ``out`` (simulation stamps: comparable logs) with its loop in C or in Python; the
-    macro steps of each block the loop in C ran with the log's rows copied in C."""
+def _logged(scenario, out: Path, monkeypatch, *, in_c: bool, live: bool = False) -> list[int]:
+    """Run ``scenario`` logged to ``out`` (simulation stamps: comparable logs) with its loop in C or in Python, and
+    with a live view (a free port) when ``live``; the macro steps of each block the loop in C ran with the log's rows
+    copied in C."""
     blocks: list[int] = []
     with monkeypatch.context() as m:
         if in_c:
@@ -58,20 +59,23 @@ def _logged(scenario, out: Path, monkeypatch, *, in_c: bool) -> list[int]:
             m.setattr(cloop.CLoop, "run", spy)
         else:
             m.setattr(cloop, "make", lambda ex: None)
-        result = run_scenario(scenario, RunOptions(out=out, log=True, stamps="simulation"))
+        result = run_scenario(scenario, RunOptions(out=out, log=True, stamps="simulation",
+                                                   live=("127.0.0.1", 0) if live else None))
     assert result.status == "completed", (result.status, result.message)
     return blocks
 
 
-@pytest.mark.parametrize("layout", ["samples", "blocks"])
-def test_a_logged_run_in_c_blocks_writes_the_python_loops_log(tmp_path, monkeypatch, layout):
-    """helix_ctc_analytic on native FMUs for 0.457 s (a stop between two scenes): its 3D scene at 30 Hz ends the
-    blocks; every channel's messages are those of the Python loop, byte for byte."""
+@pytest.mark.parametrize("layout, live", [("samples", False), ("blocks", False), ("samples", True)],
+                         ids=["samples", "blocks", "samples and a live view"])
+def test_a_logged_run_in_c_blocks_writes_the_python_loops_log(tmp_path, monkeypatch, layout, live):
+    """helix_ctc_analytic on native FMUs for 0.457 s (a stop between two scenes): its 3D scene at 30 Hz (and the live
+    view's clock, every 33 ms) ends the blocks; every channel's messages are those of the Python loop, byte for
+    byte."""
     overrides = {("fmus",): "native", ("parallel",): "off", ("time", "stop"): 0.457, ("logging", "layout"): layout}
     scenario = load_scenario(ROOT / "scenarios" / "helix_ctc_analytic.yaml", overrides)
-    blocks = _logged(scenario, tmp_path / "c.mcap", monkeypatch, in_c=True)
+    blocks = _logged(scenario, tmp_path / "c.mcap", monkeypatch, in_c=True, live=live)
     assert sum(blocks) == 457 and max(blocks) > 30, f"blocks the loop in C ran with the rows: {blocks}"
-    _logged(scenario, tmp_path / "py.mcap", monkeypatch, in_c=False)
+    _logged(scenario, tmp_path / "py.mcap", monkeypatch, in_c=False, live=live)
     c_channels, c_messages = _messages(tmp_path / "c.mcap")
     py_channels, py_messages = _messages(tmp_path / "py.mcap")
     assert c_channels == py_channels, (sorted(c_channels), sorted(py_channels))
