@@ -48,9 +48,6 @@ without arguments that returns one."""
 class FmuSource(Protocol):
     """How components given as ``fmu: NAME`` get their FMU file."""
 
-    def names(self) -> Sequence[str]:
-        """Every name ``fmu:`` may take."""
-
     def key(self, scenario: Any, name: str) -> Hashable:
         """What decides the file for ``name`` in ``scenario`` (the same key: the same file; a sweep builds each
         key once)."""

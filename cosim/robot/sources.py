@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import sys
 from pathlib import Path
-from typing import Any, Sequence
+from typing import Any
 
 from delta.errors import DeltaError
 from fmus import registry
@@ -20,9 +20,6 @@ __all__ = ["RegistrySource"]
 
 class RegistrySource:
     """:class:`cosim.engine.plugins.FmuSource` of our FMUs: a key is (FMU name, native, FMI version)."""
-
-    def names(self) -> Sequence[str]:
-        return registry.names()
 
     def key(self, scenario: Scenario, name: str) -> tuple[str, bool, int]:
         """The native build where the scenario asks for it (``fmus: native``, or ``auto`` with a C compiler on this
