@@ -94,7 +94,8 @@ class RunOptions:
     first grid point at or after it), to ``checkpoint_out`` (default: beside the log, suffix ``.ckpt``);
     ``resume``: a :class:`~cosim.io.checkpoint.Checkpoint` to continue (the scenario must be the one it holds,
     :func:`resumed_scenario`), with ``resume_sets`` (``component.variable: value``) set at its time as an event;
-    ``command``: the command line, written into a checkpoint.
+    ``command``: the command line, written into a checkpoint; ``live_wait``: with ``live``, hold the run before it
+    sends anything until a viewer subscribes, at most this many s (:mod:`cosim.observers.live`).
     """
 
     out: str | Path | None = None
@@ -112,6 +113,7 @@ class RunOptions:
     resume: Any = None
     resume_sets: Mapping[str, Any] | None = None
     command: str = ""
+    live_wait: float | None = None
 
 
 def progress_bar():
@@ -138,7 +140,7 @@ def _publishing(scenario: Scenario, mcap_path: Path | None, options: RunOptions)
     recorder = None
     if options.live is not None:  # first: a port in use fails before the log file is opened
         host, port = options.live
-        sinks.append(LiveView(publisher, port, host))
+        sinks.append(LiveView(publisher, port, host, wait=options.live_wait))
     if mcap_path is not None:
         recorder = McapRecorder(mcap_path, publisher, scenario, scenario.source, scenario.logging.flush_interval)
         sinks.append(recorder)
@@ -473,6 +475,9 @@ class _Loop:
         t_loop_end: float | None = None
         bar = None
         stop = StopRequest()
+        for o in ex.observers:  # --live-wait: a stop signal ends the live view's wait for a viewer
+            if isinstance(o, LiveView):
+                o.stop_request = stop
         try:
             if ahead:  # proxies take the feed-forward components' places, on the same buffers
                 self.offload = Offload(ex, ahead, [ex.slaves[c] for c in ahead])

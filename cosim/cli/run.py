@@ -14,7 +14,10 @@ from pathlib import Path
 from ..errors import CosimError, number_option
 from .common import EXIT_CHECK_FAILED, EXIT_OK, NUMBER, emit
 
-__all__ = ["register"]
+__all__ = ["LIVE_WAIT_S", "register"]
+
+LIVE_WAIT_S = 60.0
+"""s ``run --live-wait`` waits at most for a viewer when no SECONDS are given; then the run goes on without one."""
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -38,6 +41,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--live", nargs="?", const="8765", default=None, metavar="PORT",
                    help="serve the run over the Foxglove WebSocket protocol on PORT or HOST:PORT (default 8765, "
                         "localhost): the log's channels and 3D scene while it runs; the log is still written")
+    p.add_argument("--live-wait", nargs="?", const=LIVE_WAIT_S, type=number_option(gt=0), metavar="SECONDS",
+                   help="with --live: start stepping once a viewer has subscribed, so it misses nothing; at most "
+                        f"SECONDS (default {LIVE_WAIT_S:g}), then the run goes on without one")
     p.add_argument("--realtime", nargs="?", const="1", default=None, metavar="FACTOR",
                    help="pace simulated time to the wall clock, FACTOR simulated s per wall s (default 1); "
                         "the summary gives the achieved factor and the lag")
@@ -159,6 +165,8 @@ def _cmd_run(args: argparse.Namespace) -> int:
         from ..observers.live import parse_address
 
         live = parse_address(args.live)
+    elif args.live_wait is not None:
+        raise CosimError("--live-wait waits for a viewer of the live view: it needs --live [PORT]")
     if args.realtime is not None:
         from ..observers.realtime import parse_factor
 
@@ -174,7 +182,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
             res = run_scenario(scenario, out=args.out, log=False if args.no_log else None,
                                progress=not (args.quiet or args.json), live=live, realtime=realtime,
                                stamps="simulation" if args.sim_stamps else "wall", checkpoint_at=args.checkpoint_at,
-                               checkpoint_out=args.checkpoint_out, command=command)
+                               checkpoint_out=args.checkpoint_out, command=command, live_wait=args.live_wait)
     if args.json:
         print(json.dumps(res.as_dict(), indent=2))
     elif not args.quiet:
@@ -208,7 +216,8 @@ def _resume_run(args: argparse.Namespace, live, realtime, command: str):
     return run_scenario(scenario, out=out, log=False if args.no_log else None,
                         progress=not (args.quiet or args.json), live=live, realtime=realtime,
                         stamps="simulation" if args.sim_stamps else "wall", resume=checkpoint, resume_sets=sets,
-                        checkpoint_at=args.checkpoint_at, checkpoint_out=args.checkpoint_out, command=command)
+                        checkpoint_at=args.checkpoint_at, checkpoint_out=args.checkpoint_out, command=command,
+                        live_wait=args.live_wait)
 
 
 def _cmd_check(args: argparse.Namespace) -> int:

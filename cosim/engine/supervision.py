@@ -32,12 +32,15 @@ from typing import Any, Callable
 from .. import procs
 from ..errors import STOP_SIGNALS, printable
 
-__all__ = ["Record", "supervise", "contained", "record", "finished", "command_pid", "ENABLED", "MASTER", "PHASES"]
+__all__ = ["Record", "supervise", "contained", "record", "finished", "command_pid", "ENABLED", "MASTER", "PHASES",
+           "WAITING"]
 
 MASTER = -1
 """``current[0]`` when no component has the turn (the master between turns, its observers)."""
-PHASES = ("initialization", "step", "termination")
-"""``current[2]``: the phase of the run, by index."""
+PHASES = ("initialization", "step", "termination", "waiting")
+"""``current[2]``: the phase of the run, by index; ``waiting``: the run waits on purpose before its first step (for a
+live view's first viewer, ``run --live-wait``), which the watchdogs take for progress, not a stall."""
+WAITING = PHASES.index("waiting")
 
 ENABLED = False
 """Set by ``python -m cosim`` (never by a library user's process, which must not be forked)."""
@@ -241,8 +244,8 @@ def _watch(pid: int, rec: Record, stopped_at: list[float], wake: int | None = No
         if done:
             return status, None
         now = time.monotonic()
-        state = tuple(rec.current[:4])  # component, time, phase, steps: any change is progress
-        if state != seen:
+        state = tuple(rec.current[:4])  # component, time, phase, steps: any change is progress, and a wait on purpose
+        if state != seen or state[2] == WAITING:
             seen, since = state, now
         budget = rec.info().get("watchdog_s")
         reason = None

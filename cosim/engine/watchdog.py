@@ -37,7 +37,7 @@ from .. import procs
 from ..errors import Interrupted, StallError, exit_now, exit_status, exit_text
 from . import supervision
 from .offload import Proxy
-from .supervision import MASTER, PHASES
+from .supervision import MASTER, PHASES, WAITING
 
 __all__ = ["Watchdog", "GRACE_S"]
 
@@ -132,7 +132,7 @@ class Watchdog:
             if self._done.is_set():
                 return
             k = self.ex.k_done
-            if k != last_k:
+            if k != last_k or self.ex.current[2] == WAITING:  # a step done, or a wait on purpose (run --live-wait)
                 last_k, since = k, now
             if signum is not None and now - signalled_at > self.grace and now - since > self.grace:
                 component, t, where = self._where()

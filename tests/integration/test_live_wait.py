@@ -1,0 +1,128 @@
+"""``run --live --live-wait``: the run holds before it sends anything until a viewer subscribes, so a viewer that
+connects after the run started gets every message of the log; the wait is bounded, a stop signal ends it as it ends
+a step, the watchdog and the supervisor do not take it for a stall."""
+
+from __future__ import annotations
+
+import json
+import signal
+import socket
+import struct
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+from cli_helpers import free_port
+
+from cosim.cli import main
+
+ROOT = Path(__file__).resolve().parents[2]
+SCENARIO = ROOT / "scenarios" / "helix_ctc_analytic.yaml"
+pytestmark = pytest.mark.integration
+
+
+def _serving(port: int, proc: subprocess.Popen, timeout: float = 60.0) -> None:
+    """Return once something accepts connections on ``port`` (the run's server is up); fail if the run ended."""
+    deadline = time.monotonic() + timeout
+    while True:
+        try:
+            socket.create_connection(("127.0.0.1", port), timeout=1).close()
+            return
+        except OSError:
+            assert proc.poll() is None, f"the run ended (exit {proc.returncode}) before it served"
+            assert time.monotonic() < deadline, "the live view did not start"
+            time.sleep(0.05)
+
+
+def _logged(path: Path, topic: str) -> list[tuple[int, bytes]]:
+    from mcap.reader import make_reader
+
+    with open(path, "rb") as f:
+        return [(m.log_time, bytes(m.data)) for _, _, m in make_reader(f).iter_messages(topics=[topic])]
+
+
+def test_a_late_viewer_gets_every_message_of_the_log(tmp_path):
+    """The viewer connects well after the run started (longer than the run's watchdog budget plus the supervisor's
+    grace: a wait taken for a stall would have been killed), subscribes to /plant only and reads until the run
+    closes it: it received exactly the log's /plant messages, the sample at t = 0 first."""
+    from websockets.sync.client import connect
+
+    port, out = free_port(), tmp_path / "waited.mcap"
+    proc = subprocess.Popen([sys.executable, "-m", "cosim", "run", str(SCENARIO), "--stop-time", "0.5", "--live",
+                             str(port), "--live-wait", "60", "--watchdog", "1", "--realtime", "--out", str(out)],
+                            cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    got: list[tuple[int, bytes]] = []
+    try:
+        _serving(port, proc)
+        time.sleep(6.0)  # watchdog 1 s; the supervisor kills after the budget plus twice its 2 s grace
+        assert proc.poll() is None, f"the waiting run ended: {proc.communicate()}"
+        with connect(f"ws://127.0.0.1:{port}", subprotocols=["foxglove.sdk.v1"], max_size=None,
+                     open_timeout=10) as ws:
+            sub = None
+            while True:
+                try:
+                    raw = ws.recv(timeout=30)
+                except Exception:  # noqa: BLE001 - the run ended and closed the connection
+                    break
+                if isinstance(raw, str):
+                    msg = json.loads(raw)
+                    if msg["op"] == "advertise" and sub is None:
+                        plant = next(ch for ch in msg["channels"] if ch["topic"] == "/plant")
+                        sub = 7
+                        ws.send(json.dumps({"op": "subscribe", "subscriptions": [{"id": sub, "channelId": plant["id"]}]}))
+                elif raw[0] == 0x01:
+                    sub_id, log_time = struct.unpack_from("<IQ", raw, 1)
+                    assert sub_id == sub
+                    got.append((log_time, bytes(raw[13:])))
+        stdout, err = proc.communicate(timeout=60)
+    finally:
+        proc.kill()
+    assert proc.returncode == 0, err
+    assert "the run waited" in stdout and "for its first viewer" in stdout, stdout
+    logged = _logged(out, "/plant")
+    assert len(logged) == 501 and json.loads(logged[0][1])["t"] == 0.0, (len(logged), logged[:1])
+    assert got and json.loads(got[0][1])["t"] == 0.0, f"the viewer's first /plant sample: {got[:1]}"
+    assert got == logged, f"viewer received {len(got)} /plant messages, the log holds {len(logged)}"
+
+
+def test_no_viewer_within_the_bound_the_run_goes_on(tmp_path):
+    port, out = free_port(), tmp_path / "alone.mcap"
+    t0 = time.monotonic()
+    r = subprocess.run([sys.executable, "-m", "cosim", "run", str(SCENARIO), "--stop-time", "0.2", "--live", str(port),
+                        "--live-wait", "1.5", "--out", str(out)], cwd=ROOT, capture_output=True, text=True,
+                       timeout=120)
+    wall = time.monotonic() - t0
+    assert r.returncode == 0, r.stderr
+    assert "no viewer subscribed within 1.5 s (--live-wait): the run went on without one" in r.stdout, r.stdout
+    assert wall >= 1.5 and len(_logged(out, "/plant")) == 201, wall
+
+
+@pytest.mark.parametrize("signum", [signal.SIGTERM, signal.SIGINT])
+def test_a_stop_signal_ends_the_wait_and_the_log_is_finished(tmp_path, signum):
+    from cosim.io.runlog import read_run
+
+    port, out = free_port(), tmp_path / "stopped.mcap"
+    proc = subprocess.Popen([sys.executable, "-m", "cosim", "run", str(SCENARIO), "--stop-time", "0.5", "--live",
+                             str(port), "--live-wait", "--out", str(out)],
+                            cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        _serving(port, proc)
+        time.sleep(0.5)
+        t0 = time.monotonic()
+        proc.send_signal(signum)
+        _, err = proc.communicate(timeout=30)
+        stopped = time.monotonic() - t0
+    finally:
+        proc.kill()
+    assert proc.returncode == 128 + signum, (proc.returncode, err)
+    assert stopped < 5, f"{stopped:.1f} s to stop"
+    assert out.exists() and not out.with_name(out.name + ".partial").exists(), sorted(tmp_path.iterdir())
+    assert read_run(out).status == "interrupted"
+
+
+def test_live_wait_needs_live(capsys):
+    assert main(["run", str(SCENARIO), "--stop-time", "0.01", "--no-log", "--live-wait", "5"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err == "error: --live-wait waits for a viewer of the live view: it needs --live [PORT]", err
