@@ -283,25 +283,24 @@ def thread(target: Callable[..., Any], *args: Any, name: str) -> threading.Threa
     return t
 
 
-def open_fd(fd: int) -> bool:
-    """Whether descriptor ``fd`` is open: False once something closed it behind its owner's back (a component that
-    closes every descriptor it did not open, as a careless daemonising library does)."""
+def _unless_closed(op: Callable[[int], Any], fd: int) -> bool:
+    """``op(fd)``: True, or False when ``fd`` was closed behind its owner's back (EBADF)."""
     try:
-        os.fstat(fd)
+        op(fd)
     except OSError as exc:
         if exc.errno == errno.EBADF:
             return False
         raise
     return True
+
+
+def open_fd(fd: int) -> bool:
+    """Whether descriptor ``fd`` is open: False once something closed it behind its owner's back (a component that
+    closes every descriptor it did not open, as a careless daemonising library does)."""
+    return _unless_closed(os.fstat, fd)
 
 
 def close_fd(fd: int) -> bool:
     """Close descriptor ``fd`` at the end of its use: True, or False when it was already closed behind our back
-    (EBADF; the owner says so where it matters, see :func:`open_fd`)."""
-    try:
-        os.close(fd)
-    except OSError as exc:
-        if exc.errno == errno.EBADF:
-            return False
-        raise
-    return True
+    (the owner says so where it matters, see :func:`open_fd`)."""
+    return _unless_closed(os.close, fd)
