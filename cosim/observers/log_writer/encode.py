@@ -112,7 +112,7 @@ class BlockLayout:
 
 
 def encode_samples(layout: BlockLayout, stamps: list[int], data: bytes | list,
-                   skip: tuple[int, int] | None = None) -> list[bytes]:
+                   skip: tuple[int, int] | None = None, times: bytes | None = None) -> list[bytes]:
     """One message per sample at ``stamps`` (simulation ns): ``{"t": s, "<key>": value, ...}``, byte for byte
     what ``orjson.dumps`` writes of that dict (the messages of logs written before blocks).
 
@@ -120,18 +120,19 @@ def encode_samples(layout: BlockLayout, stamps: list[int], data: bytes | list,
     are written by orjson, two calls (the times, the values), and joined with the keys
     (:meth:`BlockLayout.joints`) between them: by ``cosim_samples`` (``samples.c``, :func:`samples_helper`), one
     pass in C over orjson's output, else cut at their commas (a number, ``true``, ``false`` or ``null``
-    has none) and joined in Python. No dict and no Python loop per sample either way.
+    has none) and joined in Python. No dict and no Python loop per sample either way. ``times``: the times as
+    orjson writes them (:func:`times_json`), where the caller encodes several channels of the same stamps.
     """
-    times = [s * 1e-9 for s in stamps]
     if layout.fmt is None:
         keys = ("t", *layout.keys)
-        return [orjson.dumps(dict(zip(keys, (t, *values)))) for t, values in zip(times, data)]
+        return [orjson.dumps(dict(zip(keys, (s * 1e-9, *values)))) for s, values in zip(stamps, data)]
     n = len(stamps)
     flat = layout.rows_struct(n, skip).unpack(data)
     join = _samples_helper()
+    t_json = times_json(stamps) if times is None else times
     if join is None:
-        return _samples_py(layout, times, flat, n)
-    t_json, v_json = orjson.dumps(times), orjson.dumps(flat)
+        return _samples_py(layout, t_json, flat, n)
+    v_json = orjson.dumps(flat)
     joints, ends, fmi2 = layout.c_joints()
     width = len(flat) // n
     with _OUT_LOCK:  # the live view's thread and an in-process log share the buffer
@@ -176,13 +177,13 @@ def _samples_helper():
     return _SAMPLES_HELPER[0]
 
 
-def _samples_py(layout: BlockLayout, times: list[float], flat: tuple, n: int) -> list[bytes]:
+def _samples_py(layout: BlockLayout, t_json: bytes, flat: tuple, n: int) -> list[bytes]:
     """:func:`encode_samples`'s messages without the C helper: orjson's numbers cut at their commas, one list
     of them per element of the row, joined with the keys sample by sample."""
     width = len(flat) // n
     values = orjson.dumps(flat)[1:-1].split(b",")
     joints = layout.joints()
-    columns = [repeat(joints[0], n), orjson.dumps(times)[1:-1].split(b",")]
+    columns = [repeat(joints[0], n), t_json[1:-1].split(b",")]
     fmi2 = layout.fmi2_elements()
     for e in range(width):
         column = values[e::width]
@@ -221,6 +222,12 @@ def encode_block(layout: BlockLayout, stamps: list[int], data: bytes | list,
                 elements = [[v != 0 for v in el] for el in elements]
             msg[key] = list(zip(*elements))
     return orjson.dumps(msg)
+
+
+def times_json(stamps: list[int]) -> bytes:
+    """The ``"t"`` values (s) of samples at ``stamps`` (simulation ns) as a JSON array, as :func:`encode_samples`
+    writes them."""
+    return orjson.dumps([s * 1e-9 for s in stamps])
 
 
 def encode_messages(layout: BlockLayout, stamps: list[int], data: bytes | list, skip: tuple[int, int] | None,

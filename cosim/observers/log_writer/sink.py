@@ -19,7 +19,7 @@ from functools import partial
 from pathlib import Path
 from typing import Any
 
-from .encode import BlockLayout, encode_messages
+from .encode import BlockLayout, encode_messages, encode_samples, times_json
 
 __all__ = ["FoxgloveChannels", "LogSink", "WRITER_LOGGER", "os_reason"]
 
@@ -167,7 +167,19 @@ class LogSink(FoxgloveChannels):
 
     def blocks(self, offset_ns: int, blocks: list[tuple[int, list[int], bytes | list, Any]]) -> None:
         """Samples ``(cid, stamps, rows, skip)`` of component channels (see :func:`encode_messages`), in the
-        order of their log times."""
+        order of their log times (of one time, in the blocks' order)."""
+        first = blocks[0][1] if blocks else None
+        if len(blocks) > 1 and all(b[1] == first and self._layouts[b[0]].per_sample and self._layouts[b[0]].fmt
+                                   for b in blocks):  # the joint rows: one message per sample of each channel
+            t_json = times_json(first)  # written once for every channel
+            logs = [self._log[cid] for cid, _, _, _ in blocks]
+            datas = [encode_samples(self._layouts[cid], first, data, skip, t_json) for cid, _, data, skip in blocks]
+            for j, s in enumerate(first):
+                t = s + offset_ns
+                for log, d in zip(logs, datas):
+                    log(d[j], t)
+            self._check()
+            return
         logs, times, datas = [], [], []
         for cid, stamps, data, skip in blocks:
             t, d = encode_messages(self._layouts[cid], stamps, data, skip, offset_ns)
