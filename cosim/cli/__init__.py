@@ -27,12 +27,12 @@ from typing import Sequence
 from fmus import cli as fmus_cli
 
 from ..errors import EXIT_BAD_INPUT, STOP_SIGNALS, exit_status, exit_text, user_errors
-from . import calibrate, compare, export, report, robot, run, ssp, sweep
+from . import calibrate, compare, export, layout, report, robot, run, ssp, sweep
 from .common import EXIT_OK, Handler
 
 __all__ = ["COMMANDS", "build_parser", "main"]
 
-COMMANDS = (robot, run, compare, calibrate, report, export, ssp, sweep, fmus_cli)
+COMMANDS = (robot, run, compare, calibrate, report, export, layout, ssp, sweep, fmus_cli)
 """The command modules, each with ``register(subparsers)``, in the order ``--help`` lists their commands."""
 
 
