@@ -266,7 +266,7 @@ MAX_PARAMETER_FILE_BYTES = 64 * 2 ** 10
 """Bytes a file of values (``parameters:``) may hold (``calibrate --out`` writes a few hundred)."""
 
 
-def parameter_file_overrides(files: Any, base: Path, named_at: str, loc: tuple = ("parameters",)) -> Overrides:
+def parameter_file_overrides(files: Any, base: Path, named_at: str) -> Overrides:
     """The values of the files a scenario's ``parameters:`` key names (one path or a list; relative to ``base``, the
     scenario's folder), as overrides by dotted name (``plant.mass.payload: 0.3``, ``components.meas.offset: 0.21``,
     the names ``--set`` takes), in the files' order (a later file's value wins). ``named_at``: where the key was
