@@ -88,6 +88,10 @@ def _measure(args, rec: record.Recording) -> int:
         print(f"  {label:<30} best {min(loop[label]):.3f}  median {statistics.median(loop[label]):.3f}  "
               f"(whole command: median {statistics.median(whole[label]):.2f})")
     a, b = loop.values()
+    rec.put("this_loop_s", a)
+    rec.put("baseline_loop_s", b)
+    rec.put("ratio_best", min(a) / min(b))
+    rec.put("ratio_median", statistics.median(a) / statistics.median(b))
     print(f"  ratio this / baseline: best {min(a) / min(b):.3f}, median {statistics.median(a) / statistics.median(b):.3f}")
     return 0
 

@@ -105,6 +105,14 @@ def _measure(args, rec: record.Recording) -> int:
           f"(ratio {med(with_ck) / med(without_ck):.3f})")
     print(f"  resume to one step after it / a fresh run of one step: {med(resumes):.3f} s / {med(fresh):.3f} s "
           f"(ratio {med(resumes) / med(fresh):.3f})")
+    rec.put("write_ms", med(writes) * 1e3)
+    rec.put("bytes", ckpt.stat().st_size)
+    rec.put("loop_with_s", med(with_ck))
+    rec.put("loop_without_s", med(without_ck))
+    rec.put("loop_ratio", med(with_ck) / med(without_ck))
+    rec.put("resume_s", med(resumes))
+    rec.put("fresh_s", med(fresh))
+    rec.put("resume_ratio", med(resumes) / med(fresh))
 
     # state event: located by re-stepping, against a time event at the located time
     short = {**serial, ("time", "stop"): min(args.at, scenario.time.stop)}
@@ -128,6 +136,11 @@ def _measure(args, rec: record.Recording) -> int:
     print(f"  run with it / with a time event at that time: {med(located):.3f} s / {med(timed_ev):.3f} s "
           f"(ratio {med(located) / med(timed_ev):.3f}; while it is armed the system's state is saved every "
           f"{STATE_SAVE_INTERVAL} macro steps)")
+    rec.put("event_t_s", t_event)
+    rec.put("event_restarts", restarts)
+    rec.put("event_run_s", med(located))
+    rec.put("time_event_run_s", med(timed_ev))
+    rec.put("event_ratio", med(located) / med(timed_ev))
     return 0
 
 

@@ -71,10 +71,7 @@ def main() -> int:
     record.add_options(ap)
     args = ap.parse_args()
     with record.Recording(args, "exit_stress") as rec:
-        code = _measure(args, rec)
-        if code:
-            rec.discard()
-    return code
+        return _measure(args, rec)  # recorded with abnormal exits too: their count is what it measures
 
 
 def _measure(args, rec: record.Recording) -> int:
@@ -90,6 +87,10 @@ def _measure(args, rec: record.Recording) -> int:
     print(f"{args.runs} runs ({failures} ending in an error, {failures - sum(r[0].startswith('controller') for r in results)} "
           f"of them solver failures or end stops) in {time.perf_counter() - t0:.0f} s: "
           f"{len(abnormal)} abnormal exits")
+    rec.put("runs", args.runs)
+    rec.put("abnormal", len(abnormal))
+    rec.put("errors", failures)
+    rec.put("wall_s", time.perf_counter() - t0)
     return 1 if abnormal else 0
 
 

@@ -171,10 +171,14 @@ def _cell(table: Table, row, column: str, res: Result) -> str:
 def _verdict(row, res: Result) -> str:
     if row.met_if is None or res.transcribed:
         return ""
-    key, limit = row.met_if
-    if key not in res.doc["figures"]:
-        raise FiguresError(f"{res.path}: no figure {key!r} (the target check of row {row.key})")
-    return "met: " if res.doc["figures"][key] <= limit else "**not met**: "
+    key, op, limit = row.met_if if len(row.met_if) == 3 else (row.met_if[0], "<=", row.met_if[1])
+    value = res.doc["figures"]
+    for part in key.split("."):
+        if not isinstance(value, dict) or part not in value:
+            raise FiguresError(f"{res.path}: no figure {key!r} (the target check of row {row.key})")
+        value = value[part]
+    met = value <= limit if op == "<=" else value >= limit
+    return "met: " if met else "**not met**: "
 
 
 def render_table(table: Table, results: dict[str, Result]) -> str:

@@ -179,6 +179,7 @@ def _measure(args, rec: record.Recording) -> None:
     print(f"{'FMU':<26} {'FMI':>3} {'bytes':>6} {'floor':>6} {'get':>6} {'set':>6} {'ser+de':>7} {'doStep':>7} "
           f"{'(get+set)/doStep':>17}")
     worst = {"get": 0.0, "set": 0.0}
+    native: list[dict[str, float]] = []
     for fmi in args.fmi:
         for name in names:
             subject = Subject(registry.build(name, native=True, fmi=fmi), fmi)
@@ -187,9 +188,17 @@ def _measure(args, rec: record.Recording) -> None:
             finally:
                 subject.close()
             worst = {k: max(worst[k], f[k]) for k in worst}
+            native.append(f)
             print(f"{name:<26} {fmi:>3} {f['bytes']:>6.0f} {f['floor']:>6.0f} {f['get']:>6.0f} {f['set']:>6.0f} "
                   f"{f['serialize']:>7.0f} {f['step']:>7.0f} {(f['get'] + f['set']) / f['step']:>17.3f}")
     print(f"worst get {worst['get']:.0f} ns, worst set {worst['set']:.0f} ns (target < 1000 each)")
+    if native:
+        rec.put("native_fmus", len(native))
+        for key in ("floor", "get", "set"):  # us: [smallest, largest] over the FMU builds
+            rec.put(f"native_{key}_us", [min(f[key] for f in native) / 1e3, max(f[key] for f in native) / 1e3])
+        rec.put("native_worst_us", max(worst.values()) / 1e3)
+        ratios = [(f["get"] + f["set"]) / f["step"] for f in native]
+        rec.put("native_state_per_step", [min(ratios), max(ratios)])
     if args.python_fmu:
         subject = Subject(registry.build(args.python_fmu), 2, python=True)
         try:
@@ -201,6 +210,10 @@ def _measure(args, rec: record.Recording) -> None:
         finally:
             subject.close()
         ratio = (f["get"] + f["set"]) / f["step"]
+        rec.put("python_fmu", args.python_fmu)
+        rec.put("python_get_us", f["get"] / 1e3)
+        rec.put("python_set_us", f["set"] / 1e3)
+        rec.put("python_step_us", f["step"] / 1e3)
         print(f"python FMU {args.python_fmu} (FMI 2, pythonfmu): floor {f['floor']:.0f} ns, get {f['get']:.0f} ns, "
               f"set {f['set']:.0f} ns, doStep {f['step']:.0f} ns: (get+set)/doStep {ratio:.3f}")
 

@@ -137,6 +137,12 @@ def _measure(args, rec: record.Recording) -> None:
             if res.wall_time < best[key]:
                 best[key], shares[key], worker[key] = res.wall_time, dict(res.component_time), res.worker_time
     per_s = {k: v / args.stop_time for k, v in best.items()}
+    rec.put("loop_s", best)  # best of the rounds: "mono" the monolithic loop, the others the co-simulations
+    rec.put("whole_call_s", {k: v for k, v in whole.items() if k != "mono"})
+    rec.put("ratio_to_monolithic", {k: v / best["mono"] for k, v in best.items() if k != "mono"})
+    rec.put("rmse_m", rmse)
+    rec.put("monolithic_split", {k: v / best["mono"] for k, v in parts.items()})
+    rec.put("worker_s", worker)
     print(f"helix_ctc, {args.stop_time:g} s simulated at 1 ms, best of {args.rounds} alternated rounds")
     print(f"  monolithic loop (no FMI)      : {per_s['mono']:7.3f} s wall per simulated s "
           f"({best['mono']:.3f} s)  RMSE x/y/z {' / '.join(f'{e:.3e}' for e in rmse['mono'])} m")

@@ -64,10 +64,7 @@ def main() -> int:
     record.add_options(ap)
     args = ap.parse_args()
     with record.Recording(args, "long_run") as rec:
-        code = _measure(args, rec)
-        if code:
-            rec.discard()
-    return code
+        return _measure(args, rec)  # recorded even when a run failed: "complete" is what it measures
 
 
 def _measure(args, rec: record.Recording) -> int:
@@ -81,6 +78,9 @@ def _measure(args, rec: record.Recording) -> int:
             out = Path(tmp) / scenario.replace(".yaml", ".mcap") if args.log else None
             r = run(scenario, stop, out)
             ok &= r["exit"] == 0
+            rec.put(scenario.removesuffix(".yaml"), {"simulated_s": stop, "exit": r["exit"], "wall_s": r["wall"],
+                                                     "rt_factor": stop / r["wall"], "rss_start_mib": r["rss_start"],
+                                                     "rss_end_mib": r["rss_end"], "rss_max_mib": r["rss_max"]})
             print(f"{scenario:30s} {stop:9.0f}s {r['exit']:5d} {r['wall']:7.1f}s {stop / r['wall']:10.2f} "
                   f"{r['rss_start']:7.1f}MiB {r['rss_end']:6.1f}MiB {r['rss_max']:6.1f}MiB", flush=True)
             if r["exit"] != 0:

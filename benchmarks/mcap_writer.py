@@ -20,7 +20,7 @@ the run's macro steps (the overhead per simulated step) and by the messages. The
 is the same for every writer. Each writer runs ``--repeat`` times, interleaved; the median is
 reported.
 
-    python benchmarks/mcap_writer.py [RUN.mcap] [--repeat N]
+    python benchmarks/mcap_writer.py [RUN.mcap] [--repeat N] [--json FILE | --record]
 
 Without RUN.mcap, helix_ctc is run first into a temporary directory (about 5 s).
 """
@@ -150,6 +150,10 @@ WRITERS = {
     "foxglove-sdk (zstd 1)": lambda p, c, m: _foxglove(p, c, m, file_object=True, level=1),
     "foxglove-sdk (as log)": lambda p, c, m: _foxglove(p, c, m, file_object=False, level=1, threads=0),
 }
+# each writer's figures' name in the recorded JSON
+FIGURE_KEYS = {"mcap-sink (before)": "sink", "mcap-public": "public", "foxglove-sdk (path)": "sdk_path",
+               "foxglove-sdk (file)": "sdk_file", "foxglove-sdk (zstd 1)": "sdk_zstd1",
+               "foxglove-sdk (as log)": "sdk_as_log"}
 
 
 def _stream(path: Path) -> tuple[dict, list, int]:
@@ -202,6 +206,12 @@ def _measure(args, rec: record.Recording) -> None:
         print(f"{name:<22}{t / steps * 1e6:>9.2f}{t / len(messages) * 1e6:>12.2f}{base / t:>10.2f}x"
               f"{sizes[name] / 1e6:>9.2f}")
     print("(median of", args.repeat, "interleaved runs; 'vs before' > 1 means faster than the hand-packed sink)")
+    rec.put("messages", len(messages))
+    rec.put("steps", steps)
+    for name, ts in times.items():
+        t = statistics.median(ts)
+        rec.put(FIGURE_KEYS[name], {"us_per_step": t / steps * 1e6, "vs_before": base / t,
+                                    "file_mb": sizes[name] / 1e6})
 
 
 if __name__ == "__main__":

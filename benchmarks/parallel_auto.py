@@ -80,6 +80,8 @@ def _measure(args, rec: record.Recording) -> int:
                     worst_worker = max(worst_worker or 0.0, auto / off)
                 print(f"{build:8}{load:>9}{auto:10.3f}{off:10.3f}{auto / off:10.3f}   {note} "
                       f"(load average {before:.2f})")
+                rec.put(build + ("_spinner" if load == "yes" else ""),
+                        {"auto_s": auto, "off_s": off, "ratio": auto / off, "chose": note, "load_before": before})
         finally:
             if spinner is not None:
                 spinner.kill()

@@ -182,7 +182,7 @@ def main(argv: list[str] | None = None) -> None:
 def _measure(args, rec: record.Recording) -> None:
     """The benchmark proper (see the module docstring); its figures also go to ``rec``."""
     if args.in_run is not None:
-        in_run(args.in_run, args.steps, args.rounds)
+        in_run(args.in_run, args.steps, args.rounds, rec)
         return
 
     import multibody
@@ -220,13 +220,15 @@ def _measure(args, rec: record.Recording) -> None:
         verdict = "-" if target is None else f"{target:.2f} {'met' if ratio <= target else 'MISSED'}"
         print(f"{name:15s} {np.median(old):8.1f} ({min(old):6.1f}) {np.median(new):8.1f} ({min(new):6.1f}) "
               f"{ratio:7.2f} {verdict:>13s}")
+        rec.put(name.replace(" ", "_"), {"baseline_median_us": float(np.median(old)), "baseline_min_us": min(old),
+                                         "median_us": float(np.median(new)), "min_us": min(new), "ratio": ratio})
 
 
 TARGET_IN_RUN = 1.15
 """Issue 36 item 6: helix_ctc's plant component per step at most 1.15x the linear full plant's step here."""
 
 
-def in_run(stop: float, steps: int, rounds: int) -> None:
+def in_run(stop: float, steps: int, rounds: int, rec: record.Recording) -> None:
     """``--in-run`` (see the module docstring)."""
     import multibody
     from cosim.engine.scenario import load_scenario
@@ -253,6 +255,9 @@ def in_run(stop: float, steps: int, rounds: int) -> None:
                     sys.exit(f"helix_ctc did not complete: {res.status} {res.message}")
                 run.append(res.component_time["plant"] / res.steps * 1e6)
     ratio = float(np.median(run) / np.median(bench))
+    rec.put("bench_step_us", [min(bench), float(np.median(bench))])
+    rec.put("run_plant_us", [min(run), float(np.median(run))])
+    rec.put("ratio_medians", ratio)
     print(f"us per 1 ms step, median (min) of {rounds} alternated rounds: linear full plant ({steps} steps) "
           f"{np.median(bench):.1f} ({min(bench):.1f}); helix_ctc's plant component ({stop:g} s, serial, no log) "
           f"{np.median(run):.1f} ({min(run):.1f}); ratio {ratio:.2f}, target <= {TARGET_IN_RUN:g}: "

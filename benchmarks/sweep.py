@@ -154,7 +154,22 @@ def _measure(args, rec: record.Recording) -> int:
     print(f"speed-up {ts / tp:.2f}x over the serial loop (targets on 2 cores: 32 cases of 0.1 s 1.5x, 100 cases 1.7x); "
           f"{tq / tp:.2f}x over the serial loop prepared as the workers are (the second worker's gain); {stop:g} s "
           f"simulated per case; metrics identical; load average {os.getloadavg()[0]:.2f} after")
+    rec.put("cases", len(cases))
+    rec.put("case_stop_s", stop)
+    rec.put("serial_s", t_serial)  # every run, in order (the first extracts the FMUs: the slowest)
+    rec.put("prepared_s", t_prepared)
+    rec.put("sweep_s", t_sweep)
+    rec.put("serial_median_s", ts)
+    rec.put("prepared_median_s", tq)
+    rec.put("sweep_median_s", tp)
+    rec.put("speedup_median", ts / tp)
+    rec.put("speedup_prepared_median", tq / tp)
+    rec.put("speedup_runs", [a / b for a, b in zip(t_serial, t_sweep)])
+    rec.put("speedup_prepared_runs", [a / b for a, b in zip(t_prepared, t_sweep)])
+    rec.put("stepping_serial_s", statistics.median(loops_serial))
+    rec.put("stepping_worker_s", statistics.median(loops_worker))
     if t_warm:
+        rec.put("dask_warm_s", t_warm)
         tw = statistics.median(t_warm)
         print(f"on a running, warmed-up Dask cluster of {args.workers} workers (scheduler=, no start-up): "
               f"{tw:.2f} s, speed-up {ts / tw:.2f}x; metrics identical")

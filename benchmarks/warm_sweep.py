@@ -126,6 +126,13 @@ def _measure(args, rec: record.Recording) -> int:
     print(f"{'one case whole, s':28}{statistics.median(whole_cold):18.3f}{statistics.median(whole_warm):18.3f}")
     print(f"warm sweep {tc / tw:.2f}x faster than cold (cases' stepping {cc / cw:.2f}x); writing the checkpoint "
           f"(a run to {args.at:g} s, once) took {t_checkpoint:.2f} s; load average {os.getloadavg()[0]:.2f} after")
+    rec.put("cold_s", t_cold)
+    rec.put("warm_s", t_warm)
+    rec.put("cold_median_s", tc)
+    rec.put("warm_median_s", tw)
+    rec.put("speedup_median", tc / tw)
+    rec.put("stepping_speedup_median", cc / cw)
+    rec.put("checkpoint_run_s", t_checkpoint)
     if args.repeat > 1:
         print(f"best of {args.repeat}: cold {min(t_cold):.2f} s, warm {min(t_warm):.2f} s, "
               f"{min(t_cold) / min(t_warm):.2f}x")

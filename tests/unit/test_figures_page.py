@@ -135,3 +135,10 @@ def test_logged_run_json_plugs_into_its_row(copy):
                if line.startswith("| helix_ctc_analytic on native FMUs, every signal logged"))
     assert "**not met**: 10.0x (rounds 9.5-10.5x): the loop 0.250 s logged against 0.025 s" in row, row
     assert "`python benchmarks/logged_run.py --json x.json` | 2026-11-30, before (1.0, 1.0, 1.0)" in row, row
+
+
+def test_a_json_into_a_missing_folder_is_refused_before_the_run(tmp_path):
+    out = tmp_path / "nowhere" / "bench.json"
+    with pytest.raises(SystemExit) as exc:
+        record.Recording(_Args(out), "bench")
+    assert f"--json {out}: the folder {out.parent} does not exist" in str(exc.value), str(exc.value)
