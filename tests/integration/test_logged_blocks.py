@@ -16,9 +16,12 @@ from collections import defaultdict
 from pathlib import Path
 
 import pytest
+import yaml
+from cfmus import build
+from endings import ENDING_CASES, ending, expected_error
 
 from cosim.engine import cloop
-from cosim.engine.scenario import load_scenario
+from cosim.engine.scenario import load_scenario, parse_scenario
 from cosim.io.runlog import read_run
 from cosim.observers.log_writer import writer_forks
 from cosim.run import RunOptions, run_scenario
@@ -41,28 +44,37 @@ def _messages(path: Path) -> tuple[dict, list]:
     return channels, messages
 
 
-def _logged(scenario, out: Path, monkeypatch, *, in_c: bool, live: bool = False) -> list[int]:
-    """Run ``scenario`` logged to ``out`` (simulation stamps: comparable logs) with its loop in C or in Python, and
-    with a live view (a free port) when ``live``; the macro steps of each block the loop in C ran with the log's rows
-    copied in C."""
-    blocks: list[int] = []
+def _logged(scenario, out: Path, monkeypatch, *, in_c: bool, live: bool = False, blocks: list | None = None):
+    """The result of ``scenario`` logged to ``out`` (simulation stamps: comparable logs) with its loop in C or in
+    Python, and with a live view (a free port) when ``live``; ``blocks`` gets the macro steps of each block the loop in
+    C ran with the log's rows copied in C."""
+    blocks = [] if blocks is None else blocks
     with monkeypatch.context() as m:
         if in_c:
             run = cloop.CLoop.run
 
             def spy(self, k, n):
-                done = run(self, k, n)
-                if self.section is not None:
-                    blocks.append(done)
-                return done
+                try:
+                    return run(self, k, n)
+                finally:  # also the steps done before one that ended the run (raised)
+                    if self.section is not None:
+                        blocks.append(self.ex.k_done - k)
 
             m.setattr(cloop.CLoop, "run", spy)
         else:
             m.setattr(cloop, "make", lambda ex: None)
-        result = run_scenario(scenario, RunOptions(out=out, log=True, stamps="simulation",
-                                                   live=("127.0.0.1", 0) if live else None))
-    assert result.status == "completed", (result.status, result.message)
-    return blocks
+        return run_scenario(scenario, RunOptions(out=out, log=True, stamps="simulation",
+                                                 live=("127.0.0.1", 0) if live else None))
+
+
+def _same_log(c_log: Path, py_log: Path) -> None:
+    c_channels, c_messages = _messages(c_log)
+    py_channels, py_messages = _messages(py_log)
+    assert c_channels == py_channels, (sorted(c_channels), sorted(py_channels))
+    first = next((i for i, (a, b) in enumerate(zip(c_messages, py_messages)) if a != b), None)
+    assert first is None and len(c_messages) == len(py_messages), \
+        (first, c_messages[first] if first is not None else len(c_messages),
+         py_messages[first] if first is not None else len(py_messages))
 
 
 @pytest.mark.parametrize("layout, live", [("samples", False), ("blocks", False), ("samples", True)],
@@ -73,20 +85,41 @@ def test_a_logged_run_in_c_blocks_writes_the_python_loops_log(tmp_path, monkeypa
     byte."""
     overrides = {("fmus",): "native", ("parallel",): "off", ("time", "stop"): 0.457, ("logging", "layout"): layout}
     scenario = load_scenario(ROOT / "scenarios" / "helix_ctc_analytic.yaml", overrides)
-    blocks = _logged(scenario, tmp_path / "c.mcap", monkeypatch, in_c=True, live=live)
+    blocks: list[int] = []
+    _logged(scenario, tmp_path / "c.mcap", monkeypatch, in_c=True, live=live, blocks=blocks)
     assert sum(blocks) == 457 and max(blocks) > 30, f"blocks the loop in C ran with the rows: {blocks}"
     _logged(scenario, tmp_path / "py.mcap", monkeypatch, in_c=False, live=live)
-    c_channels, c_messages = _messages(tmp_path / "c.mcap")
-    py_channels, py_messages = _messages(tmp_path / "py.mcap")
-    assert c_channels == py_channels, (sorted(c_channels), sorted(py_channels))
     per_topic = defaultdict(int)
-    for topic, *_ in py_messages:
+    for topic, *_ in _messages(tmp_path / "py.mcap")[1]:
         per_topic[topic] += 1
     assert per_topic["/plant"] == (458 if layout == "samples" else 15), dict(per_topic)
-    first = next((i for i, (a, b) in enumerate(zip(c_messages, py_messages)) if a != b), None)
-    assert first is None and len(c_messages) == len(py_messages), \
-        (first, c_messages[first] if first is not None else len(c_messages),
-         py_messages[first] if first is not None else len(py_messages))
+    _same_log(tmp_path / "c.mcap", tmp_path / "py.mcap")
+
+
+NUMBERS_ONLY = ("non-finite output, numbers only", {"osc": ("VanDerPol", 2, {"mu": 1e6})}, [], 1.0, 1e-3)
+
+
+@pytest.mark.parametrize("what, components, connections, stop, step", [*ENDING_CASES, NUMBERS_ONLY])
+def test_a_logged_run_in_c_blocks_ends_and_logs_as_the_python_loop(tmp_path, monkeypatch, what, components,
+                                                                  connections, stop, step):
+    """A rejected step, an FMU's end of the simulation, a non-finite output inside a block: the same ending and the
+    same log (the steps before it, the last step's samples of an FMU's end) as the Python loop."""
+    comps = {name: {"path": str(build(model, fmi)), "parameters": params}
+             for name, (model, fmi, params) in components.items()}
+    doc = {"name": "ends", "components": comps, "connections": [{"from": a, "to": b} for a, b in connections],
+           "time": {"stop": stop, "step": step}, "parallel": "off"}
+    scenario = parse_scenario(yaml.safe_dump(doc, sort_keys=False), str(tmp_path / "ends.yaml"))
+    blocks: list[int] = []
+    c_end = ending(lambda: _logged(scenario, tmp_path / "c.mcap", monkeypatch, in_c=True, blocks=blocks))
+    py_end = ending(lambda: _logged(scenario, tmp_path / "py.mcap", monkeypatch, in_c=False))
+    assert c_end == py_end and (c_end[0][0] if c_end[0] else None) == expected_error(what), (c_end, py_end)
+    # rows copied in C; blocks of one step where a step (0.1 s) is longer than the period of the handovers (30 Hz);
+    # none where a component logs strings (Feedthrough: its values are read one by one, in Python after every step)
+    if all(model != "Feedthrough" for model, _, _ in components.values()):
+        assert blocks and (max(blocks) > 1 or step > 1 / 30), f"{what}: blocks the loop in C ran with rows: {blocks}"
+    else:
+        assert blocks == [], f"{what}: rows copied in C for a component of strings: {blocks}"
+    _same_log(tmp_path / "c.mcap", tmp_path / "py.mcap")
 
 
 CRASH = """
@@ -109,7 +142,8 @@ def test_a_crash_inside_a_block_keeps_every_step_before_it(write_scenario, tmp_p
     if not writer_forks():
         pytest.skip("the writer cannot be forked here: short runs log in the master")
     calm = load_scenario(write_scenario(CRASH.format(mode=0), "calm.yaml"))
-    blocks = _logged(calm, tmp_path / "calm.mcap", monkeypatch, in_c=True)
+    blocks: list[int] = []
+    _logged(calm, tmp_path / "calm.mcap", monkeypatch, in_c=True, blocks=blocks)
     # every step in C with its row copied there; blocks of 34 steps, fewer where the call's wall budget ran out (a
     # loaded machine), which hands no rows over: those since the step ending at 374 ms lie in the shared memory alone
     assert sum(blocks) == 500 and max(blocks) > 1, f"blocks with the rows copied in C: {blocks}"
