@@ -45,7 +45,11 @@ def test_a_live_run_serves_a_recording_components_outputs_as_the_log_holds_them(
            "--quiet"]
     proc = subprocess.Popen(cmd, cwd=tmp_path, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
     try:
-        channels, got, _ = asyncio.run(_watch(port, {"/meas", "/m"}, want=20, deadline=time.monotonic() + 90))
+        try:
+            channels, got, _ = asyncio.run(_watch(port, {"/meas", "/m"}, want=20, deadline=time.monotonic() + 90))
+        except OSError as exc:  # never served: the run's own error says why
+            proc.kill()
+            pytest.fail(f"no live view ({exc}): {proc.communicate(timeout=30)[1].decode()[-1000:]}")
         _, err = proc.communicate(timeout=120)
     finally:
         proc.kill()
