@@ -6,8 +6,11 @@ process), and with ``--no-log``, both through :func:`cosim.run.run_scenario`. Pr
 wall time of each (``RunResult.wall_time``), their ratio, and the whole call (start-up, FMU loading and the log's
 completion); then the ranges, the machine's load (``uptime``), and where a logged step's time goes:
 
+- the master's own logging work per step: a third run in each round, logged with a writer that drops every sample
+  and message it receives (a fork of the master with :meth:`LogSink.blocks` and :meth:`LogSink.message` made
+  no-ops, so the master never waits on it) against the unlogged run: the rows copied, the scene drawn, the blocks
+  pickled and written down the pipe;
 - the master's time blocked writing to the writer's pipe (the writer not keeping up), measured around its writes;
-- the master's own logging work per step: the logged loop minus the unlogged one minus that wait;
 - the writer process's throughput: the calls the master sent in one logged run (captured on the way) replayed
   through the writer's loop (:func:`cosim.observers.log_writer._serve`) in this process, with no master beside it:
   what the writer needs per step on a core of its own.
@@ -73,6 +76,21 @@ class PipeWatch:
         self.blocked, self.writes = 0.0, 0
 
 
+class WriterDrops:
+    """While entered, a forked writer drops the samples and messages it receives (the master's work unchanged)."""
+
+    def __enter__(self) -> "WriterDrops":
+        from cosim.observers.log_writer import sink
+
+        self._cls = sink.LogSink
+        self._saved = self._cls.blocks, self._cls.message
+        self._cls.blocks = self._cls.message = lambda *args: None
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self._cls.blocks, self._cls.message = self._saved
+
+
 def run(stop: float, log: bool, out: Path):
     from cosim.engine.scenario import load_scenario
     from cosim.run import run_scenario
@@ -127,34 +145,46 @@ def main() -> None:
     load_before = load()
     steps = round(args.stop_time / 1e-3)
     run(0.01, True, tmp / "warm.mcap")  # build and cache the FMUs outside the measurement
-    logged, unlogged, whole_l, whole_u, ratios, blocked = [], [], [], [], [], []
+    from cosim.observers.log_writer import writer_forks
+
+    forks = writer_forks()
+    logged, unlogged, whole_l, whole_u, ratios, blocked, work = [], [], [], [], [], [], []
     with PipeWatch() as watch:
         for r in range(args.rounds):
-            for log in ((True, False) if r % 2 == 0 else (False, True)):
+            kinds = ("logged", "unlogged", "dropped") if forks else ("logged", "unlogged")
+            for kind in (kinds if r % 2 == 0 else kinds[::-1]):
                 watch.reset()
-                watch.capture = log and r == 0
-                res, whole = run(args.stop_time, log, tmp / f"run_{r}.mcap")
+                watch.capture = kind == "logged" and r == 0
+                if kind == "dropped":
+                    with WriterDrops():
+                        dropped, _ = run(args.stop_time, True, tmp / f"dropped_{r}.mcap")
+                    continue
+                res, whole = run(args.stop_time, kind == "logged", tmp / f"run_{r}.mcap")
                 watch.capture = False
-                (logged if log else unlogged).append(res.wall_time)
-                (whole_l if log else whole_u).append(whole)
-                if log:
+                (logged if kind == "logged" else unlogged).append(res.wall_time)
+                (whole_l if kind == "logged" else whole_u).append(whole)
+                if kind == "logged":
                     blocked.append(watch.blocked)
             ratios.append(logged[-1] / unlogged[-1])
+            if forks:
+                work.append((dropped.wall_time - unlogged[-1]) * 1e6 / steps)
             print(f"round {r + 1}: loop logged {logged[-1]:.4f} s, unlogged {unlogged[-1]:.4f} s: {ratios[-1]:.2f}x; "
                   f"whole call {whole_l[-1]:.3f} / {whole_u[-1]:.3f} s; master blocked on the writer's pipe "
-                  f"{blocked[-1]:.4f} s", flush=True)
+                  f"{blocked[-1]:.4f} s" + (f"; logged with the writer dropping all {dropped.wall_time:.4f} s"
+                                            if forks else ""), flush=True)
         sent = list(watch.sent)
     writer_s = replay(sent, tmp / "replay.mcap", 3)
     load_after = load()
     us = 1e6 / steps
-    work = [(lg - blk - min(unlogged)) * us for lg, blk in zip(logged, blocked)]
     print(f"helix_ctc_analytic, native FMUs, serial, {args.stop_time:g} s at 1 ms ({steps} steps), {args.rounds} "
           f"alternated rounds; load before {load_before}, after {load_after}")
     print(f"loop: logged {span(logged, '.4f')} s, unlogged {span(unlogged, '.4f')} s; ratio {span(ratios, '.2f')}x "
           f"(target <= 2x)")
     print(f"whole call: logged {span(whole_l, '.3f')} s, unlogged {span(whole_u, '.3f')} s")
-    print(f"per step: unlogged {min(unlogged) * us:.2f} us; logged {min(logged) * us:.2f} us = master's own logging "
-          f"work {span(work, '.2f')} us + blocked on the writer's pipe {span([b * us for b in blocked], '.2f')} us")
+    print(f"per step: unlogged {span([u * us for u in unlogged], '.2f')} us, logged {span([g * us for g in logged], '.2f')}"
+          f" us; the master blocked on the writer's pipe {span([b * us for b in blocked], '.2f')} us")
+    print("the master's own logging work (logged with a writer that drops all, minus unlogged, same round): "
+          + (f"{span(work, '.2f')} us per step" if work else "not measured (the writer is not a fork here)"))
     print(f"writer process (its loop replayed alone, best of 3): {writer_s * us:.2f} us per step, "
           f"{writer_s:.3f} s for the run")
     if args.json is not None:
@@ -164,7 +194,7 @@ def main() -> None:
             "ratio min": min(ratios), "ratio max": max(ratios), "ratio median": statistics.median(ratios),
             "whole call logged s (median)": statistics.median(whole_l),
             "whole call unlogged s (median)": statistics.median(whole_u),
-            "master logging work us/step (median)": statistics.median(work),
+            "master logging work us/step (median)": statistics.median(work) if work else None,
             "blocked on writer pipe us/step (median)": statistics.median(blocked) * us,
             "writer process us/step": writer_s * us,
             "command": "python benchmarks/logged_run.py " + " ".join(sys.argv[1:]),

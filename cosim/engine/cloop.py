@@ -120,6 +120,7 @@ class CLoop:
         pairs = [p for o in sums for p in o.pairs]
         n_pairs = len(pairs)
         self.times, self.steps, self.ends = (c_double * BLOCK)(), (c_double * BLOCK)(), (c_int64 * BLOCK)()
+        self._held = (0, 0)  # the macro steps whose doubles the arrays hold: first, how many (_window)
         self.wall = (c_double * len(ex.slaves))()
         self.sq, self.mx, self.t_mx = (c_double * max(1, n_pairs))(), (c_double * max(1, n_pairs))(), \
             (c_int64 * max(1, n_pairs))()
@@ -146,8 +147,21 @@ class CLoop:
         self.call = proto(c_size_t, c_void_p, c_size_t, c_size_t, c_size_t)(ctypes.cast(f, c_void_p).value)
         self.ref = ctypes.byref(self.s)
 
+    def _window(self, k: int, n: int) -> int:
+        """Where macro step ``k`` lies in the arrays, macro steps ``k .. k + n - 1`` there: the grid's doubles are
+        computed for :data:`BLOCK` steps at a time (numpy's calls cost tens of us: a block that ends at each scene of
+        a logged run, every 34 steps, paid them every time), kept while the blocks fall inside them."""
+        w0, wn = self._held
+        if w0 <= k and k + n <= w0 + wn:
+            return k - w0
+        m = max(n, min(BLOCK, self.ex.grid.n_steps - k))
+        self._block(k, m)
+        self._held = (k, m)
+        return 0
+
     def _block(self, k: int, n: int) -> None:
         """The grid's doubles of macro steps ``k .. k + n - 1`` (as the Python loop gets them) into the arrays."""
+        self._held = (0, 0)
         grid = self.ex.grid
         times, steps = grid.chunk(k, k + n)
         self.times[:n], self.steps[:n] = times, steps
@@ -163,7 +177,7 @@ class CLoop:
         ex, sums = self.ex, self.sums
         if self.section is not None and self.section.count >= self.section.cap:
             raise RuntimeError("the log's rows are full: their observer did not hand them over")
-        self._block(k, n)
+        j0 = self._window(k, n)
         j = 0
         for o in sums:
             for p in range(len(o.pairs)):
@@ -173,7 +187,7 @@ class CLoop:
         wall[:] = ctime
         self.inside(True)
         try:
-            done = self.call(self.ref, k, 0, n)
+            done = self.call(self.ref, k, j0, n)
         finally:
             self.inside(False)
         ctime[:] = wall
@@ -190,7 +204,7 @@ class CLoop:
         for o in self.observers:  # the completed steps, also before a failed one (as the Python loop)
             o.stepped(k, done)
         if failed:
-            self.ended(k + done, done)
+            self.ended(k + done, j0 + done)
         return done
 
     def inside(self, yes: bool) -> None:
