@@ -106,7 +106,8 @@ class Result:
     def how(self, row_key: str, note: str = "") -> str:
         """The "how" cell: the command (with the spec's note), or a transcribed row's cell as the page gave it."""
         verbatim = self.doc.get("rows", {}).get(row_key, {}).get("how")
-        return verbatim if verbatim else f"`{self.command(row_key)}`" + (f" {note}" if note else "")
+        sep = "" if note[:1] in (",", ";") else " "
+        return verbatim if verbatim else f"`{self.command(row_key)}`" + (sep + note if note else "")
 
     def when(self, row_key: str | None = None) -> str:
         if self.transcribed:
@@ -195,7 +196,8 @@ def render_table(table: Table, results: dict[str, Result]) -> str:
     for row in table.rows:
         res = result(row.result or table.result)
         cells = [_cell(table, row, c, res) for c in table.columns]
-        first = next((i for i, c in enumerate(table.columns) if c not in row.cells), None)
+        first = (table.columns.index(row.met_column) if row.met_column else
+                 next((i for i, c in enumerate(table.columns) if c not in row.cells), None))
         if first is not None:
             cells[first] = _verdict(row, res) + cells[first]
         if per_row:
@@ -231,7 +233,20 @@ def render_page(text: str, results: dict[str, Result], page: Path) -> str:
     missing = [t.name for t in TABLES if t.name not in seen]
     if missing:
         raise FiguresError(f"{page}: no marker <!-- figures: NAME ... --> for {', '.join(missing)}")
+    _check_all_used(results)
     return "\n".join(out)
+
+
+def _check_all_used(results: dict[str, Result]) -> None:
+    """Every JSON, and every transcribed row in one, is rendered somewhere: no figure lies about unseen."""
+    used = {(r.result or t.result, r.key) for t in TABLES for r in t.rows}
+    for name, res in results.items():
+        if not any(n == name for n, _ in used):
+            raise FiguresError(f"{res.path}: no row of benchmarks/figures_spec.py renders it")
+        if res.transcribed:
+            extra = sorted(k for k in res.doc["rows"] if (name, k) not in used)
+            if extra:
+                raise FiguresError(f"{res.path}: transcribed rows no table renders: {', '.join(extra)}")
 
 
 def _changed_since(commit: str) -> list[str] | None:

@@ -142,3 +142,12 @@ def test_a_json_into_a_missing_folder_is_refused_before_the_run(tmp_path):
     with pytest.raises(SystemExit) as exc:
         record.Recording(_Args(out), "bench")
     assert f"--json {out}: the folder {out.parent} does not exist" in str(exc.value), str(exc.value)
+
+
+def test_a_json_no_row_renders_is_named(copy):
+    doc = {"source": "measured", "command": "python benchmarks/x.py", "date": "2026-11-29T00:00:00Z",
+           "machine": {"cores": 2, "load_start": [1, 1, 1], "load_end": [1, 1, 1]}, "figures": {"x": 1.0}}
+    (copy / "results" / "unrendered.json").write_text(json.dumps(doc), encoding="utf-8")
+    proc = _check(copy)
+    assert proc.returncode == 2 and "unrendered.json: no row of benchmarks/figures_spec.py renders it" in proc.stderr, \
+        proc.stderr
