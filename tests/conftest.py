@@ -1,4 +1,9 @@
-"""Shared test configuration: hypothesis profile, markers, the suite's temp folder."""
+"""Shared test configuration: hypothesis profile, markers, the suite's temp folder, how xdist shares out the tests.
+
+pyproject.toml runs the suite on pytest-xdist (``-n auto --dist loadgroup``): each worker is a process with its
+own session, so its own temp folder (:func:`_suite_temp_folder`), its own session fixtures and its own module
+fixtures. The tests of a module that share a module-scoped fixture (a built FMU set, a long reference run) are put
+in one group, which one worker runs; every other test goes to whichever worker is free."""
 
 import os
 import shutil
@@ -15,6 +20,30 @@ settings.register_profile(
 )
 settings.load_profile("default")
 
+
+def pytest_xdist_auto_num_workers(config):
+    """``-n auto``: a worker per CPU this process may use, but none when every argument names single tests
+    (``pytest tests/x.py::test_y``): starting workers would cost more than the test."""
+    args = config.invocation_params.args
+    named = [a for a in args if not str(a).startswith("-")]
+    if named and all("::" in str(a) for a in named):
+        return 0
+    return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1
+
+
+def pytest_itemcollected(item):
+    """Under ``--dist loadgroup``, the tests of a module that use a module- or class-scoped fixture form one
+    group (xdist_group named by the module), so that fixture is made once, in one worker, as in a serial run.
+    Marked as each test is collected: xdist names the groups in its own collection hook, which must see them."""
+    option = item.config.option
+    if getattr(option, "dist", "no") != "loadgroup" and not getattr(option, "loadgroup", False):
+        return
+    info = getattr(item, "_fixtureinfo", None)
+    if info is None or any(True for _ in item.iter_markers("xdist_group")):
+        return
+    if any(defs and defs[-1].scope in ("module", "class", "package")
+           for defs in (info.name2fixturedefs.get(name) for name in info.names_closure)):
+        item.add_marker(pytest.mark.xdist_group(item.nodeid.split("::")[0]))
 
 
 @pytest.fixture(scope="session", autouse=True)
