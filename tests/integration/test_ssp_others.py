@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import zipfile
 from pathlib import Path
+from xml.etree import ElementTree as ET
 
 import numpy as np
 import pytest
@@ -13,7 +14,8 @@ import pytest
 from cosim.cli import main
 from cosim.engine.overrides import apply_overrides
 from cosim.io.ssp.scenario import open_ssp
-from cosim.io.ssp.spec import SspError
+from cosim.io.ssp.spec import NS, SspError
+from cosim.io.ssp.write import export_ssp
 from cosim.observers.recorders import Probe
 from cosim.run import run_scenario
 
@@ -116,6 +118,39 @@ def test_names_with_spaces_and_dots_and_a_system_binding_with_a_mapping(tmp_path
     assert src[0] == 0.25, src  # the system-level offset reached the source
     # Jacobi (OSP's algorithm): the gain's step k reads the source's output of step k - 1
     np.testing.assert_allclose(gain[1:], 3.0 * src[:-1], rtol=0, atol=1e-15, err_msg="gain.y != k * src.y(t - h)")
+
+
+def test_names_no_ssp_tool_can_address_are_exported_as_identifiers_and_mapped_back(tmp_path, test_fmus):
+    """Our export of that system names its components as every SSP tool can address them (OMSimulator takes a
+    component's name as an identifier: `Ship.Engine` and `DP Controller` cannot be added there), and a
+    component named as the first part of one of its FMU's variables (`k`, the gain's parameter) gets `_` (its
+    Python API reads `k.x` of a component `k` as `x`); our import maps the names back, and the run is the same."""
+    ssp = _archive(tmp_path, test_fmus, system_extra=SYSTEM_BINDING,
+                   files={"resources/system.ssv": SSV, "resources/system.ssm": SSM},
+                   elements_extra='<ssd:Component name="k" source="resources/gain.fmu"><ssd:Connectors>'
+                                  '<ssd:Connector name="u" kind="input"><ssc:Real/></ssd:Connector>'
+                                  '<ssd:Connector name="y" kind="output"><ssc:Real/></ssd:Connector>'
+                                  '</ssd:Connectors></ssd:Component>',
+                   connections_extra='<ssd:Connection startElement="DP Controller" startConnector="y" '
+                                     'endElement="k" endConnector="u"/>')
+    signals = ["'Ship.Engine'.y", "DP Controller.y", "k.y"]
+    runs = []
+    for archive in (ssp, tmp_path / "exported.ssp"):
+        probe = Probe(signals)
+        with open_ssp(archive) as sc:
+            assert list(sc.components) == ["Ship.Engine", "DP Controller", "k"], list(sc.components)
+            if archive == ssp:
+                export_ssp(sc, tmp_path / "exported.ssp")
+            run_scenario(sc, out=archive.with_suffix(".mcap"), observers=[probe])
+        runs.append({s: probe.values[s] for s in signals})
+    with zipfile.ZipFile(tmp_path / "exported.ssp") as z:
+        ssd = ET.fromstring(z.read("SystemStructure.ssd"))
+    names = [c.get("name") for c in ssd.iterfind("ssd:System/ssd:Elements/ssd:Component", NS)]
+    assert names == ["Ship_Engine", "DP_Controller", "k_"], names
+    ends = {(c.get("startElement"), c.get("endElement")) for c in ssd.iterfind("ssd:System/ssd:Connections/*", NS)}
+    assert ends == {("Ship_Engine", "DP_Controller"), ("DP_Controller", "k_")}, ends
+    assert runs[1] == runs[0], runs
+    assert runs[0]["k.y"][-1] != 0.0, runs[0]  # the renamed component took part
 
 
 def test_the_algebraic_loop_of_an_ssp_is_refused_with_set_advice(tmp_path, test_fmus, capsys):
@@ -248,6 +283,29 @@ def test_a_system_binding_that_cannot_be_applied_is_one_line(tmp_path, test_fmus
 def test_each_unsupported_ssp_feature_is_one_line_naming_it(tmp_path, test_fmus, capsys, case):
     kwargs, expected = UNSUPPORTED[case]
     ssp = _archive(tmp_path, test_fmus, **kwargs)
+    rc, _, err = _cli(capsys, "run", ssp, "--no-log", "--quiet")
+    assert rc == 2 and len(err.strip().splitlines()) == 1 and expected in err and str(ssp) in err, err
+
+
+def _names_annotation(names_json: str) -> str:
+    return ('<ssd:Annotations><ssc:Annotation type="org.delta-cosim.engine.scenario"><dcs:Scenario '
+            f'xmlns:dcs="https://github.com/delta-cosim/ssp">{{"component_names": {names_json}}}</dcs:Scenario>'
+            '</ssc:Annotation></ssd:Annotations>')
+
+
+NAMES_ERRORS = {
+    "not_a_mapping": ('["DP Controller"]', "component_names must map the archive's component names to the "
+                                           "scenario's (strings), got a list"),
+    "no_such_component": ('{"Nope": "x"}', "component_names names 'Nope', which is no component of the system"),
+    "two_alike": ('{"Ship.Engine": "DP Controller"}', "component_names gives two components the name "
+                                                      "'DP Controller'"),
+}
+
+
+@pytest.mark.parametrize("case", list(NAMES_ERRORS))
+def test_component_names_that_cannot_be_mapped_back_are_one_line(tmp_path, test_fmus, capsys, case):
+    names_json, expected = NAMES_ERRORS[case]
+    ssp = _archive(tmp_path, test_fmus, system_extra=_names_annotation(names_json))
     rc, _, err = _cli(capsys, "run", ssp, "--no-log", "--quiet")
     assert rc == 2 and len(err.strip().splitlines()) == 1 and expected in err and str(ssp) in err, err
 

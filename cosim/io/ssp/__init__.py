@@ -4,9 +4,13 @@ Export (:func:`~cosim.io.ssp.write.export_ssp`, ``python -m cosim ssp export SCE
 scenario as an SSP archive that any SSP tool can run:
 
 - ``SystemStructure.ssd``: one ``ssd:Component`` per FMU (``source="resources/<name>.fmu"``,
-  ``implementation`` when the scenario fixes the interface), its scalar inputs and outputs as
-  connectors with kind, type and unit (``ssd:Units`` defines the units from the FMUs' own
-  UnitDefinitions), one ``ssd:Connection`` per scenario connection (element-wise, as written),
+  ``implementation`` when the scenario fixes the interface, except model exchange of an FMU that also
+  offers co-simulation: OMSimulator's Python API loses such a component's connections), its scalar
+  inputs and outputs and the parameters its .ssv sets as connectors with kind, type and unit
+  (``ssd:Units`` defines the units from the FMUs' own UnitDefinitions), one ``ssd:Connection`` per
+  scenario connection (element-wise, as written),
+  components and the system named as every SSP tool can address them (identifiers; a component's name is
+  never the first part of one of its FMU's variables), our annotation mapping the components' names back,
   the default experiment (``startTime``, ``stopTime``) with the base step in the OSP annotation
   libcosim reads (``osp:FixedStepAlgorithm baseStepSize``) and a component's step multiple as
   ``osp:StepSizeHint``;

@@ -37,6 +37,7 @@ def read_ssp(ssp: str | Path, workdir: str | Path) -> dict[str, Any]:
         system = _system(root, ssp)
         extras = _our_annotation(root, system, ssp)
         options = extras.pop("component_options", {}) or {}
+        _scenario_names(system, extras.pop("component_names", {}), ssp)
         ssd_units = unit_table(root, "ssd:Units/ssc:Unit", ssp, SSD_NAME)
         elements = system.find("ssd:Elements", NS)
         elements = list(elements) if elements is not None else []
@@ -115,6 +116,31 @@ def _our_annotation(root: ET.Element, system: ET.Element, ssp: Path) -> dict[str
                             f"({extras['logging']['out']!r}): an archive cannot choose where the log is written; "
                             "give --out")
     return extras
+
+
+def _scenario_names(system: ET.Element, renamed: dict[str, str], ssp: Path) -> None:
+    """Give the system's components and connections the scenario's names where our export wrote others (names
+    every SSP tool can address: :func:`cosim.io.ssp.write._archive_names`), from our annotation's
+    ``component_names`` (archive name -> scenario name)."""
+    if not renamed:
+        return
+    elements = system.findall("ssd:Elements/*", NS)
+    present = {el.get("name") for el in elements}
+    missing = sorted(set(renamed) - present)
+    if missing:
+        raise SspError(ssp, f"{SSD_NAME}: annotation {OUR_ANNOTATION}: component_names names {missing[0]!r}, which "
+                            f"is no component of the system ({', '.join(sorted(n for n in present if n))})")
+    final = [renamed.get(n, n) for n in present]
+    twice = next((n for n in final if final.count(n) > 1), None)
+    if twice is not None:
+        raise SspError(ssp, f"{SSD_NAME}: annotation {OUR_ANNOTATION}: component_names gives two components the "
+                            f"name {twice!r}")
+    for el in elements:
+        el.set("name", renamed.get(el.get("name"), el.get("name")))
+    for cn in system.iterfind("ssd:Connections/ssd:Connection", NS):
+        for side in ("startElement", "endElement"):
+            if cn.get(side) in renamed:
+                cn.set(side, renamed[cn.get(side)])
 
 
 def _same_units(cn: ET.Element, connectors: dict[str, dict[str, tuple]], units: dict[str, tuple], ssp: Path,
@@ -223,10 +249,14 @@ def _annotation(text: str, ssp: Path) -> dict[str, Any]:
         raise SspError(ssp, f"{where}: not a scenario's JSON ({str(exc)[:120]})") from None
     if not isinstance(data, dict):
         raise SspError(ssp, f"{where}: expected a JSON object, got {type(data).__name__}")
-    unknown = sorted(set(data) - {*EXTRAS, "name", "component_options"})
+    unknown = sorted(set(data) - {*EXTRAS, "name", "component_options", "component_names"})
     if unknown:
         raise SspError(ssp, f"{where}: unknown key {unknown[0]!r} (an archive's annotation carries "
-                            f"{', '.join(EXTRAS)}, name and component_options)")
+                            f"{', '.join(EXTRAS)}, name, component_options and component_names)")
+    renamed = data.get("component_names", {})
+    if not isinstance(renamed, dict) or not all(isinstance(v, str) and v for v in renamed.values()):
+        raise SspError(ssp, f"{where}: component_names must map the archive's component names to the scenario's "
+                            f"(strings), got {_shape(renamed)}")
     options = data.get("component_options", {})
     if not isinstance(options, dict) or not all(isinstance(v, dict) for v in options.values()):
         raise SspError(ssp, f"{where}: component_options must map component names to objects of their options, "

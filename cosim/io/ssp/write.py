@@ -7,6 +7,7 @@ by their prefixes literally) instead of relying on ElementTree's namespace regis
 from __future__ import annotations
 
 import json
+import re
 import zipfile
 from dataclasses import dataclass
 from pathlib import Path
@@ -72,12 +73,14 @@ def export_ssp(scenario: Scenario, out: str | Path) -> ExportReport:
                        "); SSP 1.0 has no such component: export a scenario whose components are all FMUs")
     plan, _ = prepare(scenario)
     names, infos = plan.names, plan.infos
+    arc_names = _archive_names(names, infos)
     t = scenario.time
+    system_name = _identifier(scenario.name)  # our annotation keeps the scenario's name
     root = _el(None, "ssd:SystemStructureDescription", {
         "xmlns:ssd": NS["ssd"], "xmlns:ssc": NS["ssc"], "xmlns:ssv": NS["ssv"], "xmlns:osp": NS["osp"],
-        "xmlns:dcs": NS["dcs"], "xmlns:oms": NS["oms"], "name": scenario.name, "version": "1.0",
+        "xmlns:dcs": NS["dcs"], "xmlns:oms": NS["oms"], "name": system_name, "version": "1.0",
         "description": scenario.description or None, "generationTool": "delta-cosim"})
-    system = _el(root, "ssd:System", {"name": scenario.name})
+    system = _el(root, "ssd:System", {"name": system_name})
     elements = _el(system, "ssd:Elements")
     # OMSimulator 3.0 types a system by its own annotation (SystemWC, its fixed-step master): without
     # it the import fails ("[NewSystem] internal error"). It reads only the first ssc:Annotation here.
@@ -91,11 +94,11 @@ def export_ssp(scenario: Scenario, out: str | Path) -> ExportReport:
     n_params: dict[str, int] = {}
     stems = _member_stems(names)
     for c, name in enumerate(names):
-        ssv = _component(elements, scenario, plan, c, stems[c], connected, out)
+        ssv = _component(elements, scenario, plan, c, (arc_names[c], stems[c]), connected, out)
         if ssv is not None:
             ssv_files[f"resources/{stems[c]}.ssv"] = ssv
         n_params[name] = len(_start_values(plan, c))
-    _connections(system, plan)
+    _connections(system, plan, arc_names)
     system.append(system_annotations)
     _units(root, infos)
     exp = _el(root, "ssd:DefaultExperiment", {"startTime": num_text(t.start), "stopTime": num_text(t.stop)})
@@ -104,7 +107,11 @@ def export_ssp(scenario: Scenario, out: str | Path) -> ExportReport:
     # ours on the system, after OMSimulator's: OMSimulator 3.0 refuses any ssd:Annotations at the top
     # ("wrong xml schema detected"), though SSP 1.0 allows them there
     ours = _el(system_annotations, "ssc:Annotation", {"type": OUR_ANNOTATION})
-    _el(ours, "dcs:Scenario").text = json.dumps(_extras(scenario), indent=1)
+    extras = _extras(scenario)
+    renamed = {a: n for a, n in zip(arc_names, names) if a != n}
+    if renamed:
+        extras["component_names"] = renamed
+    _el(ours, "dcs:Scenario").text = json.dumps(extras, indent=1)
     check_output(out, (*input_files(scenario), *(info.path for info in infos)))
     with written_by_rename(out) as partial, zipfile.ZipFile(partial, "w", zipfile.ZIP_DEFLATED) as z:
         z.writestr(SSD_NAME, _xml(root))
@@ -133,14 +140,15 @@ def _start_values(plan, c: int) -> dict[str, Any]:
     return {k: v for k, v in plan.start_values[c].items() if not _string_at_start(info.variables[k], v)}
 
 
-def _component(elements: ET.Element, scenario: Scenario, plan, c: int, stem: str, connected: set[tuple[str, str]],
-               out: Path) -> bytes | None:
+def _component(elements: ET.Element, scenario: Scenario, plan, c: int, arc: tuple[str, str],
+               connected: set[tuple[str, str]], out: Path) -> bytes | None:
     """Component ``c``'s ``ssd:Component`` (its connectors, its parameter binding, its step size hint) under
-    ``elements``; its .ssv (None without start values)."""
+    ``elements``, named ``arc`` (its name in the archive, its file stem); its .ssv (None without start values)."""
     name, info = plan.names[c], plan.infos[c]
+    arc_name, stem = arc
     comp = scenario.components[name]
-    el = _el(elements, "ssd:Component", {"name": name, "type": FMU_TYPE, "source": f"resources/{stem}.fmu",
-                                         "implementation": IMPLEMENTATION.get(comp.interface)})
+    el = _el(elements, "ssd:Component", {"name": arc_name, "type": FMU_TYPE, "source": f"resources/{stem}.fmu",
+                                         "implementation": _implementation(comp.interface, info)})
     connectors = _el(el, "ssd:Connectors")
     for var in info.variables.values():
         if var.causality not in ("input", "output"):
@@ -153,9 +161,19 @@ def _component(elements: ET.Element, scenario: Scenario, plan, c: int, stem: str
         conn = _el(connectors, "ssd:Connector", {"name": var.name, "kind": var.causality,
                                                  "description": var.description or None})
         _typed(conn, "ssc", var)
+    values = _start_values(plan, c)
+    # every parameter the .ssv sets is also declared, as OMSimulator's own export declares them: its
+    # Python API (OMSimulator.SSP) finds a declared name as it is, and guesses an undeclared one by
+    # dropping each part that is in its own path ("model.root.ctl"), so "model.w_inertia" became the
+    # unknown "model.root.ctl.w_inertia" and instantiate() failed
+    for vname in values:
+        var = info.variables[vname]
+        if var.causality == "parameter" and SSP_TYPE.get(var.fmi_type) and not var.is_array:
+            _typed(_el(connectors, "ssd:Connector", {"name": vname, "kind": "parameter",
+                                                     "description": var.description or None}), "ssc", var)
     if not len(connectors):
         el.remove(connectors)
-    ssv = _parameter_set(name, info, _start_values(plan, c), out)
+    ssv = _parameter_set(name, info, values, out)
     if ssv is not None:
         bindings = _el(el, "ssd:ParameterBindings")
         _el(bindings, "ssd:ParameterBinding", {"type": PARAMETER_SET_TYPE, "source": f"resources/{stem}.ssv"})
@@ -163,6 +181,19 @@ def _component(elements: ET.Element, scenario: Scenario, plan, c: int, stem: str
         ann = _el(_el(el, "ssd:Annotations"), "ssc:Annotation", {"type": OSP_ANNOTATION})
         _el(ann, "osp:StepSizeHint", {"value": num_text(scenario.time.step * comp.step_multiple)})
     return ssv
+
+
+def _implementation(interface: str, info) -> str | None:
+    """The ``implementation`` attribute of a component run through ``interface``: none (any: the tool chooses)
+    for model exchange when its FMU also offers co-simulation, our annotation keeping the choice for our master.
+    OMSimulator runs every FMU of its fixed-step system through co-simulation whatever the attribute says (its
+    C++ import, ``System::importFromSnapshot``); its Python API puts a model-exchange component in a system of its
+    own (CVODE) and drops every connection between that system and the others (``System.processElements``
+    files them under no solver), so the plant ran open loop there. Without the attribute both run the FMU's
+    co-simulation interface, closed loop."""
+    if interface == "me" and "cs" in info.interfaces:
+        return None
+    return IMPLEMENTATION.get(interface)
 
 
 def _parameter_set(name: str, info, values: dict[str, Any], out: Path) -> bytes | None:
@@ -182,11 +213,10 @@ def _parameter_set(name: str, info, values: dict[str, Any], out: Path) -> bytes 
     return _xml(pset)
 
 
-def _connections(system: ET.Element, plan) -> None:
-    """One ``ssd:Connection`` per link of the plan, element-wise as written."""
+def _connections(system: ET.Element, plan, names: list[str]) -> None:
+    """One ``ssd:Connection`` per link of the plan, element-wise as written, between the components ``names``."""
     if not plan.links:
         return
-    names = plan.names
     conns = _el(system, "ssd:Connections")
     for link in plan.links:
         attrs = {"startElement": names[link.src.comp], "startConnector": _connector(link.src),
@@ -265,6 +295,31 @@ def _extras(scenario: Scenario) -> dict[str, Any]:
             options[name] = changed
     data["component_options"] = options
     return data
+
+
+def _archive_names(names: list[str], infos) -> list[str]:
+    """The components' names in the archive: names every SSP tool can address, each the scenario's name where it
+    is one (our annotation's ``component_names`` maps the others back on import). OMSimulator takes a component's
+    name as an identifier (``ComRef::isValidIdent``: a letter, then letters, digits, ``_`` and ``-``; ``DP
+    Controller`` or ``Ship.Engine`` cannot be added), and its Python API reads a parameter whose first part is the
+    component's name (``gain`` and its ``gain.kp[1]``) as a path that repeats the component, and drops that part.
+    So: any other character becomes ``_``, ``c`` goes before a name that does not start with a letter, and ``_``
+    is appended while the name is the first part of one of its FMU's variables, or another component's name."""
+    out: list[str] = []
+    for name, info in zip(names, infos):
+        firsts = {re.split(r"[.\[]", v, maxsplit=1)[0] for v in info.variables}
+        arc = _identifier(name)
+        while arc in firsts or arc.lower() in {o.lower() for o in out}:
+            arc += "_"
+        out.append(arc)
+    return out
+
+
+def _identifier(name: str) -> str:
+    """``name`` as an OMSimulator identifier (``^[a-zA-Z][a-zA-Z0-9_-]*$``): other characters ``_``, and ``c``
+    before a name that does not start with a letter."""
+    ident = re.sub(r"[^A-Za-z0-9_-]", "_", name)
+    return ident if re.match(r"[A-Za-z]", ident) else "c" + ident
 
 
 def _member_stems(names: list[str]) -> list[str]:
