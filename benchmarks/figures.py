@@ -116,7 +116,7 @@ class Result:
         if "load_start" not in m:
             return f"{self.date()}, {m.get('load')}"
         loads = [m["load_start"][0], m["load_end"][0]]
-        return f"{self.date()}, load {min(loads):.1f}-{max(loads):.1f} on {m['cores']} cores"
+        return f"{self.date()}, load {FORMATTER.format_field(loads, '.1f')} on {m['cores']} cores"
 
 
 def load_results(folder: Path) -> dict[str, Result]:

@@ -174,17 +174,31 @@ TABLES = (
             met_if=("sdk_as_log.vs_before", ">=", 1.0)),
         Row("helix-ctc-parallel", "helix_ctc",
             {"what": "10 s of helix_ctc, no logging, parallel (the default)",
-             "target": "5 s wall"}),
-        Row("helix-ctc-logged", "helix_ctc-log",
+             "target": "5 s wall"},
+            templates={"measured": "{loop_s[parallel]:.2f} s (serial {loop_s[serial]:.2f} s; best of the rounds). On "
+                                   "2026-11-26 (three runs, quiet, converged plant steps, rods as end-point masses): "
+                                   "1.34-1.44 s, serial 1.30-1.42 s; with rigid-body rods 1.85-1.90 / 1.73-1.77 s"},
+            met_if=("loop_s.parallel", 5.0)),
+        Row("helix-ctc-logged", "helix_ctc",
             {"what": "10 s of helix_ctc, every signal logged (what `cosim run` does), parallel",
-             "target": "-"}),
+             "target": "-"},
+            templates={"measured": "{loop_s[parallel_log]:.2f} s (serial {loop_s[serial_log]:.2f} s; whole call with "
+                                   "start-up {whole_call_s[parallel_log]:.2f} s). On 2026-11-26: 1.42-1.49 s (serial "
+                                   "1.44 s; whole call 1.58 s); with rigid-body rods 1.97 / 2.13 s"}),
         Row("helix-ctc-vs-monolithic", "helix_ctc",
             {"what": "helix_ctc against a monolithic in-process loop (same plant, kinematics and CTC law, no FMI), "
                      "parallel",
-             "target": "ratio 1.3"}),
+             "target": "ratio 1.3"},
+            templates={"measured": "{ratio_to_monolithic[parallel]:.2f} ({loop_s[parallel]:.2f} s against "
+                                   "{loop_s[mono]:.2f} s; with the log {ratio_to_monolithic[parallel_log]:.2f}). On "
+                                   "2026-11-26: 0.99-1.04 (1.34-1.44 s against 1.35-1.39 s; with the log 1.02-1.03)"},
+            met_if=("ratio_to_monolithic.parallel", 1.3)),
         Row("helix-ctc-vs-monolithic-serial", "helix_ctc",
             {"what": "the same, serial (`parallel: off`)",
-             "target": "ratio 1.3"}),
+             "target": "ratio 1.3"},
+            templates={"measured": "{ratio_to_monolithic[serial]:.2f} ({loop_s[serial]:.2f} s against "
+                                   "{loop_s[mono]:.2f} s). On 2026-11-26: 0.94-0.97 (1.73-1.77 s against 1.81-1.84 s)"},
+            met_if=("ratio_to_monolithic.serial", 1.3)),
         Row("long-run", "long_run",
             {"what": "level helix under CTC, full plants, no logging: linear 600 s / rotary 300 s simulated "
                      "(`helix_ctc_level`, `rotary_helix_ctc_level`)",
@@ -252,8 +266,11 @@ TABLES = (
             how_note="(the python line), [fmus.md](fmus.md#fmu-state-of-the-python-fmus)"),
         Row("checkpoint-exudyn", "checkpoint",
             {"what": "checkpoint of helix_ctc at T = 5 s (Exudyn plant)"}),
-        Row("checkpoint-native", "checkpoint",
-            {"what": "checkpoint of helix_ctc_analytic at T = 5 s (native)"}),
+        Row("checkpoint-native", "checkpoint-native",
+            {"what": "checkpoint of helix_ctc_analytic at T = 5 s (native)"},
+            templates={"figure": "written in {write_ms:.1f} ms, {bytes} bytes; loop {loop_ratio:.2f}x; resume "
+                                 "{resume_ratio:.2f}x a fresh one-step run ({resume_s:.3f} / {fresh_s:.3f} s). On "
+                                 "2026-11-28, quiet: 4.1 ms, 3 882 bytes; 1.06x; 1.12x (0.034 / 0.031 s)"}),
         Row("state-event", "checkpoint",
             {"what": "locating a state event (`plant.p.x < 0.0003`, the helix a little before 0.5 s, 9 steps after "
                      "the last save)"}),

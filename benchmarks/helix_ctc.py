@@ -15,7 +15,11 @@ included, is printed too), alternated ``--rounds`` times so machine load drifts 
 alike; the best of each is kept. The platform RMSE of each is printed as a check that they
 compute the same thing.
 
-    python benchmarks/helix_ctc.py [--stop-time 10] [--rounds 3] [--log]
+``--fmus`` picks the build of our FMUs (default: the scenario's, ``auto``: native where a C compiler is found);
+docs/figures.md's rows are ``--fmus python``.
+
+    python benchmarks/helix_ctc.py [--stop-time 10] [--rounds 3] [--log] [--fmus auto|python|native]
+                                   [--json FILE | --record]
 """
 
 from __future__ import annotations
@@ -87,12 +91,12 @@ def monolithic(stop_time: float) -> tuple[float, list[float], dict[str, float]]:
     return wall, [math.sqrt(s / n) for s in sq], parts
 
 
-def cosim(stop_time: float, log: bool, out: Path, parallel: str = "off"):
+def cosim(stop_time: float, log: bool, out: Path, parallel: str = "off", fmus: str = "auto"):
     """The master's RunResult for helix_ctc over ``stop_time`` s, and the whole call's wall time."""
     from cosim.run import run_scenario
     from cosim.engine.scenario import load_scenario
 
-    scenario = load_scenario(SCENARIO, {("time", "stop"): stop_time, ("parallel",): parallel})
+    scenario = load_scenario(SCENARIO, {("time", "stop"): stop_time, ("parallel",): parallel, ("fmus",): fmus})
     t0 = time.perf_counter()
     res = run_scenario(scenario, out=out, log=log)
     return res, time.perf_counter() - t0
@@ -103,6 +107,8 @@ def main() -> None:
     ap.add_argument("--stop-time", type=float, default=10.0, help="simulated seconds (default 10)")
     ap.add_argument("--rounds", type=int, default=3, help="alternated rounds, best kept (default 3)")
     ap.add_argument("--log", action="store_true", help="also time the co-simulation with every signal logged")
+    ap.add_argument("--fmus", choices=("auto", "python", "native"), default="auto",
+                    help="the build of our FMUs (default auto, the scenario's)")
     record.add_options(ap)
     args = ap.parse_args()
     with record.Recording(args, "helix_ctc") as rec:
@@ -112,7 +118,7 @@ def main() -> None:
 def _measure(args, rec: record.Recording) -> None:
     """The benchmark proper (see the module docstring); its figures also go to ``rec``."""
     tmp = Path(tempfile.mkdtemp(prefix="helix_ctc_bench_"))
-    cosim(0.01, False, tmp / "warm.mcap")  # build/cache the FMUs outside the measurement
+    cosim(0.01, False, tmp / "warm.mcap", fmus=args.fmus)  # build/cache the FMUs outside the measurement
     runs = [("serial", "off", False, "co-simulation, serial"), ("parallel", "on", False, "co-simulation, parallel")]
     if args.log:
         runs += [("serial_log", "off", True, "serial, all logged"), ("parallel_log", "on", True, "parallel, all logged")]
@@ -127,7 +133,7 @@ def _measure(args, rec: record.Recording) -> None:
         if wall < best["mono"]:
             best["mono"], parts = wall, mono_parts
         for key, parallel, log, _label in runs:
-            res, call = cosim(args.stop_time, log, tmp / "bench.mcap", parallel)
+            res, call = cosim(args.stop_time, log, tmp / "bench.mcap", parallel, args.fmus)
             if res.status != "completed":
                 sys.exit(f"co-simulation did not complete: {res.status} {res.message}")
             if parallel == "on" and not res.worker_time:
