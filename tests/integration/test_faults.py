@@ -343,9 +343,11 @@ def test_signal_finishes_and_marks_the_log(scen, tmp_path, sig, code):
 
 def test_signal_during_a_stalled_step(scen, tmp_path):
     out = tmp_path / "st.mcap"
-    proc = start_cosim("run", scen(SLOW), "--out", out, "--quiet", "--set", "ramp.delay=100", "--watchdog", "0")
-    wait_for(lambda: out.with_name("st.mcap.partial").exists(), what="the run to start")
-    time.sleep(1.0)
+    stepping = tmp_path / "stepping"  # the ramp creates it as its first step begins its 100 s sleep
+    proc = start_cosim("run", scen(SLOW), "--out", out, "--quiet", "--set", "ramp.delay=100", "--watchdog", "0",
+                       env={**os.environ, "COSIM_T_SLOW_STEPPING": str(stepping)})
+    wait_for(lambda: stepping.exists() or proc.poll() is not None, what="the ramp's first step")
+    assert proc.poll() is None, f"run ended early: {proc.communicate()}"
     t0 = time.monotonic()
     proc.send_signal(signal.SIGTERM)
     _, err = proc.communicate(timeout=30)

@@ -114,8 +114,9 @@ def test_busy_cpus_counts_a_spinning_process(tmp_path):
         pytest.skip("no /proc/loadavg (not Linux)")
     spinners = [subprocess.Popen([sys.executable, "-c", "while True: pass"]) for _ in range(2)]
     try:
-        time.sleep(0.3)
-        busy = offload.busy_cpus()
+        deadline = time.monotonic() + 30  # until both have started spinning (slow on a loaded machine)
+        while (busy := offload.busy_cpus()) < 2 and time.monotonic() < deadline:
+            time.sleep(0.05)
     finally:
         for p in spinners:
             p.kill()
