@@ -62,7 +62,6 @@ from record import MEASURED_CODE, ROOT  # noqa: E402
 PAGE = ROOT / "docs" / "figures.md"
 RESULTS = ROOT / "benchmarks" / "results"
 COMMAND = "python benchmarks/figures.py"
-TRANSCRIBED = "transcribed from docs/figures.md"
 BEGIN = re.compile(r"^<!-- figures: ([\w-]+) .*-->$")
 
 
@@ -127,11 +126,12 @@ def load_results(folder: Path) -> dict[str, Result]:
             doc = json.loads(path.read_text(encoding="utf-8"))
         except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
             raise FiguresError(f"{path}: not readable JSON: {exc}") from None
-        if isinstance(doc, dict) and "source" not in doc:
+        if not isinstance(doc, dict):
+            raise FiguresError(f"{path}: a JSON object was expected, not {type(doc).__name__}")
+        if "source" not in doc:
             doc = _flat(doc)
-        need = ["source", "command", "date"] + (["machine", "figures"] if doc.get("source") == "measured" else
-                                                ["rows"])
-        missing = [k for k in need if k not in doc] if isinstance(doc, dict) else need
+        need = ["source", "command", "date"] + (["machine", "figures"] if doc["source"] == "measured" else ["rows"])
+        missing = [k for k in need if k not in doc]
         if missing:
             raise FiguresError(f"{path}: missing {', '.join(missing)}")
         if not re.match(r"\d{4}-\d\d-\d\d", str(doc["date"])):
@@ -187,7 +187,7 @@ def render_table(table: Table, results: dict[str, Result]) -> str:
 
     def result(name: str) -> Result:
         if name not in results:
-            raise FiguresError(f"{RESULTS.relative_to(ROOT)}/{name}.json: missing (table {table.name})")
+            raise FiguresError(f"{name}.json: missing from the results folder (table {table.name})")
         return results[name]
 
     per_row = table.result is None
@@ -238,7 +238,8 @@ def render_page(text: str, results: dict[str, Result], page: Path) -> str:
 
 
 def _check_all_used(results: dict[str, Result]) -> None:
-    """Every JSON, and every transcribed row in one, is rendered somewhere: no figure lies about unseen."""
+    """Every JSON, and every transcribed row in one, is rendered somewhere: the folder holds nothing the page does
+    not show."""
     used = {(r.result or t.result, r.key) for t in TABLES for r in t.rows}
     for name, res in results.items():
         if not any(n == name for n, _ in used):
