@@ -71,9 +71,12 @@ class FiguresError(Exception):
 
 class _Formatter(string.Formatter):
     """``str.format`` where a list of numbers is a range: ``[229.4, 235.1]`` with ``.0f`` gives ``229-235``, and
-    ``[537.2, 537.4]`` gives ``537`` (equal at the printed precision)."""
+    ``[537.2, 537.4]`` gives ``537`` (equal at the printed precision); ``None`` (a figure the benchmark could not
+    measure that time) prints as ``-``."""
 
     def format_field(self, value, spec: str) -> str:
+        if value is None:
+            return "-"
         if isinstance(value, list) and value and all(isinstance(v, (int, float)) for v in value):
             texts = [format(v, spec) for v in (min(value), max(value))]
             return texts[0] if texts[0] == texts[1] else "-".join(texts)
@@ -143,7 +146,7 @@ def load_results(folder: Path) -> dict[str, Result]:
 def _flat(doc: dict) -> dict:
     """A benchmark's own flat JSON (figures, ``command``, ``date`` and ``load`` side by side, as
     ``benchmarks/logged_run.py --json`` writes) read as a measured one: its numbers are its figures."""
-    figures = {k: v for k, v in doc.items() if isinstance(v, (int, float)) and not isinstance(v, bool)}
+    figures = {k: v for k, v in doc.items() if v is None or isinstance(v, (int, float)) and not isinstance(v, bool)}
     return {"format": 1, "source": "measured", "command": doc.get("command"), "date": doc.get("date"),
             "machine": {"load": doc.get("load", "load not recorded")}, "revision": None, "figures": figures}
 
@@ -178,6 +181,8 @@ def _verdict(row, res: Result) -> str:
         if not isinstance(value, dict) or part not in value:
             raise FiguresError(f"{res.path}: no figure {key!r} (the target check of row {row.key})")
         value = value[part]
+    if value is None:
+        return ""
     met = value <= limit if op == "<=" else value >= limit
     return "met: " if met else "**not met**: "
 

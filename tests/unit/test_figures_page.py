@@ -135,6 +135,11 @@ def test_logged_run_json_plugs_into_its_row(copy):
                if line.startswith("| helix_ctc_analytic on native FMUs, every signal logged"))
     assert "**not met**: 10.0x (rounds 9.5-10.5x): the loop 0.250 s logged against 0.025 s" in row, row
     assert "`python benchmarks/logged_run.py --json x.json` | 2026-11-30, before (1.0, 1.0, 1.0)" in row, row
+    figures["master logging work us/step (median)"] = None  # not measured that time: printed as "-"
+    (copy / "results" / "logged_run.json").write_text(json.dumps(figures), encoding="utf-8")
+    proc = _figures("--page", str(page), "--results", str(copy / "results"))
+    assert proc.returncode == 0, proc.stderr
+    assert "the master's own logging work - us and 12.0 us blocked" in page.read_text(encoding="utf-8"), proc.stdout
 
 
 def test_a_json_into_a_missing_folder_is_refused_before_the_run(tmp_path):
