@@ -108,6 +108,7 @@ from __future__ import annotations
 import argparse
 import importlib.util
 import io
+import re
 import subprocess
 import sys
 import tarfile
@@ -135,24 +136,40 @@ TARGET_RATIO = {"linear full": 0.5, "rotary full": 0.5}
 """Issue 27 item 3: per-step time of the full plants at most half the baseline's."""
 
 
+_CORE = re.compile(r"^(\s*)(from|import) (delta|multibody)\b", re.M)
+
+
 def load_baseline(commit: str, into: Path):
-    """Import ``multibody/`` as it is in ``commit`` (from ``git archive``) as package ``multibody_baseline``."""
-    proc = subprocess.run(["git", "-C", str(ROOT), "archive", "--format=tar", commit, "multibody"],
+    """Import ``multibody/`` as it is in ``commit`` (from ``git archive``) as package ``multibody_baseline``, with
+    the ``delta/`` of that commit beside it as ``delta_baseline`` (the core it was written against: today's may no
+    longer have what it imports)."""
+    proc = subprocess.run(["git", "-C", str(ROOT), "archive", "--format=tar", commit, "multibody", "delta"],
                           capture_output=True)
     if proc.returncode != 0:
         message = proc.stderr.decode(errors="replace").strip().splitlines()
-        raise ValueError(f"--baseline {commit!r}: no multibody/ at that commit in {ROOT} "
+        raise ValueError(f"--baseline {commit!r}: no multibody/ and delta/ at that commit in {ROOT} "
                          f"({message[-1] if message else 'git archive failed'})")
     with tarfile.open(fileobj=io.BytesIO(proc.stdout)) as tar:
         tar.extractall(into, filter="data")
-    package = into / "multibody_baseline"
-    (into / "multibody").rename(package)
-    spec = importlib.util.spec_from_file_location("multibody_baseline", package / "__init__.py",
-                                                  submodule_search_locations=[str(package)])
-    module = importlib.util.module_from_spec(spec)
-    sys.modules["multibody_baseline"] = module  # its relative imports resolve inside it
-    spec.loader.exec_module(module)
+    for name in ("delta", "multibody"):
+        package = into / f"{name}_baseline"
+        (into / name).rename(package)
+        for path in package.rglob("*.py"):  # their absolute imports of each other: the baseline's
+            path.write_text(_CORE.sub(lambda m: f"{m[1]}{m[2]} {m[3]}_baseline", path.read_text()))
+    for name in ("delta_baseline", "multibody_baseline"):
+        package = into / name
+        spec = importlib.util.spec_from_file_location(name, package / "__init__.py",
+                                                      submodule_search_locations=[str(package)])
+        module = importlib.util.module_from_spec(spec)
+        sys.modules[name] = module  # its relative imports resolve inside it
+        spec.loader.exec_module(module)
     return module
+
+
+def _as_baseline(robot):
+    """``robot`` as the baseline's own core describes it (its classes: its plants check the robot's type)."""
+    kind = getattr(sys.modules["delta_baseline.robots"], type(robot).__name__)
+    return kind(**{f: getattr(robot, f) for f in robot.__dataclass_fields__})
 
 
 def _positive(text: str) -> int:
@@ -198,8 +215,10 @@ def _measure(args, rec: record.Recording) -> None:
             for version, package in versions.items():
                 forced = version == "this" and args.reuse_jacobian is not None
                 settings = multibody.SolverSettings(reuse_jacobian=args.reuse_jacobian) if forced else None
-                plant = package.make_plant(robot, fidelity=fidelity, p0=P0, settings=settings)
-                u = analytic_model(robot, plant.masses).gravity_term(plant.output.q)
+                own = robot if version == "this" else _as_baseline(robot)
+                plant = package.make_plant(own, fidelity=fidelity, p0=P0, settings=settings)
+                model = analytic_model if version == "this" else sys.modules["delta_baseline.dynamics"].analytic_model
+                u = model(own, plant.masses).gravity_term(plant.output.q)
                 plants[name, version] = (plant, u)
         samples = {key: [] for key in plants}
         for _ in range(args.rounds):
