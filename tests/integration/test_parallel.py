@@ -48,6 +48,28 @@ logging: {{signals: all, flush_interval: 0.1}}
 """
 
 
+def _logged_more_than(partial: Path, topic: str, n: int) -> bool:
+    """Whether the log being written, ``partial``, holds more than ``n`` samples of ``topic`` (read from its start
+    until it does, or up to where its writer has got)."""
+    from mcap.exceptions import McapError
+    from mcap.reader import NonSeekingReader
+
+    from cosim.io.runlog import samples
+
+    seen = 0
+    try:
+        with open(partial, "rb") as f:
+            for _, channel, message in NonSeekingReader(f).iter_messages(log_time_order=False):
+                if channel.topic == topic:
+                    blocks = channel.metadata.get("layout") == "blocks"
+                    seen += len(samples(orjson.loads(message.data))) if blocks else 1
+                    if seen > n:
+                        return True
+    except (OSError, McapError):  # not there yet, or its end still being written
+        pass
+    return False
+
+
 def _messages(path: Path) -> dict[str, list[tuple[int, bytes]]]:
     """(simulation time, JSON) by topic, one per sample on a component channel (a block's samples each)."""
     from mcap.reader import make_reader
@@ -177,7 +199,11 @@ def test_sigint_stops_master_and_worker_and_finishes_the_log(write_scenario, tmp
         time.sleep(0.2)
         workers = _children(proc.pid)
     assert workers, "no worker process appeared"
-    time.sleep(2.0)  # the worker's start-up and some thousand steps
+    partial = out.with_name(out.name + ".partial")  # the worker started and more than 100 steps are logged
+    deadline = time.monotonic() + 60
+    while not _logged_more_than(partial, "/plant", 100) and proc.poll() is None and time.monotonic() < deadline:
+        time.sleep(0.1)
+    assert proc.poll() is None, f"the run ended early: {proc.communicate()}"
     proc.send_signal(signal.SIGINT)
     _, err = proc.communicate(timeout=30)
     assert proc.returncode == 130, f"exit code {proc.returncode} vs 130; stderr: {err.decode()}"
