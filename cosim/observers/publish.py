@@ -241,7 +241,7 @@ class _Joint:
         self.puts: tuple = ()  # every other mirror's put of a row (see Publisher.start)
 
     @property
-    def stamps(self) -> bool:
+    def held(self) -> bool:
         """Whether rows are held."""
         return self.area.count > 0
 
@@ -444,7 +444,7 @@ class Publisher:
         if not self._n:
             return
         self._n = 0
-        blocks = self._joint.take() if self._joint is not None and self._joint.stamps else []
+        blocks = self._joint.take() if self._joint is not None and self._joint.held else []
         blocks += [rows.take() for rows in self._pending if rows.stamps]
         for sink in self._sinks:
             sink.blocks(self.offset_ns, blocks)
