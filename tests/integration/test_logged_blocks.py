@@ -44,10 +44,24 @@ def _messages(path: Path) -> tuple[dict, list]:
     return channels, messages
 
 
-def _logged(scenario, out: Path, monkeypatch, *, in_c: bool, live: bool = False, blocks: list | None = None):
+class _Each:
+    """An observer in Python after every macro step (as a caller's own): the loop in C makes a call per step."""
+
+    def start(self, ex) -> None:
+        return None
+
+    def stepped(self, k, t_ns, active) -> None:
+        return None
+
+    def finish(self, ex, error) -> None:
+        return None
+
+
+def _logged(scenario, out: Path, monkeypatch, *, in_c: bool, live: bool = False, blocks: list | None = None,
+            each: bool = False):
     """The result of ``scenario`` logged to ``out`` (simulation stamps: comparable logs) with its loop in C or in
     Python, and with a live view (a free port) when ``live``; ``blocks`` gets the macro steps of each block the loop in
-    C ran with the log's rows copied in C."""
+    C ran with the log's rows copied in C; ``each``: with an observer in Python after every step."""
     blocks = [] if blocks is None else blocks
     with monkeypatch.context() as m:
         if in_c:
@@ -64,7 +78,8 @@ def _logged(scenario, out: Path, monkeypatch, *, in_c: bool, live: bool = False,
         else:
             m.setattr(cloop, "make", lambda ex: None)
         return run_scenario(scenario, RunOptions(out=out, log=True, stamps="simulation",
-                                                 live=("127.0.0.1", 0) if live else None))
+                                                 live=("127.0.0.1", 0) if live else None,
+                                                 observers=[_Each()] if each else ()))
 
 
 def _same_log(c_log: Path, py_log: Path) -> None:
@@ -77,18 +92,23 @@ def _same_log(c_log: Path, py_log: Path) -> None:
          py_messages[first] if first is not None else len(py_messages))
 
 
-@pytest.mark.parametrize("layout, live", [("samples", False), ("blocks", False), ("samples", True)],
-                         ids=["samples", "blocks", "samples and a live view"])
-def test_a_logged_run_in_c_blocks_writes_the_python_loops_log(tmp_path, monkeypatch, layout, live):
+@pytest.mark.parametrize("layout, live, each", [("samples", False, False), ("blocks", False, False),
+                                               ("samples", True, False), ("samples", False, True)],
+                         ids=["samples", "blocks", "samples and a live view", "samples, a call per step"])
+def test_a_logged_run_in_c_blocks_writes_the_python_loops_log(tmp_path, monkeypatch, layout, live, each):
     """helix_ctc_analytic on native FMUs for 0.457 s (a stop between two scenes): its 3D scene at 30 Hz (and the live
     view's clock, every 33 ms) ends the blocks; every channel's messages are those of the Python loop, byte for
-    byte."""
+    byte. With an observer that needs Python after every step, the loop in C makes a call per step and the publisher
+    copies the rows in Python, to the same log."""
     overrides = {("fmus",): "native", ("parallel",): "off", ("time", "stop"): 0.457, ("logging", "layout"): layout}
     scenario = load_scenario(ROOT / "scenarios" / "helix_ctc_analytic.yaml", overrides)
     blocks: list[int] = []
-    _logged(scenario, tmp_path / "c.mcap", monkeypatch, in_c=True, live=live, blocks=blocks)
-    assert sum(blocks) == 457 and max(blocks) > 30, f"blocks the loop in C ran with the rows: {blocks}"
-    _logged(scenario, tmp_path / "py.mcap", monkeypatch, in_c=False, live=live)
+    _logged(scenario, tmp_path / "c.mcap", monkeypatch, in_c=True, live=live, blocks=blocks, each=each)
+    if each:
+        assert blocks == [], f"blocks with the rows copied in C beside an observer in Python: {blocks}"
+    else:
+        assert sum(blocks) == 457 and max(blocks) > 30, f"blocks the loop in C ran with the rows: {blocks}"
+    _logged(scenario, tmp_path / "py.mcap", monkeypatch, in_c=False, live=live, each=each)
     per_topic = defaultdict(int)
     for topic, *_ in _messages(tmp_path / "py.mcap")[1]:
         per_topic[topic] += 1
