@@ -8,7 +8,9 @@ Foxglove WebSocket server (subprotocol ``foxglove.sdk.v1``) and attaches a sink 
 ``ws://localhost:PORT`` (the Foxglove app: *Open connection*, *Foxglove WebSocket*) sees exactly
 the channels, schemas and 3D scene of the MCAP log, message for message, while the log is still
 written. The server also broadcasts the run's current log time (the *Time* capability), so the
-viewer's clock follows the simulation. Combine it with ``--realtime`` to watch at wall-clock pace;
+viewer's clock follows the simulation. The viewers reach the server through a relay
+(:mod:`cosim.observers.relay`) that passes every byte unchanged and answers a viewer's close, which the server
+does not. Combine it with ``--realtime`` to watch at wall-clock pace;
 without it the run goes as fast as it can and the viewer sees it fast-forwarded.
 
 ``--live-wait [SECONDS]`` holds the run before it sends anything (every channel advertised, nothing logged yet) until
@@ -33,6 +35,7 @@ from ..engine.supervision import WAITING
 from ..errors import CosimError, printable
 from .log_writer import FoxgloveChannels, encode_messages, live_view_serving
 from .publish import Publisher
+from .relay import Relay
 
 __all__ = ["DEFAULT_PORT", "LiveView", "ViewerMessages", "parse_address"]
 
@@ -188,6 +191,7 @@ class LiveView:
         self.waited: float | None = None  # s waited for a viewer (None: no wait); ``viewed``: whether one came
         self.viewed = False
         self.server = None
+        self._relay: Relay | None = None
         self._sink: _ContextSink | None = None
         self._subscribed: float | None = None  # monotonic time of the last subscription seen while waiting
 
@@ -202,16 +206,22 @@ class LiveView:
         context = foxglove.Context()
         self._messages = ViewerMessages.attach()  # what the server logs of its viewers: escaped, a few lines
         live_view_serving(True)  # no log writer is forked from this process while its threads run
-        try:
-            self.server = foxglove.start_server(name=self.name, host=self.host, port=self.port,
+        try:  # the viewers' address is the relay's (it answers their close); the server listens on loopback behind it
+            self._relay = Relay(self.host, self.port)
+            self.server = foxglove.start_server(name=self.name, host="127.0.0.1", port=0,
                                                 capabilities=[Capability.Time], context=context,
                                                 message_backlog_size=BACKLOG_MESSAGES,
                                                 server_listener=None if self.wait is None else self._listener())
-        except RuntimeError as exc:
+        except (OSError, RuntimeError) as exc:
+            if self._relay is not None:
+                self._relay.stop()
+                self._relay = None
             live_view_serving(False)
             self._messages.detach()
-            raise CosimError(f"--live: cannot serve on {self.host}:{self.port}: {exc}") from None
-        self.port = self.server.port
+            reason = exc.strerror if isinstance(exc, OSError) and exc.strerror else exc
+            raise CosimError(f"--live: cannot serve on {self.host}:{self.port}: {reason}") from None
+        self._relay.start(("127.0.0.1", self.server.port))
+        self.port = self._relay.port
         self._sink = _ContextSink(context, None if self.wait is None else lambda: self._wait_for_viewer(rt))
         self.publisher.attach(self._sink)
         self._offset = self.publisher.origin(rt)
@@ -281,15 +291,21 @@ class LiveView:
             self._stop(server)
 
     def _stop(self, server) -> None:
-        """``server.stop()``, which waits for every viewer to take its close, waited for :data:`STOP_TIMEOUT` at most
-        (in a thread of its own, left behind when a viewer never reads again: the process still ends)."""
+        """``server.stop()``, which waits for every viewer to take its close, then the relay's end, which waits for
+        each viewer to take what it was given: :data:`STOP_TIMEOUT` at most in all (the server's stop in a thread
+        of its own, left behind when a viewer never reads again: the process still ends)."""
 
+        end = time.monotonic() + STOP_TIMEOUT
         stopper = threading.Thread(target=server.stop, name="live-view-stop", daemon=True)
         stopper.start()
         stopper.join(STOP_TIMEOUT)
+        dropped = stopper.is_alive()
+        if self._relay is not None:  # the viewers' connections: what they were given written, then closed
+            relay, self._relay = self._relay, None
+            dropped = relay.stop(max(0.0, end - time.monotonic())) > 0 or dropped
         live_view_serving(False)  # its threads idle from now on (a stopper left behind is a thread: no fork either)
         self._messages.detach()
-        if stopper.is_alive():
+        if dropped:
             print(f"warning: live view on {self.url}: a viewer did not take the end of the run within "
                   f"{STOP_TIMEOUT:g} s (it stopped reading): dropped", file=sys.stderr, flush=True)
 

@@ -1,0 +1,47 @@
+"""The live view's relay follows WebSocket frame boundaries however the bytes are cut (cosim.observers.relay)."""
+
+from __future__ import annotations
+
+import os
+import struct
+
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from cosim.observers.relay import _Frames
+
+
+def _frame(opcode: int, payload: bytes, mask: bytes | None) -> bytes:
+    n = len(payload)
+    length = bytes([n]) if n < 126 else bytes([126]) + struct.pack("!H", n) if n < 65536 else \
+        bytes([127]) + struct.pack("!Q", n)
+    if mask is None:
+        return bytes([0x80 | opcode]) + length + payload
+    masked = bytes(b ^ mask[i % 4] for i, b in enumerate(payload))
+    return bytes([0x80 | opcode, length[0] | 0x80]) + length[1:] + mask + masked
+
+
+SIZES = st.sampled_from([0, 1, 2, 125, 126, 127, 65535, 65536, 70000])
+
+
+@settings(max_examples=60, deadline=None)
+@given(frames=st.lists(st.tuples(st.sampled_from([0x1, 0x2, 0x8, 0x9, 0xA]), SIZES), min_size=1, max_size=6),
+       masked=st.booleans(), cuts=st.lists(st.integers(min_value=1, max_value=70), min_size=1, max_size=40))
+def test_boundaries_and_close_payloads_whatever_the_chunks(frames, masked, cuts):
+    stream, expected, end = b"", [], 0
+    for opcode, size in frames:
+        size = min(size, 125) if opcode >= 0x8 else size  # control frames carry at most 125 bytes
+        payload = struct.pack("!H", 1000 + size) + b"r" * max(0, size - 2) if opcode == 0x8 and size >= 2 else \
+            os.urandom(size)
+        stream += _frame(opcode, payload, os.urandom(4) if masked else None)
+        end = len(stream)
+        expected.append((end, payload if opcode == 0x8 else None))
+    parser, got, pos, i = _Frames(masked), [], 0, 0
+    while pos < len(stream):  # cut in pieces of the sizes drawn, cycled, the last ones large
+        size = cuts[i % len(cuts)] * (1 if i < 200 else 1000)
+        chunk = stream[pos:pos + size]
+        got += [(pos + at, payload) for at, payload in parser.feed(chunk)]
+        pos += len(chunk)
+        i += 1
+    assert got == expected
+    assert parser.at_boundary
