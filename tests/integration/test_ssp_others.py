@@ -124,7 +124,8 @@ def test_names_no_ssp_tool_can_address_are_exported_as_identifiers_and_mapped_ba
     """Our export of that system names its components as every SSP tool can address them (OMSimulator takes a
     component's name as an identifier: `Ship.Engine` and `DP Controller` cannot be added there), and a
     component named as the first part of one of its FMU's variables (`k`, the gain's parameter) gets `_` (its
-    Python API reads `k.x` of a component `k` as `x`); our import maps the names back, and the run is the same."""
+    import and its Python API read `k.x` of a component `k` as `x`); our import maps the names back, and the run
+    is the same."""
     ssp = _archive(tmp_path, test_fmus, system_extra=SYSTEM_BINDING,
                    files={"resources/system.ssv": SSV, "resources/system.ssm": SSM},
                    elements_extra='<ssd:Component name="k" source="resources/gain.fmu"><ssd:Connectors>'

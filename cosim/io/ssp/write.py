@@ -301,8 +301,9 @@ def _archive_names(names: list[str], infos) -> list[str]:
     """The components' names in the archive: names every SSP tool can address, each the scenario's name where it
     is one (our annotation's ``component_names`` maps the others back on import). OMSimulator takes a component's
     name as an identifier (``ComRef::isValidIdent``: a letter, then letters, digits, ``_`` and ``-``; ``DP
-    Controller`` or ``Ship.Engine`` cannot be added), and its Python API reads a parameter whose first part is the
-    component's name (``gain`` and its ``gain.kp[1]``) as a path that repeats the component, and drops that part.
+    Controller`` or ``Ship.Engine`` cannot be added), and its C++ import and its Python API read a parameter whose
+    first part is the component's name (``model`` and its ``model.w_inertia``) as a path that repeats the component,
+    and drop that part.
     So: any other character becomes ``_``, ``c`` goes before a name that does not start with a letter, and ``_``
     is appended while the name is the first part of one of its FMU's variables, or another component's name."""
     out: list[str] = []
