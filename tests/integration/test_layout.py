@@ -97,3 +97,18 @@ def test_bad_input_is_one_line(tmp_path, capsys):
     err = capsys.readouterr().err.strip()
     assert err.startswith("error:") and "is a directory" in err and "\n" not in err, err
     assert list(tmp_path.iterdir()) == []
+
+
+def test_a_scenario_with_nothing_to_show_is_one_line_and_no_file(tmp_path, capsys):
+    import yaml
+
+    from cfmus import build
+
+    scenario = tmp_path / "vdp.yaml"
+    scenario.write_text(yaml.safe_dump({"name": "vdp", "components": {"m": {"path": str(build("VanDerPol", 2))}},
+                                        "time": {"stop": 1.0, "step": 0.001}}))
+    out = tmp_path / "vdp.layout.json"
+    assert main(["layout", str(scenario), "--out", str(out)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err == "error: layout: vdp has no 3D scene (logging.scene) and no joint signals (q, q_ref, u) to show", err
+    assert not out.exists() and sorted(p.name for p in tmp_path.iterdir()) == ["vdp.yaml"]
