@@ -83,8 +83,9 @@ def test_the_pages_hold_the_commands_this_test_runs():
     assert shell_blocks("```text\nA\n```\nprose\n```bash\nB\n```\n") == ["B\n"], "fences paired wrongly"
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture
 def workdir(tmp_path_factory) -> Path:
+    """A folder of a page's own, as a reader starts one page (the pages run on the suite's workers at once)."""
     d = tmp_path_factory.mktemp("documented")
     shutil.copytree(ROOT / "scenarios", d / "scenarios")
     (d / "tests").mkdir()
@@ -94,6 +95,8 @@ def workdir(tmp_path_factory) -> Path:
 
 @pytest.mark.parametrize("page", [p for p in PAGES if any(q == p for q, _, _ in RUNNABLE)], ids=lambda p: p.name)
 def test_every_documented_command_works_as_written(page, workdir):
+    """Among the suite's longest (the README's page: 17 commands, each a process of its own, about a minute): nothing
+    cheaper proves that a page works as a reader types it; the pages run side by side on the suite's workers."""
     for command, error in ((c, e) for q, c, e in RUNNABLE if q == page):
         args = shlex.split(command)
         args[0] = sys.executable
