@@ -138,3 +138,76 @@ def test_a_close_cut_in_single_bytes_is_answered_and_probes_pass(tmp_path):
     assert pos == len(rest), "a frame cut short"
     assert frames and frames[-1] == (0x8, struct.pack("!H", 4002)), frames[-1:]
     assert answer == b"", answer[:80]  # foxglove-sdk drops a plain GET unanswered; the relay passes that on
+
+
+_SAME_STREAM = r'''
+import json, sys, threading, time
+import foxglove
+from foxglove.websocket import Capability
+from websockets.sync.client import connect
+from cosim.observers.relay import Relay
+
+ctx = foxglove.Context()
+server = foxglove.start_server(port=0, context=ctx, capabilities=[Capability.Time])
+relay = Relay("127.0.0.1", 0)
+relay.start(("127.0.0.1", server.port))
+schema = foxglove.Schema(name="x", encoding="jsonschema", data=b'{"type": "object"}')
+channels = [foxglove.Channel(f"/c{i}", schema=schema, message_encoding="json", context=ctx) for i in range(3)]
+seen = {}
+
+def viewer(name, port, ready, go):
+    with connect(f"ws://127.0.0.1:{port}", subprotocols=["foxglove.sdk.v1"], max_size=None, max_queue=None) as ws:
+        got = [ws.subprotocol, ws.response.headers.get("Sec-WebSocket-Protocol")]
+        while True:
+            raw = ws.recv(timeout=10)
+            got.append(raw)
+            if isinstance(raw, str) and json.loads(raw)["op"] == "advertise":
+                ids = sorted(ch["id"] for ch in json.loads(raw)["channels"])
+                ws.send(json.dumps({"op": "subscribe", "subscriptions": [{"id": i, "channelId": i} for i in ids]}))
+                break
+        ready.set()
+        go.wait(10)
+        while len(got) < 2 + 2 + 3 * 200 + 1:
+            got.append(ws.recv(timeout=10))
+    seen[name] = got
+
+events = {n: (threading.Event(), threading.Event()) for n in ("direct", "relayed")}
+threads = [threading.Thread(target=viewer, args=(n, p, *events[n])) for n, p in
+           (("direct", server.port), ("relayed", relay.port))]
+for t in threads:
+    t.start()
+for ready, _ in events.values():
+    ready.wait(10)
+time.sleep(0.5)  # both subscriptions registered
+for _, go in events.values():
+    go.set()
+for k in range(200):
+    for ch in channels:
+        ch.log(json.dumps({"k": k}).encode(), log_time=k)
+server.broadcast_time(12345)
+for t in threads:
+    t.join(30)
+relay.stop()
+server.stop()
+print(json.dumps({n: [m if isinstance(m, str) or m is None else m.hex() for m in v] for n, v in seen.items()}))
+'''
+
+
+def test_a_relayed_viewer_sees_what_a_direct_one_sees():
+    """Two viewers of one server, one direct, one through the relay: the same subprotocol, and the same messages,
+    byte for byte (serverInfo, advertise, 600 messages, a time broadcast; the server interleaves its data and control
+    messages as its queues come, so each is compared in its own order). In a process of its own: the SDK's threads
+    stay out of the test process."""
+    r = subprocess.run([sys.executable, "-c", _SAME_STREAM], cwd=ROOT, capture_output=True, text=True, timeout=120)
+    assert r.returncode == 0, r.stderr[-2000:]
+    seen = json.loads(r.stdout.strip().splitlines()[-1])
+    assert seen["direct"][:2] == ["foxglove.sdk.v1", "foxglove.sdk.v1"]
+    assert len(seen["direct"]) == 2 + 2 + 600 + 1
+
+    def planes(got: list) -> tuple[list, list]:  # the server's data and control planes: each in order, not interleaved
+        data = [m for m in got if m.startswith("01")]
+        return data, [m for m in got if not m.startswith("01")]
+
+    direct, relayed = planes(seen["direct"]), planes(seen["relayed"])
+    assert len(direct[0]) == 600 and relayed[0] == direct[0], "the relayed messages differ"
+    assert relayed[1] == direct[1], (relayed[1], direct[1])  # subprotocol, serverInfo, advertise, time
