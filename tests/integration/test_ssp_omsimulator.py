@@ -155,17 +155,23 @@ PY_API = Path(LIB).parent / "OMSimulator" / "__init__.py" if LIB else None
 def _run(ssp: Path, signals: list[str], step: float, n: int, procs: int = 1) -> tuple[dict, list[str]]:
     """Run ``ssp`` in OMSimulator's C API on ``procs`` threads: (the samples, the error and warning lines it
     logged)."""
-    return _subprocess([_C_RUNNER, LIB, str(ssp), repr(step), str(n), str(procs), *signals], ssp)
+    data, lines = _subprocess([_C_RUNNER, LIB, str(ssp), repr(step), str(n), str(procs), *signals], ssp)
+    return data, _complaints(lines)
 
 
 def _subprocess(args: list[str], ssp: Path) -> tuple[dict, list[str]]:
+    """Run a runner: (its samples, every line it printed)."""
     proc = subprocess.run([sys.executable, "-c", *args], check=False, capture_output=True, text=True,
                           timeout=LIMIT_S, cwd=ssp.parent)
     lines = (proc.stdout + proc.stderr).splitlines()
     data = [json.loads(line) for line in lines if line.startswith('{"t"')]
     assert proc.returncode == 0 and data, (f"OMSimulator failed (exit code {proc.returncode}):\n"
                                            f"{proc.stdout[-3000:]}\n{proc.stderr[-3000:]}")
-    return data[0], [line for line in lines if line.startswith(("error:", "warning:"))]
+    return data[0], lines
+
+
+def _complaints(lines: list[str]) -> list[str]:
+    return [line for line in lines if line.startswith(("error:", "warning:"))]
 
 
 def omsimulator(ssp: Path, signals: list[str], step: float = STEP, n: int = N,
@@ -199,8 +205,8 @@ def omsimulator_python(ssp: Path, signals: list[str], step: float = STEP,
     if PY_API is None or not PY_API.is_file():
         pytest.skip(f"OMSimulator's Python API is not beside {LIB} (install OMSimulator: docs/ssp.md)")
     params = _bound_parameters(ssp)
-    data, complaints = _subprocess([_PY_RUNNER, LIB, str(ssp), repr(step), str(n), json.dumps(params), *signals],
-                                   ssp)
+    data, lines = _subprocess([_PY_RUNNER, LIB, str(ssp), repr(step), str(n), json.dumps(params), *signals], ssp)
+    complaints = _complaints(lines)
     assert not complaints, "OMSimulator complained:\n" + "\n".join(complaints)
     return np.array(data["t"]), np.array(data["values"]), params, data["parameters"]
 
@@ -279,7 +285,10 @@ def test_omsimulator_steps_the_exudyn_plant_from_its_own_threads(tmp_path):
     ssp = tmp_path / "helix_ctc.ssp"
     export_ssp(load_scenario(ROOT / "scenarios" / "helix_ctc.yaml", {("time", "stop"): STOP}), ssp)
     t_one, p_one = omsimulator(ssp, P)
-    t_pool, p_pool = omsimulator(ssp, P, procs=2)
+    data, lines = _subprocess([_C_RUNNER, LIB, str(ssp), repr(STEP), str(N), "2", *P], ssp)
+    assert not _complaints(lines), _complaints(lines)
+    assert any("Initialized thread pool" in line and "with 2 threads" in line for line in lines), lines[:20]
+    t_pool, p_pool = np.array(data["t"]), np.array(data["values"])
     assert np.array_equal(t_one, t_pool), "time grids differ"
     assert np.abs(p_pool - p_one).max() <= SAME_TOL, (
         f"threads changed the run: max |pool - one thread| = {np.abs(p_pool - p_one).max():.3e} m")
