@@ -142,6 +142,7 @@ def _scalar_start(v: Variable) -> int:
     try:
         return int(str(v.start).split()[0])
     except (ValueError, IndexError):
+        # Refused (correctness): no array size follows from it
         raise ComponentSourceError(Issue("", f"structural parameter {v.name} has no usable start value "
                                              f"({v.start!r})")) from None
 
@@ -151,6 +152,7 @@ def _shape(dims, by_vr: dict[int, int], name: str) -> tuple[int, ...]:
     for size, vr in dims:
         if size is None:
             if vr not in by_vr:
+                # Refused (correctness): no array size follows from it
                 raise ComponentSourceError(Issue("", f"{name}: dimension refers to value reference {vr}, "
                                                      "which is not a structural parameter"))
             size = by_vr[vr]
@@ -200,24 +202,28 @@ def _numbers(text: str, kind: str) -> list[float]:
 def _check_description(path: Path, md: Any) -> None:
     """What fmpy reads without validation but the master relies on, one error naming the variable: a model
     identifier that is a C identifier (it names the library loaded: '../../x' or '/x' loaded a library outside the
-    FMU), a GUID, unique names, value references that are unsigned 32-bit, no input or parameter sharing its value
-    reference with another of them (an alias set holds at most one: setting one silently changed the other; an
-    output or a local may alias an input or a parameter), and start, min and max values of the
-    variable's type (a Real start 'abc', NaN or INF of a parameter or an input was taken), with min <= max."""
+    FMU), a GUID, value references that are unsigned 32-bit, no input or parameter sharing its value reference with
+    another of them (an alias set holds at most one: setting one silently changed the other; an output or a local may
+    alias an input or a parameter), and start, min and max values of the variable's type (a Real start 'abc', or a
+    start NaN or INF of a parameter or an input, was taken), with min <= max. An infinite min or max is no bound, as
+    FMPy reads it; names declared twice are :func:`_ambiguous`'s."""
     def fail(message: str) -> ComponentSourceError:
         return ComponentSourceError(Issue("", f"{path}: modelDescription.xml: {message}"))
 
     for kind in ("coSimulation", "modelExchange", "scheduledExecution"):
         interface = getattr(md, kind, None)
         if interface is not None and not _IDENTIFIER.match(str(interface.modelIdentifier or "")):
+            # Refused (security): it names the library loaded: '../../x' or '/x' loaded one outside the FMU
             raise fail(f"{kind} modelIdentifier {interface.modelIdentifier!r} is not a C identifier (it names the "
                        "FMU's library: letters, digits and _)")
     if not str(md.fmiVersion or "").startswith("3") and not md.guid:
+        # Refused (correctness): FMI 1.0 and 2.0 require it, instantiation passes it (the FMU checks it)
         raise fail("no guid (fmi2Instantiate checks it)")
     aliases: dict[tuple, list[Any]] = {}
     for v in md.modelVariables:
         vr = v.valueReference
         if not isinstance(vr, int) or not 0 <= vr < 2 ** 32:
+            # Refused (correctness): the FMI calls take a uint32: another variable would be read or set
             raise fail(f"variable {v.name}: valueReference {vr!r} is not an unsigned 32-bit integer")
         kind = _KIND.get(v.type, v.type)
         aliases.setdefault((kind, vr), []).append(v)
@@ -228,16 +234,22 @@ def _check_description(path: Path, md: Any) -> None:
             try:
                 values = _numbers(str(text), kind)
             except ValueError:
+                # Refused (correctness): no value of the declared type: FMPy's schema validation refuses it too
                 raise fail(f"variable {v.name}: {attr} {str(text)[:40]!r} is not a {v.type} value") from None
-            if v.causality in _SET_BY_MASTER and not all(map(math.isfinite, values)):
+            # an infinite min or max is no bound (FMPy reads INF as xs:double allows; the range check takes it so)
+            unusable = [x for x in values if math.isnan(x) or (attr == "start" and math.isinf(x))]
+            if v.causality in _SET_BY_MASTER and unusable:
+                # Refused (correctness): a NaN bound passes every value; a NaN or inf start reaches the equations
                 raise fail(f"variable {v.name} ({v.causality}): {attr} {str(text)[:40]!r} is not a finite number")
         lo, hi = getattr(v, "min", None), getattr(v, "max", None)
         if lo is not None and hi is not None and kind in (REAL, INTEGER) and float(lo) > float(hi):
+            # Refused (correctness): the range check would refuse every value the variable could take
             raise fail(f"variable {v.name}: min {lo} > max {hi}: no value is in range")
     for (kind, vr), group in aliases.items():
         settable = [v for v in group if v.causality in _SET_BY_MASTER]
         if len(settable) > 1:  # aliases are legal, but a set of them holds at most one parameter or input
             names = ", ".join(f"{v.name} ({v.causality})" for v in settable[:4])
+            # Refused (correctness): setting one would silently change the other
             raise fail(f"{names} share the {kind} valueReference {vr}: setting one would change the other (a set "
                        "of aliases holds at most one parameter or input)")
 
@@ -278,9 +290,11 @@ def load_fmu(path: str | Path) -> FMUInfo:
     try:
         st = path.stat()
     except OSError:
+        # Refused (correctness): no FMU, nothing to run
         raise ComponentSourceError(Issue("", f"FMU not found: {path}")) from None
     problem = file_problem(path, directory_ok=True)  # an .fmu file, or the folder of an unpacked one
     if problem is not None:
+        # Refused (security): a FIFO or a device named .fmu would be read for ever
         raise ComponentSourceError(Issue("", f"{path}: {problem}")) from None
     stamp = file_stamp(st)
     cached = _CACHE.get(path)
@@ -293,10 +307,12 @@ def load_fmu(path: str | Path) -> FMUInfo:
     try:
         md = fmpy.read_model_description(str(path), validate=False)
     except Exception as exc:  # fmpy raises bare Exception for malformed files
+        # Refused (correctness): what the FMU declares cannot be read
         raise ComponentSourceError(Issue("", f"{path}: cannot read modelDescription.xml: {exc}")) from None
     clocks = [v for v in md.modelVariables if v.type == "Clock"]
     if clocks:
         names = ", ".join(f"{v.name} (vr {v.valueReference})" for v in clocks[:5])
+        # Refused (correctness): clocked partitions would never tick: the run would be silently wrong
         raise ComponentSourceError(Issue("", f"{path.name} declares Clock variables ({names}): clocks (FMI 3.0 "
                                              "scheduled execution and synchronous clocks) are not supported"))
     _check_description(path, md)

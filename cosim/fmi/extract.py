@@ -55,10 +55,12 @@ def check_archive(path: Path) -> None:
         with zipfile.ZipFile(path) as zf:
             members = zf.infolist()
     except (zipfile.BadZipFile, OSError) as exc:
+        # Refused (correctness): not a zip: nothing of the FMU can be read
         raise ComponentSourceError(Issue("", f"{path}: not an FMU (a zip archive): {exc}")) from None
     total = sum(m.file_size for m in members)
     description = sum(m.file_size for m in members if m.filename == "modelDescription.xml")
     if total > MAX_FMU_BYTES or description > MAX_DESCRIPTION_BYTES:
+        # Refused (security): a zip bomb: refused before anything is read or extracted
         raise ComponentSourceError(Issue("", f"{path}: unpacks to {total:,} bytes (modelDescription.xml "
                                              f"{description:,}); at most {MAX_FMU_BYTES:,} "
                                              f"({MAX_DESCRIPTION_BYTES:,}) are accepted: refused"))
@@ -142,6 +144,7 @@ def extraction(key: Key) -> Path:
                 fmpy.extract(str(path), str(unzipdir), include=_used)
             except Exception as exc:  # a corrupt archive  # noqa: BLE001
                 shutil.rmtree(unzipdir, ignore_errors=True)
+                # Refused (correctness): its files cannot be unpacked (disk full, no permission): it cannot run
                 raise ComponentSourceError(Issue("", f"{path}: cannot extract: {exc}")) from None
             _EXTRACTED[key] = unzipdir
         if held is not None:

@@ -314,9 +314,8 @@ BAD_SSP = {
                       "the archive holds two members named 'resources/g.fmu': refused"),
     "duplicate_ssd": (dict(extra=[("SystemStructure.ssd", b"<x/>")]),
                       "the archive holds two members named 'SystemStructure.ssd'"),
-    # connectors that say what their FMU's variables are not (taken as the FMU's)
-    "kind_unknown": (dict(ssd=lambda s: s.replace(U_INPUT, U_INPUT.replace("input", "sideways"))),
-                     "component 'g': connector 'u': kind 'sideways' is not an SSP connector kind"),
+    # connectors that say what their FMU's variables are not (taken as the FMU's); a kind SSP does not know is a
+    # warning (test_a_connector_kind_ssp_does_not_know_is_one_warning)
     "kind_wrong": (dict(ssd=lambda s: s.replace(U_INPUT, U_INPUT.replace("input", "output"))),
                    "component 'g': connector 'u': declared an output, but its FMU's variable u is an input"),
     "type_wrong": (dict(ssd=lambda s: s.replace(U_INPUT, U_INPUT.replace("Real", "Boolean"))),
@@ -366,6 +365,19 @@ def test_a_hostile_archive_is_one_line_naming_what_is_wrong(run, small_ssp, tmp_
     assert not list(tmp_path.glob("x.mcap*")), "a refused archive left output files"
 
 
+def test_a_connector_kind_ssp_does_not_know_is_one_warning(run, small_ssp, tmp_path):
+    """libcosim's SSP parser stores a connector's kind unchecked and connects the FMU's variables; here too the
+    FMU's variable decides (u is its input), with one warning naming component, connector and kind, and the run
+    goes on. A kind that contradicts the FMU (kind_wrong) stays refused: the file says two things of one signal."""
+    odd = _rewrite(small_ssp, tmp_path / "odd.ssp", ssd=lambda s: s.replace(U_INPUT, U_INPUT.replace("input",
+                                                                                                      "sideways")))
+    r = run("run", odd, "--out", tmp_path / "x.mcap", "--quiet")
+    assert r.returncode == 0, r.stderr
+    assert r.stderr.strip().splitlines() == [
+        "warning: odd.ssp: component 'g': connector 'u': kind 'sideways' is not an SSP connector kind (input, output, "
+        "inout, parameter, calculatedParameter): its FMU's variable decides"], r.stderr
+
+
 def test_the_archive_as_exported_still_runs(run, small_ssp, tmp_path):
     """The checks above refuse what is wrong only: the exporter's own archive checks and runs."""
     assert run("check", small_ssp).returncode == 0
@@ -410,6 +422,9 @@ BAD_FMU = {
     "min_text": (lambda s: s.replace(K_START, '<Real start="1" min="abc"/>'), "variable k: min 'abc' is not a Real"),
     "empty_range": (lambda s: s.replace(K_START, '<Real start="1" min="5" max="0"/>'),
                     "variable k: min 5 > max 0: no value is in range"),
+    # a NaN bound compares false: every value would pass the range check (an infinite one is no bound: it loads)
+    "max_nan": (lambda s: s.replace(K_START, '<Real start="1" max="NaN"/>'),
+                "variable k \\(parameter\\): max 'NaN' is not a finite number"),
 }
 
 
@@ -440,6 +455,20 @@ def test_a_name_declared_twice_is_refused_only_where_it_is_named(run, write_scen
     named = write_scenario(SMALL.replace("{CosimTGain}", str(fmu)), "named.yaml")  # sets g.k
     fails(run("run", named, "--out", tmp_path / "y.mcap"), 2, r"named.yaml:\d+: ",
           "twice.fmu declares 2 variables named 'k' \\(value references 0, 2\\): the name is ambiguous")
+
+
+def test_an_infinite_min_or_max_is_no_bound(run, write_scenario, test_fmus, tmp_path):
+    """FMI's min and max are xs:double, which holds INF; FMPy reads them as float('inf') and runs such an FMU. An
+    infinite bound is no bound (the range check takes it so): the FMU loads and runs with a parameter set, where it
+    was refused as 'not a finite number'; a value outside a finite bound beside it is still refused."""
+    fmu = _fmu_with(test_fmus["CosimTGain"], tmp_path / "inf.fmu",
+                    lambda s: s.replace(K_START, '<Real start="1" min="-INF" max="INF"/>'))
+    r = run("run", write_scenario(SMALL.replace("{CosimTGain}", str(fmu))), "--out", tmp_path / "x.mcap", "--quiet")
+    assert r.returncode == 0 and not r.stderr.strip(), r.stderr
+    half = _fmu_with(test_fmus["CosimTGain"], tmp_path / "half.fmu",
+                     lambda s: s.replace(K_START, '<Real start="1" min="-INF" max="1.5"/>'))
+    fails(run("run", write_scenario(SMALL.replace("{CosimTGain}", str(half)), "half.yaml"), "--out",
+              tmp_path / "y.mcap"), 2, r"half.yaml:\d+: ", "is outside its declared range \\[-INF, 1.5\\]")
 
 
 def test_an_output_may_alias_an_input(run, write_scenario, test_fmus, tmp_path):
