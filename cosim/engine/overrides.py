@@ -41,6 +41,7 @@ def parse_set_value(raw: str, origin: str = "--set") -> Any:
         return _numbers(load_yaml(raw)[0])
     except yaml.YAMLError as exc:  # YAML's text runs over lines ("in <unicode string>, position 1"): one line
         why = " ".join(str(getattr(exc, "problem", None) or exc).split())
+        # Refused (correctness): what the value means cannot be read (an alias bomb is bounded: security)
         raise ScenarioError(Issue("", f"invalid value: {why}", origin)) from None
 
 
@@ -138,6 +139,7 @@ def _split(text: str, origin: str) -> tuple[str, str | None]:
     try:
         head, rest, _ = split_ref(text)
     except ValueError as exc:
+        # Refused (correctness): a name we cannot split: which component is meant is a guess
         raise ScenarioError(Issue("", str(exc), origin)) from None
     return head, rest
 
@@ -177,6 +179,7 @@ def resolve_name(name: str, data: dict[str, Any], origin: str = "--set") -> tupl
     head, rest = _split(name, origin)
     if head in components:
         if not rest:
+            # Refused (correctness): replacing a component by one value would drop it
             raise ScenarioError(Issue("", f"{name!r} is a component: name one of its parameters, "
                                           f"{quote(head)}.PARAM", origin))
         return ("components", head, "parameters", rest)
@@ -197,6 +200,7 @@ def resolve_name(name: str, data: dict[str, Any], origin: str = "--set") -> tupl
             items = node.get(base) if isinstance(node, dict) else None
             if not isinstance(items, list) or index >= len(items):
                 count = len(items) if isinstance(items, list) else 0
+                # Refused (correctness): an item the list does not have: the value would be dropped or misplaced
                 raise ScenarioError(Issue("", f"{name!r}: {prefix}{base} has {count} item(s), numbered from 0",
                                           origin))
             path += (base, index)
@@ -206,6 +210,7 @@ def resolve_name(name: str, data: dict[str, Any], origin: str = "--set") -> tupl
             continue
         if key not in fields:
             top = list(components) + list(fields) if not path else list(fields)
+            # Refused (correctness): a name the scenario does not have: the value would be dropped
             raise _unknown_name(name, prefix, key, top, origin)
         path += (key,)
         ann = fields[key].annotation
@@ -222,6 +227,7 @@ def resolve_name(name: str, data: dict[str, Any], origin: str = "--set") -> tupl
         elif sub is not None:
             model = sub
         elif remaining is not None:
+            # Refused (correctness): a value has no keys: the value would be dropped
             raise ScenarioError(Issue("", f"{'.'.join(map(str, path))} is a value, it has no "
                                           f"{remaining!r}", origin))
     return path
@@ -233,6 +239,7 @@ def dotted_overrides(values: dict[str, Any], origin: str = "override") -> Overri
     out = Overrides()
     for name, value in values.items():
         if not isinstance(name, str) or not name or name.startswith(".") or name.endswith("."):
+            # Refused (correctness): no name to put the value under
             raise ScenarioError(Issue("", f"expected a dotted name (component.parameter, time.stop, "
                                           f"trajectory.params.NAME), got {shown(repr(name))}", origin))
         out.put((DOTTED, name), value, f"{origin} {name}={shown(repr(value))}")
@@ -247,10 +254,12 @@ def apply_overrides(sets: list[str], stop_time: float | None = None) -> Override
         try:  # a quoted component name may hold '=': the key ends at the first '=' after it
             end = split_ref(item)[2] if item.startswith("'") else 0
         except ValueError as exc:
+            # Refused (correctness): a name we cannot split: which component is meant is a guess
             raise ScenarioError(Issue("", str(exc), origin)) from None
         at = item.find("=", end)
         key = item[:at] if at >= 0 else item
         if at < 0 or not key or key.startswith(".") or key.endswith("."):
+            # Refused (correctness): no name to put the value under
             raise ScenarioError(Issue("", f"expected NAME=value (component.parameter, time.stop, "
                                           f"trajectory.params.NAME, ...), got {shown(item)!r}", "--set"))
         value = parse_set_value(item[at + 1:], origin)

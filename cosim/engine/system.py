@@ -161,11 +161,13 @@ class SystemPlan:
     def port(self, ref: str) -> Port:
         comp, name, _ = split_ref(ref)
         if comp not in self.names or name is None:
+            # Refused (correctness): a signal named that the system does not have: what is meant is a guess
             raise UnknownSignalError(f"{ref}: no such component.variable (components: "
                                      f"{', '.join(map(quote, self.names))})")
         i = self.names.index(comp)
         var, element, problem = find_variable(self.infos[i], name)
         if var is None:
+            # Refused (correctness): no such variable, or a name declared twice (ambiguous): either could be meant
             raise UnknownSignalError(problem or f"{ref}: no such variable")
         return Port(i, var, element)
 
@@ -216,6 +218,7 @@ def build_plan(structure: SystemStructure, infos: Mapping[str, FMUInfo], log_sig
     links = _links(structure, infos, idx, issue)
     reads = _reads(structure, infos, idx, issue)
     if issues:
+        # Refused (correctness): connections that cannot carry their values (kinds, sizes, causality)
         raise WiringError(issues)
     for info in infos.values():
         warn_ambiguous(info)  # names declared twice that nothing named: left out, said once
@@ -408,6 +411,7 @@ def _order(structure: SystemStructure, infos: dict[str, FMUInfo], names: list[st
             else:
                 err.issues[0] = sources.issue(("connections",), err.issues[0].message)
             err.args = ("\n".join(str(i) for i in err.issues),)
+            # Refused (correctness): an algebraic loop: Gauss-Seidel would read a value not yet computed
             raise err
     # an algorithm that reads the previous step only (Jacobi) can take any order
     return gauss_seidel_order(len(names), [(lk.src.comp, lk.dst.comp,
@@ -496,6 +500,7 @@ def gauss_seidel_order(n: int, edges: list[tuple[int, int, bool]]) -> list[int]:
         if not ready:
             ready = [c for c in remaining if all(s in done or not hard for s, hard in incoming[c])]
             if not ready:
+                # Refused (correctness): an algebraic loop: Gauss-Seidel would read a value not yet computed
                 raise AlgebraicLoopError([str(c) for c in remaining])
         c = ready[0]
         done.append(c)

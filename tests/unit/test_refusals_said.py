@@ -1,11 +1,12 @@
 """Every refusal of outside input in the audited readers says why it is a refusal and not a warning.
 
 Strict where it protects, lenient where other tools are: an error raised on what an SSP archive, an FMU's
-modelDescription.xml or a YAML file holds is either a security need (a bound on memory or time, a path out of a
-folder, a file that would be read for ever) or a correctness need (the run would be silently wrong, a value
-ambiguous where it is used). Each such ``raise`` carries ``# Refused (security): why`` or ``# Refused
-(correctness): why`` on the line above it (or on its own lines); what is neither is read as other tools read it,
-with one warning. A new ``raise`` in these modules without that comment fails here, naming file and line.
+modelDescription.xml, a scenario or --set value, a run's log, a checkpoint or a recording holds is either a security
+need (a bound on memory or time, a path out of a folder, a file that would be read for ever) or a correctness need
+(the run would be silently wrong, a value ambiguous where it is used). Each such ``raise`` carries ``# Refused
+(security): why`` or ``# Refused (correctness): why`` on the line above it (or on its own lines); what is neither
+is read as other tools read it, with one warning. A new ``raise`` in these modules without that comment fails
+here, naming file and line.
 """
 
 from __future__ import annotations
@@ -21,7 +22,9 @@ AUDITED = [
     "cosim/io/ssp/archive.py", "cosim/io/ssp/components.py", "cosim/io/ssp/parameters.py", "cosim/io/ssp/read.py",
     "cosim/io/ssp/scenario.py", "cosim/io/ssp/units.py",
     "cosim/fmi/description.py", "cosim/fmi/extract.py",
-    "cosim/engine/bounded_yaml.py",
+    "cosim/engine/bounded_yaml.py", "cosim/engine/scenario.py", "cosim/engine/overrides.py", "cosim/engine/system.py",
+    "cosim/io/runlog.py", "cosim/io/recover.py", "cosim/io/checkpoint.py",
+    *(f"cosim/io/recordings/{m}.py" for m in ("bags", "component", "csvfile", "export", "recording", "spec", "units")),
 ]
 SAID = re.compile(r"# Refused \((security|correctness)\): \S")
 

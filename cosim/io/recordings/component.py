@@ -87,6 +87,7 @@ def recording_info(name: str, replay: Replay, base: Path, span: tuple[float, flo
     path = Path(replay.file)
     path = path if path.is_absolute() else base / path
     if not path.exists():
+        # Refused (correctness): no recording, nothing to replay
         raise CosimError(f"recording file not found: {path}")
     specs = dict(replay.signals)
     rec = read_recording(path, specs, time=replay.time, units=dict(replay.units))
@@ -94,6 +95,7 @@ def recording_info(name: str, replay: Replay, base: Path, span: tuple[float, flo
     hi = min(rec.times[n][-1] for n in specs)
     start, stop = (t + replay.offset_s for t in span)
     if start < lo - SPAN_SLACK_S or stop > hi + SPAN_SLACK_S:
+        # Refused (correctness): past its ends the replayed values would be made up
         raise CosimError(f"recording {path} covers t = {lo:.9g} .. {hi:.9g} s (its time, from its first message), "
                          f"the run t = {span[0]:.9g} .. {span[1]:.9g} s needs {start:.9g} .. {stop:.9g} s with offset "
                          f"{replay.offset_s:g} s" + (f" ({rec.end_note})" if rec.end_note else ""))
@@ -131,6 +133,7 @@ class RecordingSlave:
 
     def bind(self, inputs: list[Variable], outputs: list[Variable]) -> None:
         if inputs:
+            # Refused (correctness): a connection into a replay would be dropped silently
             raise CosimError(f"component {self.name!r} replays a recording: it has no inputs "
                              f"({', '.join(v.name for v in inputs)})")
         self._out = [v.name for v in outputs]
@@ -197,6 +200,7 @@ class RecordingSlave:
     def free_state(self, state: ComponentState) -> None: ...
 
     def set_values(self, values: dict) -> None:
+        # Refused (correctness): a value set on a replay would be dropped silently
         raise CosimError(f"component {self.name!r} replays a recording: its outputs cannot be set "
                          f"({', '.join(v.name for v in values)})")
 
