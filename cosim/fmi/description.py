@@ -89,6 +89,7 @@ class FMUInfo:
     variables: dict[str, Variable]
     stamp: tuple[int, ...] = ()  # the file as read (:func:`file_stamp`): a rebuilt file is another extraction
     ambiguous: dict[str, tuple[int, ...]] = field(default_factory=dict)  # names declared twice (:func:`_ambiguous`)
+    notes: tuple[str, ...] = ()  # what the description says that is read as other tools read it, said once
 
     @property
     def unzipdir(self) -> Path:
@@ -135,7 +136,7 @@ class FMUInfo:
                  for n, v in self.structural_parameters().items()}
         variables = {n: replace(v, shape=_shape(v.dims, by_vr, n)) if v.dims else v
                      for n, v in self.variables.items()}
-        return FMUInfo(self.path, self.md, variables, self.stamp)
+        return FMUInfo(self.path, self.md, variables, self.stamp, self.ambiguous, self.notes)
 
 
 def _scalar_start(v: Variable) -> int:
@@ -199,14 +200,15 @@ def _numbers(text: str, kind: str) -> list[float]:
     return [float(w) if kind == REAL else float(int(w)) for w in text.split()]
 
 
-def _check_description(path: Path, md: Any) -> None:
+def _check_description(path: Path, md: Any) -> tuple[str, ...]:
     """What fmpy reads without validation but the master relies on, one error naming the variable: a model
     identifier that is a C identifier (it names the library loaded: '../../x' or '/x' loaded a library outside the
     FMU), a GUID, value references that are unsigned 32-bit, no input or parameter sharing its value reference with
     another of them (an alias set holds at most one: setting one silently changed the other; an output or a local may
     alias an input or a parameter), and start, min and max values of the variable's type (a Real start 'abc', or a
-    start NaN or INF of a parameter or an input, was taken), with min <= max. An infinite min or max is no bound, as
-    FMPy reads it; names declared twice are :func:`_ambiguous`'s."""
+    start NaN or INF of a parameter or an input, was taken). An infinite min or max is no bound, as FMPy reads it; a
+    min above the max is returned as a note to say once (FMPy and libcosim run such an FMU: any value set there is
+    refused where it is set, as outside the range); names declared twice are :func:`_ambiguous`'s."""
     def fail(message: str) -> ComponentSourceError:
         return ComponentSourceError(Issue("", f"{path}: modelDescription.xml: {message}"))
 
@@ -220,6 +222,7 @@ def _check_description(path: Path, md: Any) -> None:
         # Refused (correctness): FMI 1.0 and 2.0 require it, instantiation passes it (the FMU checks it)
         raise fail("no guid (fmi2Instantiate checks it)")
     aliases: dict[tuple, list[Any]] = {}
+    empty: list[str] = []
     for v in md.modelVariables:
         vr = v.valueReference
         if not isinstance(vr, int) or not 0 <= vr < 2 ** 32:
@@ -243,8 +246,7 @@ def _check_description(path: Path, md: Any) -> None:
                 raise fail(f"variable {v.name} ({v.causality}): {attr} {str(text)[:40]!r} is not a finite number")
         lo, hi = getattr(v, "min", None), getattr(v, "max", None)
         if lo is not None and hi is not None and kind in (REAL, INTEGER) and float(lo) > float(hi):
-            # Refused (correctness): the range check would refuse every value the variable could take
-            raise fail(f"variable {v.name}: min {lo} > max {hi}: no value is in range")
+            empty.append(f"{v.name} (min {lo} > max {hi})")
     for (kind, vr), group in aliases.items():
         settable = [v for v in group if v.causality in _SET_BY_MASTER]
         if len(settable) > 1:  # aliases are legal, but a set of them holds at most one parameter or input
@@ -252,6 +254,10 @@ def _check_description(path: Path, md: Any) -> None:
             # Refused (correctness): setting one would silently change the other
             raise fail(f"{names} share the {kind} valueReference {vr}: setting one would change the other (a set "
                        "of aliases holds at most one parameter or input)")
+    if not empty:
+        return ()
+    return (f"variable{'s' if len(empty) > 1 else ''} {', '.join(empty[:5])}{' and more' if len(empty) > 5 else ''}: "
+            "no value is in the declared range; the run goes on, and a value set there is refused as outside it",)
 
 
 def _ambiguous(md: Any) -> dict[str, tuple[int, ...]]:
@@ -270,10 +276,15 @@ _WARNED: set[Path] = set()
 
 
 def warn_ambiguous(info: FMUInfo) -> None:
-    """Say once per FMU file and process, on stderr, which names ``info`` left out as declared more than once."""
-    if not info.ambiguous or info.path in _WARNED:
+    """Say once per FMU file and process, on stderr, which names ``info`` left out as declared more than once, and
+    its other :attr:`~FMUInfo.notes` (what it declares that is read as other tools read it)."""
+    if info.path in _WARNED or not (info.ambiguous or info.notes):
         return
     _WARNED.add(info.path)
+    for note in info.notes:
+        print(printable(f"warning: {info.path.name}: modelDescription.xml: {note}"), file=sys.stderr)
+    if not info.ambiguous:
+        return
     named = ", ".join(f"{n!r} (value references {', '.join(map(str, vrs))})"
                       for n, vrs in list(info.ambiguous.items())[:5])
     more = " and more" if len(info.ambiguous) > 5 else ""
@@ -315,7 +326,7 @@ def load_fmu(path: str | Path) -> FMUInfo:
         # Refused (correctness): clocked partitions would never tick: the run would be silently wrong
         raise ComponentSourceError(Issue("", f"{path.name} declares Clock variables ({names}): clocks (FMI 3.0 "
                                              "scheduled execution and synchronous clocks) are not supported"))
-    _check_description(path, md)
+    notes = _check_description(path, md)
     ambiguous = _ambiguous(md)
     variables = {}
     for i, v in enumerate(md.modelVariables, start=1):
@@ -327,6 +338,6 @@ def load_fmu(path: str | Path) -> FMUInfo:
             causality=v.causality, variability=v.variability, unit=_unit(v), description=v.description,
             start=v.start, index=i, shape=tuple(v.shape or ()) if dims else (), dims=dims, initial=v.initial,
             min=_attr(v, "min"), max=_attr(v, "max"))
-    info = FMUInfo(path, md, variables, stamp, ambiguous)
+    info = FMUInfo(path, md, variables, stamp, ambiguous, notes)
     _CACHE[path] = info
     return info

@@ -420,8 +420,6 @@ BAD_FMU = {
     "start_inf": (lambda s: s.replace(K_START, '<Real start="1e999"/>'),
                   "variable k \\(parameter\\): start '1e999' is not a finite number"),
     "min_text": (lambda s: s.replace(K_START, '<Real start="1" min="abc"/>'), "variable k: min 'abc' is not a Real"),
-    "empty_range": (lambda s: s.replace(K_START, '<Real start="1" min="5" max="0"/>'),
-                    "variable k: min 5 > max 0: no value is in range"),
     # a NaN bound compares false: every value would pass the range check (an infinite one is no bound: it loads)
     "max_nan": (lambda s: s.replace(K_START, '<Real start="1" max="NaN"/>'),
                 "variable k \\(parameter\\): max 'NaN' is not a finite number"),
@@ -469,6 +467,22 @@ def test_an_infinite_min_or_max_is_no_bound(run, write_scenario, test_fmus, tmp_
                      lambda s: s.replace(K_START, '<Real start="1" min="-INF" max="1.5"/>'))
     fails(run("run", write_scenario(SMALL.replace("{CosimTGain}", str(half)), "half.yaml"), "--out",
               tmp_path / "y.mcap"), 2, r"half.yaml:\d+: ", "is outside its declared range \\[-INF, 1.5\\]")
+
+
+def test_an_empty_range_is_one_warning_and_refused_where_a_value_is_set(run, write_scenario, test_fmus, tmp_path):
+    """FMPy (its validation included) and libcosim do not compare min with max, and run such an FMU; so do we, with
+    one warning naming the variable, while nothing sets it. A value set there is refused as outside the range,
+    naming the scenario's line: the check applies where the range is used."""
+    fmu = _fmu_with(test_fmus["CosimTGain"], tmp_path / "empty.fmu",
+                    lambda s: s.replace(K_START, '<Real start="1" min="5" max="0"/>'))
+    r = run("run", write_scenario(SMALL.replace("{CosimTGain}", str(fmu)).replace("{k: 2.0}", "{}")), "--out",
+            tmp_path / "x.mcap", "--quiet")
+    assert r.returncode == 0, r.stderr
+    assert r.stderr.strip().splitlines() == [
+        "warning: empty.fmu: modelDescription.xml: variable k (min 5 > max 0): no value is in the declared range; the "
+        "run goes on, and a value set there is refused as outside it"], r.stderr
+    fails(run("run", write_scenario(SMALL.replace("{CosimTGain}", str(fmu)), "set.yaml"), "--out",
+              tmp_path / "y.mcap"), 2, r"set.yaml:\d+: ", "k = 2.0 is outside its declared range \\[5, 0\\]")
 
 
 def test_an_output_may_alias_an_input(run, write_scenario, test_fmus, tmp_path):
