@@ -23,6 +23,8 @@ AUDITED = [
     "cosim/io/ssp/scenario.py", "cosim/io/ssp/units.py",
     "cosim/fmi/description.py", "cosim/fmi/extract.py",
     "cosim/engine/bounded_yaml.py", "cosim/engine/scenario.py", "cosim/engine/overrides.py", "cosim/engine/system.py",
+    "cosim/engine/schema.py", "cosim/engine/grid.py", "cosim/engine/names.py", "cosim/engine/events.py",
+    "cosim/engine/prepare.py",
     "cosim/io/runlog.py", "cosim/io/recover.py", "cosim/io/checkpoint.py",
     *(f"cosim/io/recordings/{m}.py" for m in ("bags", "component", "csvfile", "export", "recording", "spec", "units")),
     *(f"cosim/analysis/{m}.py" for m in ("cases", "compare", "recording_compare", "report", "results", "sweep",
