@@ -174,10 +174,14 @@ class SystemPlan:
 
 def _missing(info: FMUInfo, vname: str, candidates: list[str], comp: str = "") -> str:
     """Why ``vname`` names no variable of ``info``: declared more than once (ambiguous: refused where named, see
-    :func:`cosim.fmi.description._ambiguous`), or not at all (with the closest names)."""
+    :func:`cosim.fmi.description._ambiguous`), sharing its value reference with another parameter or input (setting
+    one would change the other: refused where named), or not at all (with the closest names)."""
     where = f"{info.path.name}{f' ({comp})' if comp else ''}"
     base = vname.split("[", 1)[0]
     for name in (vname, base):
+        if name in info.shared:
+            return f"{where}: {info.shared[name]}: setting one would change the other, so {name!r} cannot be set or " \
+                   "connected"
         if name in info.ambiguous:
             vrs = ", ".join(map(str, info.ambiguous[name]))
             return (f"{where} declares {len(info.ambiguous[name])} variables named {name!r} (value references "
@@ -305,7 +309,8 @@ def _links(structure: SystemStructure, infos: dict[str, FMUInfo], idx: dict[str,
         var, element, problem = find_variable(info, vname)
         candidates = [v.name for v in info.variables.values() if v.causality in want]
         if var is None:
-            issue(loc, problem if problem and vname not in info.ambiguous else _missing(info, vname, candidates, comp))
+            named = vname in info.ambiguous or vname in info.shared
+            issue(loc, problem if problem and not named else _missing(info, vname, candidates, comp))
             return None
         if var.causality not in want:
             issue(loc, f"{ref} is a{'n' if var.causality[0] in 'aeiou' else ''} {var.causality}, expected an "

@@ -90,6 +90,7 @@ class FMUInfo:
     stamp: tuple[int, ...] = ()  # the file as read (:func:`file_stamp`): a rebuilt file is another extraction
     ambiguous: dict[str, tuple[int, ...]] = field(default_factory=dict)  # names declared twice (:func:`_ambiguous`)
     notes: tuple[str, ...] = ()  # what the description says that is read as other tools read it, said once
+    shared: dict[str, str] = field(default_factory=dict)  # parameters and inputs on one value reference: left out
 
     @property
     def unzipdir(self) -> Path:
@@ -136,7 +137,7 @@ class FMUInfo:
                  for n, v in self.structural_parameters().items()}
         variables = {n: replace(v, shape=_shape(v.dims, by_vr, n)) if v.dims else v
                      for n, v in self.variables.items()}
-        return FMUInfo(self.path, self.md, variables, self.stamp, self.ambiguous, self.notes)
+        return FMUInfo(self.path, self.md, variables, self.stamp, self.ambiguous, self.notes, self.shared)
 
 
 def _scalar_start(v: Variable) -> int:
@@ -200,15 +201,16 @@ def _numbers(text: str, kind: str) -> list[float]:
     return [float(w) if kind == REAL else float(int(w)) for w in text.split()]
 
 
-def _check_description(path: Path, md: Any) -> tuple[str, ...]:
+def _check_description(path: Path, md: Any) -> tuple[tuple[str, ...], dict[str, str]]:
     """What fmpy reads without validation but the master relies on, one error naming the variable: a model
     identifier that is a C identifier (it names the library loaded: '../../x' or '/x' loaded a library outside the
-    FMU), a GUID, value references that are unsigned 32-bit, no input or parameter sharing its value reference with
-    another of them (an alias set holds at most one: setting one silently changed the other; an output or a local may
-    alias an input or a parameter), and start, min and max values of the variable's type (a Real start 'abc', or a
-    start NaN or INF of a parameter or an input, was taken). An infinite min or max is no bound, as FMPy reads it; a
-    min above the max is returned as a note to say once (FMPy and libcosim run such an FMU: any value set there is
-    refused where it is set, as outside the range); names declared twice are :func:`_ambiguous`'s."""
+    FMU), a GUID, value references that are unsigned 32-bit, and start, min and max values of the variable's type (a
+    Real start 'abc', or a start NaN or INF of a parameter or an input, was taken). An infinite min or max is no
+    bound, as FMPy reads it. Returned, as FMPy and libcosim run such FMUs: notes to say once (a min above the max: a
+    value set there is refused where it is set, as outside the range) and the parameters and inputs that share a
+    value reference with another of them, name -> what they share (an alias set holds at most one: setting one
+    would silently change the other; left out, they are refused where named, as names declared twice are, see
+    :func:`_ambiguous`; an output or a local may alias an input or a parameter)."""
     def fail(message: str) -> ComponentSourceError:
         return ComponentSourceError(Issue("", f"{path}: modelDescription.xml: {message}"))
 
@@ -247,17 +249,19 @@ def _check_description(path: Path, md: Any) -> tuple[str, ...]:
         lo, hi = getattr(v, "min", None), getattr(v, "max", None)
         if lo is not None and hi is not None and kind in (REAL, INTEGER) and float(lo) > float(hi):
             empty.append(f"{v.name} (min {lo} > max {hi})")
+    notes, shared = [], {}
     for (kind, vr), group in aliases.items():
         settable = [v for v in group if v.causality in _SET_BY_MASTER]
         if len(settable) > 1:  # aliases are legal, but a set of them holds at most one parameter or input
             names = ", ".join(f"{v.name} ({v.causality})" for v in settable[:4])
-            # Refused (correctness): setting one would silently change the other
-            raise fail(f"{names} share the {kind} valueReference {vr}: setting one would change the other (a set "
-                       "of aliases holds at most one parameter or input)")
-    if not empty:
-        return ()
-    return (f"variable{'s' if len(empty) > 1 else ''} {', '.join(empty[:5])}{' and more' if len(empty) > 5 else ''}: "
-            "no value is in the declared range; the run goes on, and a value set there is refused as outside it",)
+            what = f"{names} share the {kind} value reference {vr}"
+            shared.update((v.name, what) for v in settable)
+            notes.append(f"{what}: left out (not logged, not settable); the run goes on while nothing names them")
+    if empty:
+        more = " and more" if len(empty) > 5 else ""
+        notes.append(f"variable{'s' if len(empty) > 1 else ''} {', '.join(empty[:5])}{more}: no value is in the "
+                     "declared range; the run goes on, and a value set there is refused as outside it")
+    return tuple(notes), shared
 
 
 def _ambiguous(md: Any) -> dict[str, tuple[int, ...]]:
@@ -326,11 +330,11 @@ def load_fmu(path: str | Path) -> FMUInfo:
         # Refused (correctness): clocked partitions would never tick: the run would be silently wrong
         raise ComponentSourceError(Issue("", f"{path.name} declares Clock variables ({names}): clocks (FMI 3.0 "
                                              "scheduled execution and synchronous clocks) are not supported"))
-    notes = _check_description(path, md)
+    notes, shared = _check_description(path, md)
     ambiguous = _ambiguous(md)
     variables = {}
     for i, v in enumerate(md.modelVariables, start=1):
-        if v.name in ambiguous:
+        if v.name in ambiguous or v.name in shared:
             continue
         dims = tuple((int(d.start) if d.start is not None else None, d.valueReference) for d in v.dimensions)
         variables[v.name] = Variable(
@@ -338,6 +342,6 @@ def load_fmu(path: str | Path) -> FMUInfo:
             causality=v.causality, variability=v.variability, unit=_unit(v), description=v.description,
             start=v.start, index=i, shape=tuple(v.shape or ()) if dims else (), dims=dims, initial=v.initial,
             min=_attr(v, "min"), max=_attr(v, "max"))
-    info = FMUInfo(path, md, variables, stamp, ambiguous, notes)
+    info = FMUInfo(path, md, variables, stamp, ambiguous, notes, shared)
     _CACHE[path] = info
     return info

@@ -407,10 +407,7 @@ BAD_FMU = {
     "identifier_missing": (lambda s: s.replace(' modelIdentifier="CosimTGain"', ""),
                            "coSimulation modelIdentifier None is not a C identifier"),  # was a NoneType + str
     "guid_missing": (lambda s: re.sub(r' guid="[^"]*"', "", s), "no guid"),  # was a NoneType .encode at t = 0
-    # a parameter and an input on one value reference: setting u changed k (ran, silently). An output aliasing an
-    # input is legal (test_an_output_may_alias_an_input): an alias set holds at most one parameter or input
-    "shared_reference": (lambda s: s.replace('name="u" valueReference="1"', 'name="u" valueReference="0"'),
-                         "k \\(parameter\\), u \\(input\\) share the Real valueReference 0"),
+    # a parameter and an input on one value reference: refused where named (test_a_parameter_and_an_input_on_one_...)
     "negative_reference": (lambda s: s.replace('name="u" valueReference="1"', 'name="u" valueReference="-1"'),
                            "variable u: valueReference -1 is not an unsigned 32-bit integer"),
     # start, min and max of another type, or no number (taken, and never checked)
@@ -483,6 +480,30 @@ def test_an_empty_range_is_one_warning_and_refused_where_a_value_is_set(run, wri
         "run goes on, and a value set there is refused as outside it"], r.stderr
     fails(run("run", write_scenario(SMALL.replace("{CosimTGain}", str(fmu)), "set.yaml"), "--out",
               tmp_path / "y.mcap"), 2, r"set.yaml:\d+: ", "k = 2.0 is outside its declared range \\[5, 0\\]")
+
+
+def test_a_parameter_and_an_input_on_one_value_reference_are_refused_only_where_named(run, write_scenario, test_fmus,
+                                                                                      tmp_path):
+    """An alias set holds at most one parameter or input (setting u changed k, silently); FMPy and libcosim run such
+    an FMU all the same. As for a name declared twice: the FMU loads with one warning, k and u left out, and the run
+    goes on while nothing names them; a connection into u (or a value for k) is refused, naming both."""
+    fmu = _fmu_with(test_fmus["CosimTGain"], tmp_path / "shared.fmu",
+                    lambda s: s.replace('name="u" valueReference="1"', 'name="u" valueReference="0"'))
+    alone = write_scenario(f'name: alone\ncomponents:\n  g: {{path: "{fmu}"}}\ntime: {{stop: 0.2, step: 0.01}}\n',
+                           "alone.yaml")
+    r = run("run", alone, "--out", tmp_path / "x.mcap", "--quiet")
+    assert r.returncode == 0, r.stderr
+    assert r.stderr.strip().splitlines() == [
+        "warning: shared.fmu: modelDescription.xml: k (parameter), u (input) share the Real value reference 0: left "
+        "out (not logged, not settable); the run goes on while nothing names them"], r.stderr
+    connected = write_scenario(SMALL.replace("{CosimTGain}", str(fmu)).replace("{k: 2.0}", "{}"), "connected.yaml")
+    fails(run("run", connected, "--out", tmp_path / "y.mcap"), 2, r"connected.yaml:\d+: ",
+          re.escape("shared.fmu (g): k (parameter), u (input) share the Real value reference 0: setting one would "
+                    "change the other, so 'u' cannot be set or connected"))
+    set_k = write_scenario(f'name: set\ncomponents:\n  g: {{path: "{fmu}", parameters: {{k: 2.0}}}}\n'
+                           'time: {stop: 0.2, step: 0.01}\n', "set.yaml")
+    fails(run("run", set_k, "--out", tmp_path / "z.mcap"), 2, r"set.yaml:\d+: components.g.parameters.k: ",
+          "so 'k' cannot be set or connected")
 
 
 def test_an_output_may_alias_an_input(run, write_scenario, test_fmus, tmp_path):
