@@ -177,6 +177,11 @@ UNSUPPORTED = {
     "system_connector_connected": (dict(system_extra=SYSTEM_CONNECTOR, connections_extra=(
         '<ssd:Connection startConnector="x" endElement="DP Controller" endConnector="u"/>')),
         "connections to the system's own connectors are not supported"),
+    # signal dictionaries are left out (below); an element referring to one would be missing from the run
+    "signal_dictionary_referred": (dict(system_extra='<ssd:SignalDictionaries><ssd:SignalDictionary name="d"/>'
+                                                     '</ssd:SignalDictionaries>',
+                                        elements_extra='<ssd:SignalDictionaryReference name="r" dictionary="d"/>'),
+                                   "nested systems and signal dictionaries are not supported"),
 }
 LEFT_OUT = {
     "system_connectors": (dict(system_extra=SYSTEM_CONNECTOR),

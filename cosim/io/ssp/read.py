@@ -110,7 +110,8 @@ def _system(root: ET.Element, ssp: Path) -> ET.Element:
                     for cn in system.iterfind("ssd:Connections/ssd:Connection", NS))
     if system.find("ssd:Connectors", NS) is not None and connected:  # else the connection to one is refused
         warn(ssp, f"{SSD_NAME}: the system's own connectors are left out (no connection uses them)")
-    if system.find("ssd:SignalDictionaries", NS) is not None:
+    referred = system.find("ssd:Elements/ssd:SignalDictionaryReference", NS) is not None  # refused as an element
+    if system.find("ssd:SignalDictionaries", NS) is not None and not referred:
         warn(ssp, f"{SSD_NAME}: the system's signal dictionaries are left out (no component refers to them)")
     return system
 
