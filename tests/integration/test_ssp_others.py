@@ -304,6 +304,19 @@ def test_a_step_size_hint_off_the_base_step_is_one_warning_and_rounds_down_as_li
         capsys.readouterr()  # open_ssp's own warning, said again
 
 
+def test_connector_kinds_ssp_does_not_know_are_one_warning_per_component_and_kind(tmp_path, test_fmus, capsys):
+    """libcosim's SSP parser stores a connector's kind unchecked and connects the FMU's variables: so do we, with one
+    warning per component and kind naming its connectors (not one line per connector)."""
+    ssp = _edited(_archive(tmp_path, test_fmus, "kinds.ssp"), lambda ssd: ssd.replace(
+        '<ssd:Connector name="u" kind="input">', '<ssd:Connector name="u" kind="signal">').replace(
+        '          <ssd:Connector name="y" kind="output">', '          <ssd:Connector name="y" kind="signal">'))
+    rc, _, err = _cli(capsys, "run", ssp, "--no-log", "--quiet")
+    assert rc == 0, err
+    assert err.strip().splitlines() == [
+        "warning: kinds.ssp: component 'DP Controller': connectors 'u', 'y': kind 'signal' is not an SSP connector "
+        "kind (input, output, inout, parameter, calculatedParameter): its FMU's variable decides"], err
+
+
 def _edited(ssp: Path, edit) -> Path:
     """``ssp`` with its SystemStructure.ssd rewritten by ``edit`` (in place)."""
     with zipfile.ZipFile(ssp) as z:

@@ -110,15 +110,15 @@ _CONNECTOR_KINDS = ("input", "output", "inout", "parameter", "calculatedParamete
 def check_connectors(el: ET.Element, components: dict[str, dict[str, Any]], ssp: Path) -> None:
     """A component's connectors as its FMU declares them: an input or an output where the FMU variable is one, and
     its type (a connector declared Boolean on a Real variable, or an output on an input, was taken as the FMU's).
-    A kind SSP does not know is one warning (the FMU's variable decides, as in libcosim)."""
+    A kind SSP does not know is one warning per component and kind (the FMU's variable decides, as in libcosim)."""
     name = el.get("name")
     info = None
+    odd: dict[str, list[str]] = {}  # a kind SSP does not know -> its connectors
     for c in el.iterfind("ssd:Connectors/ssd:Connector", NS):
         cname, kind = c.get("name", ""), c.get("kind", "")
         label = f"component {name!r}: connector {cname!r}"
         if kind not in _CONNECTOR_KINDS:  # libcosim stores the kind unchecked; the FMU's causality decides here too
-            warn(ssp, f"{label}: kind {kind!r} is not an SSP connector kind ({', '.join(_CONNECTOR_KINDS)}): its "
-                      "FMU's variable decides")
+            odd.setdefault(kind, []).append(cname)
         info = info or component_fmu(name, components, ssp)
         var = info.variables.get(cname)
         if var is None:  # named in a connection later, or never used
@@ -132,6 +132,10 @@ def check_connectors(el: ET.Element, components: dict[str, dict[str, Any]], ssp:
         if declared in ("Real", "Integer", "Boolean", "String") and want is not None and declared != want:
             # Refused (correctness): the file says two things of one signal: it may have been written for another FMU
             raise SspError(ssp, f"{label}: declared {declared}, but its FMU's variable {cname} is {var.fmi_type}")
+    for kind, names in odd.items():
+        listed = ", ".join(map(repr, names[:3])) + (f" and {len(names) - 3} more" if len(names) > 3 else "")
+        warn(ssp, f"component {name!r}: connector{'s' if len(names) > 1 else ''} {listed}: kind {kind!r} is not an "
+                  f"SSP connector kind ({', '.join(_CONNECTOR_KINDS)}): its FMU's variable decides")
 
 
 def step_hint(el: ET.Element, ssp: Path, comp: str) -> float | None:
