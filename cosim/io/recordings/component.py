@@ -61,6 +61,8 @@ class RecordingInfo:
         defaultExperiment=None, coSimulation=None, modelExchange=None))
     feedthrough: dict[str, list[str] | None] = field(default_factory=dict)
     ambiguous: dict[str, tuple[int, ...]] = field(default_factory=dict)  # none: the outputs are a mapping's keys
+    shared: dict[str, str] = field(default_factory=dict)  # none: no value references
+    notes: tuple[str, ...] = ()  # nothing read leniently
     interfaces: tuple[str, ...] = ("cs",)
 
     def structural_parameters(self) -> dict:
