@@ -97,9 +97,11 @@ def parse_fits(items: Sequence[str]) -> list[Fit]:
         label, sep, bounds = item.partition("=")
         names = tuple(n.strip() for n in label.split(","))
         if not label.strip() or not all(names):
+            # Refused (correctness): a fit we cannot read: what is fitted is a guess
             raise CalibrationError(f"--fit {item!r}: expected NAME[=LOW:HIGH] (plant.mass.payload=0:1, offset, "
                                    "a,b=LOW:HIGH for one value set at both)")
         if OFFSET in names and len(names) > 1:
+            # Refused (correctness): the offset is no parameter of a component: a link would be dropped
             raise CalibrationError(f"--fit {item!r}: offset is the recording's clock, it cannot be linked to a "
                                    "scenario value")
         low, high = -math.inf, math.inf
@@ -110,16 +112,20 @@ def parse_fits(items: Sequence[str]) -> list[Fit]:
             except ValueError:
                 colon = ""
             if not colon or math.isnan(low) or math.isnan(high):
+                # Refused (correctness): bounds we cannot read: the fit's range would be a guess
                 raise CalibrationError(f"--fit {item!r}: bounds are LOW:HIGH, two numbers (either may be empty: "
                                        "unbounded), e.g. plant.mass.payload=0:1")
             if not low < high:
+                # Refused (correctness): no value lies between them
                 raise CalibrationError(f"--fit {item!r}: the lower bound {low:g} is not below the upper {high:g}")
         twice = seen.intersection(names)
         if twice:
+            # Refused (correctness): which bounds are meant is a guess
             raise CalibrationError(f"--fit {item!r}: {', '.join(sorted(twice))} is fitted twice")
         seen.update(names)
         fits.append(Fit(names, low, high))
     if not fits:
+        # Refused (correctness): nothing to fit
         raise CalibrationError("calibrate needs at least one --fit NAME[=LOW:HIGH]")
     return fits
 
@@ -255,6 +261,7 @@ def _start_values(runner: _Runner, fits: list[Fit]) -> tuple[list[float], dict[s
             known = [f"{comp}.{v}" for v in infos[comp].variables] if comp in infos else []
             close = difflib.get_close_matches(name, known, n=3, cutoff=0.5)
             hint = f"; did you mean {', '.join(close)}?" if close else ""
+            # Refused (correctness): a signal the run does not have
             raise CalibrationError(f"--map {name}=...: not a signal of the run: {exc.args[0] if exc.args else exc}"
                                    f"{hint}") from None
     data = runner.base.model_dump(mode="json", by_alias=True)
@@ -278,6 +285,7 @@ def _value_at(runner: _Runner, data: dict, infos: Mapping[str, Any], name: str, 
             settable = [v.name for v in infos[path[1]].variables.values() if v.causality in ("parameter", "input")]
             close = difflib.get_close_matches(path[3], settable, n=3, cutoff=0.5)
             hint = f"; did you mean {', '.join(f'{path[1]}.{c}' for c in close)}?" if close else ""
+            # Refused (correctness): a parameter the component does not have
             raise CalibrationError(f"--fit {label}: {path[1]} has no parameter {path[3]!r}{hint}")
         if value is None:
             value = var.start
@@ -293,6 +301,7 @@ def _value_at(runner: _Runner, data: dict, infos: Mapping[str, Any], name: str, 
         if isinstance(value, bool) or not math.isfinite(number):
             raise ValueError
     except (TypeError, ValueError):
+        # Refused (correctness): no fit starts from a value that is no number
         raise CalibrationError(f"--fit {label}: {name} is {value!r} in the scenario, not a finite number to start "
                                f"the fit from (give one with --set {name}=VALUE)") from None
     return number
@@ -334,6 +343,7 @@ def _problem(rec, t: np.ndarray, offset: float, recording: str | Path, maps: Map
         keep = (rec.times[name] - offset >= t[0]) & (rec.times[name] - offset <= t[-1])
         if keep.sum() < 2:
             times = rec.times[name]
+            # Refused (correctness): past the recording's ends the fitted values would be made up
             raise CalibrationError(f"{name}: the run covers t = {t[0]:.3f} .. {t[-1]:.3f} s and {recording}'s {spec} "
                                    f"{times[0]:.3f} .. {times[-1]:.3f} s (offset {offset:.6g} s): no overlap; try "
                                    "--fit offset, --offset, --time-origin or --time")
@@ -366,6 +376,7 @@ def calibrate(scenario: str | Path, recording: str | Path, maps: Mapping[str, st
     result with ``converged`` False."""
     t_start = time.perf_counter()
     if not maps:
+        # Refused (correctness): no signal paired: nothing to fit against
         raise CalibrationError("calibrate needs --map RUN_SIGNAL=RECORDING_SIGNAL (one per signal)")
     fits = list(fits)
     scen = [f for f in fits if not f.is_offset]
@@ -379,6 +390,7 @@ def calibrate(scenario: str | Path, recording: str | Path, maps: Mapping[str, st
         starts, run_units = _start_values(runner, scen)
         for f, s in zip(scen, starts):
             if not f.low <= s <= f.high:
+                # Refused (correctness): a start outside the bounds: the fit would start from another value than given
                 raise CalibrationError(f"--fit {f.label}={f.low:g}:{f.high:g}: the start value {s:g} (the "
                                        f"scenario's) is outside the bounds; give another with --set")
         rec = _recorded(recording, maps, run_units, units or {}, time_stamps, time_origin, runner.notes)
@@ -454,6 +466,7 @@ def _fit(runner: _Runner, rec, scen: list[Fit], off_fit: Fit | None, starts: lis
     x0 = np.array(starts + ([offset] if off_fit is not None else []), dtype=float)
     fits = scen + ([off_fit] if off_fit is not None else [])
     if sum(len(v) for v in problem.tau.values()) <= len(fits):
+        # Refused (correctness): fewer samples than fitted values: the fit is not determined
         raise CalibrationError(f"{sum(len(v) for v in problem.tau.values())} recorded samples inside the run for "
                                f"{len(fits)} fitted values: too few to fit")
     best = {"cost": math.inf, "x": x0.copy()}

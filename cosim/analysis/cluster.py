@@ -143,22 +143,28 @@ class SweepCluster:
         try:  # connect() retries a refused connection for ``timeout``, then its handshake waits for ever: bounded
             answer = asyncio.run(asyncio.wait_for(identity(), timeout + 1.0))
         except TimeoutError:
+            # Refused (security): a peer that accepts and never answers would hold the sweep for ever
             raise SweepError(f"--scheduler {address}: no answer from {address} within {timeout:g} s (it accepted "
                              f"the connection: is it a Dask scheduler?)") from None
         except ValueError as exc:  # parse_address: not an address of a comm Dask knows
+            # Refused (correctness): an address we cannot read: where the cases go is a guess
             raise SweepError(f"--scheduler {address}: not a scheduler address ({exc}); expected tcp://HOST:PORT") \
                 from None
         except OSError as exc:  # distributed's CommClosedError too: refused, or closed during the handshake
             if str(exc).startswith("Timed out trying to connect"):
+                # Refused (correctness): no scheduler there: the cases would go nowhere
                 raise SweepError(f"--scheduler {address}: cannot connect to {address} within {timeout:g} s "
                                  f"({_comm_reason(exc.__cause__ or exc)})") from None
+            # Refused (correctness): not a scheduler: the cases would go nowhere
             raise SweepError(f"--scheduler {address}: {address} is not a Dask scheduler (it closed the connection "
                              f"in Dask's handshake: {_comm_reason(exc)})") from None
         except Exception:  # noqa: BLE001 - an answer in another protocol: a frame of 3 EiB, undecodable, ...
+            # Refused (security): another protocol's answer (a frame of 3 EiB) is not read further
             raise SweepError(f"--scheduler {address}: {address} is not a Dask scheduler (its answer is not "
                              f"Dask's protocol)") from None
         if not isinstance(answer, dict) or answer.get("type") != "Scheduler":
             kind = answer.get("type") if isinstance(answer, dict) else None
+            # Refused (correctness): not a scheduler: the cases would go nowhere
             raise SweepError(f"--scheduler {address}: {address} is not a Dask scheduler"
                              + (f" (a Dask {kind})" if kind else ""))
 
@@ -192,6 +198,7 @@ class SweepCluster:
             try:
                 self.client = Client(self.scheduler, timeout="10s")
             except OSError as exc:
+                # Refused (correctness): no scheduler there: the cases would go nowhere
                 raise SweepError(f"--scheduler {self.scheduler}: cannot connect: {exc}") from None
             n = len(self.client.scheduler_info().get("workers", {}))
             return self.client, f"{self.scheduler} ({n} workers)"

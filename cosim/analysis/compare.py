@@ -160,6 +160,7 @@ def parse_tolerances(items: Sequence[str]) -> dict[str, float]:
         except ValueError:
             value = math.nan
         if not sep or not key or not 0 < value < math.inf:  # nan and inf are no tolerance
+            # Refused (correctness): a tolerance we cannot read: the verdict would use a guess
             raise CosimError(f"--tol {item!r}: expected SIGNAL_PATTERN=POSITIVE_NUMBER (finite), e.g. plant.p=1e-6")
         out[key.strip()] = value
     return out
@@ -216,13 +217,16 @@ def compare_logs(a: RunLog | str | Path, b: RunLog | str | Path, tolerances: Map
     common = [n for n in names_a if n in names_b]
     unused = [p for p in tolerances if not any(_matches(p, n) for n in common)]
     if unused:
+        # Refused (correctness): a tolerance that applies to nothing: the signal meant is judged by another
         raise CosimError(f"tolerance pattern(s) {', '.join(unused)} match no signal of both logs "
                          f"(e.g. {', '.join(common[:4])})")
     if signals:
         common = [n for n in common if any(_matches(p, n) for p in signals)]
         if not common:
+            # Refused (correctness): nothing to compare: a pass would say nothing
             raise CosimError(f"no common signal of {a.path} and {b.path} matches {', '.join(signals)}")
     if not common:
+        # Refused (correctness): nothing to compare: a pass would say nothing
         raise CosimError(f"{a.path} and {b.path} share no signal (components {', '.join(a.components)} vs "
                          f"{', '.join(b.components)})")
     first, other = a.signals[common[0]], b.signals[common[0]]
@@ -230,6 +234,7 @@ def compare_logs(a: RunLog | str | Path, b: RunLog | str | Path, tolerances: Map
     hi = min(int(first.t_ns[-1]), int(other.t_ns[-1]))
     problems = []
     if hi < lo:
+        # Refused (correctness): no common time: a pass would say nothing
         raise CosimError(f"{a.path} covers t = {first.t[0]:.3f} .. {first.t[-1]:.3f} s and {b.path} "
                          f"t = {other.t[0]:.3f} .. {other.t[-1]:.3f} s: no overlap")
     step = max(_period(first.t_ns), _period(other.t_ns))  # the coarser grid
@@ -244,6 +249,7 @@ def compare_logs(a: RunLog | str | Path, b: RunLog | str | Path, tolerances: Map
         sa, sb = a.signals[name], b.signals[name]
         t_ns, ya, yb = _aligned(sa, sb, lo, hi)
         if len(t_ns) < 2 and min(len(sa.t_ns), len(sb.t_ns)) >= 2:
+            # Refused (correctness): no common stamps: values would have to be interpolated, which compare never does
             raise CosimError(f"{name}: {a.path} (every {_period(sa.t_ns) * 1e-9:.6g} s) and {b.path} (every "
                              f"{_period(sb.t_ns) * 1e-9:.6g} s) share {len(t_ns)} time stamp(s) over t = "
                              f"{lo * 1e-9:.3f} .. {hi * 1e-9:.3f} s: no common grid to compare them on "
@@ -278,13 +284,16 @@ def _plant_component(scenario, component: str | None) -> tuple[str, str]:
     found = {n: plants[c.fmu] for n, c in scenario.components.items() if c.fmu in plants}
     if component is not None:
         if component not in scenario.components:
+            # Refused (correctness): a component the scenario does not have
             raise ScenarioError(Issue("--component", f"unknown component {component!r}; components: "
                                       f"{', '.join(scenario.components)}", scenario.source))
         if component not in found:
+            # Refused (correctness): the plant comparison needs one of our plants: another's values mean other things
             raise ScenarioError(Issue(f"components.{component}", "is not one of our plant FMUs "
                                       f"({', '.join(plants)}); its plant cannot be swapped", scenario.source))
         return component, found[component].kind
     if len(found) != 1:
+        # Refused (correctness): which plant is meant is a guess
         raise ScenarioError(Issue("components", f"{'no' if not found else 'more than one'} plant component "
                                   f"({', '.join(found) or 'none of our plant FMUs'}); name it with --component",
                                   scenario.source))
@@ -326,9 +335,11 @@ def compare_plants(path: str | Path, plants: Sequence[str] = ("exudyn", "analyti
     """
 
     if len(plants) != 2:
+        # Refused (correctness): a comparison is of two
         raise CosimError(f"--plants needs exactly two plants, got {len(plants)}: {', '.join(plants)}")
     unknown = [p for p in plants if p not in PLANTS]
     if unknown:
+        # Refused (correctness): a plant we do not have
         raise CosimError(f"unknown plant {', '.join(unknown)}; valid: {', '.join(PLANTS)}")
     base = load_scenario(path, overrides)
     comp, kind = _plant_component(base, component)

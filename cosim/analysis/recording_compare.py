@@ -67,9 +67,11 @@ def parse_maps(items: Sequence[str]) -> dict[str, str]:
     for item in items:
         run, sep, rec = item.partition("=")
         if not sep or not run.strip() or not rec.strip():
+            # Refused (correctness): a mapping we cannot read: which signals pair is a guess
             raise CosimError(f"--map {item!r}: expected RUN_SIGNAL=RECORDING_SIGNAL, e.g. "
                              "plant.q[1]=/joint_states.position[joint1]")
         if run.strip() in out:
+            # Refused (correctness): which recorded signal is meant is a guess
             raise CosimError(f"--map: {run.strip()} is mapped twice")
         out[run.strip()] = rec.strip()
     return out
@@ -108,6 +110,7 @@ def estimate_offset(run: Sequence[tuple[np.ndarray, np.ndarray]], rec: Sequence[
     tb0, tb1 = max(t[0] for t, _ in rec), min(t[-1] for t, _ in rec)
     span_run, span_rec = ta1 - ta0, tb1 - tb0
     if span_run <= 0 or span_rec <= 0:
+        # Refused (correctness): no common span: the offset found would be a guess
         raise CosimError("--align: the signals share no time span to correlate (run "
                          f"{ta0:.3f} .. {ta1:.3f} s, recording {tb0:.3f} .. {tb1:.3f} s)")
     steps = [float(np.median(np.diff(t))) for t, _ in (*run, *rec)]
@@ -131,6 +134,7 @@ def estimate_offset(run: Sequence[tuple[np.ndarray, np.ndarray]], rec: Sequence[
     lags = tb0 - ta0 + (np.arange(na + nb - 1) - (na - 1)) * step
     allowed = np.abs(lags) <= limit
     if not allowed.any():
+        # Refused (correctness): no offset to try: the alignment would be a guess
         raise CosimError(f"--align: no offset within {limit:g} s to try (run span {span_run:.3f} s, recording "
                          f"{span_rec:.3f} s)")
     score = np.where(allowed, score / len(run), -np.inf)
@@ -183,6 +187,7 @@ def compared_traces(run: RunLog | str | Path, recording: str | Path, maps: Mappi
     """:func:`compare_recording`'s comparison, and each mapped signal's :class:`Trace` (what a figure draws)."""
     run = run if isinstance(run, RunLog) else read_run(run)
     if not maps:
+        # Refused (correctness): no signal paired: a pass would say nothing
         raise CosimError("compare with a recording needs --map RUN_SIGNAL=RECORDING_SIGNAL (one per signal)")
     for name in maps:
         run.signal(name)  # an unknown run signal: one line with the closest names
@@ -202,6 +207,7 @@ def compared_traces(run: RunLog | str | Path, recording: str | Path, maps: Mappi
         t_rec = rec.times[name]
         keep = (t_run + offset >= t_rec[0] - _SLACK_S) & (t_run + offset <= t_rec[-1] + _SLACK_S)
         if not keep.any():
+            # Refused (correctness): past the recording's ends the compared values would be made up
             raise CosimError(f"{name}: the run covers t = {t_run[0]:.3f} .. {t_run[-1]:.3f} s and {recording}'s "
                              f"{spec} {t_rec[0]:.3f} .. {t_rec[-1]:.3f} s (offset {offset:.6g} s): no overlap; "
                              "try --align, --time-origin or --time")

@@ -186,6 +186,7 @@ def make_report(run: RunLog | str | Path, out_dir: str | Path | None = None, rec
         recording; a map without a recording. Every check is made before the first file is written.
     """
     if recording is None and (maps or options):
+        # Refused (correctness): options for a comparison without its recording would be dropped silently
         raise CosimError(f"{', '.join(['maps'] * bool(maps) + sorted(options))}: need a recording to compare with")
     tr = tracking(run)
     log = tr.run

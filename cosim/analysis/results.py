@@ -26,13 +26,16 @@ def read_results(out: str | Path) -> list[dict[str, str]]:
         return []
     problem = file_problem(path)  # a directory, or a FIFO read for ever
     if problem is not None:
+        # Refused (security): a FIFO or a device named as a results table would be read for ever
         raise SweepError(f"{path}: {problem}; use another --out")
     try:
         with path.open(newline="", encoding="utf-8") as f:
             rows = list(csv.DictReader(f))
     except (OSError, UnicodeDecodeError, csv.Error) as exc:
+        # Refused (correctness): another file: its rows would be taken as this sweep's cases
         raise SweepError(f"{path}: not a sweep's results table ({exc}); use another --out") from None
     if rows and (None in rows[0] or not {"case", "status"} <= set(rows[0])):
+        # Refused (correctness): another file: its rows would be taken as this sweep's cases
         raise SweepError(f"{path}: not a sweep's results table (no case and status columns); use another --out")
     return rows
 

@@ -224,6 +224,7 @@ def _warm_scenario(scenario: str, checkpoint: str | Path, stop_time: float | Non
     for name in params:
         comp, dot, _ = name.partition(".")
         if not dot or comp not in sc.components:
+            # Refused (correctness): a warm case cannot change the run's setup: the value would be dropped
             raise SweepError(f"{name}: a scenario key, not a variable of a component ({', '.join(sc.components)}); a "
                              f"warm sweep continues the checkpoint's run as it was from t = {ck.time:g} s and sets "
                              "only component variables settable during a run (tunable parameters, inputs no "
@@ -250,6 +251,7 @@ def _check_sets(cases: list[Case], plan: SystemPlan, t: float) -> None:
             resolve_sets(dict(c.values), plan, "sweep")
         except ScenarioError as exc:
             why = exc.issues[0].message if exc.issues else str(exc)
+            # Refused (correctness): a value not settable during a run would be dropped
             raise SweepError(f"{why} (a warm sweep sets each case's values at the checkpoint's time, t = {t:g} s, "
                              "as an event)") from None
 
@@ -357,6 +359,7 @@ def _loaded(scenario: str, cases: list[Case], params: list[str], checkpoint: str
     values (the file read once), a warm sweep's the checkpoint's scenario (a case's values are set during its run)."""
     if checkpoint is None:
         if stop_time is not None:
+            # Refused (correctness): a stop time without a checkpoint would be dropped silently
             raise SweepError("stop_time is a warm sweep's (with checkpoint=); a case from t = 0 takes time.stop "
                              "among its values")
         source = read_scenario(scenario)  # read once: every case is derived from it
@@ -374,13 +377,16 @@ def _finished(out: Path, columns: list[str], params: list[str], warm: WarmStart 
     table = out / RESULTS
     done_rows = read_results(out)
     if done_rows and list(done_rows[0]) != columns:
+        # Refused (correctness): two sweeps' rows in one table: results would mix
         raise SweepError(f"{table} holds another sweep (columns {', '.join(done_rows[0])}); use another --out")
     before = read_meta(out).get("scenario") if done_rows else None
     if before is not None and before != scenario:
+        # Refused (correctness): two sweeps' rows in one table: results would mix
         raise SweepError(f"{table} holds another sweep (of {before}); use another --out")
     if done_rows and warm is not None:
         before = read_meta(out).get("warm_start")
         if before != warm.record():
+            # Refused (correctness): two sweeps' rows in one table: results would mix
             raise SweepError(f"{table} holds another sweep ({started(before)}, not {warm.text()} to "
                              f"{warm.stop_time:g} s); use another --out")
     finished = {r["case"]: r for r in done_rows if r["status"] in ("ok", "failed")}

@@ -18,6 +18,29 @@ from .results import RESULTS, WARM_COLUMNS, read_results
 __all__ = ["report"]
 
 
+def _sweep_meta(out: Path, rows: list[dict[str, str]]) -> dict:
+    """The sweep.json of the sweep in ``out``, its ``parameters`` (those it swept) each a column of ``rows`` (its
+    results.csv)."""
+    meta_path = out / "sweep.json"
+    meta = {}
+    if os.path.lexists(meta_path):
+        problem = file_problem(meta_path)
+        if problem is not None:
+            # Refused (security): a FIFO or a device named as sweep.json would be read for ever
+            raise SweepError(f"{meta_path}: {problem}")
+        try:
+            meta = json.loads(meta_path.read_text(encoding="utf-8"))
+        except (OSError, UnicodeDecodeError, ValueError, RecursionError) as exc:
+            # Refused (correctness): the sweep's description cannot be read: columns would be a guess
+            raise SweepError(f"{meta_path}: not the sweep's JSON ({str(exc)[:120]})") from None
+    params = meta.get("parameters") if isinstance(meta, dict) else None
+    if not params or not isinstance(params, list) or not all(isinstance(p, str) and p in rows[0] for p in params):
+        # Refused (correctness): the sweep's description cannot be read: columns would be a guess
+        raise SweepError(f"{meta_path}: missing or without parameters (the columns of results.csv "
+                         "it swept); it is written by the sweep next to results.csv")
+    return meta
+
+
 def report(out: str | Path, metric: str = "rmse", fig: str | Path | None = None) -> Path:
     """A figure of ``metric`` over the swept parameters of ``out/results.csv``: a line against one
     parameter (several lines when a second one has few values), a heatmap against two (a scatter
@@ -29,24 +52,14 @@ def report(out: str | Path, metric: str = "rmse", fig: str | Path | None = None)
 
     rows = read_results(out)
     if not rows:
+        # Refused (correctness): no results: nothing to report
         raise SweepError(f"{Path(out) / RESULTS}: no results")
-    meta_path = Path(out) / "sweep.json"
-    meta = {}
-    if os.path.lexists(meta_path):
-        problem = file_problem(meta_path)
-        if problem is not None:
-            raise SweepError(f"{meta_path}: {problem}")
-        try:
-            meta = json.loads(meta_path.read_text(encoding="utf-8"))
-        except (OSError, UnicodeDecodeError, ValueError, RecursionError) as exc:
-            raise SweepError(f"{meta_path}: not the sweep's JSON ({str(exc)[:120]})") from None
-    params = meta.get("parameters") if isinstance(meta, dict) else None
-    if not params or not isinstance(params, list) or not all(isinstance(p, str) and p in rows[0] for p in params):
-        raise SweepError(f"{meta_path}: missing or without parameters (the columns of results.csv "
-                         "it swept); it is written by the sweep next to results.csv")
+    meta = _sweep_meta(Path(out), rows)
+    params = meta["parameters"]
     if metric not in rows[0]:
         valid = [c for c in rows[0] if c not in ("case", "status", "checks", "mcap", "message", *WARM_COLUMNS,
                                                  *params)]
+        # Refused (correctness): a metric the table does not have
         raise SweepError(f"--metric {metric}: not a column; valid: {', '.join(valid)}")
     ok = [r for r in rows if r["status"] == "ok"]
     n_bad = len(rows) - len(ok)
@@ -57,6 +70,7 @@ def report(out: str | Path, metric: str = "rmse", fig: str | Path | None = None)
         y = np.array([float(r[metric]) for r in ok])
     except (TypeError, ValueError):
         bad = next(r for r in ok if not _is_number(r[metric]))
+        # Refused (correctness): a value that is no number would be plotted as a made-up one
         raise SweepError(f"{Path(out) / RESULTS}: case {bad['case']}: {metric} = {bad[metric]!r} is not a "
                          "number") from None
     f, ax = plt.subplots(figsize=(6.4, 4.6), layout="constrained")
@@ -113,6 +127,7 @@ def report(out: str | Path, metric: str = "rmse", fig: str | Path | None = None)
         with written_by_rename(fig_path) as tmp:
             f.savefig(tmp, dpi=120, format="png")
     except OSError as exc:
+        # Refused (correctness): the figure could not be written whole
         raise SweepError(f"{fig_path}: cannot write the figure: {exc.strerror or exc}") from None
     finally:
         plt.close(f)

@@ -57,6 +57,7 @@ class Table:
         """The table in markdown; ``units`` picks the column groups, any of ``"m"`` and ``"um"``."""
         bad = [u for u in units if u not in ("m", "um")]
         if bad or not units:
+            # Refused (correctness): a unit we do not know: the column would be a guess
             raise ReportError(f"table units must be among m, um; got {', '.join(bad) or 'none'}")
         head = ["run", "controller", "plant"] + [f"{a} ({u})" for u in units for a in AXES]
         out = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
@@ -118,12 +119,14 @@ def controller_table(paths: Sequence[str | Path | RunLog], thesis: bool | None =
     """
 
     if not paths:
+        # Refused (correctness): nothing to tabulate
         raise ReportError("controller table: no run logs given")
     rows: list[TableRow] = []
     helix_controllers: list[str] = []
     for item in paths:
         tr = tracking(item)
         if not tr.is_platform:
+            # Refused (correctness): the table's columns are a platform's x, y, z: others would be mislabelled
             raise ReportError(f"{tr.run.path}: the table needs a platform vector x, y, z; the run compares "
                               f"{', '.join(tr.position.actual_names)}")
         controller, plant, is_helix = _describe(tr.run, tr.position.actual_names[0].split(".", 1)[0])

@@ -95,6 +95,7 @@ def scenario_doc(run: RunLog) -> tuple[str | None, dict]:
             doc = load_yaml(run.attachments[name])[0]
         except yaml.YAMLError as exc:
             why = " ".join(str(exc).split())
+            # Refused (correctness): the scenario as run cannot be read: which signals to compare is a guess
             raise ReportError(f"{run.path}: attachment {name} is not valid YAML ({why})") from None
         return name, doc if isinstance(doc, dict) else {}
     return None, {}
@@ -113,10 +114,12 @@ def _compare_spec(run: RunLog) -> tuple[list[str], list[str], str]:
     try:
         cmp = Compare.model_validate(section)
     except ValidationError as exc:
+        # Refused (correctness): the compare section cannot be read: which signals to compare is a guess
         raise ReportError(f"{run.path}: the compare section of {att} is invalid: "
                           f"{exc.errors()[0]['msg']}") from None
     actual, reference = expand_signal(cmp.actual), expand_signal(cmp.reference)
     if len(actual) != len(reference):
+        # Refused (correctness): signals that do not pair: which is compared with which is a guess
         raise ReportError(f"{run.path}: the compare section of {att} pairs {len(actual)} actual signals with "
                           f"{len(reference)} reference signals")
     return actual, reference, f"compare section of {att}"
@@ -127,6 +130,7 @@ def _get(run: RunLog, name: str, role: str, source: str):
         try:
             run.signal(name)
         except CosimError as exc:
+            # Refused (correctness): a signal the log does not hold
             raise ReportError(f"{exc} (the {role} signal, from the {source})") from None
     return run.signals[name]
 
@@ -138,6 +142,7 @@ def _pair(run: RunLog, actual: list[str], reference: list[str], source: str) -> 
     for s in a[1:] + r:
         stamps = np.intersect1d(stamps, s.t_ns, assume_unique=True)
     if stamps.size == 0:
+        # Refused (correctness): no common stamps: values would have to be interpolated
         raise ReportError(f"{run.path}: {actual[0]} and {reference[0]} share no time stamp")
 
     def on_stamps(s) -> np.ndarray:

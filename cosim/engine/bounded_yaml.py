@@ -70,10 +70,12 @@ def load_yaml(text: str | bytes) -> tuple[Any, yaml.Node | None]:
     if root is None:
         return None, None
     if _expanded_nodes(root) > MAX_YAML_NODES:
+        # Refused (security): an alias bomb: 1 kB of YAML expanded to 8 GB
         raise YamlTooLarge(f"the YAML expands to more than {MAX_YAML_NODES} values (aliases of aliases nested too "
                            "deep, a 'billion laughs'): refused")
     duplicate = _duplicate_key(root)
     if duplicate is not None:
+        # Refused (correctness): a key given twice: PyYAML kept the last silently, which one is meant is a guess
         raise duplicate
     loader = yaml.SafeLoader("")
     try:

@@ -101,6 +101,7 @@ def resolve_events(structure: SystemStructure, plan: SystemPlan) -> list[EventSp
             spec.update(signal=port, op=op, value=value, repeat=e.repeat)
         out.append(EventSpec(**spec))
     if issues:
+        # Refused (correctness): events that cannot be applied as written: the run would not be the one written
         raise ScenarioError(issues)
     return out
 
@@ -130,6 +131,7 @@ def resolve_sets(values: dict[str, Any], plan: SystemPlan, origin: str = "--set"
             continue
         changes.append(Change(port.comp, port.var, flat))
     if issues:
+        # Refused (correctness): events that cannot be applied as written: the run would not be the one written
         raise ScenarioError(issues)
     return tuple(changes)
 

@@ -149,6 +149,7 @@ class Execution:
         length = min(period, max(1, self.n_steps))
         if length > MAX_SCHEDULE:
             rates = ", ".join(f"{n} every {m}" for n, m in zip(self.plan.names, self.multiples) if m > 1)
+            # Refused (security): the schedule is held in memory: a step_multiple of 1e12 asked for terabytes
             raise ScenarioError(Issue("components", f"the step multiples ({rates} base steps) repeat only every "
                                       f"{period} base steps, more than the {MAX_SCHEDULE} a run's schedule holds: "
                                       "choose multiples with a shorter common period (divisors of one another)"))

@@ -107,6 +107,7 @@ class Grid:
     def __init__(self, start_ns: int, stop_ns: int, step_ns: int):
         why = grid_error(start_ns, stop_ns, step_ns)
         if why is not None:
+            # Refused (correctness): a span that is no whole number of steps: the last step would be cut short
             raise ValueError(why)
         self.start_ns, self.stop_ns, self.step_ns = start_ns, stop_ns, step_ns
         self.n_steps = max(1, round((stop_ns - start_ns) / step_ns))

@@ -60,11 +60,13 @@ def split_ref(text: str) -> tuple[str, str | None, int]:
             if end == len(text) or text[end] in "=":
                 return "".join(out), None, end
             if text[end] != ".":
+                # Refused (correctness): a name we cannot split: which component is meant is a guess
                 raise ValueError(f"{text!r}: expected '.' after the quoted component name {''.join(out)!r}")
             return "".join(out), text[end + 1:], end
         else:
             out.append(c)
             i += 1
+    # Refused (correctness): a name we cannot split: which component is meant is a guess
     raise ValueError(f"{text!r}: the quoted component name has no closing quote (write ' inside as \\')")
 
 

@@ -43,6 +43,7 @@ def parse_set_value(raw: str, origin: str = "--set") -> Any:
         return _numbers(load_yaml(raw)[0])
     except yaml.YAMLError as exc:  # YAML's text runs over lines ("in <unicode string>, position 1"): one line
         why = " ".join(str(getattr(exc, "problem", None) or exc).split())
+        # Refused (correctness): what the value means cannot be read (an alias bomb is bounded: security)
         raise ScenarioError(Issue("", f"invalid value: {why}", origin)) from None
 
 
@@ -140,6 +141,7 @@ def _split(text: str, origin: str) -> tuple[str, str | None]:
     try:
         head, rest, _ = split_ref(text)
     except ValueError as exc:
+        # Refused (correctness): a name we cannot split: which component is meant is a guess
         raise ScenarioError(Issue("", str(exc), origin)) from None
     return head, rest
 
@@ -179,6 +181,7 @@ def resolve_name(name: str, data: dict[str, Any], origin: str = "--set") -> tupl
     head, rest = _split(name, origin)
     if head in components:
         if not rest:
+            # Refused (correctness): replacing a component by one value would drop it
             raise ScenarioError(Issue("", f"{name!r} is a component: name one of its parameters, "
                                           f"{quote(head)}.PARAM", origin))
         return ("components", head, "parameters", rest)
@@ -199,6 +202,7 @@ def resolve_name(name: str, data: dict[str, Any], origin: str = "--set") -> tupl
             items = node.get(base) if isinstance(node, dict) else None
             if not isinstance(items, list) or index >= len(items):
                 count = len(items) if isinstance(items, list) else 0
+                # Refused (correctness): an item the list does not have: the value would be dropped or misplaced
                 raise ScenarioError(Issue("", f"{name!r}: {prefix}{base} has {count} item(s), numbered from 0",
                                           origin))
             path += (base, index)
@@ -208,6 +212,7 @@ def resolve_name(name: str, data: dict[str, Any], origin: str = "--set") -> tupl
             continue
         if key not in fields:
             top = list(components) + list(fields) if not path else list(fields)
+            # Refused (correctness): a name the scenario does not have: the value would be dropped
             raise _unknown_name(name, prefix, key, top, origin)
         path += (key,)
         ann = fields[key].annotation
@@ -224,6 +229,7 @@ def resolve_name(name: str, data: dict[str, Any], origin: str = "--set") -> tupl
         elif sub is not None:
             model = sub
         elif remaining is not None:
+            # Refused (correctness): a value has no keys: the value would be dropped
             raise ScenarioError(Issue("", f"{'.'.join(map(str, path))} is a value, it has no "
                                           f"{remaining!r}", origin))
     return path
@@ -235,6 +241,7 @@ def dotted_overrides(values: dict[str, Any], origin: str = "override") -> Overri
     out = Overrides()
     for name, value in values.items():
         if not isinstance(name, str) or not name or name.startswith(".") or name.endswith("."):
+            # Refused (correctness): no name to put the value under
             raise ScenarioError(Issue("", f"expected a dotted name (component.parameter, time.stop, "
                                           f"trajectory.params.NAME), got {shown(repr(name))}", origin))
         out.put((DOTTED, name), value, f"{origin} {name}={shown(repr(value))}")
@@ -249,10 +256,12 @@ def apply_overrides(sets: list[str], stop_time: float | None = None) -> Override
         try:  # a quoted component name may hold '=': the key ends at the first '=' after it
             end = split_ref(item)[2] if item.startswith("'") else 0
         except ValueError as exc:
+            # Refused (correctness): a name we cannot split: which component is meant is a guess
             raise ScenarioError(Issue("", str(exc), origin)) from None
         at = item.find("=", end)
         key = item[:at] if at >= 0 else item
         if at < 0 or not key or key.startswith(".") or key.endswith("."):
+            # Refused (correctness): no name to put the value under
             raise ScenarioError(Issue("", f"expected NAME=value (component.parameter, time.stop, "
                                           f"trajectory.params.NAME, ...), got {shown(item)!r}", "--set"))
         value = parse_set_value(item[at + 1:], origin)
@@ -291,6 +300,7 @@ def parameter_file_overrides(files: Any, base: Path, named_at: str) -> Overrides
             except OSError as exc:
                 problem = exc.strerror or str(exc)
         if problem is not None:
+            # Refused (correctness): values the scenario names but cannot read would leave it run on other values
             raise ScenarioError(Issue("", f"parameters file {path}: {problem}", where))
         _file_values(raw, str(path), where, out)
     return out
@@ -305,33 +315,40 @@ def _file_values(raw: bytes, path: str, named_at: str, out: Overrides) -> None:
         return ScenarioError(Issue("", message, at(line)))
 
     if len(raw) > MAX_PARAMETER_FILE_BYTES:
+        # Refused (security): outside input read whole: its size is bounded
         raise fail(f"larger than {MAX_PARAMETER_FILE_BYTES // 2 ** 10} kB, more than a file of values holds: "
                    "refused unread")
     try:
         data, root = load_yaml(raw.decode("utf-8"))
     except UnicodeDecodeError as exc:
+        # Refused (correctness): text that is not UTF-8 would be read as other names and values
         raise fail(f"not UTF-8 text (byte 0x{raw[exc.start]:02x} at offset {exc.start})",
                    raw[:exc.start].count(b"\n") + 1) from None
     except yaml.YAMLError as exc:
         mark = getattr(exc, "problem_mark", None)
         why = " ".join(str(getattr(exc, "problem", None) or exc).split())
+        # Refused (correctness): a file that does not parse gives no values to run with
         raise fail(f"invalid YAML: {why}", mark.line + 1 if mark else None) from None
     if data is None:
         return  # only comments: no values
     if not isinstance(data, dict):
+        # Refused (correctness): anything but names and values sets nothing that can be placed
         raise fail("expected a mapping of names to values (plant.mass.payload: 0.3)", 1)
     lines = {k.value: k.start_mark.line + 1 for k, _ in root.value if isinstance(k, yaml.ScalarNode)}
     for name, value in data.items():
         line = lines.get(name)
         if not isinstance(name, str) or not name or name.startswith(".") or name.endswith("."):
+            # Refused (correctness): a value without a name it could be set by would be dropped
             raise fail(f"expected a dotted name (component.parameter, time.stop, components.NAME.offset), got "
                        f"{shown(repr(name))}", line)
         if name == "parameters":
+            # Refused (correctness): files naming files: which value wins would depend on a chain of files
             raise fail("a parameters file cannot name other parameters files", line)
         scalar = (bool, int, float, str)
         if not (isinstance(value, scalar) or isinstance(value, list) and all(
                 isinstance(v, scalar) or isinstance(v, list) and all(isinstance(w, scalar) for w in v)
                 for v in value)):
+            # Refused (correctness): a value of another kind cannot be set on an FMU variable
             raise fail(f"{name}: expected a number, a boolean, a string or a list of them, got "
                        f"{shown(repr(value))}", line)
         out.put((DOTTED, name), _numbers(value), at(line))

@@ -57,6 +57,7 @@ def locate_fmus(scenario: Scenario, fmu_files: Mapping[str, str | Path] | None =
         except ComponentSourceError as exc:
             issues += [Issue(f"components.{name}", i.message, **where) for i in exc.issues]
     if issues:
+        # Refused (correctness): FMUs that cannot be read: the run would lack them
         raise ComponentSourceError(issues)
     return infos
 
@@ -89,6 +90,7 @@ def build_ours(*key: object) -> Path:
     except CosimError:
         raise
     except (KeyError, ValueError, LookupError) as exc:  # the source's message names the FMU and the valid ones
+        # Refused (correctness): an FMU we do not have
         raise ComponentSourceError(Issue("", str(exc.args[0]) if exc.args else f"unknown FMU {key!r}")) from None
 
 

@@ -54,6 +54,7 @@ def _parse_yaml(text: str, file: str) -> ScenarioFile:
     try:
         data, root = load_yaml(text)
     except YamlTooLarge as exc:
+        # Refused (security): an alias bomb: bounded before it expands
         raise ScenarioError(Issue("", str(exc), file, 1)) from None
     except yaml.YAMLError as exc:
         mark = getattr(exc, "problem_mark", None)
@@ -63,13 +64,16 @@ def _parse_yaml(text: str, file: str) -> ScenarioFile:
             line = text[:exc.position].count("\n") + 1
             code = exc.character if isinstance(exc.character, int) else ord(exc.character)
             problem = f"the character U+{code:04X} at offset {exc.position} is not allowed in YAML"
+        # Refused (correctness): what the file means cannot be read
         raise ScenarioError(Issue("", f"invalid YAML: {problem}", file, line)) from None
     lines: dict[tuple, int] = {}
     if root is not None:
         collect_lines(root, (), lines)
     if data is None:  # an empty file, or only comments: one line, not every key it lacks
+        # Refused (correctness): nothing to run
         raise ScenarioError(Issue("", "the file holds no scenario (it is empty, or only comments)", file, 1))
     if not isinstance(data, dict):
+        # Refused (correctness): what the file means cannot be read as a scenario
         raise ScenarioError(Issue("", "a scenario is a mapping (components, connections, time, ...)", file, 1))
     return ScenarioFile(file, data, lines)
 
@@ -97,11 +101,13 @@ def scenario_from_data(data: dict[str, Any], file: str = "<string>", overrides: 
             origins[path] = origin
         components = data.get("components") or {}
         if path[0] == "components" and len(path) == 1:  # the whole mapping replaced by an option's value
+            # Refused (correctness): replacing every component by one value would drop them
             raise ScenarioError(Issue("", "name a component's parameter (NAME.PARAM=VALUE), not all of components",
                                       origins.get(path, "--set components")))
         if path[0] == "components" and path[1] not in components:
             close = difflib.get_close_matches(path[1], list(components), n=3)
             hint = f"did you mean {', '.join(close)}? " if close else ""
+            # Refused (correctness): a value for a component the file does not have would be dropped
             raise ScenarioError(Issue("", f"unknown component {path[1]!r} in {file}; {hint}components: "
                                       f"{', '.join(components)}", origins.get(path, "--set")))
         if path[0] == "components" and len(path) == 4 and path[2] == "parameters":
@@ -128,9 +134,11 @@ def scenario_from_data(data: dict[str, Any], file: str = "<string>", overrides: 
             by_loc.setdefault(loc, []).append(msg)
         issues = [issue_at(loc, msgs[0] if len(msgs) == 1 else _PARAM_MSG, file, lines, origins)
                   for loc, msgs in by_loc.items()]
+        # Refused (correctness): values of the wrong type or range: the run would not be the one written
         raise ScenarioError(issues) from None
     issues = [issue_at(loc, msg, file, lines, origins) for loc, msg in _semantic_issues(scenario)]
     if issues:
+        # Refused (correctness): a scenario that contradicts itself: the run would not be the one written
         raise ScenarioError(issues)
     scenario._sources = SourceMap(file, lines, origins, written)
     return scenario
@@ -257,14 +265,17 @@ def read_scenario(path: str | Path) -> ScenarioFile:
         except OSError as exc:
             problem = exc.strerror or str(exc)
     if problem is not None:
+        # Refused (security): a FIFO or a device named as a scenario would be read for ever
         raise ScenarioError(Issue("", f"cannot read scenario: {problem}", str(path))) from None
     if len(raw) > MAX_SCENARIO_BYTES:
+        # Refused (security): a scenario is read whole: its size is bounded
         raise ScenarioError(Issue("", f"the file is larger than {MAX_SCENARIO_BYTES // 2 ** 20} MiB, more than any "
                                       "scenario holds (cosim.engine.scenario.MAX_SCENARIO_BYTES): refused", str(path)))
     try:
         text = raw.decode("utf-8")
     except UnicodeDecodeError as exc:
         line = raw[:exc.start].count(b"\n") + 1
+        # Refused (correctness): what the file means cannot be read
         raise ScenarioError(Issue("", f"not UTF-8 text (byte 0x{raw[exc.start]:02x} at offset {exc.start}); "
                                       f"save the scenario as UTF-8", str(path), line)) from None
     return _parse_yaml(text, str(path))

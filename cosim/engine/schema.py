@@ -96,22 +96,27 @@ class Component(_Model):
     @model_validator(mode="after")
     def _one_source(self) -> "Component":
         if sum(x is not None for x in (self.fmu, self.path, self.recording)) != 1:
+            # Refused (correctness): which source is meant is a guess, or there is none
             raise ValueError("give exactly one of 'fmu' (our FMU by name), 'path' (an .fmu file) or 'recording' "
                              "(a recording replayed as outputs)")
         given = {f for f in self.model_fields_set  # a key written with its default (a log's scenario as run) is not
                  if getattr(self, f) != type(self).model_fields[f].get_default(call_default_factory=True)}
         replay = {"signals", "interpolation", "offset", "time", "time_origin", "units"} & given
         if self.recording is None and replay:
+            # Refused (correctness): a recording's key on an FMU would be dropped silently
             raise ValueError(f"{', '.join(sorted(replay))}: only for a component given by 'recording'")
         if self.recording is not None:
             if not self.signals:
+                # Refused (correctness): nothing to replay
                 raise ValueError("a recording component needs 'signals': output name -> signal spec")
             fmu_only = {"parameters", "step_multiple", "interface", "feedthrough", "rtol", "solver",
                         "max_step"} & given
             if fmu_only:
+                # Refused (correctness): an FMU's key on a recording would be dropped silently
                 raise ValueError(f"{', '.join(sorted(fmu_only))}: not for a recording (it has outputs only)")
             unknown = sorted(set(self.units) - set(self.signals))
             if unknown:
+                # Refused (correctness): a unit for no signal would be dropped silently
                 raise ValueError(f"units: {', '.join(unknown)} not among the signals ({', '.join(self.signals)})")
         return self
 
@@ -133,8 +138,10 @@ class Connection(_Model):
         try:
             comp, rest, _ = split_ref(v)
         except ValueError as exc:
+            # Refused (correctness): a name we cannot split: which component is meant is a guess
             raise ValueError(str(exc)) from None
         if not comp or rest == "" or v.endswith("."):
+            # Refused (correctness): a connection end we cannot read
             raise ValueError(f"expected 'component.variable', a prefix 'component.p_ref' or a component, got {v!r} "
                              "(a component name with a dot is quoted: 'a.b'.x)")
         return v
@@ -154,17 +161,22 @@ class TimeGrid(_Model):
             v = getattr(self, name)
             # a float read from YAML is within 1e-3 ns of its intended whole-nanosecond value
             if abs(v * NS_PER_S - round(v * NS_PER_S)) > 1e-3:
+                # Refused (correctness): the grid counts whole nanoseconds: the time would be moved silently
                 raise ValueError(f"{name} = {v} s is not a whole number of nanoseconds")
         if self.step_ns < 1:
+            # Refused (correctness): no grid of whole nanoseconds has that step
             raise ValueError(f"step = {self.step} s is shorter than the grid's resolution, 1 ns")
         if self.stop_ns <= self.start_ns:
+            # Refused (correctness): no time to run
             raise ValueError(f"stop ({self.stop} s) must be after start ({self.start} s)")
         # a step that is no whole number of ns (1/30 s) is rounded to the ns, the last point still the stop time
         too_short = resolution_error(self.start_ns, self.stop_ns, self.step_ns)
         if too_short is not None:
+            # Refused (correctness): a double cannot tell the steps apart at that time: FMUs would get steps of 0
             raise ValueError(too_short)
         if grid_error(self.start_ns, self.stop_ns, self.step_ns) is not None:
             n = (self.stop_ns - self.start_ns) // self.step_ns
+            # Refused (correctness): the last step would be cut short or the stop time moved silently
             raise ValueError(
                 f"stop - start = {seconds(self.stop_ns - self.start_ns)} s is not a whole number of steps of "
                 f"{seconds(self.step_ns)} s; use stop = {seconds(self.start_ns + n * self.step_ns)} or "
@@ -209,6 +221,7 @@ class TrajectorySpec(_Model):
         if kind not in types:
             close = difflib.get_close_matches(kind, list(types), n=2, cutoff=0.6)
             hint = f"did you mean {' or '.join(close)}? " if close else ""
+            # Refused (correctness): a trajectory we do not have
             raise ValueError(f"unknown trajectory type {kind!r}; {hint}valid: {', '.join(types) or 'none (no plugin)'}")
         return kind
 
@@ -243,6 +256,7 @@ class InitialState(_Model):
     @classmethod
     def _three(cls, v: list[str]) -> list[str]:
         if len(v) not in (0, 3):
+            # Refused (correctness): a vector of another size: which axis is which is a guess
             raise ValueError(f"give 3 variable names (x, y, z) or none, got {len(v)}")
         return v
 
@@ -306,6 +320,7 @@ class Regression(_Model):
     def _positive(cls, v: dict[str, float]) -> dict[str, float]:
         bad = [k for k, x in v.items() if not x > 0]
         if bad:
+            # Refused (correctness): no value passes a tolerance <= 0 (or NaN)
             raise ValueError(f"tolerances must be > 0: {', '.join(bad)}")
         return v
 
@@ -323,6 +338,7 @@ def parse_condition(text: str) -> tuple[str, str, float]:
         except ValueError:
             value = None
     if m is None or value is None or not math.isfinite(value):
+        # Refused (correctness): a condition we cannot read: when the event fires is a guess
         raise ValueError(f"condition {text!r} is not 'SIGNAL < VALUE' or 'SIGNAL > VALUE' (SIGNAL a "
                          "component.variable, VALUE a finite number)")
     return m.group(1), m.group(2), value
@@ -355,10 +371,13 @@ class Event(_Model):
     @model_validator(mode="after")
     def _one_kind(self) -> "Event":
         if (self.at is None) == (self.when is None):
+            # Refused (correctness): when the event fires is a guess, or never
             raise ValueError("an event has either 'at' (a time) or 'when' (a condition), not both or neither")
         if self.repeat and self.when is None:
+            # Refused (correctness): a time event fires once: 'repeat' would be dropped silently
             raise ValueError("'repeat' is for a state event ('when'); a time event fires once")
         if not self.set:
+            # Refused (correctness): an event that sets nothing
             raise ValueError("'set' names at least one component.variable")
         return self
 
@@ -460,6 +479,7 @@ class Scenario(_Model):
             try:  # spec.params are typed by the scenario's model (TrajectorySpec._typed)
                 self._trajectory = cls(**spec.params)
             except (TypeError, ValueError) as exc:  # pydantic's ValidationError is a ValueError
+                # Refused (correctness): trajectory parameters the trajectory cannot take
                 raise ScenarioError(Issue("trajectory.params", f"{cls.__name__}: {exc}", self.source)) from None
         return self._trajectory
 
@@ -488,6 +508,7 @@ class Scenario(_Model):
         for name in self.components:
             problem = name_problem(name)
             if problem:
+                # Refused (correctness): an empty name, or control characters a message would show garbled
                 raise ValueError(problem)
         return self
 

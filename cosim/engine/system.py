@@ -161,21 +161,27 @@ class SystemPlan:
     def port(self, ref: str) -> Port:
         comp, name, _ = split_ref(ref)
         if comp not in self.names or name is None:
+            # Refused (correctness): a signal named that the system does not have: what is meant is a guess
             raise UnknownSignalError(f"{ref}: no such component.variable (components: "
                                      f"{', '.join(map(quote, self.names))})")
         i = self.names.index(comp)
         var, element, problem = find_variable(self.infos[i], name)
         if var is None:
+            # Refused (correctness): no such variable, or a name declared twice (ambiguous): either could be meant
             raise UnknownSignalError(problem or f"{ref}: no such variable")
         return Port(i, var, element)
 
 
 def _missing(info: FMUInfo, vname: str, candidates: list[str], comp: str = "") -> str:
     """Why ``vname`` names no variable of ``info``: declared more than once (ambiguous: refused where named, see
-    :func:`cosim.fmi.description._ambiguous`), or not at all (with the closest names)."""
+    :func:`cosim.fmi.description._ambiguous`), sharing its value reference with another parameter or input (setting
+    one would change the other: refused where named), or not at all (with the closest names)."""
     where = f"{info.path.name}{f' ({comp})' if comp else ''}"
     base = vname.split("[", 1)[0]
     for name in (vname, base):
+        if name in info.shared:
+            return f"{where}: {info.shared[name]}: setting one would change the other, so {name!r} cannot be set or " \
+                   "connected"
         if name in info.ambiguous:
             vrs = ", ".join(map(str, info.ambiguous[name]))
             return (f"{where} declares {len(info.ambiguous[name])} variables named {name!r} (value references "
@@ -216,6 +222,7 @@ def build_plan(structure: SystemStructure, infos: Mapping[str, FMUInfo], log_sig
     links = _links(structure, infos, idx, issue)
     reads = _reads(structure, infos, idx, issue)
     if issues:
+        # Refused (correctness): connections that cannot carry their values (kinds, sizes, causality)
         raise WiringError(issues)
     for info in infos.values():
         warn_ambiguous(info)  # names declared twice that nothing named: left out, said once
@@ -302,7 +309,8 @@ def _links(structure: SystemStructure, infos: dict[str, FMUInfo], idx: dict[str,
         var, element, problem = find_variable(info, vname)
         candidates = [v.name for v in info.variables.values() if v.causality in want]
         if var is None:
-            issue(loc, problem if problem and vname not in info.ambiguous else _missing(info, vname, candidates, comp))
+            named = vname in info.ambiguous or vname in info.shared
+            issue(loc, problem if problem and not named else _missing(info, vname, candidates, comp))
             return None
         if var.causality not in want:
             issue(loc, f"{ref} is a{'n' if var.causality[0] in 'aeiou' else ''} {var.causality}, expected an "
@@ -408,6 +416,7 @@ def _order(structure: SystemStructure, infos: dict[str, FMUInfo], names: list[st
             else:
                 err.issues[0] = sources.issue(("connections",), err.issues[0].message)
             err.args = ("\n".join(str(i) for i in err.issues),)
+            # Refused (correctness): an algebraic loop: Gauss-Seidel would read a value not yet computed
             raise err
     # an algorithm that reads the previous step only (Jacobi) can take any order
     return gauss_seidel_order(len(names), [(lk.src.comp, lk.dst.comp,
@@ -496,6 +505,7 @@ def gauss_seidel_order(n: int, edges: list[tuple[int, int, bool]]) -> list[int]:
         if not ready:
             ready = [c for c in remaining if all(s in done or not hard for s, hard in incoming[c])]
             if not ready:
+                # Refused (correctness): an algebraic loop: Gauss-Seidel would read a value not yet computed
                 raise AlgebraicLoopError([str(c) for c in remaining])
         c = ready[0]
         done.append(c)

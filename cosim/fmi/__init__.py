@@ -42,6 +42,7 @@ def make_slave(name: str, info: FMUInfo, interface: str = "auto", rtol: float = 
     if interface == "auto":
         interface = "cs" if "cs" in available else "me"
     if interface not in available:
+        # Refused (correctness): an interface the FMU does not have cannot run
         raise ComponentSourceError(Issue(f"components.{name}.interface",
                                          f"{info.path.name} has no {interface} interface (it has: "
                                          f"{', '.join(available) or 'none'})"))
@@ -49,6 +50,7 @@ def make_slave(name: str, info: FMUInfo, interface: str = "auto", rtol: float = 
            (2, "cs"): FMI2CoSimulation, (2, "me"): FMI2ModelExchange,
            (3, "cs"): FMI3CoSimulation, (3, "me"): FMI3ModelExchange}.get((info.fmi_major, interface))
     if cls is None:
+        # Refused (correctness): an FMI version we cannot call: its functions differ
         raise ComponentSourceError(Issue(f"components.{name}", f"FMI {info.md.fmiVersion} is not supported "
                                                                "(FMI 1.0, 2.0 and 3.0 are)"))
     slave = cls(name, info)

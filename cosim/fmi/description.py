@@ -89,6 +89,8 @@ class FMUInfo:
     variables: dict[str, Variable]
     stamp: tuple[int, ...] = ()  # the file as read (:func:`file_stamp`): a rebuilt file is another extraction
     ambiguous: dict[str, tuple[int, ...]] = field(default_factory=dict)  # names declared twice (:func:`_ambiguous`)
+    notes: tuple[str, ...] = ()  # what the description says that is read as other tools read it, said once
+    shared: dict[str, str] = field(default_factory=dict)  # parameters and inputs on one value reference: left out
 
     @property
     def unzipdir(self) -> Path:
@@ -135,13 +137,14 @@ class FMUInfo:
                  for n, v in self.structural_parameters().items()}
         variables = {n: replace(v, shape=_shape(v.dims, by_vr, n)) if v.dims else v
                      for n, v in self.variables.items()}
-        return FMUInfo(self.path, self.md, variables, self.stamp)
+        return FMUInfo(self.path, self.md, variables, self.stamp, self.ambiguous, self.notes, self.shared)
 
 
 def _scalar_start(v: Variable) -> int:
     try:
         return int(str(v.start).split()[0])
     except (ValueError, IndexError):
+        # Refused (correctness): no array size follows from it
         raise ComponentSourceError(Issue("", f"structural parameter {v.name} has no usable start value "
                                              f"({v.start!r})")) from None
 
@@ -151,6 +154,7 @@ def _shape(dims, by_vr: dict[int, int], name: str) -> tuple[int, ...]:
     for size, vr in dims:
         if size is None:
             if vr not in by_vr:
+                # Refused (correctness): no array size follows from it
                 raise ComponentSourceError(Issue("", f"{name}: dimension refers to value reference {vr}, "
                                                      "which is not a structural parameter"))
             size = by_vr[vr]
@@ -197,27 +201,34 @@ def _numbers(text: str, kind: str) -> list[float]:
     return [float(w) if kind == REAL else float(int(w)) for w in text.split()]
 
 
-def _check_description(path: Path, md: Any) -> None:
+def _check_description(path: Path, md: Any) -> tuple[tuple[str, ...], dict[str, str]]:
     """What fmpy reads without validation but the master relies on, one error naming the variable: a model
     identifier that is a C identifier (it names the library loaded: '../../x' or '/x' loaded a library outside the
-    FMU), a GUID, unique names, value references that are unsigned 32-bit, no input or parameter sharing its value
-    reference with another of them (an alias set holds at most one: setting one silently changed the other; an
-    output or a local may alias an input or a parameter), and start, min and max values of the
-    variable's type (a Real start 'abc', NaN or INF of a parameter or an input was taken), with min <= max."""
+    FMU), a GUID, value references that are unsigned 32-bit, and start, min and max values of the variable's type (a
+    Real start 'abc', or a start NaN or INF of a parameter or an input, was taken). An infinite min or max is no
+    bound, as FMPy reads it. Returned, as FMPy and libcosim run such FMUs: notes to say once (a min above the max: a
+    value set there is refused where it is set, as outside the range) and the parameters and inputs that share a
+    value reference with another of them, name -> what they share (an alias set holds at most one: setting one
+    would silently change the other; left out, they are refused where named, as names declared twice are, see
+    :func:`_ambiguous`; an output or a local may alias an input or a parameter)."""
     def fail(message: str) -> ComponentSourceError:
         return ComponentSourceError(Issue("", f"{path}: modelDescription.xml: {message}"))
 
     for kind in ("coSimulation", "modelExchange", "scheduledExecution"):
         interface = getattr(md, kind, None)
         if interface is not None and not _IDENTIFIER.match(str(interface.modelIdentifier or "")):
+            # Refused (security): it names the library loaded: '../../x' or '/x' loaded one outside the FMU
             raise fail(f"{kind} modelIdentifier {interface.modelIdentifier!r} is not a C identifier (it names the "
                        "FMU's library: letters, digits and _)")
     if not str(md.fmiVersion or "").startswith("3") and not md.guid:
+        # Refused (correctness): FMI 1.0 and 2.0 require it, instantiation passes it (the FMU checks it)
         raise fail("no guid (fmi2Instantiate checks it)")
     aliases: dict[tuple, list[Any]] = {}
+    empty: list[str] = []
     for v in md.modelVariables:
         vr = v.valueReference
         if not isinstance(vr, int) or not 0 <= vr < 2 ** 32:
+            # Refused (correctness): the FMI calls take a uint32: another variable would be read or set
             raise fail(f"variable {v.name}: valueReference {vr!r} is not an unsigned 32-bit integer")
         kind = _KIND.get(v.type, v.type)
         aliases.setdefault((kind, vr), []).append(v)
@@ -228,18 +239,29 @@ def _check_description(path: Path, md: Any) -> None:
             try:
                 values = _numbers(str(text), kind)
             except ValueError:
+                # Refused (correctness): no value of the declared type: FMPy's schema validation refuses it too
                 raise fail(f"variable {v.name}: {attr} {str(text)[:40]!r} is not a {v.type} value") from None
-            if v.causality in _SET_BY_MASTER and not all(map(math.isfinite, values)):
+            # an infinite min or max is no bound (FMPy reads INF as xs:double allows; the range check takes it so)
+            unusable = [x for x in values if math.isnan(x) or (attr == "start" and math.isinf(x))]
+            if v.causality in _SET_BY_MASTER and unusable:
+                # Refused (correctness): a NaN bound passes every value; a NaN or inf start reaches the equations
                 raise fail(f"variable {v.name} ({v.causality}): {attr} {str(text)[:40]!r} is not a finite number")
         lo, hi = getattr(v, "min", None), getattr(v, "max", None)
         if lo is not None and hi is not None and kind in (REAL, INTEGER) and float(lo) > float(hi):
-            raise fail(f"variable {v.name}: min {lo} > max {hi}: no value is in range")
+            empty.append(f"{v.name} (min {lo} > max {hi})")
+    notes, shared = [], {}
     for (kind, vr), group in aliases.items():
         settable = [v for v in group if v.causality in _SET_BY_MASTER]
         if len(settable) > 1:  # aliases are legal, but a set of them holds at most one parameter or input
             names = ", ".join(f"{v.name} ({v.causality})" for v in settable[:4])
-            raise fail(f"{names} share the {kind} valueReference {vr}: setting one would change the other (a set "
-                       "of aliases holds at most one parameter or input)")
+            what = f"{names} share the {kind} value reference {vr}"
+            shared.update((v.name, what) for v in settable)
+            notes.append(f"{what}: left out (not logged, not settable); the run goes on while nothing names them")
+    if empty:
+        more = " and more" if len(empty) > 5 else ""
+        notes.append(f"variable{'s' if len(empty) > 1 else ''} {', '.join(empty[:5])}{more}: no value is in the "
+                     "declared range; the run goes on, and a value set there is refused as outside it")
+    return tuple(notes), shared
 
 
 def _ambiguous(md: Any) -> dict[str, tuple[int, ...]]:
@@ -258,10 +280,15 @@ _WARNED: set[Path] = set()
 
 
 def warn_ambiguous(info: FMUInfo) -> None:
-    """Say once per FMU file and process, on stderr, which names ``info`` left out as declared more than once."""
-    if not info.ambiguous or info.path in _WARNED:
+    """Say once per FMU file and process, on stderr, which names ``info`` left out as declared more than once, and
+    its other :attr:`~FMUInfo.notes` (what it declares that is read as other tools read it)."""
+    if info.path in _WARNED or not (info.ambiguous or info.notes):
         return
     _WARNED.add(info.path)
+    for note in info.notes:
+        print(printable(f"warning: {info.path.name}: modelDescription.xml: {note}"), file=sys.stderr)
+    if not info.ambiguous:
+        return
     named = ", ".join(f"{n!r} (value references {', '.join(map(str, vrs))})"
                       for n, vrs in list(info.ambiguous.items())[:5])
     more = " and more" if len(info.ambiguous) > 5 else ""
@@ -278,9 +305,11 @@ def load_fmu(path: str | Path) -> FMUInfo:
     try:
         st = path.stat()
     except OSError:
+        # Refused (correctness): no FMU, nothing to run
         raise ComponentSourceError(Issue("", f"FMU not found: {path}")) from None
     problem = file_problem(path, directory_ok=True)  # an .fmu file, or the folder of an unpacked one
     if problem is not None:
+        # Refused (security): a FIFO or a device named .fmu would be read for ever
         raise ComponentSourceError(Issue("", f"{path}: {problem}")) from None
     stamp = file_stamp(st)
     cached = _CACHE.get(path)
@@ -293,17 +322,19 @@ def load_fmu(path: str | Path) -> FMUInfo:
     try:
         md = fmpy.read_model_description(str(path), validate=False)
     except Exception as exc:  # fmpy raises bare Exception for malformed files
+        # Refused (correctness): what the FMU declares cannot be read
         raise ComponentSourceError(Issue("", f"{path}: cannot read modelDescription.xml: {exc}")) from None
     clocks = [v for v in md.modelVariables if v.type == "Clock"]
     if clocks:
         names = ", ".join(f"{v.name} (vr {v.valueReference})" for v in clocks[:5])
+        # Refused (correctness): clocked partitions would never tick: the run would be silently wrong
         raise ComponentSourceError(Issue("", f"{path.name} declares Clock variables ({names}): clocks (FMI 3.0 "
                                              "scheduled execution and synchronous clocks) are not supported"))
-    _check_description(path, md)
+    notes, shared = _check_description(path, md)
     ambiguous = _ambiguous(md)
     variables = {}
     for i, v in enumerate(md.modelVariables, start=1):
-        if v.name in ambiguous:
+        if v.name in ambiguous or v.name in shared:
             continue
         dims = tuple((int(d.start) if d.start is not None else None, d.valueReference) for d in v.dimensions)
         variables[v.name] = Variable(
@@ -311,6 +342,6 @@ def load_fmu(path: str | Path) -> FMUInfo:
             causality=v.causality, variability=v.variability, unit=_unit(v), description=v.description,
             start=v.start, index=i, shape=tuple(v.shape or ()) if dims else (), dims=dims, initial=v.initial,
             min=_attr(v, "min"), max=_attr(v, "max"))
-    info = FMUInfo(path, md, variables, stamp, ambiguous)
+    info = FMUInfo(path, md, variables, stamp, ambiguous, notes, shared)
     _CACHE[path] = info
     return info

@@ -56,10 +56,12 @@ def check_archive(path: Path) -> None:
         with zipfile.ZipFile(path) as zf:
             members = zf.infolist()
     except (zipfile.BadZipFile, OSError) as exc:
+        # Refused (correctness): not a zip: nothing of the FMU can be read
         raise ComponentSourceError(Issue("", f"{path}: not an FMU (a zip archive): {exc}")) from None
     total = sum(m.file_size for m in members)
     description = sum(m.file_size for m in members if m.filename == "modelDescription.xml")
     if total > MAX_FMU_BYTES or description > MAX_DESCRIPTION_BYTES:
+        # Refused (security): a zip bomb: refused before anything is read or extracted
         raise ComponentSourceError(Issue("", f"{path}: unpacks to {total:,} bytes (modelDescription.xml "
                                              f"{description:,}); at most {MAX_FMU_BYTES:,} "
                                              f"({MAX_DESCRIPTION_BYTES:,}) are accepted: refused"))
@@ -147,6 +149,7 @@ def extraction(key: Key) -> Path:
             try:
                 unzipdir = Path(tempfile.mkdtemp(prefix=f"{_PREFIX}{os.getpid()}-{path.stem}-"))
             except OSError as exc:
+                # Refused (correctness): without a folder to unpack it into the FMU cannot be loaded
                 raise ComponentSourceError(Issue("", f"{path}: cannot make a folder to extract it into in "
                                                      f"{tempfile.gettempdir()}: {exc.strerror or exc} (set TMPDIR "
                                                      "to a writable folder with room)")) from None
@@ -155,13 +158,15 @@ def extraction(key: Key) -> Path:
             except OSError as exc:
                 shutil.rmtree(unzipdir, ignore_errors=True)
                 if not _refused_by(exc, unzipdir):
+                    # Refused (correctness): its files cannot be read out of the archive: it cannot run
                     raise ComponentSourceError(Issue("", f"{path}: cannot extract: {exc}")) from None
-                # the system's refusal (a full or read-only temporary folder), not the archive's
+                # Refused (correctness): the system refuses the temporary folder (full, read-only), not the archive
                 raise ComponentSourceError(Issue("", f"{path}: cannot extract it into {unzipdir}: "
                                                      f"{exc.strerror or exc} (set TMPDIR to a writable folder with "
                                                      "room)")) from None
             except Exception as exc:  # a corrupt archive  # noqa: BLE001
                 shutil.rmtree(unzipdir, ignore_errors=True)
+                # Refused (correctness): a corrupt archive: its files cannot be unpacked, it cannot run
                 raise ComponentSourceError(Issue("", f"{path}: cannot extract: {exc}")) from None
             _EXTRACTED[key] = unzipdir
         if held is not None:

@@ -106,6 +106,7 @@ def _binary(value: Any, name: str) -> bytes:
     try:
         return bytes.fromhex(str(value))
     except ValueError:
+        # Refused (correctness): bytes we cannot read: the value set would be a guess
         raise ScenarioError(f"{name}: a Binary value is given as hexadecimal digits, got {value!r}") from None
 
 

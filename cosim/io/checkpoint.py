@@ -83,6 +83,7 @@ class Checkpoint:
         for c in self.header["components"]:
             if c["name"] == name:
                 return c
+        # Refused (correctness): a component without its state would start from t = 0 beside the others
         raise CheckpointError(f"{self.path}: no state of component {name!r} (it holds "
                               f"{', '.join(c['name'] for c in self.header['components'])})")
 
@@ -92,29 +93,36 @@ class Checkpoint:
         h = self.header
         names = [c["name"] for c in h["components"]]
         if names != list(ex.plan.names):
+            # Refused (correctness): states set into other components: a checkpoint of another scenario
             raise CheckpointError(f"{self.path} holds the components {', '.join(names)}; scenario {scenario_name!r} "
                                   f"has {', '.join(ex.plan.names)}: a checkpoint of another scenario")
         if (h["grid"]["start_ns"], h["grid"]["step_ns"]) != (ex.start_ns, ex.step_ns):
+            # Refused (correctness): the resumed run would step on another grid than the one saved
             raise CheckpointError(f"{self.path} was written on a time grid from {h['grid']['start_ns'] * 1e-9:g} s "
                                   f"in steps of {h['grid']['step_ns'] * 1e-9:g} s; this run's starts at "
                                   f"{ex.start_ns * 1e-9:g} s in steps of {ex.step_ns * 1e-9:g} s")
         if h["algorithm"] != ex.algorithm_name:
+            # Refused (correctness): another algorithm exchanges other values: the resumed run would differ
             raise CheckpointError(f"{self.path} was written by the {h['algorithm']} algorithm; this run uses "
                                   f"{ex.algorithm_name}")
         if not self.t_ns < ex.stop_ns:
+            # Refused (correctness): nothing to continue: the run would be empty
             raise CheckpointError(f"{self.path} is at t = {self.time:g} s, not before this run's stop time "
                                   f"{ex.stop_ns * 1e-9:g} s: nothing to continue (give a later --stop-time)")
         if ex.grid.t_ns(self.k_done) != self.t_ns:
+            # Refused (correctness): the resumed steps would fall off this run's grid
             raise CheckpointError(f"{self.path}: t = {self.time:g} s is not the end of macro step {self.k_done} of "
                                   "this run's grid")
         for c, (entry, info) in enumerate(zip(h["components"], ex.plan.infos)):
             guid = info.md.guid
             if entry["guid"] != guid:
+                # Refused (correctness): a state set into another FMU (only the FMU that wrote a state reads it)
                 raise CheckpointError(f"{self.path}: component {entry['name']!r} was saved from the FMU with guid "
                                       f"{entry['guid']}; this run's {info.path.name} has guid {guid}: a checkpoint "
                                       "of another FMU build")
             digest = file_sha256(info.path)
             if entry["fmu_sha256"] != digest:
+                # Refused (correctness): same guid, other bytes: another build, its state may mean another thing
                 raise CheckpointError(f"{self.path}: component {entry['name']!r} was saved from an FMU file with "
                                       f"SHA-256 {entry['fmu_sha256'][:16]}...; {info.path} has {digest[:16]}...: "
                                       "a checkpoint of another FMU build")
@@ -138,6 +146,7 @@ def write_checkpoint(path: str | Path, ex: Execution, scenario: dict, command: s
     size in bytes. ``scenario``: the scenario as run (:func:`cosim.engine.scenario.effective_scenario`)."""
     missing = [n for n, s in zip(ex.plan.names, ex.slaves) if not getattr(s, "can_serialize_state", False)]
     if missing:
+        # Refused (correctness): a checkpoint without those states could not resume the run
         raise CheckpointError(f"cannot write a checkpoint: the state of {', '.join(missing)} cannot be serialized "
                               "(no canSerializeFMUstate in its FMU)")
     state = ex.save_state()
@@ -177,6 +186,7 @@ def read_checkpoint(path: str | Path) -> Checkpoint:
     :class:`CheckpointError` naming the file and what is wrong."""
     path = Path(path)
     if not path.is_file():
+        # Refused (correctness): no checkpoint, nothing to resume
         raise CheckpointError(f"{path}: no such checkpoint file")
     try:
         with zipfile.ZipFile(path) as z:
@@ -184,15 +194,19 @@ def read_checkpoint(path: str | Path) -> Checkpoint:
                 try:
                     info = z.getinfo(name)
                 except KeyError:
+                    # Refused (correctness): a part of the checkpoint is missing
                     raise CheckpointError(f"{path}: not a complete checkpoint (no {name})") from None
                 if info.file_size > _MAX_MEMBER:
+                    # Refused (security): a zip bomb: a member is bounded before it is read
                     raise CheckpointError(f"{path}: {name} claims {info.file_size} bytes; refused")
                 return z.read(name)
 
             header = _json(path, "checkpoint.json", member("checkpoint.json"))
             if header.get("format") != FORMAT:
+                # Refused (correctness): another format: its values would mean other things
                 raise CheckpointError(f"{path}: not a delta-cosim checkpoint")
             if header.get("version") != VERSION:
+                # Refused (correctness): another version's layout: its values would mean other things
                 raise CheckpointError(f"{path}: checkpoint format version {header.get('version')!r}; this version "
                                       f"of delta-cosim reads version {VERSION}")
             scenario = _json(path, "scenario.json", member("scenario.json"))
@@ -201,12 +215,14 @@ def read_checkpoint(path: str | Path) -> Checkpoint:
             for entry in header["components"]:
                 blob = member(entry["state"])
                 if len(blob) != entry["state_bytes"] or hashlib.sha256(blob).hexdigest() != entry["state_sha256"]:
+                    # Refused (correctness): a state that does not match its checksum would be set as it is
                     raise CheckpointError(f"{path}: the state of component {entry['name']!r} is damaged "
                                           f"({len(blob)} bytes, its checksum does not match)")
                 states.append(blob)
     except CheckpointError:
         raise
     except (zipfile.BadZipFile, zlib.error, EOFError, OSError, KeyError, TypeError, ValueError) as exc:
+        # Refused (correctness): a damaged checkpoint: what it holds cannot be read whole
         raise CheckpointError(f"{path}: not a checkpoint, or a damaged or truncated one ({type(exc).__name__}: "
                               f"{exc})") from None
     return Checkpoint(path, header, scenario, states)
@@ -225,19 +241,24 @@ def _check_header(path: Path, header: dict) -> None:
 
     for key, kind in _HEADER.items():
         if not isinstance(header.get(key), kind) or isinstance(header.get(key), bool):
+            # Refused (correctness): a header of the wrong shape: what it holds cannot be read
             raise bad(f"{key} missing or not a {kind.__name__}")
     for key in ("start_ns", "stop_ns", "step_ns"):
         if not isinstance(header["grid"].get(key), int):
+            # Refused (correctness): a header of the wrong shape: what it holds cannot be read
             raise bad(f"grid.{key} missing or not an integer")
     for i, entry in enumerate(header["components"]):
         if not isinstance(entry, dict):
+            # Refused (correctness): a header of the wrong shape: what it holds cannot be read
             raise bad(f"components[{i}] is not an object")
         for key, kind in _COMPONENT.items():
             if not isinstance(entry.get(key), kind):
+                # Refused (correctness): a header of the wrong shape: what it holds cannot be read
                 raise bad(f"components[{i}].{key} missing or of the wrong type")
         try:
             entry["decoded"] = {k: _decode_buffer(v) for k, v in entry["exchanged"].items()}
         except (TypeError, ValueError, KeyError, AttributeError):
+            # Refused (correctness): the exchanged values cannot be read: the first resumed step would be wrong
             raise bad(f"components[{i}].exchanged does not decode") from None
 
 
@@ -263,7 +284,9 @@ def _json(path: Path, name: str, data: bytes) -> Any:
     try:
         value = json.loads(data)
     except (UnicodeDecodeError, ValueError) as exc:
+        # Refused (correctness): the checkpoint's description cannot be read
         raise CheckpointError(f"{path}: {name} is not valid JSON ({exc})") from None
     if not isinstance(value, dict):
+        # Refused (correctness): the checkpoint's description cannot be read
         raise CheckpointError(f"{path}: {name} is not a JSON object")
     return value

@@ -41,12 +41,14 @@ def recover(path: str | Path, out: str | Path | None = None) -> RecoveryReport:
     out = Path(out) if out else _default_out(path)
     problem = file_problem(path)
     if problem is not None:
+        # Refused (security): a FIFO or a device named as a log would be read for ever
         raise CosimError(f"{path}: {problem}")
     check_output(out, (path,))
     try:
         with written_by_rename(out) as tmp:
             report = _copy(path, tmp, out)
     except OSError as exc:
+        # Refused (correctness): the copy could not be written whole: nothing is left half-written
         raise CosimError(f"{out}: cannot write the recovered log: {exc.strerror or exc}; nothing was written "
                          f"({path} is unchanged)") from None
     return report
@@ -131,6 +133,7 @@ def _copy(path: Path, tmp: Path, out: Path) -> RecoveryReport:
         except (McapError, EOFError, ValueError, Exception):  # noqa: B014 - any damage ends the usable input
             truncated = True
         if truncated and not (schemas or channels or any(counts.values())):
+            # Refused (correctness): nothing of a run to keep: an empty copy would look like a log
             raise NothingLogged(f"{path}: not an MCAP log (no complete record in it); nothing was written")
         if truncated:
             w.add_metadata("recovery", {"source": str(path), "note": "input ended inside a record; "

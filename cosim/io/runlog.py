@@ -128,6 +128,7 @@ class RunLog:
         except KeyError:
             close = difflib.get_close_matches(name, list(self.signals), n=4)
             hint = f"; did you mean {', '.join(close)}?" if close else f"; it has {len(self.signals)} signals"
+            # Refused (correctness): a name the log does not hold: which signal is meant is a guess
             raise CosimError(f"{self.path}: no signal {name!r}{hint}") from None
 
     def vector(self, prefix: str) -> tuple[np.ndarray, np.ndarray]:
@@ -171,6 +172,7 @@ def _inflate(chunk, path: Path, offset: int) -> bytes:
     declared = chunk.uncompressed_size
     where = f"{path}: the MCAP chunk at byte {offset}"
     if declared > MAX_CHUNK_BYTES:
+        # Refused (security): a forged chunk: an 82 KB log inflated to 2.5 GiB
         raise CosimError(f"{where} declares {declared:,} bytes uncompressed, more than the {MAX_CHUNK_BYTES:,} read "
                          f"(cosim.io.runlog.MAX_CHUNK_BYTES; the logs written here have chunks of 1 MiB): refused")
     try:
@@ -181,13 +183,17 @@ def _inflate(chunk, path: Path, offset: int) -> bytes:
         elif chunk.compression == "":
             data = chunk.data
         else:
+            # Refused (correctness): a chunk we cannot inflate: its records would be missing
             raise UnsupportedCompressionError(chunk.compression)
     except (zstandard.ZstdError, RuntimeError, ValueError, EOFError) as exc:  # RuntimeError: lz4's
+        # Refused (correctness): a damaged chunk: its records would be missing
         raise McapError(f"chunk at byte {offset}: {exc}") from None
     if len(data) > declared:
+        # Refused (security): read no further than declared: a forged chunk is bounded
         raise CosimError(f"{where} inflates past the {declared:,} bytes it declares: refused (a damaged or forged "
                          f"log)")
     if len(data) < declared:  # cut short (a killed writer) or damaged: no partial record is parsed
+        # Refused (correctness): cut short: a partial record would be parsed as a whole one
         raise McapError(f"chunk at byte {offset} inflates to {len(data):,} of the {declared:,} bytes it declares")
     return data
 
@@ -214,6 +220,7 @@ def log_records(f, path: str | Path, chunks: bool = True, limit: int | None = No
                 yield rec
             start = f.tell()
     except (struct.error, EOFError) as exc:  # the mcap reader's own errors for a record cut short: as its others
+        # Refused (correctness): cut short: a partial record would be parsed as a whole one
         raise McapError(f"the file ends inside a record ({exc})") from None
 
 
@@ -231,6 +238,7 @@ def read_run(path: str | Path, components: Iterable[str] | None = None) -> RunLo
     path = Path(path)
     problem = file_problem(path)
     if problem is not None:
+        # Refused (security): a FIFO or a device named as a log would be read for ever
         raise CosimError(f"{path}: {problem}")
     wanted = None if components is None else {f"/{c}" for c in components}
     columns: dict[str, dict[str, list]] = {}  # per component, per key (t included): the values in file order
@@ -288,12 +296,15 @@ def read_run(path: str | Path, components: Iterable[str] | None = None) -> RunLo
                 elif isinstance(rec, Footer):
                     footer = True
         if not footer:
+            # Refused (correctness): an unfinished log: recover says what was kept, this would not
             raise McapError("no footer (unfinished log)")
     except (McapError, OSError, ValueError, orjson.JSONDecodeError) as exc:
+        # Refused (correctness): a damaged log: its values would be partial
         raise _open_error(path, exc) from None
     if wanted is not None:
         missing = sorted(w[1:] for w in wanted if w[1:] not in columns)
         if missing:
+            # Refused (correctness): a component the log does not hold was asked for
             raise CosimError(f"{path}: no channel for component(s) {', '.join(missing)}; "
                              f"it has {', '.join(sorted(channel_md)) or 'none'}")
     offset = time_offset_ns(metadata)
@@ -308,6 +319,7 @@ def read_run(path: str | Path, components: Iterable[str] | None = None) -> RunLo
             if key == "t":
                 continue
             if len(values) != len(order):
+                # Refused (correctness): values and time stamps do not pair: each value's time would be a guess
                 raise CosimError(f"{path}: channel /{comp} has {len(values)} values of {key!r} for "
                                  f"{len(order)} time stamps")
             meta = props[comp].get(key, {})
@@ -348,8 +360,10 @@ def write_baseline(source: str | Path, out: str | Path, period: float = 0.01,
     source, out = Path(source), Path(out)
     problem = file_problem(source)
     if problem is not None:
+        # Refused (security): a FIFO or a device named as a log would be read for ever
         raise CosimError(f"{source}: {problem}")
     if not 1e-9 <= period <= MAX_TIME_S:  # nan and infinities too: stamps are whole nanoseconds of a grid
+        # Refused (correctness): no grid of whole nanoseconds has that period
         raise CosimError(f"baseline period must be from 1 ns to {MAX_TIME_S:g} s, got {period:g} s")
     # as every output: a regular file or nothing (a device or a FIFO was replaced by a regular file: as root,
     # --out /dev/null destroyed /dev/null), never the source, its folder made
@@ -376,6 +390,7 @@ def write_baseline(source: str | Path, out: str | Path, period: float = 0.01,
                 elif isinstance(rec, Footer):
                     footer = True
             if not footer:
+                # Refused (correctness): an unfinished log: recover says what was kept, this would not
                 raise McapError("no footer (unfinished log)")
             w = Writer(dst, compression=CompressionType.ZSTD)
             w.start(profile="", library="cosim-baseline")
@@ -392,6 +407,7 @@ def write_baseline(source: str | Path, out: str | Path, period: float = 0.01,
                 found = {ch.topic for ch in channels.values()}
                 missing = sorted(c[1:] for c in wanted - found)
                 if missing:
+                    # Refused (correctness): a component the log does not hold was asked for
                     raise CosimError(f"{source}: no channel for component(s) {', '.join(missing)}")
             offset = time_offset_ns({rec.name: dict(rec.metadata) for rec in metadata})
             f.seek(0)
@@ -420,6 +436,7 @@ def write_baseline(source: str | Path, out: str | Path, period: float = 0.01,
     except CosimError:
         raise
     except Exception as exc:  # the source is unreadable: no half-written baseline is left behind
+        # Refused (correctness): a damaged log: its baseline would be partial
         raise _open_error(source, exc) from None
     return out, written
 
@@ -445,6 +462,7 @@ def open_from_log(path: str | Path, overrides: dict[tuple, Any] | None = None) -
     path = Path(path)
     problem = file_problem(path)
     if problem is not None:
+        # Refused (security): a FIFO or a device named as a log would be read for ever
         raise ScenarioError(Issue("", problem.replace("no such file", "no such log file"), str(path)))
     found = archive = None
     try:
@@ -456,26 +474,32 @@ def open_from_log(path: str | Path, overrides: dict[tuple, Any] | None = None) -
                     found = bytes(rec.data)
                     break
     except RecordLengthLimitExceeded as exc:  # what a run writes before it is small: a forged or foreign log
+        # Refused (security): a forged attachment of gigabytes was read whole
         raise ScenarioError(Issue("", f"a record before the scenario as run is larger than "
                                       f"{_BEFORE_SCENARIO_BYTES:,} bytes ({exc}): not a run's log as written here, "
                                       "refused", str(path))) from None
     except (McapError, OSError, ValueError) as exc:  # before the attachment: read up to it otherwise
+        # Refused (correctness): a damaged log: the scenario as run cannot be read
         raise ScenarioError(Issue("", f"not a readable MCAP log ({type(exc).__name__}: {exc}); give a run's log",
                                   str(path))) from None
     if found is None:
+        # Refused (correctness): nothing records what was run: running it again would be a guess
         raise ScenarioError(Issue("", f"the log records no scenario as run ({EFFECTIVE_ATTACHMENT}): written by an "
                                       "older version or not by `python -m cosim run`; run its scenario file instead",
                                   str(path)))
     values = found.count(b",") + found.count(b"[") + found.count(b"{")
     if len(found) > MAX_SCENARIO_BYTES or values > MAX_YAML_NODES:  # as a scenario file is bounded
+        # Refused (security): bounded as a scenario file is (memory, an alias-bomb's size)
         raise ScenarioError(Issue("", f"{EFFECTIVE_ATTACHMENT} holds {len(found):,} bytes, about {values:,} values: "
                                       f"more than a scenario may ({MAX_SCENARIO_BYTES:,} bytes, {MAX_YAML_NODES:,} "
                                       "values, as for a scenario file): refused", str(path)))
     try:
         data = json.loads(found)
     except (ValueError, RecursionError) as exc:  # RecursionError: nested past the parser's depth
+        # Refused (correctness): the scenario as run cannot be read
         raise ScenarioError(Issue("", f"{EFFECTIVE_ATTACHMENT} is not JSON ({exc})", str(path))) from None
     if not isinstance(data, dict):
+        # Refused (correctness): the scenario as run cannot be read
         raise ScenarioError(Issue("", f"{EFFECTIVE_ATTACHMENT} is not a scenario mapping", str(path)))
     if isinstance(data.get("logging"), dict):
         data["logging"]["out"] = None
@@ -494,6 +518,7 @@ def _unpacked_archive_gone(data: dict[str, Any], path: Path) -> None:
         fmu = Path(comp["path"]) if isinstance(comp, dict) and isinstance(comp.get("path"), str) else None
         if fmu is not None and len(fmu.parents) > 2 and fmu.parents[2].name.startswith(SSP_PREFIX) \
                 and not fmu.exists():  # <archive folder>/fmus/<place>/<name>.fmu (cosim.io.ssp.read_ssp)
+            # Refused (correctness): its FMUs are gone with the archive's folder
             raise ScenarioError(Issue(f"components.{name}.path", f"the run was made from an SSP archive, unpacked "
                                       f"for that run only into {fmu.parents[2]} (gone), and the log (written by an "
                                       "older version) does not name the archive: run the archive again", str(path)))

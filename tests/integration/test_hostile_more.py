@@ -314,9 +314,8 @@ BAD_SSP = {
                       "the archive holds two members named 'resources/g.fmu': refused"),
     "duplicate_ssd": (dict(extra=[("SystemStructure.ssd", b"<x/>")]),
                       "the archive holds two members named 'SystemStructure.ssd'"),
-    # connectors that say what their FMU's variables are not (taken as the FMU's)
-    "kind_unknown": (dict(ssd=lambda s: s.replace(U_INPUT, U_INPUT.replace("input", "sideways"))),
-                     "component 'g': connector 'u': kind 'sideways' is not an SSP connector kind"),
+    # connectors that say what their FMU's variables are not (taken as the FMU's); a kind SSP does not know is a
+    # warning (test_a_connector_kind_ssp_does_not_know_is_one_warning)
     "kind_wrong": (dict(ssd=lambda s: s.replace(U_INPUT, U_INPUT.replace("input", "output"))),
                    "component 'g': connector 'u': declared an output, but its FMU's variable u is an input"),
     "type_wrong": (dict(ssd=lambda s: s.replace(U_INPUT, U_INPUT.replace("Real", "Boolean"))),
@@ -366,6 +365,19 @@ def test_a_hostile_archive_is_one_line_naming_what_is_wrong(run, small_ssp, tmp_
     assert not list(tmp_path.glob("x.mcap*")), "a refused archive left output files"
 
 
+def test_a_connector_kind_ssp_does_not_know_is_one_warning(run, small_ssp, tmp_path):
+    """libcosim's SSP parser stores a connector's kind unchecked and connects the FMU's variables; here too the
+    FMU's variable decides (u is its input), with one warning naming component, connector and kind, and the run
+    goes on. A kind that contradicts the FMU (kind_wrong) stays refused: the file says two things of one signal."""
+    odd = _rewrite(small_ssp, tmp_path / "odd.ssp", ssd=lambda s: s.replace(U_INPUT, U_INPUT.replace("input",
+                                                                                                      "sideways")))
+    r = run("run", odd, "--out", tmp_path / "x.mcap", "--quiet")
+    assert r.returncode == 0, r.stderr
+    assert r.stderr.strip().splitlines() == [
+        "warning: odd.ssp: component 'g': connector 'u': kind 'sideways' is not an SSP connector kind (input, output, "
+        "inout, parameter, calculatedParameter): its FMU's variable decides"], r.stderr
+
+
 def test_the_archive_as_exported_still_runs(run, small_ssp, tmp_path):
     """The checks above refuse what is wrong only: the exporter's own archive checks and runs."""
     assert run("check", small_ssp).returncode == 0
@@ -395,10 +407,7 @@ BAD_FMU = {
     "identifier_missing": (lambda s: s.replace(' modelIdentifier="CosimTGain"', ""),
                            "coSimulation modelIdentifier None is not a C identifier"),  # was a NoneType + str
     "guid_missing": (lambda s: re.sub(r' guid="[^"]*"', "", s), "no guid"),  # was a NoneType .encode at t = 0
-    # a parameter and an input on one value reference: setting u changed k (ran, silently). An output aliasing an
-    # input is legal (test_an_output_may_alias_an_input): an alias set holds at most one parameter or input
-    "shared_reference": (lambda s: s.replace('name="u" valueReference="1"', 'name="u" valueReference="0"'),
-                         "k \\(parameter\\), u \\(input\\) share the Real valueReference 0"),
+    # a parameter and an input on one value reference: refused where named (test_a_parameter_and_an_input_on_one_...)
     "negative_reference": (lambda s: s.replace('name="u" valueReference="1"', 'name="u" valueReference="-1"'),
                            "variable u: valueReference -1 is not an unsigned 32-bit integer"),
     # start, min and max of another type, or no number (taken, and never checked)
@@ -408,8 +417,9 @@ BAD_FMU = {
     "start_inf": (lambda s: s.replace(K_START, '<Real start="1e999"/>'),
                   "variable k \\(parameter\\): start '1e999' is not a finite number"),
     "min_text": (lambda s: s.replace(K_START, '<Real start="1" min="abc"/>'), "variable k: min 'abc' is not a Real"),
-    "empty_range": (lambda s: s.replace(K_START, '<Real start="1" min="5" max="0"/>'),
-                    "variable k: min 5 > max 0: no value is in range"),
+    # a NaN bound compares false: every value would pass the range check (an infinite one is no bound: it loads)
+    "max_nan": (lambda s: s.replace(K_START, '<Real start="1" max="NaN"/>'),
+                "variable k \\(parameter\\): max 'NaN' is not a finite number"),
 }
 
 
@@ -440,6 +450,60 @@ def test_a_name_declared_twice_is_refused_only_where_it_is_named(run, write_scen
     named = write_scenario(SMALL.replace("{CosimTGain}", str(fmu)), "named.yaml")  # sets g.k
     fails(run("run", named, "--out", tmp_path / "y.mcap"), 2, r"named.yaml:\d+: ",
           "twice.fmu declares 2 variables named 'k' \\(value references 0, 2\\): the name is ambiguous")
+
+
+def test_an_infinite_min_or_max_is_no_bound(run, write_scenario, test_fmus, tmp_path):
+    """FMI's min and max are xs:double, which holds INF; FMPy reads them as float('inf') and runs such an FMU. An
+    infinite bound is no bound (the range check takes it so): the FMU loads and runs with a parameter set, where it
+    was refused as 'not a finite number'; a value outside a finite bound beside it is still refused."""
+    fmu = _fmu_with(test_fmus["CosimTGain"], tmp_path / "inf.fmu",
+                    lambda s: s.replace(K_START, '<Real start="1" min="-INF" max="INF"/>'))
+    r = run("run", write_scenario(SMALL.replace("{CosimTGain}", str(fmu))), "--out", tmp_path / "x.mcap", "--quiet")
+    assert r.returncode == 0 and not r.stderr.strip(), r.stderr
+    half = _fmu_with(test_fmus["CosimTGain"], tmp_path / "half.fmu",
+                     lambda s: s.replace(K_START, '<Real start="1" min="-INF" max="1.5"/>'))
+    fails(run("run", write_scenario(SMALL.replace("{CosimTGain}", str(half)), "half.yaml"), "--out",
+              tmp_path / "y.mcap"), 2, r"half.yaml:\d+: ", "is outside its declared range \\[-INF, 1.5\\]")
+
+
+def test_an_empty_range_is_one_warning_and_refused_where_a_value_is_set(run, write_scenario, test_fmus, tmp_path):
+    """FMPy (its validation included) and libcosim do not compare min with max, and run such an FMU; so do we, with
+    one warning naming the variable, while nothing sets it. A value set there is refused as outside the range,
+    naming the scenario's line: the check applies where the range is used."""
+    fmu = _fmu_with(test_fmus["CosimTGain"], tmp_path / "empty.fmu",
+                    lambda s: s.replace(K_START, '<Real start="1" min="5" max="0"/>'))
+    r = run("run", write_scenario(SMALL.replace("{CosimTGain}", str(fmu)).replace("{k: 2.0}", "{}")), "--out",
+            tmp_path / "x.mcap", "--quiet")
+    assert r.returncode == 0, r.stderr
+    assert r.stderr.strip().splitlines() == [
+        "warning: empty.fmu: modelDescription.xml: variable k (min 5 > max 0): no value is in the declared range; the "
+        "run goes on, and a value set there is refused as outside it"], r.stderr
+    fails(run("run", write_scenario(SMALL.replace("{CosimTGain}", str(fmu)), "set.yaml"), "--out",
+              tmp_path / "y.mcap"), 2, r"set.yaml:\d+: ", "k = 2.0 is outside its declared range \\[5, 0\\]")
+
+
+def test_a_parameter_and_an_input_on_one_value_reference_are_refused_only_where_named(run, write_scenario, test_fmus,
+                                                                                      tmp_path):
+    """An alias set holds at most one parameter or input (setting u changed k, silently); FMPy and libcosim run such
+    an FMU all the same. As for a name declared twice: the FMU loads with one warning, k and u left out, and the run
+    goes on while nothing names them; a connection into u (or a value for k) is refused, naming both."""
+    fmu = _fmu_with(test_fmus["CosimTGain"], tmp_path / "shared.fmu",
+                    lambda s: s.replace('name="u" valueReference="1"', 'name="u" valueReference="0"'))
+    alone = write_scenario(f'name: alone\ncomponents:\n  g: {{path: "{fmu}"}}\ntime: {{stop: 0.2, step: 0.01}}\n',
+                           "alone.yaml")
+    r = run("run", alone, "--out", tmp_path / "x.mcap", "--quiet")
+    assert r.returncode == 0, r.stderr
+    assert r.stderr.strip().splitlines() == [
+        "warning: shared.fmu: modelDescription.xml: k (parameter), u (input) share the Real value reference 0: left "
+        "out (not logged, not settable); the run goes on while nothing names them"], r.stderr
+    connected = write_scenario(SMALL.replace("{CosimTGain}", str(fmu)).replace("{k: 2.0}", "{}"), "connected.yaml")
+    fails(run("run", connected, "--out", tmp_path / "y.mcap"), 2, r"connected.yaml:\d+: ",
+          re.escape("shared.fmu (g): k (parameter), u (input) share the Real value reference 0: setting one would "
+                    "change the other, so 'u' cannot be set or connected"))
+    set_k = write_scenario(f'name: set\ncomponents:\n  g: {{path: "{fmu}", parameters: {{k: 2.0}}}}\n'
+                           'time: {stop: 0.2, step: 0.01}\n', "set.yaml")
+    fails(run("run", set_k, "--out", tmp_path / "z.mcap"), 2, r"set.yaml:\d+: components.g.parameters.k: ",
+          "so 'k' cannot be set or connected")
 
 
 def test_an_output_may_alias_an_input(run, write_scenario, test_fmus, tmp_path):

@@ -206,12 +206,31 @@ BINDING_ERRORS = {
         '<ssc:MapEntry source="2" target="3"/></ssc:IntegerMappingTransformation></ssm:MappingEntry>'),
         "resources/system.ssm: parameter g of resources/system.ssv: IntegerMappingTransformation has no MapEntry"),
 }
+SYSTEM_CONNECTOR = '<ssd:Connectors><ssd:Connector name="x" kind="input"/></ssd:Connectors>'
 UNSUPPORTED = {
     "nested_system": (dict(elements_extra=NESTED), "nested systems"),
-    "system_connectors": (dict(system_extra='<ssd:Connectors><ssd:Connector name="x" kind="input"/></ssd:Connectors>'),
-                          "connectors of the system itself are not supported"),
-    "ssp_2": (dict(version="2.0"), "SSP version '2.0' is not supported"),
-    "signal_dictionary": (dict(system_extra='<ssd:SignalDictionaries/>'), "signal dictionaries are not supported"),
+    # the system's connectors are left out (below); a connection to one would leave its input without a value
+    "system_connector_connected": (dict(system_extra=SYSTEM_CONNECTOR, connections_extra=(
+        '<ssd:Connection startConnector="x" endElement="DP Controller" endConnector="u"/>')),
+        "connections to the system's own connectors are not supported"),
+    # signal dictionaries are left out (below); an element referring to one would be missing from the run
+    "signal_dictionary_referred": (dict(system_extra='<ssd:SignalDictionaries><ssd:SignalDictionary name="d"/>'
+                                                     '</ssd:SignalDictionaries>',
+                                        elements_extra='<ssd:SignalDictionaryReference name="r" dictionary="d"/>'),
+                                   "nested systems and signal dictionaries are not supported"),
+}
+LEFT_OUT = {
+    "system_connectors": (dict(system_extra=SYSTEM_CONNECTOR),
+                          "SystemStructure.ssd: the system's own connectors are left out (no connection uses them)"),
+    "signal_dictionary": (dict(system_extra="<ssd:SignalDictionaries/>"),
+                          "SystemStructure.ssd: the system's signal dictionaries are left out (no component refers "
+                          "to them)"),
+    "version_draft": (dict(version="Draft20171219"),
+                      "SystemStructure.ssd: SSP version 'Draft20171219' read as SSP 1.0 (its namespaces are SSP "
+                      "1.0's)"),
+    "version_2_in_ssp1_namespaces": (dict(version="2.0"),
+                                     "SystemStructure.ssd: SSP version '2.0' read as SSP 1.0 (its namespaces are SSP "
+                                     "1.0's)"),
 }
 
 
@@ -309,6 +328,63 @@ def test_component_names_that_cannot_be_mapped_back_are_one_line(tmp_path, test_
     ssp = _archive(tmp_path, test_fmus, system_extra=_names_annotation(names_json))
     rc, _, err = _cli(capsys, "run", ssp, "--no-log", "--quiet")
     assert rc == 2 and len(err.strip().splitlines()) == 1 and expected in err and str(ssp) in err, err
+
+
+@pytest.mark.parametrize("case", list(LEFT_OUT))
+def test_what_libcosim_leaves_out_is_one_warning_and_the_run_goes_on(tmp_path, test_fmus, capsys, case):
+    """libcosim's SSP parser (src/cosim/ssp/ssp_parser.cpp) reads the version attribute without checking it and
+    never reads the system's own connectors or its signal dictionaries; OMSimulator 2 wrote version="Draft20171219"
+    with SSP 1.0's namespaces. Such an archive runs here too, with one warning naming what was read otherwise (a
+    connection to a system connector stays refused: UNSUPPORTED)."""
+    kwargs, says = LEFT_OUT[case]
+    ssp = _archive(tmp_path, test_fmus, **kwargs)
+    rc, _, err = _cli(capsys, "run", ssp, "--no-log", "--quiet")
+    assert rc == 0, err
+    assert err.strip().splitlines() == [f"warning: others.ssp: {says}"], err
+
+
+def test_a_step_size_hint_off_the_base_step_is_one_warning_and_rounds_down_as_libcosim(tmp_path, test_fmus, capsys):
+    """libcosim's fixed-step algorithm (calculate_decimation_factor) steps a component every max(1, floor(hint /
+    base step)) base steps and logs a warning where the hint is no whole multiple; so do we: 0.25 s on a 0.1 s base
+    step is a step multiple of 2 (0.2 s), 0.05 s is 1 (0.1 s), each with one warning naming the component."""
+    for hint, multiple, every in ((0.25, 2, "0.2"), (0.05, 1, "0.1")):
+        annotation = ('<ssd:Annotations><ssc:Annotation type="com.opensimulationplatform">'
+                      f'<osp:StepSizeHint value="{hint}"/></ssc:Annotation></ssd:Annotations>')
+        ssp = _archive(tmp_path, test_fmus, f"hint{multiple}.ssp")
+        ssp = _edited(ssp, lambda ssd: ssd.replace('source="resources/gain.fmu">',
+                                                   'source="resources/gain.fmu">' + annotation, 1))
+        rc, _, err = _cli(capsys, "run", ssp, "--no-log", "--quiet")
+        assert rc == 0, err
+        assert err.strip().splitlines() == [
+            f"warning: {ssp.name}: component 'DP Controller': osp:StepSizeHint {hint:g} s is not a whole multiple of "
+            f"the base step 0.1 s: it steps every {every} s, as libcosim does"], err
+        with open_ssp(ssp) as sc:
+            assert sc.components["DP Controller"].step_multiple == multiple, sc.components["DP Controller"]
+        capsys.readouterr()  # open_ssp's own warning, said again
+
+
+def test_connector_kinds_ssp_does_not_know_are_one_warning_per_component_and_kind(tmp_path, test_fmus, capsys):
+    """libcosim's SSP parser stores a connector's kind unchecked and connects the FMU's variables: so do we, with one
+    warning per component and kind naming its connectors (not one line per connector)."""
+    ssp = _edited(_archive(tmp_path, test_fmus, "kinds.ssp"), lambda ssd: ssd.replace(
+        '<ssd:Connector name="u" kind="input">', '<ssd:Connector name="u" kind="signal">').replace(
+        '          <ssd:Connector name="y" kind="output">', '          <ssd:Connector name="y" kind="signal">'))
+    rc, _, err = _cli(capsys, "run", ssp, "--no-log", "--quiet")
+    assert rc == 0, err
+    assert err.strip().splitlines() == [
+        "warning: kinds.ssp: component 'DP Controller': connectors 'u', 'y': kind 'signal' is not an SSP connector "
+        "kind (input, output, inout, parameter, calculatedParameter): its FMU's variable decides"], err
+
+
+def _edited(ssp: Path, edit) -> Path:
+    """``ssp`` with its SystemStructure.ssd rewritten by ``edit`` (in place)."""
+    with zipfile.ZipFile(ssp) as z:
+        members = {n: z.read(n) for n in z.namelist()}
+    members["SystemStructure.ssd"] = edit(members["SystemStructure.ssd"].decode()).encode()
+    with zipfile.ZipFile(ssp, "w") as z:
+        for name, data in members.items():
+            z.writestr(name, data)
+    return ssp
 
 
 def test_ssp_2_namespace_is_named(tmp_path, test_fmus, capsys):

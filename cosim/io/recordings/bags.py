@@ -95,6 +95,7 @@ def read_bag(path: Path, specs: Mapping[str, BagSpec], time: str) -> BagSamples:
         cut = _cut_mcap(path)
         if cut is None:
             hint = _HINTS.get("ros1" if kind == "ros1" else path.suffix, "")
+            # Refused (correctness): nothing of the bag can be read (a cut ROS 2 .mcap is read up to its cut)
             raise RecordingError(f"{path}: cannot read the {kind.upper()} bag: {_said(exc)}{hint}") from None
         return _read_cut(path, cut, specs, time, _said(exc))
 
@@ -114,6 +115,7 @@ def _check_topics(path: Path, specs: Mapping[str, BagSpec], topics: Mapping[str,
             close = difflib.get_close_matches(spec.topic, list(topics), n=2)
             hint = f"; did you mean {' or '.join(close)}?" if close else ""
             listed = ", ".join(f"{t} ({m})" for t, m in sorted(topics.items())) or "none"
+            # Refused (correctness): a signal asked for is not in the bag: what would drive it is a guess
             raise RecordingError(f"{path}: {spec.text}: no topic {spec.topic!r}{hint} (topics: {listed})")
 
 
@@ -137,6 +139,7 @@ def _collect(path: Path, specs: Mapping[str, BagSpec], stream: Iterator, time: s
         except CosimError:
             raise
         except Exception as exc:  # noqa: BLE001 - rosbags' deserialisers raise their own and struct's errors
+            # Refused (correctness): a message that does not decode: its values would be a guess
             raise RecordingError(f"{path}: {topic}: message {i} (log time {log_ns * 1e-9:.6f} s) is no "
                                  f"{msgtype}: {_said(exc)}") from None
         counts[topic] = i + 1
@@ -144,6 +147,7 @@ def _collect(path: Path, specs: Mapping[str, BagSpec], stream: Iterator, time: s
             value, stamped = res.value(msg, i, log_ns * 1e-9)
             if time == "header":
                 if stamped is None:
+                    # Refused (correctness): no header stamp to time it by: the remedy (time: log) is named
                     raise RecordingError(f"{path}: {res.spec.text}: {res.msgtype} has no header to take a stamp "
                                          "from; read it with time: log (the recorder's receive times)")
                 st = stamped.header.stamp
@@ -185,6 +189,7 @@ def _read_cut(path: Path, files: list[Path], specs: Mapping[str, BagSpec], time:
                                          else get_types_from_msg(text, rec.name))
                                 store.register({k: v for k, v in types.items() if k not in store.fielddefs})
                             except Exception as exc:  # noqa: BLE001 - rosbags' parser errors vary by version
+                                # Refused (correctness): a schema that does not parse: its messages cannot be decoded
                                 raise RecordingError(f"{file}: schema {rec.name!r}: {_said(exc)}") from None
                         elif isinstance(rec, Channel):
                             schema = schemas.get(rec.schema_id)
@@ -200,6 +205,7 @@ def _read_cut(path: Path, files: list[Path], specs: Mapping[str, BagSpec], time:
     out = _collect(path, specs, stream(), time)
     if not channels:
         where = "; ".join(ended) or "no channel in it"
+        # Refused (correctness): nothing of the bag can be read
         raise RecordingError(f"{path}: cannot read the ROS 2 bag ({why}), and nothing of it is readable: {where}")
     _check_topics(path, specs, {t: m for t, m in channels.values()})
     out.end_note = f"{path}: cut bag ({why}): " + ("; ".join(ended) or "read to its last record")

@@ -64,6 +64,8 @@ class RecordingInfo:
         defaultExperiment=None, coSimulation=None, modelExchange=None))
     feedthrough: dict[str, list[str] | None] = field(default_factory=dict)
     ambiguous: dict[str, tuple[int, ...]] = field(default_factory=dict)  # none: the outputs are a mapping's keys
+    shared: dict[str, str] = field(default_factory=dict)  # none: no value references
+    notes: tuple[str, ...] = ()  # nothing read leniently
     interfaces: tuple[str, ...] = ("cs",)
 
     def structural_parameters(self) -> dict:
@@ -91,6 +93,7 @@ def recording_info(name: str, replay: Replay, base: Path, span: tuple[float, flo
     path = Path(replay.file)
     path = path if path.is_absolute() else base / path
     if not path.exists():
+        # Refused (correctness): no recording, nothing to replay
         raise CosimError(f"recording file not found: {path}")
     specs = dict(replay.signals)
     rec = read_recording(path, specs, time=replay.time, units=dict(replay.units))  # from its first message: its
@@ -109,6 +112,7 @@ def recording_info(name: str, replay: Replay, base: Path, span: tuple[float, flo
         else:
             covers, needs = f"t = {lo:.9g} .. {hi:.9g} s (its time, from its first message)", \
                 f"{start:.9g} .. {stop:.9g} s with offset {replay.offset_s:g} s"
+        # Refused (correctness): past its ends the replayed values would be made up
         raise CosimError(f"recording {path} covers {covers}, the run t = {span[0]:.9g} .. {span[1]:.9g} s needs "
                          f"{needs}" + (f" ({rec.end_note})" if rec.end_note else ""))
     variables = {}
@@ -151,6 +155,7 @@ class RecordingSlave:
 
     def bind(self, inputs: list[Variable], outputs: list[Variable]) -> None:
         if inputs:
+            # Refused (correctness): a connection into a replay would be dropped silently
             raise CosimError(f"component {self.name!r} replays a recording: it has no inputs "
                              f"({', '.join(v.name for v in inputs)})")
         self._out = [v.name for v in outputs]
@@ -217,6 +222,7 @@ class RecordingSlave:
     def free_state(self, state: ComponentState) -> None: ...
 
     def set_values(self, values: dict) -> None:
+        # Refused (correctness): a value set on a replay would be dropped silently
         raise CosimError(f"component {self.name!r} replays a recording: its outputs cannot be set "
                          f"({', '.join(v.name for v in values)})")
 

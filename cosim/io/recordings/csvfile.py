@@ -49,8 +49,10 @@ def read_csv(path: Path, names: Mapping[str, str]) -> tuple[np.ndarray, dict[str
             rows = [(i, r) for i, r in enumerate(csv.reader(f), start=1)
                     if r and not r[0].lstrip().startswith("#") and any(c.strip() for c in r)]
     except (OSError, UnicodeDecodeError, csv.Error) as exc:
+        # Refused (correctness): nothing of the file can be read
         raise RecordingError(f"{path}: cannot read the CSV file: {exc}") from None
     if not rows:
+        # Refused (correctness): no column names: which column is which would be a guess
         raise RecordingError(f"{path}: no header line (the column names, e.g. time [s],q1 [rad])")
     head_line, head = rows[0]
     cols = [split_header(c) for c in head]
@@ -63,11 +65,13 @@ def read_csv(path: Path, names: Mapping[str, str]) -> tuple[np.ndarray, dict[str
         if column not in labels:
             close = difflib.get_close_matches(column, labels, n=2)
             hint = f"; did you mean {' or '.join(close)}?" if close else ""
+            # Refused (correctness): a signal asked for is not in the file
             raise RecordingError(f"{path}:{head_line}: no column {column!r}{hint} (columns: {', '.join(labels)})")
         index[name] = labels.index(column)
     data = np.empty((len(rows) - 1, len(cols)))
     for k, (line, row) in enumerate(rows[1:]):
         if len(row) != len(cols):
+            # Refused (correctness): a row of another width: which cell is which column would be a guess
             raise RecordingError(f"{path}:{line}: {len(row)} cells where the header names {len(cols)} columns")
         for j, cell in enumerate(row):
             try:
@@ -80,4 +84,5 @@ def read_csv(path: Path, names: Mapping[str, str]) -> tuple[np.ndarray, dict[str
 
 def _bad_cell(path: Path, line: int, column: str, cell: str) -> float:
     shown = cell if len(cell) <= 40 else cell[:40] + "..."
+    # Refused (correctness): a cell that is no number would be replayed as a made-up value
     raise RecordingError(f"{path}:{line}: column {column!r}: {shown!r} is not a number")

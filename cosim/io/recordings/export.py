@@ -49,8 +49,10 @@ def export_csv(log: RunLog | str | Path, out_dir: str | Path) -> list[Path]:
     log = log if isinstance(log, RunLog) else read_run(log)
     out_dir = Path(out_dir)
     if out_dir.exists() and not out_dir.is_dir():
+        # Refused (correctness): the output folder cannot be made there
         raise CosimError(f"--csv {out_dir}: is a file, not a folder")
     if not out_dir.parent.resolve().is_dir():
+        # Refused (correctness): the output folder cannot be made there
         raise CosimError(f"--csv {out_dir}: no folder {out_dir.parent} to make it in")
     out_dir.mkdir(exist_ok=True)
     written = []
@@ -73,6 +75,7 @@ def export_csv(log: RunLog | str | Path, out_dir: str | Path) -> list[Path]:
                 for row in zip(*cols):
                     w.writerow([_cell(v) for v in row])
         except OSError as exc:
+            # Refused (correctness): the file could not be written whole
             raise CosimError(f"--csv: cannot write {target}: {exc.strerror or exc}") from None
         written.append(target)
     return written
@@ -86,6 +89,7 @@ def export_parquet(log: RunLog | str | Path, out: str | Path) -> Path:
     log = log if isinstance(log, RunLog) else read_run(log)
     out = Path(out)
     if not out.parent.resolve().is_dir():
+        # Refused (correctness): the output file cannot be made there
         raise CosimError(f"--parquet {out}: no folder {out.parent} to write it in")
     check_output(out, (log.path,))
     t_ns = np.unique(np.concatenate([s.t_ns for s in log.signals.values()]))
@@ -108,5 +112,6 @@ def export_parquet(log: RunLog | str | Path, out: str | Path) -> Path:
         with written_by_rename(out) as tmp:
             pq.write_table(table, tmp)
     except OSError as exc:
+        # Refused (correctness): the file could not be written whole
         raise CosimError(f"--parquet: cannot write {out}: {exc.strerror or exc}") from None
     return out

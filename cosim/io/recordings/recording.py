@@ -61,6 +61,7 @@ class Recording:
         if interpolation == "hold":
             i = np.clip(np.searchsorted(times, tt, side="right") - 1, 0, len(times) - 1)
             return values[i]
+        # Refused (correctness): an interpolation we do not know: the replayed values would be a guess
         raise CosimError(f"interpolation {interpolation!r}: valid: linear, hold")
 
     def converted(self, name: str, unit: str) -> np.ndarray:
@@ -94,16 +95,21 @@ def read_recording(path: str | Path, specs: Mapping[str, str], *, time: Literal[
     Raises RecordingError (one line) for what cannot be read; a cut bag reads what it holds (``end_note``)."""
     path = Path(path)
     if time not in ("header", "log"):
+        # Refused (correctness): a time base we do not know: each sample's time would be a guess
         raise RecordingError(f"time {time!r}: valid: header (the messages' stamps), log (receive times)")
     if time_origin not in ("first", "absolute"):
+        # Refused (correctness): a time origin we do not know: each sample's time would be a guess
         raise RecordingError(f"time_origin {time_origin!r}: valid: first, absolute")
     if not specs:
+        # Refused (correctness): nothing to read
         raise RecordingError(f"{path}: no signal asked for")
     problem = file_problem(path, directory_ok=True)
     if problem is not None:
+        # Refused (security): a FIFO or a device named as a recording would be read for ever
         raise RecordingError(f"{path}: {problem}")
     kind = recording_kind(path)
     if kind is None:
+        # Refused (correctness): a file of no format we read
         raise RecordingError(f"{path}: not a recording (a ROS 2 bag folder or .mcap/.db3 file, a ROS 1 .bag, a "
                              ".csv, or a run log .mcap)")
     t_ns: dict[str, np.ndarray] = {}
@@ -134,6 +140,7 @@ def _finish(path: Path, kind: str, specs: Mapping[str, str], t_ns: dict, vals: d
     """Checks (messages, monotonic time, NaN), the time origin, the window and the units."""
     for n, s in specs.items():
         if not len(t_ns[n]):
+            # Refused (correctness): no samples: nothing to replay
             raise RecordingError(f"{path}: {s}: no messages" + (f" ({end_note})" if end_note else ""))
     origin_ns = min(int(t[0]) for t in t_ns.values()) if time_origin == "first" else 0
     if end_note:
@@ -144,18 +151,21 @@ def _finish(path: Path, kind: str, specs: Mapping[str, str], t_ns: dict, vals: d
         bad = np.flatnonzero(np.diff(t_ns[n]) <= 0)
         if len(bad):
             i = int(bad[0]) + 1
+            # Refused (correctness): two values at one time, or out of order: interpolation between them is a guess
             raise RecordingError(f"{path}: {s}: time is not increasing at sample {i} (t = {t[i]:.9g} s after "
                                  f"{t[i - 1]:.9g} s); a bag's header stamps can be out of order: read with "
                                  "time: log")
         nan = np.flatnonzero(~np.isfinite(vals[n]))
         if len(nan):
             i = int(nan[0])
+            # Refused (correctness): a NaN or inf sample would drive the FMUs with a non-finite value
             raise RecordingError(f"{path}: {s}: {vals[n][i]} at sample {i} (t = {t[i]:.9g} s)"
                                  + (f", and {len(nan) - 1} more" if len(nan) > 1 else ""))
         y = vals[n]
         if window is not None:
             keep = (t >= window[0]) & (t <= window[1])
             if not keep.any():
+                # Refused (correctness): no samples in the window: nothing to replay
                 raise RecordingError(f"{path}: {s}: no messages in t = {window[0]:g} .. {window[1]:g} s (it has "
                                      f"{t[0]:.6g} .. {t[-1]:.6g} s)")
             t, y = t[keep], y[keep]

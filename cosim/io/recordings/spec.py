@@ -42,6 +42,7 @@ def parse_bag_spec(text: str) -> BagSpec:
     while pos < len(rest):
         t = _TOKEN.match(rest, pos)
         if t is None:
+            # Refused (correctness): a signal name we cannot read: which field is meant is a guess
             raise RecordingError(f"signal {text!r}: cannot read {rest[pos:]!r}; a bag signal is /TOPIC.FIELD.SUB[INDEX] "
                                  "(e.g. /joint_states.position[joint1], /tcp_pose.pose.position.x)")
         field, sel = t.groups()
@@ -52,6 +53,7 @@ def parse_bag_spec(text: str) -> BagSpec:
             steps.append(int(sel) if re.fullmatch(r"\d+", sel) else (sel,))
         pos = t.end()
     if not topic or not steps or not isinstance(steps[0], str):
+        # Refused (correctness): a signal name we cannot read: which field is meant is a guess
         raise RecordingError(f"signal {text!r}: a bag signal is /TOPIC.FIELD... naming a numeric field (e.g. "
                              "/joint_states.position[joint1], /tcp_pose.pose.position.x)")
     return BagSpec(text, topic, tuple(steps))
@@ -89,6 +91,7 @@ class Resolver:
                 if not hasattr(obj, step):
                     fields = _fields(obj)
                     kind = getattr(type(obj), "__msgtype__", type(obj).__name__)
+                    # Refused (correctness): a field the message does not have
                     raise self._fail(f"no field {step!r} in {kind} (fields: {', '.join(fields)}){_hint(step, fields)}")
                 parent, obj = obj, getattr(obj, step)
             else:
@@ -97,17 +100,20 @@ class Resolver:
                 stamped = obj
         if isinstance(obj, (bool, np.bool_)) or not isinstance(obj, (int, float, np.integer, np.floating)):
             what = type(obj).__name__ if not hasattr(obj, "__len__") else f"an array of {len(obj)}"
+            # Refused (correctness): no number to replay: which element is meant is a guess
             raise self._fail(f"is {what}, not a number; select one element ([0], [NAME]) or a numeric field",
                              index, t_s)
         return float(obj), stamped
 
     def _element(self, seq, parent, step, k: int, index: int, t_s: float):
         if not hasattr(seq, "__len__") or isinstance(seq, (str, bytes)):
+            # Refused (correctness): an index into something that is no array
             raise self._fail(f"[{step if isinstance(step, int) else step[0]}] applied to {type(seq).__name__}, "
                              "not an array", index, t_s)
         n = len(seq)
         if isinstance(step, int):
             if step >= n:
+                # Refused (correctness): an element the array does not have
                 raise self._fail(f"index [{step}] out of range: the array has {n} element(s)", index, t_s)
             return seq[step]
         key = step[0]
@@ -117,10 +123,12 @@ class Resolver:
             if key not in names:
                 shown = ", ".join(map(str, names[:12])) or "none"
                 what = "joint" if parent is not None and hasattr(parent, "name") else "element"
+                # Refused (correctness): a name the array does not have
                 raise self._fail(f"no {what} named {key!r} (names: {shown}){_hint(key, list(map(str, names)))}",
                                  index, t_s)
             pos = self._cache[k] = names.index(key)
         if pos >= n:
+            # Refused (correctness): names and values do not pair: which value is meant is a guess
             raise self._fail(f"{key!r} is name {pos + 1} of {len(names)} but the array has {n} element(s) "
                              "(an empty position, velocity or effort?)", index, t_s)
         return seq[pos]

@@ -47,9 +47,11 @@ def unit_factor(unit_from: str, unit_to: str, where: str = "") -> float:
     for u in (a, b):
         if u not in UNITS:
             known = ", ".join(k for k in UNITS if k not in ("", "1", "-"))
+            # Refused (correctness): a unit we do not know: the conversion would be a guess
             raise RecordingError(f"{prefix}unknown unit {u!r}; known: {known}")
     (dim_a, f_a), (dim_b, f_b) = UNITS[a], UNITS[b]
     if dim_a != dim_b:
+        # Refused (correctness): no conversion connects other dimensions: the value would mean another thing
         raise RecordingError(f"{prefix}unit {a!r} does not convert to {b!r} ({dim_a} is not {dim_b})")
     return f_a / f_b
 

@@ -34,6 +34,7 @@ def parse_xml(data: bytes, ssp: Path, member: str) -> ET.Element:
                 return ET.fromstring(declared)
             except ET.ParseError:
                 pass
+        # Refused (correctness): what the member means cannot be read
         raise SspError(ssp, f"{member}: not well-formed XML ({exc})") from None
 
 
@@ -46,6 +47,7 @@ def read_member(zf: zipfile.ZipFile, member: str, ssp: Path) -> bytes:
     with zf.open(member) as f:
         data = f.read(MAX_XML_BYTES + 1)
     if len(data) > MAX_XML_BYTES:
+        # Refused (security): a zip bomb: read no further than the bound
         raise SspError(ssp, f"{member} unpacks to more than {MAX_XML_BYTES:,} bytes: refused")
     return data
 
@@ -54,10 +56,12 @@ def member_path(base: str, uri: str, ssp: Path, what: str) -> str:
     """The archive member a relative URI in ``base`` (a member's directory) points at."""
     parsed = urlparse(uri)
     if parsed.scheme or parsed.netloc or uri.startswith("/"):
+        # Refused (security): a URL or an absolute path would read outside the archive
         raise SspError(ssp, f"{what}: source {uri!r} is not a relative reference into the archive "
                             "(only those are supported)")
     path = posixpath.normpath(posixpath.join(base, unquote(parsed.path)))
     if path.startswith("../") or path == "..":
+        # Refused (security): a path out of the archive (../) would read the user's files
         raise SspError(ssp, f"{what}: source {uri!r} points outside the archive")
     return path
 
@@ -68,4 +72,5 @@ def component_fmu(comp: str, components: dict[str, dict[str, Any]], ssp: Path) -
     try:
         return load_fmu(components[comp]["path"])
     except CosimError as exc:
+        # Refused (correctness): an FMU the run cannot read (the error of load_fmu, named by component)
         raise SspError(ssp, f"component {comp!r}: {exc}") from None

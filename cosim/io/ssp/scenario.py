@@ -71,6 +71,7 @@ def open_ssp(ssp: str | Path, overrides: dict[tuple, Any] | None = None) -> Iter
                    if key not in data["time"] and ("time", key) not in overrides]
         if missing:
             what = " and ".join(f"the {'base step' if k == 'step' else 'stop time'}" for k, _ in missing)
+            # Refused (correctness): no time grid: the step or stop would be a guess
             raise SspError(ssp, f"{what}: neither the SSD's default experiment nor the FMUs give it; "
                                 f"pass {' and '.join(f for _, f in missing)}")
         scenario = scenario_from_data(data, str(ssp), overrides)
@@ -91,27 +92,33 @@ def reopen_ssp(archive: dict[str, str], data: dict[str, Any], source: str,
     try:
         ssp, sha256, unpacked = Path(archive["file"]), archive["sha256"], archive["unpacked"]
     except (KeyError, TypeError):
+        # Refused (correctness): the archive the run was made from cannot be found again
         raise SspError(source, f"the log's ssp metadata is incomplete ({archive!r}): expected file, sha256 and "
                                "unpacked") from None
     head = f"the run was made from the SSP archive {ssp}, which"
     problem = file_problem(ssp)  # the log names it: a FIFO or a device would be hashed for ever
     if problem not in (None, "no such file"):
+        # Refused (security): a FIFO or a device named by a log would be hashed for ever
         raise SspError(source, f"{head} cannot be read: {problem}")
     try:
         size = ssp.stat().st_size
     except OSError:
         size = 0  # gone or unreadable: said below
     if size > MAX_ARCHIVE_BYTES:  # the log names it: a huge (or sparse) file would be hashed for minutes
+        # Refused (security): a huge or sparse file named by a log would be hashed for minutes
         raise SspError(source, f"{head} is {size:,} bytes, more than any archive is read "
                                f"(cosim.io.ssp.scenario.MAX_ARCHIVE_BYTES, {MAX_ARCHIVE_BYTES:,}): refused")
     try:
         now = _sha256(ssp)
     except FileNotFoundError:
+        # Refused (correctness): the run's FMUs are gone with the archive
         raise SspError(source, f"{head} is gone: its FMUs were unpacked from it for the run only; put the archive "
                                "back to run the log again") from None
     except OSError as exc:
+        # Refused (correctness): the archive cannot be read: the run's FMUs cannot be unpacked
         raise SspError(source, f"{head} cannot be read: {exc.strerror or exc}") from None
     if now != sha256:
+        # Refused (correctness): the log's values may no longer be the archive's
         raise SspError(source, f"{head} has changed since (SHA-256 {sha256[:16]}... then, {now[:16]}... now): the "
                                f"log's FMUs and values may no longer be the archive's; run the archive itself "
                                f"(`python -m cosim run {ssp}`)")

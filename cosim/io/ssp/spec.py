@@ -3,12 +3,13 @@ SSP carries, the scenario sections our annotation holds, and :class:`SspError`."
 
 from __future__ import annotations
 
+import sys
 from pathlib import Path
 from xml.etree import ElementTree as ET
 
-from ...errors import Issue, ScenarioError
+from ...errors import Issue, ScenarioError, printable
 
-__all__ = ["NS", "SSD_NAME", "SspError"]
+__all__ = ["NS", "SSD_NAME", "SspError", "warn"]
 
 
 NS = {
@@ -46,6 +47,12 @@ class SspError(ScenarioError):
 
     def __init__(self, file: str | Path, message: str):
         super().__init__(Issue("", message, str(file)))
+
+
+def warn(ssp: Path, message: str) -> None:
+    """One line on stderr for what the reader takes as other tools take it (and says so): ``warning: ARCHIVE:
+    message``, control characters escaped (the archive's names are outside input)."""
+    print(printable(f"warning: {Path(ssp).name}: {message}"), file=sys.stderr)
 
 
 def num_text(x: float) -> str:

@@ -43,8 +43,10 @@ def unit_table(parent: ET.Element | None, path: str, ssp: Path, where: str) -> d
             factor, offset = float(attrs.get("factor", "1")), float(attrs.get("offset", "0"))
             unit = (tuple(int(attrs.get(k, "0")) for k in BASE_UNITS), factor, offset)
         except ValueError:
+            # Refused (correctness): the conversion would be a guess
             raise SspError(ssp, f"{where}: unit {name!r}: its BaseUnit attributes are not numbers") from None
         if not conversion_ok(factor, offset):
+            # Refused (correctness): no conversion through it exists (x 0, inf, nan)
             raise SspError(ssp, f"{where}: unit {name!r}: BaseUnit factor {factor!r}, offset {offset!r}: a "
                                 "unit needs a finite factor other than 0 and a finite offset")
         _same_unit(out, name, unit, ssp, where)
@@ -57,6 +59,7 @@ def _same_unit(known: dict[str, tuple], name: str, unit: tuple, ssp: Path, where
     converted with would be a guess; 1500 mm reached an FMU as 1 500 000 when the last one won)."""
     if name in known and known[name] != unit:
         (e1, f1, o1), (e2, f2, o2) = known[name], unit
+        # Refused (correctness): which definition a value is converted with would be a guess
         raise SspError(ssp, f"{where}: unit {name!r} is defined twice, differently (factor {f1!r} then {f2!r}, offset "
                             f"{o1!r} then {o2!r}{', other base units' if e1 != e2 else ''}): give it one definition")
 
@@ -93,18 +96,22 @@ def convert_units(components: dict[str, dict[str, Any]], ssp: Path) -> None:
                 continue
             target = next((u.baseUnit for u in info.md.unitDefinitions or [] if u.name == unit), None)
             if q.base is None:
+                # Refused (correctness): the value's unit is unknown: it would be set as if in the variable's
                 raise SspError(ssp, f"{q.where}: unit {q.unit!r} is defined in neither the parameter set's ssv:Units "
                                     f"nor the SSD's ssd:Units: cannot convert it to {comp}.{var}'s unit {unit!r}")
             if target is None:
+                # Refused (correctness): the variable's unit is unknown: the conversion would be a guess
                 raise SspError(ssp, f"{q.where}: {comp}.{var} is in {unit!r}, which its FMU does not define: cannot "
                                     f"convert {q.unit!r} to it")
             exps = tuple(int(getattr(target, k, 0) or 0) for k in BASE_UNITS)
             if exps != q.base[0]:
+                # Refused (correctness): no conversion connects other dimensions: the value would mean another thing
                 raise SspError(ssp, f"{q.where}: unit {q.unit!r} does not convert to {comp}.{var}'s unit {unit!r} "
                                     "(other base units)")
             factor = 1.0 if target.factor is None else float(target.factor)
             offset = 0.0 if target.offset is None else float(target.offset)
             if not conversion_ok(factor, offset):
+                # Refused (correctness): no conversion through it exists (x 0, inf, nan)
                 raise SspError(ssp, f"{q.where}: {comp}.{var}'s unit {unit!r} has factor {factor!r}, offset {offset!r} "
                                     "in its FMU: cannot convert to it")
             params[var] = (q.base[1] * q.value + q.base[2] - offset) / factor
