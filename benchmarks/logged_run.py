@@ -8,8 +8,8 @@ completion); then the ranges, the machine's load (``uptime``), and where a logge
 
 - the master's own logging work per step: a third run in each round, logged with a writer that drops every sample
   and message it receives (a fork of the master with :meth:`LogSink.blocks` and :meth:`LogSink.message` made
-  no-ops, so the master never waits on it) against the unlogged run: the rows copied, the scene drawn, the blocks
-  pickled and written down the pipe;
+  no-ops), less the time its writes to the pipe blocked (that writer off its core on a busy machine), against the
+  unlogged run: the rows copied, the scene drawn, the blocks pickled and written down the pipe;
 - the master's time blocked writing to the writer's pipe (the writer not keeping up), measured around its writes;
 - the writer process's throughput: the calls the master sent in one logged run (captured on the way) replayed
   through the writer's loop (:func:`cosim.observers.log_writer._serve`) in this process, with no master beside it:
@@ -158,6 +158,7 @@ def main() -> None:
                 if kind == "dropped":
                     with WriterDrops():
                         dropped, _ = run(args.stop_time, True, tmp / f"dropped_{r}.mcap")
+                    dropped_blocked = watch.blocked  # a writer that drops all may still be off its core a while
                     continue
                 res, whole = run(args.stop_time, kind == "logged", tmp / f"run_{r}.mcap")
                 watch.capture = False
@@ -167,7 +168,7 @@ def main() -> None:
                     blocked.append(watch.blocked)
             ratios.append(logged[-1] / unlogged[-1])
             if forks:
-                work.append((dropped.wall_time - unlogged[-1]) * 1e6 / steps)
+                work.append((dropped.wall_time - dropped_blocked - unlogged[-1]) * 1e6 / steps)
             print(f"round {r + 1}: loop logged {logged[-1]:.4f} s, unlogged {unlogged[-1]:.4f} s: {ratios[-1]:.2f}x; "
                   f"whole call {whole_l[-1]:.3f} / {whole_u[-1]:.3f} s; master blocked on the writer's pipe "
                   f"{blocked[-1]:.4f} s" + (f"; logged with the writer dropping all {dropped.wall_time:.4f} s"
@@ -183,7 +184,8 @@ def main() -> None:
     print(f"whole call: logged {span(whole_l, '.3f')} s, unlogged {span(whole_u, '.3f')} s")
     print(f"per step: unlogged {span([u * us for u in unlogged], '.2f')} us, logged {span([g * us for g in logged], '.2f')}"
           f" us; the master blocked on the writer's pipe {span([b * us for b in blocked], '.2f')} us")
-    print("the master's own logging work (logged with a writer that drops all, minus unlogged, same round): "
+    print("the master's own logging work (logged with a writer that drops all, less its waits on the pipe, minus "
+          "unlogged, same round): "
           + (f"{span(work, '.2f')} us per step" if work else "not measured (the writer is not a fork here)"))
     print(f"writer process (its loop replayed alone, best of 3): {writer_s * us:.2f} us per step, "
           f"{writer_s:.3f} s for the run")
