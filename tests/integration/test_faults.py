@@ -102,6 +102,17 @@ def test_help_and_version(args):
         assert re.search(r"\(delta-cosim\) \d+\.\d+", r.stdout), r.stdout
 
 
+def test_the_console_script_is_the_same_command():
+    """The install's ``delta-cosim`` script (README) runs the same CLI as ``python -m cosim``."""
+    script = Path(sys.executable).with_name("delta-cosim")
+    if not script.is_file():
+        pytest.skip(f"no {script}: the package is not installed into this interpreter's environment")
+    got = subprocess.run([str(script), "--version"], capture_output=True, text=True, timeout=120)
+    assert got.returncode == 0 and got.stdout == cosim("--version").stdout, (got.stdout, got.stderr)
+    helped = subprocess.run([str(script), "fmus", "--help"], capture_output=True, text=True, timeout=120)
+    assert helped.returncode == 0 and "info" in helped.stdout, helped.stdout
+
+
 @pytest.mark.parametrize("args, patterns", [
     (("robot", "ik", "--robot", "linear_delta_thesis", "1", "2"), ["required: Z"]),
     (("robot", "fk", "--robot", "linear_delta_thesis", "0.1", "0.1"), ["required: Q3"]),
