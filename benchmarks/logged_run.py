@@ -6,14 +6,14 @@ process), and with ``--no-log``, both through :func:`cosim.run.run_scenario`. Pr
 wall time of each (``RunResult.wall_time``), their ratio, and the whole call (start-up, FMU loading and the log's
 completion); then the ranges, the machine's load (``uptime``), and where a logged step's time goes:
 
-- the master's own logging work per step: a third run in each round, logged with a writer that drops every sample
-  and message it receives (a fork of the master with :meth:`LogSink.blocks` and :meth:`LogSink.message` made
-  no-ops), less the time its writes to the pipe blocked (that writer off its core on a busy machine), against the
-  unlogged run: the rows copied, the scene drawn, the blocks pickled and written down the pipe;
+- the master's own logging work per step: the CPU time of the master's thread in the loop (around
+  :func:`cosim.engine.cloop.simulate`), logged minus unlogged in the same round: the rows copied, the scene drawn,
+  the blocks pickled and written down the pipe; CPU time, so neither its waits on the writer nor the other
+  processes of a busy machine count;
 - the master's time blocked writing to the writer's pipe (the writer not keeping up), measured around its writes;
 - the writer process's throughput: the calls the master sent in one logged run (captured on the way) replayed
   through the writer's loop (:func:`cosim.observers.log_writer._serve`) in this process, with no master beside it:
-  what the writer needs per step on a core of its own.
+  what the writer needs per step on a core of its own (wall time, best of 3, and the CPU time of that run).
 
     python benchmarks/logged_run.py [--rounds 5] [--stop-time 10] [--json FILE]
 """
@@ -76,19 +76,28 @@ class PipeWatch:
         self.blocked, self.writes = 0.0, 0
 
 
-class WriterDrops:
-    """While entered, a forked writer drops the samples and messages it receives (the master's work unchanged)."""
+class LoopCpu:
+    """While entered, the CPU seconds of the calling thread inside the loop in C (:func:`cosim.engine.cloop.simulate`,
+    which a run of native FMUs takes), summed in :attr:`seconds`."""
 
-    def __enter__(self) -> "WriterDrops":
-        from cosim.observers.log_writer import sink
+    def __enter__(self) -> "LoopCpu":
+        from cosim.engine import cloop
 
-        self._cls = sink.LogSink
-        self._saved = self._cls.blocks, self._cls.message
-        self._cls.blocks = self._cls.message = lambda *args: None
+        self._module, self._original, self.seconds = cloop, cloop.simulate, 0.0
+        watch, original = self, self._original
+
+        def timed(*args) -> None:
+            t0 = time.thread_time()
+            try:
+                original(*args)
+            finally:
+                watch.seconds += time.thread_time() - t0
+
+        cloop.simulate = timed
         return self
 
     def __exit__(self, *exc) -> None:
-        self._cls.blocks, self._cls.message = self._saved
+        self._module.simulate = self._original
 
 
 def run(stop: float, log: bool, out: Path):
@@ -104,8 +113,9 @@ def run(stop: float, log: bool, out: Path):
     return res, whole
 
 
-def replay(sent: list[bytes], path: Path, rounds: int) -> float:
-    """Best wall seconds of the writer's loop over the captured calls (the file opened at ``path``)."""
+def replay(sent: list[bytes], path: Path, rounds: int) -> tuple[float, float]:
+    """Best wall seconds of the writer's loop over the captured calls (the file opened at ``path``), and the CPU
+    seconds of that round."""
     import pickle
     import struct
 
@@ -121,11 +131,11 @@ def replay(sent: list[bytes], path: Path, rounds: int) -> float:
         framed += (struct.pack("<I", len(payload)), payload)
         i += 4 + n
     stream = b"".join(framed)
-    best = float("inf")
+    best = (float("inf"), float("inf"))
     for _ in range(rounds):
-        t0 = time.perf_counter()
+        t0, c0 = time.perf_counter(), time.process_time()
         _serve(io.BytesIO(stream), io.BytesIO())
-        best = min(best, time.perf_counter() - t0)
+        best = min(best, (time.perf_counter() - t0, time.process_time() - c0))
     return best
 
 
@@ -145,38 +155,29 @@ def main() -> None:
     load_before = load()
     steps = round(args.stop_time / 1e-3)
     run(0.01, True, tmp / "warm.mcap")  # build and cache the FMUs outside the measurement
-    from cosim.observers.log_writer import writer_forks
-
-    forks = writer_forks()
-    logged, unlogged, whole_l, whole_u, ratios, blocked, work = [], [], [], [], [], [], []
+    logged, unlogged, whole_l, whole_u, ratios, blocked, cpu_l, cpu_u = [], [], [], [], [], [], [], []
     with PipeWatch() as watch:
         for r in range(args.rounds):
-            kinds = ("logged", "unlogged", "dropped") if forks else ("logged", "unlogged")
-            for kind in (kinds if r % 2 == 0 else kinds[::-1]):
+            for log in ((True, False) if r % 2 == 0 else (False, True)):
                 watch.reset()
-                watch.capture = kind == "logged" and r == 0
-                if kind == "dropped":
-                    with WriterDrops():
-                        dropped, _ = run(args.stop_time, True, tmp / f"dropped_{r}.mcap")
-                    dropped_blocked = watch.blocked  # a writer that drops all may still be off its core a while
-                    continue
-                res, whole = run(args.stop_time, kind == "logged", tmp / f"run_{r}.mcap")
+                watch.capture = log and r == 0
+                with LoopCpu() as cpu:
+                    res, whole = run(args.stop_time, log, tmp / f"run_{r}.mcap")
                 watch.capture = False
-                (logged if kind == "logged" else unlogged).append(res.wall_time)
-                (whole_l if kind == "logged" else whole_u).append(whole)
-                if kind == "logged":
+                (logged if log else unlogged).append(res.wall_time)
+                (whole_l if log else whole_u).append(whole)
+                (cpu_l if log else cpu_u).append(cpu.seconds)
+                if log:
                     blocked.append(watch.blocked)
             ratios.append(logged[-1] / unlogged[-1])
-            if forks:
-                work.append((dropped.wall_time - dropped_blocked - unlogged[-1]) * 1e6 / steps)
             print(f"round {r + 1}: loop logged {logged[-1]:.4f} s, unlogged {unlogged[-1]:.4f} s: {ratios[-1]:.2f}x; "
                   f"whole call {whole_l[-1]:.3f} / {whole_u[-1]:.3f} s; master blocked on the writer's pipe "
-                  f"{blocked[-1]:.4f} s" + (f"; logged with the writer dropping all {dropped.wall_time:.4f} s"
-                                            if forks else ""), flush=True)
+                  f"{blocked[-1]:.4f} s; the master's CPU in the loop {cpu_l[-1]:.4f} / {cpu_u[-1]:.4f} s", flush=True)
         sent = list(watch.sent)
-    writer_s = replay(sent, tmp / "replay.mcap", 3)
+    writer_s, writer_cpu = replay(sent, tmp / "replay.mcap", 3)
     load_after = load()
     us = 1e6 / steps
+    work = [(lg - ul) * us for lg, ul in zip(cpu_l, cpu_u)]
     print(f"helix_ctc_analytic, native FMUs, serial, {args.stop_time:g} s at 1 ms ({steps} steps), {args.rounds} "
           f"alternated rounds; load before {load_before}, after {load_after}")
     print(f"loop: logged {span(logged, '.4f')} s, unlogged {span(unlogged, '.4f')} s; ratio {span(ratios, '.2f')}x "
@@ -184,11 +185,11 @@ def main() -> None:
     print(f"whole call: logged {span(whole_l, '.3f')} s, unlogged {span(whole_u, '.3f')} s")
     print(f"per step: unlogged {span([u * us for u in unlogged], '.2f')} us, logged {span([g * us for g in logged], '.2f')}"
           f" us; the master blocked on the writer's pipe {span([b * us for b in blocked], '.2f')} us")
-    print("the master's own logging work (logged with a writer that drops all, less its waits on the pipe, minus "
-          "unlogged, same round): "
-          + (f"{span(work, '.2f')} us per step" if work else "not measured (the writer is not a fork here)"))
-    print(f"writer process (its loop replayed alone, best of 3): {writer_s * us:.2f} us per step, "
-          f"{writer_s:.3f} s for the run")
+    print(f"the master's CPU in the loop per step: logged {span([c * us for c in cpu_l], '.2f')} us, unlogged "
+          f"{span([c * us for c in cpu_u], '.2f')} us; its own logging work (logged minus unlogged, same round) "
+          f"{span(work, '.2f')} us")
+    print(f"writer process (its loop replayed alone, best of 3): {writer_s * us:.2f} us per step wall, "
+          f"{writer_cpu * us:.2f} us CPU; {writer_s:.3f} s for the run")
     if args.json is not None:
         figures = {
             "loop logged s (median)": statistics.median(logged),
@@ -196,9 +197,12 @@ def main() -> None:
             "ratio min": min(ratios), "ratio max": max(ratios), "ratio median": statistics.median(ratios),
             "whole call logged s (median)": statistics.median(whole_l),
             "whole call unlogged s (median)": statistics.median(whole_u),
-            "master logging work us/step (median)": statistics.median(work) if work else None,
+            "master logging work us/step (median)": statistics.median(work),
+            "master loop cpu logged us/step (median)": statistics.median(cpu_l) * us,
+            "master loop cpu unlogged us/step (median)": statistics.median(cpu_u) * us,
             "blocked on writer pipe us/step (median)": statistics.median(blocked) * us,
             "writer process us/step": writer_s * us,
+            "writer process cpu us/step": writer_cpu * us,
             "command": "python benchmarks/logged_run.py " + " ".join(sys.argv[1:]),
             "date": datetime.now(timezone.utc).isoformat(timespec="seconds"),
             "load": f"before {load_before}; after {load_after}",
