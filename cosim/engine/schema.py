@@ -513,20 +513,12 @@ class Scenario(_Model):
         return self
 
 
-@dataclasses.dataclass(frozen=True)
-class _Replay(Replay):
-    """:class:`~cosim.engine.structure.Replay` with ``time_origin`` ('first' or 'absolute', as ``compare
-    --time-origin``), which the reader of the recording takes (``getattr(replay, "time_origin", "first")``)."""
-
-    time_origin: str = "first"
-
-
 def _replay(c: Component) -> Replay | None:
     """A recording component's source, as the structure holds it (None: an FMU)."""
     if c.recording is None:
         return None
-    return _Replay(c.recording, tuple(c.signals.items()), c.interpolation, c.offset, c.time, tuple(c.units.items()),
-                   c.time_origin)
+    return Replay(c.recording, tuple(c.signals.items()), c.interpolation, c.offset, c.time, tuple(c.units.items()),
+                  c.time_origin)
 
 
 def expand_signal(spec: str | list[str]) -> list[str]:

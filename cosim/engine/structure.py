@@ -26,8 +26,9 @@ class Replay:
     """A component that replays a recording as outputs (``recording: FILE``): ``file`` (relative to
     :attr:`SystemStructure.base`), ``signals`` ((output name, signal spec) pairs, in order), ``interpolation``
     ('linear' or 'hold'), ``offset_s`` (the recording's time minus the run's), ``time`` (a bag's 'header' stamps or
-    'log' times), ``units`` ((output name, unit) pairs). The domain that reads recordings makes it a component
-    (:func:`cosim.engine.plugins.recording_source`)."""
+    'log' times), ``units`` ((output name, unit) pairs), ``time_origin`` ('first': the recording's time counts from
+    its first message; 'absolute': from its stamps, as ``compare --time-origin absolute``). The domain that reads
+    recordings makes it a component (:func:`cosim.engine.plugins.recording_source`)."""
 
     file: str
     signals: tuple[tuple[str, str], ...]
@@ -35,6 +36,7 @@ class Replay:
     offset_s: float = 0.0
     time: str = "header"
     units: tuple[tuple[str, str], ...] = ()
+    time_origin: str = "first"
 
 
 @dataclass(frozen=True)

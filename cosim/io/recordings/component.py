@@ -79,7 +79,7 @@ class RecordingInfo:
                        f"unit={quoteattr(self.variables[n].unit or '')}/>\n" for n, s in r.signals)
         return (f'<?xml version="1.0" encoding="UTF-8"?>\n<cosimRecording file={quoteattr(str(self.path))} '
                 f'kind={quoteattr(self.recording.kind)} interpolation={quoteattr(r.interpolation)} '
-                f'offset_s="{r.offset_s!r}" time={quoteattr(r.time)} time_origin={quoteattr(time_origin(r))}>\n'
+                f'offset_s="{r.offset_s!r}" time={quoteattr(r.time)} time_origin={quoteattr(r.time_origin)}>\n'
                 f'{rows}</cosimRecording>\n').encode()
 
     def slave(self, name: str) -> "RecordingSlave":
@@ -98,7 +98,7 @@ def recording_info(name: str, replay: Replay, base: Path, span: tuple[float, flo
     specs = dict(replay.signals)
     rec = read_recording(path, specs, time=replay.time, units=dict(replay.units))  # from its first message: its
     # times keep their nanoseconds, which absolute stamps (1.7e9 s, a double's step 0.24 us) would round
-    absolute = time_origin(replay) == "absolute"
+    absolute = replay.time_origin == "absolute"
     offset = float(Fraction(replay.offset_s) - Fraction(rec.origin_ns, 10 ** 9)) if absolute else \
         replay.offset_s  # exact, then rounded once
     lo = max(rec.times[n][0] for n in specs)
@@ -122,12 +122,6 @@ def recording_info(name: str, replay: Replay, base: Path, span: tuple[float, flo
                                   unit=rec.units[out] or None, description=f"recorded {spec} ({path.name})",
                                   start=None, index=k + 1)
     return RecordingInfo(path, rec, replay, variables, offset)
-
-
-def time_origin(replay: Replay) -> str:
-    """'first' or 'absolute': how the replay's offset counts the recording's time (the scenario's ``time_origin``;
-    a structure made in code without it: 'first')."""
-    return getattr(replay, "time_origin", "first")
 
 
 class RecordingSlave:
