@@ -41,8 +41,10 @@ def test_a_live_run_serves_a_recording_components_outputs_as_the_log_holds_them(
                                 "units": {"q[2]": "m"}}},
         "time": {"stop": STOP_S, "step": 0.001}, "logging": {"signals": "all"}}))
     port, out = free_port(), tmp_path / "live.mcap"
-    cmd = [sys.executable, "-m", "cosim", "run", str(scenario), "--live", str(port), "--realtime", "--out", str(out),
-           "--quiet"]
+    # --live-wait: the run starts once the viewer has subscribed, so both channels are served from their start (a
+    # viewer subscribing while the run went on missed /m's first messages in 1 of 9 runs on a loaded machine)
+    cmd = [sys.executable, "-m", "cosim", "run", str(scenario), "--live", str(port), "--live-wait", "60", "--realtime",
+           "--out", str(out), "--quiet"]
     proc = subprocess.Popen(cmd, cwd=tmp_path, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
     try:
         try:
