@@ -1,4 +1,5 @@
-"""Export: a scenario written as an SSP 1.0 archive that any SSP tool can run (see :mod:`cosim.io.ssp`).
+"""Export: a system structure (from a scenario, or made in code) written as an SSP 1.0 archive that any SSP tool
+can run (see :mod:`cosim.io.ssp`).
 
 The writer emits prefixed names itself (``ssd:``, ``ssc:``, ``ssv:``, ``osp:``: OSP libcosim matches element names
 by their prefixes literally) instead of relying on ElementTree's namespace registry (a process-wide setting).
@@ -17,6 +18,7 @@ from xml.etree import ElementTree as ET
 from ...engine.names import safe_stem
 from ...engine.prepare import input_files, prepare
 from ...engine.schema import Component
+from ...engine.structure import ComponentStructure, SystemStructure
 from ...engine.wiring import index_text
 from ...errors import written_by_rename
 from ..output import check_output
@@ -27,12 +29,12 @@ from .units import unit_definitions
 if TYPE_CHECKING:
     from ...engine.schema import Scenario
 
-__all__ = ["ExportReport", "export_ssp"]
+__all__ = ["ExportReport", "export_ssp", "write_ssp"]
 
 
 @dataclass(frozen=True)
 class ExportReport:
-    """What :func:`export_ssp` wrote."""
+    """What :func:`write_ssp` wrote."""
 
     path: Path
     components: list[str]
@@ -40,7 +42,7 @@ class ExportReport:
     parameters: dict[str, int]  # component -> number of start values in its .ssv
     step: float
     stop: float
-    events: int = 0  # the scenario's events, carried in our annotation only
+    events: int = 0  # the system's events, carried in our annotation only
 
     def as_dict(self) -> dict[str, Any]:
         return {"ssp": str(self.path), "components": self.components, "connections": self.connections,
@@ -57,29 +59,43 @@ class ExportReport:
 
 
 def export_ssp(scenario: Scenario, out: str | Path) -> ExportReport:
-    """Write ``scenario`` as an SSP 1.0 archive at ``out`` (see :mod:`cosim.io.ssp`).
+    """Write ``scenario`` as an SSP 1.0 archive at ``out`` (see :mod:`cosim.io.ssp`): its system structure, through
+    :func:`write_ssp`, with the sections SSP has no place for in our annotation.
 
     Builds our FMUs if needed and runs the pre-flight (:func:`cosim.engine.prepare.prepare`); raises
     :class:`cosim.errors.CosimError` subclasses for a bad scenario, :class:`SspError` for what SSP
     1.0 cannot express.
     """
-
-    out = Path(out)
     replayed = [n for n, c in scenario.components.items() if c.recording is not None]
-    if replayed:  # SSP 1.0 components are FMUs (or SSPs): a recording has no component to become
+    if replayed:  # said at the scenario's line; write_ssp says it for a structure made in code
         line = scenario.sources.line(("components", replayed[0], "recording"))
-        raise SspError(f"{scenario.source}:{line}" if line else scenario.source or "<scenario>",
-                       f"components.{replayed[0]}: replays a recording ({scenario.components[replayed[0]].recording}"
-                       "); SSP 1.0 has no such component: export a scenario whose components are all FMUs")
+        raise SspError(f"{scenario.source}:{line}" if line else scenario.source or "<scenario>", _replaying(
+            replayed[0], scenario.components[replayed[0]].recording))
     plan, _ = prepare(scenario)
+    return write_ssp(scenario.structure(), plan, out, extras=_extras(scenario), inputs=input_files(scenario))
+
+
+def write_ssp(structure: SystemStructure, plan, out: str | Path, *, extras: dict[str, Any] | None = None,
+              inputs: tuple = ()) -> ExportReport:
+    """Write the system ``structure`` (with its ``plan``: :func:`cosim.engine.system.build_plan`) as an SSP 1.0
+    archive at ``out``: every component's FMU, connectors and start values, the connections, the time grid and the
+    algorithm; ``extras``: our annotation's sections SSP has no place for (default: what the structure holds of
+    them: its name, algorithm, what is logged, each component's options and its events); ``inputs``: files the
+    archive must not replace. A structure made in code exports as one read from a scenario."""
+    out = Path(out)
+    for name, comp in structure.components.items():
+        if comp.replay is not None:  # SSP 1.0 components are FMUs (or SSPs): a recording has no component to become
+            # Refused (correctness): the archive would hold a system without that component
+            raise SspError(out, _replaying(name, comp.replay.file))
     names, infos = plan.names, plan.infos
     arc_names = _archive_names(names, infos)
-    t = scenario.time
-    system_name = _identifier(scenario.name)  # our annotation keeps the scenario's name
+    start, stop, step = (structure.start_ns / 1e9, structure.stop_ns / 1e9, structure.step_ns / 1e9)
+    extras = dict(extras) if extras is not None else _structure_extras(structure)
+    system_name = _identifier(structure.name)  # our annotation keeps the system's name
     root = _el(None, "ssd:SystemStructureDescription", {
         "xmlns:ssd": NS["ssd"], "xmlns:ssc": NS["ssc"], "xmlns:ssv": NS["ssv"], "xmlns:osp": NS["osp"],
         "xmlns:dcs": NS["dcs"], "xmlns:oms": NS["oms"], "name": system_name, "version": "1.0",
-        "description": scenario.description or None, "generationTool": "delta-cosim"})
+        "description": extras.get("description") or None, "generationTool": "delta-cosim"})
     system = _el(root, "ssd:System", {"name": system_name})
     elements = _el(system, "ssd:Elements")
     # OMSimulator 3.0 types a system by its own annotation (SystemWC, its fixed-step master): without
@@ -88,38 +104,56 @@ def export_ssp(scenario: Scenario, out: str | Path) -> ExportReport:
     system_annotations = _el(None, "ssd:Annotations")
     oms = _el(_el(_el(system_annotations, "ssc:Annotation", {"type": OMS_ANNOTATION}), "oms:Annotations"),
               "oms:SimulationInformation")
-    _el(oms, "oms:FixedStepMaster", {"description": "oms-ma", "stepSize": num_text(t.step)})
+    _el(oms, "oms:FixedStepMaster", {"description": "oms-ma", "stepSize": num_text(step)})
     connected = _connected(plan, out)
     ssv_files: dict[str, bytes] = {}
     n_params: dict[str, int] = {}
     stems = _member_stems(names)
     for c, name in enumerate(names):
-        ssv = _component(elements, scenario, plan, c, (arc_names[c], stems[c]), connected, out)
+        ssv = _component(elements, structure, plan, c, (arc_names[c], stems[c]), connected, out)
         if ssv is not None:
             ssv_files[f"resources/{stems[c]}.ssv"] = ssv
         n_params[name] = len(_start_values(plan, c))
     _connections(system, plan, arc_names)
     system.append(system_annotations)
     _units(root, infos)
-    exp = _el(root, "ssd:DefaultExperiment", {"startTime": num_text(t.start), "stopTime": num_text(t.stop)})
+    exp = _el(root, "ssd:DefaultExperiment", {"startTime": num_text(start), "stopTime": num_text(stop)})
     ann = _el(_el(exp, "ssd:Annotations"), "ssc:Annotation", {"type": OSP_ANNOTATION})
-    _el(_el(ann, "osp:Algorithm"), "osp:FixedStepAlgorithm", {"baseStepSize": num_text(t.step)})
+    _el(_el(ann, "osp:Algorithm"), "osp:FixedStepAlgorithm", {"baseStepSize": num_text(step)})
     # ours on the system, after OMSimulator's: OMSimulator 3.0 refuses any ssd:Annotations at the top
     # ("wrong xml schema detected"), though SSP 1.0 allows them there
     ours = _el(system_annotations, "ssc:Annotation", {"type": OUR_ANNOTATION})
-    extras = _extras(scenario)
     renamed = {a: n for a, n in zip(arc_names, names) if a != n}
     if renamed:
         extras["component_names"] = renamed
     _el(ours, "dcs:Scenario").text = json.dumps(extras, indent=1)
-    check_output(out, (*input_files(scenario), *(info.path for info in infos)))
+    check_output(out, (*inputs, *(info.path for info in infos)))
     with written_by_rename(out) as partial, zipfile.ZipFile(partial, "w", zipfile.ZIP_DEFLATED) as z:
         z.writestr(SSD_NAME, _xml(root))
         for arc, data in ssv_files.items():
             z.writestr(arc, data)
         for stem, info in zip(stems, infos):
             z.write(info.path, f"resources/{stem}.fmu", compress_type=zipfile.ZIP_STORED)  # already deflated
-    return ExportReport(out, list(names), len(plan.links), n_params, t.step, t.stop, len(scenario.events))
+    return ExportReport(out, list(names), len(plan.links), n_params, step, stop, len(structure.events))
+
+
+def _replaying(name: str, file: str) -> str:
+    return (f"components.{name}: replays a recording ({file}); SSP 1.0 has no such component: export a system whose "
+            "components are all FMUs")
+
+
+def _structure_extras(structure: SystemStructure) -> dict[str, Any]:
+    """Our annotation's sections for a structure made in code: what it holds of them."""
+    defaults = ComponentStructure(None, None, {})
+    options = {}
+    for name, comp in structure.components.items():
+        changed = {k: getattr(comp, k) for k in COMPONENT_OPTIONS if getattr(comp, k) != getattr(defaults, k)}
+        if changed:
+            options[name] = changed
+    events = [{k: v for k, v in (("at", e.at), ("when", e.when), ("set", dict(e.set)), ("repeat", e.repeat),
+                                  ("tolerance", e.tolerance)) if v is not None} for e in structure.events]
+    return {"name": structure.name, "algorithm": structure.algorithm, "logging": {"signals": structure.log_signals},
+            "events": events, "component_options": options}
 
 
 def _connected(plan, out: Path) -> set[tuple[str, str]]:
@@ -140,13 +174,13 @@ def _start_values(plan, c: int) -> dict[str, Any]:
     return {k: v for k, v in plan.start_values[c].items() if not _string_at_start(info.variables[k], v)}
 
 
-def _component(elements: ET.Element, scenario: Scenario, plan, c: int, arc: tuple[str, str],
+def _component(elements: ET.Element, structure: SystemStructure, plan, c: int, arc: tuple[str, str],
                connected: set[tuple[str, str]], out: Path) -> bytes | None:
     """Component ``c``'s ``ssd:Component`` (its connectors, its parameter binding, its step size hint) under
     ``elements``, named ``arc`` (its name in the archive, its file stem); its .ssv (None without start values)."""
     name, info = plan.names[c], plan.infos[c]
     arc_name, stem = arc
-    comp = scenario.components[name]
+    comp = structure.components[name]
     el = _el(elements, "ssd:Component", {"name": arc_name, "type": FMU_TYPE, "source": f"resources/{stem}.fmu",
                                          "implementation": _implementation(comp.interface, info)})
     connectors = _el(el, "ssd:Connectors")
@@ -179,7 +213,7 @@ def _component(elements: ET.Element, scenario: Scenario, plan, c: int, arc: tupl
         _el(bindings, "ssd:ParameterBinding", {"type": PARAMETER_SET_TYPE, "source": f"resources/{stem}.ssv"})
     if comp.step_multiple != 1:
         ann = _el(_el(el, "ssd:Annotations"), "ssc:Annotation", {"type": OSP_ANNOTATION})
-        _el(ann, "osp:StepSizeHint", {"value": num_text(scenario.time.step * comp.step_multiple)})
+        _el(ann, "osp:StepSizeHint", {"value": num_text(structure.step_ns * comp.step_multiple / 1e9)})
     return ssv
 
 
