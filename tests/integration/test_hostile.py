@@ -563,6 +563,23 @@ def test_a_viewer_that_stops_reading_does_not_hold_the_run(tmp_path):
     assert read_run(out).status == "completed"
 
 
+def _logged_span_s(partial: Path) -> float:
+    """Seconds between the first and the last message the log being written, ``partial``, holds so far (read up
+    to where its writer has got; 0 before it has two)."""
+    from mcap.exceptions import McapError
+    from mcap.reader import NonSeekingReader
+
+    first = last = None
+    try:
+        with open(partial, "rb") as f:
+            for _, _, message in NonSeekingReader(f).iter_messages(log_time_order=False):
+                first = message.log_time if first is None else min(first, message.log_time)
+                last = message.log_time if last is None else max(last, message.log_time)
+    except (OSError, McapError):  # not there yet, or its end still being written
+        pass
+    return 0.0 if first is None else (last - first) / 1e9
+
+
 @pytest.mark.parametrize("sig, code", [("SIGTERM", 143), ("SIGINT", 130)])
 def test_a_signal_at_the_end_with_a_stalled_viewer_stops_it_and_keeps_the_log(tmp_path, sig, code):
     """A signal about 1 s after a 3 s run at wall-clock pace ends, while the server waits for the stalled viewer (or,
@@ -580,8 +597,13 @@ def test_a_signal_at_the_end_with_a_stalled_viewer_stops_it_and_keeps_the_log(tm
     proc = start_cosim("run", SWEEP_SCENARIO, "--stop-time", LIVE_STOP, "--live", port, "--realtime", "--out", out,
                        "--quiet")
     try:
-        assert viewer.subscribed.wait(60), "the viewer never subscribed"  # when the run's loop starts
-        time.sleep(LIVE_STOP + 1.0)  # inside the end's wait for the viewer (2 s), never after the process
+        assert viewer.subscribed.wait(60), "the viewer never subscribed"  # seen up to a second into the loop
+        partial = out.with_name(out.name + ".partial")
+        deadline = time.monotonic() + 60
+        while _logged_span_s(partial) < LIVE_STOP - 0.5 and proc.poll() is None and time.monotonic() < deadline:
+            time.sleep(0.05)  # until the log reaches the loop's last 0.5 s (of simulated time, at wall-clock pace)
+        assert proc.poll() is None, f"the run ended before its log reached {LIVE_STOP - 0.5} s: {proc.communicate()}"
+        time.sleep(1.0)  # 0.5-1 s into the end's wait for the viewer (2 s), never after the process
         proc.send_signal(getattr(signal, sig))
         _, err = proc.communicate(timeout=30)
     finally:
