@@ -90,7 +90,8 @@ def test_a_component_that_will_not_stop_is_killed_after_a_stop_signal(write_scen
 
 def test_a_component_holding_the_python_lock_past_the_watchdog_is_killed(write_scenario, tmp_path):
     tmp = Path(tempfile.mkdtemp(dir=tmp_path))
-    path = write_scenario(SCENARIO.format(mode=4, at=0.5, stop=3.0, extra="watchdog_s: 1.0"))
+    # 3 s: the budget also covers the initialization, which took over 1 s under xdist at load 12
+    path = write_scenario(SCENARIO.format(mode=4, at=0.5, stop=3.0, extra="watchdog_s: 3.0"))
     out = tmp_path / "logs" / "stalled.mcap"
     t0 = time.monotonic()
     proc = _start(path, out, tmp)
