@@ -48,11 +48,7 @@ def main() -> int:
     ap.add_argument("--set", action="append", default=[], metavar="NAME=VALUE", help="passed to both runs")
     record.add_options(ap)
     args = ap.parse_args()
-    with record.Recording(args, "against_commit") as rec:
-        code = _measure(args, rec)
-        if code:
-            rec.discard()
-    return code
+    return record.measured(args, "against_commit", _measure)
 
 
 def _measure(args, rec: record.Recording) -> int:

@@ -54,11 +54,7 @@ def main(argv=None) -> int:
                          "inside a macro step that is not a save's)")
     record.add_options(ap)
     args = ap.parse_args(argv)
-    with record.Recording(args, "checkpoint") as rec:
-        code = _measure(args, rec)
-        if code:
-            rec.discard()
-    return code
+    return record.measured(args, "checkpoint", _measure)
 
 
 def _measure(args, rec: record.Recording) -> int:

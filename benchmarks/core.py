@@ -169,11 +169,7 @@ def main(argv: list[str] | None = None) -> int:
                     help="also time helix_ctc_analytic in the baseline tree (builds its FMUs)")
     record.add_options(ap)
     args = ap.parse_args(argv)
-    with record.Recording(args, "core") as rec:
-        code = _measure(args, rec)
-        if code:
-            rec.discard()
-    return code
+    return record.measured(args, "core", _measure)
 
 
 def _measure(args, rec: record.Recording) -> int:

@@ -53,11 +53,7 @@ def main() -> int:
     ap.add_argument("--python-stop", type=float, default=3.0, help="simulated time with python FMUs, s")
     record.add_options(ap)
     args = ap.parse_args()
-    with record.Recording(args, "parallel_auto") as rec:
-        code = _measure(args, rec)
-        if code:
-            rec.discard()
-    return code
+    return record.measured(args, "parallel_auto", _measure)
 
 
 def _measure(args, rec: record.Recording) -> int:

@@ -153,3 +153,13 @@ def _relative(script: str) -> str:
         return str(path.relative_to(ROOT))
     except ValueError:
         return script
+
+
+def measured(args, name: str, measure) -> int:
+    """``measure(args, rec)`` inside a :class:`Recording` named ``name``: its exit code; a non-zero one (the
+    benchmark failed without raising) writes nothing."""
+    with Recording(args, name) as rec:
+        code = measure(args, rec)
+        if code:
+            rec.discard()
+    return code

@@ -55,11 +55,7 @@ def main() -> int:
                     help="also time the sweep on an already running, warmed-up cluster of the same workers")
     record.add_options(ap)
     args = ap.parse_args()
-    with record.Recording(args, "sweep") as rec:
-        code = _measure(args, rec)
-        if code:
-            rec.discard()
-    return code
+    return record.measured(args, "sweep", _measure)
 
 
 def _measure(args, rec: record.Recording) -> int:

@@ -48,11 +48,7 @@ def main() -> int:
     ap.add_argument("--repeat", type=int, default=1, help="alternate cold and warm N times (median)")
     record.add_options(ap)
     args = ap.parse_args()
-    with record.Recording(args, "warm_sweep") as rec:
-        code = _measure(args, rec)
-        if code:
-            rec.discard()
-    return code
+    return record.measured(args, "warm_sweep", _measure)
 
 
 def _measure(args, rec: record.Recording) -> int:
