@@ -29,6 +29,7 @@ from ..errors import printable
 __all__ = ["Relay"]
 
 _CLOSE = 0x8
+_CONTROL_MAX = 125  # bytes of a control frame's payload (RFC 6455 5.5); a Close claiming more is kept to that
 _HEADER_END = b"\r\n\r\n"
 _HANDSHAKE_LIMIT = 64 * 1024  # bytes of HTTP header before the relay stops looking for its end (a plain pipe then)
 
@@ -54,8 +55,8 @@ class _Frames:
         while pos < n:
             if self.left:
                 take = min(self.left, n - pos)
-                if self.close is not None:
-                    self.close += data[pos:pos + take]
+                if self.close is not None and len(self.close) < _CONTROL_MAX:  # kept bounded: a header may claim 2^63
+                    self.close += data[pos:pos + min(take, _CONTROL_MAX - len(self.close))]
                 self.left -= take
                 pos += take
                 if not self.left:

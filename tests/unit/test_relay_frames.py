@@ -45,3 +45,18 @@ def test_boundaries_and_close_payloads_whatever_the_chunks(frames, masked, cuts)
         i += 1
     assert got == expected
     assert parser.at_boundary
+
+
+def test_a_close_claiming_a_huge_payload_keeps_at_most_125_bytes():
+    """A viewer's Close frame whose header claims 2^40 bytes: the relay keeps at most a control frame's 125 bytes of
+    it, however much follows, and still finds where it ends."""
+    mask = os.urandom(4)
+    claimed = 1 << 40
+    parser = _Frames(masked=True)
+    header = bytes([0x80 | 0x8, 0x80 | 127]) + struct.pack("!Q", claimed) + mask
+    assert parser.feed(header) == []
+    sent = 0
+    for _ in range(64):  # 64 MiB of it
+        assert parser.feed(b"\0" * (1 << 20)) == []
+        sent += 1 << 20
+    assert len(parser.close) == 125 and parser.left == claimed - sent
