@@ -126,3 +126,36 @@ def test_live_wait_needs_live(capsys):
     assert main(["run", str(SCENARIO), "--stop-time", "0.01", "--no-log", "--live-wait", "5"]) == 2
     err = capsys.readouterr().err.strip()
     assert err == "error: --live-wait waits for a viewer of the live view: it needs --live [PORT]", err
+
+
+def test_the_bound_holds_against_a_viewer_that_subscribes_again_and_again():
+    """A viewer that subscribes anew every 0.05 s never lets 0.2 s of quiet pass: the wait still ends at its bound."""
+    import threading
+    import types
+
+    import numpy as np
+
+    from cosim.observers.live import LiveView
+
+    view = object.__new__(LiveView)
+    view.wait, view.stop_request, view._subscribed, view._offset = 0.5, None, None, 0
+    view.viewed, view.waited = False, None
+    view.server = types.SimpleNamespace(broadcast_time=lambda t: None)
+    rt = types.SimpleNamespace(current=np.zeros(5), now_ns=0)
+    done = threading.Event()
+
+    def churn():
+        while not done.is_set():
+            view._subscribed = time.monotonic()
+            done.wait(0.05)
+
+    thread = threading.Thread(target=churn)
+    thread.start()
+    try:
+        t0 = time.monotonic()
+        view._wait_for_viewer(rt)
+        took = time.monotonic() - t0
+    finally:
+        done.set()
+        thread.join()
+    assert 0.5 <= took < 5.0 and view.viewed, (took, view.viewed)
