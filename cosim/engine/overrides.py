@@ -235,12 +235,17 @@ def resolve_name(name: str, data: dict[str, Any], origin: str = "--set") -> tupl
     return path
 
 
+def _is_dotted_name(name: Any) -> bool:
+    """Whether ``name`` can be a dotted name: a non-empty string neither starting nor ending with a dot."""
+    return isinstance(name, str) and bool(name) and not name.startswith(".") and not name.endswith(".")
+
+
 def dotted_overrides(values: dict[str, Any], origin: str = "override") -> Overrides:
     """Loader overrides from ``{dotted name: value}`` (:func:`resolve_name`), e.g.
     ``{"trajectory.params.rx": 0.05, "time.stop": 0.5, "ctl.gain.kp[1]": 4e4}``."""
     out = Overrides()
     for name, value in values.items():
-        if not isinstance(name, str) or not name or name.startswith(".") or name.endswith("."):
+        if not _is_dotted_name(name):
             # Refused (correctness): no name to put the value under
             raise ScenarioError(Issue("", f"expected a dotted name (component.parameter, time.stop, "
                                           f"trajectory.params.NAME), got {shown(repr(name))}", origin))
@@ -260,7 +265,7 @@ def apply_overrides(sets: list[str], stop_time: float | None = None) -> Override
             raise ScenarioError(Issue("", str(exc), origin)) from None
         at = item.find("=", end)
         key = item[:at] if at >= 0 else item
-        if at < 0 or not key or key.startswith(".") or key.endswith("."):
+        if at < 0 or not _is_dotted_name(key):
             # Refused (correctness): no name to put the value under
             raise ScenarioError(Issue("", f"expected NAME=value (component.parameter, time.stop, "
                                           f"trajectory.params.NAME, ...), got {shown(item)!r}", "--set"))
@@ -337,7 +342,7 @@ def _file_values(raw: bytes, path: str, named_at: str, out: Overrides) -> None:
     lines = {k.value: k.start_mark.line + 1 for k, _ in root.value if isinstance(k, yaml.ScalarNode)}
     for name, value in data.items():
         line = lines.get(name)
-        if not isinstance(name, str) or not name or name.startswith(".") or name.endswith("."):
+        if not _is_dotted_name(name):
             # Refused (correctness): a value without a name it could be set by would be dropped
             raise fail(f"expected a dotted name (component.parameter, time.stop, components.NAME.offset), got "
                        f"{shown(repr(name))}", line)
