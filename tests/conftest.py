@@ -5,9 +5,11 @@ own session, so its own temp folder (:func:`_suite_temp_folder`), its own sessio
 fixtures. The tests of a module that share a module-scoped fixture (a built FMU set, a long reference run) are put
 in one group, which one worker runs; every other test goes to whichever worker is free."""
 
+import compileall
 import os
 import shutil
 import tempfile
+from pathlib import Path
 
 import pytest
 from hypothesis import HealthCheck, settings
@@ -19,6 +21,23 @@ settings.register_profile(
     suppress_health_check=[HealthCheck.filter_too_much, HealthCheck.too_slow],
 )
 settings.load_profile("default")
+
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def pytest_configure(config):
+    """The project's modules compiled to bytecode once, by the controller, before any worker or test starts.
+
+    The suite starts about a thousand ``python -m cosim`` processes. Where Python writes no bytecode of its own
+    (``PYTHONDONTWRITEBYTECODE``, set on the CI machine) and the checkout is fresh, each of them compiled the ~200
+    modules it imports again from source: 0.15-0.3 s of a core per process (``import cosim.run`` 0.66-0.93 s
+    against 0.51-0.58 s compiled, on this 2-core machine). ``compileall`` writes the bytecode whatever that
+    setting; a checkout it cannot write to is left as it is (the processes then compile, as before)."""
+    if hasattr(config, "workerinput"):  # an xdist worker: the controller did it
+        return
+    for package in ("cosim", "delta", "fmus", "multibody"):
+        compileall.compile_dir(ROOT / package, quiet=2)
 
 
 def pytest_xdist_auto_num_workers(config):
