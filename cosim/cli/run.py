@@ -115,7 +115,7 @@ def _open_scenario(args: argparse.Namespace, overrides: dict):
     from contextlib import nullcontext
 
     from ..engine.scenario import load_scenario
-    from ..io.ssp import is_ssp, open_ssp
+    from ..io.ssp.spec import is_ssp
 
     if args.step is not None:
         overrides.put(("time", "step"), args.step, f"--step {args.step:g}")
@@ -128,6 +128,8 @@ def _open_scenario(args: argparse.Namespace, overrides: dict):
 
         return open_from_log(from_log, overrides)
     if is_ssp(args.scenario):
+        from ..io.ssp.scenario import open_ssp
+
         return open_ssp(args.scenario, overrides)
     return nullcontext(load_scenario(args.scenario, overrides))
 

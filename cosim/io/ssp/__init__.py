@@ -59,12 +59,23 @@ One module per role: :mod:`.spec` (the vocabulary: namespaces, types, :class:`Ss
 :mod:`.read` (an archive into scenario data), :mod:`.archive` (its members, bounded), :mod:`.components` (its FMU
 components), :mod:`.parameters` (parameter sets and mappings), :mod:`.units` (unit definitions and conversions),
 :mod:`.scenario` (an archive as a scenario, unpacked for a block). Callers import from those modules; the names
-below are offered here for callers outside the package (:mod:`cosim.io.runlog`: ``reopen_ssp``).
+below are offered here for callers outside the package (:mod:`cosim.io.runlog`: ``reopen_ssp``), each imported
+from its module when first asked for (PEP 562): ``run`` of a YAML scenario asks whether its file is an archive
+(:func:`.spec.is_ssp`) without loading the reader and the writer.
 """
 
-from .read import read_ssp
-from .scenario import is_ssp, open_ssp, reopen_ssp
-from .spec import NS, SSD_NAME, SspError
-from .write import ExportReport, export_ssp
+from importlib import import_module
+
+_MODULE = {"read_ssp": "read", "open_ssp": "scenario", "reopen_ssp": "scenario", "is_ssp": "spec", "NS": "spec",
+           "SSD_NAME": "spec", "SspError": "spec", "ExportReport": "write", "export_ssp": "write"}
+
+
+def __getattr__(name: str):
+    try:
+        module = _MODULE[name]
+    except KeyError:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}") from None
+    return getattr(import_module(f".{module}", __name__), name)
+
 
 __all__ = ["SspError", "ExportReport", "export_ssp", "read_ssp", "open_ssp", "reopen_ssp", "is_ssp", "NS", "SSD_NAME"]

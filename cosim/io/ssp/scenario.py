@@ -16,7 +16,7 @@ from ...engine.scenario import scenario_from_data
 from ...errors import file_problem
 from ...fmi.extract import SSP_PREFIX, sweep_orphans
 from .read import read_ssp
-from .spec import SspError
+from .spec import SspError, is_ssp
 
 if TYPE_CHECKING:
     from ...engine.schema import Scenario
@@ -131,7 +131,3 @@ def reopen_ssp(archive: dict[str, str], data: dict[str, Any], source: str,
         scenario = scenario_from_data(data, source, overrides)
         scenario._archive = _archive(ssp, tmp, sha256)
         yield scenario
-
-
-def is_ssp(path: str | Path) -> bool:
-    return Path(path).suffix.lower() == ".ssp"

@@ -9,7 +9,7 @@ from xml.etree import ElementTree as ET
 
 from ...errors import Issue, ScenarioError, printable
 
-__all__ = ["NS", "SSD_NAME", "SspError", "warn"]
+__all__ = ["NS", "SSD_NAME", "SspError", "is_ssp", "warn"]
 
 
 NS = {
@@ -23,6 +23,12 @@ NS = {
     "oms": "https://raw.githubusercontent.com/OpenModelica/OMSimulator/master/schema/oms.xsd",
 }
 SSD_NAME = "SystemStructure.ssd"
+
+
+def is_ssp(path: str | Path) -> bool:
+    """Whether ``path`` names an SSP archive (by its suffix, as SSP 1.0 names them)."""
+    return Path(path).suffix.lower() == ".ssp"
+
 OSP_ANNOTATION = "com.opensimulationplatform"
 OMS_ANNOTATION = "org.openmodelica"
 OUR_ANNOTATION = "org.delta-cosim.engine.scenario"
