@@ -118,6 +118,7 @@ def fingerprint(fmu: FmuDefinition) -> str:
 
     h = hashlib.sha256()
     h.update(repr(fmu).encode())
+    h.update(f"{fmu.adapter.__module__}.{fmu.adapter.__qualname__}".encode())  # the repr holds no classes
     h.update(Path(__file__).read_bytes())
     h.update(f"pythonfmu {pythonfmu.__version__} pythonfmu3 {pythonfmu3.__version__}".encode())
     h.update(repr(requirements.project_requirements(_ROOT)).encode())  # recorded in requirements.json

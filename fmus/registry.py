@@ -3,7 +3,9 @@ to call on demand.
 
 Each definition holds the FMU's python adapter class (its interface, declared once, and the python build) and
 its native model class (the native build, traced from the same :mod:`delta` formulas), as objects: this
-module imports both layers, and neither imports it.
+module imports both layers, and neither imports it. It imports them when a definition's classes are first asked
+for (the functions below): what an FMU is (name, role, kind, whether it has a native build) is known without
+them, and a run of cached FMUs does not load pythonfmu3 and CasADi.
 
 Robot presets: one FMU per component and robot *kind* (``linear_*``, ``rotary_*``).
 The geometry is exposed as fixed ``geometry.*`` parameters whose start values are
@@ -21,11 +23,9 @@ from pathlib import Path
 from delta.actuators import KINDS
 from delta.errors import DeltaError, ParameterError
 
-from .adapters import controllers, kinematics, plant_me, plants
 from .adapters.trajectories import ADAPTERS
 from .builder import build_python
 from .definition import FmuDefinition
-from .native import models
 from .native.build import build_native
 from .native.errors import NativeError
 
@@ -40,31 +40,58 @@ class AdapterError(DeltaError, ImportError):
 ROLES = ("trajectory", "inverse_kinematics", "forward_kinematics", "controller", "plant")
 
 
-# control law -> (adapter, native model, label in tables)
-_CONTROLLERS = {"pd": (controllers.PDController, models.Controller, "PD"),
-                "pid": (controllers.PIDController, models.PIDController, "PID"),
-                "pdplus": (controllers.PDPlusController, models.PDPlusController, "PD+"),
-                "ctc": (controllers.CTCController, models.CTCController, "CTC")}
+# The modules of the definitions' classes, imported when a definition's classes are first asked for.
+def _controllers():
+    from .adapters import controllers
+    return controllers
+
+
+def _kinematics():
+    from .adapters import kinematics
+    return kinematics
+
+
+def _plants():
+    from .adapters import plants
+    return plants
+
+
+def _plant_me():
+    from .adapters import plant_me  # pythonfmu3
+    return plant_me
+
+
+def _models():
+    from .native import models  # CasADi
+    return models
+
+
+# control law -> (its classes: adapter, native model; label in tables)
+_CONTROLLERS = {"pd": (lambda: (_controllers().PDController, _models().Controller), "PD"),
+                "pid": (lambda: (_controllers().PIDController, _models().PIDController), "PID"),
+                "pdplus": (lambda: (_controllers().PDPlusController, _models().PDPlusController), "PD+"),
+                "ctc": (lambda: (_controllers().CTCController, _models().CTCController), "CTC")}
 
 
 def _robot_definitions(kind: str) -> list[FmuDefinition]:
     """The FMUs of one robot kind: for each, its adapter and native model, and what it is."""
     return [
-        FmuDefinition(f"{kind}_ik", kinematics.InverseKinematics, kind, models.InverseKinematics,
+        FmuDefinition(f"{kind}_ik", lambda: (_kinematics().InverseKinematics, _models().InverseKinematics), kind,
                       summary=f"inverse kinematics, {kind} delta", role="inverse_kinematics", label="IK"),
-        FmuDefinition(f"{kind}_fk", kinematics.ForwardKinematics, kind, models.ForwardKinematics,
+        FmuDefinition(f"{kind}_fk", lambda: (_kinematics().ForwardKinematics, _models().ForwardKinematics), kind,
                       summary=f"forward kinematics, {kind} delta", role="forward_kinematics", label="FK"),
-        *(FmuDefinition(f"{kind}_{law}", adapter, kind, model, summary=f"{label} joint controller, {kind} delta",
+        *(FmuDefinition(f"{kind}_{law}", classes, kind, summary=f"{label} joint controller, {kind} delta",
                         role="controller", variant=law, label=label)
-          for law, (adapter, model, label) in _CONTROLLERS.items()),
-        FmuDefinition(f"{kind}_analytic_plant", plants.AnalyticPlant, kind, models.AnalyticPlant,
+          for law, (classes, label) in _CONTROLLERS.items()),
+        FmuDefinition(f"{kind}_analytic_plant", lambda: (_plants().AnalyticPlant, _models().AnalyticPlant), kind,
                       summary=f"analytic dynamics plant (co-simulation), {kind} delta",
                       role="plant", variant="analytic", label="analytic model"),
-        FmuDefinition(f"{kind}_analytic_plant_me", plant_me.AnalyticPlantME, kind, models.AnalyticPlant, fmi=3,
-                      summary=f"analytic dynamics plant (FMI 3.0 model exchange), {kind} delta",
+        FmuDefinition(f"{kind}_analytic_plant_me", lambda: (_plant_me().AnalyticPlantME, _models().AnalyticPlant),
+                      kind, fmi=3, summary=f"analytic dynamics plant (FMI 3.0 model exchange), {kind} delta",
                       role="plant", variant="analytic_me", label="analytic model (model exchange)"),
-        FmuDefinition(f"{kind}_exudyn_plant", plants.ExudynPlant, kind, None, packages=("delta", "multibody"),
-                      requires=("multibody.plant",), summary=f"Exudyn multibody plant (full or lumped), {kind} delta",
+        FmuDefinition(f"{kind}_exudyn_plant", lambda: (_plants().ExudynPlant, None), kind, has_native=False,
+                      packages=("delta", "multibody"), requires=("multibody.plant",),
+                      summary=f"Exudyn multibody plant (full or lumped), {kind} delta",
                       role="plant", variant="exudyn", label="Exudyn multibody"),
     ]
 
@@ -72,7 +99,8 @@ def _robot_definitions(kind: str) -> list[FmuDefinition]:
 def _trajectory_definitions() -> list[FmuDefinition]:
     """One FMU per trajectory type of :data:`delta.trajectories.TYPES`, as its adapter declares it
     (:data:`fmus.adapters.trajectories.ADAPTERS`: FMU name, class); every one has a native build."""
-    return [FmuDefinition(a.FMU, a, None, models.Trajectory, summary=f"{a.TYPE.replace('_', ' ')} trajectory generator",
+    return [FmuDefinition(a.FMU, lambda a=a: (a, _models().Trajectory), None,
+                          summary=f"{a.TYPE.replace('_', ' ')} trajectory generator",
                           role="trajectory", variant=a.TYPE, label=a.TYPE.replace("_", " ")) for a in ADAPTERS.values()]
 
 
@@ -125,7 +153,7 @@ def available() -> list[str]:
 
 def native_names() -> list[str]:
     """Our FMUs that have a native build (all but the Exudyn plants)."""
-    return [n for n, e in REGISTRY.items() if e.native is not None]
+    return [n for n, e in REGISTRY.items() if e.has_native]
 
 
 def build(name: str, out_dir: str | Path | None = None, *, force: bool = False, native: bool = False,
@@ -138,6 +166,6 @@ def build(name: str, out_dir: str | Path | None = None, *, force: bool = False, 
     fmu = get(name)
     if not native:
         return build_python(fmu, out_dir, force=force)
-    if fmu.native is None:
+    if not fmu.has_native:
         raise NativeError(f"FMU {name!r} has no native build; native FMUs: {', '.join(native_names())}")
     return build_native(fmu, fmi, out_dir, force=force)

@@ -12,12 +12,14 @@ the adapter's variables in declaration order, then the derivatives of the model-
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 from xml.etree.ElementTree import Element, SubElement, indent, tostring
 
 from .._names import UNITS, initial_knowns
 from ..definition import declared
 from .errors import NativeError
-from .models import NativeModel
+if TYPE_CHECKING:  # the models import CasADi: model_description, which a cached build's run reaches, does not need it
+    from .models import NativeModel
 
 __all__ = ["Variable", "Interface", "interface", "model_description"]
 

@@ -20,7 +20,7 @@ import pytest
 ca = pytest.importorskip("casadi")
 
 from fmus import registry  # noqa: E402
-from fmus.native.build import _trace  # noqa: E402
+from fmus.native.generate import _trace  # noqa: E402
 from fmus.native.interface import interface  # noqa: E402
 
 RTOL = 1e-12
