@@ -35,7 +35,7 @@ from . import requirements
 from .definition import FmuDefinition
 
 __all__ = ["CACHE_ENV", "user_cache", "source_files", "fingerprint", "bundle_name", "is_current", "install",
-           "cache_folder", "cached", "deliver", "prune", "on_build", "build_python", "scratch", "BuildError"]
+           "cache_folder", "cached", "deliver", "prune", "on_build", "build_python", "scratch", "build_lock", "BuildError"]
 
 CACHE_ENV = "DELTA_COSIM_CACHE"
 """Environment variable naming the FMU cache folder (default: :func:`user_cache`)."""
@@ -252,10 +252,41 @@ def cache_folder(folder: Path) -> Path:
     try:
         folder.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
-        raise BuildError(f"cannot use {folder} for built FMUs: {exc.strerror or exc} (it must be a folder this user "
-                         f"can write: move what is in its place, or name another cache with {CACHE_ENV}=FOLDER; "
-                         "fmus build writes elsewhere with --out)") from None
+        raise _refused(folder, exc) from None
     return folder
+
+
+def _refused(folder: Path, exc: OSError) -> BuildError:
+    return BuildError(f"cannot use {folder} for built FMUs: {exc.strerror or exc} (it must be a folder this user "
+                      f"can write: move what is in its place, or name another cache with {CACHE_ENV}=FOLDER; "
+                      "fmus build writes elsewhere with --out)")
+
+
+@contextmanager
+def build_lock(folder: Path, name: str) -> Iterator[None]:
+    """Hold the building of FMU ``name`` into the cache ``folder`` (its lock file ``.NAME.lock`` there). Processes
+    that miss the same entry together (a test suite's workers, runs started at once on an empty cache) build it
+    once: the others wait here, say so, and then find it current (the caller looks again). An ``flock``: the system
+    releases it when the holder ends, however it ends. Without ``fcntl`` (Windows), no lock: each builds its own,
+    atomically (:func:`install`)."""
+    try:
+        import fcntl  # POSIX
+    except ImportError:
+        yield
+        return
+    try:
+        fd = os.open(folder / f".{name}.lock", os.O_RDWR | os.O_CREAT | os.O_CLOEXEC, 0o644)
+    except OSError as exc:
+        raise _refused(folder, exc) from None
+    try:
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            announce(f"waiting for another process building FMU {name} into {folder}")
+            fcntl.flock(fd, fcntl.LOCK_EX)
+        yield
+    finally:
+        os.close(fd)
 
 
 def is_current(target: Path, stamp: Path, digest: str) -> bool:
@@ -321,9 +352,11 @@ def build_python(fmu: FmuDefinition, out_dir: str | Path | None = None, *, force
     digest = fingerprint(fmu)
     target, stamp = cached(cache, fmu.name, digest)
     if force or not is_current(target, stamp, digest):
-        announce(f"building FMU {fmu.name} (python, FMI {fmu.fmi}) into {cache}")
-        _build_python(fmu, cache, digest)
-        prune(cache, fmu.name)
+        with build_lock(cache, fmu.name):
+            if force or not is_current(target, stamp, digest):  # else built by the process this one waited for
+                announce(f"building FMU {fmu.name} (python, FMI {fmu.fmi}) into {cache}")
+                _build_python(fmu, cache, digest)
+                prune(cache, fmu.name)
     return deliver(target, out_dir, fmu.name)
 
 

@@ -156,3 +156,41 @@ def test_a_cache_folder_that_is_a_file_names_the_variable_to_choose_another(tmp_
     monkeypatch.setenv(CACHE_ENV, str(blocker))
     with pytest.raises(BuildError, match=rf"cannot use {blocker} for built FMUs: .*{CACHE_ENV}=FOLDER"):
         registry.build("helix")
+
+
+def test_a_build_waits_for_the_one_under_way_and_says_so(tmp_path):
+    """Two builders of one FMU into one cache (the suite's workers, runs started together on an empty cache): the
+    second waits for the first's lock, saying so, and gets it only once the first is done; no lock file is
+    needed afterwards for the entry to be current."""
+    import threading
+
+    from fmus.builder import build_lock, on_build
+
+    told: list[str] = []
+    on_build(told.append)
+    first_in, first_out, second_in = threading.Event(), threading.Event(), threading.Event()
+
+    def first():
+        with build_lock(tmp_path, "linear_ik"):
+            first_in.set()
+            assert first_out.wait(10)
+
+    def second():
+        with build_lock(tmp_path, "linear_ik"):
+            second_in.set()
+
+    try:
+        a = threading.Thread(target=first)
+        a.start()
+        assert first_in.wait(10)
+        b = threading.Thread(target=second)
+        b.start()
+        assert not second_in.wait(0.3), "the second builder went in while the first held the lock"
+        assert told == [f"waiting for another process building FMU linear_ik into {tmp_path}"], told
+        first_out.set()
+        a.join(10)
+        assert second_in.wait(10), "the second builder never got the lock once the first was done"
+        b.join(10)
+    finally:
+        on_build(None)
+        first_out.set()
