@@ -177,13 +177,81 @@ def server(request):
     s.close()
 
 
+def _sweep_args(tmp_path, scheduler: str) -> tuple:
+    return ("sweep", SWEEP_SCENARIO, "--grid", "ctl.gain.kp[1]=1e4,2e4", "--stop-time", "0.05", "--scheduler",
+            scheduler, "--out", tmp_path / "sweep", "--quiet")
+
+
 def _sweep(run, tmp_path, scheduler: str):
     import time
 
     t0 = time.monotonic()
-    r = run("sweep", SWEEP_SCENARIO, "--grid", "ctl.gain.kp[1]=1e4,2e4", "--stop-time", "0.05", "--scheduler",
-            scheduler, "--out", tmp_path / "sweep", "--quiet", limit_memory=True, timeout=60)
+    r = run(*_sweep_args(tmp_path, scheduler), limit_memory=True, timeout=60)
     return r, time.monotonic() - t0
+
+
+@pytest.fixture(scope="module")
+def waiting_sweeps(tmp_path_factory):
+    """The sweeps that wait out :attr:`SweepCluster.CONNECT_TIMEOUT` (10 s, a class constant no option or variable
+    sets), started together so their waits overlap instead of following one another: against a silent scheduler,
+    against a port that refuses (Dask's connect retries it for the whole timeout), and against ``notaurl``. Each is
+    the same ``python -m cosim sweep`` as :func:`_sweep` runs, with its own temporary folder and the memory limit
+    of :func:`run`; a thread waits for each and notes when it ended. name -> a function giving (CompletedProcess,
+    wall-clock seconds from its start to its end, its temporary folder, its output folder, the scheduler address,
+    the silent server or None)."""
+    import subprocess
+    import threading
+    import time
+
+    from cli_helpers import free_port, start_cosim
+
+    silent = _Server("silent")
+    schedulers = {"silent": silent.address, "refused": f"tcp://127.0.0.1:{free_port()}", "notaurl": "notaurl"}
+
+    def limit() -> None:
+        resource.setrlimit(resource.RLIMIT_AS, (MEMORY_LIMIT, MEMORY_LIMIT))
+
+    started, done = {}, {}
+    for name, scheduler in schedulers.items():
+        folder = tmp_path_factory.mktemp(f"sweep_{name}")
+        tmp = folder / "tmp"
+        tmp.mkdir()
+        t0 = time.monotonic()
+        proc = start_cosim(*_sweep_args(folder, scheduler), env={**os.environ, "TMPDIR": str(tmp)}, preexec_fn=limit)
+        started[name] = (proc, t0, tmp, folder, scheduler)
+
+    def wait(name: str) -> None:
+        proc, t0, *_ = started[name]
+        try:
+            out, err = proc.communicate(timeout=60)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            out, err = proc.communicate()
+        done[name] = (subprocess.CompletedProcess(proc.args, proc.returncode, out, err), time.monotonic() - t0)
+
+    threads = {name: threading.Thread(target=wait, args=(name,), daemon=True) for name in started}
+    for t in threads.values():
+        t.start()
+
+    def result(name: str):
+        threads[name].join(90)
+        assert name in done, f"the sweep against {name} did not end"
+        proc, t0, tmp, folder, scheduler = started[name]
+        return (*done[name], tmp, folder, scheduler, silent if name == "silent" else None)
+
+    try:
+        yield result
+    finally:
+        for proc, *_ in started.values():
+            proc.kill()
+        for t in threads.values():
+            t.join(90)
+        silent.close()
+
+
+def _left_empty(tmp: Path) -> None:
+    """As :func:`run` checks: the command's temporary folder is empty."""
+    assert not any(tmp.iterdir()), f"left in the temporary folder: {sorted(p.name for p in tmp.iterdir())}"
 
 
 @pytest.mark.parametrize("server", ["http"], indirect=True)
@@ -193,25 +261,26 @@ def test_a_scheduler_that_answers_http_is_not_dask(server, run, tmp_path):
     assert not (tmp_path / "sweep" / "results.csv").exists(), "a case was run"
 
 
-@pytest.mark.parametrize("server", ["silent"], indirect=True)
-def test_a_silent_scheduler_is_given_up_after_the_timeout(server, run, tmp_path):
+@pytest.mark.parametrize("kind", ["silent"])
+def test_a_silent_scheduler_is_given_up_after_the_timeout(waiting_sweeps, kind):
     from cosim.analysis.cluster import SweepCluster
 
-    r, wall = _sweep(run, tmp_path, server.address)
-    fails(r, 2, f"--scheduler {server.address}: no answer from {server.address} within "
+    r, wall, tmp, _, address, _ = waiting_sweeps(kind)
+    fails(r, 2, f"--scheduler {address}: no answer from {address} within "
                 f"{SweepCluster.CONNECT_TIMEOUT:g} s")
     assert wall < SweepCluster.CONNECT_TIMEOUT + 30, f"{wall:.1f} s to give up"  # bounded, not for ever
+    _left_empty(tmp)
 
 
-def test_a_scheduler_address_that_refuses_or_is_not_an_address(run, tmp_path):
-    from cli_helpers import free_port
-
-    address = f"tcp://127.0.0.1:{free_port()}"
+def test_a_scheduler_address_that_refuses_or_is_not_an_address(waiting_sweeps):
+    r, _, tmp, _, address, _ = waiting_sweeps("refused")
     # refused, as a rule; on a loaded machine the last attempt may time out instead: a reason is given either way
-    fails(_sweep(run, tmp_path, address)[0], 2, f"--scheduler {address}: cannot connect to {address} within",
+    fails(r, 2, f"--scheduler {address}: cannot connect to {address} within",
           r"within 10 s \((\[Errno 111\] )?(Connection refused|.*Error: )")
-    fails(_sweep(run, tmp_path, "notaurl")[0], 2, "--scheduler notaurl: not a scheduler address",
-          "expected tcp://HOST:PORT")
+    _left_empty(tmp)
+    r, _, tmp, _, _, _ = waiting_sweeps("notaurl")
+    fails(r, 2, "--scheduler notaurl: not a scheduler address", "expected tcp://HOST:PORT")
+    _left_empty(tmp)
 
 
 # --------------------------------------------------------------------------- results mean what they say
