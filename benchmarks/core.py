@@ -133,8 +133,11 @@ from cosim.engine.scenario import Scenario
 BUILD = {("fmus",): "python"} if "fmus" in Scenario.model_fields else {}
 if idle:  # the plant FMU's code, loaded by a one-step run, then kept by the process: make it compute nothing
     run_scenario(load_scenario(f"scenarios/{name}.yaml", {("time", "stop"): 1e-3, **BUILD}), log=False)
-    plants = [m.AnalyticPlant for n, m in sys.modules.items() if n.endswith("fmus.adapters.plants")]
-    assert len(plants) == 1, plants
+    # the FMU's own copy (bundled as _dcosim_<hash>.fmus...); a tree whose registry imports the adapters also
+    # holds the project's module, which the FMU does not run
+    found = {n: m for n, m in sys.modules.items() if n.endswith("fmus.adapters.plants")}
+    plants = [m.AnalyticPlant for n, m in found.items() if n.startswith("_dcosim_") or len(found) == 1]
+    assert len(plants) == 1, found
     plants[0].advance = lambda self, t, h: None
     plants[0].refresh = lambda self: None
 res = run_scenario(load_scenario(f"scenarios/{name}.yaml", {("time", "stop"): stop, **BUILD}), log=False)
