@@ -9,6 +9,7 @@ matches its meaning, so callers can catch either. A domain plugged into the mast
 from __future__ import annotations
 
 import argparse
+import errno
 import math
 import os
 import re
@@ -276,6 +277,13 @@ def number_option(*, gt: float | None = None, ge: float | None = None, le: float
 
 _KINDS = ((stat.S_ISFIFO, "a FIFO"), (stat.S_ISCHR, "a character device"), (stat.S_ISBLK, "a block device"),
           (stat.S_ISSOCK, "a socket"))
+
+
+def refused_by_system(exc: OSError, folder: str | os.PathLike) -> bool:
+    """Whether ``exc`` is the system refusing to write into ``folder`` (a path in it named, or a full, read-only or
+    over-quota disk), not a fault of what was being written: the remedy is another folder."""
+    named = [str(f) for f in (exc.filename, exc.filename2) if f is not None]
+    return any(f.startswith(str(folder)) for f in named) or exc.errno in (errno.ENOSPC, errno.EROFS, errno.EDQUOT)
 
 
 def file_problem(path: str | os.PathLike, directory_ok: bool = False) -> str | None:

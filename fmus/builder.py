@@ -16,7 +16,6 @@ generated module checks them before anything else is imported (:mod:`fmus.requir
 
 from __future__ import annotations
 
-import errno
 import hashlib
 import json
 import os
@@ -29,6 +28,7 @@ from contextlib import contextmanager
 from pathlib import Path
 from typing import Any, Callable, Iterator
 
+from cosim.errors import refused_by_system
 from delta.errors import DeltaError
 
 from . import requirements
@@ -335,9 +335,7 @@ def scratch(name: str, kind: str) -> Iterator[Path]:
     try:
         yield Path(tmp)
     except OSError as exc:
-        named = [str(f) for f in (exc.filename, exc.filename2) if f is not None]
-        if any(f.startswith(tmp) for f in named) or (
-                not named and exc.errno in (errno.ENOSPC, errno.EROFS, errno.EDQUOT)):
+        if refused_by_system(exc, tmp):
             raise BuildError(f"cannot build FMU {name} in the temporary folder {tmp}: {exc.strerror or exc} "
                              "(set TMPDIR to a writable folder with room)") from None
         raise

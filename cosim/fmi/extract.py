@@ -4,7 +4,6 @@ process, removal at the end of each run and of the process (orphans of killed pr
 from __future__ import annotations
 
 import atexit
-import errno
 import os
 import shutil
 import tempfile
@@ -14,7 +13,7 @@ from contextvars import ContextVar
 from pathlib import Path
 from typing import Any, Iterable
 
-from ..errors import ComponentSourceError, Issue
+from ..errors import ComponentSourceError, Issue, refused_by_system
 
 Key = tuple  # (resolved FMU path, its stamp): one extraction per file as it was read
 
@@ -129,12 +128,6 @@ class Extractions:
 _RUN: ContextVar[Extractions | None] = ContextVar("cosim_run_extractions", default=None)
 
 
-def _refused_by(exc: OSError, folder: Path) -> bool:
-    """Whether ``exc`` is the system refusing to write into ``folder`` (full, read-only, over quota)."""
-    named = [str(f) for f in (exc.filename, exc.filename2) if f is not None]
-    return any(f.startswith(str(folder)) for f in named) or exc.errno in (errno.ENOSPC, errno.EROFS, errno.EDQUOT)
-
-
 def extraction(key: Key) -> Path:
     """The extraction directory of the FMU file ``key`` = (path, stamp), held by the current run."""
     import fmpy  # lazy: --help loads this module without it
@@ -157,7 +150,7 @@ def extraction(key: Key) -> Path:
                 fmpy.extract(str(path), str(unzipdir), include=_used)
             except OSError as exc:
                 shutil.rmtree(unzipdir, ignore_errors=True)
-                if not _refused_by(exc, unzipdir):
+                if not refused_by_system(exc, unzipdir):
                     # Refused (correctness): its files cannot be read out of the archive: it cannot run
                     raise ComponentSourceError(Issue("", f"{path}: cannot extract: {exc}")) from None
                 # Refused (correctness): the system refuses the temporary folder (full, read-only), not the archive
