@@ -150,9 +150,12 @@ def test_state_of_another_fmu_is_refused(name, instances):
     assert same_bits(first, again), f"{name}: its own state after the refusals, {differ(first, again)}"
 
 
-def test_state_of_another_build_is_refused(tmp_path, instances):
-    """The same FMU built again (a new guid) refuses a state of the first build, naming both guids."""
+def test_state_of_another_build_is_refused(tmp_path, instances, monkeypatch):
+    """The same FMU built again (a new guid) refuses a state of the first build, naming both guids. Built again in a
+    cache of its own: forced into the user's, it replaced the FMU other tests were running (a checkpoint's FMU
+    then had another SHA-256)."""
     first = _built("linear_pid")
+    monkeypatch.setenv("DELTA_COSIM_CACHE", str(tmp_path / "cache"))
     path = registry.build("linear_pid", tmp_path, force=True)
     again = Built.load(path, "linear_pid", 2)
     assert again.md.guid != first.md.guid, f"the rebuild kept the guid {first.md.guid}"

@@ -591,7 +591,8 @@ def _forge_effective(src: Path, out: Path, data: bytes) -> Path:
     (b"[" * 100_000 + b"]" * 100_000, "effective/scenario.json is not JSON \\(maximum recursion depth"),  # traceback
     (b'{"a": 1' + b"0" * 5000 + b"}", "effective/scenario.json is not JSON \\(Exceeds the limit"),
     (b"[1, 2]", "effective/scenario.json is not a scenario mapping"),
-])
+], ids=["deep", "digits", "list"])  # named: an id of 200 000 brackets reaches the children's environment
+# (PYTEST_CURRENT_TEST) and is over the system's 128 kB for one variable: "Argument list too long"
 def test_a_log_whose_recorded_scenario_is_forged_is_one_line(run, small, tmp_path, data, says):
     log = tmp_path / "log.mcap"
     assert run("run", small, "--out", log, "--quiet").returncode == 0
