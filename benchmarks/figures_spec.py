@@ -352,7 +352,8 @@ TABLES = (
         Row("cosim.robot.preflight", None,
             {"top-level import": "`cosim.robot.preflight`",
              "what it is": "the delta plugin, loaded when the schema checks the trajectory's type: `fmus.registry` "
-                           "(every FMU's adapter and native model, CasADi among them), the workspace check"},
+                           "(what each FMU is; its adapter and native model load only for a build), the workspace "
+                           "check"},
             templates={"ms": "{imports_ms[cosim.robot.preflight]:.0f}"}),
         Row("fmpy", None,
             {"top-level import": "`fmpy`",
