@@ -120,14 +120,19 @@ def entered() -> None:
 
 class Child:
     """A child started by :func:`start`, seen from its parent: ``pid``, ``name``, the pipes (``stdin``, ``stdout``,
-    ``stderr``: None without ``pipes``), ``returncode`` (None until it is reaped)."""
+    ``stderr``: None without ``pipes``), ``returncode`` (None until it is reaped) and, for a fork, ``status``: the
+    raw wait status (``os.WIFSIGNALED`` tells a crash from an exit; None until it is reaped)."""
 
     def __init__(self, pid: int, name: str, *, stdin: Any = None, stdout: Any = None, stderr: Any = None,
                  popen: subprocess.Popen | None = None, process: Any = None) -> None:
         self.pid, self.name = pid, name
         self.stdin, self.stdout, self.stderr = stdin, stdout, stderr
         self.returncode: int | None = None
+        self.status: int | None = None
         self._popen, self._process = popen, process
+
+    def _reaped(self, status: int) -> None:
+        self.status, self.returncode = status, os.waitstatus_to_exitcode(status)
 
     def poll(self) -> int | None:
         """Reap the child if it has ended: its exit code, else None."""
@@ -137,10 +142,10 @@ class Child:
             elif self._process is not None:
                 if not self._process.is_alive():  # reaps it
                     self.returncode = self._process.exitcode
-            else:
+            else:  # raises ChildProcessError when another waiter took it
                 pid, status = os.waitpid(self.pid, os.WNOHANG)
                 if pid:
-                    self.returncode = os.waitstatus_to_exitcode(status)
+                    self._reaped(status)
         return self.returncode
 
     def wait(self, timeout: float | None = None) -> int | None:
@@ -156,7 +161,7 @@ class Child:
             self._process.join(timeout)
             return self.poll()
         elif timeout is None:
-            self.returncode = os.waitstatus_to_exitcode(os.waitpid(self.pid, 0)[1])
+            self._reaped(os.waitpid(self.pid, 0)[1])
         else:
             deadline = time.monotonic() + timeout
             while self.poll() is None:

@@ -132,7 +132,7 @@ def supervise(on_crash: Callable[[Record, str], int]) -> int | None:
     if child is None:
         _RECORD, _SUPERVISOR = rec, parent
         return None
-    return _wait(child.pid, rec, on_crash)
+    return _wait(child, rec, on_crash)
 
 
 _RESULT_BYTES = 16 * 1024 * 1024  # a contained call's pickled result (anonymous: only the pages written are used)
@@ -152,11 +152,12 @@ def contained(fn: Callable[[], Any]) -> tuple[Any, str | None, Record]:
     out = mmap.mmap(-1, _RESULT_BYTES)
     ending, ends = os.pipe()
     # a group of its own: the supervisor kills the whole group (the log writer, the offload worker)
-    pid = procs.start(_contained_child, fn, rec, out, ending, ends, name="contained", group="own",
-                      die_with_parent=True).pid
+    child = procs.start(_contained_child, fn, rec, out, ending, ends, name="contained", group="own",
+                        die_with_parent=True)
+    pid = child.pid
     os.close(ends)
     try:
-        status, reason = _watch(pid, rec, [], ending)
+        status, reason = _watch(child, rec, [], ending)
         n = int.from_bytes(out[:8], "little")
         if reason is None:
             _leftovers(pid)
@@ -191,10 +192,11 @@ def _contained_child(fn: Callable[[], Any], rec: Record, out: mmap.mmap, ending:
     return 0
 
 
-def _wait(pid: int, rec: Record, on_crash: Callable[[Record, str], int]) -> int:
-    """The command's exit code once the child ``pid`` ended: its own, or ``on_crash``'s when it died or was killed;
+def _wait(child: procs.Child, rec: Record, on_crash: Callable[[Record, str], int]) -> int:
+    """The command's exit code once the ``child`` ended: its own, or ``on_crash``'s when it died or was killed;
     after a stop signal the code of that signal (128 + its number, 143 for SIGTERM) whatever it took to stop the
     child (one that ignored the signal and busy-looped was killed and ended with 2)."""
+    pid = child.pid
     stopped_at: list[float] = []
     first: list[int] = []
 
@@ -215,7 +217,7 @@ def _wait(pid: int, rec: Record, on_crash: Callable[[Record, str], int]) -> int:
 
     previous = {s: signal.signal(s, forward) for s in STOP_SIGNALS}
     try:
-        status, reason = _watch(pid, rec, stopped_at)
+        status, reason = _watch(child, rec, stopped_at)
         if reason is None and rec.current[4] == 1.0:  # ended through our exit: its code is the command's
             _leftovers(pid)
             return os.waitstatus_to_exitcode(status)
@@ -229,20 +231,21 @@ def _wait(pid: int, rec: Record, on_crash: Callable[[Record, str], int]) -> int:
     return 128 + first[0] if first else code
 
 
-def _watch(pid: int, rec: Record, stopped_at: list[float], wake: int | None = None) -> tuple[int, str | None]:
-    """Wait for the child ``pid``: (its wait status, None) once it ended; (its wait status, why) when it was killed
-    here: no end within :data:`_STOP_WAIT_S` of a stop signal (``stopped_at``), or no progress in ``rec`` for its
-    watchdog budget plus the grace. The log writer process is waited for after a kill. ``wake``: a pipe the child
-    writes a byte to just before it ends (its end is then seen at once, not at the next poll)."""
+def _watch(child: procs.Child, rec: Record, stopped_at: list[float],
+           wake: int | None = None) -> tuple[int, str | None]:
+    """Wait for the forked ``child`` (:class:`cosim.procs.Child`, which reaps it): (its wait status, None) once it
+    ended; (its wait status, why) when it was killed here: no end within :data:`_STOP_WAIT_S` of a stop signal
+    (``stopped_at``), or no progress in ``rec`` for its watchdog budget plus the grace. The log writer process is
+    waited for after a kill. ``wake``: a pipe the child writes a byte to just before it ends (its end is then seen at
+    once, not at the next poll)."""
     seen, since = tuple(rec.current[:4]), time.monotonic()
     pause = _POLL_S
     while True:
         try:
-            done, status = os.waitpid(pid, os.WNOHANG)
+            if child.poll() is not None:
+                return child.status, None
         except ChildProcessError:
             return 0, "was lost (no such child process)"
-        if done:
-            return status, None
         now = time.monotonic()
         state = tuple(rec.current[:4])  # component, time, phase, steps: any change is progress, and a wait on purpose
         if state != seen or state[2] == WAITING:
@@ -261,12 +264,12 @@ def _watch(pid: int, rec: Record, stopped_at: list[float], wake: int | None = No
                          f"stopped from inside: killed"
         if reason is not None:
             try:
-                os.killpg(pid, signal.SIGKILL)
+                os.killpg(child.pid, signal.SIGKILL)
             except ProcessLookupError:  # not a group of its own (its setpgid failed): the child alone
-                os.kill(pid, signal.SIGKILL)
-            _, status = os.waitpid(pid, 0)
+                os.kill(child.pid, signal.SIGKILL)
+            child.wait()
             _wait_for_writer(rec)
-            return status, reason
+            return child.status, reason
         if wake is None:
             time.sleep(pause)
         elif select.select([wake], [], [], _POLL_S)[0]:
