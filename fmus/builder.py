@@ -35,7 +35,8 @@ from . import requirements
 from .definition import FmuDefinition
 
 __all__ = ["CACHE_ENV", "user_cache", "source_files", "fingerprint", "bundle_name", "is_current", "install",
-           "cache_folder", "cached", "deliver", "prune", "on_build", "build_python", "scratch", "build_lock", "BuildError"]
+           "cache_folder", "cached", "deliver", "prune", "on_build", "build_python", "scratch", "build_lock",
+           "built", "BuildError"]
 
 CACHE_ENV = "DELTA_COSIM_CACHE"
 """Environment variable naming the FMU cache folder (default: :func:`user_cache`)."""
@@ -289,6 +290,20 @@ def build_lock(folder: Path, name: str) -> Iterator[None]:
         os.close(fd)
 
 
+def built(folder: Path, name: str, digest: str, what: str, build: Callable[[], Any], *, force: bool = False) -> Path:
+    """The cache ``folder``'s FMU ``name`` of fingerprint ``digest``: ``build()`` (which installs it there) is called
+    unless a current build is there, under the FMU's :func:`build_lock`, looking again once the lock is held (a
+    process this one waited for built it), said (``what``: the kind of build) and followed by :func:`prune`."""
+    target, stamp = cached(folder, name, digest)
+    if force or not is_current(target, stamp, digest):
+        with build_lock(folder, name):
+            if force or not is_current(target, stamp, digest):
+                announce(f"building FMU {name} ({what}) into {folder}")
+                build()
+                prune(folder, name)
+    return target
+
+
 def is_current(target: Path, stamp: Path, digest: str) -> bool:
     """Whether ``target`` is an FMU archive and its ``stamp`` (the JSON written beside it) records ``digest``; a
     missing, damaged or foreign entry (a stamp that is no JSON object, a folder, a truncated archive) is not, and
@@ -348,13 +363,8 @@ def build_python(fmu: FmuDefinition, out_dir: str | Path | None = None, *, force
     same fingerprint is there, then copied to ``out_dir`` if one is given (:func:`deliver`)."""
     cache = cache_folder(user_cache())
     digest = fingerprint(fmu)
-    target, stamp = cached(cache, fmu.name, digest)
-    if force or not is_current(target, stamp, digest):
-        with build_lock(cache, fmu.name):
-            if force or not is_current(target, stamp, digest):  # else built by the process this one waited for
-                announce(f"building FMU {fmu.name} (python, FMI {fmu.fmi}) into {cache}")
-                _build_python(fmu, cache, digest)
-                prune(cache, fmu.name)
+    target = built(cache, fmu.name, digest, f"python, FMI {fmu.fmi}", lambda: _build_python(fmu, cache, digest),
+                   force=force)
     return deliver(target, out_dir, fmu.name)
 
 

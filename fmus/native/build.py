@@ -28,8 +28,7 @@ import zipfile
 from functools import lru_cache
 from pathlib import Path
 
-from ..builder import (announce, build_lock, cache_folder, cached, deliver, install, is_current, prune, scratch,
-                       user_cache)
+from ..builder import built, cache_folder, cached, deliver, install, scratch, user_cache
 from ..definition import FmuDefinition
 from .errors import CompilerMissingError, NativeError
 from .interface import model_description
@@ -117,13 +116,7 @@ def build_native(fmu: FmuDefinition, fmi: int = 2, out_dir: str | Path | None = 
     cc = compiler()
     out = cache_folder(user_cache() / "native" / f"fmi{fmi}")
     digest = fingerprint()
-    target, stamp = cached(out, name, digest)
-    if force or not is_current(target, stamp, digest):
-        with build_lock(out, name):
-            if force or not is_current(target, stamp, digest):  # else built by the process this one waited for
-                announce(f"building FMU {name} (native, FMI {fmi}) into {out}")
-                _build(fmu, fmi, cc, out, digest)
-                prune(out, name)
+    target = built(out, name, digest, f"native, FMI {fmi}", lambda: _build(fmu, fmi, cc, out, digest), force=force)
     return deliver(target, None if out_dir is None else Path(out_dir) / "native" / f"fmi{fmi}", name)
 
 
