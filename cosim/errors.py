@@ -282,8 +282,8 @@ _KINDS = ((stat.S_ISFIFO, "a FIFO"), (stat.S_ISCHR, "a character device"), (stat
 def refused_by_system(exc: OSError, folder: str | os.PathLike) -> bool:
     """Whether ``exc`` is the system refusing to write into ``folder`` (a path in it named, or a full, read-only or
     over-quota disk), not a fault of what was being written: the remedy is another folder."""
-    named = [str(f) for f in (exc.filename, exc.filename2) if f is not None]
-    return any(f.startswith(str(folder)) for f in named) or exc.errno in (errno.ENOSPC, errno.EROFS, errno.EDQUOT)
+    named = [Path(os.fsdecode(f)) for f in (exc.filename, exc.filename2) if f is not None]
+    return any(f.is_relative_to(folder) for f in named) or exc.errno in (errno.ENOSPC, errno.EROFS, errno.EDQUOT)
 
 
 def file_problem(path: str | os.PathLike, directory_ok: bool = False) -> str | None:

@@ -56,3 +56,17 @@ def test_unknown_solver_is_a_setting_error():
 
     with pytest.raises(SettingError, match="unknown solver 'euler'; valid: cvode, dop853"):
         make_integrator("euler", None, 0.0, 1e-6, 1e-3)
+
+
+def test_a_refusal_of_the_system_is_told_from_a_fault_of_the_input(tmp_path):
+    """A path inside the folder named, or a full, read-only or over-quota disk: the system refused the folder. A
+    sibling whose name only begins like the folder's is not inside it."""
+    import errno
+
+    from cosim.errors import refused_by_system
+
+    folder = tmp_path / "work"
+    assert refused_by_system(OSError(errno.EACCES, "denied", str(folder / "x")), folder)
+    assert refused_by_system(OSError(errno.ENOSPC, "full", "/elsewhere/x"), folder)
+    assert not refused_by_system(OSError(errno.EACCES, "denied", str(tmp_path / "work2" / "x")), folder)
+    assert not refused_by_system(OSError(errno.EIO, "broken archive"), folder)
