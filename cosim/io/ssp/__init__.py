@@ -78,4 +78,4 @@ def __getattr__(name: str):
     return getattr(import_module(f".{module}", __name__), name)
 
 
-__all__ = ["SspError", "ExportReport", "export_ssp", "read_ssp", "open_ssp", "reopen_ssp", "is_ssp", "NS", "SSD_NAME"]
+__all__ = list(_MODULE)
