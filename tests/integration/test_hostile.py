@@ -34,13 +34,20 @@ def run(tmp_path):
     tmp.mkdir()
 
     def call(*args, limit_memory: bool = False, **kw):
-        def limit() -> None:
-            resource.setrlimit(resource.RLIMIT_AS, (MEMORY_LIMIT, MEMORY_LIMIT))
-
         env = {**os.environ, "TMPDIR": str(tmp), **kw.pop("env", {})}
-        return cosim(*args, env=env, preexec_fn=limit if limit_memory else None, **kw)
+        return cosim(*args, env=env, preexec_fn=_limit_memory if limit_memory else None, **kw)
 
     yield call
+    _left_empty(tmp)
+
+
+def _limit_memory() -> None:
+    """In a child before it runs: at most :data:`MEMORY_LIMIT` of address space."""
+    resource.setrlimit(resource.RLIMIT_AS, (MEMORY_LIMIT, MEMORY_LIMIT))
+
+
+def _left_empty(tmp: Path) -> None:
+    """The command's temporary folder is empty."""
     assert not any(tmp.iterdir()), f"left in the temporary folder: {sorted(p.name for p in tmp.iterdir())}"
 
 
@@ -208,16 +215,14 @@ def waiting_sweeps(tmp_path_factory):
     silent = _Server("silent")
     schedulers = {"silent": silent.address, "refused": f"tcp://127.0.0.1:{free_port()}", "notaurl": "notaurl"}
 
-    def limit() -> None:
-        resource.setrlimit(resource.RLIMIT_AS, (MEMORY_LIMIT, MEMORY_LIMIT))
-
     started, done = {}, {}
     for name, scheduler in schedulers.items():
         folder = tmp_path_factory.mktemp(f"sweep_{name}")
         tmp = folder / "tmp"
         tmp.mkdir()
         t0 = time.monotonic()
-        proc = start_cosim(*_sweep_args(folder, scheduler), env={**os.environ, "TMPDIR": str(tmp)}, preexec_fn=limit)
+        proc = start_cosim(*_sweep_args(folder, scheduler), env={**os.environ, "TMPDIR": str(tmp)},
+                           preexec_fn=_limit_memory)
         started[name] = (proc, t0, tmp, folder, scheduler)
 
     def wait(name: str) -> None:
@@ -247,11 +252,6 @@ def waiting_sweeps(tmp_path_factory):
         for t in threads.values():
             t.join(90)
         silent.close()
-
-
-def _left_empty(tmp: Path) -> None:
-    """As :func:`run` checks: the command's temporary folder is empty."""
-    assert not any(tmp.iterdir()), f"left in the temporary folder: {sorted(p.name for p in tmp.iterdir())}"
 
 
 @pytest.mark.parametrize("server", ["http"], indirect=True)
@@ -532,7 +532,7 @@ def plain_check(tmp_path_factory):
     as :func:`run` runs it (its own temporary folder, which must be left empty)."""
     tmp = tmp_path_factory.mktemp("plain_check")
     r = cosim("check", SWEEP_SCENARIO, env={**os.environ, "TMPDIR": str(tmp)})
-    assert not any(tmp.iterdir()), f"left in the temporary folder: {sorted(p.name for p in tmp.iterdir())}"
+    _left_empty(tmp)
     return r
 
 
