@@ -65,6 +65,20 @@ def pytest_itemcollected(item):
         item.add_marker(pytest.mark.xdist_group(item.nodeid.split("::")[0]))
 
 
+ID_LIMIT = 4096
+"""Characters of a test's id at most: pytest puts it in ``PYTEST_CURRENT_TEST``, which every process a test starts
+inherits, and the system refuses one variable over 128 kB (every child then fails, "Argument list too long")."""
+
+
+def pytest_collection_modifyitems(config, items):
+    """Refuse, naming it, a test whose id is over :data:`ID_LIMIT` (a parametrized value written into it: give the
+    case an ``id``)."""
+    long = next((item.nodeid for item in items if len(item.nodeid) > ID_LIMIT), None)
+    if long is not None:
+        raise pytest.UsageError(f"a test id of {len(long)} characters (at most {ID_LIMIT}: it reaches every child's "
+                                f"environment): {long[:200]}...; give its parametrized cases ids")
+
+
 def pytest_collection_finish(session):
     """In a worker, the groups must reach xdist's scheduler: it reads a test's group from the ``@group`` its id
     ends with, which xdist 3.8 appends by assigning the item's ``_nodeid``. pytest 9 builds ids another way and
