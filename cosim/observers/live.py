@@ -52,6 +52,9 @@ SETTLE_S = 0.2
 """s the wait goes on after a viewer's last subscription: the server announces the channels of one subscribe request
 one by one, so the first announced is not yet all of them (a measured 1 in 3 got the first sample on one channel of
 five without this)."""
+DRAIN_QUIET_S = 0.5
+"""s without a message passed to a viewer after which the run's end stops waiting for the rest of what is due to the
+viewers (see :meth:`LiveView._drain`)."""
 _POLL_S = 0.02  # s between two looks at the stop request while waiting
 
 
@@ -85,12 +88,19 @@ def _check_free(host: str, port: int) -> None:
 class _ContextSink(FoxgloveChannels):
     """A publisher's sink logging into a ``foxglove.Context`` (see :class:`cosim.observers.publish.Publisher`)."""
 
-    def __init__(self, context, first=None) -> None:
+    def __init__(self, context, viewers: dict[int, int], first=None) -> None:
         self._context = context
         self._channels: list = []
         self._log: dict[int, object] = {}
         self._layouts: dict = {}
         self._first = first  # called once before the first message is sent: every channel is declared by then
+        self._ids: dict[int, int] = {}  # the publisher's channel id -> the server's
+        self._viewers = viewers  # the server's channel id -> viewers subscribed to it (the live view's listener)
+        self.due = 0  # messages handed to the server for its viewers: one per message and subscribed viewer
+
+    def channel(self, cid: int, *args, **kwargs) -> None:
+        super().channel(cid, *args, **kwargs)
+        self._ids[cid] = self._channels[-1].id()
 
     def _sending(self) -> None:
         first, self._first = self._first, None
@@ -101,13 +111,17 @@ class _ContextSink(FoxgloveChannels):
             self._sending()
         for cid, stamps, data, skip in blocks:
             log = self._log[cid]
+            sent = 0
             for t, message in zip(*encode_messages(self._layouts[cid], stamps, data, skip, offset_ns)):
                 log(message, t)
+                sent += 1
+            self.due += sent * self._viewers.get(self._ids[cid], 0)
 
     def message(self, cid: int, log_time: int, data: bytes) -> None:
         if self._first is not None:
             self._sending()
         self._log[cid](data, log_time)
+        self.due += self._viewers.get(self._ids[cid], 0)
 
     def close(self) -> None:
         for ch in self._channels:
@@ -194,6 +208,7 @@ class LiveView:
         self._relay: Relay | None = None
         self._sink: _ContextSink | None = None
         self._subscribed: float | None = None  # monotonic time of the last subscription seen while waiting
+        self._viewers: dict[int, int] = {}  # the server's channel id -> viewers subscribed (its listener's count)
 
     @property
     def url(self) -> str:
@@ -211,7 +226,7 @@ class LiveView:
             self.server = foxglove.start_server(name=self.name, host="127.0.0.1", port=0,
                                                 capabilities=[Capability.Time], context=context,
                                                 message_backlog_size=BACKLOG_MESSAGES,
-                                                server_listener=None if self.wait is None else self._listener())
+                                                server_listener=self._listener())
         except (OSError, RuntimeError) as exc:
             if self._relay is not None:
                 self._relay.stop()
@@ -222,7 +237,8 @@ class LiveView:
             raise CosimError(f"--live: cannot serve on {self.host}:{self.port}: {reason}") from None
         self._relay.start(("127.0.0.1", self.server.port))
         self.port = self._relay.port
-        self._sink = _ContextSink(context, None if self.wait is None else lambda: self._wait_for_viewer(rt))
+        self._sink = _ContextSink(context, self._viewers,
+                                  None if self.wait is None else lambda: self._wait_for_viewer(rt))
         self.publisher.attach(self._sink)
         self._offset = self.publisher.origin(rt)
         self._next_time = rt.now_ns
@@ -230,14 +246,19 @@ class LiveView:
         self.server.broadcast_time(rt.now_ns + self._offset)
 
     def _listener(self):
-        """The server's listener while ``--live-wait`` waits: notes each viewer's subscription."""
+        """The server's listener: counts the viewers of each channel (what the run's end waits to see delivered),
+        notes the time of each subscription (what ``--live-wait`` waits for)."""
         from foxglove.websocket import ServerListener  # lazy: --help loads this module without it
 
-        view = self
+        view, viewers = self, self._viewers
 
         class Subscriptions(ServerListener):
             def on_subscribe(self, client, channel) -> None:
+                viewers[channel.id] = viewers.get(channel.id, 0) + 1
                 view._subscribed = time.monotonic()
+
+            def on_unsubscribe(self, client, channel) -> None:
+                viewers[channel.id] = max(0, viewers.get(channel.id, 0) - 1)
 
         return Subscriptions()
 
@@ -280,23 +301,45 @@ class LiveView:
             self.server.broadcast_time(t_ns + self._offset)
 
     def finish(self, rt: Execution | None, error: BaseException | None) -> None:
+        due = 0
         if self._sink is not None:
             try:
                 self.publisher.flush()  # the last samples
             except CosimError:  # the log's write failed: the recorder reports it when it finishes
                 pass
+            due = self._sink.due
             self._sink.close()
             self._sink = None
         if self.server is not None:
             server, self.server = self.server, None
-            self._stop(server)
+            self._stop(server, due)
 
-    def _stop(self, server) -> None:
-        """``server.stop()``, which waits for every viewer to take its close, then the relay's end, which waits for
-        each viewer to take what it was given: :data:`STOP_TIMEOUT` at most in all (the server's stop in a thread
-        of its own, left behind when a viewer never reads again: the process still ends)."""
+    def _drain(self, due: int, end: float) -> None:
+        """Wait until the server has passed its viewers the ``due`` messages it was given for them (the relay counts
+        them), until :data:`DRAIN_QUIET_S` pass with none passed (what is left was dropped by a viewer's lossy
+        backlog, or the viewer stopped reading), or until ``end``: the server's stop sends its Close ahead of what
+        its queues still hold, so a viewer would lose the end of the run (the last 20 of 501 samples, seen on a
+        loaded machine)."""
+        relay = self._relay
+        if relay is None:
+            return
+        last, since = relay.delivered, time.monotonic()
+        while relay.delivered < due:
+            now = time.monotonic()
+            if relay.delivered != last:
+                last, since = relay.delivered, now
+            elif now - since >= DRAIN_QUIET_S or now >= end:
+                return
+            time.sleep(_POLL_S / 2)
+
+    def _stop(self, server, due: int = 0) -> None:
+        """What is due to the viewers passed on (:meth:`_drain`), then ``server.stop()``, which waits for every
+        viewer to take its close, then the relay's end, which waits for each viewer to take what it was given:
+        :data:`STOP_TIMEOUT` at most in all (the server's stop in a thread of its own, left behind when a viewer
+        never reads again: the process still ends)."""
 
         end = time.monotonic() + STOP_TIMEOUT
+        self._drain(due, end)
         stopper = threading.Thread(target=server.stop, name="live-view-stop", daemon=True)
         stopper.start()
         stopper.join(STOP_TIMEOUT)

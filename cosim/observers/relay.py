@@ -28,6 +28,8 @@ from ..errors import printable
 __all__ = ["Relay"]
 
 _CLOSE = 0x8
+_BINARY = 0x2
+_MESSAGE_DATA = 0x01  # the Foxglove WebSocket protocol's binary op of a message on a subscribed channel
 _CONTROL_MAX = 125  # bytes of a control frame's payload (RFC 6455 5.5); a Close claiming more is kept to that
 _HEADER_END = b"\r\n\r\n"
 _HANDSHAKE_LIMIT = 64 * 1024  # bytes of HTTP header before the relay stops looking for its end (a plain pipe then)
@@ -43,6 +45,8 @@ class _Frames:
         self.left = 0  # payload bytes of the current frame still to come
         self.close: bytearray | None = None  # the payload of a Close frame being read
         self.mask = b""
+        self.messages = 0  # Foxglove message-data frames seen (binary, first payload byte 0x01)
+        self._peek = False  # the current frame is binary and its first payload byte not yet seen
 
     @property
     def at_boundary(self) -> bool:
@@ -54,6 +58,9 @@ class _Frames:
         while pos < n:
             if self.left:
                 take = min(self.left, n - pos)
+                if self._peek:
+                    self._peek = False
+                    self.messages += data[pos] == _MESSAGE_DATA
                 if self.close is not None and len(self.close) < _CONTROL_MAX:  # kept bounded: a header may claim 2^63
                     self.close += data[pos:pos + min(take, _CONTROL_MAX - len(self.close))]
                 self.left -= take
@@ -75,6 +82,7 @@ class _Frames:
             self.mask = self.header[-4:] if self.masked else b""
             self.header = b""
             self.close = bytearray() if opcode == _CLOSE else None
+            self._peek = opcode == _BINARY and length > 0
             self.left = length
             if not length:
                 ends.append((pos, self._closed()))
@@ -222,6 +230,13 @@ class _Pair:
 
     def _from_server(self, data: bytes) -> None:
         frames = self.server.frames
+        before = frames.messages
+        try:
+            self._pass_on(frames, data)
+        finally:
+            self.relay.delivered += frames.messages - before
+
+    def _pass_on(self, frames: _Frames, data: bytes) -> None:
         if self.answer is None:
             for _, payload in frames.feed(data):
                 if payload is not None:
@@ -291,6 +306,7 @@ class Relay:
         self.port = self._sock.getsockname()[1]
         self.upstream: tuple[str, int] = ("127.0.0.1", 0)
         self.pairs: set[_Pair] = set()
+        self.delivered = 0  # Foxglove messages passed from the server to the viewers (see LiveView._drain)
         self._loop: asyncio.AbstractEventLoop | None = None
         self._thread: threading.Thread | None = None
 

@@ -159,3 +159,52 @@ def test_the_bound_holds_against_a_viewer_that_subscribes_again_and_again():
         done.set()
         thread.join()
     assert 0.5 <= took < 5.0 and view.viewed, (took, view.viewed)
+
+
+def _draining(delivered_over_time, due, end_in=5.0):
+    """LiveView._drain against a relay whose ``delivered`` count follows ``delivered_over_time`` (a function of the
+    seconds since the start, run in a thread): the seconds it waited."""
+    import threading
+    import types
+
+    from cosim.observers.live import LiveView
+
+    view = object.__new__(LiveView)
+    relay = types.SimpleNamespace(delivered=0)
+    view._relay = relay
+    done = threading.Event()
+    t0 = time.monotonic()
+
+    def pass_on():
+        while not done.is_set():
+            relay.delivered = delivered_over_time(time.monotonic() - t0)
+            done.wait(0.005)
+
+    thread = threading.Thread(target=pass_on)
+    thread.start()
+    try:
+        view._drain(due, t0 + end_in)
+        return time.monotonic() - t0, relay.delivered
+    finally:
+        done.set()
+        thread.join()
+
+
+def test_the_end_waits_for_what_the_server_still_holds_for_its_viewers():
+    """The server's stop sends its Close ahead of the messages its queues still hold (foxglove-sdk's poller), so the
+    run's end first waits until the relay has passed on every message due: here the last 20 of 501 come 0.3 s late."""
+    took, delivered = _draining(lambda s: 481 if s < 0.3 else 501, due=501)
+    assert delivered >= 501 and 0.3 <= took < 0.3 + 2.0, (took, delivered)
+
+
+def test_the_end_waits_no_longer_once_nothing_passes():
+    """Messages a viewer's lossy backlog dropped never come: the wait ends DRAIN_QUIET_S after the last one passed,
+    however many were due, and at the bound at the latest (a viewer reading slowly forever)."""
+    from cosim.observers.live import DRAIN_QUIET_S
+
+    took, _ = _draining(lambda s: min(int(s * 1000), 300), due=501)  # 300 by 0.3 s, then nothing
+    assert 0.3 + DRAIN_QUIET_S - 0.05 <= took < 0.3 + DRAIN_QUIET_S + 2.0, took
+    took, _ = _draining(lambda s: int(s * 100), due=10**9, end_in=1.0)  # always passing, never all
+    assert 1.0 <= took < 1.0 + 2.0, took
+    took, _ = _draining(lambda s: 0, due=0)
+    assert took < DRAIN_QUIET_S, took

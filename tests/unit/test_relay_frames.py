@@ -47,6 +47,29 @@ def test_boundaries_and_close_payloads_whatever_the_chunks(frames, masked, cuts)
     assert parser.at_boundary
 
 
+@settings(max_examples=60, deadline=None)
+@given(frames=st.lists(st.tuples(st.sampled_from([0x1, 0x2, 0x9]), st.sampled_from([0, 1, 13, 300, 70000]),
+                                 st.sampled_from([0x01, 0x02, 0x03])), min_size=1, max_size=8),
+       cuts=st.lists(st.integers(min_value=1, max_value=70), min_size=1, max_size=40))
+def test_message_data_frames_are_counted_whatever_the_chunks(frames, cuts):
+    """The server's frames (unmasked) as the relay sees them: it counts the binary frames whose first payload byte is
+    the Foxglove protocol's message-data op (0x01), not its time (0x02) or other binary ops, not text or ping frames,
+    however the bytes are cut (the first payload byte arriving alone in the next chunk included)."""
+    stream, expected = b"", 0
+    for opcode, size, op in frames:
+        size = min(size, 125) if opcode >= 0x8 else size
+        payload = (bytes([op]) + os.urandom(size - 1)) if size else b""
+        stream += _frame(opcode, payload, None)
+        expected += opcode == 0x2 and size > 0 and op == 0x01
+    parser, pos, i = _Frames(masked=False), 0, 0
+    while pos < len(stream):
+        size = cuts[i % len(cuts)] * (1 if i < 200 else 1000)
+        parser.feed(stream[pos:pos + size])
+        pos += size
+        i += 1
+    assert parser.messages == expected
+
+
 def test_a_close_claiming_a_huge_payload_keeps_at_most_125_bytes():
     """A viewer's Close frame whose header claims 2^40 bytes: the relay keeps at most a control frame's 125 bytes of
     it, however much follows, and still finds where it ends."""
