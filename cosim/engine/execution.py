@@ -683,7 +683,9 @@ class StopRequest:
     def interrupted(self) -> BaseException:
         return Interrupted(self.signum or signal.SIGINT)
 
-    def __exit__(self, *exc) -> None:
+    def __exit__(self, exc_type, exc, tb) -> None:
         for s, previous in self._previous.items():
             signal.signal(s, previous)
         self._previous.clear()
+        if exc_type is None and self.requested:  # a signal after the last step's check (or in an initialization
+            raise self.interrupted()  # that checks none) is honoured here, not dropped: the process still ends 128+N

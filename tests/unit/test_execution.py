@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 import signal
 
 import pytest
@@ -159,6 +160,27 @@ def test_a_stop_request_ends_the_run_between_macro_steps():
     with pytest.raises(Interrupted):
         ex.simulate_until(None, stop)
     assert ex.k_done == 1 and len(src.steps()) == 1
+
+
+def test_a_signal_no_step_boundary_saw_is_honoured_when_the_stop_context_ends():
+    """A signal after the last macro step's check (or during an initialization, which checks none) is not dropped:
+    leaving the stop context raises Interrupted with its signal; without a signal, or when the block already
+    failed, nothing is added."""
+    src = counter()
+    ex = execution([src], [], stop_ns=3 * STEP_NS)
+    ex.initialize()
+    with pytest.raises(Interrupted) as caught:
+        with StopRequest() as stop:
+            ex.simulate_until(None, stop)
+            os.kill(os.getpid(), signal.SIGTERM)  # the handler only sets the flag: the loop is over
+            assert stop.requested and ex.k_done == 3
+    assert caught.value.signum == signal.SIGTERM
+    with StopRequest():
+        pass
+    with pytest.raises(ValueError):
+        with StopRequest() as stop:
+            stop.request(signal.SIGINT)
+            raise ValueError("the block's own failure stays the error")
 
 
 def test_initialization_sets_start_values_and_propagates_outputs_in_order():
