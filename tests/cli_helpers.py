@@ -8,9 +8,11 @@ from the repository root with text-mode pipes and pass extra keyword arguments t
 
 from __future__ import annotations
 
+import os
 import socket
 import subprocess
 import sys
+import threading
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -23,9 +25,49 @@ def _command(args) -> list[str]:
     return [sys.executable, "-m", "cosim", *map(str, args)]
 
 
-def cosim(*args, timeout: float = TIMEOUT, cwd: Path = ROOT, **kw) -> subprocess.CompletedProcess:
-    """Run ``python -m cosim *args`` to the end; stdout and stderr captured as text."""
-    return subprocess.run(_command(args), cwd=cwd, capture_output=True, text=True, timeout=timeout, **kw)
+def cosim(*args, timeout: float = TIMEOUT, cwd: Path = ROOT, env: dict[str, str] | None = None,
+          **kw) -> subprocess.CompletedProcess:
+    """Run ``python -m cosim *args`` to the end; stdout and stderr captured as text. The command runs in a process
+    of its own forked by the worker's fork server (:mod:`forkserver`: the imports every command makes are made once)
+    when nothing it is given is read by an interpreter at start-up; otherwise, and with any other :mod:`subprocess`
+    option (``preexec_fn``, ``input``, ...), in a new interpreter."""
+    command = [str(a) for a in args]
+    kw = {k: v for k, v in kw.items() if v is not None}
+    if not kw and _forkable(env) and _SERVER_LOCK.acquire(blocking=False):
+        try:
+            return _server().run(command, str(cwd), dict(os.environ if env is None else env), timeout)
+        finally:
+            _SERVER_LOCK.release()
+    if os.environ.get("COSIM_TEST_FORKSERVER_TRACE"):  # why a command started an interpreter: for the suite's figures
+        with open(os.environ["COSIM_TEST_FORKSERVER_TRACE"], "a") as f:
+            f.write(f"{os.environ.get('PYTEST_CURRENT_TEST', '-')}\t{sorted(kw)}\t{_forkable(env)}\n")
+    return subprocess.run(_command(args), cwd=cwd, capture_output=True, text=True, timeout=timeout, env=env, **kw)
+
+
+_SERVER: list = []
+_SERVER_LOCK = threading.Lock()  # one command at a time through the server: a second thread's starts an interpreter
+
+
+def _forkable(env: dict[str, str] | None) -> bool:
+    """Whether ``env`` leaves every variable an interpreter reads at start-up as the fork server's."""
+    if env is None or os.environ.get("COSIM_TEST_FORKSERVER", "1") == "0":
+        return env is None and os.environ.get("COSIM_TEST_FORKSERVER", "1") != "0"
+    from forkserver import STARTUP_VARIABLES
+
+    names = {n for n in (*env, *os.environ) if n.startswith(STARTUP_VARIABLES)}
+    return all(env.get(n) == os.environ.get(n) for n in names)
+
+
+def _server():
+    if not _SERVER:
+        import atexit
+
+        from forkserver import Client
+
+        client = Client(str(ROOT))
+        atexit.register(client.close)
+        _SERVER.append(client)
+    return _SERVER[0]
 
 
 def start_cosim(*args, cwd: Path = ROOT, **kw) -> subprocess.Popen:
