@@ -17,6 +17,7 @@ import sys
 from pathlib import Path
 
 import pytest
+from cli_helpers import cosim
 
 pytestmark = pytest.mark.integration
 
@@ -104,8 +105,11 @@ def test_every_documented_command_works_as_written(page, workdir):
         if ">" in args:  # the shell's redirection of stdout into a file
             at = args.index(">")
             args, target = args[:at], args[at + 1]
-        r = subprocess.run(args, cwd=workdir, capture_output=True, text=True, timeout=TIMEOUT_S,
-                           stdin=subprocess.DEVNULL)
+        if args[1:3] == ["-m", "cosim"]:  # as tests/cli_helpers.py runs every command (stdin /dev/null)
+            r = cosim(*args[3:], cwd=workdir, timeout=TIMEOUT_S)
+        else:
+            r = subprocess.run(args, cwd=workdir, capture_output=True, text=True, timeout=TIMEOUT_S,
+                               stdin=subprocess.DEVNULL)
         if error is not None:  # the page shows the command failing: with that line
             assert r.returncode == 2 and r.stderr.strip() == error, f"{page.name}: `{command}` shows `{error}`, " \
                 f"gave exit {r.returncode}: {r.stderr[-500:]}"
