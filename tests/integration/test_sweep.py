@@ -9,6 +9,7 @@ import os
 import signal
 import subprocess
 import sys
+import time
 from functools import partial
 from pathlib import Path
 
@@ -61,12 +62,15 @@ class DaskCluster:
         return p
 
     def close(self) -> None:
+        """SIGTERM, then SIGKILL to what is left after 3 s in all: a worker whose peer was killed (or whose scheduler
+        ended first) spends its close waiting out connection timeouts, 15 s of the suite's teardown."""
         for p in reversed(self.procs):
             if p.poll() is None:
                 p.terminate()
+        deadline = time.monotonic() + 3.0
         for p in self.procs:
             try:
-                p.wait(15)
+                p.wait(max(0.0, deadline - time.monotonic()))
             except subprocess.TimeoutExpired:
                 p.kill()
                 p.wait()
