@@ -3,7 +3,9 @@
 ``cosim`` runs a command to completion, ``start_cosim`` starts one to watch or signal. Both run
 from the repository root with text-mode pipes and pass extra keyword arguments to
 :mod:`subprocess` (``env``, ``preexec_fn``, ...). Arguments may be paths: they are converted with
-``str``.
+``str``. ``cosim`` runs its command in a process forked by the worker's fork server (:mod:`forkserver`) when
+nothing it is given is read by an interpreter at start-up; ``COSIM_TEST_FORKSERVER=0`` starts a new interpreter
+for every command, as the suite did before.
 """
 
 from __future__ import annotations
@@ -50,8 +52,10 @@ _SERVER_LOCK = threading.Lock()  # one command at a time through the server: a s
 
 def _forkable(env: dict[str, str] | None) -> bool:
     """Whether ``env`` leaves every variable an interpreter reads at start-up as the fork server's."""
-    if env is None or os.environ.get("COSIM_TEST_FORKSERVER", "1") == "0":
-        return env is None and os.environ.get("COSIM_TEST_FORKSERVER", "1") != "0"
+    if os.environ.get("COSIM_TEST_FORKSERVER", "1") == "0":  # the whole suite on new interpreters, as before
+        return False
+    if env is None:
+        return True
     from forkserver import STARTUP_VARIABLES
 
     names = {n for n in (*env, *os.environ) if n.startswith(STARTUP_VARIABLES)}
