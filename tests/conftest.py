@@ -30,9 +30,10 @@ ROOT = Path(__file__).resolve().parents[1]
 def pytest_configure(config):
     """The project's modules compiled to bytecode once, by the controller, before any worker or test starts.
 
-    The suite starts 642 ``python -m cosim`` processes (counted in one run on 2026-11-29). Where Python writes no bytecode of its own
-    (``PYTHONDONTWRITEBYTECODE``, set on the CI machine) and the checkout is fresh, each of them compiled the ~200
-    modules it imports again from source: 0.15-0.3 s of a core per process (``import cosim.run`` 0.66-0.93 s
+    The suite's ``python -m cosim`` commands (642 in one run on 2026-11-29) start from interpreters: each worker's
+    fork server (tests/forkserver.py) and the commands that need a new one. Where Python writes no bytecode of its
+    own (``PYTHONDONTWRITEBYTECODE``, set on the CI machine) and the checkout is fresh, each of those compiled the
+    ~200 modules it imports again from source: 0.15-0.3 s of a core per process (``import cosim.run`` 0.66-0.93 s
     against 0.51-0.58 s compiled, on this 2-core machine). ``compileall`` writes the bytecode whatever that
     setting; a checkout it cannot write to is left as it is (the processes then compile, as before)."""
     if hasattr(config, "workerinput"):  # an xdist worker: the controller did it
