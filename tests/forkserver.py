@@ -31,10 +31,10 @@ STARTUP_VARIABLES = ("LANG", "LANGUAGE", "LC_", "PYTHON", "OPENBLAS", "OMP_", "M
 environment sets or changes one of them runs a new interpreter."""
 
 PRELOAD = ("numpy", "fmpy", "fmpy.fmi2", "fmpy.fmi3", "pydantic", "yaml", "lxml.etree", "cosim.cli", "cosim.run",
-           "cosim.engine.schema", "cosim.engine.overrides", "cosim.robot.preflight", "cosim.io.ssp.reader",
-           "cosim.io.ssp.writer", "cosim.io.runlog", "delta.trajectories", "fmus.registry", "mcap.reader")
-"""What the server imports once (a module missing here is imported by the command itself, as in a new
-interpreter)."""
+           "cosim.engine.schema", "cosim.engine.overrides", "cosim.robot.preflight", "cosim.io.ssp.read",
+           "cosim.io.ssp.write", "cosim.io.runlog", "delta.trajectories", "fmus.registry", "mcap.reader")
+"""What the server imports once (a module not listed is imported by the command itself, as in a new interpreter; a
+listed one that no longer exists stops the server)."""
 
 _MAX = 1 << 20  # bytes of one request
 
@@ -44,11 +44,8 @@ def _serve(sock: socket.socket) -> None:
     import runpy
     import tempfile
 
-    for name in PRELOAD:
-        try:
-            importlib.import_module(name)
-        except ImportError:
-            pass
+    for name in PRELOAD:  # a name gone stale ends the server, and the suite's first command says so
+        importlib.import_module(name)
     sys.stdout.flush()
     sys.stderr.flush()
     while True:
