@@ -316,19 +316,21 @@ class LiveView:
 
     def _drain(self, due: int, end: float) -> None:
         """Wait until the server has passed its viewers the ``due`` messages it was given for them (the relay counts
-        them), until :data:`DRAIN_QUIET_S` pass with none passed (what is left was dropped by a viewer's lossy
-        backlog, or the viewer stopped reading), or until ``end``: the server's stop sends its Close ahead of what
-        its queues still hold, so a viewer would lose the end of the run (the last 20 of 501 samples, seen on a
-        loaded machine)."""
+        them), until no viewer is connected any more, until :data:`DRAIN_QUIET_S` pass with none passed (what is
+        left was dropped by a viewer's lossy backlog, or the viewer stopped reading), or until ``end`` (a viewer that
+        reads, but slowly): the server's stop sends its Close ahead of what its queues still hold, so a viewer would
+        lose the end of the run (the last 20 of 501 samples, seen on a loaded machine)."""
         relay = self._relay
         if relay is None:
             return
         last, since = relay.delivered, time.monotonic()
-        while relay.delivered < due:
+        while relay.delivered < due and relay.connected():
             now = time.monotonic()
+            if now >= end:
+                return
             if relay.delivered != last:
                 last, since = relay.delivered, now
-            elif now - since >= DRAIN_QUIET_S or now >= end:
+            elif now - since >= DRAIN_QUIET_S:
                 return
             time.sleep(_POLL_S / 2)
 
@@ -338,11 +340,12 @@ class LiveView:
         :data:`STOP_TIMEOUT` at most in all (the server's stop in a thread of its own, left behind when a viewer
         never reads again: the process still ends)."""
 
-        end = time.monotonic() + STOP_TIMEOUT
-        self._drain(due, end)
+        start = time.monotonic()
+        end = start + STOP_TIMEOUT
+        self._drain(due, start + STOP_TIMEOUT / 2)  # half of the end's time at most: the stop keeps the other half
         stopper = threading.Thread(target=server.stop, name="live-view-stop", daemon=True)
         stopper.start()
-        stopper.join(STOP_TIMEOUT)
+        stopper.join(max(0.0, end - time.monotonic()))
         dropped = stopper.is_alive()
         if self._relay is not None:  # the viewers' connections: what they were given written, then closed
             relay, self._relay = self._relay, None

@@ -310,6 +310,10 @@ class Relay:
         self._loop: asyncio.AbstractEventLoop | None = None
         self._thread: threading.Thread | None = None
 
+    def connected(self) -> int:
+        """How many viewers' connections are open (from any thread: the set is copied under the GIL)."""
+        return sum(1 for pair in list(self.pairs) if not pair.done)
+
     def start(self, upstream: tuple[str, int]) -> None:
         import asyncio  # lazy: loaded when a live view starts, not by every run (0.04 s)
 

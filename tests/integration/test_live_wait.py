@@ -161,16 +161,16 @@ def test_the_bound_holds_against_a_viewer_that_subscribes_again_and_again():
     assert 0.5 <= took < 5.0 and view.viewed, (took, view.viewed)
 
 
-def _draining(delivered_over_time, due, end_in=5.0):
+def _draining(delivered_over_time, due, end_in=5.0, connected=1):
     """LiveView._drain against a relay whose ``delivered`` count follows ``delivered_over_time`` (a function of the
-    seconds since the start, run in a thread): the seconds it waited."""
+    seconds since the start, run in a thread), with ``connected`` viewers: the seconds it waited."""
     import threading
     import types
 
     from cosim.observers.live import LiveView
 
     view = object.__new__(LiveView)
-    relay = types.SimpleNamespace(delivered=0)
+    relay = types.SimpleNamespace(delivered=0, connected=lambda: connected)
     view._relay = relay
     done = threading.Event()
     t0 = time.monotonic()
@@ -204,7 +204,9 @@ def test_the_end_waits_no_longer_once_nothing_passes():
 
     took, _ = _draining(lambda s: min(int(s * 1000), 300), due=501)  # 300 by 0.3 s, then nothing
     assert 0.3 + DRAIN_QUIET_S - 0.05 <= took < 0.3 + DRAIN_QUIET_S + 2.0, took
-    took, _ = _draining(lambda s: int(s * 100), due=10**9, end_in=1.0)  # always passing, never all
+    took, _ = _draining(lambda s: int(s * 1000), due=10**9, end_in=1.0)  # always passing, never all
     assert 1.0 <= took < 1.0 + 2.0, took
+    took, _ = _draining(lambda s: 0, due=501, connected=0)  # the viewers have gone: nothing more can pass
+    assert took < DRAIN_QUIET_S, took
     took, _ = _draining(lambda s: 0, due=0)
     assert took < DRAIN_QUIET_S, took
