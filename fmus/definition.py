@@ -38,7 +38,8 @@ class FmuDefinition:
     ``classes()`` returns ``(adapter, native)``, the classes themselves, imported on the first call:
     :attr:`adapter` (the python build, and the interface of both builds) and :attr:`native` (the native model
     class, or None: ``has_native`` says which without importing them); ``kind`` is the robot kind given to both
-    (None for robot-independent components); ``packages`` are the project packages bundled (under a unique name) with the python build;
+    (None for robot-independent components); ``packages`` are the project packages bundled (under a unique name)
+    with the python build;
     ``fmi`` is the python build's FMI version: 2 (co-simulation, pythonfmu) or 3 (model exchange, pythonfmu3);
     ``requires`` are further modules that must be importable for the adapter to run (those it imports lazily,
     such as ``multibody.plant``).

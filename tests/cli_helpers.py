@@ -40,9 +40,6 @@ def cosim(*args, timeout: float = TIMEOUT, cwd: Path = ROOT, env: dict[str, str]
             return _server().run(command, str(cwd), dict(os.environ if env is None else env), timeout)
         finally:
             _SERVER_LOCK.release()
-    if os.environ.get("COSIM_TEST_FORKSERVER_TRACE"):  # why a command started an interpreter: for the suite's figures
-        with open(os.environ["COSIM_TEST_FORKSERVER_TRACE"], "a") as f:
-            f.write(f"{os.environ.get('PYTEST_CURRENT_TEST', '-')}\t{sorted(kw)}\t{_forkable(env)}\n")
     return subprocess.run(_command(args), cwd=cwd, capture_output=True, text=True, timeout=timeout, env=env, **kw)
 
 

@@ -7,8 +7,9 @@ What the command sees is what ``python -m cosim ARGS`` started by :func:`subproc
 executed as ``__main__`` (:func:`runpy.run_module`), ``sys.argv``, the environment, the working folder, standard input
 from /dev/null, standard output and error on pipes the caller reads to their end (a process the command leaves
 behind holding them is waited for, as with :mod:`subprocess`), the exit status (a signal's included), and a timeout
-that kills it. What differs is only what an interpreter decides when it starts (``sys.orig_argv`` is set as it would be): the locale and the standard streams'
-encoding, UTF-8 mode, ``sys.flags``, the modules already loaded. :func:`cli_helpers.cosim` therefore sends a command
+that kills it (``sys.orig_argv`` too is set as a new interpreter's would be). What differs is only what an
+interpreter decides when it starts: the locale and the standard streams' encoding, UTF-8 mode, ``sys.flags``, the
+modules already loaded. :func:`cli_helpers.cosim` therefore sends a command
 here only when its environment changes none of the variables read at start-up (:data:`STARTUP_VARIABLES`) and no
 ``preexec_fn`` or other :mod:`subprocess` option is given; every other command, and every test of start-up itself
 (``--help``'s imports, locale, signals, lazy imports), runs a new interpreter as before.
@@ -104,8 +105,8 @@ class Client:
         import subprocess
 
         ours, theirs = socket.socketpair(socket.AF_UNIX, socket.SOCK_STREAM)
-        self.proc = subprocess.Popen([sys.executable, __file__, str(theirs.fileno())], cwd=root, pass_fds=[theirs.fileno()],
-                                     stdin=subprocess.DEVNULL)
+        self.proc = subprocess.Popen([sys.executable, __file__, str(theirs.fileno())], cwd=root,
+                                     pass_fds=[theirs.fileno()], stdin=subprocess.DEVNULL)
         theirs.close()
         self.sock = ours
 

@@ -6,19 +6,18 @@ from __future__ import annotations
 
 import os
 import subprocess
-import sys
 
 import pytest
-from cli_helpers import ROOT, cosim
+from cli_helpers import ROOT, _command, cosim
 
 pytestmark = pytest.mark.integration
 
 SCENARIO = ROOT / "scenarios" / "helix_ctc_analytic.yaml"
 
 
-def _fresh(*args, cwd=ROOT, env=None):
-    return subprocess.run([sys.executable, "-m", "cosim", *map(str, args)], cwd=cwd, env=env, capture_output=True,
-                          text=True, timeout=120)
+def _fresh(*args):
+    """The command in a new interpreter, as ``cli_helpers.cosim`` runs one that is not forked."""
+    return subprocess.run(_command(args), cwd=ROOT, capture_output=True, text=True, timeout=120)
 
 
 @pytest.mark.parametrize("args", [
