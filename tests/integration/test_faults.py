@@ -508,13 +508,8 @@ def test_recover_missing_and_not_mcap(tmp_path):
 
 def test_compare_same_verdict_either_order_and_bad_inputs(scen, tmp_path):
     fine, coarse = tmp_path / "fine.mcap", tmp_path / "coarse.mcap"
-    # the two logs compared (this test is about compare, not run): both runs in one process, as `run SCENARIO --out
-    # fine.mcap` and `run SCENARIO --out coarse.mcap --step 0.05` make them, one interpreter start instead of two
-    made = subprocess.run([sys.executable, "-c", "import sys; from cosim import api; "
-                           "api.run(sys.argv[1], log=True, out=sys.argv[2]); "
-                           "api.run(sys.argv[1], {'time.step': 0.05}, log=True, out=sys.argv[3])",
-                           str(scen(SMALL)), str(fine), str(coarse)], capture_output=True, text=True, timeout=120)
-    assert made.returncode == 0 and fine.exists() and coarse.exists(), made.stderr
+    assert cosim("run", scen(SMALL), "--out", fine, "--quiet").returncode == 0
+    assert cosim("run", scen(SMALL), "--out", coarse, "--quiet", "--step", "0.05").returncode == 0
     ab = cosim("compare", fine, coarse, "--tol", "g.y=1e-12", "--json")
     ba = cosim("compare", coarse, fine, "--tol", "g.y=1e-12", "--json")
     assert ab.returncode == ba.returncode == 0, (ab.stdout, ba.stdout)
