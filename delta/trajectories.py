@@ -251,16 +251,7 @@ class _Segments(Trajectory):
         the float path leaves out) evaluates to its start point at rest."""
         t1s, where = self._t1_list, xp.where
         if xp.symbolic:
-            k = sum(t1 < t for t1 in t1s)
-            last = len(t1s) - 1
-            rows = self._rows
-            t0, t1, p0, d = rows[last]
-            for i in range(last - 1, -1, -1):  # the row k (rows past the last: the last)
-                r0, r1, q0, e = rows[i]
-                pick = k == i
-                t0, t1 = where(pick, r0, t0), where(pick, r1, t1)
-                p0 = tuple(where(pick, a, b) for a, b in zip(q0, p0))
-                d = tuple(where(pick, a, b) for a, b in zip(e, d))
+            t0, t1, p0, d = self._symbolic_segment(t, xp)
         else:
             t = float(t)
             k = bisect_left(t1s, t)  # np.searchsorted(side="left")
@@ -281,6 +272,23 @@ class _Segments(Trajectory):
             moving = xp.both(t0 < t, t < t1)
             v, a = tuple(where(moving, x, 0.0) for x in v), tuple(where(moving, x, 0.0) for x in a)
         return p, v, a
+
+    def _symbolic_segment(self, t, xp):  # noqa: ANN001, ANN202
+        """On symbols: ``(t0, t1, p0, p1 - p0)`` of the segment at ``t``, chosen by ``where`` over every knot."""
+        return _select(self._rows, sum(t1 < t for t1 in self._t1_list), xp.where)
+
+
+def _select(rows: list, k, where) -> tuple:  # noqa: ANN001
+    """On symbols: the row ``k`` of ``rows`` (``(t0, t1, p0, d)``; past the last: the last), by ``where``."""
+    last = len(rows) - 1
+    t0, t1, p0, d = rows[last]
+    for i in range(last - 1, -1, -1):
+        r0, r1, q0, e = rows[i]
+        pick = k == i
+        t0, t1 = where(pick, r0, t0), where(pick, r1, t1)
+        p0 = tuple(where(pick, a, b) for a, b in zip(q0, p0))
+        d = tuple(where(pick, a, b) for a, b in zip(e, d))
+    return t0, t1, p0, d
 
 
 @dataclass(frozen=True)
@@ -353,6 +361,14 @@ def instance_like(obj, **changes):  # noqa: ANN001, ANN201
     new.__dict__.update(obj.__dict__)
     new.__dict__.update(changes)
     return new
+
+
+def _starts(moves: list) -> list:
+    """The start times of consecutive moves of durations ``moves`` from 0."""
+    starts = [0.0]
+    for m in moves[:-1]:
+        starts.append(starts[-1] + m)
+    return starts
 
 
 def _legs_with_dwell(points: np.ndarray, starts: list[float], moves: list[float], dwell: float, xp=SCALAR
@@ -480,37 +496,45 @@ class PickAndPlace(_Segments):
     def knots(self, xp=SCALAR) -> list:  # noqa: ANN001
         """(t0, t1, p0, p1) of each segment, cycle after cycle.
 
-        On symbols (``fmus.native``) ``cycles`` is a symbol too: the knots of :data:`NATIVE_MAX_CYCLES` cycles
-        are traced, those of cycles beyond ``cycles`` replaced by a rest at the final point from the start
-        of that cycle on (which is what the float path gives after the end), and ``direction`` is made a
-        unit vector here (the float path does it when the trajectory is made)."""
+        On symbols (``fmus.native``) ``cycles`` is a symbol too, checked here, and the knots are those of the first
+        cycle: the cycle under way is found when the trajectory is evaluated (:meth:`_symbolic_segment`)."""
         if not xp.symbolic:
             pts, moves = self._cycle_plan()
-            starts = [0.0]
-            for m in moves[:-1]:
-                starts.append(starts[-1] + m)
+            starts = _starts(moves)
             knots = []
             for c in range(self.cycles):
                 knots += _legs_with_dwell(pts, [t + c * self.cycle_time for t in starts], moves, 0.0)
             return knots
         xp.check(xp.both(self.cycles >= 1, self.cycles <= NATIVE_MAX_CYCLES),
                  f"cycle.count must be a whole number from 1 to {NATIVE_MAX_CYCLES} in the native build")
-        plan = instance_like(self, direction=_unit2(self.direction, xp))
-        pts, moves = plan._cycle_plan(xp)
-        starts = [0.0]
-        for m in moves[:-1]:
-            starts.append(starts[-1] + m)
+        pts, moves = self._unit_plan(xp)
+        return _legs_with_dwell(pts, _starts(moves), moves, 0.0, xp)
+
+    def _unit_plan(self, xp):  # noqa: ANN001, ANN202
+        """On symbols: :meth:`_cycle_plan` with ``direction`` made a unit vector (the float path does it when the
+        trajectory is made)."""
+        return instance_like(self, direction=_unit2(self.direction, xp))._cycle_plan(xp)
+
+    def _symbolic_segment(self, t, xp):  # noqa: ANN001, ANN202
+        """On symbols: the segment at ``t`` among the knots of :data:`NATIVE_MAX_CYCLES` cycles, those of the cycles
+        beyond ``cycles`` replaced by a rest at the final point from the start of that cycle on (which is what the
+        float path gives after the end), without tracing every knot: the knots' ends rise, so the cycles whose last
+        move ended before ``t`` are counted first (``done``), then the segments of cycle ``done``, whose knots are
+        computed for that index as the float path computes those of each cycle (the same roundings)."""
+        pts, moves = self._unit_plan(xp)
+        starts, ct = _starts(moves), self.cycle_time
+        done = 0
+        for c in range(NATIVE_MAX_CYCLES):
+            done = done + xp.both(c < self.cycles, (starts[-1] + c * ct) + moves[-1] < t)
+        rows = [(t0, t1, tuple(p0), tuple(b - a for a, b in zip(p0, p1)))
+                for t0, t1, p0, p1 in _legs_with_dwell(pts, [s + done * ct for s in starts], moves, 0.0, xp)]
+        t0, t1, p0, d = _select(rows, sum(t1 < t for _, t1, _, _ in rows), xp.where)
         _, _, last0, last1 = _legs_with_dwell(pts, starts, moves, 0.0, xp)[-1]
         end = tuple(a + (b - a) for a, b in zip(last0, last1))  # where the last move ends (its tau = 1)
-        knots = []
-        for c in range(NATIVE_MAX_CYCLES):  # as the float path, cycle by cycle (the same roundings)
-            active = c < self.cycles
-            rest = (c * self.cycle_time, math.inf, end, end)
-            for knot in _legs_with_dwell(pts, [t + c * self.cycle_time for t in starts], moves, 0.0, xp):
-                knots.append(tuple(xp.where(active, x, y) if not isinstance(x, tuple) else
-                                   tuple(xp.where(active, u, w) for u, w in zip(x, y))
-                                   for x, y in zip(knot, rest)))
-        return knots
+        finished, where = done >= self.cycles, xp.where
+        return (where(finished, done * ct, t0), where(finished, math.inf, t1),
+                tuple(where(finished, e, x) for e, x in zip(end, p0)),
+                tuple(where(finished, 0.0, x) for x in d))
 
     def _cycle_plan(self, xp=SCALAR) -> tuple[list[tuple], list]:  # noqa: ANN001
         """The seven stops of one cycle and the time of each move (proportional to sqrt(distance))."""

@@ -10,8 +10,9 @@ For an FMU's definition (:class:`fmus.definition.FmuDefinition`) that has a nati
    function sets, which of its checks are errors) and the FMI glue written once (``c/runtime.c`` and ``c/state.c``,
    ``c/fmi2Functions.c`` or ``c/fmi3Functions.c``) makes the FMU;
 4. the sources go into ``sources/`` (FMI 2 ``SourceFiles``, FMI 3 ``buildDescription.xml``) with the FMI
-   headers, so a tool on another platform can compile them; a binary for this platform is compiled
-   with the system C compiler (``$CC``, default ``cc``).
+   headers, so a tool on another platform can compile them; a binary for this platform is linked from parts
+   compiled with the system C compiler (``$CC``, default ``cc``): the FMU's generated model, compiled once for both
+   FMI versions, and the FMI version's glue, compiled once for every FMU (:mod:`fmus.native.parts`).
 
 Generated code is built into the cache, never committed. The cache key hashes every source that goes
 into a native FMU (the ``delta`` formulas, the adapters that declare the interface and the layer they declare
@@ -23,7 +24,6 @@ from __future__ import annotations
 import hashlib
 import os
 import shutil
-import subprocess
 import zipfile
 from functools import lru_cache
 from pathlib import Path
@@ -32,16 +32,15 @@ from ..builder import built, cache_folder, cached, deliver, install, scratch, us
 from ..definition import FmuDefinition
 from .errors import CompilerMissingError, NativeError
 from .interface import model_description
+from .parts import glue_sources, link
 
 __all__ = ["build_native", "compiler", "fingerprint", "FMI_VERSIONS"]
 
 FMI_VERSIONS = (2, 3)
 _HERE = Path(__file__).resolve().parent
 _ROOT = _HERE.parent.parent
-_GLUE = {2: ("runtime.c", "state.c", "fmi2Functions.c"), 3: ("runtime.c", "state.c", "fmi3Functions.c")}
 _HEADERS = {2: ("fmi2Functions.h", "fmi2FunctionTypes.h", "fmi2TypesPlatform.h"),
             3: ("fmi3Functions.h", "fmi3FunctionTypes.h", "fmi3PlatformTypes.h")}
-CFLAGS = ("-std=c99", "-O2", "-fPIC", "-shared", "-Wall", "-Wextra")
 _FMUS = ("__init__.py", "_names.py", "export2.py", "export3.py", "definition.py", "registry.py")
 """The modules of :mod:`fmus` a native FMU is made from (besides the adapters and this package)."""
 
@@ -89,16 +88,6 @@ def _build_description(sources: list[str]) -> bytes:
             f'    </SourceFileSet>\n  </BuildConfiguration>\n</fmiBuildDescription>\n').encode()
 
 
-def _compile(cc: str, src: Path, sources: list[str], target: Path, name: str) -> None:
-    target.parent.mkdir(parents=True, exist_ok=True)
-    cmd = [cc, *CFLAGS, "-Wno-unused-parameter", "-I", str(src), *(str(src / s) for s in sources),
-           "-o", str(target), "-lm"]
-    proc = subprocess.run(cmd, capture_output=True, text=True)
-    if proc.returncode != 0:
-        text = (proc.stderr or proc.stdout).strip().splitlines()
-        raise NativeError(f"compiling native FMU {name} failed ({cc}): " + " | ".join(text[:6]))
-
-
 def build_native(fmu: FmuDefinition, fmi: int = 2, out_dir: str | Path | None = None, *, force: bool = False) -> Path:
     """Build (or reuse from the cache) the native build of the FMU ``fmu`` defines, for FMI ``fmi`` (2 or 3); return
     its path.
@@ -116,12 +105,14 @@ def build_native(fmu: FmuDefinition, fmi: int = 2, out_dir: str | Path | None = 
     cc = compiler()
     out = cache_folder(user_cache() / "native" / f"fmi{fmi}")
     digest = fingerprint()
-    target = built(out, name, digest, f"native, FMI {fmi}", lambda: _build(fmu, fmi, cc, out, digest), force=force)
+    target = built(out, name, digest, f"native, FMI {fmi}", lambda: _build(fmu, fmi, cc, out, digest, force),
+                   force=force)
     return deliver(target, None if out_dir is None else Path(out_dir) / "native" / f"fmi{fmi}", name)
 
 
-def _build(fmu: FmuDefinition, fmi: int, cc: str, out: Path, digest: str) -> Path:
-    """Generate, compile, load once and cache the native FMU as :func:`fmus.builder.cached` names it."""
+def _build(fmu: FmuDefinition, fmi: int, cc: str, out: Path, digest: str, force: bool) -> Path:
+    """Generate, compile (``force``: every part again), load once and cache the native FMU as
+    :func:`fmus.builder.cached` names it."""
     name = fmu.name
     own = hashlib.sha256((digest + name).encode()).hexdigest()
     token = "{" + f"{own[:8]}-{own[8:12]}-{own[12:16]}-{own[16:20]}-{own[20:32]}" + "}"
@@ -130,19 +121,20 @@ def _build(fmu: FmuDefinition, fmi: int, cc: str, out: Path, digest: str) -> Pat
         src = root / "sources"
         src.mkdir(parents=True)
         from .generate import generate  # lazy: CasADi and the models, which a cached build does not load
+        from .interface import interface
 
-        itf, generated = generate(fmu, src, token)
-        for f in ("model.h", "runtime.h", *_GLUE[fmi]):
+        for f in ("model.h", "runtime.h", *glue_sources(fmi)):
             shutil.copy2(_HERE / "c" / f, src / f)
         for f in _HEADERS[fmi]:
             shutil.copy2(_fmi_headers() / f, src / f)
-        sources = [*generated, *_GLUE[fmi]]
-        (root / "modelDescription.xml").write_bytes(model_description(itf, fmi, token, sources))
+        binary = root / "binaries" / ("linux64" if fmi == 2 else "x86_64-linux") / f"{name}.so"
+        generated = link(cc, digest, name, fmi, src, binary, lambda folder: generate(fmu, folder, token),
+                         lambda lib: _loads(lib, name, cc), force=force)
+        sources = [*generated, *glue_sources(fmi)]
+        (root / "modelDescription.xml").write_bytes(model_description(interface(name, fmu.native_model()), fmi,
+                                                                      token, sources))
         if fmi == 3:
             (src / "buildDescription.xml").write_bytes(_build_description(sources).replace(b"{id}", name.encode()))
-        binary = root / "binaries" / ("linux64" if fmi == 2 else "x86_64-linux") / f"{name}.so"
-        _compile(cc, src, sources, binary, name)
-        _loads(binary, name, cc)
 
         def write(partial: Path) -> None:
             with zipfile.ZipFile(partial, "w", zipfile.ZIP_DEFLATED) as zf:

@@ -94,6 +94,8 @@ SEGMENTED = [
     ("point_to_point", {"move.t0": 0.4, "move.profile": "cubic", "move.end.y": -0.08}),
     ("pick_place", {}),
     ("pick_place", {"cycle.count": 3, "cycle.profile": "cubic", "cycle.direction.x": 0.3, "cycle.direction.y": -0.7}),
+    ("pick_place", {"cycle.count": 16, "cycle.time": 0.3}),  # every cycle the native code holds, and after them
+    ("pick_place", {"cycle.count": 15, "cycle.time": 0.3}),  # the rest after the last cycle, one before the most
     ("waypoints", {}),
     ("waypoints", {"waypoints.dwell": 0.0, "waypoints.segment_time": 0.6}),
 ]
