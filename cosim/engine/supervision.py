@@ -26,11 +26,12 @@ import os
 import pickle
 import select
 import signal
+import sys
 import time
 from typing import Any, Callable
 
 from .. import procs
-from ..errors import STOP_SIGNALS, printable
+from ..errors import STOP_SIGNALS, Interrupted, exit_status, exit_text, printable
 
 __all__ = ["Record", "supervise", "contained", "record", "finished", "command_pid", "ENABLED", "MASTER", "PHASES",
            "WAITING"]
@@ -220,7 +221,12 @@ def _wait(child: procs.Child, rec: Record, on_crash: Callable[[Record, str], int
         status, reason = _watch(child, rec, stopped_at)
         if reason is None and rec.current[4] == 1.0:  # ended through our exit: its code is the command's
             _leftovers(pid)
-            return os.waitstatus_to_exitcode(status)
+            code = os.waitstatus_to_exitcode(status)
+            if first and code == 0:  # a stop signal the child got (or missed) as it ended, after its last look:
+                # honoured as by a process without a supervisor, which the signal ends with 128 + N at any time
+                print(exit_text(*exit_status(Interrupted(first[0]))[:2]), file=sys.stderr)
+                return 128 + first[0]
+            return code
         for s in STOP_SIGNALS:  # a stop now must not cut the crash's handling short (report, writer, recovery)
             signal.signal(s, remember)
         code = on_crash(rec, reason or _death(pid, status, rec))

@@ -233,3 +233,30 @@ def test_a_stopped_log_writer_is_named_and_what_it_received_is_kept(write_scenar
     assert len(lines) == 2 and str(out) in lines[1], stderr
     assert len(read_run(out).signal("g.y").t) > 1000, "what the writer had received was lost"
     assert sorted(p.name for p in out.parent.iterdir()) == [out.name]
+
+
+_LATE_STOP = """
+import os, signal, sys, time
+from cosim.engine import supervision
+from cosim.errors import exit_now
+supervision.ENABLED = True
+code = supervision.supervise(lambda record, reason: 3)
+if code is not None:  # the supervisor: the command's exit code
+    sys.exit(code)
+signal.signal(signal.SIG_NAME, signal.SIG_IGN)  # the child past its last look at signals, as in its exit
+os.kill(supervision.command_pid(), signal.SIG_NAME)  # the user's stop reaches the supervisor, which forwards it
+time.sleep(0.5)
+supervision.finished()
+exit_now(0)  # the work done: its own exit code says nothing of the stop
+"""
+
+
+@pytest.mark.parametrize("sig, code", [("SIGINT", 130), ("SIGTERM", 143)])
+def test_a_stop_signal_as_the_command_ends_is_honoured(sig, code):
+    """A stop signal the supervisor forwarded to a child that then ended with 0 (it got the signal after its last
+    look, in its exit): the command ends 128 + N and says so, as a process without a supervisor, which that signal
+    ends at any time (it ended 0: a signal at the end of a run with a stalled viewer was dropped under load)."""
+    r = subprocess.run([sys.executable, "-c", _LATE_STOP.replace("SIG_NAME", sig)], capture_output=True, text=True,
+                       timeout=60)
+    assert r.returncode == code, (r.returncode, r.stderr)
+    assert r.stderr.strip().splitlines()[-1] == f"interrupted ({sig})", r.stderr
