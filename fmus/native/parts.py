@@ -25,7 +25,7 @@ import tempfile
 from pathlib import Path
 from typing import Callable
 
-from ..builder import KEEP, cache_folder, user_cache
+from ..builder import CACHE_ENV, KEEP, BuildError, cache_folder, user_cache
 from .errors import NativeError
 
 __all__ = ["CFLAGS", "link"]
@@ -110,7 +110,11 @@ def _make(home: Path, cc: str, write: Callable[[Path], object], src: Path, name:
     """A new part in a folder of this process's own in ``home``: its sources written by ``write``, compiled into
     ``objects/`` (the files at once, each its own compiler process), with the headers of ``src``."""
     _sweep(home)
-    folder = Path(tempfile.mkdtemp(prefix=f"{_PARTIAL}{os.getpid()}-", dir=home))
+    try:
+        folder = Path(tempfile.mkdtemp(prefix=f"{_PARTIAL}{os.getpid()}-", dir=home))
+    except OSError as exc:
+        raise BuildError(f"cannot build native FMU {name} in {home}: {exc.strerror or exc} (the cache must be a "
+                         f"folder this user can write; name another with {CACHE_ENV}=FOLDER)") from None
     try:
         write(folder)
         sources = sorted(p.name for p in folder.glob("*.c"))
