@@ -26,6 +26,8 @@ settings.load_profile("default")
 
 ROOT = Path(__file__).resolve().parents[1]
 
+pytest_plugins = ["stall_guard"]  # a stalled xdist run stops, naming its last test (tests/stall_guard.py)
+
 
 def pytest_configure(config):
     """The project's modules compiled to bytecode once, by the controller, before any worker or test starts.

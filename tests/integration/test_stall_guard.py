@@ -1,0 +1,35 @@
+"""tests/stall_guard.py stops an xdist run in which no test has reported for its bound, naming the last test."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+TESTS = Path(__file__).resolve().parents[1]
+
+
+def _run(tmp_path, body: str, stall_s: float):
+    (tmp_path / "test_subject.py").write_text(body)
+    env = {**os.environ, "PYTHONPATH": str(TESTS), "COSIM_TEST_STALL_S": str(stall_s)}
+    env.pop("PYTEST_ADDOPTS", None)
+    t0 = time.monotonic()
+    r = subprocess.run([sys.executable, "-m", "pytest", "-q", "-n", "1", "-p", "stall_guard", "-p", "no:randomly",
+                        "-p", "no:cacheprovider", "test_subject.py"], cwd=tmp_path, env=env, capture_output=True,
+                       text=True, timeout=120)
+    return r, time.monotonic() - t0
+
+
+def test_a_run_with_no_report_for_the_bound_is_stopped_naming_the_last_test(tmp_path):
+    r, wall = _run(tmp_path, "import time\n\ndef test_first():\n    pass\n\ndef test_hangs():\n    time.sleep(60)\n", 3)
+    assert r.returncode == 3, (r.returncode, r.stdout, r.stderr)
+    assert "suite stalled: no test reported for" in r.stderr and "test_subject.py::test_hangs" in r.stderr, r.stderr
+    assert wall < 50, f"{wall:.0f} s to stop a run stalled for 3 s"
+
+
+def test_a_run_that_reports_is_left_alone(tmp_path):
+    body = "import time, pytest\n\n@pytest.mark.parametrize('i', range(4))\ndef test_steady(i):\n    time.sleep(1)\n"
+    r, _ = _run(tmp_path, body, 3)
+    assert r.returncode == 0 and "4 passed" in r.stdout, (r.returncode, r.stdout, r.stderr)
