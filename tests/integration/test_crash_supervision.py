@@ -239,12 +239,24 @@ _LATE_STOP = """
 import os, signal, sys, time
 from cosim.engine import supervision
 from cosim.errors import exit_now
+
+
+def caught(pid, signum):  # whether process pid has a handler for signum (its SigCgt mask)
+    with open(f"/proc/{pid}/status") as f:
+        mask = next(int(line.split()[1], 16) for line in f if line.startswith("SigCgt:"))
+    return bool(mask >> (signum - 1) & 1)
+
+
 supervision.ENABLED = True
+signal.signal(signal.SIG_NAME, signal.SIG_DFL)  # no handler until the supervisor's own (which the child waits for)
 code = supervision.supervise(lambda record, reason: 3)
 if code is not None:  # the supervisor: the command's exit code
     sys.exit(code)
 signal.signal(signal.SIG_NAME, signal.SIG_IGN)  # the child past its last look at signals, as in its exit
-os.kill(supervision.command_pid(), signal.SIG_NAME)  # the user's stop reaches the supervisor, which forwards it
+supervisor, deadline = supervision.command_pid(), time.monotonic() + 30
+while not caught(supervisor, signal.SIG_NAME) and time.monotonic() < deadline:
+    time.sleep(0.01)  # the supervisor installs its forwarding handler once the fork returned
+os.kill(supervisor, signal.SIG_NAME)  # the user's stop reaches the supervisor, which forwards it
 time.sleep(0.5)
 supervision.finished()
 exit_now(0)  # the work done: its own exit code says nothing of the stop
