@@ -58,7 +58,7 @@ def link(cc: str, digest: str, name: str, fmi: int, src: Path, binary: Path, gen
         try:
             folders = {}
             for key, write in parts.items():
-                if not fresh and (home / key / "objects").is_dir():
+                if not fresh and _complete(home / key):
                     folders[key] = home / key
                 else:
                     made[key] = folders[key] = _make(home, cc, write, src, name)
@@ -77,7 +77,7 @@ def link(cc: str, digest: str, name: str, fmi: int, src: Path, binary: Path, gen
             for f in generated:
                 shutil.copy2(model / f, src / f)
             for key, folder in made.items():
-                _publish(folder, home / key, replace=fresh)
+                _publish(folder, home / key, replace=fresh or not _complete(home / key))
             if made:
                 _prune(home.parent, home)
             return [f for f in generated if f.endswith(".c")]
@@ -85,6 +85,17 @@ def link(cc: str, digest: str, name: str, fmi: int, src: Path, binary: Path, gen
             for folder in made.values():
                 shutil.rmtree(folder, ignore_errors=True)
     raise NativeError(f"native FMU {name}: its library did not link or load from parts compiled now")
+
+
+def _complete(part: Path) -> bool:
+    """Whether the cached ``part`` holds C sources, each with its object: one that lost a file (a source the FMU
+    would ship without, an object the link would miss) is compiled again, not used."""
+    try:
+        sources = {p.stem for p in part.glob("*.c")}
+        objects = {p.stem for p in (part / "objects").glob("*.o")}
+    except OSError:
+        return False
+    return bool(sources) and sources == objects
 
 
 def _copy(src: Path, names: tuple[str, ...], folder: Path) -> list[str]:

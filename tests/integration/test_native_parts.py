@@ -105,3 +105,15 @@ def test_force_compiles_every_part_again(tmp_path, cache, monkeypatch):
     assert _compiled(log) == sorted(first * 2), log.read_text()
     assert len(simulate_fmu(str(path), stop_time=0.01, output_interval=0.005)) == 3
     assert not list((cache / "native" / "parts").rglob(".partial-*"))
+
+
+def test_a_cached_part_that_lost_a_file_is_compiled_again(tmp_path, cache):
+    """A model part without one of its sources would have linked (its objects are there) and shipped an FMU without
+    that source: it is compiled again, and the FMU carries every source."""
+    registry.build("helix", None, native=True, fmi=2)
+    model = next((cache / "native" / "parts").glob("*/models/helix"))
+    (model / "model_functions.c").unlink()
+    path = registry.build("helix", None, native=True, fmi=3)
+    with zipfile.ZipFile(path) as zf:
+        assert "sources/model_functions.c" in zf.namelist(), zf.namelist()
+    assert (model / "model_functions.c").is_file()
