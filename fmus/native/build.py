@@ -31,7 +31,7 @@ from pathlib import Path
 from ..builder import built, cache_folder, cached, deliver, install, scratch, user_cache
 from ..definition import FmuDefinition
 from .errors import CompilerMissingError, NativeError
-from .interface import model_description
+from .interface import interface, model_description
 from .parts import glue_sources, link
 
 __all__ = ["build_native", "compiler", "fingerprint", "FMI_VERSIONS"]
@@ -121,7 +121,6 @@ def _build(fmu: FmuDefinition, fmi: int, cc: str, out: Path, digest: str, force:
         src = root / "sources"
         src.mkdir(parents=True)
         from .generate import generate  # lazy: CasADi and the models, which a cached build does not load
-        from .interface import interface
 
         for f in ("model.h", "runtime.h", *glue_sources(fmi)):
             shutil.copy2(_HERE / "c" / f, src / f)
