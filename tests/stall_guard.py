@@ -14,6 +14,8 @@ import sys
 import threading
 import time
 
+import pytest
+
 STALL_S = float(os.environ.get("COSIM_TEST_STALL_S", "600"))
 """s without any test report after which the run is stopped: several times the longest test under load (about
 60 s), the workers' start and collection included."""
@@ -32,6 +34,16 @@ def pytest_sessionstart(session):
 def pytest_runtest_logreport(report):
     _STATE["last"] = time.monotonic()
     _STATE["nodeid"] = report.nodeid
+
+
+@pytest.hookimpl(optionalhook=True)
+def pytest_testnodeready(node):
+    _STATE["last"] = time.monotonic()  # a worker up is progress: its start under load is not counted as a stall
+
+
+@pytest.hookimpl(optionalhook=True)
+def pytest_xdist_node_collection_finished(node, ids):
+    _STATE["last"] = time.monotonic()  # so is a worker's collection
 
 
 def pytest_sessionfinish(session):
