@@ -76,14 +76,13 @@ def _c_string(text: str) -> str:
     return json.dumps(text)
 
 
-def _model_c(model: NativeModel, itf: Interface, token: str, functions: list[_Function], constants: Any,
-             params: list[int]) -> str:
+def _model_c(model: NativeModel, itf: Interface, token: str, functions: list[_Function], constants: Any) -> str:
     """``model.c``: the model's tables (:func:`_tables_c`), its constants (:func:`_constants_c`) and one C function
     per traced function (:func:`_function_c`), which the FMI glue in ``native/c`` calls."""
     checks: list[tuple[str, bool, int]] = []
     for f in functions:
         checks += f.checks
-    lines = _tables_c(model, itf, token, checks, constants, params) + _constants_c(itf, constants, params)
+    lines = _tables_c(model, itf, token, checks, constants) + _constants_c(itf, constants)
     if checks:
         lines += [
             "",
@@ -113,8 +112,8 @@ _VARIABILITY = {"constant": "VARIABILITY_CONSTANT", "fixed": "VARIABILITY_FIXED"
 _VTYPE = {"real": "TYPE_REAL", "boolean": "TYPE_BOOLEAN", "integer": "TYPE_INTEGER", "string": "TYPE_STRING"}
 
 
-def _tables_c(model: NativeModel, itf: Interface, token: str, checks: list[tuple[str, bool, int]], constants: Any,
-              params: list[int]) -> list[str]:
+def _tables_c(model: NativeModel, itf: Interface, token: str, checks: list[tuple[str, bool, int]],
+              constants: Any) -> list[str]:
     """The model's identity and tables: its variables, states, checks, options and default experiment."""
     vr = {v.name: v.vr for v in itf.variables}
     return [
@@ -144,35 +143,28 @@ def _tables_c(model: NativeModel, itf: Interface, token: str, checks: list[tuple
         f"const int MODEL_ME_ADVANCES = {1 if model.me_advances else 0};",
         f"const int MODEL_ME_ACCEPTS = {1 if model.me_accepts else 0};",
         f"const double MODEL_DEFAULT_EXPERIMENT[3] = {{{', '.join(repr(float(x)) for x in itf.experiment)}}};",
-        f"const size_t MODEL_N_SCRATCH = {1 + len(params) + constants.nnz_out(0)};",
+        f"const size_t MODEL_N_SCRATCH = {1 + constants.nnz_out(0)};",
     ]
 
 
-def _constants_c(itf: Interface, constants: Any, params: list[int]) -> list[str]:
+def _constants_c(itf: Interface, constants: Any) -> list[str]:
     """``constants(values)``: what depends on parameters only, kept after the variables (``MODEL_N_SCRATCH``) and
-    computed again when a parameter differs."""
+    computed again when their flag says a parameter may have changed (the runtime clears it: ``rt_constants_stale``).
+    Comparing every parameter at every call instead cost about a fifth of a model-exchange derivative evaluation."""
     return [
         "",
-        "/* The constants (what depends on parameters only), kept after the variables (MODEL_N_SCRATCH): a flag, the",
-        "   parameter values they were computed from, the constants; computed again when a parameter differs. */",
-        f"static const size_t PARAMETER_VRS[] = {{{', '.join(map(str, params)) or '0'}}};",
+        "/* The constants (what depends on parameters only), kept after the variables (MODEL_N_SCRATCH): a flag, then",
+        "   the constants; computed again when the runtime cleared the flag (a parameter may have changed). */",
         "static const double *constants(double *values) {",
-        "    double *scratch = values + MODEL_N_VARIABLES + 1, *known = scratch + 1;",
-        f"    double *k = known + {len(params)};",
+        "    double *scratch = values + MODEL_N_VARIABLES + 1, *k = scratch + 1;",
         "    const casadi_real *arg[1];",
         "    casadi_real *res[1];",
         f"    casadi_int iw[{max(constants.sz_iw(), 1)}];",
         f"    casadi_real w[{max(constants.sz_w(), 1)}];",
-        "    size_t i;",
-        "    int same = scratch[0] != 0.0;",
-        f"    for (i = 0; same && i < {len(params)}; i++)",
-        "        same = memcmp(&known[i], &values[PARAMETER_VRS[i]], sizeof(double)) == 0;",
-        "    if (same) return k;",
+        "    if (scratch[0] != 0.0) return k;",
         "    arg[0] = values; res[0] = k;",
         f"    if ({itf.name}_constants(arg, res, iw, w, 0)) return k;",
-        f"    for (i = 0; i < {len(params)}; i++) known[i] = values[PARAMETER_VRS[i]];",
         "    scratch[0] = 1.0;",
-        "    (void)PARAMETER_VRS;",
         "    return k;",
         "}",
     ]
@@ -238,21 +230,20 @@ def generate(fmu: FmuDefinition, out: Path, token: str) -> tuple[Interface, list
     model = fmu.native_model()
     itf = interface(fmu.name, model)
     traced = [_trace(model, itf, which) for which in _FUNCTIONS]
-    functions, constants, params = _hoisted(itf, traced)
+    functions, constants = _hoisted(itf, traced)
     gen = ca.CodeGenerator("model_functions.c", {"with_header": True, "casadi_real": "double",
                                                  "casadi_int": "long long int"})
     for fn in (constants, *(fn for fn, _ in functions)):
         gen.add(fn)
     gen.generate(str(out) + os.sep)
-    (out / "model.c").write_text(_model_c(model, itf, token, [f for _, f in functions], constants, params))
+    (out / "model.c").write_text(_model_c(model, itf, token, [f for _, f in functions], constants))
     return itf, ["model_functions.c", "model.c"]
 
 
-def _hoisted(itf: Interface, traced: list) -> tuple[list, Any, list[int]]:
+def _hoisted(itf: Interface, traced: list) -> tuple[list, Any]:
     """The traced functions with what depends on parameters only taken out of them (``casadi.extract_parametric``
     over all of them at once): ``(functions taking the constants as a fifth input, the constants function of the
-    values, the parameters' value references)``. The generated glue computes the constants when the parameters
-    change (:func:`_model_c`), not at every call: the leg angles' cosines, the mass lumps, the geometry's squares.
+    values)``. The generated glue computes the constants when a parameter may have changed (:func:`_constants_c`), not at every call: the leg angles' cosines, the mass lumps, the geometry's squares.
     The same operations on the same numbers, so the same results."""
     import casadi as ca
 
@@ -274,4 +265,4 @@ def _hoisted(itf: Interface, traced: list) -> tuple[list, Any, list[int]]:
             at += o.numel()
         hoisted = ca.Function(fn.name(), [t, h, values, state, k], parts, {"cse": True})
         functions.append((hoisted, replace(f, n_w=hoisted.sz_w(), n_iw=hoisted.sz_iw())))
-    return functions, constants, params
+    return functions, constants

@@ -44,7 +44,11 @@ extern const char *const MODEL_IDENTIFIER;       /* the FMU's modelIdentifier */
 extern const char *const MODEL_TOKEN;            /* FMI 2 guid / FMI 3 instantiationToken */
 extern const size_t MODEL_N_VARIABLES;           /* including vr 0 (time) */
 extern const size_t MODEL_N_SCRATCH;             /* doubles after values[MODEL_N_VARIABLES] the model keeps for
-                                                    itself (its parameter-only constants); zero at instantiation */
+                                                    itself (its parameter-only constants); zero at instantiation.
+                                                    The first, values[MODEL_N_VARIABLES + 1], is their flag: 0 =
+                                                    compute them again before use. The runtime writes 0 wherever
+                                                    a parameter may change (rt_constants_stale), so the model
+                                                    compares no parameter at each call */
 extern const ModelVariable MODEL_VARIABLES[];    /* MODEL_VARIABLES[vr] */
 extern const size_t MODEL_N_STATES;              /* internal state size (may be 0) */
 extern const size_t MODEL_N_CONTINUOUS;          /* continuous states for model exchange (may be 0) */

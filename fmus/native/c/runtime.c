@@ -134,6 +134,7 @@ void rt_reset(Instance *inst)
 {
     size_t i;
     for (i = 0; i < MODEL_N_VARIABLES; i++) inst->values[i] = MODEL_VARIABLES[i].start;
+    rt_constants_stale(inst);
     for (i = 0; i < MODEL_N_STATES; i++) inst->state[i] = 0.0;
     set_time(inst, 0.0);
     inst->t_last = 0.0;
@@ -377,12 +378,18 @@ RtStatus rt_get(Instance *inst, size_t vr, double *value)
     return RT_OK;
 }
 
+void rt_constants_stale(Instance *inst)
+{
+    inst->values[MODEL_N_VARIABLES + 1] = 0.0;  /* MODEL_N_SCRATCH >= 1: the flag always exists */
+}
+
 void rt_set(Instance *inst, size_t vr, double value)
 {
     inst->values[vr] = value;
     inst->dirty = 1;
-    if (MODEL_VARIABLES[vr].causality == CAUSALITY_PARAMETER &&
-        (inst->mode & (MODE_INSTANTIATED | MODE_INITIALIZATION)))
+    if (MODEL_VARIABLES[vr].causality != CAUSALITY_PARAMETER) return;
+    rt_constants_stale(inst);
+    if (inst->mode & (MODE_INSTANTIATED | MODE_INITIALIZATION))
         inst->started = 0;
 }
 

@@ -81,6 +81,8 @@ RtStatus rt_not_supported(Instance *inst, const char *function);
 int rt_check_var(Instance *inst, size_t vr, VarType type, int for_set, const char *function);
 RtStatus rt_get(Instance *inst, size_t vr, double *value);
 void rt_set(Instance *inst, size_t vr, double value);
+/* the parameter-only constants to be computed again (a parameter may have changed: see MODEL_N_SCRATCH) */
+void rt_constants_stale(Instance *inst);
 /* String variables (a closed set of choices, stored as the index of one): the text of the value, or the
  * index of `text` set (an error listing the choices when it is none of them). */
 RtStatus rt_get_string(Instance *inst, size_t vr, const char **text, const char *function);

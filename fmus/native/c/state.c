@@ -12,8 +12,8 @@
 
 /* What determines the future outputs: the values (every variable: parameters, inputs, the outputs of the last
  * update, the continuous states of model exchange), the internal state, time, t_last and the flags. Not saved: the
- * scratch after values[MODEL_N_VARIABLES] (the parameter-only constants, which model.c computes again whenever the
- * parameters differ, bit for bit from the bits of the parameters the snapshot restores: a cache, not a state), the
+ * scratch after values[MODEL_N_VARIABLES] (the parameter-only constants, which model.c computes again after a
+ * restore, bit for bit from the bits of the parameters the snapshot restores: a cache, not a state), the
  * detail of the last failed check (written before it is printed), and the instance's settings (name, logger,
  * logging, eventModeUsed). */
 struct Snapshot {
@@ -113,6 +113,7 @@ RtStatus rt_set_snapshot(Instance *inst, const Snapshot *s, const char *function
     inst->failed = s->failed;
     for (i = 0; i < N_CALLS; i++) inst->last_check[i] = s->last_check[i];
     memcpy(inst->values, s->data, MODEL_N_VARIABLES * sizeof(double));
+    rt_constants_stale(inst);  /* the snapshot's parameters may differ */
     if (MODEL_N_STATES) memcpy(inst->state, s->data + MODEL_N_VARIABLES, MODEL_N_STATES * sizeof(double));
     if (!inst->started && !(inst->mode & (MODE_INSTANTIATED | MODE_INITIALIZATION))) {
         if (rt_update(inst) != RT_OK) {
