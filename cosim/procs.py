@@ -1,10 +1,12 @@
 """Every process the platform starts, started one way: :func:`start` (and its threads: :func:`thread`).
 
-Four kinds of child (docs/master.md draws who starts whom, what each owns and how each ends):
+Five kinds of child (docs/master.md draws who starts whom, what each owns and how each ends):
 
 - the run's supervised child (:func:`cosim.engine.supervision.supervise`): a fork that goes on with the command
   (``target`` None: :func:`start` returns None in the child);
 - a contained call (:func:`cosim.engine.supervision.contained`, a sweep's case): a fork that runs one function;
+- a sweep's pool worker (:class:`cosim.analysis.cluster.ForkPool`): a fork that runs the cases it is handed over a
+  socket pair;
 - the offload worker (:mod:`cosim.engine.offload`): a :mod:`multiprocessing` process (fork, or spawn off Linux and on
   Python 3.12+), the one way to hand a child multiprocessing's shared ring and semaphores;
 - the log writer (:mod:`cosim.observers.log_writer`): a fork, or a new interpreter (``how="exec"``) where a fork

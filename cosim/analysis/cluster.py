@@ -4,16 +4,18 @@ prepared (:class:`ForkPool`).
 
 Why the embedded default is not a Dask ``LocalCluster``: a sweep of short cases never paid for it. Starting one took
 about 4 s on the 2-core machine (a scheduler, and each worker a new interpreter importing Dask and the run's code),
-so 32 cases of 0.1 s ran at 0.61x the serial loop (issue 36). Workers forked after the FMUs are built, checked and
+so 32 cases of 0.1 s ran at 0.61x the serial loop. Workers forked after the FMUs are built, checked and
 extracted start in milliseconds with all of it in memory: each case then forks its supervised child from a worker that
 already holds the code, the parsed FMU descriptions and the extracted binaries. What Dask adds, reaching machines
 beyond this one, is what ``--scheduler`` is for; on one machine the standard library's process pool does what is
-needed (a case at a time per worker, results as they complete). Where ``fork`` is missing (not POSIX) the embedded
+needed (a case at a time per worker, results as they complete), and the workers are forked as every process of the
+platform is (:func:`cosim.procs.start`). Where ``fork`` is missing (not POSIX) the embedded
 cluster is Dask's ``LocalCluster``, started in a thread while the FMUs are built."""
 
 from __future__ import annotations
 
 import asyncio
+import collections
 import concurrent.futures
 import logging
 import multiprocessing
@@ -21,16 +23,19 @@ import os
 import re
 import shutil
 import signal
+import socket
 import sys
-import time
 import tempfile
+import threading
+import time
 from collections.abc import Callable, Iterable, Iterator
+from multiprocessing.connection import Connection
 from typing import Any
 
 from .. import procs
 from .cases import SweepError
 
-__all__ = ["ForkPool", "PRELOAD", "SweepCluster", "WORKER_CONFIG"]
+__all__ = ["ForkPool", "PRELOAD", "SweepCluster", "WORKER_CONFIG", "WorkerLost"]
 
 PRELOAD = "cosim.analysis.sweep"
 """The module each embedded worker loads at its start (its ``dask_setup``; ``dask worker --preload`` takes it too)."""
@@ -50,50 +55,193 @@ WORKER_CONFIG = {
 }
 
 
+class WorkerLost(RuntimeError):
+    """A case's worker ended before it returned the case (killed from outside, or crashed itself)."""
+
+
+class _Worker:
+    """One worker of a :class:`ForkPool`, seen from the sweep's process: its :class:`cosim.procs.Child`, its end of
+    the socket pair, the case it runs (a future, None when idle) and its reader thread."""
+
+    def __init__(self, number: int, child: procs.Child, sock: socket.socket, conn: Connection) -> None:
+        self.number, self.child, self.sock, self.conn = number, child, sock, conn
+        self.running: concurrent.futures.Future | None = None
+        self.gone = False
+        self.reader: threading.Thread | None = None
+        self._reaping = threading.Lock()  # one waiter at a time: a second waitpid would find the child taken
+
+    def name(self) -> str:
+        return f"sweep worker {self.number} (pid {self.child.pid})"
+
+    def wait(self, timeout: float) -> int | None:
+        """The worker's exit code once it has ended (reaped), None while it still runs after ``timeout`` s."""
+        with self._reaping:
+            return self.child.wait(timeout)
+
+
 class ForkPool:
-    """The embedded cluster: ``workers`` processes forked from this one (a standard library process pool), each
+    """The embedded cluster: ``workers`` processes forked from this one through :func:`cosim.procs.start`, each
     running one case at a time. Forked when created: create it once the process holds what every case needs.
+
     A worker ignores SIGINT (Ctrl-C stops the sweep in this process, which cancels the cases not started and waits
-    for those running); a case's crash ends only the child it runs in (:func:`cosim.analysis.sweep.run_loaded_case`);
-    a worker killed from outside fails the cases it had not returned (``lost``), as Dask's would after its retries."""
+    for those running); it ends with this process (SIGKILL included). A case's crash ends only the child it runs
+    in (:func:`cosim.analysis.sweep.run_loaded_case`); a worker killed from outside fails only the case it was
+    running (:class:`WorkerLost`, naming the worker and how it ended) and the other workers take the cases left;
+    once every worker is gone the cases left fail the same way. Each worker talks to this process over a socket
+    pair (:class:`multiprocessing.connection.Connection`: the call ``(fn, args)`` pickled out, ``(ok, value)``
+    back), read by one thread per worker here, which hands the next case to the worker as it answers."""
 
     def __init__(self, workers: int):
         self.n = workers
-        self.pool = concurrent.futures.ProcessPoolExecutor(
-            workers, mp_context=multiprocessing.get_context("fork"), initializer=_worker_start)
+        self._lock = threading.Lock()
+        self._pending: collections.deque = collections.deque()  # (future, fn, args) not handed to a worker yet
+        self._workers: list[_Worker] = []
+        self._closing = False
+        for number in range(1, workers + 1):
+            self._workers.append(self._fork(number))
+        for w in self._workers:
+            w.reader = procs.thread(self._read, w, name=f"sweep-worker-{w.number}-reader")
 
-    def submit(self, fn: Callable[..., Any], *args: Any, **_dask: Any) -> Any:
+    def _fork(self, number: int) -> _Worker:
+        ours, theirs = socket.socketpair()
+        conn = Connection(os.dup(ours.fileno()))  # the socket kept beside it, to shut down (wakes its reader)
+        keep = theirs.detach()
+        others = [fd for w in self._workers for fd in (w.sock.fileno(), w.conn.fileno())]
+        others += [ours.fileno(), conn.fileno()]  # this side's ends, which the child closes
+        child = procs.start(_serve, keep, others, name=f"sweep worker {number}", die_with_parent=True,
+                            ignore=(signal.SIGINT,))
+        os.close(keep)
+        return _Worker(number, child, ours, conn)
+
+    def submit(self, fn: Callable[..., Any], *args: Any, **_dask: Any) -> concurrent.futures.Future:
         """``fn(*args)`` on a worker: a :class:`concurrent.futures.Future` (Dask's ``key=`` / ``pure=`` ignored)."""
-        return self.pool.submit(fn, *args)
+        future: concurrent.futures.Future = concurrent.futures.Future()
+        with self._lock:
+            self._pending.append((future, fn, args))
+            self._dispatch()
+        return future
+
+    def _dispatch(self) -> None:
+        """Hand pending cases to idle workers (the lock held); with no worker left, fail them."""
+        alive = [w for w in self._workers if not w.gone]
+        if not alive:
+            while self._pending:
+                future, _, _ = self._pending.popleft()
+                if future.set_running_or_notify_cancel():
+                    future.set_exception(WorkerLost("every sweep worker has ended; the case did not run"))
+            return
+        for w in alive:
+            while w.running is None and not w.gone and self._pending:
+                future, fn, args = task = self._pending.popleft()
+                if future.cancelled():  # the sweep stopped
+                    continue
+                try:
+                    w.conn.send((fn, args))
+                except (OSError, ValueError):  # the worker is gone: its reader says how; the case waits for another
+                    self._pending.appendleft(task)
+                    w.gone = True
+                    continue
+                if future.set_running_or_notify_cancel():
+                    w.running = future
+
+    def _read(self, w: _Worker) -> None:
+        """The reader of worker ``w``: each answer completes its case and hands it the next; its end (EOF) fails
+        the case it ran and leaves the rest to the others."""
+        while True:
+            try:
+                ok, value = w.conn.recv()
+            except (EOFError, OSError):
+                break
+            except Exception as exc:  # noqa: BLE001 - an answer that does not unpickle: the case's error
+                ok, value = False, WorkerLost(f"{w.name()} answered what cannot be read: {type(exc).__name__}: {exc}")
+            with self._lock:
+                future, w.running = w.running, None
+                self._dispatch()
+            if future is None:
+                continue
+            if ok:
+                future.set_result(value)
+            else:
+                future.set_exception(value)
+        with self._lock:
+            w.gone = True
+            future, w.running = w.running, None
+            self._dispatch()
+        if future is None:
+            return
+        if self._closing:  # close() ended the pair: nobody waits for this case any more
+            future.set_exception(WorkerLost(f"the sweep stopped before {w.name()} returned the case"))
+            return
+        code = w.wait(self.CLOSE_WAIT_S)
+        how = ("its end not seen" if code is None else f"killed by {signal.Signals(-code).name}" if code < 0
+               else f"exit status {code}")
+        future.set_exception(WorkerLost(f"{w.name()} ended before it returned the case ({how})"))
 
     @staticmethod
     def as_completed(futures: Iterable[Any]) -> Iterator[Any]:
         return concurrent.futures.as_completed(futures)
 
+    def pids(self) -> list[int]:
+        """The workers' process ids (tests kill them)."""
+        return [w.child.pid for w in self._workers]
+
     CLOSE_WAIT_S = 10.0
     """s the workers get to end once the pool is shut down; one still running then is killed."""
 
     def close(self) -> None:
-        """Shut the pool down and see every worker end: the pool's own ``shutdown(wait=True)`` waited for ever once a
-        worker had been killed mid-sweep (seen once in a full test run: its manager thread never returned), so the
-        workers are joined here with a bound and one that has not ended is killed."""
-        workers = list((getattr(self.pool, "_processes", None) or {}).values())  # no public accessor for them
-        self.pool.shutdown(wait=False, cancel_futures=True)
+        """Cancel the cases not started, let each worker end (its socket closed: it ends after the case it runs),
+        within :attr:`CLOSE_WAIT_S`; kill one still running then, and reap every one."""
+        with self._lock:
+            self._closing = True
+            while self._pending:
+                self._pending.popleft()[0].cancel()
+        for w in self._workers:
+            try:
+                w.sock.shutdown(socket.SHUT_RDWR)  # the worker and its reader here see the end
+            except OSError:
+                pass
         deadline = time.monotonic() + self.CLOSE_WAIT_S
-        for process in workers:
-            process.join(max(0.0, deadline - time.monotonic()))
-            if process.is_alive():
-                process.kill()
-                process.join(1.0)
+        for w in self._workers:
+            if w.wait(max(0.0, deadline - time.monotonic())) is None:
+                w.child.kill()
+                w.wait(1.0)
+            if w.reader is not None:
+                w.reader.join(1.0)
+            w.conn.close()
+            w.sock.close()
+
+
+def _serve(fd: int, others: list[int]) -> int:
+    """A worker's life: the other ends of every socket pair closed (a worker must see EOF when the sweep closes its
+    own), then each ``(fn, args)`` received run and ``(True, result)`` or ``(False, exception)`` sent back, until the
+    sweep closes the pair."""
+    for other in others:
+        procs.close_fd(other)
+    _worker_start()
+    conn = Connection(fd)
+    while True:
+        try:
+            fn, args = conn.recv()
+        except (EOFError, OSError):
+            return 0
+        try:
+            answer = (True, fn(*args))
+        except Exception as exc:  # noqa: BLE001 - the case's error, raised in the sweep's process by its future
+            answer = (False, exc)
+        try:
+            conn.send(answer)
+        except (OSError, ValueError):
+            return 0
+        except Exception as exc:  # noqa: BLE001 - an answer that does not pickle: said as text
+            conn.send((False, RuntimeError(f"{type(exc).__name__}: the case's answer cannot be sent: {exc}")))
 
 
 def _worker_start() -> None:
-    """In each forked worker: Ctrl-C left to the sweep's process, its end when that process ends, and standard
-    streams of its own on the same file descriptors. The sweep's progress bar writes from a thread of the sweep's process: a stream's lock that thread
-    held at the fork would stay held in the worker, and the first flush here (a case's child ending, the worker's
-    own exit) would wait for ever. What the sweep's process had buffered is not written twice either."""
-    signal.signal(signal.SIGINT, signal.SIG_IGN)
-    procs.die_with_parent()  # a sweep killed (SIGKILL) left its workers waiting for ever, holding its output pipes
+    """In each forked worker: standard streams of its own on the same file descriptors. The sweep's progress bar
+    writes from a thread of the sweep's process: a stream's lock that thread held at the fork would stay held in the
+    worker, and the first flush here (a case's child ending, the worker's own exit) would wait for ever. What the
+    sweep's process had buffered is not written twice either (:func:`cosim.procs.start` flushed it before the
+    fork)."""
     for name, errors in (("stdout", "strict"), ("stderr", "backslashreplace")):
         old = getattr(sys, name)
         fd = 1 if name == "stdout" else 2

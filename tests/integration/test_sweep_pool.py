@@ -4,7 +4,6 @@ it), each case's values those of a run in this process. Short runs keep it fast.
 
 from __future__ import annotations
 
-import multiprocessing
 import os
 import signal
 import tempfile
@@ -13,7 +12,7 @@ from pathlib import Path
 import pytest
 
 from cosim.analysis.cases import Case
-from cosim.analysis.cluster import can_fork
+from cosim.analysis.cluster import ForkPool, can_fork
 from cosim.analysis.sweep import _run_case, prebuild, read_results, run_sweep
 from cosim.engine.overrides import dotted_overrides
 from cosim.engine.scenario import read_scenario
@@ -45,30 +44,70 @@ def test_pool_cases_equal_runs_here_and_leave_no_extraction(tmp_path):
     assert _extractions() == before, f"left behind: {sorted(_extractions() - before)}"
 
 
-def test_a_pool_worker_killed_mid_sweep_fails_what_it_had_not_returned(tmp_path):
-    """SIGKILL to a worker after the first row: the sweep returns (no hang), the cases not returned are ``lost`` (a
-    dead pool runs nothing more), and the same call again runs exactly those."""
+@pytest.fixture
+def pools(monkeypatch):
+    """The sweep's pools, as they are made (a test kills their workers)."""
+    made: list[ForkPool] = []
+    original = ForkPool.__init__
+
+    def init(self, workers):  # noqa: ANN001
+        original(self, workers)
+        made.append(self)
+
+    monkeypatch.setattr(ForkPool, "__init__", init)
+    return made
+
+
+def test_every_pool_worker_killed_mid_sweep_fails_what_they_had_not_returned(tmp_path, pools):
+    """SIGKILL to every worker after the first row: the sweep returns (no hang), the cases not returned are ``lost``
+    naming why, and the same call again runs exactly those."""
     cases = [Case({"time.stop": 0.3, "ctl.gain.kp[1]": 1e4 + 1e3 * k}) for k in range(8)]
     killed: list[int] = []
 
-    def kill_one(done: int, failed: int, total: int) -> None:  # noqa: ARG001
-        workers = [p for p in multiprocessing.active_children() if p.pid is not None]
-        if done >= 1 and not killed and workers:
-            killed.append(workers[0].pid)
-            os.kill(workers[0].pid, signal.SIGKILL)
+    def kill_all(done: int, failed: int, total: int) -> None:  # noqa: ARG001
+        if done >= 1 and not killed:
+            for pid in pools[0].pids():
+                killed.append(pid)
+                os.kill(pid, signal.SIGKILL)
 
     out = tmp_path / "out"
-    first = run_sweep(SCENARIO, cases, out, workers=2, on_progress=kill_one)
+    first = run_sweep(SCENARIO, cases, out, workers=2, on_progress=kill_all)
     assert killed, "no worker to kill"
     rows = read_results(out)
     assert len(rows) == len(cases), f"{len(rows)} rows for {len(cases)} cases"
     lost = [r for r in rows if r["status"] == "lost"]
-    assert lost and all("BrokenProcessPool" in r["message"] for r in lost), [(r["status"], r["message"]) for r in rows]
+    assert lost and all("WorkerLost" in r["message"] and ("killed by SIGKILL" in r["message"] or
+                                                          "every sweep worker has ended" in r["message"])
+                        for r in lost), [(r["status"], r["message"]) for r in rows]
     assert not first.ok and len(first.failed) == len(lost), first.text()
     again = run_sweep(SCENARIO, cases, out, workers=2)
     assert (again.ran, again.skipped) == (len(lost), len(cases) - len(lost)), again.text()
     done = {r["case"]: r["status"] for r in read_results(out)}
     assert all(done[c.id] == "ok" for c in cases), done
+
+
+def test_one_pool_worker_killed_loses_only_its_case(tmp_path, pools):
+    """SIGKILL to a worker running a case: that case alone is ``lost`` (naming the worker and the signal), the other
+    worker runs every other case (a standard library pool broke whole: every case not returned was lost)."""
+    cases = [Case({"time.stop": 0.3, "ctl.gain.kp[1]": 1e4 + 1e3 * k}) for k in range(8)]
+    killed: list[int] = []
+
+    def kill_one(done: int, failed: int, total: int) -> None:  # noqa: ARG001
+        if done >= 1 and not killed:
+            busy = [w for w in pools[0]._workers if w.running is not None]
+            if busy:
+                killed.append(busy[0].child.pid)
+                os.kill(busy[0].child.pid, signal.SIGKILL)
+
+    out = tmp_path / "out"
+    run_sweep(SCENARIO, cases, out, workers=2, on_progress=kill_one)
+    assert killed, "no busy worker to kill"
+    rows = read_results(out)
+    assert len(rows) == len(cases), f"{len(rows)} rows for {len(cases)} cases"
+    lost = [r for r in rows if r["status"] == "lost"]
+    assert len(lost) <= 1 and all(r["status"] in ("ok", "lost") for r in rows), [(r["status"], r["message"]) for r in rows]
+    assert all(f"(pid {killed[0]}) ended before it returned the case (killed by SIGKILL)" in r["message"]
+               for r in lost), lost
 
 
 def test_a_case_takes_the_libraries_loaded_ahead_and_gives_the_same_values():
