@@ -1,15 +1,18 @@
-"""The analytic plant as an FMI 3.0 model-exchange FMU: states q, qd, derivatives from the forward dynamics."""
+"""The analytic plant as an FMI 3.0 model-exchange FMU: states p, v (the platform), derivatives from the platform
+dynamics of the co-simulation plant; the joints q, qd are outputs."""
 
 from __future__ import annotations
 
-from delta.dynamics import forward_dynamics, platform_state
+from delta.dynamics import platform_dynamics
 from delta.errors import UnreachableError
-from delta.kinematics import END_STOP, joint_limit_reason
-from delta.model import Data, build_model
+from delta.kinematics import END_STOP, inverse_kinematics, joint_limit_reason
+from delta.model import build_model
 
 from .._names import axis_names, joint_names
 from ..export3 import AdapterME
 from .common import (
+    P0,
+    V0,
     declare_initial_state,
     declare_masses,
     declare_robot,
@@ -20,63 +23,69 @@ from .common import (
     robot_from,
 )
 
-Q, QD, QDD, U = joint_names("q"), joint_names("qd"), joint_names("qdd"), joint_names("u")
-DQ, DQD = [f"der(q[{i}])" for i in (1, 2, 3)], [f"der(qd[{i}])" for i in (1, 2, 3)]
+Q, QD, U = joint_names("q"), joint_names("qd"), joint_names("u")
 P, V = axis_names("p"), axis_names("v")
+DP, DV = [f"der({n})" for n in P], [f"der({n})" for n in V]
 
 
 class AnalyticPlantME(AdapterME):
-    """dq/dt = qd, dqd/dt = forward_dynamics(q, qd, u); the importing tool integrates."""
+    """dp/dt = v, dv/dt = platform_dynamics(p, v, u); the importing tool integrates.
+
+    The same equations as the co-simulation plant (:class:`fmus.adapters.plants.AnalyticPlant`), which integrates
+    them itself with RK4: the virtual-work dynamics in platform coordinates (:func:`delta.dynamics.platform_dynamics`,
+    a 3x3 system with no forward kinematics, no ``J^-1`` and no mass matrix), about half the work of the
+    joint-space form ``M(q) qdd = u - C qd - G`` per evaluation. The joints are outputs, by inverse kinematics of
+    the states: read at communication points, never at the integrator's trial states."""
 
     EXPERIMENT = (0.0, 1.0, 1e-3)
-    LINEAR = frozenset(zip(DQ, QD))  # dq/dt = qd
+    LINEAR = frozenset(zip(DP, V))  # dp/dt = v
 
     def __init__(self, **kwargs):
         super().__init__(**kwargs)
         kind = self.KIND
-        qu, qdu, qddu, uu = q_units(kind)
+        qu, qdu, _, uu = q_units(kind)
         self.description = f"Analytic dynamics plant of the {kind} delta (model exchange)"
         declare_robot(self, kind)
         declare_masses(self, kind)
         declare_initial_state(self, kind)
         for i in range(3):
             self.input(U[i], uu, f"actuator effort along +q (leg {i + 1})", hold_effort(kind)[i])
+        for i, a in enumerate("xyz"):
+            self.state(P[i], DP[i], "m", "m/s", f"platform position ({a})", depends=(V[i],))
+        for i, a in enumerate("xyz"):  # the platform dynamics: every state and effort
+            self.state(V[i], DV[i], "m/s", "m/s2", f"platform velocity ({a})", depends=(*P, *V, *U))
+        for i in range(3):  # inverse kinematics: no direct feedthrough of u
+            self.output(Q[i], qu, f"joint position (leg {i + 1})", depends=P)
         for i in range(3):
-            self.state(Q[i], DQ[i], qu, qdu, f"joint position (leg {i + 1})", depends=(QD[i],))
-        for i in range(3):  # M(q)^-1 (u - C(q, qd) qd - G(q)): every state and effort
-            self.state(QD[i], DQD[i], qdu, qddu, f"joint velocity (leg {i + 1})", depends=(*Q, *QD, *U))
-        for n, a in zip(P, "xyz"):  # forward kinematics: no direct feedthrough of u
-            self.output(n, "m", f"platform position ({a})", depends=Q)
-        for n, a in zip(V, "xyz"):
-            self.output(n, "m/s", f"platform velocity ({a})", depends=(*Q, *QD))
+            self.output(QD[i], qdu, f"joint velocity (leg {i + 1})", depends=(*P, *V))
 
     def start(self) -> None:
         self.model = build_model(robot_from(self, self.KIND), masses_from(self, self.KIND))
-        self.data = Data(self.model)
-        q, qd = initial_joint_state(self, self.model)
-        self.put(Q, q)
-        self.put(QD, qd)
+        initial_joint_state(self, self.model)  # raises if the initial state is unreachable
+        self.put(P, self.vec3(P0))
+        self.put(V, self.vec3(V0))
 
     def retune(self, names: tuple[str, ...]) -> None:
         """The payload changed: the model of the new masses; the states are the importer's."""
         self.model = build_model(robot_from(self, self.KIND), masses_from(self, self.KIND))
 
     def derivatives(self) -> None:
-        qd = self.vec3(QD)
-        self.put(DQ, qd)
-        self.put(DQD, forward_dynamics(self.model, self.data, self.vec3(Q), qd, self.vec3(U)))
+        v = self.vec3(V)
+        self.put(DP, v)
+        self.put(DV, platform_dynamics(self.model, self.vec3(P), v, self.vec3(U)))
 
     def outputs(self) -> None:
-        """p, v from the states; the end stops as the co-simulation plant's (:mod:`fmus.adapters.plants`): here,
+        """q, qd from the states; the end stops as the co-simulation plant's (:mod:`fmus.adapters.plants`): here,
         on the states the importer accepted (the outputs are read at communication points, never at the
         integrator's trial states, which only ``derivatives`` sees; pythonfmu3 does not pass
         ``completedIntegratorStep`` on to Python)."""
-        q = self.vec3(Q)
-        model = self.model
-        for i, qi in enumerate(q):
-            if qi < model.q_min or qi > model.q_max:  # not NaN: the master names a NaN output itself
-                raise UnreachableError(f"{self.modelName} at t = {self.time:.6f} s: {END_STOP}: "
-                                       f"{joint_limit_reason(model, i + 1, qi)}")
-        p, v = platform_state(model, self.data, q, self.vec3(QD))
-        self.put(P, p)
-        self.put(V, v)
+        p = self.vec3(P)
+        q, qd, _, fault = inverse_kinematics(self.model, p, self.vec3(V))
+        if fault > 0:
+            raise UnreachableError(f"{self.modelName} at t = {self.time:.6f} s: the platform left the workspace at "
+                                   f"p = ({p[0]:.6g}, {p[1]:.6g}, {p[2]:.6g}) m: leg {fault} has no solution")
+        if fault < 0:  # a joint past its range: the end stop, as the co-simulation plant
+            raise UnreachableError(f"{self.modelName} at t = {self.time:.6f} s: {END_STOP}: "
+                                   f"{joint_limit_reason(self.model, -fault, q[-fault - 1])}")
+        self.put(Q, q)
+        self.put(QD, qd)

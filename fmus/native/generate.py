@@ -1,7 +1,7 @@
 """Generate the C of a native FMU: trace its model's functions on CasADi symbols and write them as C.
 
-Steps 2 and 3 of :mod:`fmus.native.build`: each model function (start, refresh, advance, derivatives, accept) of
-the definition's native model is traced on ``SX`` symbols, what depends on parameters only is hoisted into a
+Steps 2 and 3 of :mod:`fmus.native.build`: each model function (start, refresh, advance, derivatives, outputs,
+accept) of the definition's native model is traced on ``SX`` symbols, what depends on parameters only is hoisted into a
 constants function, CasADi's code generator writes them as ``model_functions.c``, and ``model.c`` binds them to the
 contract of ``c/model.h``. Imported by a build only: a run of cached FMUs loads neither this module nor CasADi.
 """
@@ -20,7 +20,7 @@ from .interface import Interface, interface
 from .models import NativeModel, Result, Symbols
 from .symbolic import tracing
 
-_FUNCTIONS = ("start", "refresh", "advance", "derivatives", "accept")
+_FUNCTIONS = ("start", "refresh", "advance", "derivatives", "outputs", "accept")
 MAX_DETAIL = 4  # values a check may print into its reason (MODEL_MAX_DETAIL of c/model.h)
 
 
@@ -142,6 +142,7 @@ def _tables_c(model: NativeModel, itf: Interface, token: str, checks: list[tuple
         f"const size_t MODEL_MAX_STEP_VR = {vr[model.max_step] if model.max_step else 0};",
         f"const int MODEL_ME_ADVANCES = {1 if model.me_advances else 0};",
         f"const int MODEL_ME_ACCEPTS = {1 if model.me_accepts else 0};",
+        f"const int MODEL_ME_OUTPUTS = {1 if model.me_outputs else 0};",
         f"const double MODEL_DEFAULT_EXPERIMENT[3] = {{{', '.join(repr(float(x)) for x in itf.experiment)}}};",
         f"const size_t MODEL_N_SCRATCH = {1 + constants.nnz_out(0)};",
     ]

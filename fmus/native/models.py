@@ -13,7 +13,10 @@ The functions, as the C glue calls them (``fmus/native/c/model.h``):
 * ``start``: initial internal state (and model-exchange states) from the parameters;
 * ``refresh``: outputs from inputs, parameters, time and state (may update a held state);
 * ``advance``: the internal state over one co-simulation substep ``h``;
-* ``derivatives``: model exchange: state derivatives and outputs (default: ``refresh``).
+* ``derivatives``: model exchange: state derivatives, and the outputs unless :attr:`NativeModel.me_outputs`
+  (default: ``refresh``);
+* ``outputs``: model exchange with :attr:`NativeModel.me_outputs`: the outputs, computed when one is read, not at
+  every derivative evaluation (the integrator's trial states never need them).
 """
 
 from __future__ import annotations
@@ -24,7 +27,7 @@ from typing import Any
 import casadi as ca
 
 from delta.control import CTC, PD, PID, PDPlus
-from delta.dynamics import forward_dynamics, platform_state, platform_step
+from delta.dynamics import platform_dynamics, platform_state, platform_step
 from delta.kinematics import (BEYOND_LIMITS, END_STOP, JOINT_LIMIT, inverse_kinematics, proximity, set_pose,
                               working_mode_fault)
 from delta.model import Data
@@ -42,7 +45,7 @@ P, V = tuple(axis_names("p")), tuple(axis_names("v"))
 P_REF, V_REF, A_REF = (tuple(axis_names(n)) for n in ("p_ref", "v_ref", "a_ref"))
 Q, QD, U = (tuple(joint_names(n)) for n in ("q", "qd", "u"))
 Q_REF, QD_REF, QDD_REF = (tuple(joint_names(n)) for n in ("q_ref", "qd_ref", "qdd_ref"))
-DQ, DQD = tuple(f"der({n})" for n in Q), tuple(f"der({n})" for n in QD)
+DP, DV = tuple(f"der({n})" for n in P), tuple(f"der({n})" for n in V)
 
 
 @dataclass(frozen=True)
@@ -105,6 +108,7 @@ class NativeModel:
     me_advances = False
     me_accepts = False  # model exchange checks each accepted state (:meth:`accept`)
     me_adapter: type | None = None  # its declared states and their derivatives are the FMU's continuous states
+    me_outputs = False  # model exchange: ``outputs`` computes the outputs when read, ``derivatives`` only derivatives
 
     def __init__(self, kind: str | None, adapter: type) -> None:
         self.kind, self.adapter = kind, adapter
@@ -132,6 +136,10 @@ class NativeModel:
         return Result()
 
     def advance(self, sym: Symbols, trace: Trace) -> Result:
+        return Result()
+
+    def outputs(self, sym: Symbols, trace: Trace) -> Result:
+        """Model exchange with :attr:`me_outputs`: the outputs of the states and inputs, when one is read."""
         return Result()
 
     def derivatives(self, sym: Symbols, trace: Trace) -> Result:
@@ -310,14 +318,15 @@ def _end_stops(model, leg: int, q) -> list[Check]:
 class AnalyticPlant(NativeModel):
     """As :class:`fmus.adapters.plants.AnalyticPlant` (co-simulation: RK4 in platform coordinates, the state
     ``p, v``, substeps of at most ``solver.max_step``) and :class:`fmus.adapters.plant_me.AnalyticPlantME`
-    (model exchange: states ``q, qd``, ``qdd`` from the forward dynamics) in one model: both FMUs of the analytic
-    plant, whichever adapter their definition holds, have the co-simulation adapter's variables and the
-    model-exchange adapter's continuous states."""
+    (model exchange: the same platform dynamics, states ``p, v``, the joints ``q, qd`` as outputs) in one model: both
+    FMUs of the analytic plant, whichever adapter their definition holds, have the co-simulation adapter's variables
+    and the model-exchange adapter's continuous states."""
 
     n_state = 6
     max_step = "solver.max_step"
     me_adapter = plant_me.AnalyticPlantME
     me_accepts = True  # the end stops, on accepted states (derivatives see the integrator's trial states)
+    me_outputs = True  # q, qd by inverse kinematics when read, not at each of the integrator's evaluations
 
     def __init__(self, kind: str | None, adapter: type) -> None:
         super().__init__(kind, plants.AnalyticPlant)
@@ -330,37 +339,47 @@ class AnalyticPlant(NativeModel):
         max_step = sym.v["solver.max_step"]
         checks.append(Check(ca.logic_and(max_step > 0.0, SYMBOLIC.isfinite(max_step)),
                             "solver.max_step must be a time > 0 s"))
-        return Result(dict(zip(Q + QD, (*q, *qd))), [*p0, *v0], checks)
+        return Result(dict(zip(Q + QD + P + V, (*q, *qd, *p0, *v0))), [*p0, *v0], checks)
+
+    def _joints(self, model, p, v, trace: Trace) -> tuple[Any, Any, list[Check]]:  # noqa: ANN001
+        """``q, qd`` of the platform state ``p, v`` (at a step's end or an accepted state, never an RK stage or a
+        trial state), and their checks: a leg with no solution (the platform left the workspace), a joint past
+        its range (an end stop, printed as the python build prints it)."""
+        q, qd, _, _ = inverse_kinematics(model, p, v)
+        checks = []
+        for c in _errors(trace, WORKSPACE):
+            beyond = c.reason.removeprefix(WORKSPACE)
+            checks += _end_stops(model, BEYOND_LIMITS.index(beyond), q) if beyond in BEYOND_LIMITS else [c]
+        return q, qd, checks
 
     def refresh(self, sym: Symbols, trace: Trace) -> Result:
         model = self.model(sym, trace)
         p, v = sym.s[:3], sym.s[3:]
         checks = [Check(_all(SYMBOLIC.isfinite(x) for x in sym.s), "the state diverged (not finite)")]
-        q, qd, _, _ = inverse_kinematics(model, p, v)  # at the step's end (no RK stage): the joint limits too
-        for c in _errors(trace, WORKSPACE):
-            beyond = c.reason.removeprefix(WORKSPACE)
-            checks += _end_stops(model, BEYOND_LIMITS.index(beyond), q) if beyond in BEYOND_LIMITS else [c]
-        return Result(dict(zip(Q + QD + P + V, (*q, *qd, *p, *v))), checks=checks)
+        q, qd, joints = self._joints(model, p, v, trace)
+        return Result(dict(zip(Q + QD + P + V, (*q, *qd, *p, *v))), checks=checks + joints)
+
+    def outputs(self, sym: Symbols, trace: Trace) -> Result:
+        q, qd, checks = self._joints(self.model(sym, trace), sym.vec(P), sym.vec(V), trace)
+        return Result(dict(zip(Q + QD, (*q, *qd))), checks=checks)
 
     def accept(self, sym: Symbols, trace: Trace) -> Result:
-        model = self.model(sym, trace)
-        q = sym.vec(Q)
-        checks = [c for i in range(3) for c in _end_stops(model, i, q)]
-        return Result(checks=_errors(trace) + checks)
+        _, _, checks = self._joints(self.model(sym, trace), sym.vec(P), sym.vec(V), trace)
+        return Result(checks=checks)
 
     def advance(self, sym: Symbols, trace: Trace) -> Result:
         model = self.model(sym, trace)
         u = sym.vec(U)
         checks = [Check(_all(SYMBOLIC.isfinite(x) for x in u), "non-finite effort u")]
         p, v = platform_step(model, sym.s[:3], sym.s[3:], u, sym.h)
-        checks += [Check(c.ok, ("the platform left the workspace: " + c.reason) if "no solution" in c.reason
-                         else c.reason) for c in _errors(trace)]
+        checks += [Check(c.ok, (WORKSPACE + c.reason) if "no solution" in c.reason else c.reason)
+                   for c in _errors(trace)]
         return Result(state=[*p, *v], checks=checks)
 
     def derivatives(self, sym: Symbols, trace: Trace) -> Result:
-        data = Data(model := self.model(sym, trace))
-        q, qd = sym.vec(Q), sym.vec(QD)
-        qdd = forward_dynamics(model, data, q, qd, sym.vec(U))
-        p, v = platform_state(model, data, q, qd)
-        values = dict(zip(DQ + DQD + P + V, (*qd, *qdd, *p, *v)))
-        return Result(values, checks=_errors(trace))
+        model = self.model(sym, trace)
+        v = sym.vec(V)
+        a = platform_dynamics(model, sym.vec(P), v, sym.vec(U))
+        checks = [Check(c.ok, (WORKSPACE + c.reason) if "no solution" in c.reason else c.reason)
+                  for c in _errors(trace)]
+        return Result(dict(zip(DP + DV, (*v, *a))), checks=checks)

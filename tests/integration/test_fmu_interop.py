@@ -268,8 +268,14 @@ def _check_feedthrough(inst: _Instance, phase: str) -> list[str]:
 
 @pytest.mark.parametrize("name", NAMES)
 def test_declared_dependencies_are_the_direct_feedthrough(name):
+    """A plant starts off its symmetric home pose, where the platform dynamics have exact zeros by symmetry (a leg in
+    the x-z plane moves the platform in neither y nor its velocity's y: the model-exchange plant's der(v.y) does not
+    depend on u[1] there, though it does everywhere else)."""
     inst = _Instance(name)
     try:
+        if "initial.p.x" in inst.var:
+            p0 = (0.02, 0.01, -0.48) if name.startswith("linear") else (0.02, 0.01, -0.45)
+            inst.set(["initial.p.x", "initial.p.y", "initial.p.z"], p0)
         problems = _check_feedthrough(inst, "initialization mode")
         inst.exit_initialization()
         inst.step(1e-3)

@@ -511,8 +511,8 @@ def test_the_model_exchange_plant_checks_accepted_states_only(build, tmp_path):
         slave.bind([], [info.variables["p.x"]])
         slave.exit_initialization()
         x, dx = (c_double * 6)(), (c_double * 6)()
-        slave.get_x(x)
-        x[1] = q_max + 0.1  # q[2], 0.1 rad past the end stop, as a trial state (q[1..3] then qd[1..3])
+        slave.get_x(x)  # the platform's p then v
+        x[:3] = _pose_past_the_end_stop(q_max + 0.1, [x[0], x[1], x[2]])  # q[2] 0.1 rad past it, as a trial state
         slave.set_x(x)
         slave.get_dx(dx)  # raises for a failure or a non-finite derivative
         with pytest.raises(FMIError) as failed:
@@ -524,6 +524,18 @@ def test_the_model_exchange_plant_checks_accepted_states_only(build, tmp_path):
         slave.free()
     degrees = f"{math.degrees(q_max + 0.1):.2f} deg > q_max = {math.degrees(q_max):.2f} deg"
     assert f"leg 2 joint limit: q = {degrees}" in str(failed.value), failed.value
+
+
+def _pose_past_the_end_stop(q2: float, p0: list[float]) -> list[float]:
+    """The rotary plant's platform where joint 2 is at ``q2`` and the others as at ``p0`` (forward kinematics)."""
+    from delta.kinematics import fk, inverse_kinematics
+    from fmus import registry
+
+    adapter = registry.get("rotary_analytic_plant_me").declared()
+    adapter.start()
+    q = list(inverse_kinematics(adapter.model, p0)[0])
+    q[1] = q2
+    return [float(c) for c in fk(adapter.model, q).require()]
 
 
 @pytest.fixture(scope="module")

@@ -12,6 +12,7 @@ RTOL = 1e-12 relative to the size of each quantity (positions ~0.5 m, efforts ~1
 
 from __future__ import annotations
 
+import itertools
 import math
 
 import numpy as np
@@ -36,7 +37,8 @@ class Native:
         self.vr = {v.name: v.vr for v in self.itf.variables}
         self.values = np.array([v.start or 0.0 for v in self.itf.variables], dtype=float)
         self.state = np.array(self.model.initial_state() or [0.0], dtype=float)
-        self.fns = {w: _trace(self.model, self.itf, w) for w in ("start", "refresh", "advance", "derivatives", "accept")}
+        self.fns = {w: _trace(self.model, self.itf, w) for w in ("start", "refresh", "advance", "derivatives", "outputs",
+                                                                       "accept")}
 
     def set(self, name: str, value: float) -> None:
         self.values[self.vr[name]] = value
@@ -231,19 +233,26 @@ def test_analytic_plant_matches_python(kind):
 
 @pytest.mark.parametrize("kind", ["linear", "rotary"])
 def test_analytic_plant_derivatives_match_python_me(kind):
+    """The model-exchange plant: its states p, v start at the initial platform state; the derivatives (dp/dt = v,
+    dv/dt from the platform dynamics) and, apart from them, the outputs q, qd equal the python build's."""
     name = f"{kind}_analytic_plant_me"
     native, python = Native(name), python_adapter(name)  # the model-exchange adapter
     python.start()
     assert native.call("start") == []
-    for n in ("q[1]", "q[2]", "q[3]", "qd[1]", "qd[2]", "qd[3]"):
+    for n in ("p.x", "p.y", "p.z", "v.x", "v.y", "v.z"):
         close(native.get(n), python.values[n], f"{name} initial {n}")
-    for i in (1, 2, 3):
-        python.values[f"qd[{i}]"] = 0.1 * i
-        native.set(f"qd[{i}]", 0.1 * i)
+    for i, a in enumerate("xyz"):
+        python.values[f"v.{a}"] = 0.01 * (i + 1)
+        native.set(f"v.{a}", 0.01 * (i + 1))
     python.derivatives()
     python.outputs()
+    sets = set(native.fns["derivatives"][1].sets)
     assert native.call("derivatives") == []
-    for n in ("der(q[1])", "der(qd[1])", "der(qd[2])", "der(qd[3])", "p.x", "p.y", "p.z", "v.x", "v.z"):
+    assert not sets & {native.vr[n] for n in ("q[1]", "qd[1]")}, "derivatives computed the outputs too"
+    for n in ("der(p.x)", "der(p.z)", "der(v.x)", "der(v.y)", "der(v.z)"):
+        close(native.get(n), python.values[n], f"{name} {n}")
+    assert native.call("outputs") == []
+    for n in ("q[1]", "q[2]", "q[3]", "qd[1]", "qd[2]", "qd[3]"):
         close(native.get(n), python.values[n], f"{name} {n}")
 
 
@@ -266,21 +275,31 @@ def test_analytic_plant_faults_are_checks(kind):
 def test_analytic_plant_end_stop_names_the_joint_value_as_the_python_build(kind, side):
     """A joint past its range (below or above) fails the model-exchange accept of an accepted state with the python
     build's words: the leg, the joint value and the limit (delta.kinematics.joint_limit_reason); the model-exchange
-    derivatives, which the integrator's trial states see, do not check it."""
+    derivatives, which the integrator's trial states see, do not check it. The states are the platform's: the state
+    is the initial pose moved along an axis until a joint passes its range on the side ``side`` (0: below)."""
     from delta.kinematics import END_STOP, inverse_kinematics, joint_limit_reason
 
     native = Native(f"{kind}_analytic_plant")
     native.call("start")
     python = python_adapter(f"{kind}_analytic_plant")
     python.start()
-    model = python.model
-    q = list(inverse_kinematics(model, list(native.state[:3]))[0])
-    q[1] = model.q_min - 0.01 if side == 0 else model.q_max + 0.01  # leg 2 past its end stop
-    for i, name in enumerate(("q[1]", "q[2]", "q[3]")):
-        native.set(name, q[i])
+    model, p0 = python.model, native.state[:3].copy()
+    directions = [np.array(d, dtype=float) / np.linalg.norm(d) for d in itertools.product((-1, 0, 1), repeat=3) if any(d)]
+    for direction in directions:
+        for k in range(1, 2000):  # 0.5 mm steps, up to 1 m
+            p = p0 + direction * 5e-4 * k
+            q, _, _, fault = inverse_kinematics(model, list(p))
+            if fault:
+                break
+        if fault < 0 and (q[-fault - 1] > model.q_max) == bool(side):
+            break
+    else:
+        pytest.fail(f"no joint passes its {('lower', 'upper')[side]} limit along a line from the initial state")
+    for name, x in zip(("p.x", "p.y", "p.z"), p):
+        native.set(name, float(x))
     assert native.call("derivatives") == [], "a trial state is not checked"
-    failed = native.call("accept")
-    assert failed == [f"{END_STOP}: {joint_limit_reason(model, 2, q[1])}"], failed
+    failed = native.call("accept")  # the C glue reports the first
+    assert failed and failed[0] == f"{END_STOP}: {joint_limit_reason(model, -fault, q[-fault - 1])}", failed
 
 
 @pytest.mark.parametrize("kind", ["linear", "rotary"])

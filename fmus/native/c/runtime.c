@@ -140,6 +140,7 @@ void rt_reset(Instance *inst)
     inst->t_last = 0.0;
     inst->mode = MODE_INSTANTIATED;
     inst->dirty = 1;
+    inst->outputs_stale = 0;
     inst->started = 0;
     inst->failed = 0;
     for (i = 0; i < N_CALLS; i++) inst->last_check[i] = 0;
@@ -185,11 +186,23 @@ RtStatus rt_update(Instance *inst)
     if (inst->is_me && MODEL_N_CONTINUOUS > 0) {
         k = model_derivatives(inst->time, inst->values, inst->state, inst->detail);
         if (check(inst, CALL_DERIVATIVES, k, inst->time) != RT_OK) return RT_ERROR;
+        inst->outputs_stale = MODEL_ME_OUTPUTS;
     } else {
         k = model_refresh(inst->time, inst->values, inst->state, inst->detail);
         if (check(inst, CALL_REFRESH, k, inst->time) != RT_OK) return RT_ERROR;
     }
     inst->dirty = 0;
+    return RT_OK;
+}
+
+/* model exchange (MODEL_ME_OUTPUTS): the outputs of the current states, inputs and time; their checks are
+ * model_refresh's (which such an instance never calls) */
+static RtStatus me_outputs(Instance *inst)
+{
+    if (check(inst, CALL_REFRESH, model_outputs(inst->time, inst->values, inst->state, inst->detail), inst->time) !=
+        RT_OK)
+        return RT_ERROR;
+    inst->outputs_stale = 0;
     return RT_OK;
 }
 
@@ -371,9 +384,10 @@ RtStatus rt_get(Instance *inst, size_t vr, double *value)
         return RT_OK;
     }
     /* after a failed step the outputs stay those of the last successful one */
-    if ((c == CAUSALITY_OUTPUT || c == CAUSALITY_LOCAL) && (inst->dirty || !inst->started) && !inst->failed &&
-        rt_update(inst) != RT_OK)
-        return RT_ERROR;
+    if ((c == CAUSALITY_OUTPUT || c == CAUSALITY_LOCAL) && !inst->failed) {
+        if ((inst->dirty || !inst->started) && rt_update(inst) != RT_OK) return RT_ERROR;
+        if (inst->outputs_stale && me_outputs(inst) != RT_OK) return RT_ERROR;
+    }
     *value = inst->values[vr];
     return RT_OK;
 }

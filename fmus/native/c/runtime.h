@@ -46,6 +46,8 @@ struct Instance {
     int event_mode_used;        /* FMI 3 co-simulation: exitInitializationMode enters event mode */
     int logging_on;
     int dirty;                  /* an input, parameter, time or state changed: outputs are stale */
+    int outputs_stale;          /* model exchange with MODEL_ME_OUTPUTS: the derivatives are current, the outputs
+                                   not (model_outputs before one is read) */
     int started;                /* model_start ran with the current parameters */
     int failed;                 /* a step failed: no further steps */
     int last_check[N_CALLS];    /* last result of each model function (warnings are logged once) */

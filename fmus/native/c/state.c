@@ -114,6 +114,7 @@ RtStatus rt_set_snapshot(Instance *inst, const Snapshot *s, const char *function
     for (i = 0; i < N_CALLS; i++) inst->last_check[i] = s->last_check[i];
     memcpy(inst->values, s->data, MODEL_N_VARIABLES * sizeof(double));
     rt_constants_stale(inst);  /* the snapshot's parameters may differ */
+    inst->outputs_stale = inst->is_me && MODEL_ME_OUTPUTS;  /* its outputs may be older than its states */
     if (MODEL_N_STATES) memcpy(inst->state, s->data + MODEL_N_VARIABLES, MODEL_N_STATES * sizeof(double));
     if (!inst->started && !(inst->mode & (MODE_INSTANTIATED | MODE_INITIALIZATION))) {
         if (rt_update(inst) != RT_OK) {
