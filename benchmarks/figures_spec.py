@@ -212,15 +212,18 @@ TABLES = (
                      "with RK4), native FMUs, serial, no log; the ME plant within 1e-6 m of the CS plant",
              "target": "ratio 1.5"},
             templates={"measured": "{ratio_dopri5:.2f} ({me_dopri5_s:.3f} s against {cs_s:.3f} s, best of the "
-                                   "rounds); the ME plant within {distance_dopri5_m:.2g} m of the CS plant. The CS "
-                                   "plant takes one RK4 step of 4 evaluations per 1 ms inside the FMU, the ME plant a "
-                                   "DOPRI5 step of 6 evaluations plus one after the input changed, each through the "
-                                   "FMI exchange, so about 1.5x is the floor. `cvode` in C {ratio_cvode:.1f} "
-                                   "({me_cvode_s:.2f} s: BDF restarts at order one every step; {distance_cvode_m:.2g} "
-                                   "m). On 2026-11-28 (the other core busy, load 4-6): 1.22, 1.64 and 1.85 in three "
-                                   "runs of 10 rounds, per step the best of 12 runs each 4.41 us against 2.88 us "
-                                   "(1.53); `cvode` 6.9-9.9; `dop853` (SciPy, Python) 106. Before the integration in "
-                                   "C: 5.19 with `dop853` (3.38 s against 0.651 s)"},
+                                   "rounds; the median of the rounds' paired ratios {paired_ratio_dopri5:.2f}); the ME "
+                                   "plant within {distance_dopri5_m:.2g} m of the CS plant. The CS plant takes one RK4 "
+                                   "step of 4 evaluations per 1 ms inside the FMU, the ME plant a DOPRI5 step of 6 "
+                                   "evaluations plus one after the input changed, each through the FMI exchange; both "
+                                   "integrate the platform dynamics (the ME plant's states are p, v; its joint outputs "
+                                   "are computed when read), and the FMU's parameter-only constants are recomputed on "
+                                   "a flag, not by comparing the parameters at each evaluation. `cvode` in C "
+                                   "{ratio_cvode:.1f} ({me_cvode_s:.2f} s: BDF restarts at order one every step; "
+                                   "{distance_cvode_m:.2g} m). Before, with the joints q, qd as states (a joint-space "
+                                   "evaluation, twice the platform one) and the parameters compared at each call: "
+                                   "1.72 at load 7 (2026-11-29), 1.68 best-of on a quiet machine; before the "
+                                   "integration in C: 5.19 with `dop853` (3.38 s against 0.651 s)"},
             met_if=("ratio_dopri5", 1.5)),
         Row("core-ik-step", "core",
             {"what": "the kinematics and dynamics core per call against the plain-float code it replaced (parent of "
