@@ -57,7 +57,7 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from figures_spec import TABLES, Table  # noqa: E402
-from record import MEASURED_CODE, ROOT  # noqa: E402
+from record import MEASURED_CODE, NOT_MEASURED, ROOT  # noqa: E402
 
 PAGE = ROOT / "docs" / "figures.md"
 RESULTS = ROOT / "benchmarks" / "results"
@@ -257,7 +257,7 @@ def _check_all_used(results: dict[str, Result]) -> None:
 
 def _changed_since(commit: str) -> list[str] | None:
     proc = subprocess.run(["git", "-C", str(ROOT), "diff", "--name-only", commit, "HEAD", "--", *MEASURED_CODE,
-                           ":(exclude)benchmarks/results", ":(exclude)benchmarks/figures*.py"],
+                           *NOT_MEASURED],
                           capture_output=True, text=True, check=False)
     return proc.stdout.split() if proc.returncode == 0 else None
 

@@ -35,6 +35,8 @@ ROOT = Path(__file__).resolve().parents[1]
 RESULTS = ROOT / "benchmarks" / "results"
 # the code a benchmark measures: a figure recorded before a commit that changed these is stale
 MEASURED_CODE = ("cosim", "delta", "fmus", "multibody", "benchmarks")
+NOT_MEASURED = (":(exclude)benchmarks/results", ":(exclude)benchmarks/figures*.py")
+"""git pathspecs of what lies in MEASURED_CODE but is not measured: the recorded results, the page's renderer."""
 FORMAT = 1
 
 
@@ -62,7 +64,7 @@ def _git(*argv: str) -> str | None:
 
 def revision() -> dict:
     """The commit checked out and the measured code's files that differ from it (other work in the checkout)."""
-    changed = _git("status", "--porcelain", "--untracked-files=no", "--", *MEASURED_CODE)
+    changed = _git("status", "--porcelain", "--untracked-files=no", "--", *MEASURED_CODE, *NOT_MEASURED)
     return {"commit": _git("rev-parse", "HEAD"),
             "uncommitted": sorted(line[3:] for line in (changed or "").splitlines())}
 
