@@ -322,9 +322,20 @@ TABLES = (
                                                                           "at load 1.3-2.5: 2.56x / 1.61x"},
             met_if=("speedup_median", ">=", 1.7),
             met_column="speed-up over the loop / over the prepared loop"),
-        Row("cases-100-long", "sweep",
+        Row("cases-100-long", "sweep-100x10",
             {"sweep, native FMUs": "100 cases of 10 s",
-             "target": "1.7x"}),
+             "target": "1.7x"},
+            templates={"serial loop": "{serial_median_s:.1f} s",
+                       "serial, prepared": "{prepared_median_s:.1f} s",
+                       "sweep (2 workers)": "{sweep_median_s:.1f} s",
+                       "speed-up over the loop / over the prepared loop": "{speedup_median:.2f}x (runs "
+                                                                          "{speedup_runs:.2f}x) / "
+                                                                          "{speedup_prepared_median:.2f}x "
+                                                                          "({speedup_prepared_runs:.2f}x); 2026-11-28 "
+                                                                          "(the standard library's pool): 1.55x, not "
+                                                                          "met / 1.20x"},
+            met_if=("speedup_median", ">=", 1.7),
+            met_column="speed-up over the loop / over the prepared loop"),
     )),
     Table("startup", ("whole process", "median", "best",), result="startup", rows=(
         Row("ours", None,
