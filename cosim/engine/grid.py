@@ -141,18 +141,24 @@ class Grid:
     def chunk(self, k0: int, k1: int) -> tuple[list[float], list[float]]:
         """The doubles of points ``k0 .. k1 - 1`` and the base step size from each (``m = 1``), computed together
         for a run's hot loop: as :meth:`time` and :meth:`step_size` give them, at a few ns a point."""
+        times, steps, _ = self.chunk_arrays(k0, k1)
+        return times.tolist(), steps.tolist()
+
+    def chunk_arrays(self, k0: int, k1: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """:meth:`chunk` as float64 arrays, with the end of each step, ns (:meth:`t_ns` of ``k0 + 1 .. k1``, int64):
+        what the master's loop in C reads, copied into its arrays whole."""
         ks = range(k0, k1 + 1)
         if self.stop_ns < 2**53:  # the ns are exact doubles: the float64 division rounds correctly, as int / int
             ns = (self.start_ns + self.step_ns * np.arange(k0, k1 + 1, dtype=np.int64) if self._uniform
                   else np.array([self.t_ns(k) for k in ks], dtype=np.int64))
             t = ns / float(NS_PER_S)
         else:
+            ns = np.array([self.t_ns(k) for k in ks], dtype=np.int64)
             t = np.array([self.time(k) for k in ks])
         h = np.diff(t)
-        times, steps = t.tolist(), h.tolist()
         for i in np.flatnonzero(t[:-1] + h != t[1:]).tolist():
-            steps[i] = step_between(times[i], times[i + 1])
-        return times[:-1], steps
+            h[i] = step_between(float(t[i]), float(t[i + 1]))
+        return t[:-1], h, ns[1:]
 
     def step_size(self, k: int, m: int = 1, t: float | None = None) -> float:
         """The step size from point ``k`` (its double ``t``, when known) over ``m`` base steps: lands exactly on the
