@@ -82,9 +82,12 @@ TABLES = (
             templates={"measured": "{helix_own_c_us:.2f} us with the loop in C ({helix_loop_c_us:.2f} against "
                                    "{helix_bare_us:.2f} us a step, best of the rounds); the same loop in Python: "
                                    "{helix_own_python_us:.1f} us (per component a closure, five clock readings, the "
-                                   "tracking observer in Python). On 2026-11-28 at load 0.3-4.5: 0.56-0.71 us, met "
-                                   "(best of 5 to 15 rounds; once 1.49 us, best of 7 at load 2.7: take 15 rounds on a "
-                                   "busy machine)"},
+                                   "tracking observer in Python). Three runs on 2026-11-29 (load about 1): 0.51, 0.56, "
+                                   "0.71 us; before the C loop's arrays of a block's step times were filled whole "
+                                   "(element by element through ctypes, 0.59 us a step), the same day: 1.36 and 1.39 "
+                                   "us, 1.15 us at the previous day's last commit; on 2026-11-28 at load 0.3-4.5 0.56-"
+                                   "0.71 us were measured too (best of 5 to 15 rounds: take 15 rounds, the machine's "
+                                   "runs fall in two speed bands)"},
             met_if=("helix_own_c_us", 1.0)),
         Row("jacobi-vs-gauss-seidel", "master_native",
             {"what": "the Jacobi loop against the Gauss-Seidel loop, helix_ctc_analytic native, serial, no log, wall "
