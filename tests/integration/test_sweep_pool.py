@@ -135,3 +135,50 @@ def test_a_case_takes_the_libraries_loaded_ahead_and_gives_the_same_values():
     assert not slave._PRELOADED, "drop_preloaded kept some"
     for k in ("rmse_x", "rmse_y", "rmse_z", "max_error_x", "peak_effort", "steps"):
         assert taken[k] == fresh[k], (k, taken[k], fresh[k])
+
+
+INTERRUPTED = """
+import os, signal, sys, threading, time
+from cosim.analysis.cases import Case
+from cosim.analysis.sweep import run_sweep
+signal.signal(signal.SIGINT, signal.default_int_handler)  # a shell's background job starts with SIGINT ignored
+cases = [Case({"time.stop": 2.0, "ctl.gain.kp[1]": 1e4 + 1e3 * k}) for k in range(12)]
+first = []
+
+def progress(done, failed, total):
+    if done >= 1 and not first:  # after the first row: Ctrl-C, as a terminal sends it to the sweep's process
+        first.append(time.monotonic())
+        threading.Timer(0.05, os.kill, (os.getpid(), signal.SIGINT)).start()
+
+try:
+    run_sweep(sys.argv[1], cases, sys.argv[2], workers=2, on_progress=progress)
+except KeyboardInterrupt:
+    print(f"interrupted after {time.monotonic() - first[0]:.2f} s", flush=True)
+    sys.exit(130)
+print("not interrupted", flush=True)
+"""
+
+
+def test_ctrl_c_stops_the_pool_sweep_and_leaves_no_worker(tmp_path):
+    """Ctrl-C after the first row: the sweep's process raises KeyboardInterrupt (the cases not started cancelled, the
+    running ones let finish unwritten), its pool's workers end with it, and the table holds only whole rows of the
+    cases that finished; the same sweep again runs the rest."""
+    import subprocess
+    import sys
+
+    script = tmp_path / "interrupted.py"
+    script.write_text(INTERRUPTED)
+    out = tmp_path / "out"
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    proc = subprocess.run([sys.executable, str(script), SCENARIO, str(out)], capture_output=True, text=True,
+                          timeout=120, env=env, cwd=ROOT)
+    assert proc.returncode == 130 and "interrupted after" in proc.stdout, (proc.returncode, proc.stdout, proc.stderr)
+    took = float(proc.stdout.split("interrupted after ")[1].split()[0])
+    assert took < ForkPool.CLOSE_WAIT_S / 2, f"{took} s from Ctrl-C to the end: the workers were waited out, not ended"
+    rows = read_results(out)
+    assert 1 <= len(rows) < 12 and all(r["status"] == "ok" for r in rows), [(r["case"], r["status"]) for r in rows]
+    orphans = subprocess.run(["pgrep", "-f", str(script)], capture_output=True, text=True).stdout.split()
+    assert not orphans, f"processes of the interrupted sweep left: {orphans}"
+    cases = [Case({"time.stop": 2.0, "ctl.gain.kp[1]": 1e4 + 1e3 * k}) for k in range(12)]
+    again = run_sweep(SCENARIO, cases, out, workers=2)
+    assert again.ok and (again.ran, again.skipped) == (12 - len(rows), len(rows)), again.text()
