@@ -3,7 +3,7 @@
 For an FMU's definition (:class:`fmus.definition.FmuDefinition`) that has a native model, and FMI version 2 or 3:
 
 1. the interface comes from the definition's python adapter (:func:`fmus.native.interface.interface`);
-2. each model function (start, refresh, advance, derivatives, outputs, accept) is traced on ``SX`` symbols: time,
+2. each model function (start, refresh, advance, derivatives, accept) is traced on ``SX`` symbols: time,
    step, the values array (one element per value reference) and the internal state; CasADi's code generator
    writes them as one self-contained C file (``model_functions.c``);
 3. ``model.c`` binds them to the contract of ``c/model.h`` (the variable table, which values each

@@ -1,7 +1,7 @@
 """Generate the C of a native FMU: trace its model's functions on CasADi symbols and write them as C.
 
-Steps 2 and 3 of :mod:`fmus.native.build`: each model function (start, refresh, advance, derivatives, outputs,
-accept) of the definition's native model is traced on ``SX`` symbols, what depends on parameters only is hoisted into a
+Steps 2 and 3 of :mod:`fmus.native.build`: each model function (start, refresh, advance, derivatives, accept)
+of the definition's native model is traced on ``SX`` symbols, what depends on parameters only is hoisted into a
 constants function, CasADi's code generator writes them as ``model_functions.c``, and ``model.c`` binds them to the
 contract of ``c/model.h``. Imported by a build only: a run of cached FMUs loads neither this module nor CasADi.
 """
@@ -20,7 +20,7 @@ from .interface import Interface, interface
 from .models import NativeModel, Result, Symbols
 from .symbolic import tracing
 
-_FUNCTIONS = ("start", "refresh", "advance", "derivatives", "outputs", "accept")
+_FUNCTIONS = ("start", "refresh", "advance", "derivatives", "accept")
 MAX_DETAIL = 4  # values a check may print into its reason (MODEL_MAX_DETAIL of c/model.h)
 
 
@@ -229,6 +229,8 @@ def generate(fmu: FmuDefinition, out: Path, token: str) -> tuple[Interface, list
     import casadi as ca
 
     model = fmu.native_model()
+    if model.me_outputs and not model.me_accepts:
+        raise NativeError(f"FMU {fmu.name}: me_outputs needs me_accepts (accept computes the outputs)")
     itf = interface(fmu.name, model)
     traced = [_trace(model, itf, which) for which in _FUNCTIONS]
     functions, constants = _hoisted(itf, traced)

@@ -15,8 +15,9 @@ The functions, as the C glue calls them (``fmus/native/c/model.h``):
 * ``advance``: the internal state over one co-simulation substep ``h``;
 * ``derivatives``: model exchange: state derivatives, and the outputs unless :attr:`NativeModel.me_outputs`
   (default: ``refresh``);
-* ``outputs``: model exchange with :attr:`NativeModel.me_outputs`: the outputs, computed when one is read, not at
-  every derivative evaluation (the integrator's trial states never need them).
+* ``accept``: model exchange: the checks of a state the importer accepted (a completed integrator step, an event, a
+  communication point) and, with :attr:`NativeModel.me_outputs`, its outputs, which the integrator's trial states
+  never need.
 """
 
 from __future__ import annotations
@@ -108,7 +109,7 @@ class NativeModel:
     me_advances = False
     me_accepts = False  # model exchange checks each accepted state (:meth:`accept`)
     me_adapter: type | None = None  # its declared states and their derivatives are the FMU's continuous states
-    me_outputs = False  # model exchange: ``outputs`` computes the outputs when read, ``derivatives`` only derivatives
+    me_outputs = False  # model exchange: :meth:`accept` gives the outputs (with me_accepts), ``derivatives`` none
 
     def __init__(self, kind: str | None, adapter: type) -> None:
         self.kind, self.adapter = kind, adapter
@@ -129,17 +130,14 @@ class NativeModel:
 
     def accept(self, sym: Symbols, trace: Trace) -> Result:
         """Model exchange (with :attr:`me_accepts`): the checks of a state the importer accepted, at each completed
-        integrator step and event, never of its trial states (``derivatives``)."""
+        integrator step and event, never of its trial states (``derivatives``); with :attr:`me_outputs` also its
+        outputs, which the runtime then computes here only (at a completed step, or when one is read)."""
         return Result()
 
     def refresh(self, sym: Symbols, trace: Trace) -> Result:
         return Result()
 
     def advance(self, sym: Symbols, trace: Trace) -> Result:
-        return Result()
-
-    def outputs(self, sym: Symbols, trace: Trace) -> Result:
-        """Model exchange with :attr:`me_outputs`: the outputs of the states and inputs, when one is read."""
         return Result()
 
     def derivatives(self, sym: Symbols, trace: Trace) -> Result:
@@ -326,7 +324,7 @@ class AnalyticPlant(NativeModel):
     max_step = "solver.max_step"
     me_adapter = plant_me.AnalyticPlantME
     me_accepts = True  # the end stops, on accepted states (derivatives see the integrator's trial states)
-    me_outputs = True  # q, qd by inverse kinematics when read, not at each of the integrator's evaluations
+    me_outputs = True  # q, qd of accepted states only, not at each of the integrator's evaluations
 
     def __init__(self, kind: str | None, adapter: type) -> None:
         super().__init__(kind, plants.AnalyticPlant)
@@ -359,13 +357,9 @@ class AnalyticPlant(NativeModel):
         q, qd, joints = self._joints(model, p, v, trace)
         return Result(dict(zip(Q + QD + P + V, (*q, *qd, *p, *v))), checks=checks + joints)
 
-    def outputs(self, sym: Symbols, trace: Trace) -> Result:
+    def accept(self, sym: Symbols, trace: Trace) -> Result:
         q, qd, checks = self._joints(self.model(sym, trace), sym.vec(P), sym.vec(V), trace)
         return Result(dict(zip(Q + QD, (*q, *qd))), checks=checks)
-
-    def accept(self, sym: Symbols, trace: Trace) -> Result:
-        _, _, checks = self._joints(self.model(sym, trace), sym.vec(P), sym.vec(V), trace)
-        return Result(checks=checks)
 
     def advance(self, sym: Symbols, trace: Trace) -> Result:
         model = self.model(sym, trace)

@@ -67,10 +67,12 @@ extern const size_t MODEL_MAX_STEP_VR;           /* 0: none; else the parameter 
                                                     max(1, -int(-h // max_step))) */
 extern const int MODEL_ME_ACCEPTS;               /* 1: in model exchange, model_accept checks the state at
                                                     each completed integrator step and event */
-extern const int MODEL_ME_OUTPUTS;               /* 1: in model exchange, model_derivatives writes the
-                                                    derivatives only and model_outputs the outputs, when one
-                                                    is read (not at each of the integrator's evaluations);
-                                                    0: model_derivatives writes both, model_outputs nothing */
+extern const int MODEL_ME_OUTPUTS;               /* 1 (with MODEL_ME_ACCEPTS): in model exchange,
+                                                    model_derivatives writes the derivatives only and
+                                                    model_accept the outputs of the accepted state (at a
+                                                    completed step, or when one is read first), never at the
+                                                    integrator's evaluations; 0: model_derivatives writes
+                                                    both */
 extern const int MODEL_ME_ADVANCES;              /* 1: in model exchange, model_advance(t_last, t - t_last)
                                                     commits the internal state at each completed
                                                     integrator step and event; 0: never called in ME */
@@ -94,11 +96,9 @@ int model_advance(double time, double h, double *values, double *state, double *
 /* Model exchange: derivatives (written at MODEL_DERIVATIVE_VRS), and the outputs unless MODEL_ME_OUTPUTS, from
  * the continuous states (read at MODEL_STATE_VRS), inputs and parameters at `time`. */
 int model_derivatives(double time, double *values, double *state, double *detail);
-/* Model exchange (MODEL_ME_OUTPUTS): the outputs from the continuous states, inputs and parameters at `time`,
- * called before an output is read when the states, inputs or time changed since the last call. */
-int model_outputs(double time, double *values, double *state, double *detail);
 /* Model exchange (MODEL_ME_ACCEPTS): the checks of the state the importer accepted (a completed integrator
- * step, an event), never called on its trial states; sets nothing. */
+ * step, an event, a communication point where an output is read), never called on its trial states; sets the
+ * outputs with MODEL_ME_OUTPUTS, else nothing. */
 int model_accept(double time, double *values, double *state, double *detail);
 
 #endif

@@ -195,11 +195,11 @@ RtStatus rt_update(Instance *inst)
     return RT_OK;
 }
 
-/* model exchange (MODEL_ME_OUTPUTS): the outputs of the current states, inputs and time; their checks are
- * model_refresh's (which such an instance never calls) */
-static RtStatus me_outputs(Instance *inst)
+/* model exchange: the checks of the state where the instance stands, accepted by the importer, and with
+ * MODEL_ME_OUTPUTS its outputs (model_accept) */
+static RtStatus me_accept(Instance *inst)
 {
-    if (check(inst, CALL_REFRESH, model_outputs(inst->time, inst->values, inst->state, inst->detail), inst->time) !=
+    if (check(inst, CALL_ACCEPT, model_accept(inst->time, inst->values, inst->state, inst->detail), inst->time) !=
         RT_OK)
         return RT_ERROR;
     inst->outputs_stale = 0;
@@ -289,9 +289,7 @@ RtStatus rt_me_commit(Instance *inst)
         inst->dirty = 1;
     }
     inst->t_last = inst->time;
-    if (MODEL_ME_ACCEPTS && inst->started &&
-        check(inst, CALL_ACCEPT, model_accept(inst->time, inst->values, inst->state, inst->detail), inst->time) != RT_OK)
-        return RT_ERROR;
+    if (MODEL_ME_ACCEPTS && inst->started && me_accept(inst) != RT_OK) return RT_ERROR;
     return RT_OK;
 }
 
@@ -386,7 +384,7 @@ RtStatus rt_get(Instance *inst, size_t vr, double *value)
     /* after a failed step the outputs stay those of the last successful one */
     if ((c == CAUSALITY_OUTPUT || c == CAUSALITY_LOCAL) && !inst->failed) {
         if ((inst->dirty || !inst->started) && rt_update(inst) != RT_OK) return RT_ERROR;
-        if (inst->outputs_stale && me_outputs(inst) != RT_OK) return RT_ERROR;
+        if (inst->outputs_stale && me_accept(inst) != RT_OK) return RT_ERROR;
     }
     *value = inst->values[vr];
     return RT_OK;

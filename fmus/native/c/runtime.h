@@ -47,7 +47,7 @@ struct Instance {
     int logging_on;
     int dirty;                  /* an input, parameter, time or state changed: outputs are stale */
     int outputs_stale;          /* model exchange with MODEL_ME_OUTPUTS: the derivatives are current, the outputs
-                                   not (model_outputs before one is read) */
+                                   not (model_accept before one is read) */
     int started;                /* model_start ran with the current parameters */
     int failed;                 /* a step failed: no further steps */
     int last_check[N_CALLS];    /* last result of each model function (warnings are logged once) */
@@ -98,7 +98,8 @@ RtStatus rt_exit_initialization(Instance *inst);
 /* One co-simulation step; RT_DISCARD (logged) when a check fails, the instance then failed. */
 RtStatus rt_do_step(Instance *inst, double t, double h);
 /* Model exchange, at a completed integrator step or an event: commit the internal state up to `time`
- * (model_advance when MODEL_ME_ADVANCES), then check the accepted state (model_accept when MODEL_ME_ACCEPTS). */
+ * (model_advance when MODEL_ME_ADVANCES), then check the accepted state and, with MODEL_ME_OUTPUTS, compute its
+ * outputs (model_accept when MODEL_ME_ACCEPTS). */
 RtStatus rt_me_commit(Instance *inst);
 void rt_set_time(Instance *inst, double time);
 RtStatus rt_get_states(Instance *inst, double *x, size_t nx, const char *function);
