@@ -27,6 +27,13 @@ class Row:
     met_column: str | None = None  # the cell the verdict starts (default: the first measured one)
 
 
+def _auto_row(figures: str, build: str, spinner: str, fmt: str) -> Row:
+    """A row of the parallel-auto table: the benchmark's figures of one build and load (``figures``, a dict)."""
+    return Row(figures.replace("_", "-"), None, {"build": build, "spinner": spinner},
+               templates={"auto": f"{{{figures}[auto_s]:{fmt}}} s", "off": f"{{{figures}[off_s]:{fmt}}} s",
+                          "auto / off": f"{{{figures}[ratio]:.2f}}", "auto chose": f"{{{figures}[chose]}}"})
+
+
 @dataclass(frozen=True)
 class Table:
     name: str
@@ -403,26 +410,10 @@ TABLES = (
           "auto / off",
           "auto chose",),
           result="parallel_auto", rows=(
-        Row("native", None,
-            {"build": "native",
-             "spinner": "no"},
-            templates={"auto": "{native[auto_s]:.3f} s", "off": "{native[off_s]:.3f} s",
-                       "auto / off": "{native[ratio]:.2f}", "auto chose": "{native[chose]}"}),
-        Row("python", None,
-            {"build": "python",
-             "spinner": "no"},
-            templates={"auto": "{python[auto_s]:.2f} s", "off": "{python[off_s]:.2f} s",
-                       "auto / off": "{python[ratio]:.2f}", "auto chose": "{python[chose]}"}),
-        Row("native-spinner", None,
-            {"build": "native",
-             "spinner": "yes"},
-            templates={"auto": "{native_spinner[auto_s]:.3f} s", "off": "{native_spinner[off_s]:.3f} s",
-                       "auto / off": "{native_spinner[ratio]:.2f}", "auto chose": "{native_spinner[chose]}"}),
-        Row("python-spinner", None,
-            {"build": "python",
-             "spinner": "yes"},
-            templates={"auto": "{python_spinner[auto_s]:.2f} s", "off": "{python_spinner[off_s]:.2f} s",
-                       "auto / off": "{python_spinner[ratio]:.2f}", "auto chose": "{python_spinner[chose]}"}),
+        _auto_row("native", "native", "no", ".3f"),
+        _auto_row("python", "python", "no", ".2f"),
+        _auto_row("native_spinner", "native", "yes", ".3f"),
+        _auto_row("python_spinner", "python", "yes", ".2f"),
     )),
     Table("pick-place-payload",
           ("run",
