@@ -31,19 +31,23 @@ def pytest_sessionstart(session):
     threading.Thread(target=_watch, name="suite-stall-guard", daemon=True).start()
 
 
-def pytest_runtest_logreport(report):
+def _progress() -> None:
     _STATE["last"] = time.monotonic()
+
+
+def pytest_runtest_logreport(report):
+    _progress()
     _STATE["nodeid"] = report.nodeid
 
 
 @pytest.hookimpl(optionalhook=True)
 def pytest_testnodeready(node):
-    _STATE["last"] = time.monotonic()  # a worker up is progress: its start under load is not counted as a stall
+    _progress()  # a worker up is progress: its start under load is not counted as a stall
 
 
 @pytest.hookimpl(optionalhook=True)
 def pytest_xdist_node_collection_finished(node, ids):
-    _STATE["last"] = time.monotonic()  # so is a worker's collection
+    _progress()  # so is a worker's collection
 
 
 def pytest_sessionfinish(session):
@@ -56,7 +60,7 @@ def _watch() -> None:
         idle = time.monotonic() - _STATE["last"]
         if idle > STALL_S:
             sys.__stderr__.write(f"\nsuite stalled: no test reported for {idle:.0f} s (at most {STALL_S:g} s; the "
-                                 f"last report: {_STATE['nodeid']}, maybe the test that hangs); stopped. A worker "
+                                 f"last report: {_STATE['nodeid']}, maybe the test that hangs); stopped: a worker "
                                  "that crashed (its 'node down' line above) or a test that hangs\n")
             sys.__stderr__.flush()
             os._exit(3)

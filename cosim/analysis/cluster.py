@@ -7,9 +7,9 @@ about 4 s on the 2-core machine (a scheduler, and each worker a new interpreter 
 so 32 cases of 0.1 s ran at 0.61x the serial loop. Workers forked after the FMUs are built, checked and
 extracted start in milliseconds with all of it in memory: each case then forks its supervised child from a worker that
 already holds the code, the parsed FMU descriptions and the extracted binaries. What Dask adds, reaching machines
-beyond this one, is what ``--scheduler`` is for; on one machine the standard library's process pool does what is
-needed (a case at a time per worker, results as they complete), and the workers are forked as every process of the
-platform is (:func:`cosim.procs.start`). Where ``fork`` is missing (not POSIX) the embedded
+beyond this one, is what ``--scheduler`` is for; on one machine a pool of forked workers does what is needed (a case
+at a time per worker, results as they complete), forked as every process of the platform is
+(:func:`cosim.procs.start`). Where ``fork`` is missing (not POSIX) the embedded
 cluster is Dask's ``LocalCluster``, started in a thread while the FMUs are built."""
 
 from __future__ import annotations
