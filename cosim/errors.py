@@ -49,6 +49,16 @@ def printable(text: str) -> str:
     return _CONTROL.sub(lambda m: " " if m.group() == "\t" else repr(m.group())[1:-1], text)
 
 
+SHOWN_CHARS = 120
+"""Characters of a value given from outside (the command line, a file) that a message repeats (the rest is counted,
+not echoed)."""
+
+
+def shown(text: str) -> str:
+    """``text`` as a message repeats it: whole up to :data:`SHOWN_CHARS`, else its start and its length."""
+    return text if len(text) <= SHOWN_CHARS else f"{text[:SHOWN_CHARS]}... ({len(text)} characters)"
+
+
 def utf8(value):  # noqa: ANN001, ANN201 - str, or containers of them
     """``value`` (a str, or a list, tuple or dict of them) as text any UTF-8 writer takes: under a locale that is not
     UTF-8 (``LC_ALL=C`` with Python's UTF-8 mode off) a non-ASCII file name or argument reaches Python as surrogate
@@ -72,6 +82,8 @@ __all__ = [
     "domain_errors",
     "user_errors",
     "printable",
+    "shown",
+    "SHOWN_CHARS",
     "utf8",
     "SettingError",
     "Issue",

@@ -12,10 +12,11 @@ from .engine.assembly import assemble_structure
 from .engine.execution import Execution, Observer, StopRequest
 from .engine.names import safe_stem
 from .engine.offload import Offload, choose
-from .engine.prepare import input_files, prepare
+from .engine.prepare import prepare
 from .engine.events import EventState, event_at, resolve_sets
-from .engine.scenario import effective_scenario, load_scenario, scenario_from_data
-from .engine.schema import Scenario, expand_signal
+from .engine.scenario import effective_scenario, input_files, load_scenario, scenario_from_data
+from .engine.names import expand_signal
+from .engine.schema import Scenario
 from .engine.watchdog import Watchdog, hard_exit
 from .errors import CosimError
 from .fmi import Extractions, cleanup_extracted
@@ -133,7 +134,7 @@ def _publishing(scenario: Scenario, mcap_path: Path | None, options: RunOptions)
     """The MCAP recorder and/or the live view on one publisher of the run's channels, in start order,
     and the recorder (None without a log)."""
     scene = scenario.logging.scene
-    publisher = Publisher(plugins.scene(scenario), options.stamps,
+    publisher = Publisher(plugins.scene(scenario.structure()), options.stamps,
                           expand_signal(scenario.compare.reference) if scenario.compare is not None else None,
                           scenario.logging.layout, scene.rate_hz if scene is not None else 30.0)
     sinks: list[Observer] = []
@@ -155,7 +156,7 @@ def check_initialization(scenario: Scenario) -> tuple[Any, str]:
     with Extractions() as held:
         ex, ended = None, False
         try:
-            plan, report = prepare(scenario)
+            plan, report = prepare(scenario.structure())
             supervised = supervision.record()  # python -m cosim check: its supervisor names a crash
             ex = assemble_structure(plan, scenario.structure(), supervised)
             if supervised is not None:
@@ -387,7 +388,7 @@ def _run_claimed(scenario: Scenario, output, held: Extractions, options: RunOpti
     """A run whose log (``output``) is claimed: prepared, assembled, observed, stepped, summarised."""
     logging_on = output is not None
     published = logging_on or options.live is not None  # the log's and the live view's signals: logging.signals
-    plan, _ = prepare(scenario, None if published else ("all" if options.read_all else "none"),
+    plan, _ = prepare(scenario.structure(), None if published else ("all" if options.read_all else "none"),
                       fmu_files=options.fmu_files)
     supervised = supervision.record()  # python -m cosim run: the record its supervisor process reads
     ex = assemble_structure(plan, scenario.structure(), supervised)

@@ -250,7 +250,7 @@ class _Runner:
 def _start_values(runner: _Runner, fits: list[Fit]) -> tuple[list[float], dict[str, str]]:
     """Each scenario fit's start (the scenario's value after --set, else its FMU's start value) and the run
     signals' units; an unknown fit name or run signal is one line with the close names."""
-    infos = locate_fmus(runner.base, runner.fmu_files)
+    infos = locate_fmus(runner.base.structure(), runner.fmu_files)
     plan = build_plan(runner.base.structure(), infos)
     units = {}
     for name in runner.signals:
@@ -385,7 +385,7 @@ def calibrate(scenario: str | Path, recording: str | Path, maps: Mapping[str, st
     held = Extractions()
     try:
         with held:  # extracted once, for every run of the fit
-            for info in locate_fmus(runner.base, runner.fmu_files).values():
+            for info in locate_fmus(runner.base.structure(), runner.fmu_files).values():
                 getattr(info, "unzipdir", None)  # an FMU's: extracted on first use (a recording component has none)
         starts, run_units = _start_values(runner, scen)
         for f, s in zip(scen, starts):

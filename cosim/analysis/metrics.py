@@ -4,7 +4,8 @@ from __future__ import annotations
 
 import math
 
-from ..engine.schema import Scenario, expand_signal
+from ..engine.names import expand_signal
+from ..engine.schema import Scenario
 from ..run import RunResult
 
 __all__ = ["metric_names", "metrics"]

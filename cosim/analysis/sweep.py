@@ -200,7 +200,8 @@ class SweepSummary:
 def prebuild(scenarios: Iterable[Any]) -> dict[tuple[str, bool, int], str]:
     """Build each of our FMUs the cases use, once; :func:`cosim.engine.prepare.build_key` -> absolute path."""
 
-    keys = sorted({build_key(sc, c.fmu) for sc in scenarios for c in sc.components.values() if c.fmu is not None})
+    keys = sorted({build_key(sc.structure(), c.fmu) for sc in scenarios for c in sc.components.values()
+                   if c.fmu is not None})
     return {k: str(Path(build_ours(*k)).resolve()) for k in keys}
 
 
@@ -211,7 +212,7 @@ def _check_names(scenarios: list[Any], fmu_files: dict[tuple[str, bool, int], st
     infos = None
     for sc in scenarios:
         if infos is None or set(infos) != set(sc.components):
-            infos = locate_fmus(sc, fmu_files)
+            infos = locate_fmus(sc.structure(), fmu_files)
         build_plan(sc.structure(), infos)
 
 
@@ -236,7 +237,7 @@ def _warm_system(scenario: Scenario, ck: Checkpoint, fmu_files: dict[tuple[str, 
     """The warm cases' system, checked against the checkpoint before any case runs (the same components on the same
     FMU files, time grid and algorithm, a stop time after it: :meth:`Checkpoint.check_system`; no FMU
     instantiated). A checkpoint holds its exchanged values by variable, so a case with or without a log takes it."""
-    infos = locate_fmus(scenario, fmu_files)
+    infos = locate_fmus(scenario.structure(), fmu_files)
     plan = build_plan(scenario.structure(), infos, "none")
     ck.check_system(assemble_structure(plan, scenario.structure()), scenario.name)  # buffers, no instance
     return plan
@@ -341,7 +342,7 @@ def extract_for_cases(held: Extractions, scenario: Scenario, fmu_files: dict[tup
     nothing; a case of other FMUs extracts and loads its own, as any run). Extracting and removing each FMU for every
     case cost 30 ms a case or more, binding fmpy's functions about 3 ms an FMU. :func:`drop_preloaded` after."""
     with held:
-        for name, info in locate_fmus(scenario, fmu_files).items():
+        for name, info in locate_fmus(scenario.structure(), fmu_files).items():
             if not isinstance(info, FMUInfo):  # a recording replayed as a component: nothing to extract
                 continue
             comp = scenario.components[name]

@@ -12,7 +12,8 @@ from typing import Sequence
 import numpy as np
 
 from ..engine.bounded_yaml import load_yaml
-from ..engine.schema import Compare, expand_signal
+from ..engine.names import expand_signal
+from ..engine.schema import Compare
 from ..engine.scenario import EFFECTIVE_ATTACHMENT
 from ..errors import CosimError
 from ..io.runlog import AXES, RunLog, read_run

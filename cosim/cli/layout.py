@@ -31,7 +31,8 @@ def _cmd_layout(args: argparse.Namespace) -> int:
     from ..engine import plugins
     from ..engine.names import safe_stem
     from ..engine.overrides import apply_overrides
-    from ..engine.prepare import input_files, prepare
+    from ..engine.prepare import prepare
+    from ..engine.scenario import input_files
     from ..errors import written_by_rename
     from ..io.output import check_output
     from ..observers.layout import channels_of, layout
@@ -39,8 +40,9 @@ def _cmd_layout(args: argparse.Namespace) -> int:
 
     args.step = args.from_log = None  # what _open_scenario reads of a run's options
     with _open_scenario(args, apply_overrides(args.set)) as scenario:
-        plan, _ = prepare(scenario)  # the channels a run logs: its components' logged variables
-        drawing = plugins.scene(scenario)
+        system = scenario.structure()
+        plan, _ = prepare(system)  # the channels a run logs: its components' logged variables
+        drawing = plugins.scene(system)
         made = layout(channels_of(plan), drawing is not None and bool(drawing.position), scenario.name)
         out = Path(args.out) if args.out is not None else Path("runs") / f"{safe_stem(scenario.name)}.layout.json"
         check_output(out, input_files(scenario))

@@ -19,11 +19,10 @@ import json
 from dataclasses import dataclass, field
 from typing import Any
 
-from ..errors import Issue, ScenarioError, UnknownSignalError
+from ..errors import Issue, ScenarioError, UnknownSignalError, shown
 from ..fmi.description import REAL, STRING, Variable
 from ..fmi.slave import as_number
-from .overrides import shown
-from .schema import parse_condition
+from .conditions import parse_condition
 from .structure import SystemStructure
 from .system import Port, SystemPlan
 

@@ -12,7 +12,7 @@ the component is never parsed here: FMI variable names keep their own dots and q
 
 from __future__ import annotations
 
-__all__ = ["name_problem", "quote", "ref", "safe_stem", "split_ref"]
+__all__ = ["expand_signal", "name_problem", "quote", "ref", "safe_stem", "split_ref"]
 
 _QUOTE = "'"
 
@@ -76,3 +76,10 @@ def safe_stem(name: str, default: str = "run") -> str:
     ``runs/``, a component named so not its FMU outside the work folder)."""
     stem = "".join(c if c.isalnum() or c in "._-" else "_" for c in name).lstrip(".")
     return stem or default
+
+
+def expand_signal(spec: str | list[str]) -> list[str]:
+    """``"plant.p"`` -> ``["plant.p.x", "plant.p.y", "plant.p.z"]``; a list is kept as is."""
+    if isinstance(spec, list):
+        return list(spec)
+    return [f"{spec}.{axis}" for axis in "xyz"]

@@ -13,12 +13,12 @@ from typing import Any
 import yaml
 from pydantic import BaseModel
 
-from ..errors import Issue, ScenarioError, file_problem
+from ..errors import SHOWN_CHARS, Issue, ScenarioError, file_problem, shown
 from .bounded_yaml import load_yaml
 from .names import quote, split_ref
 from .schema import Scenario
 
-__all__ = ["Overrides", "parse_set_value", "shown", "WrittenNumber", "as_written", "has_written", "DOTTED", "resolve_name",
+__all__ = ["Overrides", "parse_set_value", "WrittenNumber", "as_written", "has_written", "DOTTED", "resolve_name",
            "dotted_overrides", "apply_overrides", "parameter_file_overrides", "MAX_PARAMETER_FILE_BYTES"]
 
 class Overrides(dict):
@@ -45,15 +45,6 @@ def parse_set_value(raw: str, origin: str = "--set") -> Any:
         why = " ".join(str(getattr(exc, "problem", None) or exc).split())
         # Refused (correctness): what the value means cannot be read (an alias bomb is bounded: security)
         raise ScenarioError(Issue("", f"invalid value: {why}", origin)) from None
-
-
-SHOWN_CHARS = 120
-"""Characters of a value given on the command line that a message repeats (the rest is counted, not echoed)."""
-
-
-def shown(text: str) -> str:
-    """``text`` as a message repeats it: whole up to :data:`SHOWN_CHARS`, else its start and its length."""
-    return text if len(text) <= SHOWN_CHARS else f"{text[:SHOWN_CHARS]}... ({len(text)} characters)"
 
 
 class WrittenNumber(float):

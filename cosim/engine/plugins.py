@@ -18,9 +18,15 @@ as one :class:`Plugin`, found through the ``cosim.plugins`` entry point group of
   plugin that gives one, the ``cosim.recordings`` entry point group's (this project publishes
   :func:`cosim.io.recordings.component.recording_info`: the engine cannot import the file formats), loaded only
   when a scenario has such a component (the reader's imports cost a run's start 0.1-0.2 s).
-* ``prepare(scenario)``: before the plan is made: the domain's pre-flight; returns a :class:`Preparation`, whose
+* ``prepare(system)``: before the plan is made: the domain's pre-flight of a
+  :class:`~cosim.engine.structure.SystemStructure` (its components and time grid, and the sections the engine leaves
+  to the domain: :attr:`~cosim.engine.structure.SystemStructure.domain`); returns a :class:`Preparation`, whose
   ``report`` is the pre-flight's line and whose ``apply(plan)`` gives the plan the domain's start values.
-* ``scene(scenario)``: what the ``/scene`` channels draw (:class:`Scene`), or None.
+* ``scene(system)``: what the ``/scene`` channels draw (:class:`Scene`), or None.
+
+Every part that acts on a run takes the system structure, never a front end's schema: a system read from an SSP
+archive, made in code or from a YAML scenario is the same to a domain. ``scenario_issues`` alone checks the YAML
+scenario as written (it places its findings at the file's lines).
 
 Like libcosim's model URI sub-resolvers, this is the one door: the engine, the FMI layer, the observers and the
 file formats import nothing of a domain (``tests/unit/test_layers.py``).
@@ -48,9 +54,9 @@ without arguments that returns one."""
 class FmuSource(Protocol):
     """How components given as ``fmu: NAME`` get their FMU file."""
 
-    def key(self, scenario: Any, name: str) -> Hashable:
-        """What decides the file for ``name`` in ``scenario`` (the same key: the same file; a sweep builds each
-        key once)."""
+    def key(self, system: Any, name: str) -> Hashable:
+        """What decides the file for ``name`` in ``system`` (a :class:`~cosim.engine.structure.SystemStructure`;
+        the same key: the same file; a sweep builds each key once)."""
 
     def build(self, key: Any) -> Path:
         """The FMU file of ``key``, built or taken from a cache. Raises a :class:`~cosim.errors.CosimError`."""
@@ -178,16 +184,16 @@ def scenario_issues(scenario: Any) -> list[tuple[tuple, str]]:
     return [issue for p in installed() if p.scenario_issues is not None for issue in p.scenario_issues(scenario)]
 
 
-def prepare(scenario: Any) -> list[Preparation]:
-    """Each domain's pre-flight of ``scenario`` (its report and start values), in plugin order."""
-    return [p.prepare(scenario) for p in installed() if p.prepare is not None]
+def prepare(system: Any) -> list[Preparation]:
+    """Each domain's pre-flight of ``system`` (its report and start values), in plugin order."""
+    return [p.prepare(system) for p in installed() if p.prepare is not None]
 
 
-def scene(scenario: Any) -> Scene | None:
-    """The drawing of ``scenario``'s ``/scene`` channels, by the first domain that draws it; None: no scene."""
+def scene(system: Any) -> Scene | None:
+    """The drawing of ``system``'s ``/scene`` channels, by the first domain that draws it; None: no scene."""
     for p in installed():
         if p.scene is not None:
-            drawing = p.scene(scenario)
+            drawing = p.scene(system)
             if drawing is not None:
                 return drawing
     return None

@@ -1,4 +1,4 @@
-"""A scenario made ready to run, with no FMU instantiated: each component's FMU located (a file, or one the domain
+"""A system made ready to run, with no FMU instantiated: each component's FMU located (a file, or one the domain
 plugged in gives by name, :func:`cosim.engine.plugins.fmu_source`), the domain's pre-flight run, the system plan
 built and given the start values the domain adds (:func:`cosim.engine.plugins.prepare`), the events resolved.
 "Prepare" is everything before the first FMU call; the domain's checks in it are its pre-flight."""
@@ -12,28 +12,29 @@ from ..errors import ComponentSourceError, CosimError, Issue
 from ..fmi import FMUInfo, load_fmu
 from . import plugins
 from .events import resolve_events
-from .schema import Scenario
+from .structure import SystemStructure
 from .system import build_plan
 
-__all__ = ["locate_fmus", "input_files", "build_key", "build_ours", "prepare"]
+__all__ = ["locate_fmus", "build_key", "build_ours", "prepare"]
 
 
-def locate_fmus(scenario: Scenario, fmu_files: Mapping[str, str | Path] | None = None) -> dict[str, FMUInfo]:
-    """Each component's FMU: ``path`` relative to the scenario file, or ``fmu`` given by the domain's FMU source; a
-    ``recording`` component's description made by the recordings plugin (:func:`cosim.engine.plugins.recording_source`).
+def locate_fmus(structure: SystemStructure,
+                fmu_files: Mapping[str, str | Path] | None = None) -> dict[str, FMUInfo]:
+    """Each component's FMU: ``path`` relative to the structure's folder, or ``fmu`` given by the domain's FMU source;
+    a ``replay`` component's description made by the recordings plugin
+    (:func:`cosim.engine.plugins.recording_source`).
 
     ``fmu_files``: our FMUs already built, by :func:`build_key` (a sweep builds them once for every case);
     the others are built here.
     """
-    base = _scenario_dir(scenario)
+    base = structure.folder()
     infos: dict[str, FMUInfo] = {}
     issues: list[Issue] = []
     built = {k: Path(p) for k, p in (fmu_files or {}).items()}
-    structure = scenario.structure()
-    for name, comp in scenario.components.items():
+    for name, comp in structure.components.items():
         loc = ("components", name, "fmu" if comp.fmu else "path" if comp.path else "recording")
-        where = dict(file=scenario.source, line=scenario.sources.line(loc))
-        replay = structure.components[name].replay
+        where = dict(file=structure.source, line=structure.where().line(loc))
+        replay = comp.replay
         if replay is not None:  # no FMU: the recordings plugin reads the file and checks its time range
             try:
                 span = (structure.start_ns * 1e-9, structure.stop_ns * 1e-9)
@@ -49,7 +50,7 @@ def locate_fmus(scenario: Scenario, fmu_files: Mapping[str, str | Path] | None =
                     issues.append(Issue(f"components.{name}.path", f"FMU file not found: {path}", **where))
                     continue
             else:
-                key = build_key(scenario, comp.fmu)
+                key = build_key(structure, comp.fmu)
                 if key not in built:
                     built[key] = build_ours(*key)
                 path = built[key]
@@ -62,24 +63,11 @@ def locate_fmus(scenario: Scenario, fmu_files: Mapping[str, str | Path] | None =
     return infos
 
 
-def input_files(scenario: Scenario) -> tuple[Path, ...]:
-    """The files a run of ``scenario`` reads: its file (or archive, or log and archive), the FMUs its components give by
-    ``path`` and the recordings they replay; no output may be written over one of them."""
-    base = _scenario_dir(scenario)
-    given = [c.path or c.recording for c in scenario.components.values() if c.path or c.recording]
-    paths = [Path(p) if Path(p).is_absolute() else base / p for p in given]
-    archive = scenario.archive["file"] if scenario.archive else None  # a run from a log of an SSP archive's run
-    return tuple(Path(p) for p in (scenario.source, archive, *paths) if p is not None and p != "<string>")
-
-
-def _scenario_dir(scenario: Scenario) -> Path:
-    return Path(scenario.source).parent if scenario.source and scenario.source != "<string>" else Path.cwd()
-
-
-def build_key(scenario: Scenario, name: str) -> Hashable:
-    """What decides the file of the component ``fmu: name`` in ``scenario`` (:meth:`~cosim.engine.plugins.FmuSource.key`;
-    the delta robot's: the FMU's name, native or python build, FMI version)."""
-    return plugins.fmu_source().key(scenario, name)
+def build_key(structure: SystemStructure, name: str) -> Hashable:
+    """What decides the file of the component ``fmu: name`` in ``structure``
+    (:meth:`~cosim.engine.plugins.FmuSource.key`; the delta robot's: the FMU's name, native or python build, FMI
+    version)."""
+    return plugins.fmu_source().key(structure, name)
 
 
 def build_ours(*key: object) -> Path:
@@ -94,17 +82,16 @@ def build_ours(*key: object) -> Path:
         raise ComponentSourceError(Issue("", str(exc.args[0]) if exc.args else f"unknown FMU {key!r}")) from None
 
 
-def prepare(scenario: Scenario, log_signals: str | None = None, *,
+def prepare(structure: SystemStructure, log_signals: str | None = None, *,
             fmu_files: Mapping[str, str | Path] | None = None):
-    """Pre-flight and plan (no FMU instantiated): returns (plan, the pre-flight's report).
+    """Pre-flight and plan of ``structure`` (no FMU instantiated): returns (plan, the pre-flight's report).
 
-    ``log_signals`` overrides ``logging.signals`` (:func:`cosim.engine.system.build_plan`);
+    ``log_signals`` overrides the structure's (:func:`cosim.engine.system.build_plan`);
     ``fmu_files``: our FMUs already built (:func:`locate_fmus`).
     """
 
-    structure = scenario.structure()  # what the engine runs; the scenario's domain sections go to its plugin
-    preparations = plugins.prepare(scenario)  # the domain's pre-flight, before any FMU is built
-    infos = locate_fmus(scenario, fmu_files)
+    preparations = plugins.prepare(structure)  # the domain's pre-flight (its sections), before any FMU is built
+    infos = locate_fmus(structure, fmu_files)
     plan = build_plan(structure, infos, log_signals)
     for prep in preparations:
         prep.apply(plan)

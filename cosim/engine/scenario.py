@@ -19,14 +19,15 @@ from pydantic import ValidationError
 
 from ..errors import Issue, ScenarioError, file_problem
 from .bounded_yaml import YamlTooLarge, load_yaml
-from .names import split_ref
+from .names import expand_signal, split_ref
 from . import plugins
 from .overrides import DOTTED, Overrides, as_written, has_written, parameter_file_overrides, resolve_name
-from .schema import Scenario, TrajectorySpec, condition_issue, expand_signal, parse_condition, trajectory_params_model
+from .conditions import condition_issue, parse_condition
+from .schema import Scenario, TrajectorySpec, trajectory_params_model
 from .sources import SourceMap, collect_lines, issue_at
 
 __all__ = ["Scenario", "ScenarioFile", "load_scenario", "read_scenario", "parse_scenario", "scenario_from_data",
-           "effective_scenario", "EFFECTIVE_ATTACHMENT", "MAX_SCENARIO_BYTES", "trajectory_params_issues"]
+           "effective_scenario", "EFFECTIVE_ATTACHMENT", "MAX_SCENARIO_BYTES", "trajectory_params_issues", "input_files"]
 
 _ALIASES = {"src": "from", "dst": "to"}
 _UNION_TAG = re.compile(r"^(bool|int|float|str|list\[.*\]|union\[.*\])$")
@@ -136,11 +137,11 @@ def scenario_from_data(data: dict[str, Any], file: str = "<string>", overrides: 
                   for loc, msgs in by_loc.items()]
         # Refused (correctness): values of the wrong type or range: the run would not be the one written
         raise ScenarioError(issues) from None
+    scenario._sources = SourceMap(file, lines, origins, written)  # before the checks: a domain's reads its structure
     issues = [issue_at(loc, msg, file, lines, origins) for loc, msg in _semantic_issues(scenario)]
     if issues:
         # Refused (correctness): a scenario that contradicts itself: the run would not be the one written
         raise ScenarioError(issues)
-    scenario._sources = SourceMap(file, lines, origins, written)
     return scenario
 
 
@@ -304,3 +305,13 @@ def effective_scenario(scenario: Scenario, log: str | Path | None = None) -> dic
     for path, text in scenario.sources.written.items():  # ("components", name, "parameters", variable)
         data["components"][path[1]]["parameters"][path[3]] = text
     return data
+
+
+def input_files(scenario: Scenario) -> tuple[Path, ...]:
+    """The files a run of ``scenario`` reads: its file (or archive, or log and archive), the FMUs its components give by
+    ``path`` and the recordings they replay; no output may be written over one of them."""
+    base = Path(scenario.source).parent if scenario.source and scenario.source != "<string>" else Path.cwd()
+    given = [c.path or c.recording for c in scenario.components.values() if c.path or c.recording]
+    paths = [Path(p) if Path(p).is_absolute() else base / p for p in given]
+    archive = scenario.archive["file"] if scenario.archive else None  # a run from a log of an SSP archive's run
+    return tuple(Path(p) for p in (scenario.source, archive, *paths) if p is not None and p != "<string>")

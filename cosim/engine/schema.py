@@ -9,26 +9,23 @@ a domain plugged in (:mod:`cosim.engine.plugins`) adds the meaning of ``robot``,
 
 from __future__ import annotations
 
-import math
 import dataclasses
 import difflib
-import re
 import typing
 from pathlib import Path
 from typing import Annotated, Any, Literal, Union
 
 from pydantic import AllowInfNan, BaseModel, ConfigDict, Field, PrivateAttr, ValidationError, field_validator, model_validator
 
-from ..errors import Issue, ScenarioError
 from .algorithm import ALGORITHMS, DEFAULT
 from .grid import MAX_TIME_S, NS_PER_S, Grid, grid_error, resolution_error, seconds
-from .names import name_problem, split_ref
+from .names import expand_signal, name_problem, split_ref
 from . import plugins
 from .sources import SourceMap
 from .structure import (ComponentStructure, ConnectionStructure, EventStructure, Observed, Replay,
                         SystemStructure)
 
-__all__ = ["Scenario", "Event", "parse_condition", "condition_issue", "Component", "Connection", "TimeGrid",
+__all__ = ["Scenario", "Event", "Component", "Connection", "TimeGrid",
            "TrajectorySpec", "InitialState", "Logging", "Compare", "Checks", "Regression", "expand_signal",
            "trajectory_params_model", "scenario_json_schema", "NS_PER_S"]
 
@@ -325,33 +322,6 @@ class Regression(_Model):
         return v
 
 
-_CONDITION = re.compile(r"^\s*([^\s<>=]+)\s*([<>])\s*([^\s<>=]+)\s*$")
-
-
-def parse_condition(text: str) -> tuple[str, str, float]:
-    """``"SIGNAL < VALUE"`` -> (signal, "<", value); raises ValueError saying what a condition looks like."""
-    m = _CONDITION.match(text)
-    value = None
-    if m:
-        try:
-            value = float(m.group(3))
-        except ValueError:
-            value = None
-    if m is None or value is None or not math.isfinite(value):
-        # Refused (correctness): a condition we cannot read: when the event fires is a guess
-        raise ValueError(f"condition {text!r} is not 'SIGNAL < VALUE' or 'SIGNAL > VALUE' (SIGNAL a "
-                         "component.variable, VALUE a finite number)")
-    return m.group(1), m.group(2), value
-
-
-def condition_issue(text: str) -> str | None:
-    try:
-        parse_condition(text)
-    except ValueError as exc:
-        return str(exc)
-    return None
-
-
 class Event(_Model):
     """A change during the run (``events:`` items): values set at a time, or when a signal crosses a value.
 
@@ -434,8 +404,6 @@ class Scenario(_Model):
     source: str | None = Field(None, exclude=True, json_schema_extra={"readOnly": True})
     # where the values came from (set by the loader): :attr:`sources`
     _sources: "SourceMap | None" = PrivateAttr(default=None)
-    _trajectory: Any = PrivateAttr(default=None)  # built once: :meth:`trajectory_object`
-    _domain: dict[str, Any] = PrivateAttr(default_factory=dict)  # :meth:`domain`
     _structure: Any = PrivateAttr(default=None)  # made once: :meth:`structure`
     _archive: dict[str, str] | None = PrivateAttr(default=None)  # set by cosim.io.ssp: :attr:`archive`
 
@@ -459,29 +427,18 @@ class Scenario(_Model):
                 t.start_ns, t.stop_ns, t.step_ns, self.algorithm,
                 tuple(EventStructure(dict(e.set), e.at, e.when, e.repeat, e.tolerance) for e in self.events),
                 self.logging.signals if self.logging.enabled else "none", tuple(observed), self.sources,
-                Path(self.source).parent if from_file else None, (self.source or "").lower().endswith(".ssp"))
+                Path(self.source).parent if from_file else None, (self.source or "").lower().endswith(".ssp"),
+                self._domain_sections(), self.source)
         return self._structure
 
-    def domain(self) -> dict[str, Any]:
-        """What the domain plugged in (:mod:`cosim.engine.plugins`) made of this scenario, kept with it so that it
-        is made once (the robot layer's identified model, read from the ``model:`` file)."""
-        return self._domain
+    def _domain_sections(self) -> dict[str, Any]:
+        """The sections only the domain reads (:attr:`SystemStructure.domain`), as plain values."""
+        def plain(section: BaseModel | None) -> dict[str, Any] | None:
+            return None if section is None else section.model_dump(mode="python")
 
-    def trajectory_object(self) -> Any:
-        """The trajectory of the ``trajectory:`` section (an instance of its type's class,
-        :func:`cosim.engine.plugins.trajectories`; None without the section), built once per scenario: the pre-flight, the start values of our
-        trajectory FMUs, the initial state and the log's reference path all use this one."""
-        spec = self.trajectory
-        if spec is None:
-            return None
-        if self._trajectory is None:
-            cls = plugins.trajectories()[spec.type]
-            try:  # spec.params are typed by the scenario's model (TrajectorySpec._typed)
-                self._trajectory = cls(**spec.params)
-            except (TypeError, ValueError) as exc:  # pydantic's ValidationError is a ValueError
-                # Refused (correctness): trajectory parameters the trajectory cannot take
-                raise ScenarioError(Issue("trajectory.params", f"{cls.__name__}: {exc}", self.source)) from None
-        return self._trajectory
+        return {"robot": self.robot, "fmus": self.fmus, "native_fmi": self.native_fmi,
+                "trajectory": plain(self.trajectory), "model": self.model,
+                "initial_state": plain(self.initial_state), "scene": plain(self.logging.scene)}
 
     @property
     def archive(self) -> dict[str, str] | None:
@@ -519,13 +476,6 @@ def _replay(c: Component) -> Replay | None:
         return None
     return Replay(c.recording, tuple(c.signals.items()), c.interpolation, c.offset, c.time, tuple(c.units.items()),
                   c.time_origin)
-
-
-def expand_signal(spec: str | list[str]) -> list[str]:
-    """``"plant.p"`` -> ``["plant.p.x", "plant.p.y", "plant.p.z"]``; a list is kept as is."""
-    if isinstance(spec, list):
-        return list(spec)
-    return [f"{spec}.{axis}" for axis in "xyz"]
 
 
 

@@ -2,7 +2,8 @@
 
 Tool-neutral and file-neutral, as libcosim's ``system_structure`` between its parsers and its execution: the
 components with their FMU sources and start values, the connections, the time grid, the algorithm, the events,
-what is logged and what the observers read. A YAML scenario (:meth:`cosim.engine.schema.Scenario.structure`)
+what is logged and what the observers read, and the sections only a domain reads (:attr:`SystemStructure.domain`:
+the robot's, for the plugin of :mod:`cosim.engine.plugins`; the engine never looks inside). A YAML scenario (:meth:`cosim.engine.schema.Scenario.structure`)
 and an SSP archive (read into the same scenario, :mod:`cosim.io.ssp`) both meet here; the plan
 (:func:`cosim.engine.system.build_plan`), the events (:func:`cosim.engine.events.resolve_events`) and the
 execution (:func:`cosim.engine.assembly.assemble_structure`) take it. Where each value came from (file and
@@ -12,7 +13,7 @@ finds is placed there.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Mapping
 
@@ -106,6 +107,15 @@ class SystemStructure:
     sources: SourceMap | None = None
     base: Path | None = None  # the folder relative FMU paths are resolved against (None: the working folder)
     archive: bool = False  # read from an SSP archive: advice names options, not YAML keys
+    domain: Mapping[str, Any] = field(default_factory=dict)
+    """The sections of the source the engine does not read, as plain values (numbers, strings, lists, mappings) the
+    front end validated: what the domain plugged in reads (:func:`cosim.engine.plugins.prepare`, ``scene``, an FMU
+    source's ``key``). A YAML scenario's: ``robot``, ``fmus``, ``native_fmi``, ``trajectory``, ``model``,
+    ``initial_state``, ``scene`` (:meth:`cosim.engine.schema.Scenario.structure`)."""
+    source: str | None = None  # the file the structure was read from (None: made in code)
+    made: dict[str, Any] = field(default_factory=dict, compare=False, repr=False)
+    """What a domain made of :attr:`domain` once per structure (a trajectory object, an identified model read from its
+    file), kept here so that every part of a run uses the same one."""
 
     def where(self) -> SourceMap:
         """Where each value came from (an empty map when the structure was made in code)."""
@@ -113,3 +123,8 @@ class SystemStructure:
 
     def folder(self) -> Path:
         return self.base if self.base is not None else Path.cwd()
+
+    def seconds(self) -> tuple[float, float, float]:
+        """(start, stop, step) in seconds: each the double nearest its decimal value (an integer count of
+        nanoseconds divided by 1e9 is rounded once, as the decimal text was when it was read)."""
+        return self.start_ns / 1e9, self.stop_ns / 1e9, self.step_ns / 1e9

@@ -11,13 +11,12 @@ import math
 from dataclasses import dataclass, field
 from typing import Any, Callable, Mapping
 
-from ..errors import AlgebraicLoopError, Issue, UnknownSignalError, WiringError
+from ..errors import AlgebraicLoopError, Issue, UnknownSignalError, WiringError, shown
 from ..fmi import FMUInfo, Variable
 from ..fmi.description import warn_ambiguous
 from ..fmi.description import initial_of, settable_at_start
 from .algorithm import ALGORITHMS
 from .names import quote, split_ref
-from .overrides import shown
 from .structure import SystemStructure
 from .wiring import expand_connection, find_variable, index_text
 

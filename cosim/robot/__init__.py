@@ -13,15 +13,19 @@ nothing of ``delta``, ``fmus`` or ``multibody``; this room is where they meet.
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 from delta.errors import DeltaError
 from delta.robots import PRESETS
 from delta.trajectories import TYPES
 
 from ..engine.plugins import Plugin
-from ..engine.schema import Scenario
 from ..errors import ScenarioError
 from . import preflight, scene, sources
-from .model_file import scenario_model
+from .model_file import system_model
+
+if TYPE_CHECKING:  # the YAML schema only names the type: the plugin's run-time parts take a system structure
+    from ..engine.schema import Scenario
 
 __all__ = ["plugin"]
 
@@ -31,7 +35,7 @@ def _scenario_issues(s: Scenario) -> list[tuple[tuple, str]]:
     out: list[tuple[tuple, str]] = []
     if s.model is not None and s.robot is not None:
         try:
-            model = scenario_model(s)
+            model = system_model(s.structure())
         except ScenarioError as exc:
             out += [(("model",), i.message) for i in exc.issues]
         else:

@@ -18,9 +18,10 @@ import yaml
 
 from ..errors import Issue, ScenarioError, file_problem, written_by_rename
 from ..engine.bounded_yaml import load_yaml
+from ..engine.structure import SystemStructure
 
 __all__ = ["FORMAT", "PARAMETERS", "ModelFile", "read_model_file", "write_model_file", "model_start_values",
-           "scenario_model", "model_based"]
+           "system_model", "model_based"]
 
 FORMAT = "cosim-identified-model/1"
 MAX_MODEL_BYTES = 64 * 2 ** 10
@@ -110,16 +111,16 @@ def model_start_values(model: ModelFile, variables: Any) -> dict[str, float]:
     return {name: value for name, value in model.parameters.items() if name in variables}
 
 
-def scenario_model(scenario: Any) -> ModelFile | None:
-    """The identified model ``scenario``'s ``model:`` key names, its path relative to the scenario file; read once
-    per scenario (kept in its :meth:`~cosim.engine.schema.Scenario.domain` slot); None without the key. Raises
-    :class:`ScenarioError`."""
-    if scenario.model is None:
+def system_model(system: SystemStructure) -> ModelFile | None:
+    """The identified model ``system``'s ``model`` section names, its path relative to the system's source file;
+    read once per system (kept in its :attr:`~cosim.engine.structure.SystemStructure.made`); None without the
+    section. Raises :class:`ScenarioError`."""
+    name = system.domain.get("model")
+    if name is None:
         return None
-    slot = scenario.domain()
-    if "model_file" not in slot:
-        path = Path(scenario.model)
-        if not path.is_absolute() and scenario.source and scenario.source != "<string>":
-            path = Path(scenario.source).parent / path
-        slot["model_file"] = read_model_file(path)
-    return slot["model_file"]
+    if "model_file" not in system.made:
+        path = Path(name)
+        if not path.is_absolute() and system.source and system.source != "<string>":
+            path = Path(system.source).parent / path
+        system.made["model_file"] = read_model_file(path)
+    return system.made["model_file"]

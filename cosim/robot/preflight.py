@@ -25,10 +25,11 @@ from fmus import registry
 from fmus.adapters.trajectories import ADAPTERS
 
 from ..engine.plugins import Preparation
-from ..engine.schema import Scenario
+from ..engine.structure import SystemStructure
 from ..engine.system import SystemPlan
 from ..errors import Issue, PreflightError, ScenarioError
-from .model_file import model_based, model_start_values, scenario_model
+from . import sections
+from .model_file import model_based, model_start_values, system_model
 
 __all__ = ["check_positions", "sampled_positions", "preflight", "initial_state_values", "trajectory_start_values",
            "prepare"]
@@ -52,56 +53,56 @@ def sampled_positions(traj, times: np.ndarray) -> np.ndarray:
     return np.asarray(p, dtype=float).reshape(len(times), 3)
 
 
-def preflight(scenario: Scenario) -> str:
-    """Check the scenario's trajectory (and the identified model's parameters against the robot's masses);
+def preflight(system: SystemStructure) -> str:
+    """Check the system's trajectory (and the identified model's parameters against the robot's masses);
     returns a one-line report, raises PreflightError."""
-    spec = scenario.trajectory
-    model = _model_report(scenario)
-    if spec is None or scenario.robot is None:
+    spec, robot = sections.trajectory(system), sections.robot(system)
+    model = _model_report(system)
+    if spec is None or robot is None:
         return "no trajectory to check" + model
-    traj = scenario.trajectory_object()
-    t0, t1 = scenario.time.start, scenario.time.stop
-    n = max(2, int(np.ceil((t1 - t0) / spec.check_step)) + 1)
+    traj = sections.trajectory_object(system)
+    t0, t1, _ = system.seconds()
+    n = max(2, int(np.ceil((t1 - t0) / spec["check_step"])) + 1)
     times = np.linspace(t0, t1, n)
-    check_positions(scenario.robot, times, sampled_positions(traj, times), spec.singularity_margin)
-    return f"trajectory reachable ({n} samples, margin {spec.singularity_margin})" + model
+    check_positions(robot, times, sampled_positions(traj, times), spec["singularity_margin"])
+    return f"trajectory reachable ({n} samples, margin {spec['singularity_margin']})" + model
 
 
-def _model_report(scenario: Scenario) -> str:
-    """``; model FILE (w_inertia = ..)`` for a scenario with an identified model, after building the robot's
+def _model_report(system: SystemStructure) -> str:
+    """``; model FILE (w_inertia = ..)`` for a system with an identified model, after building the robot's
     analytic model with its parameters (the mass validation of :mod:`delta.masses`)."""
-    model = scenario_model(scenario)
+    model = system_model(system)
     if model is None:
         return ""
 
-    robot = get_preset(scenario.robot)
+    robot = get_preset(sections.robot(system))
     fields = {name.removeprefix("model."): value for name, value in model.parameters.items()}
     try:
         build_model(robot, kind_of(robot.kind).masses_type().with_(**fields))
     except (ParameterError, TypeError) as exc:
         raise PreflightError(f"identified model {model.path}: {exc}") from None
     shown = ", ".join(f"{k} = {v:.4g}" for k, v in fields.items())
-    return f"; identified model {scenario.model} ({shown})"
+    return f"; identified model {sections.section(system, 'model')} ({shown})"
 
 
-def initial_state_values(scenario: Scenario) -> dict[str, float]:
+def initial_state_values(system: SystemStructure) -> dict[str, float]:
     """Start parameters of ``initial_state.component``: position and velocity on the trajectory at t = start."""
-    init = scenario.initial_state
-    if scenario.trajectory is None or not init.from_trajectory:
+    init = sections.initial_state(system)
+    if sections.trajectory(system) is None or not init["from_trajectory"]:
         return {}
-    traj = scenario.trajectory_object()
-    state = traj.evaluate(scenario.time.start)
+    traj = sections.trajectory_object(system)
+    state = traj.evaluate(system.seconds()[0])
     p = np.asarray(getattr(state, "p", state[0] if isinstance(state, tuple) else state), dtype=float).reshape(3)
     v = getattr(state, "v", state[1] if isinstance(state, tuple) and len(state) > 1 else None)
-    out = dict(zip(init.position, map(float, p)))
-    if v is not None and init.velocity:
-        out.update(zip(init.velocity, map(float, np.asarray(v, dtype=float).reshape(3))))
+    out = dict(zip(init["position"], map(float, p)))
+    if v is not None and init["velocity"]:
+        out.update(zip(init["velocity"], map(float, np.asarray(v, dtype=float).reshape(3))))
     return out
 
 
-def _trajectory_adapters(scenario: Scenario) -> dict[str, type]:
+def _trajectory_adapters(system: SystemStructure) -> dict[str, type]:
     """Components that are one of our trajectory FMUs (``fmu:``, not ``path:``) -> their adapter class."""
-    ours = {n: c.fmu for n, c in scenario.components.items() if c.fmu is not None}
+    ours = {n: c.fmu for n, c in system.components.items() if c.fmu is not None}
     if not ours:
         return {}
 
@@ -122,32 +123,32 @@ def _show(value: Any) -> str:
     return repr(value) if isinstance(value, str) else str(value)
 
 
-def trajectory_start_values(scenario: Scenario) -> dict[str, dict[str, Any]]:
-    """Start values of our trajectory FMUs from the scenario's ``trajectory:`` section, by component.
+def trajectory_start_values(system: SystemStructure) -> dict[str, dict[str, Any]]:
+    """Start values of our trajectory FMUs from the system's ``trajectory`` section, by component.
 
     Raises :class:`ScenarioError` (every issue, as ``file:line: path: message``) when such a
     component generates another trajectory type than the section's, when the FMU cannot
     represent the section's trajectory, or when the component also sets one of these
     parameters to a different value. Components given by ``path`` are left alone.
     """
-    spec = scenario.trajectory
-    adapters = _trajectory_adapters(scenario) if spec is not None else {}
+    spec = sections.trajectory(system)
+    adapters = _trajectory_adapters(system) if spec is not None else {}
     if not adapters:
         return {}
-    traj = scenario.trajectory_object()
+    traj = sections.trajectory_object(system)
     issues: list[Issue] = []
 
     def issue(loc: tuple, message: str) -> None:
-        issues.append(scenario.sources.issue(loc, message))
+        issues.append(system.where().issue(loc, message))
 
     out: dict[str, dict[str, Any]] = {}
     for name, cls in adapters.items():
-        comp = scenario.components[name]
-        if cls.TYPE != spec.type:
+        comp = system.components[name]
+        if cls.TYPE != spec["type"]:
 
             issue(("components", name, "fmu"),
-                  f"{comp.fmu} generates a {cls.TYPE} trajectory but trajectory.type is {spec.type}; "
-                  f"use fmu: {ADAPTERS[spec.type].FMU} or change trajectory.type")
+                  f"{comp.fmu} generates a {cls.TYPE} trajectory but trajectory.type is {spec['type']}; "
+                  f"use fmu: {ADAPTERS[spec['type']].FMU} or change trajectory.type")
             continue
         try:
             values = cls.parameters_of(traj)
@@ -161,7 +162,7 @@ def trajectory_start_values(scenario: Scenario) -> dict[str, dict[str, Any]]:
             for vname, val in targets:
                 if vname in values and not _same(val, values[vname]):
                     field = fields[vname]
-                    where = "trajectory.params" if field in spec.params else \
+                    where = "trajectory.params" if field in spec["params"] else \
                         f"trajectory (the {type(traj).__name__} default)"
                     issue(("components", name, "parameters", pname),
                           f"{_show(val)} disagrees with {where} {field} = {_show(getattr(traj, field))}; "
@@ -172,34 +173,35 @@ def trajectory_start_values(scenario: Scenario) -> dict[str, dict[str, Any]]:
     return out
 
 
-def prepare(scenario: Scenario) -> Preparation:
-    """The robot's pre-flight of ``scenario`` (the trajectory's start values checked first, then the reachability
+def prepare(system: SystemStructure) -> Preparation:
+    """The robot's pre-flight of ``system`` (the trajectory's start values checked first, then the reachability
     and the identified model) and, to apply to its plan, the start values it gives: our trajectory FMUs' from the
     ``trajectory:`` section, our model-based FMUs' from the identified model, the initial state's from the
     trajectory. A component's explicit parameters win over each (equal ones for the trajectory: checked)."""
-    trajectory_values = trajectory_start_values(scenario)
-    report = preflight(scenario)
-    return Preparation(report, lambda plan: _apply(scenario, plan, trajectory_values))
+    trajectory_values = trajectory_start_values(system)
+    report = preflight(system)
+    return Preparation(report, lambda plan: _apply(system, plan, trajectory_values))
 
 
-def _apply(scenario: Scenario, plan: SystemPlan, trajectory_values: dict[str, dict[str, Any]]) -> None:
+def _apply(system: SystemStructure, plan: SystemPlan, trajectory_values: dict[str, dict[str, Any]]) -> None:
     for name, values in trajectory_values.items():
         c = plan.names.index(name)
         plan.start_values[c] = {**values, **plan.start_values[c]}  # explicit ones are equal (checked)
-    model = scenario_model(scenario)
+    model = system_model(system)
     if model is not None:  # the identified model: start values of our model-based components, explicit ones win
         for c, name in enumerate(plan.names):
-            comp = scenario.components[name]
+            comp = system.components[name]
             if comp.fmu is not None and model_based(registry.get(comp.fmu)):
                 values = model_start_values(model, plan.infos[c].variables)
                 plan.start_values[c] = {**values, **plan.start_values[c]}
-    init = initial_state_values(scenario)
+    init = initial_state_values(system)
     if init:
-        c = plan.names.index(scenario.initial_state.component)
+        target = sections.initial_state(system)["component"]
+        c = plan.names.index(target)
         variables = plan.infos[c].variables
         missing = [n for n in init if n not in variables]
         if missing:
-            raise ScenarioError(Issue("initial_state", f"{scenario.initial_state.component} has no "
+            raise ScenarioError(Issue("initial_state", f"{target} has no "
                                       f"{', '.join(missing)} (set initial_state.position/velocity to its start "
-                                      f"parameters, or from_trajectory: false)", scenario.source))
+                                      f"parameters, or from_trajectory: false)", system.source))
         plan.start_values[c] = {**init, **plan.start_values[c]}  # explicit parameters win

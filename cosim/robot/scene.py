@@ -13,8 +13,10 @@ from delta.kinematics import inverse_kinematics, leg_axes, platform_offsets
 from delta.model import build_model
 from delta.robots import get_preset
 
-from ..engine.schema import Scenario, expand_signal
+from ..engine.names import expand_signal
+from ..engine.structure import SystemStructure
 from ..observers.publish import IDENTITY, REFERENCE_POINTS, entity, line, line_of, vec
+from . import sections
 from .preflight import sampled_positions
 
 __all__ = ["Drawing", "RobotScene", "drawing", "reference_path", "scene"]
@@ -69,15 +71,14 @@ def drawing(robot) -> Drawing:
     return Drawing(robot)
 
 
-def reference_path(scenario) -> np.ndarray | None:
-    """The scenario's whole reference path (n, 3), m, from its ``trajectory:`` section; None without one."""
-    spec = getattr(scenario, "trajectory", None)
-    if spec is None:
+def reference_path(system: SystemStructure) -> np.ndarray | None:
+    """The system's whole reference path (n, 3), m, from its ``trajectory`` section; None without one."""
+    if sections.trajectory(system) is None:
         return None
 
-    t0, t1 = scenario.time.start, scenario.time.stop
-    n = int(min(REFERENCE_POINTS, max(2, round((t1 - t0) / scenario.time.step) + 1)))
-    return sampled_positions(scenario.trajectory_object(), np.linspace(t0, t1, n))
+    t0, t1, step = system.seconds()
+    n = int(min(REFERENCE_POINTS, max(2, round((t1 - t0) / step) + 1)))
+    return sampled_positions(sections.trajectory_object(system), np.linspace(t0, t1, n))
 
 
 @dataclass
@@ -94,10 +95,10 @@ class RobotScene:
         return self.drawing.update(p, t_ns, trail)
 
 
-def scene(scenario: Scenario) -> RobotScene | None:
-    """The scene ``scenario``'s ``logging.scene`` asks for (its ``robot`` drawn); None without one."""
-    spec = scenario.logging.scene
-    if spec is None or not scenario.robot:
+def scene(system: SystemStructure) -> RobotScene | None:
+    """The scene ``system``'s ``scene`` section asks for (its ``robot`` drawn); None without one."""
+    spec, robot = sections.section(system, "scene"), sections.robot(system)
+    if spec is None or not robot:
         return None
-    return RobotScene(drawing(get_preset(scenario.robot)), expand_signal(spec.position), spec.rate_hz,
-                      reference_path(scenario))
+    return RobotScene(drawing(get_preset(robot)), expand_signal(spec["position"]), spec["rate_hz"],
+                      reference_path(system))

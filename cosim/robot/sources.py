@@ -12,7 +12,7 @@ from fmus.builder import on_build
 from fmus.native.build import compiler
 from fmus.native.errors import CompilerMissingError
 
-from ..engine.schema import Scenario
+from ..engine.structure import SystemStructure
 from ..errors import ComponentSourceError, Issue
 
 __all__ = ["RegistrySource"]
@@ -21,17 +21,18 @@ __all__ = ["RegistrySource"]
 class RegistrySource:
     """:class:`cosim.engine.plugins.FmuSource` of our FMUs: a key is (FMU name, native, FMI version)."""
 
-    def key(self, scenario: Scenario, name: str) -> tuple[str, bool, int]:
-        """The native build where the scenario asks for it (``fmus: native``, or ``auto`` with a C compiler on this
+    def key(self, system: SystemStructure, name: str) -> tuple[str, bool, int]:
+        """The native build where the system asks for it (``fmus: native``, or ``auto`` with a C compiler on this
         machine) and the FMU has one, else the python build (FMI 2 co-simulation, or 3 for ``*_me``)."""
-        if scenario.fmus == "python" or name not in registry.native_names():
+        fmus = system.domain.get("fmus") or "auto"
+        if fmus == "python" or name not in registry.native_names():
             return name, False, 2
-        if scenario.fmus == "auto":
+        if fmus == "auto":
             try:
                 compiler()
             except CompilerMissingError:
                 return name, False, 2
-        return name, True, scenario.native_fmi
+        return name, True, system.domain.get("native_fmi") or 2
 
     def build(self, key: Any) -> Path:
         """Our FMU of ``key``, built (or taken from the cache). A native build that cannot be made (no C compiler)

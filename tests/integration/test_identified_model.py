@@ -7,7 +7,7 @@ from pathlib import Path
 import pytest
 
 from cosim.engine.prepare import prepare
-from cosim.robot.model_file import scenario_model
+from cosim.robot.model_file import system_model
 from cosim.engine.scenario import load_scenario
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -15,13 +15,13 @@ pytestmark = pytest.mark.integration
 
 
 def _start(scenario, name):
-    plan, report = prepare(scenario)
+    plan, report = prepare(scenario.structure())
     return plan.start_values[plan.names.index(name)], report
 
 
 def test_the_controller_takes_the_identified_split_and_the_exudyn_plant_does_not():
     scenario = load_scenario(ROOT / "scenarios" / "helix_ctc.yaml", {("fmus",): "python"})
-    model = scenario_model(scenario).parameters
+    model = system_model(scenario.structure()).parameters
     ctl, report = _start(scenario, "ctl")
     for name, value in model.items():
         assert ctl.get(name) == value, (name, ctl.get(name), value)
@@ -35,7 +35,7 @@ def test_the_analytic_plant_takes_it_and_an_explicit_parameter_wins():
                              {("fmus",): "python", ("components", "plant", "fmu"): "linear_analytic_plant",
                               ("components", "plant", "parameters"): {},
                               ("components", "ctl", "parameters", "model.w_inertia"): 0.25})
-    model = scenario_model(scenario).parameters
+    model = system_model(scenario.structure()).parameters
     plant, _ = _start(scenario, "plant")
     assert {k: plant.get(k) for k in model} == model, (plant, model)
     ctl, _ = _start(scenario, "ctl")
@@ -52,4 +52,4 @@ def test_the_scenario_as_run_names_the_model_file_so_that_a_log_runs_again_from_
     data = effective_scenario(scenario)
     assert Path(data["model"]).is_absolute() and Path(data["model"]).is_file(), data["model"]
     again = scenario_from_data(data, str(tmp_path / "elsewhere" / "run.mcap"))
-    assert scenario_model(again).parameters == scenario_model(scenario).parameters
+    assert system_model(again.structure()).parameters == system_model(scenario.structure()).parameters

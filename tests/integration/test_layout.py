@@ -74,7 +74,8 @@ def test_the_file_is_what_foxglove_layouts_serialises(tmp_path):
     out = tmp_path / "x.json"
     assert main(["layout", str(SCENARIO), "--out", str(out)]) == 0
     scenario = load_scenario(SCENARIO)
-    made = layout(channels_of(prepare(scenario)[0]), plugins.scene(scenario) is not None, scenario.name)
+    system = scenario.structure()
+    made = layout(channels_of(prepare(system)[0]), plugins.scene(system) is not None, scenario.name)
     assert isinstance(made, fl.Layout)
     assert out.read_text(encoding="utf-8") == made.to_json()
     assert [p.name for p in tmp_path.iterdir()] == ["x.json"]  # nothing left beside it

@@ -176,7 +176,7 @@ def test_native_run_is_native_where_it_can_be(tmp_path):
     from cosim.engine.prepare import build_key
 
     scenario = api.load(ROOT / "scenarios" / "helix_ctc.yaml", {"fmus": "native"})
-    keys = {n: build_key(scenario, c.fmu) for n, c in scenario.components.items()}
+    keys = {n: build_key(scenario.structure(), c.fmu) for n, c in scenario.components.items()}
     assert keys["plant"][1] is False, keys
     assert all(keys[n][1] for n in ("traj", "ik", "ctl")), keys
 

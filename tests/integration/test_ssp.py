@@ -170,7 +170,7 @@ def test_exported_archive_holds_what_the_master_sets(ssp):
     import xml.etree.ElementTree as ET
 
     scenario = load_scenario(SCENARIO, OVERRIDES)
-    plan, _ = prepare(scenario)
+    plan, _ = prepare(scenario.structure())
     with zipfile.ZipFile(ssp) as z:
         members = set(z.namelist())
         ssd_text = z.read("SystemStructure.ssd").decode()

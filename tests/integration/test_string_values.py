@@ -51,7 +51,7 @@ def test_set_gives_a_string_input_the_text_and_numbers_the_number(tmp_path):
 def test_scenario_file_and_set_values_as_the_variable_types_them(tmp_path):
     """A parameter written ``1e3`` in the file, or set with ``--set``, is typed by its variable."""
     path = _scenario(tmp_path, "{String_parameter: 1e3, Real_parameter: 1e3}")
-    plan, _ = prepare(load_scenario(path, apply_overrides(["a.String_input=2.5e3", "a.Integer_parameter=2e1"])))
+    plan, _ = prepare(load_scenario(path, apply_overrides(["a.String_input=2.5e3", "a.Integer_parameter=2e1"])).structure())
     got = plan.start_values[0]
     want = {"String_parameter": "1e3", "Real_parameter": 1000.0, "String_input": "2.5e3", "Integer_parameter": 20}
     assert got == want, f"start values {got}, expected {want}"
@@ -64,7 +64,7 @@ def test_sweep_grid_value_reaches_a_string_as_written_with_the_case_id_of_the_nu
     grid = parse_grid(["a.String_input=1e3", "a.Real_input=2e1"])
     case = Case({name: values[0] for name, values in grid.items()})
     assert case.id == Case({"a.String_input": 1000.0, "a.Real_input": 20.0}).id, case.values
-    plan, _ = prepare(load_scenario(_scenario(tmp_path), dotted_overrides(case.values, "sweep case")))
+    plan, _ = prepare(load_scenario(_scenario(tmp_path), dotted_overrides(case.values, "sweep case")).structure())
     got = plan.start_values[0]
     assert got == {"String_input": "1e3", "Real_input": 20.0}, f"start values {got}"
 
@@ -72,5 +72,5 @@ def test_sweep_grid_value_reaches_a_string_as_written_with_the_case_id_of_the_nu
 def test_a_later_override_written_otherwise_replaces_the_text(tmp_path):
     """Two overrides of one String parameter: the last one counts, whichever way it was written."""
     overrides = apply_overrides(["a.String_input=1e3", "components.a.parameters.String_input=abc"])
-    plan, _ = prepare(load_scenario(_scenario(tmp_path), overrides))
+    plan, _ = prepare(load_scenario(_scenario(tmp_path), overrides).structure())
     assert plan.start_values[0] == {"String_input": "abc"}, plan.start_values[0]

@@ -14,7 +14,7 @@ ROOT = Path(__file__).parents[2]
 
 
 def _links(path) -> set[tuple[str, str]]:
-    plan, _ = prepare(load_scenario(path))
+    plan, _ = prepare(load_scenario(path).structure())
     return {(lk.src.label(plan.names), lk.dst.label(plan.names)) for lk in plan.links}
 
 
@@ -51,7 +51,7 @@ def test_mismatches_are_file_line_errors(tmp_path, line, expected):
     at = 1 + [n for n, text in enumerate(original.splitlines()) if "{from: plant.qd, to: ctl.qd}" in text][0]
     (tmp_path / "s.yaml").write_text(original.replace("{from: plant.qd, to: ctl.qd}", line))
     with pytest.raises(CosimError) as exc:
-        prepare(load_scenario(tmp_path / "s.yaml"))
+        prepare(load_scenario(tmp_path / "s.yaml").structure())
     assert at == 23 and f"s.yaml:{at}: {expected}" in str(exc.value), (at, str(exc.value))
 
 
@@ -66,5 +66,5 @@ def test_an_input_driven_by_a_prefix_and_an_element_line_is_an_error(tmp_path, f
     text = text.replace("  - {from: traj.p_ref, to: ik.p_ref}", f"  - {first}\n  - {second}")
     (tmp_path / "s.yaml").write_text(text)
     with pytest.raises(CosimError) as exc:
-        prepare(load_scenario(tmp_path / "s.yaml"))
+        prepare(load_scenario(tmp_path / "s.yaml").structure())
     assert "input ik.p_ref.x is already driven by connections[" in str(exc.value), str(exc.value)

@@ -181,3 +181,43 @@ def test_the_robot_plugs_in_through_its_entry_point():
     (ep,) = [e for e in entry_points(group=plugins.GROUP) if e.name == "delta"]
     assert ep.value == "cosim.robot:plugin", ep
     assert [p.name for p in plugins.installed()] == ["delta"]
+
+
+FRONT_END = ("cosim.engine.schema", "cosim.engine.scenario", "cosim.engine.overrides")
+"""The YAML scenario's modules: its pydantic schema, its reading (file lines, ``parameters:`` files) and ``--set``.
+They make a :class:`cosim.engine.structure.SystemStructure`; what runs one never needs them."""
+
+
+def _reached(graph: dict[str, set[str]], start: str) -> set[str]:
+    """Every module ``start`` imports, directly or through others."""
+    seen: set[str] = set()
+    todo = [start]
+    while todo:
+        for target in graph.get(todo.pop(), ()):
+            if target not in seen:
+                seen.add(target)
+                todo.append(target)
+    return seen
+
+
+def _front_end_reached(graph: dict[str, set[str]], modules) -> list[str]:
+    return [f"{m} reaches {', '.join(sorted(_reached(graph, m) & set(FRONT_END)))}" for m in modules
+            if _reached(graph, m) & set(FRONT_END)]
+
+
+def test_what_runs_a_system_never_reaches_the_yaml_front_end():
+    """The engine's modules (but the front end's own) and the FMI layer run a system structure, whoever made it (a
+    YAML scenario, an SSP archive, code): none imports the scenario's schema, directly or through another module,
+    at module level or inside a function (the domain plugged in reads its sections from the structure)."""
+    graph = {m: {t for t, _, _ in _imports(m, typing_too=True) if t in MODULES and t != m} for m in MODULES}
+    running = [m for m in MODULES if m.split(".")[1:2] in (["engine"], ["fmi"]) and m not in FRONT_END]
+    assert len(running) > 15, running
+    wrong = _front_end_reached(graph, running)
+    assert not wrong, "\n".join(wrong)
+
+
+def test_the_front_end_check_can_fail():
+    graph = {"cosim.engine.system": {"cosim.engine.names"}, "cosim.engine.names": {"cosim.engine.overrides"},
+             "cosim.engine.overrides": {"cosim.engine.schema"}}
+    assert _front_end_reached(graph, ["cosim.engine.system"]) == [
+        "cosim.engine.system reaches cosim.engine.overrides, cosim.engine.schema"]

@@ -6,7 +6,7 @@ from pathlib import Path
 
 import pytest
 
-from cosim.robot.model_file import read_model_file, scenario_model, write_model_file
+from cosim.robot.model_file import read_model_file, system_model, write_model_file
 from cosim.engine.scenario import load_scenario, parse_scenario
 from cosim.errors import ScenarioError
 
@@ -61,7 +61,7 @@ def test_scenario_model_path_is_relative_to_the_scenario_file(tmp_path):
     scenario_path = tmp_path / "s.yaml"
     scenario_path.write_text(SCENARIO.format(model="models/m.yaml"))
     scenario = load_scenario(scenario_path)
-    assert scenario_model(scenario).parameters["model.w_inertia"] == 0.35, scenario_model(scenario)
+    assert system_model(scenario.structure()).parameters["model.w_inertia"] == 0.35, system_model(scenario.structure())
 
 
 def test_scenario_refuses_a_model_of_another_robot_and_a_missing_file(tmp_path):
@@ -84,7 +84,7 @@ def test_a_model_needs_a_robot():
 @pytest.mark.parametrize("name", ["helix_ctc", "pick_place_ctc", "rotary_pick_place_ctc"])
 def test_shipped_ctc_scenarios_use_their_committed_identified_model(name):
     scenario = load_scenario(ROOT / "scenarios" / f"{name}.yaml")
-    model = scenario_model(scenario)
+    model = system_model(scenario.structure())
     assert model is not None and model.robot == scenario.robot, (name, model)
     assert set(model.parameters) == {"model.w_inertia", "model.w_gravity", "model.w_rotation"}, model.parameters
     assert model.parameters["model.w_rotation"] == 1.0, "identified with the rods' rotational inertia"

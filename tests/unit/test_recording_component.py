@@ -13,7 +13,8 @@ import pytest
 
 from cosim import api
 from cosim.engine.plugins import recording_source
-from cosim.engine.prepare import input_files, prepare
+from cosim.engine.prepare import prepare
+from cosim.engine.scenario import input_files
 from cosim.engine.scenario import load_scenario
 from cosim.errors import CosimError
 from cosim.io.recordings import read_recording
@@ -66,7 +67,7 @@ def test_units_come_from_the_recording_or_are_asked_for(tmp_path):
     plan, _ = prepare(load_scenario(_scenario(tmp_path, """\
         recording: r.csv
         signals: {"q[1]": q1, "q[2]": q2, "q[3]": q1}
-        units: {"q[3]": rad}""")))
+        units: {"q[3]": rad}""")).structure())
     units = {v.name: v.unit for v in plan.infos[0].variables.values()}
     assert units == {"q[1]": "deg", "q[2]": "rad", "q[3]": "rad"}, units
     res = _run(tmp_path, 'recording: r.csv\nsignals: {"a": q1, "b": q2}\nunits: {a: rad}\ninterpolation: hold')
@@ -88,7 +89,7 @@ def test_a_bag_replays_by_joint_name_and_the_file_is_an_input_of_the_run(tmp_pat
 
 def _error(folder: Path, component: str, **kw) -> str:
     with pytest.raises(CosimError) as exc:
-        prepare(load_scenario(_scenario(folder, component, **kw)))
+        prepare(load_scenario(_scenario(folder, component, **kw)).structure())
     message = str(exc.value)
     assert "\n" not in message, message
     return message
@@ -115,7 +116,7 @@ def test_every_bad_recording_component_is_one_line_at_the_file_line_and_componen
     for component, message in cases.items():
         got = _error(tmp_path, component)
         assert re.search(at, got) and re.search(message, got), (component, got)
-    assert prepare(load_scenario(_scenario(tmp_path, "recording: r.csv\nsignals: {q: q1}\noffset: 0.002")))
+    assert prepare(load_scenario(_scenario(tmp_path, "recording: r.csv\nsignals: {q: q1}\noffset: 0.002")).structure())
 
 
 def test_recording_keys_on_an_fmu_component_and_two_sources_are_refused(tmp_path):

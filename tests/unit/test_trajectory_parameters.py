@@ -99,26 +99,26 @@ def _scenario(params: str = "{}", fmu: str = "helix", sets: list[str] | None = N
 
 
 def test_section_sets_every_parameter_and_leaves_foreign_fmus_alone():
-    values = trajectory_start_values(_scenario())
+    values = trajectory_start_values(_scenario().structure())
     expected = HelixTrajectory.parameters_of(Helix(rx=0.08, z0=-0.5))
     assert values == {"traj": expected}, f"{values} vs {{'traj': {expected}}}"
 
 
 def test_equal_explicit_values_are_fine():
-    values = trajectory_start_values(_scenario("{helix.rx: 0.08, helix.ry: 0.1, helix.centre.x: 0, helix.duration: 10}"))
+    values = trajectory_start_values(_scenario("{helix.rx: 0.08, helix.ry: 0.1, helix.centre.x: 0, helix.duration: 10}").structure())
     assert values["traj"]["helix.rx"] == 0.08, f"{values['traj']['helix.rx']} vs 0.08"
 
 
 def test_disagreeing_parameter_names_file_line_component_and_both_values():
     with pytest.raises(ScenarioError) as exc:
-        trajectory_start_values(_scenario("{helix.rx: 0.2}"))
+        trajectory_start_values(_scenario("{helix.rx: 0.2}").structure())
     assert str(exc.value) == ("x.yaml:9: components.traj.parameters.helix.rx: 0.2 disagrees with trajectory.params "
                               "rx = 0.08; set it in one place (trajectory.params)"), str(exc.value)
 
 
 def test_disagreeing_default_and_set_override_are_reported_together():
     with pytest.raises(ScenarioError) as exc:
-        trajectory_start_values(_scenario("{helix.omega: 2.0}", sets=["traj.helix.vz=0.0"]))
+        trajectory_start_values(_scenario("{helix.omega: 2.0}", sets=["traj.helix.vz=0.0"]).structure())
     lines = str(exc.value).splitlines()
     assert lines == [
         "x.yaml:9: components.traj.parameters.helix.omega: 2.0 disagrees with trajectory (the Helix default) "
@@ -131,7 +131,7 @@ def test_disagreeing_default_and_set_override_are_reported_together():
 
 def test_type_mismatch_names_the_fmu_to_use():
     with pytest.raises(ScenarioError) as exc:
-        trajectory_start_values(_scenario(fmu="pick_place"))
+        trajectory_start_values(_scenario(fmu="pick_place").structure())
     assert str(exc.value) == ("x.yaml:8: components.traj.fmu: pick_place generates a pick_and_place trajectory "
                               "but trajectory.type is helix; use fmu: helix or change trajectory.type"), str(exc.value)
 
@@ -141,7 +141,7 @@ def test_section_the_fmu_cannot_generate():
         "params: {rx: 0.08, z0: -0.5}", "params: {points: [[0, 0, -0.4], [0, 0, -0.5]], segment_time: 1.0}"
     ).replace("{PARAMS}", "{}")
     with pytest.raises(ScenarioError) as exc:
-        trajectory_start_values(parse_scenario(text, "x.yaml"))
+        trajectory_start_values(parse_scenario(text, "x.yaml").structure())
     msg = str(exc.value)
     assert msg.startswith("x.yaml:5: trajectory.params: traj (fmu: waypoints) cannot generate it: Waypoints.points = "), msg
     assert "it takes 4 points" in msg, msg
@@ -150,7 +150,7 @@ def test_section_the_fmu_cannot_generate():
 def test_no_section_no_values():
     text = SCENARIO.replace("trajectory:\n  type: helix\n  params: {rx: 0.08, z0: -0.5}\n", "").replace(
         "{PARAMS}", "{helix.rx: 0.2}")
-    assert trajectory_start_values(parse_scenario(text, "x.yaml")) == {}, "no trajectory section: nothing set"
+    assert trajectory_start_values(parse_scenario(text, "x.yaml").structure()) == {}, "no trajectory section: nothing set"
 
 
 # ----------------------------------------------------------------------------- one list of types

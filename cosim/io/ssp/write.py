@@ -16,7 +16,8 @@ from typing import TYPE_CHECKING, Any
 from xml.etree import ElementTree as ET
 
 from ...engine.names import safe_stem
-from ...engine.prepare import input_files, prepare
+from ...engine.prepare import prepare
+from ...engine.scenario import input_files
 from ...engine.schema import Component
 from ...engine.structure import ComponentStructure, SystemStructure
 from ...engine.wiring import index_text
@@ -71,7 +72,7 @@ def export_ssp(scenario: Scenario, out: str | Path) -> ExportReport:
         line = scenario.sources.line(("components", replayed[0], "recording"))
         raise SspError(f"{scenario.source}:{line}" if line else scenario.source or "<scenario>", _replaying(
             replayed[0], scenario.components[replayed[0]].recording))
-    plan, _ = prepare(scenario)
+    plan, _ = prepare(scenario.structure())
     return write_ssp(scenario.structure(), plan, out, extras=_extras(scenario), inputs=input_files(scenario))
 
 
