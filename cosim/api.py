@@ -27,6 +27,7 @@ from .engine.execution import Execution
 from .engine.overrides import dotted_overrides
 from .engine.scenario import load_scenario
 from .engine.schema import Scenario
+from .engine.structure import SystemStructure
 from .engine.system import Port
 from .engine.wiring import index_text
 from .errors import ScenarioError, UnknownSignalError
@@ -130,10 +131,13 @@ class Result:
         return pd.DataFrame(self.signals, index=pd.Index(self.time, name="t"))
 
 
-def run(scenario: str | Path | Scenario, overrides: Mapping[str, Any] | None = None, *, log: bool = False,
+def run(scenario: str | Path | Scenario | SystemStructure, overrides: Mapping[str, Any] | None = None, *,
+        log: bool = False,
         out: str | Path | None = None, signals: bool = True, progress: bool = False,
         checkpoint_at: float | None = None, checkpoint_out: str | Path | None = None) -> Result:
-    """Run a scenario (path or :func:`load`-ed) with ``overrides`` (dotted names) and return a :class:`Result`.
+    """Run a scenario (path or :func:`load`-ed) with ``overrides`` (dotted names), or a system structure as it is
+    (:class:`~cosim.engine.structure.SystemStructure`: made in code, or a scenario's ``structure()``), and return a
+    :class:`Result`.
 
     Parameters
     ----------
@@ -145,7 +149,13 @@ def run(scenario: str | Path | Scenario, overrides: Mapping[str, Any] | None = N
 
     Raises :class:`~cosim.errors.CosimError` subclasses (bad input, pre-flight, FMU failure).
     """
-    return _run(load(scenario, overrides), log=log, out=out, signals=signals, progress=progress,
+    if isinstance(scenario, SystemStructure):
+        if overrides:
+            raise ScenarioError("overrides need a scenario: a system structure is run as it is")
+        system = scenario
+    else:
+        system = load(scenario, overrides).structure()
+    return _run(system, log=log, out=out, signals=signals, progress=progress,
                 checkpoint_at=checkpoint_at, checkpoint_out=checkpoint_out)
 
 
@@ -172,7 +182,7 @@ def resume(checkpoint: str | Path, sets: Mapping[str, Any] | None = None, *, sto
                 resume_sets=dict(sets or {}))
 
 
-def _run(sc: Scenario, *, signals: bool, **options: Any) -> Result:
+def _run(sc: Scenario | SystemStructure, *, signals: bool, **options: Any) -> Result:
     peak = PeakEffort()
     observers: list[Any] = [peak]
     recorder = None

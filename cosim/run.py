@@ -12,11 +12,11 @@ from .engine.assembly import assemble_structure
 from .engine.execution import Execution, Observer, StopRequest
 from .engine.names import safe_stem
 from .engine.offload import Offload, choose
-from .engine.prepare import prepare
+from .engine.prepare import input_files, prepare
 from .engine.events import EventState, event_at, resolve_sets
-from .engine.scenario import effective_scenario, input_files, load_scenario, scenario_from_data
-from .engine.names import expand_signal
+from .engine.scenario import effective_scenario, load_scenario, scenario_from_data
 from .engine.schema import Scenario
+from .engine.structure import Acceptance, SystemStructure
 from .engine.watchdog import Watchdog, hard_exit
 from .errors import CosimError
 from .fmi import Extractions, cleanup_extracted
@@ -130,25 +130,26 @@ def progress_bar():
                     TimeRemainingColumn(), transient=True)
 
 
-def _publishing(scenario: Scenario, mcap_path: Path | None, options: RunOptions) -> tuple[list[Observer], Observer | None]:
+def _publishing(system: SystemStructure, mcap_path: Path | None,
+                options: RunOptions) -> tuple[list[Observer], Observer | None]:
     """The MCAP recorder and/or the live view on one publisher of the run's channels, in start order,
     and the recorder (None without a log)."""
-    scene = scenario.logging.scene
-    publisher = Publisher(plugins.scene(scenario.structure()), options.stamps,
-                          expand_signal(scenario.compare.reference) if scenario.compare is not None else None,
-                          scenario.logging.layout, scene.rate_hz if scene is not None else 30.0)
+    scene = plugins.scene(system)
+    publisher = Publisher(scene, options.stamps,
+                          list(system.tracking.reference) if system.tracking is not None else None,
+                          system.log.layout, scene.rate_hz if scene is not None else 30.0)
     sinks: list[Observer] = []
     recorder = None
     if options.live is not None:  # first: a port in use fails before the log file is opened
         host, port = options.live
         sinks.append(LiveView(publisher, port, host, wait=options.live_wait))
     if mcap_path is not None:
-        recorder = McapRecorder(mcap_path, publisher, scenario, scenario.source, scenario.logging.flush_interval)
+        recorder = McapRecorder(mcap_path, publisher, system, system.source, system.log.flush_interval_s)
         sinks.append(recorder)
     return sinks + [publisher], recorder
 
 
-def check_initialization(scenario: Scenario) -> tuple[Any, str]:
+def check_initialization(system: SystemStructure) -> tuple[Any, str]:
     """What ``check`` does: :func:`~cosim.engine.prepare.prepare`, then every component instantiated and initialized
     as a run does before t = 0 (the FMUs' own parameter checks: a gain, a mass, a geometry, a trajectory they
     refuse), then freed, no step taken. Returns (plan, pre-flight report); raises the run's own error for what it
@@ -156,11 +157,11 @@ def check_initialization(scenario: Scenario) -> tuple[Any, str]:
     with Extractions() as held:
         ex, ended = None, False
         try:
-            plan, report = prepare(scenario.structure())
+            plan, report = prepare(system)
             supervised = supervision.record()  # python -m cosim check: its supervisor names a crash
-            ex = assemble_structure(plan, scenario.structure(), supervised)
+            ex = assemble_structure(plan, system, supervised)
             if supervised is not None:
-                supervised.describe(names=plan.names, watchdog_s=scenario.watchdog_s)
+                supervised.describe(names=plan.names, watchdog_s=system.watchdog_s)
 
             def abort(err: BaseException) -> None:  # a component that never returns from its initialization
                 held.release()
@@ -168,7 +169,7 @@ def check_initialization(scenario: Scenario) -> tuple[Any, str]:
                 hard_exit(err, [])
 
             stop = StopRequest()
-            watchdog = Watchdog(ex, scenario.watchdog_s, stop, abort)  # as a run's initialization is watched
+            watchdog = Watchdog(ex, system.watchdog_s, stop, abort)  # as a run's initialization is watched
             with stop, watchdog:
                 try:
                     ex.initialize(start_observers=False)
@@ -187,8 +188,9 @@ def check_initialization(scenario: Scenario) -> tuple[Any, str]:
     return plan, report
 
 
-def run_scenario(scenario: Scenario | str | Path, options: RunOptions | None = None, /, **changes: Any) -> RunResult:
-    """Run a scenario end to end with ``options`` (a :class:`RunOptions`; keyword ``changes`` replace its
+def run_scenario(scenario: SystemStructure | Scenario | str | Path, options: RunOptions | None = None, /,
+                 **changes: Any) -> RunResult:
+    """Run a system end to end with ``options`` (a :class:`RunOptions`; keyword ``changes`` replace its
     fields: ``run_scenario(sc, log=False)``). Raises CosimError (bad input, FMU failure, a stalled component:
     StallError) or Interrupted (a KeyboardInterrupt: SIGINT, SIGTERM, SIGHUP).
 
@@ -196,16 +198,21 @@ def run_scenario(scenario: Scenario | str | Path, options: RunOptions | None = N
     run are removed (success, error or Ctrl-C). The log's path is claimed (checked writable, locked,
     written as X.partial) before any FMU is loaded, and the finished log renamed into place at the end
     (see :mod:`cosim.io.output`).
+
+    ``scenario``: the system structure to run (:class:`~cosim.engine.structure.SystemStructure`: from a YAML
+    scenario, an SSP archive or code), or a scenario (:class:`~cosim.engine.schema.Scenario`), or a scenario
+    file's path (with ``options.overrides``): each is run as its structure.
     """
     options = replace(options or RunOptions(), **changes)
     output = None
     with Extractions() as held:  # this run's FMU extractions (other runs of the process keep theirs)
         try:
-            if not isinstance(scenario, Scenario):
+            if isinstance(scenario, (str, Path)):
                 scenario = load_scenario(scenario, dict(options.overrides) if options.overrides else None)
-            logging_on = scenario.logging.enabled if options.log is None else options.log
-            output = claim(_log_path(scenario, options.out), input_files(scenario)) if logging_on else None
-            result = _run_claimed(scenario, output, held, options)
+            system = scenario.structure() if isinstance(scenario, Scenario) else scenario
+            logging_on = system.log.enabled if options.log is None else options.log
+            output = claim(_log_path(system, options.out), input_files(system)) if logging_on else None
+            result = _run_claimed(system, output, held, options)
         except BaseException as exc:
             _name_lost_descriptors(output)
             _conclude(output, exc, held)
@@ -222,14 +229,14 @@ def _name_lost_descriptors(output) -> None:
                         "log writer's pipe among them): an FMU must close only the descriptors it opened")
 
 
-def _log_path(scenario: Scenario, out: str | Path | None) -> Path:
-    """``--out``, else the scenario's ``logging.out`` (relative to the scenario file), else runs/<name>.mcap."""
+def _log_path(system: SystemStructure, out: str | Path | None) -> Path:
+    """``--out``, else the system's log path (``logging.out``, relative to its source's folder), else
+    runs/<name>.mcap."""
     if out is not None:
         return Path(out)
-    if scenario.logging.out is not None:
-        base = Path(scenario.source).parent if scenario.source and scenario.source != "<string>" else Path(".")
-        return _tidy(base / scenario.logging.out)
-    return Path("runs") / f"{safe_stem(scenario.name)}.mcap"
+    if system.log.out is not None:
+        return _tidy((system.base if system.base is not None else Path(".")) / system.log.out)
+    return Path("runs") / f"{safe_stem(system.name)}.mcap"
 
 
 def _tidy(path: Path) -> Path:
@@ -307,7 +314,7 @@ def _settle(output, error: BaseException | None) -> None:
                           f"`python -m cosim recover {output.partial}`") from None
 
 
-def _checkpointing(ex: Execution, scenario: Scenario, options: RunOptions, output) -> tuple[Any, dict | None]:
+def _checkpointing(ex: Execution, system: SystemStructure, options: RunOptions, output) -> tuple[Any, dict | None]:
     """(macro step, hook) writing ``--checkpoint-at``'s checkpoint after the macro step reaching that time, and a
     record of what it wrote (``path``, ``bytes``, ``t``); (None, None) without the option. Raises CheckpointError for a time outside the run
     or an FMU that cannot serialize its state (before any step)."""
@@ -328,14 +335,17 @@ def _checkpointing(ex: Execution, scenario: Scenario, options: RunOptions, outpu
     while ex.t_ns(k_at) < t_ns:  # a grid whose last step is shorter
         k_at += 1
     target = Path(options.checkpoint_out) if options.checkpoint_out is not None else default_checkpoint_path(
-        output.target if output is not None else None, safe_stem(scenario.name))
-    inputs = (*input_files(scenario), options.resume.path if options.resume is not None else None,
+        output.target if output is not None else None, safe_stem(system.name))
+    if system.document is None:
+        raise CheckpointError("--checkpoint-at: this system was made in code: a checkpoint holds the scenario it "
+                              "continues, and there is none to record")
+    inputs = (*input_files(system), options.resume.path if options.resume is not None else None,
               output.target if output is not None else None)
     check_output(target, inputs)
     record: dict = {}
 
     def hook(k_done: int) -> None:
-        size = write_checkpoint(target, ex, effective_scenario(scenario, output.target if output is not None else None),
+        size = write_checkpoint(target, ex, system.recorded(output.target if output is not None else None),
                                 options.command)
         record.update(path=str(target), bytes=size, t=ex.t_ns(k_done) * 1e-9)
 
@@ -350,10 +360,10 @@ def _resume_event(ex: Execution, options: RunOptions) -> Any:
     return event_at(changes, dict(options.resume_sets), options.resume.t_ns)
 
 
-def _resume(ex: Execution, scenario: Scenario, checkpoint, event) -> None:
+def _resume(ex: Execution, system: SystemStructure, checkpoint, event) -> None:
     """Continue from ``checkpoint``: the system checked against it, its state restored, the events' progress taken
     over, the resumed run's ``--set`` fired at its time."""
-    checkpoint.check_system(ex, scenario.name)
+    checkpoint.check_system(ex, system.name)
     state = checkpoint.restore_into(ex)
     ex.free_state(state)
     if event is not None and ex.events is None:
@@ -384,32 +394,32 @@ def resumed_scenario(checkpoint, stop_time: float | None = None, scenario: Scena
     return scenario_from_data(data, str(checkpoint.path))
 
 
-def _run_claimed(scenario: Scenario, output, held: Extractions, options: RunOptions) -> RunResult:
+def _run_claimed(system: SystemStructure, output, held: Extractions, options: RunOptions) -> RunResult:
     """A run whose log (``output``) is claimed: prepared, assembled, observed, stepped, summarised."""
     logging_on = output is not None
     published = logging_on or options.live is not None  # the log's and the live view's signals: logging.signals
-    plan, _ = prepare(scenario.structure(), None if published else ("all" if options.read_all else "none"),
+    plan, _ = prepare(system, None if published else ("all" if options.read_all else "none"),
                       fmu_files=options.fmu_files)
     supervised = supervision.record()  # python -m cosim run: the record its supervisor process reads
-    ex = assemble_structure(plan, scenario.structure(), supervised)
+    ex = assemble_structure(plan, system, supervised)
     if supervised is not None:
-        supervised.describe(names=plan.names, watchdog_s=scenario.watchdog_s, start_s=ex.grid.time(0),
+        supervised.describe(names=plan.names, watchdog_s=system.watchdog_s, start_s=ex.grid.time(0),
                             step_s=(ex.grid.time(ex.n_steps) - ex.grid.time(0)) / max(1, ex.n_steps),
                             partial=str(output.partial) if output is not None else None,
                             target=str(output.target) if output is not None else None)
     ex.set_events(plan.events)
-    checkpoint_hook, checkpoint_path = _checkpointing(ex, scenario, options, output)
+    checkpoint_hook, checkpoint_path = _checkpointing(ex, system, options, output)
     writer_process = logging_on and McapRecorder.writes_in_a_process(ex.n_steps)  # a writer process takes a CPU
-    ahead, note = choose(plan, scenario.parallel, ex.n_steps, writer_process)
+    ahead, note = choose(plan, system.parallel, ex.n_steps, writer_process)
     if ahead and (options.resume is not None or checkpoint_hook is not None):
         # a component in a worker process cannot save its state (events: choose runs them serial already)
-        ahead, note = [], (f"parallel: {scenario.parallel}: serial run (a checkpoint saves every component's state "
+        ahead, note = [], (f"parallel: {system.parallel}: serial run (a checkpoint saves every component's state "
                            "in this process)")
     resume_event = _resume_event(ex, options)
-    tracking, recorder, pacing = _observe(ex, scenario, output, options, published)
-    loop = _Loop(ex, scenario, options, output, held, recorder)
+    tracking, recorder, pacing = _observe(ex, system, output, options, published)
+    loop = _Loop(ex, system, options, output, held, recorder)
     loop.run(ahead, supervised, checkpoint_hook, resume_event)
-    result = RunResult(scenario.name, ex.k_done - loop.k_start, (loop.t_end_ns - ex.t_ns(loop.k_start)) * 1e-9,
+    result = RunResult(system.name, ex.k_done - loop.k_start, (loop.t_end_ns - ex.t_ns(loop.k_start)) * 1e-9,
                        loop.wall, dict(zip(plan.names, ex.comp_time)),
                        mcap=str(output.target) if output is not None else None,
                        notes=([note] if note else []) + loop.notes,
@@ -417,20 +427,20 @@ def _run_claimed(scenario: Scenario, output, held: Extractions, options: RunOpti
     _summarise(result, ex, options, checkpoint_path, pacing)
     if tracking is not None:
         result.errors = tracking.result()
-        result.checks = acceptance(result.errors, scenario.checks)
+        result.checks = acceptance(result.errors, system.acceptance)
     return result
 
 
-def _observe(ex: Execution, scenario: Scenario, output, options: RunOptions, published: bool):
+def _observe(ex: Execution, system: SystemStructure, output, options: RunOptions, published: bool):
     """The run's observers, in order: the tracking error, the log and the live view, the caller's, the real-time
     pacing (last: every other observer has seen the step before it waits). Returns (tracking, recorder, pacing),
     each None when absent."""
     tracking = recorder = pacing = None
-    if scenario.compare is not None:
-        tracking = ErrorObserver(expand_signal(scenario.compare.actual), expand_signal(scenario.compare.reference))
+    if system.tracking is not None:
+        tracking = ErrorObserver(list(system.tracking.actual), list(system.tracking.reference))
         ex.add_observer(tracking)
     if published:  # the log and the live view: the same channels (cosim.observers.publish)
-        sinks, recorder = _publishing(scenario, output.partial if output is not None else None, options)
+        sinks, recorder = _publishing(system, output.partial if output is not None else None, options)
         for o in sinks:
             ex.add_observer(o)
     for o in options.observers:
@@ -447,10 +457,10 @@ class _Loop:
     finished whatever happened. ``wall``: the loop's wall-clock seconds; ``t_end_ns``, ``k_start``: where it
     ended and started."""
 
-    def __init__(self, ex: Execution, scenario: Scenario, options: RunOptions, output, held: Extractions,
+    def __init__(self, ex: Execution, system: SystemStructure, options: RunOptions, output, held: Extractions,
                  recorder) -> None:
-        self.ex, self.scenario, self.options, self.output, self.held, self.recorder = \
-            ex, scenario, options, output, held, recorder
+        self.ex, self.system, self.options, self.output, self.held, self.recorder = \
+            ex, system, options, output, held, recorder
         self.offload: Offload | None = None
         self.notes: list[str] = []  # what the run's summary says of the loop
         self.wall = 0.0
@@ -484,12 +494,12 @@ class _Loop:
                 self.offload = Offload(ex, ahead, [ex.slaves[c] for c in ahead])
                 for c, proxy in zip(ahead, self.offload.proxies):
                     ex.replace_slave(c, proxy)
-            watchdog = Watchdog(ex, self.scenario.watchdog_s, stop, self.abort)  # after the worker's fork
+            watchdog = Watchdog(ex, self.system.watchdog_s, stop, self.abort)  # after the worker's fork
             with stop, watchdog:
                 try:
                     ex.initialize(start_observers=options.resume is None)
                     if options.resume is not None:  # the checkpoint's state, its --set at its time, then the log
-                        _resume(ex, self.scenario, options.resume, resume_event)
+                        _resume(ex, self.system, options.resume, resume_event)
                         ex.start_observers()
                     if checkpoint_hook is not None:
                         ex.hooks.setdefault(checkpoint_hook[0], []).append(checkpoint_hook[1])
@@ -500,7 +510,7 @@ class _Loop:
                     if options.progress and ex.n_steps >= 1000:
                         bar = progress_bar()
                         bar.start()
-                        task = bar.add_task(self.scenario.name, total=ex.n_steps)
+                        task = bar.add_task(self.system.name, total=ex.n_steps)
                         every = max(1, ex.n_steps // 200)
                         cb = lambda k: bar.update(task, completed=k)  # noqa: E731
                     ex.simulate_until(None, stop, cb, every)
@@ -559,8 +569,9 @@ def _summarise(result: RunResult, ex: Execution, options: RunOptions, checkpoint
         result.terminated_by = ex.terminated.component
 
 
-def acceptance(errors: list, checks) -> dict[str, dict[str, Any]]:
-    """The scenario's acceptance checks (``checks:``) on the tracking ``errors``: each limit, the worst value, ok."""
+def acceptance(errors: list, checks: Acceptance | None) -> dict[str, dict[str, Any]]:
+    """The system's acceptance checks (a scenario's ``checks:``) on the tracking ``errors``: each limit, the worst
+    value, ok."""
     out: dict[str, dict[str, Any]] = {}
     if checks is None:
         return out

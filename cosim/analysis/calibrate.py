@@ -39,7 +39,7 @@ import difflib
 import math
 import time
 import warnings
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any, Callable, Mapping, Sequence
 
@@ -231,7 +231,7 @@ class _Runner:
             return self.cache[key]
         if self.runs >= self.max_runs:
             raise _Budget
-        sc = self.scenario(key).model_copy(update={"parallel": "off"})  # serial: a valid value, nothing to check
+        sc = replace(self.scenario(key).structure(), parallel="off")  # serial
         probe = Probe(self.signals)
         t0 = time.perf_counter()
         run_scenario(sc, log=False, progress=False, observers=[probe], read_all=True, fmu_files=self.fmu_files)

@@ -4,33 +4,35 @@ from __future__ import annotations
 
 import math
 
-from ..engine.names import expand_signal
 from ..engine.schema import Scenario
+from ..engine.structure import SystemStructure
 from ..run import RunResult
 
 __all__ = ["metric_names", "metrics"]
 
 
-def metric_names(scenario: Scenario) -> list[str]:
+def metric_names(system: SystemStructure | Scenario) -> list[str]:
     """Names of :func:`metrics`, in order: ``rmse_<axis>``..., ``max_error_<axis>``..., then the totals."""
-    axes = _axes(scenario)
+    axes = _axes(system)
     return ([f"rmse_{a}" for a in axes] + [f"max_error_{a}" for a in axes]
             + ["rmse", "max_error", "peak_effort", "sim_time_s", "steps", "wall_time_s"])
 
 
-def _axes(scenario: Scenario) -> list[str]:
-    if scenario.compare is None:
+def _axes(system: SystemStructure | Scenario) -> list[str]:
+    tracking = (system if isinstance(system, SystemStructure) else system.structure()).tracking
+    if tracking is None:
         return []
-    actual = expand_signal(scenario.compare.actual)
+    actual = list(tracking.actual)
     short = [a.rsplit(".", 1)[-1] for a in actual]
     return short if len(set(short)) == len(short) else actual
 
 
-def metrics(scenario: Scenario, result: RunResult, peak: float) -> dict[str, float]:
-    """Summary metrics of a run: per-axis RMSE and largest error of ``compare`` (signal units),
-    their largest over the axes, the peak |effort| (N or N*m), simulated and wall time (s), steps."""
+def metrics(system: SystemStructure | Scenario, result: RunResult, peak: float) -> dict[str, float]:
+    """Summary metrics of a run of ``system`` (a structure, or a scenario: its structure): per-axis RMSE and largest
+    error of its tracked pairs (a scenario's ``compare``, signal units), their largest over the axes, the peak
+    |effort| (N or N*m), simulated and wall time (s), steps."""
     out: dict[str, float] = {}
-    axes = _axes(scenario)
+    axes = _axes(system)
     for a, e in zip(axes, result.errors):
         out[f"rmse_{a}"] = e.rmse
     for a, e in zip(axes, result.errors):

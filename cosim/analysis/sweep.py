@@ -51,7 +51,7 @@ import multiprocessing
 import os
 import time
 from collections.abc import Callable, Iterable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -145,7 +145,7 @@ def _run_case(scenario: Scenario, fmu_files: dict[tuple[str, bool, int], str], m
     t0 = time.perf_counter()
     row: dict[str, Any] = {"status": "failed", "message": "", "checks": "", "mcap": ""}
     try:
-        sc = scenario.model_copy(update={"parallel": "off"})  # a valid value: nothing to validate again
+        sc = replace(scenario.structure(), parallel="off")  # the case runs serially: the pool keeps the CPUs busy
         peak = PeakEffort()
         resume = {}
         if warm is not None:  # read here: FMU states are restored in the process that runs the case

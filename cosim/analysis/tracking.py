@@ -14,7 +14,7 @@ import numpy as np
 from ..engine.bounded_yaml import load_yaml
 from ..engine.names import expand_signal
 from ..engine.schema import Compare
-from ..engine.scenario import EFFECTIVE_ATTACHMENT
+from ..engine.structure import DOCUMENT_ATTACHMENT
 from ..errors import CosimError
 from ..io.runlog import AXES, RunLog, read_run
 from ..observers.stats import ErrorStats
@@ -89,7 +89,7 @@ def scenario_doc(run: RunLog) -> tuple[str | None, dict]:
     whose ``scenario/`` attachment is the archive), else the attached scenario file."""
     import yaml  # lazy: --help loads this module without it
 
-    names = [n for n in run.attachments if n == EFFECTIVE_ATTACHMENT]
+    names = [n for n in run.attachments if n == DOCUMENT_ATTACHMENT]
     names += [n for n in run.attachments if n.startswith("scenario/") and not n.lower().endswith(".ssp")]
     for name in names:
         try:

@@ -31,8 +31,7 @@ def _cmd_layout(args: argparse.Namespace) -> int:
     from ..engine import plugins
     from ..engine.names import safe_stem
     from ..engine.overrides import apply_overrides
-    from ..engine.prepare import prepare
-    from ..engine.scenario import input_files
+    from ..engine.prepare import input_files, prepare
     from ..errors import written_by_rename
     from ..io.output import check_output
     from ..observers.layout import channels_of, layout
@@ -45,7 +44,7 @@ def _cmd_layout(args: argparse.Namespace) -> int:
         drawing = plugins.scene(system)
         made = layout(channels_of(plan), drawing is not None and bool(drawing.position), scenario.name)
         out = Path(args.out) if args.out is not None else Path("runs") / f"{safe_stem(scenario.name)}.layout.json"
-        check_output(out, input_files(scenario))
+        check_output(out, input_files(system))
         text = made.to_json()
         with written_by_rename(out) as tmp:
             tmp.write_text(text, encoding="utf-8")

@@ -228,7 +228,7 @@ def _cmd_check(args: argparse.Namespace) -> int:
     from ..run import check_initialization
 
     with _open_scenario(args, apply_overrides(args.set, args.stop_time)) as scenario:
-        plan, report = check_initialization(scenario)  # the checks a run makes before t = 0, FMUs' own included
+        plan, report = check_initialization(scenario.structure())  # the checks a run makes before t = 0, FMUs' own included
     order = " -> ".join(plan.names[c] for c in plan.order)
     from ..observers.mcap_log import McapRecorder
 

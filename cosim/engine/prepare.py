@@ -15,7 +15,7 @@ from .events import resolve_events
 from .structure import SystemStructure
 from .system import build_plan
 
-__all__ = ["locate_fmus", "build_key", "build_ours", "prepare"]
+__all__ = ["locate_fmus", "input_files", "build_key", "build_ours", "prepare"]
 
 
 def locate_fmus(structure: SystemStructure,
@@ -61,6 +61,17 @@ def locate_fmus(structure: SystemStructure,
         # Refused (correctness): FMUs that cannot be read: the run would lack them
         raise ComponentSourceError(issues)
     return infos
+
+
+def input_files(structure: SystemStructure) -> tuple[Path, ...]:
+    """The files a run of ``structure`` reads: its source (a scenario file, an archive, a log), the SSP archive it
+    came from, the FMUs its components give by ``path`` and the recordings they replay; no output may be written
+    over one of them."""
+    base = structure.folder()
+    given = [c.path or (c.replay.file if c.replay is not None else None) for c in structure.components.values()]
+    paths = [Path(p) if Path(p).is_absolute() else base / p for p in given if p]
+    archive = structure.ssp["file"] if structure.ssp else None  # e.g. a run from a log of an SSP archive's run
+    return tuple(Path(p) for p in (structure.source, archive, *paths) if p is not None and p != "<string>")
 
 
 def build_key(structure: SystemStructure, name: str) -> Hashable:

@@ -8,7 +8,6 @@ from __future__ import annotations
 
 import copy
 import difflib
-import os
 import re
 from dataclasses import dataclass
 from pathlib import Path
@@ -27,7 +26,7 @@ from .schema import Scenario, TrajectorySpec, trajectory_params_model
 from .sources import SourceMap, collect_lines, issue_at
 
 __all__ = ["Scenario", "ScenarioFile", "load_scenario", "read_scenario", "parse_scenario", "scenario_from_data",
-           "effective_scenario", "EFFECTIVE_ATTACHMENT", "MAX_SCENARIO_BYTES", "trajectory_params_issues", "input_files"]
+           "effective_scenario", "MAX_SCENARIO_BYTES", "trajectory_params_issues"]
 
 _ALIASES = {"src": "from", "dst": "to"}
 _UNION_TAG = re.compile(r"^(bool|int|float|str|list\[.*\]|union\[.*\])$")
@@ -282,36 +281,9 @@ def read_scenario(path: str | Path) -> ScenarioFile:
     return _parse_yaml(text, str(path))
 
 
-EFFECTIVE_ATTACHMENT = "effective/scenario.json"
-"""The log's attachment of the scenario as run (:func:`effective_scenario`), which ``run --from-log`` runs again."""
 
 
 def effective_scenario(scenario: Scenario, log: str | Path | None = None) -> dict[str, Any]:
-    """``scenario`` as it runs, every override applied, as a scenario mapping (JSON, valid YAML): every key with its
-    value, defaults included; the values of its ``parameters:`` files applied (the key itself emptied, so that the
-    mapping runs the same without them); the paths of FMU files and of the identified model absolute, ``logging.out`` the run's ``log`` (absolute) when
-    given; a component parameter overridden by a number written as text (``1e3``) as that text, as a file gives it."""
+    """``scenario`` as it runs, every override applied (:meth:`Scenario.as_run`), ``logging.out`` the run's ``log``."""
+    return scenario.as_run(log)
 
-    data = Scenario.model_dump(scenario, mode="json", by_alias=True)
-    base = Path(scenario.source).parent if scenario.source and scenario.source != "<string>" else Path.cwd()
-    for comp in data["components"].values():
-        if comp.get("path") is not None:
-            comp["path"] = os.path.normpath((base / comp["path"]).absolute())
-    if data.get("model") is not None:  # relative to the scenario file, as an FMU's path: absolute in the log
-        data["model"] = os.path.normpath((base / data["model"]).absolute())
-    data["parameters"] = None  # the files' values are applied above: the log runs again without the files
-    if log is not None:
-        data["logging"]["out"] = os.path.normpath(Path(log).absolute())
-    for path, text in scenario.sources.written.items():  # ("components", name, "parameters", variable)
-        data["components"][path[1]]["parameters"][path[3]] = text
-    return data
-
-
-def input_files(scenario: Scenario) -> tuple[Path, ...]:
-    """The files a run of ``scenario`` reads: its file (or archive, or log and archive), the FMUs its components give by
-    ``path`` and the recordings they replay; no output may be written over one of them."""
-    base = Path(scenario.source).parent if scenario.source and scenario.source != "<string>" else Path.cwd()
-    given = [c.path or c.recording for c in scenario.components.values() if c.path or c.recording]
-    paths = [Path(p) if Path(p).is_absolute() else base / p for p in given]
-    archive = scenario.archive["file"] if scenario.archive else None  # a run from a log of an SSP archive's run
-    return tuple(Path(p) for p in (scenario.source, archive, *paths) if p is not None and p != "<string>")

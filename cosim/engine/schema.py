@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import dataclasses
 import difflib
+import os
 import typing
 from pathlib import Path
 from typing import Annotated, Any, Literal, Union
@@ -22,8 +23,8 @@ from .grid import MAX_TIME_S, NS_PER_S, Grid, grid_error, resolution_error, seco
 from .names import expand_signal, name_problem, split_ref
 from . import plugins
 from .sources import SourceMap
-from .structure import (ComponentStructure, ConnectionStructure, EventStructure, Observed, Replay,
-                        SystemStructure)
+from .structure import (Acceptance, ComponentStructure, ConnectionStructure, EventStructure, LogSettings, Observed,
+                        Replay, SystemStructure, Tracking)
 
 __all__ = ["Scenario", "Event", "Component", "Connection", "TimeGrid",
            "TrajectorySpec", "InitialState", "Logging", "Compare", "Checks", "Regression", "expand_signal",
@@ -428,8 +429,40 @@ class Scenario(_Model):
                 tuple(EventStructure(dict(e.set), e.at, e.when, e.repeat, e.tolerance) for e in self.events),
                 self.logging.signals if self.logging.enabled else "none", tuple(observed), self.sources,
                 Path(self.source).parent if from_file else None, (self.source or "").lower().endswith(".ssp"),
-                self._domain_sections(), self.source)
+                self._domain_sections(), self.source, watchdog_s=self.watchdog_s, parallel=self.parallel,
+                tracking=None if self.compare is None else Tracking(tuple(expand_signal(self.compare.actual)),
+                                                                    tuple(expand_signal(self.compare.reference))),
+                acceptance=None if self.checks is None else Acceptance(self.checks.max_rmse, self.checks.max_error),
+                log=LogSettings(self.logging.enabled, self.logging.out, self.logging.flush_interval,
+                                self.logging.layout),
+                document=self.as_run(), ssp=dict(self._archive) if self._archive is not None else None)
         return self._structure
+
+    def with_archive(self, archive: dict[str, str]) -> None:
+        """Record the SSP archive this scenario was read from (:mod:`cosim.io.ssp`: ``file``, ``sha256``,
+        ``unpacked``): :attr:`archive`, and its structure's."""
+        self._archive = dict(archive)
+        self._structure = None  # made again with it
+
+    def as_run(self, log: str | Path | None = None) -> dict[str, Any]:
+        """This scenario as it runs, every override applied, as a scenario mapping (JSON, valid YAML): every key with
+        its value, defaults included; the values of its ``parameters:`` files applied (the key itself emptied, so
+        that the mapping runs the same without them); the paths of FMU files and of the identified model absolute,
+        ``logging.out`` the run's ``log`` (absolute) when given; a component parameter overridden by a number
+        written as text (``1e3``) as that text, as a file gives it."""
+        data = self.model_dump(mode="json", by_alias=True)
+        base = Path(self.source).parent if self.source and self.source != "<string>" else Path.cwd()
+        for comp in data["components"].values():
+            if comp.get("path") is not None:
+                comp["path"] = os.path.normpath((base / comp["path"]).absolute())
+        if data.get("model") is not None:  # relative to the scenario file, as an FMU's path: absolute in the log
+            data["model"] = os.path.normpath((base / data["model"]).absolute())
+        data["parameters"] = None  # the files' values are applied above: the log runs again without the files
+        if log is not None:
+            data["logging"]["out"] = os.path.normpath(Path(log).absolute())
+        for path, text in self.sources.written.items():  # ("components", name, "parameters", variable)
+            data["components"][path[1]]["parameters"][path[3]] = text
+        return data
 
     def _domain_sections(self) -> dict[str, Any]:
         """The sections only the domain reads (:attr:`SystemStructure.domain`), as plain values."""

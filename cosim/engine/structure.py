@@ -13,13 +13,20 @@ finds is placed there.
 
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Mapping
 
 from .sources import SourceMap
 
-__all__ = ["ComponentStructure", "ConnectionStructure", "EventStructure", "Observed", "Replay", "SystemStructure"]
+__all__ = ["DOCUMENT_ATTACHMENT", "Acceptance", "ComponentStructure", "ConnectionStructure", "EventStructure", "LogSettings", "Observed", "Replay",
+           "SystemStructure", "Tracking"]
+
+
+DOCUMENT_ATTACHMENT = "effective/scenario.json"
+"""The name of a run log's attachment holding its system's :attr:`SystemStructure.document` (the scenario as run),
+which ``run --from-log`` runs again."""
 
 
 @dataclass(frozen=True)
@@ -91,6 +98,36 @@ class Observed:
 
 
 @dataclass(frozen=True)
+class Tracking:
+    """The signals a run compares, pair by pair: ``actual[i]`` against ``reference[i]`` (the tracking error its
+    summary, its checks and its log's reference path report)."""
+
+    actual: tuple[str, ...]
+    reference: tuple[str, ...]
+
+
+@dataclass(frozen=True)
+class Acceptance:
+    """A run's acceptance check on its tracking errors: the largest per-pair RMSE and absolute error allowed (None:
+    not checked)."""
+
+    max_rmse: float | None = None
+    max_error: float | None = None
+
+
+@dataclass(frozen=True)
+class LogSettings:
+    """How a run logs: ``enabled`` by default; ``out``, the log's path relative to :attr:`SystemStructure.base` (None:
+    ``runs/<name>.mcap``); ``flush_interval_s``, wall-clock seconds between flushes; ``layout``, one message per
+    sample (``samples``) or per block of samples (``blocks``). What is logged: :attr:`SystemStructure.log_signals`."""
+
+    enabled: bool = True
+    out: str | None = None
+    flush_interval_s: float = 1.0
+    layout: str = "samples"
+
+
+@dataclass(frozen=True)
 class SystemStructure:
     """A system as the engine runs it (see the module's docstring)."""
 
@@ -113,6 +150,18 @@ class SystemStructure:
     source's ``key``). A YAML scenario's: ``robot``, ``fmus``, ``native_fmi``, ``trajectory``, ``model``,
     ``initial_state``, ``scene`` (:meth:`cosim.engine.schema.Scenario.structure`)."""
     source: str | None = None  # the file the structure was read from (None: made in code)
+    watchdog_s: float | None = 60.0  # wall-clock s a macro step (or the initialization) may take; None: no limit
+    parallel: str = "auto"  # the feed-forward components ahead in a worker process: "auto", "on" or "off"
+    tracking: Tracking | None = None
+    acceptance: Acceptance | None = None
+    log: LogSettings = LogSettings()
+    document: Mapping[str, Any] | None = None
+    """The source as a run records it, for ``run --from-log`` and checkpoints to make the same system again (a YAML
+    scenario's: every key with every override applied, :meth:`cosim.engine.schema.Scenario.as_run`); None: made in
+    code, nothing to record."""
+    ssp: Mapping[str, str] | None = None
+    """The SSP archive the system was read from (``file``: its absolute path, ``sha256``, ``unpacked``: the folder its
+    FMUs were unpacked to); a log records it so that ``run --from-log`` unpacks the same archive again."""
     made: dict[str, Any] = field(default_factory=dict, compare=False, repr=False)
     """What a domain made of :attr:`domain` once per structure (a trajectory object, an identified model read from its
     file), kept here so that every part of a run uses the same one."""
@@ -123,6 +172,16 @@ class SystemStructure:
 
     def folder(self) -> Path:
         return self.base if self.base is not None else Path.cwd()
+
+    def recorded(self, log: str | Path | None = None) -> dict[str, Any] | None:
+        """:attr:`document` as a run records it, with the run's ``log`` (absolute) as its ``logging.out``; None
+        for a system made in code."""
+        if self.document is None:
+            return None
+        data = dict(self.document)
+        if log is not None:
+            data["logging"] = {**(data.get("logging") or {}), "out": os.path.normpath(Path(log).absolute())}
+        return data
 
     def seconds(self) -> tuple[float, float, float]:
         """(start, stop, step) in seconds: each the double nearest its decimal value (an integer count of

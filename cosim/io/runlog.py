@@ -40,7 +40,8 @@ from mcap.writer import CompressionType, Writer
 
 from ..engine.grid import MAX_TIME_S
 from ..engine.bounded_yaml import MAX_YAML_NODES
-from ..engine.scenario import EFFECTIVE_ATTACHMENT, MAX_SCENARIO_BYTES, scenario_from_data
+from ..engine.scenario import MAX_SCENARIO_BYTES, scenario_from_data
+from ..engine.structure import DOCUMENT_ATTACHMENT
 from ..engine.schema import Scenario
 from ..errors import CosimError, Issue, ScenarioError, file_problem, written_by_rename
 from ..fmi.extract import SSP_PREFIX
@@ -448,7 +449,7 @@ and that attachment (a scenario's bytes at most) first; a forged attachment of g
 
 @contextmanager
 def open_from_log(path: str | Path, overrides: dict[tuple, Any] | None = None) -> Iterator[Scenario]:
-    """The scenario a run log records (:data:`EFFECTIVE_ATTACHMENT`), with ``overrides`` on top, to run it again
+    """The scenario a run log records (:data:`DOCUMENT_ATTACHMENT`), with ``overrides`` on top, to run it again
     inside the ``with`` block.
 
     Its log goes where ``--out`` says (the CLI's default: beside the first, ``<name>.rerun.mcap``), never to the
@@ -470,7 +471,7 @@ def open_from_log(path: str | Path, overrides: dict[tuple, Any] | None = None) -
             for rec in log_records(f, path, chunks=False, limit=_BEFORE_SCENARIO_BYTES):
                 if isinstance(rec, Metadata) and rec.name == "ssp":  # written before the scenario as run
                     archive = dict(rec.metadata)
-                if isinstance(rec, Attachment) and rec.name == EFFECTIVE_ATTACHMENT:
+                if isinstance(rec, Attachment) and rec.name == DOCUMENT_ATTACHMENT:
                     found = bytes(rec.data)
                     break
     except RecordLengthLimitExceeded as exc:  # what a run writes before it is small: a forged or foreign log
@@ -484,23 +485,23 @@ def open_from_log(path: str | Path, overrides: dict[tuple, Any] | None = None) -
                                   str(path))) from None
     if found is None:
         # Refused (correctness): nothing records what was run: running it again would be a guess
-        raise ScenarioError(Issue("", f"the log records no scenario as run ({EFFECTIVE_ATTACHMENT}): written by an "
+        raise ScenarioError(Issue("", f"the log records no scenario as run ({DOCUMENT_ATTACHMENT}): written by an "
                                       "older version or not by `python -m cosim run`; run its scenario file instead",
                                   str(path)))
     values = found.count(b",") + found.count(b"[") + found.count(b"{")
     if len(found) > MAX_SCENARIO_BYTES or values > MAX_YAML_NODES:  # as a scenario file is bounded
         # Refused (security): bounded as a scenario file is (memory, an alias-bomb's size)
-        raise ScenarioError(Issue("", f"{EFFECTIVE_ATTACHMENT} holds {len(found):,} bytes, about {values:,} values: "
+        raise ScenarioError(Issue("", f"{DOCUMENT_ATTACHMENT} holds {len(found):,} bytes, about {values:,} values: "
                                       f"more than a scenario may ({MAX_SCENARIO_BYTES:,} bytes, {MAX_YAML_NODES:,} "
                                       "values, as for a scenario file): refused", str(path)))
     try:
         data = json.loads(found)
     except (ValueError, RecursionError) as exc:  # RecursionError: nested past the parser's depth
         # Refused (correctness): the scenario as run cannot be read
-        raise ScenarioError(Issue("", f"{EFFECTIVE_ATTACHMENT} is not JSON ({exc})", str(path))) from None
+        raise ScenarioError(Issue("", f"{DOCUMENT_ATTACHMENT} is not JSON ({exc})", str(path))) from None
     if not isinstance(data, dict):
         # Refused (correctness): the scenario as run cannot be read
-        raise ScenarioError(Issue("", f"{EFFECTIVE_ATTACHMENT} is not a scenario mapping", str(path)))
+        raise ScenarioError(Issue("", f"{DOCUMENT_ATTACHMENT} is not a scenario mapping", str(path)))
     if isinstance(data.get("logging"), dict):
         data["logging"]["out"] = None
     if archive is not None:

@@ -16,7 +16,7 @@
   (:meth:`McapRecorder.writes_in_a_process`);
 - metadata (scenario, versions, platform, the command line and its folder, time stamps: see
   :func:`cosim.observers.publish.time_metadata`) and attachments (the scenario file, the scenario as run with every
-  override applied, :func:`cosim.engine.scenario.effective_scenario`, and each FMU's modelDescription.xml);
+  override applied, :attr:`cosim.engine.structure.SystemStructure.document`, and each FMU's modelDescription.xml);
 - zstd chunks flushed every ``flush_interval`` wall seconds, so a killed run
   leaves every complete chunk readable (see :mod:`cosim.io.recover`);
 - ``finish`` always writes the summary and index, on success, error or Ctrl-C, and the
@@ -45,7 +45,8 @@ import orjson
 
 from ..engine.cloop import BLOCK, Blocks
 from ..engine.execution import Execution
-from ..engine.scenario import EFFECTIVE_ATTACHMENT, effective_scenario
+from ..engine.grid import Grid
+from ..engine.structure import DOCUMENT_ATTACHMENT, SystemStructure
 from ..errors import CosimError, utf8
 from .log_writer import LogSink, WriterFailed, WriterProcess, os_reason, writer_forks
 from .publish import Publisher, time_metadata
@@ -113,15 +114,16 @@ class McapRecorder:
         the master keeps only what it flushed), else from :attr:`PROCESS_MIN_STEPS` steps on."""
         return n_steps >= cls.PROCESS_MIN_STEPS or writer_forks()
 
-    def __init__(self, path: str | Path, publisher: Publisher, scenario=None, scenario_file: str | Path | None = None,
-                 flush_interval: float = 1.0, process: bool | None = None):
+    def __init__(self, path: str | Path, publisher: Publisher, system: SystemStructure | None = None,
+                 scenario_file: str | Path | None = None, flush_interval: float = 1.0, process: bool | None = None):
         self.path = Path(path)
         self.publisher = publisher
-        self.scenario = scenario
+        self.system = system
         self.scenario_file = Path(scenario_file) if scenario_file else None
         self.flush_interval = flush_interval
         if process is None:
-            process = scenario is not None and self.writes_in_a_process(_steps(scenario))
+            process = system is not None and self.writes_in_a_process(
+                Grid(system.start_ns, system.stop_ns, system.step_ns).n_steps)
         self._process = WriterProcess() if process else None  # now: it starts while the FMUs load
         self._sink = None
 
@@ -162,24 +164,26 @@ class McapRecorder:
         w.metadata("versions", versions)
         w.metadata("platform", {"system": platform.system(), "machine": platform.machine(), "node": platform.node(),
                                 "python_implementation": platform.python_implementation()})
-        if self.scenario is not None:
-            s = self.scenario
+        if self.system is not None:
+            s = self.system
+            start, stop, step = s.seconds()
             w.metadata("scenario", {
-                "name": s.name, "algorithm": s.algorithm, "step_s": repr(s.time.step), "stop_s": repr(s.time.stop),
-                "start_s": repr(s.time.start), "robot": str(s.robot), "components": ",".join(s.components),
+                "name": s.name, "algorithm": s.algorithm, "step_s": repr(step), "stop_s": repr(stop),
+                "start_s": repr(start), "robot": str(s.domain.get("robot")), "components": ",".join(s.components),
                 "file": utf8(str(self.scenario_file or s.source or ""))})
-            if s.archive is not None:  # before the scenario as run: `run --from-log` unpacks the archive again
-                w.metadata("ssp", utf8(dict(s.archive)))
+            if s.ssp is not None:  # before the scenario as run: `run --from-log` unpacks the archive again
+                w.metadata("ssp", utf8(dict(s.ssp)))
         w.metadata("command", {"argv": orjson.dumps(utf8(getattr(sys, "orig_argv", sys.argv))).decode(),
                                "cwd": utf8(os.getcwd())})
         pub = self.publisher
         w.metadata("time", time_metadata(pub.stamps, pub.origin(rt), rt.start_ns))
         now = time.time_ns()
-        if self.scenario is not None:  # the scenario as run, every override applied: `run --from-log` runs it again
-            log = self.path.with_name(self.path.name.removesuffix(".partial"))  # renamed so once finished
-            w.attachment(EFFECTIVE_ATTACHMENT, "application/json",
-                         orjson.dumps(utf8(effective_scenario(self.scenario, log)), option=orjson.OPT_INDENT_2), now,
-                         now)
+        document = None
+        if self.system is not None:  # the scenario as run, every override applied: `run --from-log` runs it again
+            document = self.system.recorded(self.path.with_name(self.path.name.removesuffix(".partial")))
+        if document is not None:  # (the log's own path as it is named once finished)
+            w.attachment(DOCUMENT_ATTACHMENT, "application/json",
+                         orjson.dumps(utf8(document), option=orjson.OPT_INDENT_2), now, now)
         if self.scenario_file is not None and self.scenario_file.exists() and not _is_log(self.scenario_file):
             ssp = self.scenario_file.suffix.lower() == ".ssp"  # an SSP archive (SSP 1.0 names its MIME type)
             w.attachment(f"scenario/{self.scenario_file.name}", "application/x-ssp-package" if ssp else "application/yaml",
@@ -248,8 +252,3 @@ def _is_log(path: Path) -> bool:
     """Whether ``path`` is an MCAP file: the log a ``run --from-log`` read its scenario from, not attached again."""
     with open(path, "rb") as f:
         return f.read(5) == b"\x89MCAP"
-
-
-def _steps(scenario) -> int:
-    t = scenario.time
-    return int(round((t.stop - t.start) / t.step))

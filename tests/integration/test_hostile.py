@@ -17,7 +17,7 @@ import pytest
 from cli_helpers import cosim
 from test_faults import SMALL, fails
 
-from cosim.engine.scenario import EFFECTIVE_ATTACHMENT
+from cosim.engine.structure import DOCUMENT_ATTACHMENT
 from cosim.io.runlog import MAX_CHUNK_BYTES
 
 pytestmark = pytest.mark.integration
@@ -334,7 +334,7 @@ def test_a_run_is_repeated_from_its_log_alone(run, tmp_path):
     import json
 
     from cosim.io.runlog import read_run
-    from cosim.engine.scenario import EFFECTIVE_ATTACHMENT
+    from cosim.engine.structure import DOCUMENT_ATTACHMENT
 
     first, again, plain = tmp_path / "first.mcap", tmp_path / "again.mcap", tmp_path / "plain.mcap"
     r = run("run", SWEEP_SCENARIO, "--set", "ctl.gain.kp[1]=2e4", "--stop-time", "0.1", "--out", first, "--quiet")
@@ -347,11 +347,11 @@ def test_a_run_is_repeated_from_its_log_alone(run, tmp_path):
     log = read_run(first)
     argv = json.loads(log.metadata["command"]["argv"])
     assert argv[argv.index("--set") + 1] == "ctl.gain.kp[1]=2e4" and "--stop-time" in argv, argv
-    recorded = json.loads(log.attachments[EFFECTIVE_ATTACHMENT])
+    recorded = json.loads(log.attachments[DOCUMENT_ATTACHMENT])
     assert recorded["components"]["ctl"]["parameters"] == {"gain.kp[1]": "2e4"}, recorded["components"]["ctl"]
     assert recorded["time"]["stop"] == 0.1, recorded["time"]
     assert recorded["logging"]["out"] == str(first), recorded["logging"]  # the log it ran to, not the file's
-    rerun = json.loads(read_run(again).attachments[EFFECTIVE_ATTACHMENT])
+    rerun = json.loads(read_run(again).attachments[DOCUMENT_ATTACHMENT])
     assert rerun == {**recorded, "logging": {**recorded["logging"], "out": str(again)}}, (rerun, recorded)
     assert run("run", SWEEP_SCENARIO, "--stop-time", "0.1", "--out", plain, "--quiet").returncode == 0
     with pytest.raises(AssertionError):
@@ -407,7 +407,7 @@ def test_run_from_a_log_that_cannot_say_how_it_was_made(run, tmp_path, write_sce
     small = tmp_path / "small.mcap"
     assert run("run", scenario, "--out", small, "--quiet").returncode == 0
     older = tmp_path / "older.mcap"  # as logs were before they recorded the scenario as run
-    _copy_log(small, older, leave_out=EFFECTIVE_ATTACHMENT)
+    _copy_log(small, older, leave_out=DOCUMENT_ATTACHMENT)
     fails(run("run", "--from-log", older, "--out", tmp_path / "g.mcap"), 2,
           "older.mcap: the log records no scenario as run")
     (fmus / "CosimTGain.fmu").unlink()

@@ -567,7 +567,7 @@ def _forge_effective(src: Path, out: Path, data: bytes) -> Path:
     from mcap.reader import make_reader
     from mcap.writer import Writer
 
-    from cosim.engine.scenario import EFFECTIVE_ATTACHMENT
+    from cosim.engine.structure import DOCUMENT_ATTACHMENT
 
     with open(src, "rb") as f, open(out, "wb") as o:
         r, w = make_reader(f), Writer(o)
@@ -580,7 +580,7 @@ def _forge_effective(src: Path, out: Path, data: bytes) -> Path:
             w.add_message(channels[c.id], m.log_time, m.data, m.publish_time)
         for a in r.iter_attachments():
             w.add_attachment(a.create_time, a.log_time, a.name, a.media_type,
-                             data if a.name == EFFECTIVE_ATTACHMENT else a.data)
+                             data if a.name == DOCUMENT_ATTACHMENT else a.data)
         for md in r.iter_metadata():
             w.add_metadata(md.name, dict(md.metadata))
         w.finish()
@@ -606,7 +606,7 @@ def _log_with(path: Path, effective: bytes, before: bytes = b"", ssp: dict | Non
     recorded scenario ``effective``: what ``run --from-log`` reads before it stops."""
     from mcap.writer import Writer
 
-    from cosim.engine.scenario import EFFECTIVE_ATTACHMENT
+    from cosim.engine.structure import DOCUMENT_ATTACHMENT
 
     with open(path, "wb") as o:
         w = Writer(o)
@@ -615,7 +615,7 @@ def _log_with(path: Path, effective: bytes, before: bytes = b"", ssp: dict | Non
             w.add_attachment(0, 0, "big.bin", "application/octet-stream", before)
         if ssp is not None:
             w.add_metadata("ssp", ssp)
-        w.add_attachment(0, 0, EFFECTIVE_ATTACHMENT, "application/json", effective)
+        w.add_attachment(0, 0, DOCUMENT_ATTACHMENT, "application/json", effective)
         w.finish()
     return path
 

@@ -126,3 +126,37 @@ def test_a_structure_written_in_code_exports_as_its_scenario_does(tmp_path):
         assert _comparable(sa, sa.folder()) == _comparable(sb, sb.folder())
         signals = ["vdp.x0", "vdp.x1", "integ.x"]
         assert _final(sb, signals) == _final(sa, signals)
+
+
+def test_the_run_check_and_export_take_a_structure_written_in_code(tmp_path):
+    """``run`` (its tracking, its acceptance check and its log), ``check`` and SSP export take the system structure:
+    one written in code, with no scenario and no domain plugged in, runs as its YAML scenario does and logs no
+    scenario document (there is none to record)."""
+    from dataclasses import replace
+
+    from mcap.reader import make_reader
+
+    from cosim.engine.structure import DOCUMENT_ATTACHMENT, Acceptance, Tracking
+    from cosim.run import check_initialization, run_scenario
+
+    text = _scenario(tmp_path).read_text() + "compare: {actual: [integ.x], reference: [vdp.x0]}\n" \
+        "checks: {max_rmse: 100.0}\n"
+    (tmp_path / "tracked.yaml").write_text(text)
+    scenario = load_scenario(tmp_path / "tracked.yaml")
+    structure = replace(_in_code(), tracking=Tracking(("integ.x",), ("vdp.x0",)), acceptance=Acceptance(100.0))
+    from_yaml = run_scenario(scenario, log=False)
+    before = plugins.installed()
+    plugins.register()  # a master with no domain at all
+    try:
+        plan, report = check_initialization(structure)
+        assert plan.names == ["vdp", "integ"] and report == "no pre-flight", report
+        in_code = run_scenario(structure, out=tmp_path / "code.mcap")
+        exported = export_ssp(structure, tmp_path / "code.ssp")
+    finally:
+        plugins.register(*before)
+    assert [e.rmse for e in in_code.errors] == [e.rmse for e in from_yaml.errors] and in_code.errors[0].rmse > 0
+    assert in_code.checks == from_yaml.checks and in_code.passed, in_code.checks
+    with open(tmp_path / "code.mcap", "rb") as f:
+        names = [a.name for a in make_reader(f).iter_attachments()]
+    assert DOCUMENT_ATTACHMENT not in names and any(n.startswith("fmu/vdp/") for n in names), names
+    assert exported.components == ["vdp", "integ"], exported

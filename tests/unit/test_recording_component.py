@@ -13,8 +13,7 @@ import pytest
 
 from cosim import api
 from cosim.engine.plugins import recording_source
-from cosim.engine.prepare import prepare
-from cosim.engine.scenario import input_files
+from cosim.engine.prepare import input_files, prepare
 from cosim.engine.scenario import load_scenario
 from cosim.errors import CosimError
 from cosim.io.recordings import read_recording
@@ -84,7 +83,7 @@ def test_a_bag_replays_by_joint_name_and_the_file_is_an_input_of_the_run(tmp_pat
         units: {"q[2]": rad}""", stop=0.02)
     res = api.run(path)
     assert np.allclose(res["meas.q[2]"], 2 * res.time, rtol=0, atol=1e-15), res["meas.q[2]"]
-    assert tmp_path / "bag" in input_files(load_scenario(path)), input_files(load_scenario(path))
+    assert tmp_path / "bag" in input_files(load_scenario(path).structure()), input_files(load_scenario(path).structure())
 
 
 def _error(folder: Path, component: str, **kw) -> str:

@@ -75,7 +75,7 @@ def open_ssp(ssp: str | Path, overrides: dict[tuple, Any] | None = None) -> Iter
             raise SspError(ssp, f"{what}: neither the SSD's default experiment nor the FMUs give it; "
                                 f"pass {' and '.join(f for _, f in missing)}")
         scenario = scenario_from_data(data, str(ssp), overrides)
-        scenario._archive = _archive(ssp, tmp, sha256)
+        scenario.with_archive(_archive(ssp, tmp, sha256))
         yield scenario
 
 
@@ -129,5 +129,5 @@ def reopen_ssp(archive: dict[str, str], data: dict[str, Any], source: str,
             if isinstance(path, str) and Path(path).is_relative_to(unpacked):
                 comp["path"] = str(tmp / Path(path).relative_to(unpacked))
         scenario = scenario_from_data(data, source, overrides)
-        scenario._archive = _archive(ssp, tmp, sha256)
+        scenario.with_archive(_archive(ssp, tmp, sha256))
         yield scenario

@@ -16,9 +16,7 @@ from typing import TYPE_CHECKING, Any
 from xml.etree import ElementTree as ET
 
 from ...engine.names import safe_stem
-from ...engine.prepare import prepare
-from ...engine.scenario import input_files
-from ...engine.schema import Component
+from ...engine.prepare import input_files, prepare
 from ...engine.structure import ComponentStructure, SystemStructure
 from ...engine.wiring import index_text
 from ...errors import written_by_rename
@@ -59,21 +57,23 @@ class ExportReport:
         return text
 
 
-def export_ssp(scenario: Scenario, out: str | Path) -> ExportReport:
-    """Write ``scenario`` as an SSP 1.0 archive at ``out`` (see :mod:`cosim.io.ssp`): its system structure, through
-    :func:`write_ssp`, with the sections SSP has no place for in our annotation.
+def export_ssp(system: "SystemStructure | Scenario", out: str | Path) -> ExportReport:
+    """Write ``system`` (a system structure, or a scenario: its structure) as an SSP 1.0 archive at ``out`` (see
+    :mod:`cosim.io.ssp`), through :func:`write_ssp`, with the sections SSP has no place for in our annotation.
 
     Builds our FMUs if needed and runs the pre-flight (:func:`cosim.engine.prepare.prepare`); raises
     :class:`cosim.errors.CosimError` subclasses for a bad scenario, :class:`SspError` for what SSP
     1.0 cannot express.
     """
-    replayed = [n for n, c in scenario.components.items() if c.recording is not None]
+    if not isinstance(system, SystemStructure):
+        system = system.structure()
+    replayed = [n for n, c in system.components.items() if c.replay is not None]
     if replayed:  # said at the scenario's line; write_ssp says it for a structure made in code
-        line = scenario.sources.line(("components", replayed[0], "recording"))
-        raise SspError(f"{scenario.source}:{line}" if line else scenario.source or "<scenario>", _replaying(
-            replayed[0], scenario.components[replayed[0]].recording))
-    plan, _ = prepare(scenario.structure())
-    return write_ssp(scenario.structure(), plan, out, extras=_extras(scenario), inputs=input_files(scenario))
+        line = system.where().line(("components", replayed[0], "recording"))
+        raise SspError(f"{system.source}:{line}" if line else system.source or "<scenario>", _replaying(
+            replayed[0], system.components[replayed[0]].replay.file))
+    plan, _ = prepare(system)
+    return write_ssp(system, plan, out, extras=_extras(system), inputs=input_files(system))
 
 
 def write_ssp(structure: SystemStructure, plan, out: str | Path, *, extras: dict[str, Any] | None = None,
@@ -145,16 +145,21 @@ def _replaying(name: str, file: str) -> str:
 
 def _structure_extras(structure: SystemStructure) -> dict[str, Any]:
     """Our annotation's sections for a structure made in code: what it holds of them."""
+    events = [{k: v for k, v in (("at", e.at), ("when", e.when), ("set", dict(e.set)), ("repeat", e.repeat),
+                                  ("tolerance", e.tolerance)) if v is not None} for e in structure.events]
+    return {"name": structure.name, "algorithm": structure.algorithm, "logging": {"signals": structure.log_signals},
+            "events": events, "component_options": _component_options(structure)}
+
+
+def _component_options(structure: SystemStructure) -> dict[str, dict[str, Any]]:
+    """Each component's options that differ from their defaults (how the master drives it), by name."""
     defaults = ComponentStructure(None, None, {})
     options = {}
     for name, comp in structure.components.items():
         changed = {k: getattr(comp, k) for k in COMPONENT_OPTIONS if getattr(comp, k) != getattr(defaults, k)}
         if changed:
             options[name] = changed
-    events = [{k: v for k, v in (("at", e.at), ("when", e.when), ("set", dict(e.set)), ("repeat", e.repeat),
-                                  ("tolerance", e.tolerance)) if v is not None} for e in structure.events]
-    return {"name": structure.name, "algorithm": structure.algorithm, "logging": {"signals": structure.log_signals},
-            "events": events, "component_options": options}
+    return options
 
 
 def _connected(plan, out: Path) -> set[tuple[str, str]]:
@@ -312,23 +317,20 @@ def _string_at_start(var, value: Any) -> bool:
     return SSP_TYPE.get(var.fmi_type) == "String" and isinstance(value, str) and value == var.start
 
 
-def _extras(scenario: Scenario) -> dict[str, Any]:
-    """The scenario sections SSP has no place for, as JSON-ready data."""
-    data = scenario.model_dump(mode="json", by_alias=True, include=set(EXTRAS), exclude_defaults=False)
-    data["name"] = scenario.name
+def _extras(system: SystemStructure) -> dict[str, Any]:
+    """The sections SSP has no place for, as JSON-ready data: the scenario's as it runs (its document), or what a
+    structure made in code holds of them."""
+    document = system.document
+    if document is None:
+        return _structure_extras(system)
+    data = {k: document[k] for k in EXTRAS if k in document}
+    data["name"] = system.name
     logging = dict(data.get("logging") or {})
     logging.pop("out", None)  # relative to the YAML file; the archive's runs log to runs/<name>.mcap
     data["logging"] = logging
     if data.get("initial_state"):
         data["initial_state"] = {**data["initial_state"], "from_trajectory": False}  # values are in the .ssv
-
-    defaults = {k: Component.model_fields[k].default for k in COMPONENT_OPTIONS}
-    options = {}
-    for name, comp in scenario.components.items():
-        changed = {k: getattr(comp, k) for k in COMPONENT_OPTIONS if getattr(comp, k) != defaults[k]}
-        if changed:
-            options[name] = changed
-    data["component_options"] = options
+    data["component_options"] = _component_options(system)
     return data
 
 
