@@ -187,8 +187,29 @@ class FMIError(CosimError, RuntimeError):
         self.status = status
         label = "" if status is None else (
             f" returned {_STATUS[status] if 0 <= status < len(_STATUS) else status}")
+        detail = _without_time(detail, time)
         tail = f": {detail}" if detail else ""
         super().__init__(f"component {component!r}: {function}{label} at t = {time:.6g} s{tail}")
+
+
+_SAID_TIME = re.compile(r"(^|: )(\S+ at )?t = ([-+0-9.eE]+) s: ")
+
+
+def _without_time(detail: str, time: float) -> str:
+    """An FMU's message without the time it says (``t = 0 s: ...`` as our native FMUs log, ``NAME at t = 0 s: ...`` as
+    our python FMUs do; at its start or after the master's ``the FMU rejected the step:``) when that is the time the
+    error is said at already; a message of another time keeps it."""
+    m = _SAID_TIME.search(detail)
+    if m is None:
+        return detail
+    try:
+        said = float(m.group(3))
+    except ValueError:
+        return detail
+    if not (said == time or abs(said - time) <= 1e-9 * max(1.0, abs(time))):
+        return detail
+    who = f"{m.group(2)[:-len(' at ')]}: " if m.group(2) else ""
+    return detail[:m.start()] + m.group(1) + who + detail[m.end():]
 
 
 class Interrupted(KeyboardInterrupt):

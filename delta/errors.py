@@ -13,9 +13,15 @@ __all__ = ["DeltaError", "RobotError", "UnreachableError", "ParameterError"]
 
 class DeltaError(Exception):
     """Root of every error raised by the robot's packages (``delta``, ``fmus``, ``multibody``).
-    ``exit_kind``: what a command calls it when it ends on it (``"error"``)."""
+    ``exit_kind``: what a command calls it when it ends on it (``"error"``); ``name``: the one parameter it is about,
+    as its message names it (None: not one parameter), so that a caller can place it where that was given."""
 
     exit_kind = "error"
+    name: str | None = None
+
+    def __init__(self, *args: object, name: str | None = None) -> None:
+        super().__init__(*args)
+        self.name = name
 
 
 class RobotError(DeltaError, ValueError):

@@ -9,7 +9,7 @@ and the actuators (thesis eqs. (28)-(29)); the analytic model, the actuators' in
 from __future__ import annotations
 
 from dataclasses import dataclass, fields, replace
-from typing import Any
+from typing import Any, Mapping
 
 from .errors import ParameterError
 from .numbers import SCALAR
@@ -20,17 +20,20 @@ GRAVITY = 9.81
 """Standard gravity used by default, m/s^2 (acts along -z)."""
 
 
-def validate(masses, xp=SCALAR) -> None:  # noqa: ANN001
+def validate(masses, xp=SCALAR, names: Mapping[str, str] | None = None) -> None:  # noqa: ANN001
     """Lumping shares in [0, 1], every other mass parameter >= 0. On symbols (``fmus.native``: ``masses`` is a
-    namespace of symbols) the conditions are recorded for the generated code (see :data:`delta.numbers.SCALAR`)."""
-    name = "masses" if xp.symbolic else type(masses).__name__
+    namespace of symbols) the conditions are recorded for the generated code (see :data:`delta.numbers.SCALAR`).
+    ``names``: how the messages name each field (an FMU's parameter, ``mass.payload``); by default
+    ``<class>.<field>`` (``masses.<field>`` on symbols)."""
+    prefix = "masses" if xp.symbolic else type(masses).__name__
     items = vars(masses).items() if xp.symbolic else ((f.name, getattr(masses, f.name)) for f in fields(masses))
     for field, value in items:
+        label = names[field] if names is not None and field in names else f"{prefix}.{field}"
         if field.startswith("w_"):
-            if not xp.check(xp.both(0.0 <= value, value <= 1.0), f"{name}.{field} must be in [0, 1]"):
-                raise ParameterError(f"{name}.{field} must be in [0, 1], got {value!r}")
-        elif (xp.symbolic or isinstance(value, float)) and not xp.check(value >= 0.0, f"{name}.{field} must be >= 0"):
-            raise ParameterError(f"{name}.{field} must be >= 0, got {value!r}")
+            if not xp.check(xp.both(0.0 <= value, value <= 1.0), f"{label} must be in [0, 1]"):
+                raise ParameterError(f"{label} must be in [0, 1], got {value!r}", name=label)
+        elif (xp.symbolic or isinstance(value, float)) and not xp.check(value >= 0.0, f"{label} must be >= 0"):
+            raise ParameterError(f"{label} must be >= 0, got {value!r}", name=label)
 
 
 @dataclass(frozen=True)

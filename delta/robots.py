@@ -17,6 +17,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, fields
 from math import pi, radians, sqrt
+from typing import Mapping
 
 from .errors import RobotError
 from .numbers import SCALAR
@@ -36,18 +37,26 @@ MM = 1e-3
 _DEFAULT_ANGLES = (0.0, 2.0 * pi / 3.0, 4.0 * pi / 3.0)
 
 
-def validate(robot: "LinearDelta | RotaryDelta", xp=SCALAR) -> None:  # noqa: ANN001
+def validate(robot: "LinearDelta | RotaryDelta", xp=SCALAR,
+             names: Mapping[str, str] | None = None) -> None:  # noqa: ANN001
     """Lengths positive, three leg angles, a non-empty joint range; the error names the robot. On symbols
-    (``fmus.native``) the conditions are recorded for the generated code (see :data:`delta.actuators.SCALAR`)."""
+    (``fmus.native``) the conditions are recorded for the generated code (see :data:`delta.actuators.SCALAR`).
+    ``names``: how the messages name each field (an FMU's parameter, ``geometry.rod_length``), instead of the
+    robot and the field."""
     where = f"{type(robot).__name__} {robot.name!r}" if not xp.symbolic else "geometry"
+
+    def label(field: str) -> str:
+        return names[field] if names is not None and field in names else f"{where}: {field}"
+
     for name in LENGTHS[robot.kind]:
         value = getattr(robot, name)
-        if not xp.check(value > 0.0, f"{where}: {name} must be > 0"):
-            raise RobotError(f"{where}: {name} must be > 0, got {value!r}")
+        if not xp.check(value > 0.0, f"{label(name)} must be > 0"):
+            raise RobotError(f"{label(name)} must be > 0, got {value!r}", name=label(name))
     if len(robot.leg_angles) != 3:
         raise RobotError(f"{where}: leg_angles needs 3 angles, got {len(robot.leg_angles)}")
-    if not xp.check(robot.q_min < robot.q_max, f"{where}: q_min must be < q_max"):
-        raise RobotError(f"{where}: q_min {robot.q_min} must be < q_max {robot.q_max}")
+    lo, hi = (names["q_min"], names["q_max"]) if names is not None and "q_min" in names else (label("q_min"), "q_max")
+    if not xp.check(robot.q_min < robot.q_max, f"{lo} must be < {hi}"):
+        raise RobotError(f"{lo} {robot.q_min} must be < {hi} {robot.q_max}", name=lo)
 
 
 LENGTHS = {"linear": ("rail_radius", "platform_radius", "rod_length"),

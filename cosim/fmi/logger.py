@@ -70,11 +70,15 @@ _REPR = re.compile(r"(?P<type>[A-Za-z_][\w.]*)\((?P<args>.*)\)", re.S)
 
 def log_text(message: str) -> str:
     """An FMU's log message as shown to the user: a Python exception reported by pythonfmu as
-    ``Fatal py exception encountered: [where] ...\\nType('text')`` becomes ``Type: text``."""
+    ``Fatal py exception encountered: [where] ...\\nType('text')`` becomes ``Type: text``; its ``unknown error`` (the
+    text pythonfmu gives an exception it could not fetch: an FMU of ours logged why before raising) is nothing to
+    show, so the message before it stays the one an error names."""
     m = _PY_EXCEPTION.match(message)
     if m is None:
         return message
     rep = m["repr"].strip()
+    if rep == "unknown error":
+        return ""
     r = _REPR.fullmatch(rep)
     if r is not None:
         try:

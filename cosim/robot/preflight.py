@@ -17,11 +17,12 @@ from typing import Any
 import numpy as np
 
 from delta.actuators import kind_of
-from delta.errors import ParameterError
+from delta.errors import DeltaError, ParameterError
 from delta.model import build_model
 from delta.robots import get_preset
 from delta.workspace import check_trajectory
 from fmus import registry
+from fmus.adapters.common import check_parameters
 from fmus.adapters.trajectories import ADAPTERS
 
 from ..engine.plugins import Preparation
@@ -205,3 +206,34 @@ def _apply(system: SystemStructure, plan: SystemPlan, trajectory_values: dict[st
                                       f"{', '.join(missing)} (set initial_state.position/velocity to its start "
                                       f"parameters, or from_trajectory: false)", system.source))
         plan.start_values[c] = {**init, **plan.start_values[c]}  # explicit parameters win
+    _check_parameters(system, plan)
+
+
+def _check_parameters(system: SystemStructure, plan: SystemPlan) -> None:
+    """Our FMUs' robot and mass parameters as they will start (the FMU's own start values, under the scenario's,
+    the identified model's and the trajectory's), checked by the function the FMUs check them with at
+    initialization (:func:`fmus.adapters.common.check_parameters`): a negative payload is refused here, placed
+    where the scenario or ``--set`` gave it and named as the scenario names it (``plant.mass.payload``), before any
+    FMU is instantiated."""
+    issues: list[Issue] = []
+    for c, name in enumerate(plan.names):
+        comp = system.components[name]
+        kind = registry.get(comp.fmu).kind if comp.fmu is not None and comp.fmu in registry.names() else None
+        if kind is None:
+            continue
+        values = {n: v.start for n, v in plan.infos[c].variables.items()
+                  if n.startswith(("geometry.", "mass.", "model."))}
+        values.update((n, v) for n, v in plan.start_values[c].items() if n in values)
+        try:
+            values = {n: float(v) for n, v in values.items()}
+        except (TypeError, ValueError):  # a value of the wrong type: the plan's typing says so, by its name
+            continue
+        try:
+            check_parameters(kind, values)
+        except DeltaError as exc:
+            parameter = exc.name or ""
+            issues.append(system.where().issue(("components", name, "parameters", parameter),
+                                               f"{name}.{exc}"))
+    if issues:
+        # Refused (correctness): an FMU of ours would refuse the value at its initialization
+        raise ScenarioError(issues)

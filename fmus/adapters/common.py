@@ -5,12 +5,14 @@ from __future__ import annotations
 from dataclasses import fields
 
 from delta.actuators import KINDS, kind_of
+from delta.masses import validate as validate_masses
 from delta.robots import Robot, get_preset
+from delta.robots import validate as validate_robot
 
 from .._names import axis_names, joint_names
 
 __all__ = ["PRESET", "declare_robot", "robot_values", "robot_from", "declare_masses", "mass_values", "masses_from",
-           "q_units"]
+           "MASS_PARAMETERS", "GEOMETRY_PARAMETERS", "check_parameters", "q_units"]
 
 PRESET = {kind: cls.preset for kind, cls in KINDS.items()}
 """Robot preset whose geometry gives the parameter start values of each robot kind's FMUs."""
@@ -68,7 +70,8 @@ def robot_values(kind: str, values) -> dict:  # noqa: ANN001
 
 
 def robot_from(fmu, kind: str) -> Robot:
-    """The robot described by the current ``geometry.*`` parameter values."""
+    """The robot described by the current ``geometry.*`` parameter values (their checks name the parameters)."""
+    check_parameters(kind, fmu.values)
     return kind_of(kind).robot_type(name=f"{PRESET[kind]} (FMU {fmu.modelName})", **robot_values(kind, fmu.values))
 
 
@@ -96,7 +99,43 @@ def mass_values(kind: str, values) -> dict:  # noqa: ANN001
 
 
 def masses_from(fmu, kind: str):
+    """The mass dataclass of the current ``mass.*`` / ``model.*`` parameter values (their checks name the
+    parameters)."""
+    check_parameters(kind, fmu.values)
     return _mass_class(kind)(**mass_values(kind, fmu.values))
+
+
+MASS_PARAMETERS = {field: name for field, (name, _, _) in _MASSES.items()}
+"""The mass dataclasses' fields by the FMU parameters that hold them (``payload`` -> ``mass.payload``): the names the
+checks of :mod:`delta.masses` use in our FMUs' messages, in both builds."""
+GEOMETRY_PARAMETERS = {**{field: f"geometry.{field}" for field in _GEOMETRY},
+                       "q_min": "geometry.q_min", "q_max": "geometry.q_max"}
+"""The robot dataclasses' fields by the FMU parameters that hold them, as :data:`MASS_PARAMETERS`."""
+
+
+def _unchecked(cls: type, values: dict):
+    obj = object.__new__(cls)  # the dataclass's own check would name its class, not the FMU's parameters
+    for name, value in values.items():
+        object.__setattr__(obj, name, value)
+    return obj
+
+
+def check_parameters(kind: str, values) -> None:  # noqa: ANN001
+    """The checks of :mod:`delta.robots` and :mod:`delta.masses` on the ``geometry.*`` and ``mass.*`` / ``model.*``
+    parameters among ``values`` (FMU name -> number; a group absent is not checked), raised as they raise
+    (:class:`~delta.errors.RobotError`, :class:`~delta.errors.ParameterError`) with the FMU's parameter names
+    (``mass.payload must be >= 0, got -1.0``): what the FMUs refuse at initialization, which a master's pre-flight
+    also checks by the same function before any FMU is instantiated."""
+    cls = kind_of(kind)
+    if all(name in values for name in _names_of(cls.masses_type)):
+        validate_masses(_unchecked(cls.masses_type, mass_values(kind, values)), names=MASS_PARAMETERS)
+    if "geometry.q_min" in values:
+        robot = _unchecked(cls.robot_type, {"name": PRESET[kind], **robot_values(kind, values)})
+        validate_robot(robot, names=GEOMETRY_PARAMETERS)
+
+
+def _names_of(masses_type: type) -> set[str]:
+    return {MASS_PARAMETERS[f.name] for f in fields(masses_type)}
 
 
 def home(kind: str) -> tuple[float, float, float]:

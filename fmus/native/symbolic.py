@@ -32,6 +32,8 @@ from delta.masses import validate as validate_masses
 from delta.model import Model, compile_model
 from delta.robots import validate as validate_robot
 
+from ..adapters.common import GEOMETRY_PARAMETERS, MASS_PARAMETERS
+
 __all__ = ["SYMBOLIC", "Trace", "tracing", "symbolic_model", "instance"]
 
 
@@ -93,12 +95,13 @@ def symbolic_model(kind: str, geometry: dict[str, Any], masses: dict[str, Any] |
     kind's defaults as numbers) are symbols, compiled by :func:`delta.model.compile_model` itself."""
     actuator_cls = kind_of(kind)
     robot = SimpleNamespace(kind=kind, name=f"{kind} delta (symbolic)", **geometry)
-    validate_robot(robot, SYMBOLIC)  # the checks of the robot and mass dataclasses, recorded
+    validate_robot(robot, SYMBOLIC, names=GEOMETRY_PARAMETERS)  # the robot's and masses' checks, recorded under the
+    # FMU's parameter names (as the python build's, fmus.adapters.common.check_parameters)
     if masses is None:
         defaults = actuator_cls.masses_type()
         masses = {f: getattr(defaults, f) for f in defaults.__dataclass_fields__}
     else:
-        validate_masses(SimpleNamespace(**masses), SYMBOLIC)
+        validate_masses(SimpleNamespace(**masses), SYMBOLIC, names=MASS_PARAMETERS)
     return compile_model(robot, SimpleNamespace(**masses), actuator_cls(robot), SYMBOLIC)
 
 

@@ -550,7 +550,7 @@ def plain_check(tmp_path_factory):
 
 @pytest.mark.parametrize("item, cause", [
     ("ctl.gain.kp[1]=-1", "component 'ctl': .*CTC.kp must be > 0 per joint \\(joint 1\\)"),
-    ("plant.mass.platform=-1", "component 'plant': .*masses.platform must be >= 0"),
+    ("plant.mass.platform=-1", "--set plant.mass.platform=-1: plant.mass.platform must be >= 0, got -1.0"),
     ("plant.solver.max_step=0", "component 'plant': .*solver.max_step must be a time > 0 s"),
 ])
 def test_check_refuses_what_run_refuses_at_t0_with_the_same_message(run, tmp_path, plain_check, item, cause):
@@ -560,6 +560,48 @@ def test_check_refuses_what_run_refuses_at_t0_with_the_same_message(run, tmp_pat
     checked = fails(run("check", SWEEP_SCENARIO, "--set", item), 2, cause)
     assert checked == ran, (checked, ran)
     assert plain_check.returncode == 0, plain_check.stderr
+
+
+def _with_plant_values(tmp_path: Path, lines: str) -> Path:
+    """helix_ctc_analytic with ``lines`` (YAML, indented as the plant's ``parameters:``) set on its plant."""
+    text = SWEEP_SCENARIO.read_text().replace("  plant:\n    fmu: linear_analytic_plant\n",
+                                              "  plant:\n    fmu: linear_analytic_plant\n    parameters:\n" + lines)
+    text = text.replace("model: ", f"model: {SWEEP_SCENARIO.parent}/")  # the identified model, from tmp_path
+    path = tmp_path / "bad_masses.yaml"
+    path.write_text(text)
+    return path
+
+
+@pytest.mark.parametrize("command", ["check", "run"])
+def test_a_mass_our_fmus_refuse_is_refused_in_pre_flight_at_its_line_by_its_name(run, tmp_path, command):
+    """A negative payload was caught at t = 0 by the FMU, under the mass dataclass's field (``masses.payload``,
+    ``LinearDeltaMasses.payload``), without the file's line, the time said twice. The pre-flight now checks our FMUs'
+    robot and mass parameters as they will start, by the FMUs' own check, at the scenario's line, by the scenario's
+    name; no FMU is instantiated and no log is written."""
+    path = _with_plant_values(tmp_path, "      mass.rod: 0.1\n      mass.payload: -0.5\n")
+    line = path.read_text().splitlines().index("      mass.payload: -0.5") + 1
+    out = tmp_path / "x.mcap"
+    args = (command, path) + (("--stop-time", "0.01", "--out", out) if command == "run" else ())
+    fails(run(*args), 2, re.escape(f"{path}:{line}: components.plant.parameters.mass.payload: plant.mass.payload "
+                                   "must be >= 0, got -0.5"))
+    assert not out.exists() and not out.with_name(out.name + ".partial").exists()
+
+
+def test_a_share_out_of_range_is_named_by_its_parameter_in_both_builds(run, tmp_path):
+    """The class of it: every mass and geometry check of our FMUs names the FMU's parameter, in pre-flight and at
+    run time (an event during the run), in the python and the native build, and says the time once."""
+    fails(run("check", SWEEP_SCENARIO, "--set", "ctl.model.w_gravity=1.5"), 2,
+          re.escape("--set ctl.model.w_gravity=1.5: ctl.model.w_gravity must be in [0, 1], got 1.5"))
+    fails(run("check", SWEEP_SCENARIO, "--set", "ctl.geometry.rod_length=0", "--set", "fmus=python"), 2,
+          re.escape("ctl.geometry.rod_length must be > 0, got 0.0"))
+    path = tmp_path / "event.yaml"
+    path.write_text(SWEEP_SCENARIO.read_text() + "events:\n  - {at: 0.005, set: {plant.mass.payload: -1.0}}\n")
+    path.write_text(path.read_text().replace("model: ", f"model: {SWEEP_SCENARIO.parent}/"))
+    for build in ("native", "python"):
+        message = fails(run("run", path, "--stop-time", "0.01", "--no-log", "--set", f"fmus={build}"), 2,
+                        "component 'plant'", "mass.payload must be >= 0")
+        assert message.count("t = 0.005 s") == 1 and "masses.payload" not in message \
+            and "LinearDeltaMasses" not in message, message
 
 
 # --------------------------------------------------------------------------- a viewer that stops reading
