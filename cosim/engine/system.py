@@ -307,7 +307,9 @@ def _links(structure: SystemStructure, infos: dict[str, FMUInfo], idx: dict[str,
         want = ("output",) if role == "output" else ("input",)
         var, element, problem = find_variable(info, vname)
         candidates = [v.name for v in info.variables.values() if v.causality in want]
-        if var is None:
+        if var is None:  # a connection's end may also be a prefix (p_ref for p_ref.x .y .z): offered first
+            prefixes = dict.fromkeys(n.split("[", 1)[0].rsplit(".", 1)[0] for n in candidates if "." in n or "[" in n)
+            candidates = [p for p in prefixes if p not in info.variables] + candidates
             named = vname in info.ambiguous or vname in info.shared
             issue(loc, problem if problem and not named else _missing(info, vname, candidates, comp))
             return None
@@ -323,8 +325,8 @@ def _links(structure: SystemStructure, infos: dict[str, FMUInfo], idx: dict[str,
         if problem:
             issue(("connections", i), problem)
         for c_src, c_dst in pairs:
-            src = resolve(c_src, ("connections", i, "from"), "output")
-            dst = resolve(c_dst, ("connections", i, "to"), "input")
+            src = resolve(c_src, ("connections", i, "from"), "output") if c_src is not None else None
+            dst = resolve(c_dst, ("connections", i, "to"), "input") if c_dst is not None else None
             if src is None or dst is None:
                 continue
             if src.var.kind != dst.var.kind:

@@ -68,10 +68,13 @@ def _members(info: FMUInfo, prefix: str, causality: str) -> list[tuple[str, str]
     return out
 
 
-def expand_connection(src: str, dst: str, infos: dict[str, FMUInfo]) -> tuple[list[tuple[str, str]], str]:
+def expand_connection(src: str, dst: str,
+                      infos: dict[str, FMUInfo]) -> tuple[list[tuple[str | None, str | None]], str]:
     """The element connections of ``src -> dst`` (``comp.name`` each), and a problem ('' if none).
 
-    Ends that resolve to variables give ``[(src, dst)]`` unchanged (the caller checks them).
+    Ends that resolve to variables give ``[(src, dst)]`` unchanged (the caller checks them). An end that is neither
+    a variable nor a prefix is given back for the caller to report as unknown; the other end, when it is a prefix of
+    the right causality, is None then (it is not what is wrong: a typo in ``to`` must not flag a good ``from``).
     """
     (sc, sname, _), (dc, dname, _) = split_ref(src), split_ref(dst)  # the scenario checked the quoting
     if sname is None and dname is None:  # component to component: every output with a same-named input
@@ -91,8 +94,8 @@ def expand_connection(src: str, dst: str, infos: dict[str, FMUInfo]) -> tuple[li
     if s_var is not None or d_var is not None:
         return [(src, dst)], ""
     s_mem, d_mem = _members(infos[sc], sname, "output"), _members(infos[dc], dname, "input")
-    if not s_mem or not d_mem:
-        return [(src, dst)], ""  # neither a variable nor a prefix: reported as an unknown variable
+    if not s_mem or not d_mem:  # neither a variable nor a prefix: reported as an unknown variable
+        return [(None if s_mem else src, None if d_mem else dst)], ""
     s_suf, d_suf = [s for s, _ in s_mem], [s for s, _ in d_mem]
     if sorted(s_suf) != sorted(d_suf):
         return [], (f"prefix connection: {src} has {len(s_suf)} output(s) ({' '.join(s_suf)}), {dst} has "

@@ -68,3 +68,21 @@ def test_an_input_driven_by_a_prefix_and_an_element_line_is_an_error(tmp_path, f
     with pytest.raises(CosimError) as exc:
         prepare(load_scenario(tmp_path / "s.yaml").structure())
     assert "input ik.p_ref.x is already driven by connections[" in str(exc.value), str(exc.value)
+
+
+@pytest.mark.parametrize("line, flagged", [
+    ("{from: traj.p_ref, to: ik.p_rf}", ["to"]),
+    ("{from: traj.p_rf, to: ik.p_ref}", ["from"]),
+    ("{from: traj.p_rf, to: ik.p_rf}", ["from", "to"]),
+])
+def test_a_typo_in_one_end_of_a_prefix_connection_flags_that_end_only(tmp_path, line, flagged):
+    """A misspelt end is reported with the prefix it meant offered first; the other end, a good prefix, is not
+    reported (it was: a typo in ``to`` also flagged the correct ``from``)."""
+    text = (ROOT / "scenarios" / "helix_ctc_analytic.yaml").read_text()
+    text = text.replace("{from: traj.p_ref, to: ik.p_ref}", line).replace("model: ", f"model: {ROOT}/scenarios/")
+    (tmp_path / "s.yaml").write_text(text)
+    with pytest.raises(CosimError) as exc:
+        prepare(load_scenario(tmp_path / "s.yaml").structure())
+    issues = exc.value.issues
+    assert [i.path.rsplit(".", 1)[-1] for i in issues] == flagged, [str(i) for i in issues]
+    assert all("has no variable 'p_rf'; did you mean p_ref," in i.message for i in issues), [str(i) for i in issues]
