@@ -299,7 +299,7 @@ def number_option(*, gt: float | None = None, ge: float | None = None, le: float
             return x
         if not math.isfinite(x) or (gt is not None and not x > gt) or (ge is not None and not x >= ge) or \
                 (le is not None and not x <= le):
-            raise argparse.ArgumentTypeError(f"expected {wanted}, got {text!r}")
+            raise argparse.ArgumentTypeError(f"expected {wanted}, got {shown(repr(text))}")
         return x
 
     parse.__name__ = "int" if whole else "float"  # named in argparse's message for a text that is no number

@@ -4,6 +4,7 @@ scenarios attached to logs and identified model files all go through :func:`load
 
 from __future__ import annotations
 
+import sys
 from typing import Any
 
 import yaml
@@ -60,11 +61,35 @@ def _duplicate_key(root: yaml.Node) -> yaml.constructor.ConstructorError | None:
     return None
 
 
+def _unreadable_integer(root: yaml.Node) -> yaml.constructor.ConstructorError | None:
+    """The first integer with more digits than Python converts from text (``sys.get_int_max_str_digits``: 4300; a
+    longer one raised a ValueError from inside PyYAML, shown as an internal error), as an error marked at it."""
+    limit = sys.get_int_max_str_digits()
+    seen: set[int] = set()
+    stack = [root]
+    while stack:
+        node = stack.pop()
+        if id(node) in seen:
+            continue
+        seen.add(id(node))
+        if isinstance(node, yaml.MappingNode):
+            stack.extend(v for pair in node.value for v in pair)
+        elif isinstance(node, yaml.SequenceNode):
+            stack.extend(node.value)
+        elif node.tag == "tag:yaml.org,2002:int" and limit and sum(c.isdigit() for c in node.value) > limit:
+            digits = sum(c.isdigit() for c in node.value)
+            return yaml.constructor.ConstructorError(
+                None, None, f"an integer of {digits:,} digits: more than any value holds (at most {limit:,})",
+                node.start_mark)
+    return None
+
+
 def load_yaml(text: str | bytes) -> tuple[Any, yaml.Node | None]:
     """``yaml.safe_load`` of ``text`` that refuses, before building anything, a document whose aliases expand past
     :data:`MAX_YAML_NODES` values (:class:`YamlTooLarge`, a ``yaml.YAMLError``); also returns the composed node
     tree (None for an empty document). A key given twice in a mapping is refused (a ``ConstructorError`` marked at
-    the second), where PyYAML keeps the last. Every YAML the platform reads from a file, a log or an option goes
+    the second), where PyYAML keeps the last; an integer too long for Python to convert is refused where it is. Every
+    YAML the platform reads from a file, a log or an option goes
     through here."""
     root = yaml.compose(text, Loader=yaml.SafeLoader)
     if root is None:
@@ -77,6 +102,10 @@ def load_yaml(text: str | bytes) -> tuple[Any, yaml.Node | None]:
     if duplicate is not None:
         # Refused (correctness): a key given twice: PyYAML kept the last silently, which one is meant is a guess
         raise duplicate
+    too_long = _unreadable_integer(root)
+    if too_long is not None:
+        # Refused (security): Python bounds the digits it converts (a quadratic conversion); no value needs more
+        raise too_long
     loader = yaml.SafeLoader("")
     try:
         return loader.construct_document(root), root

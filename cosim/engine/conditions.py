@@ -9,6 +9,8 @@ from __future__ import annotations
 import math
 import re
 
+from ..errors import shown
+
 __all__ = ["parse_condition", "condition_issue"]
 
 _CONDITION = re.compile(r"^\s*([^\s<>=]+)\s*([<>])\s*([^\s<>=]+)\s*$")
@@ -25,7 +27,7 @@ def parse_condition(text: str) -> tuple[str, str, float]:
             value = None
     if m is None or value is None or not math.isfinite(value):
         # Refused (correctness): a condition we cannot read: when the event fires is a guess
-        raise ValueError(f"condition {text!r} is not 'SIGNAL < VALUE' or 'SIGNAL > VALUE' (SIGNAL a "
+        raise ValueError(f"condition {shown(repr(text))} is not 'SIGNAL < VALUE' or 'SIGNAL > VALUE' (SIGNAL a "
                          "component.variable, VALUE a finite number)")
     return m.group(1), m.group(2), value
 

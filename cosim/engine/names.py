@@ -12,6 +12,8 @@ the component is never parsed here: FMI variable names keep their own dots and q
 
 from __future__ import annotations
 
+from ..errors import shown
+
 __all__ = ["expand_signal", "name_problem", "quote", "ref", "safe_stem", "split_ref"]
 
 _QUOTE = "'"
@@ -61,13 +63,13 @@ def split_ref(text: str) -> tuple[str, str | None, int]:
                 return "".join(out), None, end
             if text[end] != ".":
                 # Refused (correctness): a name we cannot split: which component is meant is a guess
-                raise ValueError(f"{text!r}: expected '.' after the quoted component name {''.join(out)!r}")
+                raise ValueError(f"{shown(repr(text))}: expected '.' after the quoted component name {''.join(out)!r}")
             return "".join(out), text[end + 1:], end
         else:
             out.append(c)
             i += 1
     # Refused (correctness): a name we cannot split: which component is meant is a guess
-    raise ValueError(f"{text!r}: the quoted component name has no closing quote (write ' inside as \\')")
+    raise ValueError(f"{shown(repr(text))}: the quoted component name has no closing quote (write ' inside as \\')")
 
 
 def safe_stem(name: str, default: str = "run") -> str:

@@ -6,7 +6,7 @@ import ctypes
 from ctypes import byref, c_double, c_int32, c_int64, c_size_t, c_uint32
 from typing import Any, Iterable
 
-from ..errors import FMIError, ScenarioError
+from ..errors import FMIError, ScenarioError, shown
 from .description import BINARY, STRING, Variable
 from .model_exchange import ModelExchange
 from .pythonfmu import KEEP_ALIVE
@@ -107,7 +107,7 @@ def _binary(value: Any, name: str) -> bytes:
         return bytes.fromhex(str(value))
     except ValueError:
         # Refused (correctness): bytes we cannot read: the value set would be a guess
-        raise ScenarioError(f"{name}: a Binary value is given as hexadecimal digits, got {value!r}") from None
+        raise ScenarioError(f"{name}: a Binary value is given as hexadecimal digits, got {shown(repr(value))}") from None
 
 
 class FMI3CoSimulation(CoSimulation, FMI3):

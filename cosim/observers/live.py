@@ -32,7 +32,7 @@ from collections.abc import Sequence
 from ..engine.cloop import Blocks, steps_to
 from ..engine.execution import Execution, StopRequest
 from ..engine.supervision import WAITING
-from ..errors import CosimError, printable
+from ..errors import CosimError, printable, shown
 from .log_writer import FoxgloveChannels, encode_messages, live_view_serving
 from .publish import Publisher
 from .relay import Relay
@@ -68,7 +68,7 @@ def parse_address(text: str | int | None) -> tuple[str, int]:
     except ValueError:
         value = -1
     if not 0 <= value <= 65535:
-        raise CosimError(f"--live: expected a port number 0..65535 (or HOST:PORT), got {text!r}")
+        raise CosimError(f"--live: expected a port number 0..65535 (or HOST:PORT), got {shown(repr(text))}")
     return host or "127.0.0.1", value
 
 

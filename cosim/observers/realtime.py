@@ -22,7 +22,7 @@ from collections.abc import Sequence
 import numpy as np
 
 from ..engine.execution import Execution
-from ..errors import CosimError
+from ..errors import CosimError, shown
 
 __all__ = ["RealTime", "parse_factor"]
 
@@ -36,7 +36,7 @@ def parse_factor(text: str | float | None) -> float:
     except ValueError:
         value = math.nan
     if not (math.isfinite(value) and value > 0):
-        raise CosimError(f"--realtime: the factor must be a number > 0 (simulated s per wall s), got {text!r}")
+        raise CosimError(f"--realtime: the factor must be a number > 0 (simulated s per wall s), got {shown(repr(text))}")
     return value
 
 

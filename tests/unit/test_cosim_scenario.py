@@ -106,6 +106,26 @@ def test_a_set_value_is_one_line_and_a_long_one_is_not_echoed_whole():
     assert len(text) < SHOWN_CHARS + 300 and "(20002 characters)" in text, text[:400]
 
 
+def test_an_integer_too_long_for_python_is_refused_where_it_is_written(tmp_path):
+    """Python converts integers of at most 4300 digits from text; a longer one in a --set value or a file raised a
+    ValueError inside PyYAML (an internal error): it is refused at its line, its length said, not echoed whole."""
+    import sys
+
+    from cosim.engine.overrides import SHOWN_CHARS, apply_overrides
+    from cosim.engine.scenario import load_scenario
+
+    digits = sys.get_int_max_str_digits() + 1
+    with pytest.raises(ScenarioError) as exc:
+        apply_overrides([f"ctl.gain.kp[1]={'9' * digits}"])
+    text = str(exc.value)
+    assert f"an integer of {digits:,} digits" in text and len(text) < SHOWN_CHARS + 300, text[:400]
+    path = tmp_path / "s.yaml"
+    path.write_text(f"name: x\nwatchdog_s: {'9' * digits}\ncomponents: {{}}\ntime: {{stop: 1, step: 0.1}}\n")
+    with pytest.raises(ScenarioError) as exc:
+        load_scenario(path)
+    assert f"s.yaml:2: invalid YAML: an integer of {digits:,} digits" in str(exc.value), str(exc.value)[:400]
+
+
 def test_a_key_given_twice_is_refused_at_its_second_line():
     """PyYAML keeps the last of two equal keys silently: a scenario, a --set value and a model file refuse it."""
     from cosim.engine.bounded_yaml import load_yaml

@@ -15,6 +15,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ...errors import shown
 from .errors import RecordingError
 
 __all__ = ["BagSpec", "parse_bag_spec", "Resolver"]
@@ -43,7 +44,7 @@ def parse_bag_spec(text: str) -> BagSpec:
         t = _TOKEN.match(rest, pos)
         if t is None:
             # Refused (correctness): a signal name we cannot read: which field is meant is a guess
-            raise RecordingError(f"signal {text!r}: cannot read {rest[pos:]!r}; a bag signal is /TOPIC.FIELD.SUB[INDEX] "
+            raise RecordingError(f"signal {shown(repr(text))}: cannot read {shown(repr(rest[pos:]))}; a bag signal is /TOPIC.FIELD.SUB[INDEX] "
                                  "(e.g. /joint_states.position[joint1], /tcp_pose.pose.position.x)")
         field, sel = t.groups()
         if field is not None:
@@ -54,7 +55,7 @@ def parse_bag_spec(text: str) -> BagSpec:
         pos = t.end()
     if not topic or not steps or not isinstance(steps[0], str):
         # Refused (correctness): a signal name we cannot read: which field is meant is a guess
-        raise RecordingError(f"signal {text!r}: a bag signal is /TOPIC.FIELD... naming a numeric field (e.g. "
+        raise RecordingError(f"signal {shown(repr(text))}: a bag signal is /TOPIC.FIELD... naming a numeric field (e.g. "
                              "/joint_states.position[joint1], /tcp_pose.pose.position.x)")
     return BagSpec(text, topic, tuple(steps))
 

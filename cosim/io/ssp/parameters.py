@@ -11,6 +11,7 @@ from pathlib import Path
 from typing import Any
 from xml.etree import ElementTree as ET
 
+from ...errors import shown
 from .archive import component_fmu, member_path, parse_xml, read_member
 from .spec import NS, PARAMETER_MAPPING_TYPE, PARAMETER_SET_TYPE, SspError, qname, warn
 from .units import Quantity, merged_units, unit_table
@@ -37,7 +38,7 @@ def _value(kind: str, text: str | None, ssp: Path, where: str) -> Any:
         return text
     except ValueError:
         # Refused (correctness): the value the file means cannot be read
-        raise SspError(ssp, f"{where}: {text!r} is not a valid {kind} value") from None
+        raise SspError(ssp, f"{where}: {shown(repr(text))} is not a valid {kind} value") from None
 
 
 def _parameter_set(pset: ET.Element, ssp: Path, where: str, prefix: str,
@@ -155,7 +156,7 @@ def _transform(value: Any, tr: ET.Element | None, ssp: Path, where: str) -> Any:
             target = m.get("target", "")
             return _bool_text(target) if kind == "BooleanMappingTransformation" else _int_text(target, ssp, where)
     # Refused (correctness): the value the mapping gives is unknown
-    raise SspError(ssp, f"{where}: {kind} has no MapEntry for the value {text!r}")
+    raise SspError(ssp, f"{where}: {kind} has no MapEntry for the value {shown(repr(text))}")
 
 
 def _bool_text(text: str) -> bool | None:
@@ -167,7 +168,7 @@ def _int_text(text: str, ssp: Path, where: str) -> int:
         return int(text)
     except ValueError:
         # Refused (correctness): the mapped value cannot be read
-        raise SspError(ssp, f"{where}: MapEntry target {text!r} is not an integer") from None
+        raise SspError(ssp, f"{where}: MapEntry target {shown(repr(text))} is not an integer") from None
 
 
 def _binding_values(el: ET.Element, zf: zipfile.ZipFile, ssp: Path, where: str,

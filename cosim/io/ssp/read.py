@@ -13,7 +13,7 @@ from xml.etree import ElementTree as ET
 
 from ...engine.grid import MAX_TIME_S
 from ...engine.names import ref
-from ...errors import CosimError, file_problem
+from ...errors import CosimError, file_problem, shown
 from ...fmi.description import load_fmu
 from .archive import parse_xml, read_member
 from .components import read_components
@@ -347,7 +347,7 @@ def _positive_step(text: str | None, what: str, ssp: Path) -> float:
         step = float(text or "")
     except ValueError:
         # Refused (correctness): the base step would be a guess
-        raise SspError(ssp, f"{what} {text!r} is not a number") from None
+        raise SspError(ssp, f"{what} {shown(repr(text))} is not a number") from None
     if not step > 0 or not math.isfinite(step):
         # Refused (correctness): no grid steps forward by a step <= 0 or not finite
         raise SspError(ssp, f"{what} must be > 0, got {step}")
