@@ -29,10 +29,12 @@ def _per_joint(cls: str, name: str, value: object, positive: bool = False) -> _V
     arr = np.asarray(value, dtype=float).reshape(-1)
     if arr.size == 1:
         arr = np.repeat(arr, 3)
+    given = value.tolist() if isinstance(value, np.ndarray) else value  # as a message shows it: no array(...)
     if arr.shape != (3,) or not np.all(np.isfinite(arr)):
-        raise ParameterError(f"{cls}.{name} must be a scalar or 3 finite values, got {value!r}")
+        raise ParameterError(f"{cls}.{name} must be a scalar or 3 finite values, got {given!r}", name=f"{cls}.{name}")
     if not all(_gain_ok(x, positive) for x in arr.tolist()):
-        raise ParameterError(f"{cls}.{name} must be {'> 0' if positive else '>= 0'} per joint, got {value!r}")
+        raise ParameterError(f"{cls}.{name} must be {'> 0' if positive else '>= 0'} per joint, got {given!r}",
+                             name=f"{cls}.{name}")
     return float(arr[0]), float(arr[1]), float(arr[2])
 
 

@@ -209,6 +209,36 @@ def _apply(system: SystemStructure, plan: SystemPlan, trajectory_values: dict[st
     _check_parameters(system, plan)
 
 
+_LAW_PARAMETERS = {"kp": "gain.kp", "ki": "gain.ki", "kd": "gain.kd", "u_max": "limit.u_max"}
+"""The control laws' gains and limit (:mod:`delta.control`) by our controller FMUs' parameters."""
+
+
+def _law_issue(system: SystemStructure, name: str, definition: Any, start_values: dict[str, Any],
+               step_multiple: int) -> Issue | None:
+    """The controller's law made as the FMU makes it (its python adapter, :meth:`~fmus.definition.FmuDefinition.
+    declared`, with the start values, at the period the run gives it): what the law refuses (a gain <= 0), named as
+    the scenario names it, or None."""
+    adapter = definition.declared()
+    values = {n: v for n, v in start_values.items() if n in adapter.values}
+    try:
+        adapter.values.update({n: float(v) for n, v in values.items()})
+    except (TypeError, ValueError):  # a value of the wrong type: the plan's typing says so, by its name
+        return None
+    try:
+        adapter.start()
+        adapter.make_law(system.step_ns * step_multiple / 1e9)
+    except ParameterError as exc:
+        field = (exc.name or "").rsplit(".", 1)[-1]
+        parameter = _LAW_PARAMETERS.get(field)
+        if parameter is None:
+            return system.where().issue(("components", name), str(exc))
+        written = system.components[name].parameters  # as the scenario or --set wrote them (a list: one key)
+        given = next((n for n in written if n == parameter or n.startswith(parameter + "[")), parameter)
+        return system.where().issue(("components", name, "parameters", given),
+                                    f"{name}.{parameter}{str(exc)[len(exc.name):]}")
+    return None
+
+
 def _check_parameters(system: SystemStructure, plan: SystemPlan) -> None:
     """Our FMUs' robot and mass parameters as they will start (the FMU's own start values, under the scenario's,
     the identified model's and the trajectory's), checked by the function the FMUs check them with at
@@ -234,6 +264,12 @@ def _check_parameters(system: SystemStructure, plan: SystemPlan) -> None:
             parameter = exc.name or ""
             issues.append(system.where().issue(("components", name, "parameters", parameter),
                                                f"{name}.{exc}"))
+            continue
+        definition = registry.get(comp.fmu)
+        if definition.role == "controller":
+            issue = _law_issue(system, name, definition, plan.start_values[c], comp.step_multiple)
+            if issue is not None:
+                issues.append(issue)
     if issues:
         # Refused (correctness): an FMU of ours would refuse the value at its initialization
         raise ScenarioError(issues)

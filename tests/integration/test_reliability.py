@@ -88,15 +88,19 @@ def test_diverging_run_is_an_error_not_completed():
 # -- item 3: errors keep their reason ------------------------------------------------------------
 
 @pytest.mark.parametrize("build", ["python", "native"])
-def test_fmu_exception_text_reaches_the_error_of_the_right_component(build):
+def test_fmu_exception_text_reaches_the_error_of_the_right_component(build, tmp_path):
     """The reason the controller gives (the python build's exception, the native build's failed check), not
-    'status 4 (fatal)', nor another component's log."""
-    proc = cosim("run", "scenarios/helix_pd.yaml", "--stop-time", "0.05", "--set", "ctl.gain.kp[1]=-1", "--no-log",
-                 "--set", f"fmus={build}")
+    'status 4 (fatal)', nor another component's log. The gain is set by an event during the run: given from the
+    start it is refused in pre-flight, before any FMU is instantiated."""
+    path = tmp_path / "helix_pd_bad_gain.yaml"
+    path.write_text((Path(__file__).resolve().parents[2] / "scenarios" / "helix_pd.yaml").read_text()
+                    + "events:\n  - {at: 0.02, set: {\"ctl.gain.kp[1]\": -1.0}}\n")
+    proc = cosim("run", path, "--stop-time", "0.05", "--no-log", "--set", f"fmus={build}")
     err = proc.stderr.strip().splitlines()[-1] if proc.stderr.strip() else ""
     assert proc.returncode == 2, f"exit {proc.returncode}, expected 2; stderr: {proc.stderr[-500:]}"
     assert err.startswith("error: component 'ctl': ") and "PD.kp must be > 0 per joint" in err, \
         f"expected component 'ctl' and the exception's text, got: {err}"
+    assert err.count("t = 0.02 s") == 1, err
 
 
 def test_plant_solver_failure_names_component_reason_and_time():
