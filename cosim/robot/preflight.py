@@ -251,13 +251,15 @@ def _check_parameters(system: SystemStructure, plan: SystemPlan) -> None:
         kind = registry.get(comp.fmu).kind if comp.fmu is not None and comp.fmu in registry.names() else None
         if kind is None:
             continue
-        values = {n: v.start for n, v in plan.infos[c].variables.items()
-                  if n.startswith(("geometry.", "mass.", "model."))}
-        values.update((n, v) for n, v in plan.start_values[c].items() if n in values)
-        try:
-            values = {n: float(v) for n, v in values.items()}
-        except (TypeError, ValueError):  # a value of the wrong type: the plan's typing says so, by its name
-            continue
+        given = {n: v.start for n, v in plan.infos[c].variables.items()
+                 if n.startswith(("geometry.", "mass.", "model."))}
+        given.update((n, v) for n, v in plan.start_values[c].items() if n in given)
+        values = {}
+        for n, v in given.items():  # numbers only: model.fidelity is a String; a value of the wrong type is
+            try:                    # the plan's typing's to refuse (a mass left out is not checked here)
+                values[n] = float(v)
+            except (TypeError, ValueError):
+                pass
         try:
             check_parameters(kind, values)
         except DeltaError as exc:

@@ -596,6 +596,9 @@ def test_a_share_out_of_range_is_named_by_its_parameter_in_both_builds(run, tmp_
           re.escape("--set ctl.model.w_gravity=1.5: ctl.model.w_gravity must be in [0, 1], got 1.5"))
     fails(run("check", SWEEP_SCENARIO, "--set", "ctl.geometry.rod_length=0", "--set", "fmus=python"), 2,
           re.escape("ctl.geometry.rod_length must be > 0, got 0.0"))
+    # the Exudyn plant, whose model.* parameters include a String (model.fidelity)
+    fails(run("check", SWEEP_SCENARIO.with_name("helix_ctc.yaml"), "--set", "plant.mass.payload=-1"), 2,
+          re.escape("--set plant.mass.payload=-1: plant.mass.payload must be >= 0, got -1.0"))
     path = tmp_path / "event.yaml"
     path.write_text(SWEEP_SCENARIO.read_text() + "events:\n  - {at: 0.005, set: {plant.mass.payload: -1.0}}\n")
     path.write_text(path.read_text().replace("model: ", f"model: {SWEEP_SCENARIO.parent}/"))
