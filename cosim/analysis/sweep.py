@@ -145,7 +145,9 @@ def _run_case(scenario: Scenario, fmu_files: dict[tuple[str, bool, int], str], m
     t0 = time.perf_counter()
     row: dict[str, Any] = {"status": "failed", "message": "", "checks": "", "mcap": ""}
     try:
-        sc = replace(scenario.structure(), parallel="off")  # the case runs serially: the pool keeps the CPUs busy
+        system = scenario.structure()  # the case runs serially (the pool keeps the CPUs busy), and its log says so
+        sc = replace(system, parallel="off",
+                     document={**system.document, "parallel": "off"} if system.document is not None else None)
         peak = PeakEffort()
         resume = {}
         if warm is not None:  # read here: FMU states are restored in the process that runs the case
