@@ -120,3 +120,17 @@ def _suite_temp_folder():
         else:
             os.environ["TMPDIR"] = saved_env
         shutil.rmtree(folder, ignore_errors=True)
+
+
+@pytest.fixture(autouse=True)
+def _fmpy_logger_proxy():
+    """After each test, fmpy's C logging proxy points at a logger that is alive (:func:`fmu_helpers.repoint_fmpy_logger`:
+    ``fmpy.simulate_fmu(..., logger=f)`` leaves it pointing at a freed thunk, and a later FMU's log call in the same
+    worker then runs freed memory; once a CI worker segfaulted so)."""
+    yield
+    import sys
+
+    if "fmpy.logging" in sys.modules:  # nothing to do where no test loaded the proxy
+        from fmu_helpers import repoint_fmpy_logger
+
+        repoint_fmpy_logger()

@@ -98,3 +98,31 @@ connections:
 time: {stop: 20.0, step: 0.01}
 logging: {flush_interval: 0.1}
 """
+
+
+_LIVE_LOGGER: list = []  # fmpy's default logger as a ctypes thunk that lives as long as the process, and its struct
+
+
+def repoint_fmpy_logger() -> None:
+    """Point fmpy's C logging proxy at fmpy's default logger, through a thunk that lives as long as the process.
+
+    The proxy (``fmpy/logging``: ``addLoggerProxy``) keeps ONE logger for the whole process, a C global set by the
+    last ``addLoggerProxy`` call. ``fmpy.simulate_fmu(..., logger=f)`` sets it to a ctypes thunk of ``f`` that is
+    freed when ``simulate_fmu`` returns, so the next FMU in the process that logs through the proxy (any FMU fmpy
+    instantiates with its default callbacks) calls freed memory: measured, a later Horizon model-exchange run's log
+    calls landed in CVode's right-hand-side thunk (``Exception ignored on calling ctypes callback function:
+    CVodeSolver.f``), and once a CI worker segfaulted in ``fmi2SetTime`` and xdist waited for it until the stall
+    guard stopped the suite. Our master is not exposed (its slaves give the proxy one thunk that lives as long as
+    the process, ``cosim.fmi.logger.fmi2_logger``); tests that call ``simulate_fmu`` with a logger are (the suite
+    calls this after every test: ``tests/conftest.py``)."""
+    from ctypes import byref
+
+    from fmpy.fmi1 import printLogMessage
+    from fmpy.fmi2 import fmi2CallbackFunctions, fmi2CallbackLoggerTYPE
+    from fmpy.logging import addLoggerProxy
+
+    if not _LIVE_LOGGER:
+        _LIVE_LOGGER.extend((fmi2CallbackLoggerTYPE(printLogMessage), fmi2CallbackFunctions()))
+    thunk, callbacks = _LIVE_LOGGER
+    callbacks.logger = thunk  # the proxy put itself in the struct last time, and skips a struct that holds it
+    addLoggerProxy(byref(callbacks))

@@ -481,3 +481,29 @@ def test_failed_compile_raises_with_gcc_stderr(monkeypatch):
     assert "no_such_model.c" in str(info.value), f"error message {info.value}, expected gcc's complaint"
     leftovers = [p.name for p in cfmus.CACHE_DIR.iterdir() if p.name.startswith((".build-Broken", "Broken"))]
     assert leftovers == [], f"the failed build left {leftovers} in {cfmus.CACHE_DIR}"
+
+
+def test_an_fmu_logs_to_a_live_logger_after_a_simulation_with_its_own_logger(capsys, tmp_path):
+    """fmpy's C logging proxy keeps one logger per process; ``simulate_fmu(logger=f)`` leaves it at a thunk freed on
+    return (see ``fmu_helpers.repoint_fmpy_logger``, which the suite calls after every test). Re-pointed, an FMU that
+    fmpy instantiates with its default callbacks logs to fmpy's default logger again: here an ``fmi2SetTime`` before
+    initialization, refused with its reason."""
+    from fmpy import extract, read_model_description
+
+    from fmu_helpers import repoint_fmpy_logger
+
+    path = str(build("VanDerPol", 2))
+    seen: list[bytes] = []
+    fmpy.simulate_fmu(path, stop_time=0.01, logger=lambda *args: seen.append(args[-1]))
+    repoint_fmpy_logger()
+    md = read_model_description(path)
+    fmu = fmi2.FMU2Model(guid=md.guid, unzipDirectory=extract(path, str(tmp_path / "x")),
+                         modelIdentifier=md.modelExchange.modelIdentifier, instanceName="vdp")
+    fmu.instantiate()
+    try:
+        capsys.readouterr()
+        with pytest.raises(FMICallException):
+            fmu.setTime(0.5)  # in Instantiated mode: the FMU logs why through fmpy's proxy
+        assert "must not be called in Instantiated" in capsys.readouterr().out
+    finally:
+        fmu.freeInstance()
