@@ -248,7 +248,8 @@ def _check_parameters(system: SystemStructure, plan: SystemPlan) -> None:
     issues: list[Issue] = []
     for c, name in enumerate(plan.names):
         comp = system.components[name]
-        kind = registry.get(comp.fmu).kind if comp.fmu is not None and comp.fmu in registry.names() else None
+        definition = registry.get(comp.fmu) if comp.fmu is not None and comp.fmu in registry.names() else None
+        kind = definition.kind if definition is not None else None
         if kind is None:
             continue
         given = {n: v.start for n, v in plan.infos[c].variables.items()
@@ -267,7 +268,6 @@ def _check_parameters(system: SystemStructure, plan: SystemPlan) -> None:
             issues.append(system.where().issue(("components", name, "parameters", parameter),
                                                f"{name}.{exc}"))
             continue
-        definition = registry.get(comp.fmu)
         if definition.role == "controller":
             issue = _law_issue(system, name, definition, plan.start_values[c], comp.step_multiple)
             if issue is not None:
