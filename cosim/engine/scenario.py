@@ -283,7 +283,7 @@ def read_scenario(path: str | Path) -> ScenarioFile:
 
 
 
-def effective_scenario(scenario: Scenario, log: str | Path | None = None) -> dict[str, Any]:
-    """``scenario`` as it runs, every override applied (:meth:`Scenario.as_run`), ``logging.out`` the run's ``log``."""
-    return scenario.as_run(log)
+def effective_scenario(scenario: Scenario) -> dict[str, Any]:
+    """``scenario`` as it runs, every override applied (:meth:`Scenario.as_run`)."""
+    return scenario.as_run()
 

@@ -444,12 +444,12 @@ class Scenario(_Model):
         self._archive = dict(archive)
         self._structure = None  # made again with it
 
-    def as_run(self, log: str | Path | None = None) -> dict[str, Any]:
+    def as_run(self) -> dict[str, Any]:
         """This scenario as it runs, every override applied, as a scenario mapping (JSON, valid YAML): every key with
         its value, defaults included; the values of its ``parameters:`` files applied (the key itself emptied, so
-        that the mapping runs the same without them); the paths of FMU files and of the identified model absolute,
-        ``logging.out`` the run's ``log`` (absolute) when given; a component parameter overridden by a number
-        written as text (``1e3``) as that text, as a file gives it."""
+        that the mapping runs the same without them); the paths of FMU files and of the identified model absolute (a
+        run writes its log's path in it: :meth:`~cosim.engine.structure.SystemStructure.recorded`); a component
+        parameter overridden by a number written as text (``1e3``) as that text, as a file gives it."""
         data = self.model_dump(mode="json", by_alias=True)
         base = Path(self.source).parent if self.source and self.source != "<string>" else Path.cwd()
         for comp in data["components"].values():
@@ -458,8 +458,6 @@ class Scenario(_Model):
         if data.get("model") is not None:  # relative to the scenario file, as an FMU's path: absolute in the log
             data["model"] = os.path.normpath((base / data["model"]).absolute())
         data["parameters"] = None  # the files' values are applied above: the log runs again without the files
-        if log is not None:
-            data["logging"]["out"] = os.path.normpath(Path(log).absolute())
         for path, text in self.sources.written.items():  # ("components", name, "parameters", variable)
             data["components"][path[1]]["parameters"][path[3]] = text
         return data
