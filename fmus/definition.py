@@ -1,8 +1,9 @@
 """One definition per FMU of ours: what it is, and the code of both its builds, by reference.
 
 A :class:`FmuDefinition` names the FMU and holds, as objects (no class-name strings, nothing looked up by
-``importlib``), behind ``classes`` (a function of the registry that imports their modules when first asked:
-a run of cached FMUs reads what an FMU is without loading pythonfmu3 and CasADi, about 0.09 s):
+``importlib``), behind two functions of the registry that import their modules when first asked (``adapter_class``,
+``native_class``: a run of cached FMUs reads what an FMU is without loading pythonfmu3, and the pre-flight that
+makes a controller's law from its adapter does not load CasADi and the native models, about 0.03 s):
 
 * ``adapter``: the python adapter class (:mod:`fmus.adapters`). Its ``__init__`` declares the FMU's interface
   once (variables, units, start values, causality, variability and tunability, ModelStructure dependencies,
@@ -35,9 +36,9 @@ __all__ = ["FmuDefinition", "declared"]
 class FmuDefinition:
     """One FMU of ours.
 
-    ``classes()`` returns ``(adapter, native)``, the classes themselves, imported on the first call:
-    :attr:`adapter` (the python build, and the interface of both builds) and :attr:`native` (the native model
-    class, or None: ``has_native`` says which without importing them); ``kind`` is the robot kind given to both
+    ``adapter_class()`` and ``native_class()`` return the classes themselves, each importing its module on the
+    first call: :attr:`adapter` (the python build, and the interface of both builds) and :attr:`native` (the native
+    model class; None where ``native_class`` is None: ``has_native`` says which without importing anything); ``kind`` is the robot kind given to both
     (None for robot-independent components); ``packages`` are the project packages bundled (under a unique name)
     with the python build;
     ``fmi`` is the python build's FMI version: 2 (co-simulation, pythonfmu) or 3 (model exchange, pythonfmu3);
@@ -50,9 +51,9 @@ class FmuDefinition:
     """
 
     name: str
-    classes: Callable[[], tuple[type, type | None]] = field(repr=False, compare=False)
+    adapter_class: Callable[[], type] = field(repr=False, compare=False)
+    native_class: Callable[[], type] | None = field(repr=False, compare=False)
     kind: str | None
-    has_native: bool = True
     packages: tuple[str, ...] = ("delta",)
     fmi: int = 2
     requires: tuple[str, ...] = ()
@@ -64,12 +65,17 @@ class FmuDefinition:
     @cached_property
     def adapter(self) -> type:
         """The python adapter class (its module imported on first use)."""
-        return self.classes()[0]
+        return self.adapter_class()
 
     @cached_property
     def native(self) -> type | None:
         """The native model class, None where there is no native build (its module imported on first use)."""
-        return self.classes()[1]
+        return None if self.native_class is None else self.native_class()
+
+    @property
+    def has_native(self) -> bool:
+        """Whether the FMU has a native build (nothing imported to say so)."""
+        return self.native_class is not None
 
     def python_class(self) -> type:
         """The FMU's own class: its adapter with the robot kind (the class the FMU's generated module declares)."""

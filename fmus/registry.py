@@ -66,30 +66,31 @@ def _models():
     return models
 
 
-# control law -> (its classes: adapter, native model; label in tables)
-_CONTROLLERS = {"pd": (lambda: (_controllers().PDController, _models().Controller), "PD"),
-                "pid": (lambda: (_controllers().PIDController, _models().PIDController), "PID"),
-                "pdplus": (lambda: (_controllers().PDPlusController, _models().PDPlusController), "PD+"),
-                "ctc": (lambda: (_controllers().CTCController, _models().CTCController), "CTC")}
+# control law -> (its adapter class, its native model class: each imported when first asked for; label in tables)
+_CONTROLLERS = {"pd": (lambda: _controllers().PDController, lambda: _models().Controller, "PD"),
+                "pid": (lambda: _controllers().PIDController, lambda: _models().PIDController, "PID"),
+                "pdplus": (lambda: _controllers().PDPlusController, lambda: _models().PDPlusController, "PD+"),
+                "ctc": (lambda: _controllers().CTCController, lambda: _models().CTCController, "CTC")}
 
 
 def _robot_definitions(kind: str) -> list[FmuDefinition]:
     """The FMUs of one robot kind: for each, its adapter and native model, and what it is."""
     return [
-        FmuDefinition(f"{kind}_ik", lambda: (_kinematics().InverseKinematics, _models().InverseKinematics), kind,
-                      summary=f"inverse kinematics, {kind} delta", role="inverse_kinematics", label="IK"),
-        FmuDefinition(f"{kind}_fk", lambda: (_kinematics().ForwardKinematics, _models().ForwardKinematics), kind,
-                      summary=f"forward kinematics, {kind} delta", role="forward_kinematics", label="FK"),
-        *(FmuDefinition(f"{kind}_{law}", classes, kind, summary=f"{label} joint controller, {kind} delta",
+        FmuDefinition(f"{kind}_ik", lambda: _kinematics().InverseKinematics, lambda: _models().InverseKinematics,
+                      kind, summary=f"inverse kinematics, {kind} delta", role="inverse_kinematics", label="IK"),
+        FmuDefinition(f"{kind}_fk", lambda: _kinematics().ForwardKinematics, lambda: _models().ForwardKinematics,
+                      kind, summary=f"forward kinematics, {kind} delta", role="forward_kinematics", label="FK"),
+        *(FmuDefinition(f"{kind}_{law}", adapter, native, kind, summary=f"{label} joint controller, {kind} delta",
                         role="controller", variant=law, label=label)
-          for law, (classes, label) in _CONTROLLERS.items()),
-        FmuDefinition(f"{kind}_analytic_plant", lambda: (_plants().AnalyticPlant, _models().AnalyticPlant), kind,
-                      summary=f"analytic dynamics plant (co-simulation), {kind} delta",
+          for law, (adapter, native, label) in _CONTROLLERS.items()),
+        FmuDefinition(f"{kind}_analytic_plant", lambda: _plants().AnalyticPlant, lambda: _models().AnalyticPlant,
+                      kind, summary=f"analytic dynamics plant (co-simulation), {kind} delta",
                       role="plant", variant="analytic", label="analytic model"),
-        FmuDefinition(f"{kind}_analytic_plant_me", lambda: (_plant_me().AnalyticPlantME, _models().AnalyticPlant),
-                      kind, fmi=3, summary=f"analytic dynamics plant (FMI 3.0 model exchange), {kind} delta",
+        FmuDefinition(f"{kind}_analytic_plant_me", lambda: _plant_me().AnalyticPlantME,
+                      lambda: _models().AnalyticPlant, kind, fmi=3,
+                      summary=f"analytic dynamics plant (FMI 3.0 model exchange), {kind} delta",
                       role="plant", variant="analytic_me", label="analytic model (model exchange)"),
-        FmuDefinition(f"{kind}_exudyn_plant", lambda: (_plants().ExudynPlant, None), kind, has_native=False,
+        FmuDefinition(f"{kind}_exudyn_plant", lambda: _plants().ExudynPlant, None, kind,
                       packages=("delta", "multibody"), requires=("multibody.plant",),
                       summary=f"Exudyn multibody plant (full or lumped), {kind} delta",
                       role="plant", variant="exudyn", label="Exudyn multibody"),
@@ -99,7 +100,7 @@ def _robot_definitions(kind: str) -> list[FmuDefinition]:
 def _trajectory_definitions() -> list[FmuDefinition]:
     """One FMU per trajectory type of :data:`delta.trajectories.TYPES`, as its adapter declares it
     (:data:`fmus.adapters.trajectories.ADAPTERS`: FMU name, class); every one has a native build."""
-    return [FmuDefinition(a.FMU, lambda a=a: (a, _models().Trajectory), None,
+    return [FmuDefinition(a.FMU, lambda a=a: a, lambda: _models().Trajectory, None,
                           summary=f"{a.TYPE.replace('_', ' ')} trajectory generator",
                           role="trajectory", variant=a.TYPE, label=a.TYPE.replace("_", " ")) for a in ADAPTERS.values()]
 
