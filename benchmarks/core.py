@@ -135,7 +135,8 @@ if idle:  # the plant FMU's code, loaded by a one-step run, then kept by the pro
     run_scenario(load_scenario(f"scenarios/{name}.yaml", {("time", "stop"): 1e-3, **BUILD}), log=False)
     # the FMU's own copy (bundled as _dcosim_<hash>.fmus...); a tree whose registry imports the adapters also
     # holds the project's module, which the FMU does not run
-    found = {n: m for n, m in sys.modules.items() if n.endswith("fmus.adapters.plants")}
+    found = {n: m for n, m in sys.modules.items()  # the module that declares it: analytic_plant, once plants
+             if n.endswith(("fmus.adapters.analytic_plant", "fmus.adapters.plants")) and hasattr(m, "AnalyticPlant")}
     plants = [m.AnalyticPlant for n, m in found.items() if n.startswith("_dcosim_") or len(found) == 1]
     assert len(plants) == 1, found
     plants[0].advance = lambda self, t, h: None

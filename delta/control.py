@@ -99,6 +99,16 @@ class Controller:
             xp.check(_gain_ok(x, True), f"{cls.__name__}.u_max must be > 0 per joint (joint {i + 1})")
         return law
 
+    @classmethod
+    def check(cls, h: float, u_max=None, **gains) -> None:  # noqa: ANN001
+        """What the constructor refuses, without making the law (no model needed): each gain of ``gains`` (``kp``,
+        ``ki``, ``kd``), the limit ``u_max`` (None: no saturation) and the period ``h``, by the same checks and
+        messages (a pre-flight checks a scenario's gains with it)."""
+        for name, value in gains.items():
+            _per_joint(cls.__name__, name, value, positive=_GAINS[name])
+        _limit(cls.__name__, "u_max", u_max)
+        _period(cls.__name__, h)
+
     def reset(self) -> None:
         """Clear the internal state (nothing for stateless laws)."""
 

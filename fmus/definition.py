@@ -3,22 +3,23 @@
 A :class:`FmuDefinition` names the FMU and holds, as objects (no class-name strings, nothing looked up by
 ``importlib``), behind two functions of the registry that import their modules when first asked (``adapter_class``,
 ``native_class``: a run of cached FMUs reads what an FMU is without loading pythonfmu3, and the pre-flight that
-makes a controller's law from its adapter does not load CasADi and the native models, about 0.03 s):
+reads a controller's declared gains does not load CasADi and the native models, about 0.03 s):
 
-* ``adapter``: the python adapter class (:mod:`fmus.adapters`). Its ``__init__`` declares the FMU's interface
-  once (variables, units, start values, causality, variability and tunability, ModelStructure dependencies,
-  default experiment); its ``start`` / ``refresh`` / ``advance`` (``derivatives`` in model exchange) are the
-  python build's step, calls of the :mod:`delta` formulas on floats;
-* ``native``: the native model class (:mod:`fmus.native.models`, None where there is no native build): the same
-  behaviour as functions of the :mod:`delta` formulas on CasADi symbols, traced to C, over the interface the
-  adapter declares (:func:`fmus.native.interface.interface` reads it from :meth:`FmuDefinition.declared`).
+* ``adapter``: the adapter class (:mod:`fmus.adapters`). Its ``__init__`` declares the FMU's interface once
+  (variables, units, start values, causality, variability and tunability, ModelStructure dependencies, default
+  experiment), for both builds;
+* ``native``: the native model class (:mod:`fmus.native.models`, None for the Exudyn plants): what each FMI call
+  computes, as functions of the :mod:`delta` formulas, over the interface the adapter declares. Traced on CasADi
+  symbols (:meth:`FmuDefinition.traced_model`), it is the step of both builds: written as C by the native build,
+  run in CasADi's machine by the python build (:mod:`fmus.traced`). An FMU without one (the Exudyn plants) has its
+  step in its adapter (``start`` / ``advance`` / ``refresh``).
 
 The python FMU's class is made from the definition (:meth:`FmuDefinition.python_class`: the adapter with the
-robot kind; the builder writes the same class into the FMU's generated module), and so is its native model
-(:meth:`FmuDefinition.native_model`). The table of our definitions is :data:`fmus.registry.REGISTRY`.
+robot kind and the traced model; the builder writes the same class into the FMU's generated module), and so is its
+native model (:meth:`FmuDefinition.native_model`). The table of our definitions is :data:`fmus.registry.REGISTRY`.
 
-This module imports nothing of :mod:`fmus` but the native build's errors: the builders take a definition
-without knowing the registry.
+This module imports nothing of :mod:`fmus` but the adapters' ``declared``, the native build's errors and (when a
+traced model is first asked for) its generator: the builders take a definition without knowing the registry.
 """
 
 from __future__ import annotations
@@ -27,9 +28,10 @@ from dataclasses import dataclass, field
 from functools import cached_property
 from typing import Any, Callable
 
+from .adapters.common import declared
 from .native.errors import NativeError
 
-__all__ = ["FmuDefinition", "declared"]
+__all__ = ["FmuDefinition"]
 
 
 @dataclass(frozen=True)
@@ -78,8 +80,20 @@ class FmuDefinition:
         return self.native_class is not None
 
     def python_class(self) -> type:
-        """The FMU's own class: its adapter with the robot kind (the class the FMU's generated module declares)."""
-        return type(self.name, (self.adapter,), {"KIND": self.kind})
+        """The FMU's own class: its adapter with the robot kind (the class the FMU's generated module declares) and,
+        where the FMU has a native model, its traced model (:meth:`traced_model`, traced when first started)."""
+        extra = {"TRACED": staticmethod(self.traced_model)} if self.has_native else {}
+        return type(self.name, (self.adapter,), {"KIND": self.kind, **extra})
+
+    def traced_model(self) -> Any:
+        """The traced functions of the native model (:class:`fmus.traced.TracedModel`): the python build's step,
+        the native build's C. Traced once per process (CasADi, 1 to 60 ms)."""
+        traced = _TRACED.get(self.name)
+        if traced is None:
+            from .native.generate import traced_model  # lazy: CasADi and the native models
+
+            traced = _TRACED[self.name] = traced_model(self)
+        return traced
 
     def declared(self) -> Any:
         """An instance of :meth:`python_class` made in Python (not by an FMU's binary): its declarations are the
@@ -94,6 +108,6 @@ class FmuDefinition:
         return self.native(self.kind, self.adapter)
 
 
-def declared(adapter: type, kind: str | None, name: str) -> Any:
-    """An instance of ``adapter`` for robot ``kind`` named ``name``, made in Python for its declarations."""
-    return type(name, (adapter,), {"KIND": kind})(instance_name=name, resources="", visible=False)
+_TRACED: dict[str, Any] = {}
+
+

@@ -101,6 +101,7 @@ class Adapter(StateAccess, ValueAccess, Fmi2Slave):
     KIND: str | None = None
     EXPERIMENT: tuple[float, float, float] = (0.0, 1.0, 1e-3)
     _STATUS_ERROR = Fmi2Status.error
+    _STATUS_WARNING = Fmi2Status.warning
 
     def __init__(self, **kwargs: Any) -> None:
         compensate_exporter_refcount(type(self))
@@ -337,12 +338,15 @@ class Adapter(StateAccess, ValueAccess, Fmi2Slave):
             self.advance(current_time, step_size)
         except Exception as exc:  # noqa: BLE001 - reported through the FMI logger, never fmi2Fatal
             self._failed = f"{type(exc).__name__}: {exc}"
-            self.log(f"doStep from t = {current_time!r} s over h = {step_size!r} s failed: {self._failed}",
-                     Fmi2Status.error)
+            self.log(self._step_failure(current_time, step_size, exc), Fmi2Status.error)
             return False
         self.time = current_time + step_size
         self._dirty = True  # outputs are recomputed once, when next read
         return True
+
+    def _step_failure(self, t: float, h: float, exc: Exception) -> str:
+        """What a failed step logs: the step, the exception's type and text."""
+        return f"doStep from t = {t!r} s over h = {h!r} s failed: {self._failed}"
 
     # ------------------------------------------------------------------ FMU state (fmus._names.StateAccess)
     def _flags(self) -> dict:

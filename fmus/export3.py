@@ -52,6 +52,7 @@ class AdapterME(StateAccess, ValueAccess, Fmi3SlaveBase, ModelExchange):
     LINEAR: frozenset[tuple[str, str]] = frozenset()
     """(unknown, known) pairs where the known enters as a constant factor (dependenciesKind "constant")."""
     _STATUS_ERROR = Fmi3Status.error
+    _STATUS_WARNING = Fmi3Status.warning
 
     def __init__(self, **kwargs: Any) -> None:
         compensate_exporter_refcount(type(self))

@@ -1,8 +1,8 @@
 """Our FMUs: one definition each (:class:`~fmus.definition.FmuDefinition`), and ``build(name)`` for the master
 to call on demand.
 
-Each definition holds the FMU's python adapter class (its interface, declared once, and the python build) and
-its native model class (the native build, traced from the same :mod:`delta` formulas), as objects: this
+Each definition holds the FMU's adapter class (its interface, declared once) and its native model class (what it
+computes, traced from the :mod:`delta` formulas: the step of both builds, :mod:`fmus.traced`), as objects: this
 module imports both layers, and neither imports it. It imports them when a definition's classes are first asked
 for (the functions below): what an FMU is (name, role, kind, whether it has a native build) is known without
 them, and a run of cached FMUs does not load pythonfmu3 and CasADi.
@@ -56,6 +56,11 @@ def _plants():
     return plants
 
 
+def _analytic_plant():
+    from .adapters import analytic_plant
+    return analytic_plant
+
+
 def _plant_me():
     from .adapters import plant_me  # pythonfmu3
     return plant_me
@@ -69,7 +74,7 @@ def _models():
 # control law -> (its adapter class, its native model class: each imported when first asked for; label in tables)
 _CONTROLLERS = {"pd": (lambda: _controllers().PDController, lambda: _models().Controller, "PD"),
                 "pid": (lambda: _controllers().PIDController, lambda: _models().PIDController, "PID"),
-                "pdplus": (lambda: _controllers().PDPlusController, lambda: _models().PDPlusController, "PD+"),
+                "pdplus": (lambda: _controllers().PDPlusController, lambda: _models().Controller, "PD+"),
                 "ctc": (lambda: _controllers().CTCController, lambda: _models().CTCController, "CTC")}
 
 
@@ -83,7 +88,7 @@ def _robot_definitions(kind: str) -> list[FmuDefinition]:
         *(FmuDefinition(f"{kind}_{law}", adapter, native, kind, summary=f"{label} joint controller, {kind} delta",
                         role="controller", variant=law, label=label)
           for law, (adapter, native, label) in _CONTROLLERS.items()),
-        FmuDefinition(f"{kind}_analytic_plant", lambda: _plants().AnalyticPlant, lambda: _models().AnalyticPlant,
+        FmuDefinition(f"{kind}_analytic_plant", lambda: _analytic_plant().AnalyticPlant, lambda: _models().AnalyticPlant,
                       kind, summary=f"analytic dynamics plant (co-simulation), {kind} delta",
                       role="plant", variant="analytic", label="analytic model"),
         FmuDefinition(f"{kind}_analytic_plant_me", lambda: _plant_me().AnalyticPlantME,

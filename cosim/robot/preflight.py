@@ -215,18 +215,18 @@ _LAW_PARAMETERS = {"kp": "gain.kp", "ki": "gain.ki", "kd": "gain.kd", "u_max": "
 
 def _law_issue(system: SystemStructure, name: str, definition: Any, start_values: dict[str, Any],
                step_multiple: int) -> Issue | None:
-    """The controller's law made as the FMU makes it (its python adapter, :meth:`~fmus.definition.FmuDefinition.
-    declared`, with the start values, at the period the run gives it): what the law refuses (a gain <= 0), named as
-    the scenario names it, or None."""
+    """The controller's gains, limit and period as the FMU will start (its start values under the scenario's, at the
+    period the run gives it) checked as its law (the adapter's ``LAW_CLASS``, :mod:`delta.control`) checks them:
+    what the law refuses (a gain <= 0), named as the scenario names it, or None."""
     adapter = definition.declared()
-    values = {n: v for n, v in start_values.items() if n in adapter.values}
+    values = dict(adapter.values)
     try:
-        adapter.values.update({n: float(v) for n, v in values.items()})
+        values.update({n: float(v) for n, v in start_values.items() if n in values})
     except (TypeError, ValueError):  # a value of the wrong type: the plan's typing says so, by its name
         return None
+    gains = {g: [values[f"gain.{g}[{i}]"] for i in (1, 2, 3)] for g in ("kp", "ki", "kd") if f"gain.{g}[1]" in values}
     try:
-        adapter.start()
-        adapter.make_law(system.step_ns * step_multiple / 1e9)
+        adapter.LAW_CLASS.check(system.step_ns * step_multiple / 1e9, u_max=values["limit.u_max"] or None, **gains)
     except ParameterError as exc:
         field = (exc.name or "").rsplit(".", 1)[-1]
         parameter = _LAW_PARAMETERS.get(field)

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from dataclasses import fields
+from typing import Any
 
 from delta.actuators import KINDS, kind_of
 from delta.masses import validate as validate_masses
@@ -11,7 +12,7 @@ from delta.robots import validate as validate_robot
 
 from .._names import axis_names, joint_names
 
-__all__ = ["PRESET", "declare_robot", "robot_values", "robot_from", "declare_masses", "mass_values", "masses_from",
+__all__ = ["PRESET", "declared", "declare_robot", "robot_values", "robot_from", "declare_masses", "mass_values", "masses_from",
            "MASS_PARAMETERS", "GEOMETRY_PARAMETERS", "check_parameters", "q_units"]
 
 PRESET = {kind: cls.preset for kind, cls in KINDS.items()}
@@ -40,6 +41,13 @@ _MASSES = {
     "w_rotation": ("model.w_rotation", "1", "share of the rods' rotational inertia about their centres (uniform rods: 1)"),
     "gravity": ("model.gravity", "m/s2", "gravitational acceleration along -z"),
 }
+
+
+def declared(adapter: type, kind: str | None, name: str) -> Any:
+    """An instance of ``adapter`` for robot ``kind`` named ``name``, made in Python for its declarations (nothing is
+    computed until it is started): what :meth:`fmus.definition.FmuDefinition.declared` gives, and what the native
+    build reads the interface from (:func:`fmus.native.interface.interface`)."""
+    return type(name, (adapter,), {"KIND": kind})(instance_name=name, resources="", visible=False)
 
 
 def q_units(kind: str) -> tuple[str, str, str, str]:

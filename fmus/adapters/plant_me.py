@@ -3,35 +3,20 @@ dynamics of the co-simulation plant; the joints q, qd are outputs."""
 
 from __future__ import annotations
 
-from delta.dynamics import platform_dynamics
-from delta.errors import UnreachableError
-from delta.kinematics import END_STOP, inverse_kinematics, joint_limit_reason
-from delta.model import build_model
-
 from .._names import axis_names, joint_names
 from ..export3 import AdapterME
-from .common import (
-    P0,
-    V0,
-    declare_initial_state,
-    declare_masses,
-    declare_robot,
-    hold_effort,
-    initial_joint_state,
-    masses_from,
-    q_units,
-    robot_from,
-)
+from ..traced import TracedME
+from .common import declare_initial_state, declare_masses, declare_robot, hold_effort, q_units
 
 Q, QD, U = joint_names("q"), joint_names("qd"), joint_names("u")
 P, V = axis_names("p"), axis_names("v")
 DP, DV = [f"der({n})" for n in P], [f"der({n})" for n in V]
 
 
-class AnalyticPlantME(AdapterME):
+class AnalyticPlantME(TracedME, AdapterME):
     """dp/dt = v, dv/dt = platform_dynamics(p, v, u); the importing tool integrates.
 
-    The same equations as the co-simulation plant (:class:`fmus.adapters.plants.AnalyticPlant`), which integrates
+    The same equations as the co-simulation plant (:class:`fmus.adapters.analytic_plant.AnalyticPlant`), which integrates
     them itself with RK4: the virtual-work dynamics in platform coordinates (:func:`delta.dynamics.platform_dynamics`,
     a 3x3 system with no forward kinematics, no ``J^-1`` and no mass matrix), about half the work of the
     joint-space form ``M(q) qdd = u - C qd - G`` per evaluation. The joints are outputs, by inverse kinematics of
@@ -58,34 +43,3 @@ class AnalyticPlantME(AdapterME):
             self.output(Q[i], qu, f"joint position (leg {i + 1})", depends=P)
         for i in range(3):
             self.output(QD[i], qdu, f"joint velocity (leg {i + 1})", depends=(*P, *V))
-
-    def start(self) -> None:
-        self.model = build_model(robot_from(self, self.KIND), masses_from(self, self.KIND))
-        initial_joint_state(self, self.model)  # raises if the initial state is unreachable
-        self.put(P, self.vec3(P0))
-        self.put(V, self.vec3(V0))
-
-    def retune(self, names: tuple[str, ...]) -> None:
-        """The payload changed: the model of the new masses; the states are the importer's."""
-        self.model = build_model(robot_from(self, self.KIND), masses_from(self, self.KIND))
-
-    def derivatives(self) -> None:
-        v = self.vec3(V)
-        self.put(DP, v)
-        self.put(DV, platform_dynamics(self.model, self.vec3(P), v, self.vec3(U)))
-
-    def outputs(self) -> None:
-        """q, qd from the states; the end stops as the co-simulation plant's (:mod:`fmus.adapters.plants`): here,
-        on the states the importer accepted (the outputs are read at communication points, never at the
-        integrator's trial states, which only ``derivatives`` sees; pythonfmu3 does not pass
-        ``completedIntegratorStep`` on to Python)."""
-        p = self.vec3(P)
-        q, qd, _, fault = inverse_kinematics(self.model, p, self.vec3(V))
-        if fault > 0:
-            raise UnreachableError(f"{self.modelName} at t = {self.time:.6f} s: the platform left the workspace at "
-                                   f"p = ({p[0]:.6g}, {p[1]:.6g}, {p[2]:.6g}) m: leg {fault} has no solution")
-        if fault < 0:  # a joint past its range: the end stop, as the co-simulation plant
-            raise UnreachableError(f"{self.modelName} at t = {self.time:.6f} s: {END_STOP}: "
-                                   f"{joint_limit_reason(self.model, -fault, q[-fault - 1])}")
-        self.put(Q, q)
-        self.put(QD, qd)

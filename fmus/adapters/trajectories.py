@@ -14,7 +14,9 @@ Each adapter declares its parameters once, in ``PARAMS``: FMU name <-> dataclass
 (and element of a tuple field). The same table declares the FMI variables, builds the
 trajectory from the parameter values (:meth:`_Trajectory.from_parameters`) and gives the
 parameter values of a trajectory (:meth:`_Trajectory.parameters_of`), which the master
-uses to set a component from the scenario's ``trajectory:`` section.
+uses to set a component from the scenario's ``trajectory:`` section. What a trajectory FMU computes is its native
+model's (:class:`fmus.native.models.Trajectory`: ``evaluate_scalar`` of the trajectory these parameters make), which
+both builds evaluate (:mod:`fmus.traced`).
 """
 
 from __future__ import annotations
@@ -25,10 +27,10 @@ from typing import Any, Callable, Mapping
 from delta.errors import ParameterError
 from delta.trajectories import TYPES, Helix, PickAndPlace, PointToPoint, seed004_z_steps
 
-from ..export2 import Adapter, axis_names, writer
+from ..export2 import Adapter, axis_names
+from ..traced import TracedCS
 
 P_REF, V_REF, A_REF = axis_names("p_ref"), axis_names("v_ref"), axis_names("a_ref")
-_WRITE_OUTPUTS = writer(P_REF, V_REF, A_REF)  # (values, p, v, a): refresh's store
 
 
 @dataclass(frozen=True)
@@ -49,7 +51,7 @@ def _xyz(prefix: str, field: str, description: str, outer: tuple[int, ...] = ())
                  for i, (axis, name) in enumerate(zip("xyz", axis_names(prefix))))
 
 
-class _Trajectory(Adapter):
+class _Trajectory(TracedCS, Adapter):
     """Base: ``TYPE`` (the scenario's trajectory type, a key of TYPES), ``FMU`` (the FMU's name),
     ``CLASS`` (``TYPES[TYPE]``), ``DEFAULT``, ``PARAMS`` and ``DESCRIPTION``."""
 
@@ -122,16 +124,6 @@ class _Trajectory(Adapter):
     def _unrepresentable(cls, trajectory, field: str) -> str:
         return (f"{cls.CLASS.__name__}.{field} = {getattr(trajectory, field)!r} cannot be set on this FMU"
                 + (f" ({cls.LIMITS})" if cls.LIMITS else ""))
-
-    def make(self):
-        return self.from_parameters(self.values)
-
-    def start(self) -> None:
-        self.trajectory = self.make()
-
-    def refresh(self) -> None:
-        p, v, a = self.trajectory.evaluate_scalar(self.time)
-        _WRITE_OUTPUTS(self.values, p, v, a)
 
 
 class TrajectoryTypeError(ParameterError, TypeError):

@@ -14,13 +14,12 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
-from ..definition import FmuDefinition
+from ..traced import CALLS, Call, TracedModel
 from .errors import NativeError
 from .interface import Interface, interface
 from .models import NativeModel, Result, Symbols
 from .symbolic import tracing
 
-_FUNCTIONS = ("start", "refresh", "advance", "derivatives", "accept")
 MAX_DETAIL = 4  # values a check may print into its reason (MODEL_MAX_DETAIL of c/model.h)
 
 
@@ -223,17 +222,35 @@ def _function_c(model: NativeModel, itf: Interface, f: _Function, offset: int) -
     return lines
 
 
-def generate(fmu: FmuDefinition, out: Path, token: str) -> tuple[Interface, list[str]]:
-    """Write the generated C of the FMU (``model.c``, ``model_functions.c/.h``) into ``out``; return the interface
-    and the generated file names."""
-    import casadi as ca
-
+def _traced(fmu: Any) -> tuple[NativeModel, Interface, list, Any]:
+    """``fmu`` (an :class:`fmus.definition.FmuDefinition`, which imports this module when first asked for its traced
+    model): its native model, its interface, its traced functions with their parameter-only part hoisted, and the
+    constants function: what both builds evaluate (the native one as C, the python one in CasADi's machine)."""
     model = fmu.native_model()
     if model.me_outputs and not model.me_accepts:
         raise NativeError(f"FMU {fmu.name}: me_outputs needs me_accepts (accept computes the outputs)")
     itf = interface(fmu.name, model)
-    traced = [_trace(model, itf, which) for which in _FUNCTIONS]
-    functions, constants = _hoisted(itf, traced)
+    functions, constants = _hoisted(itf, [_trace(model, itf, which) for which in CALLS])
+    return model, itf, functions, constants
+
+
+def traced_model(fmu: Any) -> TracedModel:
+    """The python build's step of ``fmu`` (:mod:`fmus.traced`): the functions :func:`generate` writes as C."""
+    model, itf, functions, constants = _traced(fmu)
+    vr = {v.name: v.vr for v in itf.variables}
+    return TracedModel(fmu.name, tuple((v.name, v.type, float(v.start or 0.0), v.choices) for v in itf.variables),
+                       model.n_state, tuple(float(x) for x in model.initial_state()),
+                       vr[model.max_step] if model.max_step else 0, model.me_advances, model.me_accepts,
+                       model.me_outputs, constants,
+                       {f.name: Call(fn, tuple(f.sets), tuple(f.checks), f.sets_state) for fn, f in functions})
+
+
+def generate(fmu: Any, out: Path, token: str) -> tuple[Interface, list[str]]:
+    """Write the generated C of the FMU (``model.c``, ``model_functions.c/.h``) into ``out``; return the interface
+    and the generated file names."""
+    import casadi as ca
+
+    model, itf, functions, constants = _traced(fmu)
     gen = ca.CodeGenerator("model_functions.c", {"with_header": True, "casadi_real": "double",
                                                  "casadi_int": "long long int"})
     for fn in (constants, *(fn for fn, _ in functions)):

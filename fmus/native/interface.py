@@ -2,7 +2,7 @@
 
 Each FMU's variables (names, units, start values, causality, variability, ModelStructure
 dependencies) are declared once, in its adapter's ``__init__`` (:mod:`fmus.adapters`). The native
-build instantiates that adapter (without running it: :func:`fmus.definition.declared`) and reads its
+build instantiates that adapter (without running it: :func:`fmus.adapters.common.declared`) and reads its
 declarations, so both builds have one interface; a model-exchange native model's continuous states are
 those its model-exchange adapter declares (:attr:`~fmus.native.models.NativeModel.me_adapter`).
 Value references: 0 is the time (FMI 3's independent variable; implicit in FMI 2), then
@@ -16,7 +16,7 @@ from typing import TYPE_CHECKING
 from xml.etree.ElementTree import Element, SubElement, indent, tostring
 
 from .._names import UNITS, initial_knowns
-from ..definition import declared
+from ..adapters.common import declared
 from .errors import NativeError
 if TYPE_CHECKING:  # the models import CasADi: model_description, which a cached build's run reaches, does not need it
     from .models import NativeModel

@@ -1,10 +1,11 @@
-"""What each native FMU computes, written as calls of the ``delta/`` formulas on symbols.
+"""What each FMU of ours computes (both builds), written as calls of the ``delta/`` formulas on symbols.
 
-A native model is the behaviour of one python adapter (:mod:`fmus.adapters`) over the same interface:
-an FMU's definition (:class:`fmus.definition.FmuDefinition`) holds both classes, and makes the native model
-with the robot kind and the adapter class itself; its variables are the adapter's, read from the adapter
-(:mod:`fmus.native.interface`), and its functions call the same :mod:`delta` algorithms the adapter calls,
-with a model compiled on symbols (:func:`fmus.native.symbolic.symbolic_model`). They return :class:`Result` records:
+A native model is the behaviour of one FMU over the interface its adapter declares (:mod:`fmus.adapters`): an
+FMU's definition (:class:`fmus.definition.FmuDefinition`) holds both classes, and makes the native model with the
+robot kind and the adapter class itself; its variables are the adapter's (:mod:`fmus.native.interface`), and its
+functions call the :mod:`delta` algorithms with a model compiled on symbols
+(:func:`fmus.native.symbolic.symbolic_model`). Traced once (:mod:`fmus.native.generate`), they are the native
+build's C and the python build's step (:mod:`fmus.traced`, run in CasADi's machine): written once. They return :class:`Result` records:
 the variables they set, the new internal state, and the checks the formulas recorded, each an error
 (the FMI call fails with the reason logged) or a warning (logged once when it starts failing).
 
@@ -27,7 +28,7 @@ from typing import Any
 
 import casadi as ca
 
-from delta.control import CTC, PD, PID, PDPlus
+from delta.control import DEFAULT_GAINS
 from delta.dynamics import platform_dynamics, platform_state, platform_step
 from delta.kinematics import (BEYOND_LIMITS, END_STOP, JOINT_LIMIT, inverse_kinematics, proximity, set_pose,
                               working_mode_fault)
@@ -35,12 +36,12 @@ from delta.model import Data
 from delta.trajectories import PROFILES
 
 from .._names import axis_names, joint_names
-from ..adapters import plant_me, plants
+from ..adapters import analytic_plant, plant_me
 from ..adapters.common import P0, V0, mass_values, robot_values
 from .symbolic import SYMBOLIC, Trace, instance, symbolic_model
 
 __all__ = ["Check", "Result", "Symbols", "NativeModel", "Trajectory", "InverseKinematics", "ForwardKinematics",
-           "Controller", "PIDController", "PDPlusController", "CTCController", "AnalyticPlant"]
+           "Controller", "PIDController", "CTCController", "AnalyticPlant"]
 
 P, V = tuple(axis_names("p")), tuple(axis_names("v"))
 P_REF, V_REF, A_REF = (tuple(axis_names(n)) for n in ("p_ref", "v_ref", "a_ref"))
@@ -174,7 +175,7 @@ class InverseKinematics(NativeModel):
     """As :class:`fmus.adapters.kinematics.InverseKinematics`: the joint references of ``p_ref, v_ref,
     a_ref``; an unreachable reference (no solution, a joint limit, or a singularity proximity below
     ``singularity.margin`` > 0) drops ``reachable`` and holds the last reachable references (the state).
-    A type 1 singularity with ``singularity.margin`` <= 0 is an error, as in the python build."""
+    A type 1 singularity with ``singularity.margin`` <= 0 is an error."""
 
     n_state = 9  # the last reachable q_ref, qd_ref, qdd_ref
 
@@ -208,7 +209,7 @@ class InverseKinematics(NativeModel):
 class ForwardKinematics(NativeModel):
     """As :class:`fmus.adapters.kinematics.ForwardKinematics`: ``p, v`` and the singularity proximity of ``q, qd``;
     ``valid`` drops (and ``p, v``, the proximity hold their last valid values) when the rods cannot meet or ``q``
-    would be assembled outside the working mode. A type 1 or 2 singularity is an error, as in the python build."""
+    would be assembled outside the working mode. A type 1 or 2 singularity is an error."""
 
     n_state = 7  # the last valid p, v and proximity
 
@@ -235,23 +236,21 @@ class ForwardKinematics(NativeModel):
 # ----------------------------------------------------------------------------- controllers
 
 class Controller(NativeModel):
-    """As :class:`fmus.adapters.controllers._Controller`: ``u`` from the law's ``output_scalar`` on the inputs,
-    gains and ``limit.u_max`` (0 = no saturation) as parameters."""
+    """``u`` from the law's ``output_scalar`` on the inputs, the gains and ``limit.u_max`` (0 = no saturation)
+    as parameters: the law (``LAW_CLASS``), whether it takes the robot model (``MODEL_BASED``) and its gains (those
+    of :data:`delta.control.DEFAULT_GAINS` under ``LAW``) are the adapter's (:mod:`fmus.adapters.controllers`)."""
 
-    LAW: type = PD
-    GAINS: tuple[str, ...] = ("kp", "kd")
-    MODEL_BASED = False
     FIXED: dict[str, Any] = {}  # law attributes the FMU does not expose
 
     def law(self, sym: Symbols, trace: Trace, h: Any, **state: Any):  # noqa: ANN201
         u_max = sym.v["limit.u_max"]
-        bound = ca.if_else(u_max != 0.0, u_max, ca.inf)  # the python build: `u_max or None`
-        fields = {g: sym.vec(joint_names(f"gain.{g}")) for g in self.GAINS}
+        bound = ca.if_else(u_max != 0.0, u_max, ca.inf)  # 0 = no saturation
+        fields = {g: sym.vec(joint_names(f"gain.{g}")) for g in DEFAULT_GAINS[self.kind][self.adapter.LAW]}
         fields.update(h=h, u_max=(bound, bound, bound), **self.FIXED, **state)
-        if self.MODEL_BASED:
+        if self.adapter.MODEL_BASED:
             fields.update(model=(model := self.model(sym, trace)), data=Data(model))
         before = trace.take()
-        law = self.LAW.traced(SYMBOLIC, **fields)
+        law = self.adapter.LAW_CLASS.traced(SYMBOLIC, **fields)
         trace.set_aside(before)
         return law
 
@@ -263,25 +262,20 @@ class Controller(NativeModel):
         return Result(dict(zip(U, u)), checks=_errors(trace))
 
 
-class PDPlusController(Controller):
-    LAW, MODEL_BASED = PDPlus, True
-
-
 class CTCController(Controller):
-    LAW, MODEL_BASED, FIXED = CTC, True, {"feedforward": True}
+    FIXED = {"feedforward": True}
 
 
 class PIDController(Controller):
     """PID: the state is the integral and the period of the last step (the output's integral update uses it;
-    before the first step the default step). As in the python build, the integral is kept when the step size
+    before the first step the default step). The integral is kept when the step size
     changes: it is a sum of ``e h`` whatever each ``h``."""
 
-    LAW, GAINS = PID, ("kp", "ki", "kd")
     n_state = 4  # integral[3], h of the last step
     me_advances = True  # in model exchange the integral advances at each completed integrator step
 
     def initial_state(self) -> list[float]:
-        return [0.0, 0.0, 0.0, self.adapter.EXPERIMENT[2]]  # the default experiment's step, as the python build
+        return [0.0, 0.0, 0.0, self.adapter.EXPERIMENT[2]]  # the default experiment's step
 
     def law(self, sym: Symbols, trace: Trace, h: Any, **state: Any):  # noqa: ANN201
         law = super().law(sym, trace, h, **state)
@@ -303,9 +297,9 @@ WORKSPACE = "the platform left the workspace: "
 
 
 def _end_stops(model, leg: int, q) -> list[Check]:
-    """Joint ``leg`` (0-based) within its range, below and above, each failing with the python build's reason
-    (``END_STOP: leg 3 joint limit: q = 0.5803 m > q_max = 0.5800 m``): the joint value and the limit printed in C
-    as the actuator shows them (:attr:`delta.actuators.Rail.Q_PRINTF`)."""
+    """Joint ``leg`` (0-based) within its range, below and above, each failing with the reason
+    :func:`delta.kinematics.joint_limit_reason` gives (``END_STOP: leg 3 joint limit: q = 0.5803 m > q_max = 0.5800
+    m``): the joint value and the limit printed as the actuator shows them (:attr:`delta.actuators.Rail.Q_PRINTF`)."""
     fmt, factor = model.actuator.Q_PRINTF
     return [Check(ok, f"{END_STOP}: " + JOINT_LIMIT[above].format(leg=leg + 1, q=fmt, limit=fmt),
                   values=(q[leg] * factor, limit * factor))
@@ -314,7 +308,7 @@ def _end_stops(model, leg: int, q) -> list[Check]:
 
 
 class AnalyticPlant(NativeModel):
-    """As :class:`fmus.adapters.plants.AnalyticPlant` (co-simulation: RK4 in platform coordinates, the state
+    """As :class:`fmus.adapters.analytic_plant.AnalyticPlant` (co-simulation: RK4 in platform coordinates, the state
     ``p, v``, substeps of at most ``solver.max_step``) and :class:`fmus.adapters.plant_me.AnalyticPlantME`
     (model exchange: the same platform dynamics, states ``p, v``, the joints ``q, qd`` as outputs) in one model: both
     FMUs of the analytic plant, whichever adapter their definition holds, have the co-simulation adapter's variables
@@ -327,7 +321,7 @@ class AnalyticPlant(NativeModel):
     me_outputs = True  # q, qd of accepted states only, not at each of the integrator's evaluations
 
     def __init__(self, kind: str | None, adapter: type) -> None:
-        super().__init__(kind, plants.AnalyticPlant)
+        super().__init__(kind, analytic_plant.AnalyticPlant)
 
     def start(self, sym: Symbols, trace: Trace) -> Result:
         model = self.model(sym, trace)
@@ -342,7 +336,7 @@ class AnalyticPlant(NativeModel):
     def _joints(self, model, p, v, trace: Trace) -> tuple[Any, Any, list[Check]]:  # noqa: ANN001
         """``q, qd`` of the platform state ``p, v`` (at a step's end or an accepted state, never an RK stage or a
         trial state), and their checks: a leg with no solution (the platform left the workspace), a joint past
-        its range (an end stop, printed as the python build prints it)."""
+        its range (an end stop, printed as :func:`delta.kinematics.joint_limit_reason` prints it)."""
         q, qd, _, _ = inverse_kinematics(model, p, v)
         checks = []
         for c in _errors(trace, WORKSPACE):

@@ -259,9 +259,9 @@ def test_bundled_code_does_not_shadow(fmu_dir):
     """Two FMUs plus the installed package in one interpreter: each FMU runs its own bundle."""
     import zipfile
 
-    import delta.kinematics
+    import delta.robots
 
-    installed = delta.kinematics.__file__
+    installed = delta.robots.__file__
     slaves = [_Slave(_path(fmu_dir, n), n) for n in ("linear_ik", "rotary_fk")]
     try:
         bundles = []
@@ -271,10 +271,10 @@ def test_bundled_code_does_not_shadow(fmu_dir):
             bundles.append(bundle)
         assert bundles[0] != bundles[1], f"both FMUs use bundle {bundles[0]}"
         for b in bundles:
-            mod = sys.modules.get(f"{b}.delta.kinematics")
-            assert mod is not None, f"{b}.delta.kinematics not loaded; loaded: {[m for m in sys.modules if b in m]}"
+            mod = sys.modules.get(f"{b}.delta.robots")  # the geometry both declare
+            assert mod is not None, f"{b}.delta.robots not loaded; loaded: {[m for m in sys.modules if b in m]}"
             assert "resources" in mod.__file__ and b in mod.__file__, f"{b} loaded from {mod.__file__}"
-        assert sys.modules["delta.kinematics"].__file__ == installed, "installed delta was replaced"
+        assert sys.modules["delta.robots"].__file__ == installed, "installed delta was replaced"
         assert "resources" not in installed, f"installed delta resolves to {installed}"
         slaves[0].set(P_REF, (0, 0, -0.5))
         assert slaves[0].get(Q_REF)[0] > 0.1, "linear IK FMU lost its code"

@@ -529,13 +529,15 @@ def test_the_model_exchange_plant_checks_accepted_states_only(build, tmp_path):
 def _pose_past_the_end_stop(q2: float, p0: list[float]) -> list[float]:
     """The rotary plant's platform where joint 2 is at ``q2`` and the others as at ``p0`` (forward kinematics)."""
     from delta.kinematics import fk, inverse_kinematics
+    from delta.model import build_model
     from fmus import registry
+    from fmus.adapters.common import robot_from
 
     adapter = registry.get("rotary_analytic_plant_me").declared()
-    adapter.start()
-    q = list(inverse_kinematics(adapter.model, p0)[0])
+    model = build_model(robot_from(adapter, adapter.KIND))
+    q = list(inverse_kinematics(model, p0)[0])
     q[1] = q2
-    return [float(c) for c in fk(adapter.model, q).require()]
+    return [float(c) for c in fk(model, q).require()]
 
 
 @pytest.fixture(scope="module")

@@ -169,8 +169,10 @@ def test_refusal_in_python_raises_and_changes_nothing():
         assert reason in a.log_queue[-1].msg, a.log_queue[-1].msg
     assert a.values == before, "a refused state changed values"
     vr = next(v.value_reference for v in a.vars.values() if v.name == "limit.u_max")
-    a.set_real([vr], [123.0])  # tunable: taken
-    assert a.values["limit.u_max"] == 123.0 and a.u_max == 123.0, (a.values["limit.u_max"], a.u_max)
+    a.set_real([vr], [123.0])  # tunable: taken, and the law saturates at it
+    ref, u = (next(v.value_reference for v in a.vars.values() if v.name == n) for n in ("q_ref[1]", "u[1]"))
+    a.set_real([ref], [a.values["q[1]"] + 1.0])
+    assert a.values["limit.u_max"] == 123.0 and a.get_real([u]) == [123.0], (a.values["limit.u_max"], a.get_real([u]))
     ctc = _make("linear_ctc")
     ctc.exit_initialization_mode()
     vr = next(v.value_reference for v in ctc.vars.values() if v.name == "mass.platform")
