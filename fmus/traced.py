@@ -145,8 +145,8 @@ class _Bound:
 
 class Runtime:
     """One instance's evaluation of a :class:`TracedModel`: the values array (the C runtime's ``values``), the
-    internal state, the constants and which check each call reported last (a warning is logged when no call
-    reported it on its last call, as ``check`` in the C runtime)."""
+    internal state, the constants and which check each function reported last (a warning is logged when its
+    function did not report it on its last call, as ``check`` in the C runtime)."""
 
     def __init__(self, model: TracedModel, warn: Callable[[str], None]) -> None:
         self.model, self.warn = model, warn
@@ -181,7 +181,7 @@ class Runtime:
         if call.sets_state:
             self.state[:self.model.n_state] = b.new_state[:self.model.n_state]
         failed = self._first_failed(b)
-        reported = failed in self.last.values()
+        reported = self.last[which] == failed  # each check belongs to one function: reported by its last call
         self.last[which] = failed
         if failed < 0:
             return
