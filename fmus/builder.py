@@ -127,18 +127,27 @@ def fingerprint(fmu: FmuDefinition) -> str:
         h.update(rel.encode() + b"\0" + path.read_bytes() + b"\0")
     for path in _traced_sources(fmu):  # what its traced model is made from (resources/traced.json)
         h.update(path.relative_to(_ROOT).as_posix().encode() + b"\0" + path.read_bytes() + b"\0")
+    if fmu.has_native:  # and the version of CasADi that traced and serialized it
+        h.update(f"casadi {_version('casadi')}".encode())
     return h.hexdigest()
 
 
 def _traced_sources(fmu: FmuDefinition) -> list[Path]:
-    """The files a python FMU's traced model (:mod:`fmus.traced`) is made from, with CasADi's version (its
-    serialization and virtual machine): the native models, their tracer, and the formulas of ``delta``."""
+    """The files a python FMU's traced model (:mod:`fmus.traced`) is made from: the native models, their tracer,
+    and the formulas of ``delta``."""
     if not fmu.has_native:
         return []
-    import casadi  # lazy: only the fingerprint of an FMU with a native model needs it
+    return [*_imported_closure(["fmus.native.generate"]), *_package_files("delta")]
 
-    return [Path(casadi.__file__), *_imported_closure(["fmus.native.generate"]),
-            *(p for p in _package_files("delta"))]
+
+def _version(distribution: str) -> str:
+    """The installed version of ``distribution`` from its metadata (importing CasADi to ask it costs 25 ms)."""
+    from importlib.metadata import PackageNotFoundError, version  # lazy: a fingerprint only
+
+    try:
+        return version(distribution)
+    except PackageNotFoundError:
+        return "not installed"
 
 
 def bundle_name(digest: str) -> str:
