@@ -34,6 +34,8 @@ from .errors import ScenarioError, UnknownSignalError
 from .fmi import BOOLEAN, INTEGER, REAL
 from .observers.recorders import PeakEffort
 from .io.checkpoint import read_checkpoint
+from .io.ssp.scenario import open_ssp
+from .io.ssp.spec import is_ssp
 from .run import RunResult, resumed_scenario, run_scenario
 
 __all__ = ["PeakEffort", "Result", "SignalRecorder", "load", "metric_names", "metrics", "resume", "run"]
@@ -135,9 +137,9 @@ def run(scenario: str | Path | Scenario | SystemStructure, overrides: Mapping[st
         log: bool = False,
         out: str | Path | None = None, signals: bool = True, progress: bool = False,
         checkpoint_at: float | None = None, checkpoint_out: str | Path | None = None) -> Result:
-    """Run a scenario (path or :func:`load`-ed) with ``overrides`` (dotted names), or a system structure as it is
-    (:class:`~cosim.engine.structure.SystemStructure`: made in code, or a scenario's ``structure()``), and return a
-    :class:`Result`.
+    """Run a scenario (a YAML path or :func:`load`-ed, or an SSP archive's path) with ``overrides`` (dotted names),
+    or a system structure as it is (:class:`~cosim.engine.structure.SystemStructure`: made in code, or a scenario's
+    ``structure()``), and return a :class:`Result`.
 
     Parameters
     ----------
@@ -149,14 +151,16 @@ def run(scenario: str | Path | Scenario | SystemStructure, overrides: Mapping[st
 
     Raises :class:`~cosim.errors.CosimError` subclasses (bad input, pre-flight, FMU failure).
     """
+    options = dict(log=log, out=out, signals=signals, progress=progress, checkpoint_at=checkpoint_at,
+                   checkpoint_out=checkpoint_out)
     if isinstance(scenario, SystemStructure):
         if overrides:
             raise ScenarioError("overrides need a scenario: a system structure is run as it is")
-        system = scenario
-    else:
-        system = load(scenario, overrides).structure()
-    return _run(system, log=log, out=out, signals=signals, progress=progress,
-                checkpoint_at=checkpoint_at, checkpoint_out=checkpoint_out)
+        return _run(scenario, **options)
+    if isinstance(scenario, (str, Path)) and is_ssp(scenario):  # its FMUs unpacked for the run only
+        with open_ssp(scenario, dotted_overrides(dict(overrides or {}))) as system:
+            return _run(system, **options)
+    return _run(load(scenario, overrides).structure(), **options)
 
 
 def resume(checkpoint: str | Path, sets: Mapping[str, Any] | None = None, *, stop_time: float | None = None,

@@ -35,18 +35,17 @@ def _cmd_layout(args: argparse.Namespace) -> int:
     from ..errors import written_by_rename
     from ..io.output import check_output
     from ..observers.layout import channels_of, layout
-    from .run import _open_scenario
+    from .run import _open_system
 
-    args.step = args.from_log = None  # what _open_scenario reads of a run's options
-    with _open_scenario(args, apply_overrides(args.set)) as scenario:
-        system = scenario.structure()
+    args.step = args.from_log = None  # what _open_system reads of a run's options
+    with _open_system(args, apply_overrides(args.set)) as system:
         plan, _ = prepare(system)  # the channels a run logs: its components' logged variables
         drawing = plugins.scene(system)
-        made = layout(channels_of(plan), drawing is not None and bool(drawing.position), scenario.name)
-        out = Path(args.out) if args.out is not None else Path("runs") / f"{safe_stem(scenario.name)}.layout.json"
+        made = layout(channels_of(plan), drawing is not None and bool(drawing.position), system.name)
+        out = Path(args.out) if args.out is not None else Path("runs") / f"{safe_stem(system.name)}.layout.json"
         check_output(out, input_files(system))
         text = made.to_json()
         with written_by_rename(out) as tmp:
             tmp.write_text(text, encoding="utf-8")
-    emit(args, {"scenario": scenario.name, "written": str(out)}, f"wrote {out} (Foxglove layout)")
+    emit(args, {"scenario": system.name, "written": str(out)}, f"wrote {out} (Foxglove layout)")
     return EXIT_OK

@@ -109,9 +109,9 @@ def _summary_text(res) -> str:
     return "\n".join(lines)
 
 
-def _open_scenario(args: argparse.Namespace, overrides: dict):
-    """The scenario of a YAML file, of an SSP archive or of a run's log (an archive unpacked for the ``with`` block
-    only)."""
+def _open_system(args: argparse.Namespace, overrides: dict):
+    """The system structure of a YAML scenario, of an SSP archive or of a run's log, for a ``with`` block (an archive
+    is unpacked for the block only)."""
     from contextlib import nullcontext
 
     from ..engine.scenario import load_scenario
@@ -131,7 +131,7 @@ def _open_scenario(args: argparse.Namespace, overrides: dict):
         from ..io.ssp.scenario import open_ssp
 
         return open_ssp(args.scenario, overrides)
-    return nullcontext(load_scenario(args.scenario, overrides))
+    return nullcontext(load_scenario(args.scenario, overrides).structure())
 
 
 @contextlib.contextmanager
@@ -180,8 +180,8 @@ def _cmd_run(args: argparse.Namespace) -> int:
         with _stdout_kept_for_json(args.json):
             res = _resume_run(args, live, realtime, command)
     else:
-        with _stdout_kept_for_json(args.json), _open_scenario(args, overrides) as scenario:
-            res = run_scenario(scenario, out=args.out, log=False if args.no_log else None,
+        with _stdout_kept_for_json(args.json), _open_system(args, overrides) as system:
+            res = run_scenario(system, out=args.out, log=False if args.no_log else None,
                                progress=not (args.quiet or args.json), live=live, realtime=realtime,
                                stamps="simulation" if args.sim_stamps else "wall", checkpoint_at=args.checkpoint_at,
                                checkpoint_out=args.checkpoint_out, command=command, live_wait=args.live_wait)
@@ -227,17 +227,17 @@ def _cmd_check(args: argparse.Namespace) -> int:
     from ..engine.overrides import apply_overrides
     from ..run import check_initialization
 
-    with _open_scenario(args, apply_overrides(args.set, args.stop_time)) as scenario:
-        plan, report = check_initialization(scenario.structure())  # the checks a run makes before t = 0, FMUs' own included
+    with _open_system(args, apply_overrides(args.set, args.stop_time)) as system:
+        plan, report = check_initialization(system)  # the checks a run makes before t = 0, FMUs' own included
     order = " -> ".join(plan.names[c] for c in plan.order)
     from ..observers.mcap_log import McapRecorder
 
-    n_steps = scenario.time.n_steps  # a logged run of these steps writes through a writer process (cosim.observers.mcap_log)
-    _, parallel = choose(plan, scenario.parallel, n_steps,
-                         scenario.logging.enabled and McapRecorder.writes_in_a_process(n_steps))
-    payload = {"scenario": scenario.name, "ok": True, "preflight": report, "order": [plan.names[c] for c in plan.order],
+    n_steps = system.n_steps()  # a logged run of these steps writes through a writer process (cosim.observers.mcap_log)
+    _, parallel = choose(plan, system.parallel, n_steps,
+                         system.log.enabled and McapRecorder.writes_in_a_process(n_steps))
+    payload = {"scenario": system.name, "ok": True, "preflight": report, "order": [plan.names[c] for c in plan.order],
                "connections": len(plan.links), "parallel": parallel}
-    emit(args, payload, f"{scenario.name}: ok\n  pre-flight: {report}\n  order: {order}\n"
+    emit(args, payload, f"{system.name}: ok\n  pre-flight: {report}\n  order: {order}\n"
                          f"  {len(plan.links)} connections" + (f"\n  {parallel}" if parallel else ""))
     return EXIT_OK
 

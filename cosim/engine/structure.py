@@ -18,6 +18,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Mapping
 
+from .grid import Grid
 from .sources import SourceMap
 
 __all__ = ["DOCUMENT_ATTACHMENT", "Acceptance", "ComponentStructure", "ConnectionStructure", "EventStructure", "LogSettings", "Observed", "Replay",
@@ -182,6 +183,10 @@ class SystemStructure:
         if log is not None:
             data["logging"] = {**(data.get("logging") or {}), "out": os.path.normpath(Path(log).absolute())}
         return data
+
+    def n_steps(self) -> int:
+        """The base steps of the run's time grid (:class:`cosim.engine.grid.Grid`)."""
+        return Grid(self.start_ns, self.stop_ns, self.step_ns).n_steps
 
     def seconds(self) -> tuple[float, float, float]:
         """(start, stop, step) in seconds: each the double nearest its decimal value (an integer count of

@@ -41,8 +41,7 @@ from mcap.writer import CompressionType, Writer
 from ..engine.grid import MAX_TIME_S
 from ..engine.bounded_yaml import MAX_YAML_NODES
 from ..engine.scenario import MAX_SCENARIO_BYTES, scenario_from_data
-from ..engine.structure import DOCUMENT_ATTACHMENT
-from ..engine.schema import Scenario
+from ..engine.structure import DOCUMENT_ATTACHMENT, SystemStructure
 from ..errors import CosimError, Issue, ScenarioError, file_problem, written_by_rename
 from ..fmi.extract import SSP_PREFIX
 from .output import check_output
@@ -448,9 +447,9 @@ and that attachment (a scenario's bytes at most) first; a forged attachment of g
 
 
 @contextmanager
-def open_from_log(path: str | Path, overrides: dict[tuple, Any] | None = None) -> Iterator[Scenario]:
-    """The scenario a run log records (:data:`DOCUMENT_ATTACHMENT`), with ``overrides`` on top, to run it again
-    inside the ``with`` block.
+def open_from_log(path: str | Path, overrides: dict[tuple, Any] | None = None) -> Iterator[SystemStructure]:
+    """The system structure of the scenario a run log records (:data:`DOCUMENT_ATTACHMENT`), with ``overrides`` on
+    top, to run it again inside the ``with`` block.
 
     Its log goes where ``--out`` says (the CLI's default: beside the first, ``<name>.rerun.mcap``), never to the
     recorded ``logging.out`` (the first
@@ -509,7 +508,7 @@ def open_from_log(path: str | Path, overrides: dict[tuple, Any] | None = None) -
             yield scenario
         return
     _unpacked_archive_gone(data, path)
-    yield scenario_from_data(data, str(path), overrides)
+    yield scenario_from_data(data, str(path), overrides).structure()
 
 
 def _unpacked_archive_gone(data: dict[str, Any], path: Path) -> None:

@@ -35,3 +35,21 @@ def test_unknown_name_is_one_line():
     with pytest.raises(ScenarioError) as exc:
         api.load(SCENARIO, {"ctl.gain.kp[1]": 1.0, "trajectory.params.radius": 0.1})
     assert "helix has no parameter 'radius'" in str(exc.value) and "\n" not in str(exc.value), str(exc.value)
+
+
+def test_an_ssp_archive_runs_from_the_api_as_its_scenario(tmp_path):
+    """A path of an SSP archive (our export of a scenario) runs as the scenario itself, overrides included, and the
+    archive's unpacked FMUs are gone after the run."""
+    import os
+    import tempfile
+
+    from cosim.fmi.extract import SSP_PREFIX
+    from cosim.io.ssp.write import export_ssp
+
+    archive = tmp_path / "helix.ssp"
+    export_ssp(api.load(SCENARIO), archive)
+    overrides = {"time.stop": 0.02, "ctl.gain.kp[1]": 3.5e3}
+    a, b = api.run(archive, overrides), api.run(SCENARIO, overrides)
+    assert a.run.steps == b.run.steps == 20
+    assert np.array_equal(a["plant.p.x"], b["plant.p.x"]) and np.array_equal(a["ctl.u[1]"], b["ctl.u[1]"])
+    assert not list(Path(tempfile.gettempdir()).glob(f"{SSP_PREFIX}{os.getpid()}-*")), "an unpacked archive is left"

@@ -60,7 +60,7 @@ def test_yaml_and_its_ssp_archive_parse_into_one_structure(tmp_path):
     archive = tmp_path / "vdp.ssp"
     export_ssp(scenario, archive)
     with open_ssp(archive) as from_ssp:
-        a, b = scenario.structure(), from_ssp.structure()
+        a, b = scenario.structure(), from_ssp
         assert _comparable(a, a.folder()) == _comparable(b, b.folder())
         assert b.archive and not a.archive  # advice in errors names options for an archive, YAML keys for a file
 
@@ -122,7 +122,7 @@ def test_a_structure_written_in_code_exports_as_its_scenario_does(tmp_path):
         plugins.register(*before)
     assert report.components == ["vdp", "integ"] and report.connections == 1, report
     with open_ssp(from_yaml) as a, open_ssp(report.path) as b:
-        sa, sb = a.structure(), b.structure()
+        sa, sb = a, b
         assert _comparable(sa, sa.folder()) == _comparable(sb, sb.folder())
         signals = ["vdp.x0", "vdp.x1", "integ.x"]
         assert _final(sb, signals) == _final(sa, signals)

@@ -26,8 +26,10 @@ scenario as an SSP archive that any SSP tool can run:
 
 Import (:func:`~cosim.io.ssp.scenario.open_ssp`, ``python -m cosim run|check SYSTEM.ssp``) reads any SSP 1.0 archive with
 FMU components (ours or another tool's): the .ssd, its parameter bindings (.ssv files or inline
-parameter sets), the FMUs from the archive, and builds the same :class:`cosim.engine.scenario.Scenario`
-the YAML loader builds, run by the normal :func:`cosim.run.run_scenario`. The base step comes from
+parameter sets), the FMUs from the archive, into a scenario document (:func:`~cosim.io.ssp.read.read_ssp`), which is
+validated and overridden (``--set``) as a YAML scenario's is, and gives the same
+:class:`cosim.engine.structure.SystemStructure` the YAML loader gives, run by the normal
+:func:`cosim.run.run_scenario` (the CLI, ``cosim.api.run`` and ``run --from-log`` of an archive's run take it). The base step comes from
 the OSP annotation (``osp:FixedStepAlgorithm baseStepSize``, which also makes the algorithm Jacobi:
 libcosim's fixed_step_algorithm steps every FMU from the previous step's values) or OMSimulator's
 (``oms:FixedStepMaster stepSize`` on the system; two annotations that disagree are an error), else
@@ -40,7 +42,7 @@ an unmapped name stays as it is); the system's come last and win. Component name
 (``DP Controller``); in dotted names a name with a dot is quoted (:mod:`cosim.engine.names`), and a file
 made from a name is made safe first. The archive is
 unpacked into a temporary directory that :func:`~cosim.io.ssp.scenario.open_ssp` removes when its block ends (also on
-error and Ctrl-C); the scenario names the archive and its SHA-256, which a run's log records, so that
+error and Ctrl-C); the structure names the archive and its SHA-256, which a run's log records, so that
 ``run --from-log`` unpacks the same archive again (:func:`~cosim.io.ssp.scenario.reopen_ssp`). Bad input raises
 :class:`~cosim.io.ssp.spec.SspError`: one line naming the file and the problem.
 Not supported (a clear error, never a silent change): SSP 2.0, nested systems, signal dictionaries,
@@ -58,7 +60,7 @@ namespaces properly, so files of other tools with other prefixes read too.
 One module per role: :mod:`.spec` (the vocabulary: namespaces, types, :class:`SspError`), :mod:`.write` (export),
 :mod:`.read` (an archive into scenario data), :mod:`.archive` (its members, bounded), :mod:`.components` (its FMU
 components), :mod:`.parameters` (parameter sets and mappings), :mod:`.units` (unit definitions and conversions),
-:mod:`.scenario` (an archive as a scenario, unpacked for a block). Callers import from those modules; the names
+:mod:`.scenario` (an archive as a system structure, unpacked for a block). Callers import from those modules; the names
 below are offered here for callers outside the package (:mod:`cosim.io.runlog`: ``reopen_ssp``), each imported
 from its module when first asked for (PEP 562): ``run`` of a YAML scenario asks whether its file is an archive
 (:func:`.spec.is_ssp`) without loading the reader and the writer.

@@ -1,6 +1,12 @@
-"""An SSP archive as a scenario: :func:`open_ssp` unpacks it for a ``with`` block (removed when the block ends, also
-on error and Ctrl-C) and names it and its SHA-256 in the scenario, which a run's log records, so that ``run
---from-log`` unpacks the same archive again (:func:`reopen_ssp`)."""
+"""An SSP archive as a system structure: :func:`open_ssp` unpacks it for a ``with`` block (removed when the block
+ends, also on error and Ctrl-C) and gives the :class:`~cosim.engine.structure.SystemStructure` the engine runs,
+naming the archive and its SHA-256 (:attr:`~cosim.engine.structure.SystemStructure.ssp`), which a run's log
+records, so that ``run --from-log`` unpacks the same archive again (:func:`reopen_ssp`).
+
+Between the archive and the structure, the archive is read into a scenario document (:func:`~cosim.io.ssp.read.
+read_ssp`: the components, connections, time grid and algorithm the SSD gives, the sections our annotation
+carries) and validated as a YAML scenario's document is, ``--set`` overrides included: one set of checks and one
+override mechanism for every format, and the document is what a run's log records to make the system again."""
 
 from __future__ import annotations
 
@@ -19,7 +25,7 @@ from .read import read_ssp
 from .spec import SspError, is_ssp
 
 if TYPE_CHECKING:
-    from ...engine.schema import Scenario
+    from ...engine.structure import SystemStructure
 
 __all__ = ["is_ssp", "open_ssp", "reopen_ssp"]
 
@@ -49,18 +55,18 @@ def _unpacking(ssp: Path) -> Iterator[Path]:
 
 
 def _archive(ssp: Path, tmp: Path, sha256: str) -> dict[str, str]:
-    """:attr:`cosim.engine.scenario.Scenario.archive` of a scenario read from ``ssp`` unpacked into ``tmp``."""
+    """:attr:`~cosim.engine.structure.SystemStructure.ssp` of a system read from ``ssp`` unpacked into ``tmp``."""
     return {"file": os.path.normpath(ssp.absolute()), "sha256": sha256, "unpacked": str(tmp)}
 
 
 @contextmanager
-def open_ssp(ssp: str | Path, overrides: dict[tuple, Any] | None = None) -> Iterator[Scenario]:
-    """The scenario of an SSP archive, valid inside the ``with`` block (its FMUs are unpacked into a
+def open_ssp(ssp: str | Path, overrides: dict[tuple, Any] | None = None) -> Iterator[SystemStructure]:
+    """The system structure of an SSP archive, valid inside the ``with`` block (its FMUs are unpacked into a
     temporary directory removed when the block ends, also on error).
 
     ``overrides`` as for :func:`cosim.engine.scenario.load_scenario` (``--set``, ``--stop-time``, and
-    ``("time", "step")`` for ``--step``). The scenario's :attr:`~cosim.engine.scenario.Scenario.archive` names the
-    archive and its SHA-256, which a run's log records for :func:`reopen_ssp`.
+    ``("time", "step")`` for ``--step``). The structure's :attr:`~cosim.engine.structure.SystemStructure.ssp` names
+    the archive and its SHA-256, which a run's log records for :func:`reopen_ssp`.
     """
     ssp = Path(ssp)
     with _unpacking(ssp) as tmp:
@@ -74,17 +80,23 @@ def open_ssp(ssp: str | Path, overrides: dict[tuple, Any] | None = None) -> Iter
             # Refused (correctness): no time grid: the step or stop would be a guess
             raise SspError(ssp, f"{what}: neither the SSD's default experiment nor the FMUs give it; "
                                 f"pass {' and '.join(f for _, f in missing)}")
-        scenario = scenario_from_data(data, str(ssp), overrides)
-        scenario.with_archive(_archive(ssp, tmp, sha256))
-        yield scenario
+        yield _structure(data, str(ssp), overrides, _archive(ssp, tmp, sha256))
+
+
+def _structure(data: dict[str, Any], source: str, overrides: dict[tuple, Any] | None,
+               archive: dict[str, str]) -> SystemStructure:
+    """The structure of the scenario document ``data`` read from ``archive`` (validated, ``overrides`` applied)."""
+    scenario = scenario_from_data(data, source, overrides)
+    scenario.with_archive(archive)
+    return scenario.structure()
 
 
 @contextmanager
 def reopen_ssp(archive: dict[str, str], data: dict[str, Any], source: str,
-               overrides: dict[tuple, Any] | None = None) -> Iterator[Scenario]:
-    """The scenario ``data`` of a run made from an SSP archive (as its log records it: ``archive`` is the run's
-    :attr:`~cosim.engine.scenario.Scenario.archive`), with its FMUs unpacked again from that archive for the
-    ``with`` block; ``source`` names the log in messages.
+               overrides: dict[tuple, Any] | None = None) -> Iterator[SystemStructure]:
+    """The system structure of the scenario document ``data`` of a run made from an SSP archive (as its log records
+    it: ``archive`` is the run's :attr:`~cosim.engine.structure.SystemStructure.ssp`), with its FMUs unpacked again
+    from that archive for the ``with`` block; ``source`` names the log in messages.
 
     Raises :class:`SspError` naming ``source`` and the archive when the archive is gone, or is not the file the
     run was made from (its SHA-256 differs): the recorded scenario's values would not be the archive's.
@@ -128,6 +140,4 @@ def reopen_ssp(archive: dict[str, str], data: dict[str, Any], source: str,
             path = comp.get("path") if isinstance(comp, dict) else None
             if isinstance(path, str) and Path(path).is_relative_to(unpacked):
                 comp["path"] = str(tmp / Path(path).relative_to(unpacked))
-        scenario = scenario_from_data(data, source, overrides)
-        scenario.with_archive(_archive(ssp, tmp, sha256))
-        yield scenario
+        yield _structure(data, source, overrides, _archive(ssp, tmp, sha256))
