@@ -259,9 +259,8 @@ class Traced:
         model = self.TRACED()
         rt = Runtime(model, lambda message: self.log(message, self._STATUS_WARNING))
         mine = self.values
-        index = {v[0]: i for i, v in enumerate(model.variables)}
-        self._pull = [(index[n], n, _number(kind, choices, n)) for n, (_, kind, _, choices) in
-                      ((v[0], v) for v in model.variables) if n in mine and n != "time"]
+        self._pull = [(i, n, _number(kind, choices, n)) for i, (n, kind, _, choices) in enumerate(model.variables)
+                      if n in mine and n != "time"]
         self._push = {i: (model.variables[i][0], _BACK.get(model.variables[i][1], float))
                       for c in model.calls.values() for i in c.sets}
         return rt
@@ -301,6 +300,7 @@ class Traced:
         dt = h / n
         for k in range(n):
             rt.run("advance", t + k * dt, dt)
+        self._sync_out("advance")
         self.time = t + h
         rt.run("refresh", self.time)
         self._sync_out("refresh")
