@@ -36,7 +36,7 @@ from .observers.recorders import PeakEffort
 from .io.checkpoint import read_checkpoint
 from .io.ssp.scenario import open_ssp
 from .io.ssp.spec import is_ssp
-from .run import RunResult, resumed_scenario, run_scenario
+from .run import RunResult, resumed, run_scenario
 
 __all__ = ["PeakEffort", "Result", "SignalRecorder", "load", "metric_names", "metrics", "resume", "run"]
 
@@ -182,8 +182,9 @@ def resume(checkpoint: str | Path, sets: Mapping[str, Any] | None = None, *, sto
     ck = read_checkpoint(checkpoint)
     if log and out is None:  # as the CLI: beside the checkpoint, never over the log of the run that wrote it
         out = Path(ck.path).with_suffix(".resumed.mcap")
-    return _run(resumed_scenario(ck, stop_time), log=log, out=out, signals=signals, progress=progress, resume=ck,
-                resume_sets=dict(sets or {}))
+    with resumed(ck, stop_time) as scenario:  # a run of an SSP archive: the archive unpacked again meanwhile
+        return _run(scenario, log=log, out=out, signals=signals, progress=progress, resume=ck,
+                    resume_sets=dict(sets or {}))
 
 
 def _run(sc: Scenario | SystemStructure, *, signals: bool, **options: Any) -> Result:

@@ -3,9 +3,10 @@
 from __future__ import annotations
 
 import time
+from contextlib import contextmanager
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Any, Mapping, Sequence
+from typing import Any, Iterator, Mapping, Sequence
 
 from .engine import plugins, supervision
 from .engine.assembly import assemble_structure
@@ -21,6 +22,7 @@ from .engine.watchdog import Watchdog, hard_exit
 from .errors import CosimError
 from .fmi import Extractions, cleanup_extracted
 from .io.checkpoint import CheckpointError, default_checkpoint_path, write_checkpoint
+from .io.ssp.scenario import ArchiveFile, reopen_archive
 from .io.output import OutputError, check_output, claim
 from .observers.live import LiveView
 from .observers.mcap_log import McapRecorder
@@ -29,7 +31,7 @@ from .observers.realtime import RealTime
 from .observers.recorders import ErrorObserver
 from .observers.stats import ErrorStats
 
-__all__ = ["RunOptions", "RunResult", "progress_bar", "run_scenario", "resumed_scenario"]
+__all__ = ["RunOptions", "RunResult", "progress_bar", "run_scenario", "resumed_scenario", "resumed"]
 
 
 @dataclass
@@ -346,7 +348,7 @@ def _checkpointing(ex: Execution, system: SystemStructure, options: RunOptions, 
 
     def hook(k_done: int) -> None:
         size = write_checkpoint(target, ex, system.recorded(output.target if output is not None else None),
-                                options.command)
+                                options.command, system.ssp)
         record.update(path=str(target), bytes=size, t=ex.t_ns(k_done) * 1e-9)
 
     return (k_at, hook), record
@@ -374,10 +376,27 @@ def _resume(ex: Execution, system: SystemStructure, checkpoint, event) -> None:
         ex.fire(event, checkpoint.time)
 
 
-def resumed_scenario(checkpoint, stop_time: float | None = None, scenario: Scenario | None = None) -> Scenario:
+def resumed_scenario(checkpoint, stop_time: float | None = None, scenario: Scenario | None = None,
+                     archive: ArchiveFile | None = None) -> Scenario:
     """The scenario a checkpoint holds (as it ran), to ``stop_time`` (default: its own); ``scenario``: the one the
-    user named, which must be that one (else CheckpointError: a checkpoint of another scenario)."""
+    user named, which must be that one (else CheckpointError: a checkpoint of another scenario).
+
+    A checkpoint of a run read from an SSP archive (:attr:`~cosim.io.checkpoint.Checkpoint.archive`) needs that
+    archive unpacked: ``archive`` (the same file, unpacked: :func:`resumed` does it), into which the recorded FMU
+    paths are moved."""
     data = dict(checkpoint.scenario)
+    ours = checkpoint.archive
+    if ours is not None:
+        if archive is None:
+            # Refused (correctness): the run's FMUs were unpacked for it only: they are gone
+            raise CheckpointError(f"{checkpoint.path} is a checkpoint of a run of the SSP archive {ours['file']}: "
+                                  "its FMUs are unpacked again from the archive to resume it (cosim.run.resumed)")
+        if archive.archive["sha256"] != ours["sha256"]:
+            # Refused (correctness): the archive's FMUs and values may not be those the state was saved with
+            raise CheckpointError(f"{checkpoint.path} is a checkpoint of a run of the SSP archive {ours['file']} "
+                                  f"(SHA-256 {ours['sha256'][:16]}...); {archive.file} is another file "
+                                  f"({archive.archive['sha256'][:16]}...)")
+        data = archive.adopt(data, ours["unpacked"])
     if scenario is not None:
         mine = effective_scenario(scenario)
         theirs = {k: v for k, v in data.items() if k not in ("logging", "time")}
@@ -391,7 +410,24 @@ def resumed_scenario(checkpoint, stop_time: float | None = None, scenario: Scena
     else:
         data["time"] = {**data["time"], "stop": checkpoint.header["grid"]["stop_ns"] * 1e-9}
     data.get("logging", {}).pop("out", None)  # the resumed run's log is its own (--out, or the default)
+    if ours is not None:
+        return replace(archive, file=str(checkpoint.path), data=data).load()
     return scenario_from_data(data, str(checkpoint.path))
+
+
+@contextmanager
+def resumed(checkpoint, stop_time: float | None = None, scenario: Scenario | None = None) -> Iterator[Scenario]:
+    """:func:`resumed_scenario` for a ``with`` block: a checkpoint of a run read from an SSP archive has the archive
+    unpacked again for the block (checked to be the file the run was made from: its SHA-256), as ``run --from-log``
+    does (:func:`cosim.io.ssp.scenario.reopen_archive`); ``scenario``, if named, is compared as the run read it."""
+    if checkpoint.archive is None:
+        yield resumed_scenario(checkpoint, stop_time, scenario)
+        return
+    with reopen_archive(checkpoint.archive, {}, str(checkpoint.path)) as archive:
+        if scenario is not None and scenario.archive is not None:  # the named archive's paths into this unpacking
+            scenario = replace(archive, file=scenario.source,
+                               data=archive.adopt(scenario.as_run(), scenario.archive["unpacked"])).load()
+        yield resumed_scenario(checkpoint, stop_time, scenario, archive)
 
 
 def _run_claimed(system: SystemStructure, output, held: Extractions, options: RunOptions) -> RunResult:

@@ -50,7 +50,8 @@ import logging
 import multiprocessing
 import os
 import time
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Iterable, Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -60,7 +61,7 @@ from ..engine.assembly import assemble_structure
 from ..engine.events import resolve_sets
 from ..engine.overrides import dotted_overrides
 from ..engine.prepare import build_key, build_ours, locate_fmus
-from ..engine.scenario import load_scenario, read_scenario
+from ..engine.scenario import read_scenario
 from ..engine.system import SystemPlan, build_plan
 from ..errors import CosimError, ScenarioError, exit_now, written_by_rename
 from ..fmi import Extractions, FMUInfo, cleanup_extracted, make_slave
@@ -69,6 +70,8 @@ from ..fmi.slave import drop_preloaded, preload
 from ..io.checkpoint import Checkpoint, file_sha256, read_checkpoint
 from ..io.output import exclusive, output_dir
 from ..io.recover import recover_crashed
+from ..io.ssp.scenario import ArchiveFile, read_archive
+from ..io.ssp.spec import is_ssp
 from ..observers.recorders import PeakEffort
 from ..run import resumed_scenario, run_scenario
 from .cases import Case, SweepError
@@ -218,12 +221,13 @@ def _check_names(scenarios: list[Any], fmu_files: dict[tuple[str, bool, int], st
         build_plan(sc.structure(), infos)
 
 
-def _warm_scenario(scenario: str, checkpoint: str | Path, stop_time: float | None,
+def _warm_scenario(source: Any, checkpoint: str | Path, stop_time: float | None,
                    params: list[str]) -> tuple[Checkpoint, Scenario]:
-    """The checkpoint read and its scenario to ``stop_time`` (``scenario``, the file named, must be the one it holds:
-    CheckpointError); a swept name that is a scenario key, not a component's variable, refused (SweepError)."""
-    ck = read_checkpoint(checkpoint)
-    sc = resumed_scenario(ck, stop_time, load_scenario(scenario))
+    """The checkpoint read and its scenario to ``stop_time`` (``source``'s scenario, the file named, must be the one
+    it holds: CheckpointError); a swept name that is a scenario key, not a component's variable, refused
+    (SweepError)."""
+    ck = read_checkpoint(checkpoint)  # of an archive's run: its FMUs moved into the sweep's unpacking of it
+    sc = resumed_scenario(ck, stop_time, source.load(), source if isinstance(source, ArchiveFile) else None)
     for name in params:
         comp, dot, _ = name.partition(".")
         if not dot or comp not in sc.components:
@@ -279,17 +283,30 @@ def run_sweep(scenario: str | Path, cases: list[Case], out: str | Path, *, worke
 
     t_start = time.perf_counter()
     out = output_dir(out)
-    with exclusive(out, "a sweep"):  # two sweeps appending to one table at once corrupted it
-        return _run_sweep(str(Path(scenario).resolve()), cases, out, t_start, workers=workers, scheduler=scheduler,
-                          logs=logs, on_progress=on_progress, checkpoint=checkpoint, stop_time=stop_time)
+    path = str(Path(scenario).resolve())
+    with exclusive(out, "a sweep"), _source(path) as source:  # two sweeps appending to one table corrupted it
+        return _run_sweep(path, source, cases, out, t_start, workers=workers, scheduler=scheduler, logs=logs,
+                          on_progress=on_progress, checkpoint=checkpoint, stop_time=stop_time)
 
 
-def _run_sweep(scenario: str, cases: list[Case], out: Path, t_start: float, *, workers: int | None,
+@contextmanager
+def _source(scenario: str) -> Iterator[Any]:
+    """The scenario read once, every case derived from it (its ``load(overrides)``): a YAML file's
+    (:class:`cosim.engine.scenario.ScenarioFile`), or an SSP archive's, unpacked for the whole sweep
+    (:class:`cosim.io.ssp.scenario.ArchiveFile`: the cases' workers, forked from here, run its FMUs)."""
+    if is_ssp(scenario):
+        with read_archive(scenario) as archive:
+            yield archive
+    else:
+        yield read_scenario(scenario)
+
+
+def _run_sweep(scenario: str, source: Any, cases: list[Case], out: Path, t_start: float, *, workers: int | None,
                scheduler: str | None, logs: bool, on_progress: Callable[[int, int, int], None] | None,
                checkpoint: str | Path | None, stop_time: float | None) -> SweepSummary:
     """:func:`run_sweep` in its folder ``out``, held."""
     params = list(dict.fromkeys(k for c in cases for k in c.values))
-    ck, warm, loaded = _loaded(scenario, cases, params, checkpoint, stop_time)
+    ck, warm, loaded = _loaded(source, cases, params, checkpoint, stop_time)
     columns = table_columns(params, metric_names(loaded[0]), warm is not None)
     finished, failed = _finished(out, columns, params, warm, scenario)
     todo = [(c, sc) for c, sc in zip(cases, loaded) if c.id not in finished]
@@ -356,18 +373,18 @@ def extract_for_cases(held: Extractions, scenario: Scenario, fmu_files: dict[tup
                 continue  # case says so itself
 
 
-def _loaded(scenario: str, cases: list[Case], params: list[str], checkpoint: str | Path | None,
+def _loaded(source: Any, cases: list[Case], params: list[str], checkpoint: str | Path | None,
             stop_time: float | None) -> tuple[Checkpoint | None, WarmStart | None, list[Scenario]]:
     """(the checkpoint, the warm start, each case's scenario): a cold sweep's cases each the scenario with their
-    values (the file read once), a warm sweep's the checkpoint's scenario (a case's values are set during its run)."""
+    values (``source``, the file read once: :func:`_source`), a warm sweep's the checkpoint's scenario (a case's
+    values are set during its run)."""
     if checkpoint is None:
         if stop_time is not None:
             # Refused (correctness): a stop time without a checkpoint would be dropped silently
             raise SweepError("stop_time is a warm sweep's (with checkpoint=); a case from t = 0 takes time.stop "
                              "among its values")
-        source = read_scenario(scenario)  # read once: every case is derived from it
         return None, None, [source.load(dotted_overrides(c.values, "sweep case")) for c in cases]
-    ck, warm_scenario = _warm_scenario(scenario, checkpoint, stop_time, params)
+    ck, warm_scenario = _warm_scenario(source, checkpoint, stop_time, params)
     warm = WarmStart(str(Path(ck.path).resolve()), ck.time, file_sha256(ck.path), warm_scenario.time.stop)
     return ck, warm, [warm_scenario] * len(cases)
 

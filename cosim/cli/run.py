@@ -198,7 +198,9 @@ def _resume_run(args: argparse.Namespace, live, realtime, command: str):
     from ..engine.overrides import parse_set_value
     from ..engine.scenario import load_scenario
     from ..io.checkpoint import read_checkpoint
-    from ..run import resumed_scenario, run_scenario
+    from ..io.ssp.scenario import read_archive
+    from ..io.ssp.spec import is_ssp
+    from ..run import resumed, run_scenario
 
     if args.from_log is not None:
         raise CosimError("run takes --resume FILE or --from-log LOG, not both")
@@ -206,8 +208,6 @@ def _resume_run(args: argparse.Namespace, live, realtime, command: str):
         if value is not None:
             raise CosimError(f"{option} cannot change a resumed run: it continues the checkpoint's run as it was")
     checkpoint = read_checkpoint(args.resume)
-    named = load_scenario(args.scenario) if args.scenario is not None else None
-    scenario = resumed_scenario(checkpoint, args.stop_time, named)
     sets = {}
     for item in args.set:
         name, sep, raw = item.partition("=")
@@ -215,11 +215,17 @@ def _resume_run(args: argparse.Namespace, live, realtime, command: str):
             raise CosimError(f"--set {item}: expected component.variable=VALUE")
         sets[name.strip()] = parse_set_value(raw, f"--set {item}")
     out = args.out if args.out is not None else Path(checkpoint.path).with_suffix(".resumed.mcap")
-    return run_scenario(scenario, out=out, log=False if args.no_log else None,
-                        progress=not (args.quiet or args.json), live=live, realtime=realtime,
-                        stamps="simulation" if args.sim_stamps else "wall", resume=checkpoint, resume_sets=sets,
-                        checkpoint_at=args.checkpoint_at, checkpoint_out=args.checkpoint_out, command=command,
-                        live_wait=args.live_wait)
+    with contextlib.ExitStack() as stack:
+        named = None
+        if args.scenario is not None:  # must be the one the checkpoint holds
+            named = stack.enter_context(read_archive(args.scenario)).load() if is_ssp(args.scenario) \
+                else load_scenario(args.scenario)
+        scenario = stack.enter_context(resumed(checkpoint, args.stop_time, named))
+        return run_scenario(scenario, out=out, log=False if args.no_log else None,
+                            progress=not (args.quiet or args.json), live=live, realtime=realtime,
+                            stamps="simulation" if args.sim_stamps else "wall", resume=checkpoint, resume_sets=sets,
+                            checkpoint_at=args.checkpoint_at, checkpoint_out=args.checkpoint_out, command=command,
+                            live_wait=args.live_wait)
 
 
 def _cmd_check(args: argparse.Namespace) -> int:

@@ -24,7 +24,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                                    "failed. With --from-checkpoint, every case continues a checkpoint of the "
                                    "scenario's run (run --checkpoint-at) with its values set at the checkpoint's "
                                    "time: only component variables settable during a run (plant.mass.payload).")
-    p.add_argument("scenario", help="scenario file (.yaml)")
+    p.add_argument("scenario", help="scenario file (.yaml) or SSP 1.0 archive (.ssp)")
     p.add_argument("--grid", action="append", default=[], metavar="NAME=V1,V2,...", help="values of NAME "
                    "(repeatable: the cartesian product); NAME,NAME2=... sets both to each value (one axis)")
     p.add_argument("--random", action="append", default=[], metavar="NAME=uniform(A,B)|normal(MU,SIGMA)",

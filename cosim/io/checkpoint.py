@@ -79,6 +79,11 @@ class Checkpoint:
     def k_done(self) -> int:
         return int(self.header["k_done"])
 
+    @property
+    def archive(self) -> dict[str, str] | None:
+        """The SSP archive the run was read from (``file``, ``sha256``, ``unpacked``), None for a YAML scenario's."""
+        return self.header.get("ssp")
+
     def component(self, name: str) -> dict:
         for c in self.header["components"]:
             if c["name"] == name:
@@ -141,9 +146,12 @@ class Checkpoint:
         return state
 
 
-def write_checkpoint(path: str | Path, ex: Execution, scenario: dict, command: str = "") -> int:
+def write_checkpoint(path: str | Path, ex: Execution, scenario: dict, command: str = "",
+                     ssp: dict[str, str] | None = None) -> int:
     """Write ``ex``'s state now (after macro step ``ex.k_done``) to ``path`` (whole or not at all); returns its
-    size in bytes. ``scenario``: the scenario as run (:func:`cosim.engine.scenario.effective_scenario`)."""
+    size in bytes. ``scenario``: the scenario as run (:func:`cosim.engine.scenario.effective_scenario`); ``ssp``: the
+    SSP archive the system was read from (:attr:`cosim.engine.structure.SystemStructure.ssp`: its FMUs, unpacked for
+    that run only, are unpacked again from it to resume)."""
     missing = [n for n, s in zip(ex.plan.names, ex.slaves) if not getattr(s, "can_serialize_state", False)]
     if missing:
         # Refused (correctness): a checkpoint without those states could not resume the run
@@ -170,6 +178,8 @@ def write_checkpoint(path: str | Path, ex: Execution, scenario: dict, command: s
         "algorithm": ex.algorithm_name, "components": components, "command": command,
         "events": None if ev is None else ev.progress(),
     }
+    if ssp is not None:
+        header["ssp"] = dict(ssp)
     path = Path(path)
     with written_by_rename(path) as tmp:
         with zipfile.ZipFile(tmp, "w", compression=zipfile.ZIP_DEFLATED) as z:
@@ -247,6 +257,11 @@ def _check_header(path: Path, header: dict) -> None:
         if not isinstance(header["grid"].get(key), int):
             # Refused (correctness): a header of the wrong shape: what it holds cannot be read
             raise bad(f"grid.{key} missing or not an integer")
+    ssp = header.get("ssp")
+    if ssp is not None and not (isinstance(ssp, dict) and all(isinstance(ssp.get(k), str)
+                                                              for k in ("file", "sha256", "unpacked"))):
+        # Refused (correctness): the archive whose FMUs the run used cannot be found again
+        raise bad("ssp is not an object of file, sha256 and unpacked")
     for i, entry in enumerate(header["components"]):
         if not isinstance(entry, dict):
             # Refused (correctness): a header of the wrong shape: what it holds cannot be read

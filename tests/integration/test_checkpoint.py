@@ -74,6 +74,34 @@ def test_a_resumed_run_equals_the_uninterrupted_one_after_the_checkpoint(case, t
     _assert_same_after(full, resumed, t_taken)
 
 
+def test_a_run_of_an_ssp_archive_resumes_from_its_checkpoint_with_the_archive_unpacked_again(tmp_path):
+    """The archive's FMUs were unpacked for the run that wrote the checkpoint only: the checkpoint names the archive
+    (its SHA-256), and resuming unpacks it again, whether the archive is named or not; the resumed run's samples
+    are the uninterrupted run's. Another archive, a changed one or the YAML scenario it came from is refused, and a
+    warm sweep of the archive starts from the checkpoint too. Nothing is left in the temporary folder."""
+    env = {**__import__("os").environ, "TMPDIR": str(tmp_path)}
+    archive, full, ckpt = tmp_path / "helix.ssp", tmp_path / "full.mcap", tmp_path / "run.ckpt"
+    assert cosim("ssp", "export", ANALYTIC, "-o", str(archive), env=env).returncode == 0
+    r = cosim("run", archive, "--stop-time", "0.4", "--checkpoint-at", "0.2", "--checkpoint-out", str(ckpt),
+              "--out", str(full), "--sim-stamps", env=env)
+    assert r.returncode == 0, r.stderr
+    for named in ([], [str(archive)]):
+        resumed = tmp_path / f"resumed{len(named)}.mcap"
+        r = cosim("run", *named, "--resume", str(ckpt), "--out", str(resumed), "--sim-stamps", env=env)
+        assert r.returncode == 0, r.stderr
+        _assert_same_after(full, resumed, 0.2)
+    r = cosim("run", ANALYTIC, "--resume", str(ckpt), "--out", str(tmp_path / "x.mcap"), env=env)
+    assert r.returncode == 2 and "differs from it: a checkpoint of another scenario" in r.stderr, r.stderr
+    r = cosim("sweep", archive, "--from-checkpoint", str(ckpt), "--grid", "plant.mass.payload=0,1e-4", "--out",
+              str(tmp_path / "sweep"), "--quiet", env=env)
+    assert r.returncode == 0, r.stdout + r.stderr
+    with zipfile.ZipFile(archive, "a") as z:  # the archive changed since the run
+        z.writestr("extra.txt", "changed")
+    r = cosim("run", "--resume", str(ckpt), "--out", str(tmp_path / "y.mcap"), env=env)
+    assert r.returncode == 2 and "has changed since" in r.stderr and len(r.stderr.strip().splitlines()) == 1, r.stderr
+    assert not list(tmp_path.glob("cosim-ssp-*")), "an unpacked archive is left"
+
+
 def test_resume_with_set_applies_the_value_as_an_event_at_the_checkpoint_time(tmp_path):
     ckpt, base, heavy = tmp_path / "run.ckpt", tmp_path / "base.mcap", tmp_path / "heavy.mcap"
     r = cosim("run", ANALYTIC, "--set", "fmus=native", "--stop-time", "0.3", "--checkpoint-at", "0.1",

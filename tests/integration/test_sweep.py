@@ -107,6 +107,22 @@ def test_sweep_metrics_equal_serial_runs_to_the_last_digit(tmp_path):
     assert _rows(out) == rows, "the re-run changed the table"
 
 
+def test_a_sweep_of_an_ssp_archive_gives_its_scenarios_rows(tmp_path):
+    """The archive exported from a scenario sweeps as the scenario does: the same metrics for the same cases (the
+    archive unpacked once for the whole sweep, nothing of it left after), warm starts included."""
+    archive = tmp_path / "helix.ssp"
+    assert _cosim("ssp", "export", SCENARIO, "-o", str(archive)).returncode == 0
+    grid = ["--grid", "ctl.gain.kp[1]=1e4,4e4", "--stop-time", "0.05", "--workers", "2", "--quiet"]
+    rows = []
+    for source, out in ((SCENARIO, tmp_path / "yaml"), (str(archive), tmp_path / "ssp")):
+        r = _cosim("sweep", source, *grid, "--out", str(out), env={**os.environ, "TMPDIR": str(tmp_path)})
+        assert r.returncode == 0, r.stdout + r.stderr
+        rows.append(sorted(({k: v for k, v in x.items() if k.startswith(("rmse", "max_error", "ctl.", "status"))}
+                            for x in _rows(out)), key=lambda x: float(x["ctl.gain.kp[1]"])))  # in arrival order
+    assert rows[0] == rows[1] and len(rows[0]) == 2, rows
+    assert not list(tmp_path.glob("cosim-ssp-*")), "the unpacked archive is left in TMPDIR"
+
+
 def test_sweep_on_an_existing_dask_cluster(cluster, tmp_path):
     out = tmp_path / "sweep"
     r = _cosim("sweep", SCENARIO, "--random", "trajectory.params.rx=uniform(0.04,0.1)", "-n", "3", "--seed", "7",

@@ -10,11 +10,13 @@ override mechanism for every format, and the document is what a run's log record
 
 from __future__ import annotations
 
+import copy
 import hashlib
 import os
 import shutil
 import tempfile
 from contextlib import contextmanager
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Iterator
 
@@ -25,9 +27,10 @@ from .read import read_ssp
 from .spec import SspError, is_ssp
 
 if TYPE_CHECKING:
+    from ...engine.schema import Scenario
     from ...engine.structure import SystemStructure
 
-__all__ = ["is_ssp", "open_ssp", "reopen_ssp"]
+__all__ = ["is_ssp", "open_ssp", "reopen_ssp", "read_archive", "reopen_archive", "ArchiveFile"]
 
 
 MAX_ARCHIVE_BYTES = 16 * 1024 ** 3
@@ -59,6 +62,53 @@ def _archive(ssp: Path, tmp: Path, sha256: str) -> dict[str, str]:
     return {"file": os.path.normpath(ssp.absolute()), "sha256": sha256, "unpacked": str(tmp)}
 
 
+@dataclass
+class ArchiveFile:
+    """An SSP archive read once and unpacked (inside :func:`read_archive`'s block): ``file`` (its path), ``data``
+    (the scenario document read from it), ``archive`` (what a structure names of it: file, SHA-256, unpacked
+    folder). :meth:`load` validates the document with overrides, as a YAML file's
+    (:class:`cosim.engine.scenario.ScenarioFile`), so the variants of one archive (a sweep's cases) read it once."""
+
+    file: str
+    data: dict[str, Any]
+    archive: dict[str, str]
+
+    def load(self, overrides: dict[tuple, Any] | None = None) -> Scenario:
+        """The archive's scenario with ``overrides`` applied; an :class:`SspError` when neither the archive nor
+        ``overrides`` give the base step or the stop time."""
+        missing = [(key, flag) for key, flag in (("step", "--step"), ("stop", "--stop-time"))
+                   if key not in self.data["time"] and ("time", key) not in (overrides or {})]
+        if missing:
+            what = " and ".join(f"the {'base step' if k == 'step' else 'stop time'}" for k, _ in missing)
+            # Refused (correctness): no time grid: the step or stop would be a guess
+            raise SspError(self.file, f"{what}: neither the SSD's default experiment nor the FMUs give it; "
+                                      f"pass {' and '.join(f for _, f in missing)}")
+        scenario = scenario_from_data(self.data, self.file, overrides)
+        scenario.with_archive(self.archive)
+        return scenario
+
+    def adopt(self, data: dict[str, Any], unpacked: str) -> dict[str, Any]:
+        """``data`` (a scenario document of a run of this archive, unpacked then into ``unpacked``) with its
+        components' FMU paths moved into this unpacking (the same archive unpacks its FMUs to the same places
+        relative to its folder)."""
+        data = copy.deepcopy(data)
+        for comp in (data.get("components") or {}).values():
+            path = comp.get("path") if isinstance(comp, dict) else None
+            if isinstance(path, str) and Path(path).is_relative_to(unpacked):
+                comp["path"] = str(Path(self.archive["unpacked"]) / Path(path).relative_to(unpacked))
+        return data
+
+
+@contextmanager
+def read_archive(ssp: str | Path) -> Iterator[ArchiveFile]:
+    """``ssp`` read and its FMUs unpacked into a temporary directory for the ``with`` block (removed when the block
+    ends, also on error and Ctrl-C)."""
+    ssp = Path(ssp)
+    with _unpacking(ssp) as tmp:
+        data = read_ssp(ssp, tmp)  # reads the file (an archive that is not one is named by it) before it is hashed
+        yield ArchiveFile(str(ssp), data, _archive(ssp, tmp, _sha256(ssp)))
+
+
 @contextmanager
 def open_ssp(ssp: str | Path, overrides: dict[tuple, Any] | None = None) -> Iterator[SystemStructure]:
     """The system structure of an SSP archive, valid inside the ``with`` block (its FMUs are unpacked into a
@@ -68,27 +118,8 @@ def open_ssp(ssp: str | Path, overrides: dict[tuple, Any] | None = None) -> Iter
     ``("time", "step")`` for ``--step``). The structure's :attr:`~cosim.engine.structure.SystemStructure.ssp` names
     the archive and its SHA-256, which a run's log records for :func:`reopen_ssp`.
     """
-    ssp = Path(ssp)
-    with _unpacking(ssp) as tmp:
-        data = read_ssp(ssp, tmp)  # reads the file (an archive that is not one is named by it) before it is hashed
-        sha256 = _sha256(ssp)
-        overrides = dict(overrides or {})
-        missing = [(key, flag) for key, flag in (("step", "--step"), ("stop", "--stop-time"))
-                   if key not in data["time"] and ("time", key) not in overrides]
-        if missing:
-            what = " and ".join(f"the {'base step' if k == 'step' else 'stop time'}" for k, _ in missing)
-            # Refused (correctness): no time grid: the step or stop would be a guess
-            raise SspError(ssp, f"{what}: neither the SSD's default experiment nor the FMUs give it; "
-                                f"pass {' and '.join(f for _, f in missing)}")
-        yield _structure(data, str(ssp), overrides, _archive(ssp, tmp, sha256))
-
-
-def _structure(data: dict[str, Any], source: str, overrides: dict[tuple, Any] | None,
-               archive: dict[str, str]) -> SystemStructure:
-    """The structure of the scenario document ``data`` read from ``archive`` (validated, ``overrides`` applied)."""
-    scenario = scenario_from_data(data, source, overrides)
-    scenario.with_archive(archive)
-    return scenario.structure()
+    with read_archive(ssp) as archive:
+        yield archive.load(overrides).structure()
 
 
 @contextmanager
@@ -96,7 +127,17 @@ def reopen_ssp(archive: dict[str, str], data: dict[str, Any], source: str,
                overrides: dict[tuple, Any] | None = None) -> Iterator[SystemStructure]:
     """The system structure of the scenario document ``data`` of a run made from an SSP archive (as its log records
     it: ``archive`` is the run's :attr:`~cosim.engine.structure.SystemStructure.ssp`), with its FMUs unpacked again
-    from that archive for the ``with`` block; ``source`` names the log in messages.
+    from that archive for the ``with`` block (:func:`reopen_archive`); ``source`` names the log in messages."""
+    with reopen_archive(archive, data, source) as again:
+        yield again.load(overrides).structure()
+
+
+@contextmanager
+def reopen_archive(archive: dict[str, str], data: dict[str, Any], source: str) -> Iterator[ArchiveFile]:
+    """The scenario document ``data`` of a run made from the SSP archive ``archive`` (what a log or a checkpoint
+    records: :attr:`~cosim.engine.structure.SystemStructure.ssp`), the archive unpacked again for the ``with`` block
+    and ``data``'s FMU paths moved into it (:meth:`ArchiveFile.adopt`); ``source`` (the log, the checkpoint) names
+    it in messages.
 
     Raises :class:`SspError` naming ``source`` and the archive when the archive is gone, or is not the file the
     run was made from (its SHA-256 differs): the recorded scenario's values would not be the archive's.
@@ -105,19 +146,19 @@ def reopen_ssp(archive: dict[str, str], data: dict[str, Any], source: str,
         ssp, sha256, unpacked = Path(archive["file"]), archive["sha256"], archive["unpacked"]
     except (KeyError, TypeError):
         # Refused (correctness): the archive the run was made from cannot be found again
-        raise SspError(source, f"the log's ssp metadata is incomplete ({archive!r}): expected file, sha256 and "
+        raise SspError(source, f"the recorded ssp metadata is incomplete ({archive!r}): expected file, sha256 and "
                                "unpacked") from None
     head = f"the run was made from the SSP archive {ssp}, which"
-    problem = file_problem(ssp)  # the log names it: a FIFO or a device would be hashed for ever
+    problem = file_problem(ssp)  # a log or checkpoint names it: a FIFO or a device would be hashed for ever
     if problem not in (None, "no such file"):
-        # Refused (security): a FIFO or a device named by a log would be hashed for ever
+        # Refused (security): a FIFO or a device named by a log or checkpoint would be hashed for ever
         raise SspError(source, f"{head} cannot be read: {problem}")
     try:
         size = ssp.stat().st_size
     except OSError:
         size = 0  # gone or unreadable: said below
-    if size > MAX_ARCHIVE_BYTES:  # the log names it: a huge (or sparse) file would be hashed for minutes
-        # Refused (security): a huge or sparse file named by a log would be hashed for minutes
+    if size > MAX_ARCHIVE_BYTES:  # a log names it: a huge (or sparse) file would be hashed for minutes
+        # Refused (security): a huge or sparse file named by a log or checkpoint would be hashed for minutes
         raise SspError(source, f"{head} is {size:,} bytes, more than any archive is read "
                                f"(cosim.io.ssp.scenario.MAX_ARCHIVE_BYTES, {MAX_ARCHIVE_BYTES:,}): refused")
     try:
@@ -125,19 +166,16 @@ def reopen_ssp(archive: dict[str, str], data: dict[str, Any], source: str,
     except FileNotFoundError:
         # Refused (correctness): the run's FMUs are gone with the archive
         raise SspError(source, f"{head} is gone: its FMUs were unpacked from it for the run only; put the archive "
-                               "back to run the log again") from None
+                               "back to run it again") from None
     except OSError as exc:
         # Refused (correctness): the archive cannot be read: the run's FMUs cannot be unpacked
         raise SspError(source, f"{head} cannot be read: {exc.strerror or exc}") from None
     if now != sha256:
-        # Refused (correctness): the log's values may no longer be the archive's
+        # Refused (correctness): the recorded values may no longer be the archive's
         raise SspError(source, f"{head} has changed since (SHA-256 {sha256[:16]}... then, {now[:16]}... now): the "
-                               f"log's FMUs and values may no longer be the archive's; run the archive itself "
+                               f"recorded FMUs and values may no longer be the archive's; run the archive itself "
                                f"(`python -m cosim run {ssp}`)")
     with _unpacking(ssp) as tmp:
         read_ssp(ssp, tmp)  # the FMUs go where they went for the run, relative to the folder (numbered by place)
-        for comp in (data.get("components") or {}).values():
-            path = comp.get("path") if isinstance(comp, dict) else None
-            if isinstance(path, str) and Path(path).is_relative_to(unpacked):
-                comp["path"] = str(tmp / Path(path).relative_to(unpacked))
-        yield _structure(data, source, overrides, _archive(ssp, tmp, sha256))
+        again = ArchiveFile(source, {}, _archive(ssp, tmp, sha256))
+        yield replace(again, data=again.adopt(data, unpacked))
