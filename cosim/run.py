@@ -399,6 +399,8 @@ def resumed_scenario(checkpoint, stop_time: float | None = None, scenario: Scena
         data = archive.adopt(data, ours["unpacked"])
     if scenario is not None:
         mine = effective_scenario(scenario)
+        if ours is not None and scenario.archive is not None:  # the named archive's FMUs, where the data's are now
+            mine = archive.adopt(mine, scenario.archive["unpacked"])
         theirs = {k: v for k, v in data.items() if k not in ("logging", "time")}
         if {k: v for k, v in mine.items() if k not in ("logging", "time")} != theirs or \
                 {k: v for k, v in mine["time"].items() if k != "stop"} != \
@@ -424,9 +426,6 @@ def resumed(checkpoint, stop_time: float | None = None, scenario: Scenario | Non
         yield resumed_scenario(checkpoint, stop_time, scenario)
         return
     with reopen_archive(checkpoint.archive, {}, str(checkpoint.path)) as archive:
-        if scenario is not None and scenario.archive is not None:  # the named archive's paths into this unpacking
-            scenario = replace(archive, file=scenario.source,
-                               data=archive.adopt(scenario.as_run(), scenario.archive["unpacked"])).load()
         yield resumed_scenario(checkpoint, stop_time, scenario, archive)
 
 

@@ -123,10 +123,10 @@ def fingerprint(fmu: FmuDefinition) -> str:
     h.update(Path(__file__).read_bytes())
     h.update(f"pythonfmu {pythonfmu.__version__} pythonfmu3 {pythonfmu3.__version__}".encode())
     h.update(repr(requirements.project_requirements(_ROOT)).encode())  # recorded in requirements.json
-    for rel, path in sorted(source_files(fmu).items()):
+    bundled = source_files(fmu)
+    traced = {p.relative_to(_ROOT).as_posix(): p for p in _traced_sources(fmu)}  # resources/traced.json's sources
+    for rel, path in sorted({**bundled, **traced}.items()):  # each file once
         h.update(rel.encode() + b"\0" + path.read_bytes() + b"\0")
-    for path in _traced_sources(fmu):  # what its traced model is made from (resources/traced.json)
-        h.update(path.relative_to(_ROOT).as_posix().encode() + b"\0" + path.read_bytes() + b"\0")
     if fmu.has_native:  # and the version of CasADi that traced and serialized it
         h.update(f"casadi {_version('casadi')}".encode())
     return h.hexdigest()

@@ -87,13 +87,14 @@ class FmuDefinition:
 
     def traced_model(self) -> Any:
         """The traced functions of the native model (:class:`fmus.traced.TracedModel`): the python build's step,
-        the native build's C. Traced once per process (CasADi, 1 to 60 ms)."""
-        traced = _TRACED.get(self.name)
-        if traced is None:
-            from .native.generate import traced_model  # lazy: CasADi and the native models
+        the native build's C. Traced once per definition (CasADi, 1 to 60 ms)."""
+        return self._traced
 
-            traced = _TRACED[self.name] = traced_model(self)
-        return traced
+    @cached_property
+    def _traced(self) -> Any:
+        from .native.generate import traced_model  # lazy: CasADi and the native models
+
+        return traced_model(self)
 
     def declared(self) -> Any:
         """An instance of :meth:`python_class` made in Python (not by an FMU's binary): its declarations are the
@@ -106,8 +107,3 @@ class FmuDefinition:
         if not self.has_native:
             raise NativeError(f"FMU {self.name!r} has no native build")
         return self.native(self.kind, self.adapter)
-
-
-_TRACED: dict[str, Any] = {}
-
-

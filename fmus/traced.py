@@ -26,10 +26,11 @@ from typing import Any, Callable
 
 import numpy as np
 
+from delta.dynamics import substeps
 from delta.errors import DeltaError
 
 __all__ = ["FILE", "FORMAT", "CALLS", "ModelCheckError", "Call", "TracedModel", "Runtime", "TracedCS", "TracedME",
-           "load", "loader"]
+           "first_values", "load", "loader"]
 
 FILE = "traced.json"
 """The traced model's file in a python FMU's ``resources/``."""
@@ -52,14 +53,16 @@ class Call:
     checks: tuple[tuple[str, bool, int], ...]
     sets_state: bool
 
-    @property
-    def firsts(self) -> tuple[int, ...]:
-        """Where each check's printed values begin among the function's check values."""
-        out, at = [], 0
-        for _, _, n in self.checks:
-            out.append(at)
-            at += n
-        return tuple(out)
+
+
+def first_values(checks) -> list[int]:  # noqa: ANN001
+    """Where each check's printed values begin among its function's check values (``checks``: (reason, is an error,
+    number of values) each): the python runtime's and the generated C's (``first_value``) offsets."""
+    out, at = [], 0
+    for _, _, n in checks:
+        out.append(at)
+        at += n
+    return out
 
 
 @dataclass(frozen=True)
@@ -135,7 +138,8 @@ class _Bound:
         self.new_state = np.zeros(max(fn.nnz_out(1), 1))
         self.ok = np.zeros(max(fn.nnz_out(2), 1))
         self.details = np.zeros(max(fn.nnz_out(3), 1))
-        self.firsts = call.firsts
+        self.firsts = first_values(call.checks)
+        self.sets = np.array(call.sets, dtype=np.intp)  # where the values it sets go
         self.buffer, self.run = fn.buffer()
         for i, a in enumerate((t, h, values, state, constants)):
             self.buffer.set_arg(i, memoryview(a))
@@ -174,8 +178,8 @@ class Runtime:
         self.t[0], self.h[0] = t, h
         b.run()
         call = b.call
-        if call.sets:
-            self.values[list(call.sets)] = b.out[:len(call.sets)]
+        if len(b.sets):
+            self.values[b.sets] = b.out[:len(b.sets)]
         if which == "start":
             self.state[:self.model.n_state] = self.model.initial_state
         if call.sets_state:
@@ -209,19 +213,17 @@ class Runtime:
         return warning
 
     def substeps(self, h: float) -> int:
-        """Into how many equal advances a step of ``h`` is split (the C runtime's ``rt_substeps``)."""
+        """Into how many equal advances a step of ``h`` is split (:func:`delta.dynamics.substeps`, as the C
+        runtime's ``rt_substeps``), with the C runtime's refusals."""
         if not self.model.max_step:
             return 1
         name = self.model.variables[self.model.max_step][0]
         max_step = float(self.values[self.model.max_step])
         if not (max_step > 0.0 and math.isfinite(max_step)):
             raise ModelCheckError(f"{name} must be a time > 0 s, got {max_step!r}")
-        n = -((-h) // max_step)
-        if n < 1.0:
-            return 1
-        if not n <= 9007199254740992.0:
+        if not -((-h) // max_step) <= 9007199254740992.0:  # 2**53: more substeps than a double counts
             raise ModelCheckError(f"a step of {h!r} s in substeps of {name} = {max_step!r} s is too many substeps")
-        return int(n)  # a float of integral value
+        return substeps(h, max_step)
 
 
 def _number(kind: str, choices: tuple[str, ...], name: str) -> Callable[[Any], float]:
@@ -261,8 +263,8 @@ class Traced:
         mine = self.values
         self._pull = [(i, n, _number(kind, choices, n)) for i, (n, kind, _, choices) in enumerate(model.variables)
                       if n in mine and n != "time"]
-        self._push = {i: (model.variables[i][0], _BACK.get(model.variables[i][1], float))
-                      for c in model.calls.values() for i in c.sets}
+        self._push = {which: [(i, model.variables[i][0], _BACK.get(model.variables[i][1], float)) for i in c.sets
+                              if model.variables[i][0] in mine] for which, c in model.calls.items()}
         return rt
 
     def _sync_in(self) -> None:
@@ -272,10 +274,8 @@ class Traced:
 
     def _sync_out(self, which: str) -> None:
         values, arr = self.values, self._rt.values
-        for i in self._rt.model.calls[which].sets:
-            name, back = self._push[i]
-            if name in values:
-                values[name] = back(arr[i])
+        for i, name, back in self._push[which]:
+            values[name] = back(arr[i])
 
     def _run(self, which: str, t: float, h: float = 0.0) -> None:
         self._sync_in()

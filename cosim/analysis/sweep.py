@@ -50,8 +50,7 @@ import logging
 import multiprocessing
 import os
 import time
-from collections.abc import Callable, Iterable, Iterator
-from contextlib import contextmanager
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -61,7 +60,6 @@ from ..engine.assembly import assemble_structure
 from ..engine.events import resolve_sets
 from ..engine.overrides import dotted_overrides
 from ..engine.prepare import build_key, build_ours, locate_fmus
-from ..engine.scenario import read_scenario
 from ..engine.system import SystemPlan, build_plan
 from ..errors import CosimError, ScenarioError, exit_now, written_by_rename
 from ..fmi import Extractions, FMUInfo, cleanup_extracted, make_slave
@@ -70,8 +68,7 @@ from ..fmi.slave import drop_preloaded, preload
 from ..io.checkpoint import Checkpoint, file_sha256, read_checkpoint
 from ..io.output import exclusive, output_dir
 from ..io.recover import recover_crashed
-from ..io.ssp.scenario import ArchiveFile, read_archive
-from ..io.ssp.spec import is_ssp
+from ..io.ssp.scenario import ArchiveFile, read_source
 from ..observers.recorders import PeakEffort
 from ..run import resumed_scenario, run_scenario
 from .cases import Case, SweepError
@@ -284,21 +281,10 @@ def run_sweep(scenario: str | Path, cases: list[Case], out: str | Path, *, worke
     t_start = time.perf_counter()
     out = output_dir(out)
     path = str(Path(scenario).resolve())
-    with exclusive(out, "a sweep"), _source(path) as source:  # two sweeps appending to one table corrupted it
+    # read once, every case derived from it (an SSP archive unpacked for the whole sweep: the workers fork from here)
+    with exclusive(out, "a sweep"), read_source(path) as source:  # two sweeps appending to one table corrupted it
         return _run_sweep(path, source, cases, out, t_start, workers=workers, scheduler=scheduler, logs=logs,
                           on_progress=on_progress, checkpoint=checkpoint, stop_time=stop_time)
-
-
-@contextmanager
-def _source(scenario: str) -> Iterator[Any]:
-    """The scenario read once, every case derived from it (its ``load(overrides)``): a YAML file's
-    (:class:`cosim.engine.scenario.ScenarioFile`), or an SSP archive's, unpacked for the whole sweep
-    (:class:`cosim.io.ssp.scenario.ArchiveFile`: the cases' workers, forked from here, run its FMUs)."""
-    if is_ssp(scenario):
-        with read_archive(scenario) as archive:
-            yield archive
-    else:
-        yield read_scenario(scenario)
 
 
 def _run_sweep(scenario: str, source: Any, cases: list[Case], out: Path, t_start: float, *, workers: int | None,
@@ -376,7 +362,7 @@ def extract_for_cases(held: Extractions, scenario: Scenario, fmu_files: dict[tup
 def _loaded(source: Any, cases: list[Case], params: list[str], checkpoint: str | Path | None,
             stop_time: float | None) -> tuple[Checkpoint | None, WarmStart | None, list[Scenario]]:
     """(the checkpoint, the warm start, each case's scenario): a cold sweep's cases each the scenario with their
-    values (``source``, the file read once: :func:`_source`), a warm sweep's the checkpoint's scenario (a case's
+    values (``source``, the file read once: :func:`cosim.io.ssp.scenario.read_source`), a warm sweep's the checkpoint's scenario (a case's
     values are set during its run)."""
     if checkpoint is None:
         if stop_time is not None:

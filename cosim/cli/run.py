@@ -196,10 +196,8 @@ def _resume_run(args: argparse.Namespace, live, realtime, command: str):
     """``run --resume FILE``: the checkpoint's scenario (``--stop-time`` moves its end; a scenario file given too
     must be the checkpoint's), its state restored, ``--set`` values set at its time."""
     from ..engine.overrides import parse_set_value
-    from ..engine.scenario import load_scenario
     from ..io.checkpoint import read_checkpoint
-    from ..io.ssp.scenario import read_archive
-    from ..io.ssp.spec import is_ssp
+    from ..io.ssp.scenario import read_source
     from ..run import resumed, run_scenario
 
     if args.from_log is not None:
@@ -218,8 +216,7 @@ def _resume_run(args: argparse.Namespace, live, realtime, command: str):
     with contextlib.ExitStack() as stack:
         named = None
         if args.scenario is not None:  # must be the one the checkpoint holds
-            named = stack.enter_context(read_archive(args.scenario)).load() if is_ssp(args.scenario) \
-                else load_scenario(args.scenario)
+            named = stack.enter_context(read_source(args.scenario)).load()
         scenario = stack.enter_context(resumed(checkpoint, args.stop_time, named))
         return run_scenario(scenario, out=out, log=False if args.no_log else None,
                             progress=not (args.quiet or args.json), live=live, realtime=realtime,

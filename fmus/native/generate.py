@@ -14,7 +14,7 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
-from ..traced import CALLS, Call, TracedModel
+from ..traced import CALLS, Call, TracedModel, first_values
 from .errors import NativeError
 from .interface import Interface, interface
 from .models import NativeModel, Result, Symbols
@@ -175,10 +175,8 @@ def _function_c(model: NativeModel, itf: Interface, f: _Function, offset: int) -
     the model's from ``offset`` on."""
     fn = f"{itf.name}_{f.name}"
     n_sets, n_checks = len(f.sets), len(f.checks)
-    firsts, n_details = [], 0  # where each check's values start in the function's details
-    for _, _, n in f.checks:
-        firsts.append(n_details)
-        n_details += n
+    firsts = first_values(f.checks)  # where each check's values start in the function's details
+    n_details = sum(n for _, _, n in f.checks)
     args = "double time, double h, double *values, double *state, double *detail" if f.name == "advance" else \
         "double time, double *values, double *state, double *detail"
     lines = [

@@ -20,7 +20,7 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Iterator
 
-from ...engine.scenario import scenario_from_data
+from ...engine.scenario import ScenarioFile, read_scenario, scenario_from_data
 from ...errors import file_problem
 from ...fmi.extract import SSP_PREFIX, sweep_orphans
 from .read import read_ssp
@@ -30,7 +30,7 @@ if TYPE_CHECKING:
     from ...engine.schema import Scenario
     from ...engine.structure import SystemStructure
 
-__all__ = ["is_ssp", "open_ssp", "reopen_ssp", "read_archive", "reopen_archive", "ArchiveFile"]
+__all__ = ["is_ssp", "open_ssp", "reopen_ssp", "read_archive", "reopen_archive", "read_source", "ArchiveFile"]
 
 
 MAX_ARCHIVE_BYTES = 16 * 1024 ** 3
@@ -107,6 +107,18 @@ def read_archive(ssp: str | Path) -> Iterator[ArchiveFile]:
     with _unpacking(ssp) as tmp:
         data = read_ssp(ssp, tmp)  # reads the file (an archive that is not one is named by it) before it is hashed
         yield ArchiveFile(str(ssp), data, _archive(ssp, tmp, _sha256(ssp)))
+
+
+@contextmanager
+def read_source(path: str | Path) -> Iterator[ScenarioFile | ArchiveFile]:
+    """A scenario read once for the ``with`` block, to make variants of it (``load(overrides)``): a YAML file's
+    (:class:`cosim.engine.scenario.ScenarioFile`), or an SSP archive's (:func:`read_archive`, its FMUs unpacked for
+    the block)."""
+    if is_ssp(path):
+        with read_archive(path) as archive:
+            yield archive
+    else:
+        yield read_scenario(path)
 
 
 @contextmanager
