@@ -271,6 +271,11 @@ def read_scenario(path: str | Path) -> ScenarioFile:
         # Refused (security): a scenario is read whole: its size is bounded
         raise ScenarioError(Issue("", f"the file is larger than {MAX_SCENARIO_BYTES // 2 ** 20} MiB, more than any "
                                       "scenario holds (cosim.engine.scenario.MAX_SCENARIO_BYTES): refused", str(path)))
+    if raw.startswith(b"PK\x03\x04"):
+        # Refused (correctness): a zip archive read as YAML: its bytes say nothing a scenario means
+        raise ScenarioError(Issue("", "a zip archive, not a YAML scenario: run, check, layout, sweep and "
+                                      "cosim.api.run read an SSP archive whose name ends in .ssp; the other commands "
+                                      "take a YAML scenario", str(path)))
     try:
         text = raw.decode("utf-8")
     except UnicodeDecodeError as exc:

@@ -686,6 +686,23 @@ def test_events_travel_in_our_annotation_and_the_export_says_other_tools_drop_th
     assert [e["t"] for e in res.fired] == [0.0, 0.25, 0.5], f"fired {res.fired}"
 
 
+@pytest.mark.parametrize("argv", [
+    ["ssp", "export", "{a}", "-o", "{tmp}/again.ssp"],
+    ["calibrate", "{a}", "--measured", "{tmp}/r.csv", "--map", "plant.p.x=x", "--fit", "plant.mass.payload"],
+    ["run", "{zip}", "--no-log"],  # an archive not named .ssp
+])
+def test_an_archive_where_a_yaml_scenario_is_read_is_one_line_naming_what_reads_it(ssp, tmp_path, capsys, argv):
+    """Every command that reads a YAML scenario, given an SSP archive (or an archive under another name), says what
+    it is and which commands read archives, instead of reporting its bytes as text that is not UTF-8."""
+    renamed = tmp_path / "system.zip"
+    renamed.write_bytes(ssp.read_bytes())
+    (tmp_path / "r.csv").write_text("t,x\n0,0\n0.1,0\n")
+    rc, out, err = _cli(capsys, *[x.format(a=ssp, tmp=tmp_path, zip=renamed) for x in argv])
+    assert rc == 2 and len(err.strip().splitlines()) == 1, err
+    assert "a zip archive, not a YAML scenario" in err and "UTF-8" not in err, err
+    assert not (tmp_path / "again.ssp").exists()
+
+
 def test_table_and_report_read_the_log_of_a_run_from_an_archive(ssp, tmp_path, capsys):
     """The log of a run from an SSP archive attaches the archive (not YAML) and the scenario as run
     (effective/scenario.json): table and report read the latter, and name the plant by its FMU file."""
